@@ -1,0 +1,41 @@
+"""The one error root of the project and its few meaningful subclasses."""
+
+from __future__ import annotations
+
+
+class TraceError(Exception):
+    """Base of every error this project raises on purpose."""
+
+
+class RecordError(TraceError, ValueError):
+    """A record handed to the logger is invalid: a programming error in the robot."""
+
+
+class UsageError(TraceError):
+    """The logger or a reader was used out of order (e.g. a layer added twice in one cycle)."""
+
+
+class LogReadError(TraceError):
+    """A log cannot be read: missing, not MCAP, truncated beyond recovery, or not TRACE."""
+
+    def __init__(self, path: str, reason: str) -> None:
+        super().__init__(f"{path}: {reason}")
+        self.path = path
+        self.reason = reason
+
+
+class NotTraceLogError(LogReadError):
+    """The file is valid MCAP but not of the TRACE profile (e.g. a rosbag2 recording)."""
+
+
+class TimeOutOfRangeError(TraceError):
+    """A time asked about lies outside the log's time range."""
+
+    def __init__(self, t_ns: int, start_ns: int, end_ns: int) -> None:
+        super().__init__(
+            f"t={t_ns / 1e9:.3f} s is outside the log's range "
+            f"[{start_ns / 1e9:.3f} s, {end_ns / 1e9:.3f} s]"
+        )
+        self.t_ns = t_ns
+        self.start_ns = start_ns
+        self.end_ns = end_ns

@@ -1,0 +1,498 @@
+"""``AuditLogger``: the per-cycle audit trail API a robot's control loop calls.
+
+The control thread does little: it checks and keeps references to the records, encodes the
+small sensor payloads it needs digests for, and hands the cycle to a bounded queue. A
+writer thread encodes the layer records canonically, seals the cycle into the hash chain
+and writes a chunk per batch, so every committed cycle reaches the OS within one period.
+
+Failure policy (see schemas/PROFILE.md, "Dropped cycles"): nothing about I/O ever raises
+into the control loop. A full queue, a failed write, a lost disk or permission: the cycle
+is dropped and counted, the first failure of each kind is logged once through ``logging``,
+and the next seal that is written carries the count in ``dropped``.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import re
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import Any, BinaryIO, Literal
+
+from trace_runtime.chain import digest
+from trace_runtime.codec import encode_json, encode_layer, encode_seal
+from trace_runtime.errors import RecordError, UsageError
+from trace_runtime.records import (
+    GENESIS,
+    LAYER_MODELS,
+    SENSOR_PREFIX,
+    TOPIC_ACTION,
+    TOPIC_BELIEF,
+    TOPIC_EXECUTION,
+    TOPIC_PERCEPTION,
+    TOPIC_SEAL,
+    EvidenceRef,
+    Seal,
+    _Record,
+    validate_record,
+)
+from trace_runtime.segment import OutMessage, SegmentWriter, SegmentWriteError
+from trace_runtime.session import SessionInfo
+
+log = logging.getLogger("trace_runtime")
+
+Opener = Callable[[Path], BinaryIO]
+
+
+def _default_opener(path: Path) -> BinaryIO:
+    return open(path, "wb")  # noqa: SIM115 - owned and closed by SegmentWriter
+
+
+@dataclass(frozen=True, slots=True)
+class LoggerConfig:
+    """How the logger writes. Defaults suit a 10 Hz robot on a local disk."""
+
+    threaded: bool = True
+    """Write on a background thread (robots). False writes at ``commit()`` (simulators, tests)."""
+    queue_cycles: int = 256
+    """Bound of the hand-over queue, in cycles."""
+    when_full: Literal["drop", "block"] = "drop"
+    """Queue full: drop the cycle and count it (default; never stalls the loop) or block."""
+    max_batch_cycles: int = 512
+    """At most this many cycles per chunk when the writer is catching up."""
+    fsync_interval_s: float | None = 1.0
+    """fsync the segment at most this often (None: leave it to the OS)."""
+    max_segment_s: float = 3600.0
+    """Rotate to a new segment after this much log time (log roots only)."""
+    max_segment_bytes: int = 512 * 1024 * 1024
+    """Rotate to a new segment past this size (log roots only)."""
+    compression_level: int = 3
+    opener: Opener | None = None
+    """How segment files are opened; a plug point for custom storage and fault injection."""
+
+
+@dataclass(slots=True)
+class LoggerStats:
+    """Counters a robot can export to its health monitoring."""
+
+    committed: int = 0
+    written: int = 0
+    dropped_queue_full: int = 0
+    dropped_io: int = 0
+    dropped_aborted: int = 0
+    segments: list[Path] = field(default_factory=list)
+    bytes_written: int = 0
+
+    @property
+    def dropped(self) -> int:
+        return self.dropped_queue_full + self.dropped_io + self.dropped_aborted
+
+
+@dataclass(slots=True)
+class _PendingCycle:
+    cycle: int
+    t_ns: int
+    layers: dict[str, _Record]
+    sensors: list[OutMessage | tuple[str, int, int, bytes]]
+    dropped_before: int
+
+
+class CycleBuilder:
+    """One decision cycle being assembled; commit it once, or let ``with`` do it."""
+
+    __slots__ = ("_committed", "_layers", "_logger", "_sensors", "cycle", "t_ns")
+
+    def __init__(self, logger: AuditLogger, cycle: int, t_ns: int) -> None:
+        self._logger = logger
+        self.cycle = cycle
+        self.t_ns = t_ns
+        self._layers: dict[str, _Record] = {}
+        self._sensors: list[OutMessage | tuple[str, int, int, bytes]] = []
+        self._committed = False
+
+    def sensor(self, topic: str, payload: Any, t_ns: int | None = None) -> EvidenceRef:
+        """Log a sensor reading that evidence will point to; return its evidence ref.
+
+        ``payload`` is a JSON-able object or bytes of JSON. The ref carries the topic, log
+        time, per-topic sequence and the SHA-256 of the data, so it resolves and verifies.
+        """
+        if not topic.startswith(SENSOR_PREFIX):
+            raise RecordError(f"sensor topic must start with {SENSOR_PREFIX!r}: {topic!r}")
+        data = payload if isinstance(payload, bytes) else encode_json(payload)
+        log_time = self.t_ns if t_ns is None else t_ns
+        sequence = self._logger._next_sensor_sequence(topic)
+        self._sensors.append((topic, sequence, log_time, data))
+        return EvidenceRef(topic=topic, log_time_ns=log_time, sequence=sequence, digest=digest(data))
+
+    def perception(self, record: Any) -> None:
+        """Add layer 1 (a ``Perception`` or a dict of its fields)."""
+        self._add(TOPIC_PERCEPTION, record)
+
+    def belief(self, record: Any) -> None:
+        """Add layer 2 (a ``Belief`` or a dict of its fields)."""
+        self._add(TOPIC_BELIEF, record)
+
+    def action(self, record: Any) -> None:
+        """Add layer 3 (an ``Action`` or a dict of its fields)."""
+        self._add(TOPIC_ACTION, record)
+
+    def execution(self, record: Any) -> None:
+        """Add layer 4 (an ``Execution`` or a dict of its fields)."""
+        self._add(TOPIC_EXECUTION, record)
+
+    def _add(self, topic: str, record: Any) -> None:
+        if self._committed:
+            raise UsageError(f"cycle {self.cycle} is already committed")
+        if topic in self._layers:
+            raise UsageError(f"cycle {self.cycle} already has a {topic} record")
+        self._layers[topic] = validate_record(LAYER_MODELS[topic], record)
+
+    def commit(self) -> None:
+        """Hand the cycle to the writer. Never raises because of I/O."""
+        if self._committed:
+            raise UsageError(f"cycle {self.cycle} is already committed")
+        self._committed = True
+        self._logger._commit(self)
+
+    def abort(self) -> None:
+        """Give the cycle up; it is counted as dropped and the next seal says so."""
+        if not self._committed:
+            self._committed = True
+            self._logger._abort(self)
+
+    def __enter__(self) -> CycleBuilder:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if exc_type is None:
+            if not self._committed:
+                self.commit()
+        else:
+            self.abort()
+
+
+class AuditLogger:
+    """Writes a robot's decision cycles as a hash-chained TRACE MCAP log.
+
+    ``path`` is one ``.mcap`` file, or a directory used as a log root: segments then go to
+    ``ROOT/hot/<robot_id>_<segment>.mcap`` and the chain and cycle numbers continue from the
+    newest segment already there, across restarts.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        robot_id: str,
+        period_s: float = 0.1,
+        software_version: str = "",
+        policy_version: str = "",
+        clock: str = "system",
+        config: LoggerConfig | None = None,
+    ) -> None:
+        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", robot_id):
+            raise UsageError(f"robot_id must be a simple name (letters, digits, _.-): {robot_id!r}")
+        if period_s <= 0:
+            raise UsageError(f"period_s must be positive, got {period_s}")
+        self.config = config or LoggerConfig()
+        self.path = Path(path)
+        self.is_root = not self.path.suffix == ".mcap"
+        self.stats = LoggerStats()
+        self._opener = self.config.opener or _default_opener
+        self._lock = threading.Lock()
+        self._closed = False
+        self._open_cycle: CycleBuilder | None = None
+        self._sensor_seq: dict[str, int] = {}
+        self._dropped_since_seal = 0  # guarded by _lock: both threads add to it
+        self._reported: set[str] = set()
+        self._last_sync = time.monotonic()
+
+        first_cycle, prev_seal, segment_no = 0, GENESIS, 0
+        if self.is_root:
+            first_cycle, prev_seal, segment_no = _resume_point(self.path / "hot", robot_id)
+        self._next_cycle = first_cycle
+        self._prev_seal = prev_seal
+        self._session = SessionInfo(
+            robot_id=robot_id,
+            period_ns=round(period_s * 1e9),
+            software_version=software_version,
+            policy_version=policy_version,
+            clock=clock,
+            segment=segment_no,
+            prev_seal=prev_seal,
+            first_cycle=first_cycle,
+        )
+        self._segment: SegmentWriter | None = None
+        self._segment_start_ns: int | None = None
+        # Opening the first segment may fail (bad path, no permission): that is a set-up
+        # error the integrator must see, so it raises here, unlike every later I/O failure.
+        self._open_segment(self._session)
+
+        self._queue: queue.Queue[_PendingCycle | None] | None = None
+        self._thread: threading.Thread | None = None
+        if self.config.threaded:
+            self._queue = queue.Queue(maxsize=self.config.queue_cycles)
+            self._thread = threading.Thread(
+                target=self._run_writer, name=f"trace-writer-{robot_id}", daemon=True
+            )
+            self._thread.start()
+
+    # --- control-thread API -------------------------------------------------------------
+
+    def cycle(self, t_ns: int | None = None) -> CycleBuilder:
+        """Begin the next decision cycle at ``t_ns`` (default: now, wall clock)."""
+        if self._closed:
+            raise UsageError("the logger is closed")
+        if self._open_cycle is not None and not self._open_cycle._committed:
+            raise UsageError(f"cycle {self._open_cycle.cycle} was begun but not committed")
+        builder = CycleBuilder(self, self._next_cycle, time.time_ns() if t_ns is None else t_ns)
+        self._next_cycle += 1
+        self._open_cycle = builder
+        return builder
+
+    begin = cycle
+
+    def log_cycle(
+        self,
+        t_ns: int | None = None,
+        *,
+        perception: Any = None,
+        belief: Any = None,
+        action: Any = None,
+        execution: Any = None,
+    ) -> int:
+        """Log a whole cycle of pre-built records in one call; return its cycle number."""
+        with self.cycle(t_ns) as c:
+            for add, record in (
+                (c.perception, perception),
+                (c.belief, belief),
+                (c.action, action),
+                (c.execution, execution),
+            ):
+                if record is not None:
+                    add(record)
+        return c.cycle
+
+    def flush(self, timeout_s: float = 5.0) -> bool:
+        """Wait until every committed cycle has been written; True if it got there."""
+        if self._queue is None:
+            return True
+        deadline = time.monotonic() + timeout_s
+        while self._queue.unfinished_tasks and time.monotonic() < deadline:
+            time.sleep(0.0005)
+        return not self._queue.unfinished_tasks
+
+    def close(self) -> None:
+        """Write what is queued, then the segment's summary and indexes. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._queue is not None and self._thread is not None:
+            self._queue.put(None)
+            self._thread.join()
+        with self._lock:
+            self._close_segment()
+
+    def __enter__(self) -> AuditLogger:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- hand-over ----------------------------------------------------------------------
+
+    def _next_sensor_sequence(self, topic: str) -> int:
+        seq = self._sensor_seq.get(topic, 0)
+        self._sensor_seq[topic] = seq + 1
+        return seq
+
+    def _commit(self, builder: CycleBuilder) -> None:
+        self.stats.committed += 1
+        pending = _PendingCycle(builder.cycle, builder.t_ns, builder._layers, builder._sensors, 0)
+        if self._queue is None:
+            with self._lock:
+                self._write_batch([pending])
+            return
+        try:
+            if self.config.when_full == "block":
+                self._queue.put(pending)
+            else:
+                self._queue.put_nowait(pending)
+        except queue.Full:
+            with self._lock:
+                self.stats.dropped_queue_full += 1
+                self._dropped_since_seal += 1
+            self._report_once("queue", "audit queue full: dropping cycles (writer too slow)")
+
+    def _abort(self, builder: CycleBuilder) -> None:
+        with self._lock:
+            self.stats.dropped_aborted += 1
+            self._dropped_since_seal += 1
+
+    # --- writer side --------------------------------------------------------------------
+
+    def _run_writer(self) -> None:
+        assert self._queue is not None
+        q = self._queue
+        stop = False
+        while not stop:
+            item = q.get()
+            batch: list[_PendingCycle] = []
+            taken = 1
+            if item is None:
+                stop = True
+            else:
+                batch.append(item)
+            while not stop and len(batch) < self.config.max_batch_cycles:
+                try:
+                    more = q.get_nowait()
+                except queue.Empty:
+                    break
+                taken += 1
+                if more is None:
+                    stop = True
+                else:
+                    batch.append(more)
+            if batch:
+                with self._lock:
+                    self._write_batch(batch)
+            for _ in range(taken):
+                q.task_done()
+
+    def _write_batch(self, batch: list[_PendingCycle]) -> None:
+        """Seal and write cycles; called with ``_lock`` held. Swallows every failure."""
+        try:
+            self._maybe_rotate(batch[0].t_ns)
+            if self._segment is None:
+                self._open_segment(self._session.next_segment(self._prev_seal, batch[0].cycle))
+            segment = self._segment
+            if segment is None:
+                raise SegmentWriteError("no segment could be opened", rolled_back=False)
+            messages, last_seal = self._seal(segment, batch)
+            self.stats.bytes_written += segment.write_batch(messages)
+        except SegmentWriteError as err:
+            self._lose(batch, err, abandon=not err.rolled_back)
+            return
+        except Exception as err:  # noqa: BLE001 - the robot must outlive any logger bug
+            self._lose(batch, err, abandon=True)
+            return
+        self._prev_seal = last_seal
+        self._dropped_since_seal = 0
+        self.stats.written += len(batch)
+        if self._segment_start_ns is None:
+            self._segment_start_ns = batch[0].t_ns
+        self._maybe_sync()
+
+    def _seal(
+        self, segment: SegmentWriter, batch: list[_PendingCycle]
+    ) -> tuple[list[OutMessage], str]:
+        messages: list[OutMessage] = []
+        prev = self._prev_seal
+        dropped = self._dropped_since_seal
+        seal_channel = segment.channel(TOPIC_SEAL)
+        for pending in batch:
+            for sensor in pending.sensors:
+                if isinstance(sensor, tuple):
+                    topic, sequence, log_time, data = sensor
+                    sensor = OutMessage(segment.channel(topic), sequence, log_time, data)
+                messages.append(sensor)
+            digests: dict[str, str] = {}
+            for topic, record in pending.layers.items():
+                data = encode_layer(pending.cycle, pending.t_ns, record)
+                digests[topic] = digest(data)
+                messages.append(OutMessage(segment.channel(topic), pending.cycle, pending.t_ns, data))
+            seal = Seal(cycle=pending.cycle, t_ns=pending.t_ns, digests=digests, prev=prev,
+                        dropped=dropped)
+            data = encode_seal(seal)
+            messages.append(OutMessage(seal_channel, pending.cycle, pending.t_ns, data))
+            prev = digest(data)
+            dropped = 0
+        return messages, prev
+
+    def _lose(self, batch: list[_PendingCycle], err: Exception, *, abandon: bool) -> None:
+        self.stats.dropped_io += len(batch)
+        self._dropped_since_seal += len(batch)
+        self._report_once(f"io:{type(err).__name__}", f"audit write failed, dropping cycles: {err}")
+        if abandon and self._segment is not None:
+            # The file cannot be trusted past its last good batch; readers recover up to it.
+            try:
+                self._segment._stream.close()
+            except Exception:  # noqa: BLE001 - already failing; nothing more to do
+                pass
+            self._segment = None
+
+    def _maybe_rotate(self, t_ns: int) -> None:
+        segment = self._segment
+        if segment is None or not self.is_root or self._segment_start_ns is None:
+            return
+        too_long = t_ns - self._segment_start_ns >= self.config.max_segment_s * 1e9
+        if too_long or segment.offset >= self.config.max_segment_bytes:
+            self._close_segment()
+
+    def _open_segment(self, session: SessionInfo) -> None:
+        path = self._segment_path(session)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        stream = self._opener(path)
+        self._segment = SegmentWriter(stream, session, level=self.config.compression_level)
+        self._session = session
+        self._segment_start_ns = None
+        self.stats.segments.append(path)
+
+    def _close_segment(self) -> None:
+        segment, self._segment = self._segment, None
+        if segment is None:
+            return
+        try:
+            segment.close()
+        except Exception as err:  # noqa: BLE001 - closing must not raise into the robot either
+            self._report_once("close", f"could not finish segment: {err}")
+
+    def _segment_path(self, session: SessionInfo) -> Path:
+        if not self.is_root:
+            if session.segment == 0 or not self.stats.segments:
+                return self.path
+            return self.path.with_name(f"{self.path.stem}.{session.segment:06d}.mcap")
+        return self.path / "hot" / f"{session.robot_id}_{session.segment:06d}.mcap"
+
+    def _maybe_sync(self) -> None:
+        interval = self.config.fsync_interval_s
+        if interval is None or self._segment is None:
+            return
+        now = time.monotonic()
+        if now - self._last_sync >= interval:
+            self._last_sync = now
+            try:
+                self._segment.sync()
+            except OSError as err:
+                self._report_once("fsync", f"fsync failed: {err}")
+
+    def _report_once(self, kind: str, message: str) -> None:
+        if kind not in self._reported:
+            self._reported.add(kind)
+            log.warning("%s (reported once; see AuditLogger.stats)", message)
+
+
+def _resume_point(hot: Path, robot_id: str) -> tuple[int, str, int]:
+    """(next cycle, last seal digest, next segment number) after the newest segment in ``hot``."""
+    segments = sorted(hot.glob(f"{robot_id}_*.mcap")) if hot.is_dir() else []
+    if not segments:
+        return 0, GENESIS, 0
+    from trace_runtime.reader import last_seal  # deferred: the reader is not needed otherwise
+
+    newest = segments[-1]
+    number = int(newest.stem.rsplit("_", 1)[-1])
+    found = last_seal(newest)
+    if found is None:
+        return 0, GENESIS, number + 1
+    seal, seal_digest = found
+    return seal.cycle + 1, seal_digest, number + 1

@@ -1,0 +1,658 @@
+"""The one reader of the TRACE format: segments, logs of many segments, cycles.
+
+A finished segment is read through its summary: chunk indexes give the time range of every
+chunk, so a question about one moment decodes one chunk. A segment without a summary (the
+robot crashed, or the disk filled) is scanned linearly once, every complete record is kept,
+and ``SegmentInfo.recovered`` says so.
+
+How messages become cycles depends on the tier a segment is in (``trace.session`` metadata
+``tier``): hot segments hold one message per layer and a seal per cycle; other tiers register
+their own assembler with ``register_assembler``.
+"""
+
+from __future__ import annotations
+
+import bisect
+import logging
+import mmap
+import os
+import struct
+import zlib
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any, Protocol
+
+import orjson
+import zstandard
+
+from trace_runtime.chain import digest
+from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeError
+from trace_runtime.records import (
+    PROFILE,
+    TOPIC_ACTION,
+    TOPIC_BELIEF,
+    TOPIC_EXECUTION,
+    TOPIC_PERCEPTION,
+    TOPIC_SEAL,
+    ActionMessage,
+    BeliefMessage,
+    ExecutionMessage,
+    PerceptionMessage,
+    Seal,
+)
+from trace_runtime.segment import MAGIC
+from trace_runtime.session import SESSION_METADATA, SessionInfo
+
+log = logging.getLogger("trace_runtime")
+
+_RECORD_HEADER = struct.Struct("<BQ")
+_MESSAGE_FIXED = struct.Struct("<HIQQ")
+_CHUNK_FIXED = struct.Struct("<QQQI")
+_FOOTER_SIZE = 9 + 20
+_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
+_OP_CHUNK_INDEX, _OP_METADATA, _OP_DATA_END = 8, 12, 15
+_MAX_RECORD = 1 << 34
+
+
+# --- values ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class RawMessage:
+    """A message as stored: topic, per-channel sequence, log time, data."""
+
+    topic: str
+    sequence: int
+    log_time_ns: int
+    data: bytes
+
+
+@dataclass(slots=True)
+class Cycle:
+    """One decision cycle as logged: its layer messages, seal and sensor readings.
+
+    ``payloads`` maps a /trace topic to its canonical bytes. A warm-tier summary cycle has
+    ``summary`` set and only the payloads that tier kept.
+    """
+
+    cycle: int
+    t_ns: int
+    payloads: dict[str, bytes] = field(default_factory=dict)
+    sensors: list[RawMessage] = field(default_factory=list)
+    segment: str = ""
+    summary: dict[str, Any] | None = None
+
+    @property
+    def sealed(self) -> bool:
+        return TOPIC_SEAL in self.payloads
+
+    def json(self, topic: str) -> Any:
+        """The message on ``topic`` parsed as plain JSON, or None if absent."""
+        data = self.payloads.get(topic)
+        return None if data is None else orjson.loads(data)
+
+    @property
+    def seal(self) -> Seal | None:
+        data = self.payloads.get(TOPIC_SEAL)
+        return None if data is None else Seal.model_validate_json(data)
+
+    @property
+    def perception(self) -> PerceptionMessage | None:
+        data = self.payloads.get(TOPIC_PERCEPTION)
+        return None if data is None else PerceptionMessage.model_validate_json(data)
+
+    @property
+    def belief(self) -> BeliefMessage | None:
+        data = self.payloads.get(TOPIC_BELIEF)
+        return None if data is None else BeliefMessage.model_validate_json(data)
+
+    @property
+    def action(self) -> ActionMessage | None:
+        data = self.payloads.get(TOPIC_ACTION)
+        return None if data is None else ActionMessage.model_validate_json(data)
+
+    @property
+    def execution(self) -> ExecutionMessage | None:
+        data = self.payloads.get(TOPIC_EXECUTION)
+        return None if data is None else ExecutionMessage.model_validate_json(data)
+
+    def digests(self) -> dict[str, str]:
+        """SHA-256 of each layer payload present, keyed by topic (what a seal names)."""
+        return {t: digest(d) for t, d in self.payloads.items() if t != TOPIC_SEAL}
+
+
+@dataclass(frozen=True, slots=True)
+class ChunkInfo:
+    """Where a chunk is and what time it covers."""
+
+    offset: int
+    length: int
+    start_ns: int
+    end_ns: int
+
+
+@dataclass(slots=True)
+class SegmentInfo:
+    """What a segment is, from its header, metadata and summary (or a scan)."""
+
+    path: Path
+    session: SessionInfo
+    finished: bool
+    recovered: bool
+    start_ns: int
+    end_ns: int
+    message_count: int
+    chunk_count: int
+    channels: dict[str, int]
+    bytes: int
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+
+    @property
+    def tier(self) -> str:
+        return self.session.tier
+
+
+class Assembler(Protocol):
+    """Turns the messages of one chunk (in file order) into cycles."""
+
+    def __call__(self, messages: Sequence[RawMessage], segment: str) -> list[Cycle]: ...
+
+
+# --- hot tier assembly ---------------------------------------------------------------------
+
+
+def assemble_hot(messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
+    """Group hot-tier messages into cycles: everything up to and including a seal.
+
+    Messages after the last seal (a cycle the writer never sealed) become an unsealed cycle,
+    numbered from their own ``cycle`` field, so nothing that was written is hidden.
+    """
+    cycles: list[Cycle] = []
+    payloads: dict[str, bytes] = {}
+    sensors: list[RawMessage] = []
+    for msg in messages:
+        if msg.topic.startswith("/trace/"):
+            payloads[msg.topic] = msg.data
+            if msg.topic == TOPIC_SEAL:
+                cycles.append(Cycle(msg.sequence, msg.log_time_ns, payloads, sensors, segment))
+                payloads, sensors = {}, []
+        else:
+            sensors.append(msg)
+    if payloads:
+        first = next(iter(payloads.values()))
+        number = int(orjson.loads(first).get("cycle", -1))
+        t_ns = max(m.log_time_ns for m in messages if m.topic in payloads)
+        cycles.append(Cycle(number, t_ns, payloads, sensors, segment))
+    return cycles
+
+
+_ASSEMBLERS: dict[str, Assembler] = {"hot": assemble_hot}
+
+
+def register_assembler(tier: str, assembler: Assembler) -> None:
+    """Teach the reader a tier: how that tier's messages become cycles."""
+    _ASSEMBLERS[tier] = assembler
+
+
+def _assembler_for(tier: str) -> Assembler:
+    if tier not in _ASSEMBLERS:
+        # Tier modules register themselves on import; importing here keeps the base reader
+        # free of them until a segment of that tier is actually opened.
+        import importlib
+
+        try:
+            importlib.import_module("trace_runtime.tiers")
+        except ImportError:
+            pass
+    return _ASSEMBLERS.get(tier, assemble_hot)
+
+
+# --- one segment -----------------------------------------------------------------------------
+
+
+class Segment:
+    """A TRACE MCAP segment opened for reading."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._data = _map_file(self.path)
+        if self._data[:8] != MAGIC:
+            raise LogReadError(str(path), "not an MCAP file (bad magic)")
+        self._schemas: dict[int, str] = {}
+        self._topics: dict[int, str] = {}
+        self._chunks: list[ChunkInfo] = []
+        self._loose: list[RawMessage] = []  # messages written outside chunks
+        self._metadata: dict[str, dict[str, str]] = {}
+        self._decompressor = zstandard.ZstdDecompressor()
+        self._profile = ""
+        finished = self._read_summary()
+        if not finished:
+            self._scan()
+        if self._profile != PROFILE:
+            label = repr(self._profile) if self._profile else "none"
+            raise NotTraceLogError(str(path), f"MCAP profile is {label}, not a TRACE log")
+        if SESSION_METADATA not in self._metadata:
+            raise NotTraceLogError(str(path), "no trace.session metadata record")
+        self._chunks.sort(key=lambda c: (c.start_ns, c.offset))
+        self._chunk_starts = [c.start_ns for c in self._chunks]
+        self._assemble = _assembler_for(self.session.tier)
+        self.info = self._make_info(finished)
+        if not finished:
+            log.warning(
+                "%s: no summary (unfinished segment); recovered %d complete messages by scan",
+                self.path,
+                self.info.message_count,
+            )
+
+    @cached_property
+    def session(self) -> SessionInfo:
+        return SessionInfo.from_metadata(self._metadata[SESSION_METADATA])
+
+    @property
+    def metadata(self) -> dict[str, dict[str, str]]:
+        return self._metadata
+
+    # --- summary and scan ------------------------------------------------------------
+
+    def _read_summary(self) -> bool:
+        data = self._data
+        header = self._parse_header(8)
+        if header is None:
+            raise LogReadError(str(self.path), "truncated before the MCAP header ended")
+        if len(data) < 8 + _FOOTER_SIZE + 8 or data[-8:] != MAGIC:
+            return False
+        footer_at = len(data) - 8 - _FOOTER_SIZE
+        opcode, length = _RECORD_HEADER.unpack_from(data, footer_at)
+        if opcode != _OP_FOOTER or length != 20:
+            return False
+        summary_start, _summary_offset_start, _crc = struct.unpack_from("<QQI", data, footer_at + 9)
+        if summary_start == 0:
+            return False  # a finished file written without a summary: scan it
+        pos = summary_start
+        while pos < footer_at:
+            opcode, length = _RECORD_HEADER.unpack_from(data, pos)
+            body = pos + 9
+            if opcode == _OP_SCHEMA:
+                self._parse_schema(body)
+            elif opcode == _OP_CHANNEL:
+                self._parse_channel(body)
+            elif opcode == _OP_CHUNK_INDEX:
+                start, end, offset, chunk_len = struct.unpack_from("<QQQQ", data, body)
+                self._chunks.append(ChunkInfo(offset, chunk_len, start, end))
+            elif opcode == _OP_METADATA + 1:  # metadata index
+                offset, _len = struct.unpack_from("<QQ", data, body)
+                self._parse_metadata_at(offset)
+            pos = body + length
+        if not self._chunks and not self._metadata:
+            return False
+        self._scan_loose_messages()
+        return True
+
+    def _parse_header(self, pos: int) -> int | None:
+        data = self._data
+        if pos + 9 > len(data):
+            return None
+        opcode, length = _RECORD_HEADER.unpack_from(data, pos)
+        if opcode != _OP_HEADER or pos + 9 + length > len(data):
+            return None
+        profile, _ = _read_str(data, pos + 9)
+        self._profile = profile
+        return pos + 9 + length
+
+    def _scan(self) -> None:
+        """Walk every record after the header; stop at the first incomplete one."""
+        data = self._data
+        pos = self._parse_header(8) or len(data)
+        end = len(data)
+        while pos + 9 <= end:
+            opcode, length = _RECORD_HEADER.unpack_from(data, pos)
+            body = pos + 9
+            if length > _MAX_RECORD or body + length > end:
+                break  # a record cut short by the crash: everything before it is kept
+            if opcode == _OP_SCHEMA:
+                self._parse_schema(body)
+            elif opcode == _OP_CHANNEL:
+                self._parse_channel(body)
+            elif opcode == _OP_METADATA:
+                self._parse_metadata(body)
+            elif opcode == _OP_CHUNK:
+                start, stop = struct.unpack_from("<QQ", data, body)
+                if self._chunk_valid(pos):
+                    self._chunks.append(ChunkInfo(pos, 9 + length, start, stop))
+            elif opcode == _OP_MESSAGE:
+                self._loose.append(self._parse_message(body, length, data))
+            elif opcode in (_OP_DATA_END, _OP_FOOTER):
+                break
+            pos = body + length
+
+    def _scan_loose_messages(self) -> None:
+        """Messages written outside chunks are not indexed; find them between chunks."""
+        # Our writer never does this; other writers may. Cheap: skip over chunk records.
+        data = self._data
+        pos = self._parse_header(8) or len(data)
+        while pos + 9 <= len(data):
+            opcode, length = _RECORD_HEADER.unpack_from(data, pos)
+            if opcode == _OP_MESSAGE:
+                self._loose.append(self._parse_message(pos + 9, length, data))
+            elif opcode == _OP_METADATA and SESSION_METADATA not in self._metadata:
+                self._parse_metadata(pos + 9)
+            elif opcode in (_OP_DATA_END, _OP_FOOTER) or length > _MAX_RECORD:
+                break
+            pos += 9 + length
+
+    def _chunk_valid(self, pos: int) -> bool:
+        try:
+            self._decode_chunk(ChunkInfo(pos, 0, 0, 0))
+        except (LogReadError, zstandard.ZstdError, struct.error):
+            return False
+        return True
+
+    def _parse_schema(self, body: int) -> None:
+        schema_id, = struct.unpack_from("<H", self._data, body)
+        name, _ = _read_str(self._data, body + 2)
+        self._schemas[schema_id] = name
+
+    def _parse_channel(self, body: int) -> None:
+        channel_id, _schema_id = struct.unpack_from("<HH", self._data, body)
+        topic, _ = _read_str(self._data, body + 4)
+        self._topics[channel_id] = topic
+
+    def _parse_metadata_at(self, offset: int) -> None:
+        opcode, _length = _RECORD_HEADER.unpack_from(self._data, offset)
+        if opcode == _OP_METADATA:
+            self._parse_metadata(offset + 9)
+
+    def _parse_metadata(self, body: int) -> None:
+        name, pos = _read_str(self._data, body)
+        (map_len,) = struct.unpack_from("<I", self._data, pos)
+        pos += 4
+        stop = pos + map_len
+        values: dict[str, str] = {}
+        while pos < stop:
+            key, pos = _read_str(self._data, pos)
+            value, pos = _read_str(self._data, pos)
+            values[key] = value
+        self._metadata[name] = values
+
+    def _parse_message(self, body: int, length: int, data: bytes) -> RawMessage:
+        channel_id, sequence, log_time, _publish = _MESSAGE_FIXED.unpack_from(data, body)
+        topic = self._topics.get(channel_id, f"<channel {channel_id}>")
+        return RawMessage(topic, sequence, log_time, data[body + 22 : body + length])
+
+    # --- chunks ----------------------------------------------------------------------------
+
+    def _decode_chunk(self, chunk: ChunkInfo) -> list[RawMessage]:
+        data = self._data
+        body = chunk.offset + 9
+        _start, _end, size, crc = _CHUNK_FIXED.unpack_from(data, body)
+        compression, pos = _read_str(data, body + 28)
+        (records_len,) = struct.unpack_from("<Q", data, pos)
+        pos += 8
+        compressed = data[pos : pos + records_len]
+        if compression == "zstd":
+            raw = self._decompressor.decompress(compressed, max_output_size=size)
+        elif compression == "":
+            raw = compressed
+        else:
+            raise LogReadError(str(self.path), f"unsupported chunk compression {compression!r}")
+        if crc and zlib.crc32(raw) != crc:
+            raise LogReadError(str(self.path), f"chunk at offset {chunk.offset} fails its CRC")
+        messages: list[RawMessage] = []
+        pos, end = 0, len(raw)
+        while pos + 9 <= end:
+            opcode, length = _RECORD_HEADER.unpack_from(raw, pos)
+            body = pos + 9
+            if opcode == _OP_MESSAGE:
+                channel_id, sequence, log_time, _publish = _MESSAGE_FIXED.unpack_from(raw, body)
+                messages.append(
+                    RawMessage(self._topics[channel_id], sequence, log_time,
+                               raw[body + 22 : body + length])
+                )
+            elif opcode == _OP_SCHEMA:
+                self._parse_inner(raw, opcode, body)
+            elif opcode == _OP_CHANNEL:
+                self._parse_inner(raw, opcode, body)
+            pos = body + length
+        return messages
+
+    def _parse_inner(self, raw: bytes, opcode: int, body: int) -> None:
+        if opcode == _OP_CHANNEL:
+            channel_id, _schema = struct.unpack_from("<HH", raw, body)
+            topic, _ = _read_str(raw, body + 4)
+            self._topics[channel_id] = topic
+
+    def chunks(self) -> list[ChunkInfo]:
+        return list(self._chunks)
+
+    def iter_messages(self, start_ns: int | None = None, end_ns: int | None = None,
+                      *, reverse: bool = False) -> Iterator[RawMessage]:
+        """Raw messages with ``start_ns <= log_time <= end_ns``, in file order per chunk."""
+        for messages in self._iter_chunk_messages(start_ns, end_ns, reverse=reverse):
+            for msg in (reversed(messages) if reverse else messages):
+                if (start_ns is None or msg.log_time_ns >= start_ns) and (
+                    end_ns is None or msg.log_time_ns <= end_ns
+                ):
+                    yield msg
+
+    def _iter_chunk_messages(self, start_ns: int | None, end_ns: int | None,
+                             *, reverse: bool) -> Iterator[list[RawMessage]]:
+        chunks = [
+            c for c in self._chunks
+            if (start_ns is None or c.end_ns >= start_ns) and (end_ns is None or c.start_ns <= end_ns)
+        ]
+        if self._loose and not reverse:
+            yield self._loose
+        for chunk in (reversed(chunks) if reverse else chunks):
+            yield self._decode_chunk(chunk)
+        if self._loose and reverse:
+            yield self._loose
+
+    # --- cycles ----------------------------------------------------------------------------
+
+    def iter_cycles(self, start_ns: int | None = None, end_ns: int | None = None,
+                    *, reverse: bool = False) -> Iterator[Cycle]:
+        """Cycles with ``start_ns <= t_ns <= end_ns``, oldest first (or newest first)."""
+        name = self.path.name
+        for messages in self._iter_chunk_messages(start_ns, end_ns, reverse=reverse):
+            cycles = self._assemble(messages, name)
+            for cycle in (reversed(cycles) if reverse else cycles):
+                if (start_ns is None or cycle.t_ns >= start_ns) and (
+                    end_ns is None or cycle.t_ns <= end_ns
+                ):
+                    yield cycle
+
+    def cycle_at(self, t_ns: int) -> Cycle | None:
+        """The cycle in force at ``t_ns``: the last one at or before it (None if none)."""
+        index = bisect.bisect_right(self._chunk_starts, t_ns)
+        # The chunk that starts last at or before t holds the answer unless t falls before
+        # its first cycle (e.g. sensors earlier than the cycle): then step back one chunk.
+        for chunk in reversed(self._chunks[max(0, index - 2) : index]):
+            cycles = [c for c in self._assemble(self._decode_chunk(chunk), self.path.name)
+                      if c.t_ns <= t_ns]
+            if cycles:
+                return cycles[-1]
+        if self._loose:
+            cycles = [c for c in self._assemble(self._loose, self.path.name) if c.t_ns <= t_ns]
+            if cycles:
+                return cycles[-1]
+        return None
+
+    def _make_info(self, finished: bool) -> SegmentInfo:
+        channels: dict[str, int] = {}
+        start = min((c.start_ns for c in self._chunks), default=0)
+        end = max((c.end_ns for c in self._chunks), default=0)
+        count = 0
+        if finished:
+            channels = self._statistics_counts()
+            count = sum(channels.values())
+        else:
+            for messages in self._iter_chunk_messages(None, None, reverse=False):
+                for msg in messages:
+                    channels[msg.topic] = channels.get(msg.topic, 0) + 1
+                    count += 1
+        if self._loose:
+            times = [m.log_time_ns for m in self._loose]
+            start = min(times) if not self._chunks else min(start, *times)
+            end = max(end, *times)
+        return SegmentInfo(
+            path=self.path,
+            session=self.session,
+            finished=finished,
+            recovered=not finished,
+            start_ns=start,
+            end_ns=end,
+            message_count=count,
+            chunk_count=len(self._chunks),
+            channels=channels,
+            bytes=len(self._data),
+            metadata=dict(self._metadata),
+        )
+
+    def _statistics_counts(self) -> dict[str, int]:
+        data = self._data
+        footer_at = len(data) - 8 - _FOOTER_SIZE
+        (summary_start,) = struct.unpack_from("<Q", data, footer_at + 9)
+        pos = summary_start
+        counts: dict[str, int] = {}
+        while pos < footer_at:
+            opcode, length = _RECORD_HEADER.unpack_from(data, pos)
+            if opcode == 0x0B:
+                body = pos + 9 + 8 + 2 + 4 + 4 + 4 + 4 + 8 + 8
+                (map_len,) = struct.unpack_from("<I", data, body)
+                p = body + 4
+                while p < body + 4 + map_len:
+                    channel_id, n = struct.unpack_from("<HQ", data, p)
+                    counts[self._topics.get(channel_id, str(channel_id))] = n
+                    p += 10
+            pos += 9 + length
+        return counts
+
+
+def _map_file(path: Path) -> bytes:
+    """Map a segment read-only: seeks touch only the pages they read, however big the file."""
+    try:
+        with open(path, "rb") as f:
+            size = os.fstat(f.fileno()).st_size
+            if size == 0:
+                raise LogReadError(str(path), "empty file")
+            return mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)  # type: ignore[return-value]
+    except FileNotFoundError as err:
+        raise LogReadError(str(path), "no such file") from err
+    except IsADirectoryError as err:
+        raise LogReadError(str(path), "is a directory, not a segment") from err
+    except PermissionError as err:
+        raise LogReadError(str(path), "permission denied") from err
+    except OSError as err:
+        raise LogReadError(str(path), f"cannot read ({err.strerror or err})") from err
+
+
+def _read_str(data: bytes, pos: int) -> tuple[str, int]:
+    (length,) = struct.unpack_from("<I", data, pos)
+    start = pos + 4
+    if start + length > len(data):
+        raise struct.error("string runs past the end of the record")
+    return data[start : start + length].decode("utf-8", errors="replace"), start + length
+
+
+# --- a log of many segments ----------------------------------------------------------------
+
+
+class Log:
+    """One or more segments read as one log, ordered by time (across tiers)."""
+
+    def __init__(self, segments: Sequence[Segment], root: Path) -> None:
+        if not segments:
+            raise LogReadError(str(root), "no TRACE segments found")
+        self.root = root
+        self.segments = sorted(segments, key=lambda s: (s.info.start_ns, s.session.segment))
+        self._starts = [s.info.start_ns for s in self.segments]
+
+    @property
+    def start_ns(self) -> int:
+        return min(s.info.start_ns for s in self.segments)
+
+    @property
+    def end_ns(self) -> int:
+        return max(s.info.end_ns for s in self.segments)
+
+    @property
+    def recovered(self) -> bool:
+        return any(s.info.recovered for s in self.segments)
+
+    def iter_cycles(self, start_ns: int | None = None, end_ns: int | None = None,
+                    *, reverse: bool = False) -> Iterator[Cycle]:
+        """Every cycle in time order across segments (or newest first)."""
+        segments = [
+            s for s in self.segments
+            if (start_ns is None or s.info.end_ns >= start_ns)
+            and (end_ns is None or s.info.start_ns <= end_ns)
+        ]
+        for segment in (reversed(segments) if reverse else segments):
+            yield from segment.iter_cycles(start_ns, end_ns, reverse=reverse)
+
+    def cycle_at(self, t_ns: int) -> Cycle:
+        """The cycle in force at ``t_ns``; ``TimeOutOfRangeError`` outside the log's range."""
+        if t_ns < self.start_ns or t_ns > self.end_ns + max(
+            (s.session.period_ns for s in self.segments), default=0
+        ):
+            raise TimeOutOfRangeError(t_ns, self.start_ns, self.end_ns)
+        index = bisect.bisect_right(self._starts, t_ns)
+        for segment in reversed(self.segments[:index]):
+            found = segment.cycle_at(t_ns)
+            if found is not None:
+                return found
+        raise TimeOutOfRangeError(t_ns, self.start_ns, self.end_ns)
+
+    def get_cycle(self, number: int) -> Cycle | None:
+        """The cycle with this number (a scan bounded to the segment that covers it)."""
+        for segment in self.segments:
+            first = segment.session.first_cycle
+            if number < first:
+                continue
+            for cycle in segment.iter_cycles():
+                if cycle.cycle == number:
+                    return cycle
+                if cycle.cycle > number:
+                    break
+        return None
+
+
+SegmentOpener = Callable[[Path], Segment]
+
+
+def find_segments(path: Path) -> list[Path]:
+    """Segment files of a log: the file itself, or every ``*.mcap`` below a directory."""
+    if path.is_dir():
+        return sorted(p for p in path.rglob("*.mcap") if p.is_file() and ".partial" not in p.name)
+    return [path]
+
+
+def open_segment(path: str | Path) -> Segment:
+    """Open one segment file; raises ``LogReadError`` / ``NotTraceLogError``."""
+    return Segment(path)
+
+
+def open_log(path: str | Path) -> Log:
+    """Open a segment file, a directory of segments, or a log root (hot/ warm/ cold/)."""
+    root = Path(path)
+    if not root.exists():
+        raise LogReadError(str(root), "no such file or directory")
+    files = find_segments(root)
+    if not files:
+        raise LogReadError(str(root), "directory holds no .mcap segments")
+    return Log([Segment(p) for p in files], root)
+
+
+def last_seal(path: Path) -> tuple[Seal, str] | None:
+    """The last seal in a segment and its digest (used to continue a chain after restart)."""
+    try:
+        segment = Segment(path)
+    except LogReadError:
+        return None
+    for cycle in segment.iter_cycles(reverse=True):
+        data = cycle.payloads.get(TOPIC_SEAL)
+        if data is not None:
+            return Seal.model_validate_json(data), digest(data)
+    return None

@@ -1,0 +1,355 @@
+"""Writing one MCAP segment of the TRACE profile, a batch of whole cycles per chunk.
+
+The `mcap` library's Writer keeps its open chunk in memory until it reaches ``chunk_size``,
+so a killed process loses that chunk. Here every ``write_batch`` call closes a chunk and
+hands it, with its message indexes, to the OS in one write: a batch that returned is on
+disk as far as the process is concerned, and a crash can only cut the batch in flight.
+A failed write is rolled back (the file is truncated to the end of the last good batch) so
+the segment stays valid and the caller can drop the batch and go on.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import zlib
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import BinaryIO
+
+import zstandard
+from mcap.records import (
+    Channel,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
+from mcap.records import (
+    Chunk as ChunkRecord,
+)
+from mcap.records import (
+    MessageIndex as MessageIndexRecord,
+)
+from mcap.records import (
+    RecordBuilder as _RecordBuilder,
+)
+
+from trace_runtime.errors import TraceError
+from trace_runtime.records import LAYER_TOPICS, PROFILE, TOPIC_SEAL
+from trace_runtime.schemas import SENSOR_SCHEMA_NAME, schema_bytes, schema_name
+from trace_runtime.session import SESSION_METADATA, SessionInfo
+
+MAGIC = b"\x89MCAP0\r\n"
+LIBRARY = "trace_runtime 0.1"
+_MESSAGE_HEADER = struct.Struct("<BQHIQQ")
+_OPCODE_MESSAGE = 0x05
+_OPCODE_SCHEMA = 0x03
+_OPCODE_CHANNEL = 0x04
+_OPCODE_METADATA = 0x0C
+
+
+def _encode(record: object) -> bytes:
+    builder = _RecordBuilder()
+    record.write(builder)  # type: ignore[attr-defined]
+    return bytes(builder.end())
+
+
+class SegmentWriteError(TraceError):
+    """A batch could not be written. ``rolled_back`` says whether the segment is still usable."""
+
+    def __init__(self, reason: str, *, rolled_back: bool) -> None:
+        super().__init__(reason)
+        self.rolled_back = rolled_back
+
+
+@dataclass(slots=True)
+class OutMessage:
+    """One message to write: channel id, per-channel sequence, log time and data."""
+
+    channel_id: int
+    sequence: int
+    log_time_ns: int
+    data: bytes
+
+
+@dataclass(slots=True)
+class _ChannelSpec:
+    id: int
+    topic: str
+    schema_id: int
+    encoding: str
+    metadata: dict[str, str] = field(default_factory=dict)
+
+
+class SegmentWriter:
+    """Writes an MCAP file: header, schemas, channels, session metadata, chunks, summary.
+
+    ``message_encoding`` and the channel table are per segment; the hot tier uses ``json``.
+    """
+
+    def __init__(
+        self,
+        stream: BinaryIO,
+        session: SessionInfo,
+        *,
+        compression: str = "zstd",
+        level: int = 3,
+        extra_metadata: Sequence[tuple[str, dict[str, str]]] = (),
+    ) -> None:
+        self._stream = stream
+        self.session = session
+        self._compression = compression
+        self._compressor = zstandard.ZstdCompressor(level=level) if compression == "zstd" else None
+        self._schemas: dict[str, Schema] = {}
+        self._channels: dict[str, _ChannelSpec] = {}
+        self._pending = b""  # schema/channel records not yet on disk
+        self._chunk_indexes: list[ChunkIndex] = []
+        self._metadata_indexes: list[MetadataIndex] = []
+        self._message_counts: dict[int, int] = {}
+        self._start_ns: int | None = None
+        self._end_ns = 0
+        self.offset = 0
+        self.broken = False
+        self.finished = False
+
+        head = _RecordBuilder()
+        head.write(MAGIC)
+        Header(profile=PROFILE, library=LIBRARY).write(head)
+        self._write_now(head.end())
+        for topic in (*LAYER_TOPICS, TOPIC_SEAL):
+            self.channel(topic)
+        self.add_metadata(SESSION_METADATA, session.to_metadata())
+        for name, data in extra_metadata:
+            self.add_metadata(name, data)
+
+    # --- channels and metadata ---------------------------------------------------------
+
+    def channel(
+        self,
+        topic: str,
+        *,
+        encoding: str = "json",
+        schema: tuple[str, str, bytes] | None = None,
+    ) -> int:
+        """Channel id of ``topic``, registering it (and its schema) on first use.
+
+        ``schema`` is (name, encoding, data); by default /trace topics get their generated
+        JSON Schema and other topics the permissive sensor schema.
+        """
+        spec = self._channels.get(topic)
+        if spec is not None:
+            return spec.id
+        if schema is None:
+            name = schema_name(topic) if topic.startswith("/trace/") else SENSOR_SCHEMA_NAME
+            schema = (name, "jsonschema", schema_bytes(topic))
+        name, schema_encoding, data = schema
+        record = self._schemas.get(name)
+        if record is None:
+            record = Schema(id=len(self._schemas) + 1, name=name, encoding=schema_encoding, data=data)
+            self._schemas[name] = record
+            self._pending += _encode(record)
+        spec = _ChannelSpec(len(self._channels) + 1, topic, record.id, encoding)
+        self._channels[topic] = spec
+        self._pending += _encode(
+            Channel(
+                id=spec.id,
+                topic=topic,
+                message_encoding=encoding,
+                schema_id=record.id,
+                metadata=spec.metadata,
+            )
+        )
+        return spec.id
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        """Write a metadata record now (outside any chunk) and index it."""
+        start = self.offset + len(self._pending)
+        record = _encode(Metadata(name=name, metadata=data))
+        self._write_now(record)
+        self._metadata_indexes.append(MetadataIndex(offset=start, length=len(record), name=name))
+
+    # --- data --------------------------------------------------------------------------
+
+    def write_batch(self, messages: Sequence[OutMessage]) -> int:
+        """Write ``messages`` as one chunk and flush it to the OS; return bytes written.
+
+        On failure the file is truncated back to the last good batch and
+        ``SegmentWriteError(rolled_back=True)`` is raised; if even that fails the segment is
+        marked broken (``rolled_back=False``) and must be abandoned.
+        """
+        if self.broken or self.finished:
+            raise SegmentWriteError("segment is closed", rolled_back=False)
+        if not messages:
+            return 0
+        records = bytearray()
+        indexes: dict[int, list[tuple[int, int]]] = {}
+        start = messages[0].log_time_ns
+        end = start
+        pack = _MESSAGE_HEADER.pack
+        for msg in messages:
+            indexes.setdefault(msg.channel_id, []).append((msg.log_time_ns, len(records)))
+            records += pack(
+                _OPCODE_MESSAGE,
+                22 + len(msg.data),
+                msg.channel_id,
+                msg.sequence,
+                msg.log_time_ns,
+                msg.log_time_ns,
+            )
+            records += msg.data
+            start = min(start, msg.log_time_ns)
+            end = max(end, msg.log_time_ns)
+        raw = bytes(records)
+        payload = self._compressor.compress(raw) if self._compressor else raw
+
+        before = self.offset
+        base = self.offset + len(self._pending)  # where this batch's chunk will start
+        out = _RecordBuilder()
+        chunk_offset = base
+        ChunkRecord(
+            compression=self._compression,
+            data=payload,
+            message_start_time=start,
+            message_end_time=end,
+            uncompressed_crc=zlib.crc32(raw),
+            uncompressed_size=len(raw),
+        ).write(out)
+        chunk_length = out.count
+        index_start = base + out.count
+        offsets: dict[int, int] = {}
+        for channel_id, entries in indexes.items():
+            offsets[channel_id] = base + out.count
+            MessageIndexRecord(channel_id=channel_id, records=entries).write(out)
+        index_length = base + out.count - index_start
+        data = out.end()
+        self._write_now(data)
+
+        self._chunk_indexes.append(
+            ChunkIndex(
+                message_start_time=start,
+                message_end_time=end,
+                chunk_start_offset=chunk_offset,
+                chunk_length=chunk_length,
+                message_index_offsets=offsets,
+                message_index_length=index_length,
+                compression=self._compression,
+                compressed_size=len(payload),
+                uncompressed_size=len(raw),
+            )
+        )
+        for msg in messages:
+            self._message_counts[msg.channel_id] = self._message_counts.get(msg.channel_id, 0) + 1
+        self._start_ns = start if self._start_ns is None else min(self._start_ns, start)
+        self._end_ns = max(self._end_ns, end)
+        return self.offset - before
+
+    def sync(self) -> None:
+        """fsync the file, when the stream has a file descriptor."""
+        try:
+            fileno = self._stream.fileno()
+        except (AttributeError, OSError, ValueError):
+            return
+        os.fsync(fileno)
+
+    def finish(self) -> None:
+        """Write the data end, the summary (schemas, channels, statistics, indexes), the footer."""
+        if self.finished or self.broken:
+            return
+        out = _RecordBuilder()
+        DataEnd(data_section_crc=0).write(out)
+        summary_start = self.offset + len(self._pending) + out.count
+        summary = _RecordBuilder()
+        groups: list[tuple[int, int, int]] = []
+
+        def group(opcode: int, records: Sequence[object]) -> None:
+            if not records:
+                return
+            begin = summary.count
+            for record in records:
+                record.write(summary)  # type: ignore[attr-defined]
+            groups.append((opcode, summary_start + begin, summary.count - begin))
+
+        group(_OPCODE_SCHEMA, list(self._schemas.values()))
+        group(
+            _OPCODE_CHANNEL,
+            [
+                Channel(
+                    id=c.id,
+                    topic=c.topic,
+                    message_encoding=c.encoding,
+                    schema_id=c.schema_id,
+                    metadata=c.metadata,
+                )
+                for c in self._channels.values()
+            ],
+        )
+        group(
+            0x0B,
+            [
+                Statistics(
+                    message_count=sum(self._message_counts.values()),
+                    schema_count=len(self._schemas),
+                    channel_count=len(self._channels),
+                    attachment_count=0,
+                    metadata_count=len(self._metadata_indexes),
+                    chunk_count=len(self._chunk_indexes),
+                    message_start_time=self._start_ns or 0,
+                    message_end_time=self._end_ns,
+                    channel_message_counts=dict(self._message_counts),
+                )
+            ],
+        )
+        group(0x08, self._chunk_indexes)
+        group(_OPCODE_METADATA + 1, self._metadata_indexes)
+        summary_bytes = summary.end()
+        offsets = _RecordBuilder()
+        for opcode, begin, length in groups:
+            SummaryOffset(group_opcode=opcode, group_start=begin, group_length=length).write(offsets)
+        offset_bytes = offsets.end()
+        summary_offset_start = summary_start + len(summary_bytes)
+        footer_prefix = struct.pack("<BQQQ", 0x02, 20, summary_start, summary_offset_start)
+        crc = zlib.crc32(summary_bytes + offset_bytes + footer_prefix)
+        tail = _RecordBuilder()
+        Footer(
+            summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=crc
+        ).write(tail)
+        self._write_now(out.end() + summary_bytes + offset_bytes + tail.end() + MAGIC)
+        self.finished = True
+        self.sync()
+
+    def close(self) -> None:
+        """Finish (if still healthy) and close the underlying stream."""
+        try:
+            self.finish()
+        finally:
+            self._stream.close()
+
+    # --- io ----------------------------------------------------------------------------
+
+    def _write_now(self, data: bytes) -> None:
+        """Write ``data`` after any pending schema/channel records, all or nothing."""
+        good = self.offset
+        data = self._pending + data
+        try:
+            self._stream.write(data)
+            self._stream.flush()
+        except (OSError, ValueError) as err:
+            self._roll_back(good, err)
+        self._pending = b""
+        self.offset = good + len(data)
+
+    def _roll_back(self, good: int, err: Exception) -> None:
+        try:
+            self._stream.seek(good)
+            self._stream.truncate(good)
+            self._stream.flush()
+        except (OSError, ValueError):
+            self.broken = True
+            raise SegmentWriteError(f"write failed ({err}); rollback failed", rolled_back=False) from err
+        raise SegmentWriteError(f"write failed ({err})", rolled_back=True) from err
