@@ -1,0 +1,84 @@
+"""The ``trace-audit`` typer app, its shared options, and the one place errors become exit codes.
+
+Exit codes (documented in the README and in ``--help``):
+  0 ok · 1 findings (verify failed, a metric under its threshold) · 2 usage (bad option,
+  t outside the log, unknown action) · 3 unreadable input (missing, not MCAP, truncated,
+  not a TRACE log, empty).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable
+from typing import Annotated, Any, NoReturn, TypeVar
+
+import typer
+
+from trace_runtime.errors import LogReadError, TimeOutOfRangeError, TraceError, UsageError
+
+T = TypeVar("T")
+
+EXIT_OK = 0
+EXIT_FINDINGS = 1
+EXIT_USAGE = 2
+EXIT_UNREADABLE = 3
+
+app = typer.Typer(
+    name="trace-audit",
+    help=(
+        "Investigate TRACE robot decision logs: explain a decision, find why the robot "
+        "stopped, measure auditability, verify integrity, compact storage tiers.\n\n"
+        "Exit codes: 0 ok, 1 findings, 2 usage error, 3 unreadable input."
+    ),
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode="rich",
+)
+
+JsonOption = Annotated[bool, typer.Option("--json", help="Print machine-readable JSON on stdout.")]
+PlainOption = Annotated[
+    bool, typer.Option("--plain", help="No colour or box drawing (for logs and CI).")
+]
+
+
+def fail(message: str, code: int) -> NoReturn:
+    """Print one line on stderr and exit with ``code``."""
+    sys.stderr.write(f"trace-audit: {message}\n")
+    raise typer.Exit(code)
+
+
+def exit_code_for(err: TraceError) -> int:
+    """The documented exit code of an error raised by the library."""
+    if isinstance(err, LogReadError):
+        return EXIT_UNREADABLE
+    if isinstance(err, TimeOutOfRangeError | UsageError):
+        return EXIT_USAGE
+    return EXIT_UNREADABLE
+
+
+def guarded(call: Callable[[], T]) -> T:
+    """Run a library call; turn its ``TraceError`` into one stderr line and an exit code."""
+    try:
+        return call()
+    except TraceError as err:
+        fail(str(err), exit_code_for(err))
+    except KeyboardInterrupt:
+        fail("interrupted", 130)
+
+
+def print_json(value: Any) -> None:
+    """Write ``value`` (pydantic model, dataclass tree or plain data) as JSON on stdout."""
+    from trace_audit.jsonout import to_jsonable
+
+    sys.stdout.write(json.dumps(to_jsonable(value), indent=2, ensure_ascii=False) + "\n")
+
+
+def console(plain: bool = False) -> Any:
+    """A rich console; plain (no colour, ASCII boxes) when asked or when stdout is not a tty."""
+    from rich.console import Console
+
+    if plain:
+        return Console(no_color=True, highlight=False, emoji=False, soft_wrap=False, width=100)
+    return Console(highlight=False)

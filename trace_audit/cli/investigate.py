@@ -1,0 +1,3 @@
+"""trace-audit commands: investigate (registered on the shared app)."""
+
+from __future__ import annotations
