@@ -74,7 +74,9 @@ class Cycle:
     """One decision cycle as logged: its layer messages, seal and sensor readings.
 
     ``payloads`` maps a /trace topic to its canonical bytes. A warm-tier summary cycle has
-    ``summary`` set and only the payloads that tier kept.
+    only the payloads that tier kept in full (at least the seal) and ``summary``: the pruned
+    layer messages keyed by topic, shaped like the full JSON with the same field names.
+    ``layer(topic)`` gives either, so analysis code reads both kinds of cycle alike.
     """
 
     cycle: int
@@ -88,10 +90,23 @@ class Cycle:
     def sealed(self) -> bool:
         return TOPIC_SEAL in self.payloads
 
+    @property
+    def is_summary(self) -> bool:
+        return self.summary is not None
+
     def json(self, topic: str) -> Any:
-        """The message on ``topic`` parsed as plain JSON, or None if absent."""
+        """The full message on ``topic`` parsed as plain JSON, or None if absent."""
         data = self.payloads.get(topic)
         return None if data is None else orjson.loads(data)
+
+    def layer(self, topic: str) -> Any:
+        """The message on ``topic`` as JSON: the full one, else the warm summary's, else None."""
+        data = self.payloads.get(topic)
+        if data is not None:
+            return orjson.loads(data)
+        if self.summary is not None:
+            return self.summary.get(topic)
+        return None
 
     @property
     def seal(self) -> Seal | None:
