@@ -9,7 +9,15 @@ from trace_runtime.errors import (
     UsageError,
 )
 from trace_runtime.logger import AuditLogger, CycleBuilder, LoggerConfig, LoggerStats
-from trace_runtime.reader import Cycle, Log, RawMessage, Segment, SegmentInfo, open_log, open_segment
+from trace_runtime.reader import (
+    Cycle,
+    Log,
+    RawMessage,
+    Segment,
+    SegmentInfo,
+    open_log,
+    open_segment,
+)
 from trace_runtime.records import (
     Action,
     Alternative,

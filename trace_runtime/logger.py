@@ -13,6 +13,7 @@ and the next seal that is written carries the count in ``dropped``.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import queue
 import re
@@ -22,7 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Any, BinaryIO, Literal
+from typing import Any, BinaryIO, Literal, Protocol
 
 from trace_runtime.chain import digest
 from trace_runtime.codec import encode_json, encode_layer, encode_seal
@@ -41,7 +42,7 @@ from trace_runtime.records import (
     _Record,
     validate_record,
 )
-from trace_runtime.segment import OutMessage, SegmentWriter, SegmentWriteError
+from trace_runtime.segment import OutMessage, SegmentWriteError, SegmentWriter
 from trace_runtime.session import SessionInfo
 
 log = logging.getLogger("trace_runtime")
@@ -50,7 +51,7 @@ Opener = Callable[[Path], BinaryIO]
 
 
 def _default_opener(path: Path) -> BinaryIO:
-    return open(path, "wb")  # noqa: SIM115 - owned and closed by SegmentWriter
+    return open(path, "wb")
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,8 +99,16 @@ class _PendingCycle:
     cycle: int
     t_ns: int
     layers: dict[str, _Record]
-    sensors: list[OutMessage | tuple[str, int, int, bytes]]
+    sensors: list[tuple[str, int, int, bytes]]
     dropped_before: int
+
+
+class CycleSink(Protocol):
+    """What a ``CycleBuilder`` hands its cycle to: the logger, or a test capture."""
+
+    def _next_sensor_sequence(self, topic: str) -> int: ...
+    def _commit(self, builder: CycleBuilder) -> None: ...
+    def _abort(self, builder: CycleBuilder) -> None: ...
 
 
 class CycleBuilder:
@@ -107,12 +116,12 @@ class CycleBuilder:
 
     __slots__ = ("_committed", "_layers", "_logger", "_sensors", "cycle", "t_ns")
 
-    def __init__(self, logger: AuditLogger, cycle: int, t_ns: int) -> None:
+    def __init__(self, logger: CycleSink, cycle: int, t_ns: int) -> None:
         self._logger = logger
         self.cycle = cycle
         self.t_ns = t_ns
         self._layers: dict[str, _Record] = {}
-        self._sensors: list[OutMessage | tuple[str, int, int, bytes]] = []
+        self._sensors: list[tuple[str, int, int, bytes]] = []
         self._committed = False
 
     def sensor(self, topic: str, payload: Any, t_ns: int | None = None) -> EvidenceRef:
@@ -127,7 +136,9 @@ class CycleBuilder:
         log_time = self.t_ns if t_ns is None else t_ns
         sequence = self._logger._next_sensor_sequence(topic)
         self._sensors.append((topic, sequence, log_time, data))
-        return EvidenceRef(topic=topic, log_time_ns=log_time, sequence=sequence, digest=digest(data))
+        return EvidenceRef(
+            topic=topic, log_time_ns=log_time, sequence=sequence, digest=digest(data)
+        )
 
     def perception(self, record: Any) -> None:
         """Add layer 1 (a ``Perception`` or a dict of its fields)."""
@@ -206,7 +217,7 @@ class AuditLogger:
             raise UsageError(f"period_s must be positive, got {period_s}")
         self.config = config or LoggerConfig()
         self.path = Path(path)
-        self.is_root = not self.path.suffix == ".mcap"
+        self.is_root = self.path.suffix != ".mcap"
         self.stats = LoggerStats()
         self._opener = self.config.opener or _default_opener
         self._lock = threading.Lock()
@@ -383,7 +394,7 @@ class AuditLogger:
         except SegmentWriteError as err:
             self._lose(batch, err, abandon=not err.rolled_back)
             return
-        except Exception as err:  # noqa: BLE001 - the robot must outlive any logger bug
+        except Exception as err:
             self._lose(batch, err, abandon=True)
             return
         self._prev_seal = last_seal
@@ -401,18 +412,18 @@ class AuditLogger:
         dropped = self._dropped_since_seal
         seal_channel = segment.channel(TOPIC_SEAL)
         for pending in batch:
-            for sensor in pending.sensors:
-                if isinstance(sensor, tuple):
-                    topic, sequence, log_time, data = sensor
-                    sensor = OutMessage(segment.channel(topic), sequence, log_time, data)
-                messages.append(sensor)
+            for topic, sequence, log_time, data in pending.sensors:
+                messages.append(OutMessage(segment.channel(topic), sequence, log_time, data))
             digests: dict[str, str] = {}
             for topic, record in pending.layers.items():
                 data = encode_layer(pending.cycle, pending.t_ns, record)
                 digests[topic] = digest(data)
-                messages.append(OutMessage(segment.channel(topic), pending.cycle, pending.t_ns, data))
-            seal = Seal(cycle=pending.cycle, t_ns=pending.t_ns, digests=digests, prev=prev,
-                        dropped=dropped)
+                messages.append(
+                    OutMessage(segment.channel(topic), pending.cycle, pending.t_ns, data)
+                )
+            seal = Seal(
+                cycle=pending.cycle, t_ns=pending.t_ns, digests=digests, prev=prev, dropped=dropped
+            )
             data = encode_seal(seal)
             messages.append(OutMessage(seal_channel, pending.cycle, pending.t_ns, data))
             prev = digest(data)
@@ -425,10 +436,8 @@ class AuditLogger:
         self._report_once(f"io:{type(err).__name__}", f"audit write failed, dropping cycles: {err}")
         if abandon and self._segment is not None:
             # The file cannot be trusted past its last good batch; readers recover up to it.
-            try:
+            with contextlib.suppress(Exception):  # already failing; nothing more to do
                 self._segment._stream.close()
-            except Exception:  # noqa: BLE001 - already failing; nothing more to do
-                pass
             self._segment = None
 
     def _maybe_rotate(self, t_ns: int) -> None:
@@ -454,7 +463,7 @@ class AuditLogger:
             return
         try:
             segment.close()
-        except Exception as err:  # noqa: BLE001 - closing must not raise into the robot either
+        except Exception as err:
             self._report_once("close", f"could not finish segment: {err}")
 
     def _segment_path(self, session: SessionInfo) -> Path:

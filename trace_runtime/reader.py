@@ -13,6 +13,7 @@ their own assembler with ``register_assembler``.
 from __future__ import annotations
 
 import bisect
+import contextlib
 import logging
 import mmap
 import os
@@ -217,10 +218,8 @@ def _assembler_for(tier: str) -> Assembler:
         # free of them until a segment of that tier is actually opened.
         import importlib
 
-        try:
+        with contextlib.suppress(ImportError):
             importlib.import_module("trace_runtime.tiers")
-        except ImportError:
-            pass
     return _ASSEMBLERS.get(tier, assemble_hot)
 
 
@@ -314,7 +313,7 @@ class Segment:
             return None
         profile, _ = _read_str(data, pos + 9)
         self._profile = profile
-        return pos + 9 + length
+        return int(pos + 9 + length)
 
     def _scan(self) -> None:
         """Walk every record after the header; stop at the first incomplete one."""
@@ -365,7 +364,7 @@ class Segment:
         return True
 
     def _parse_schema(self, body: int) -> None:
-        schema_id, = struct.unpack_from("<H", self._data, body)
+        (schema_id,) = struct.unpack_from("<H", self._data, body)
         name, _ = _read_str(self._data, body + 2)
         self._schemas[schema_id] = name
 
@@ -422,11 +421,10 @@ class Segment:
             if opcode == _OP_MESSAGE:
                 channel_id, sequence, log_time, _publish = _MESSAGE_FIXED.unpack_from(raw, body)
                 messages.append(
-                    RawMessage(self._topics[channel_id], sequence, log_time,
-                               raw[body + 22 : body + length])
+                    RawMessage(
+                        self._topics[channel_id], sequence, log_time, raw[body + 22 : body + length]
+                    )
                 )
-            elif opcode == _OP_SCHEMA:
-                self._parse_inner(raw, opcode, body)
             elif opcode == _OP_CHANNEL:
                 self._parse_inner(raw, opcode, body)
             pos = body + length
@@ -441,38 +439,43 @@ class Segment:
     def chunks(self) -> list[ChunkInfo]:
         return list(self._chunks)
 
-    def iter_messages(self, start_ns: int | None = None, end_ns: int | None = None,
-                      *, reverse: bool = False) -> Iterator[RawMessage]:
+    def iter_messages(
+        self, start_ns: int | None = None, end_ns: int | None = None, *, reverse: bool = False
+    ) -> Iterator[RawMessage]:
         """Raw messages with ``start_ns <= log_time <= end_ns``, in file order per chunk."""
         for messages in self._iter_chunk_messages(start_ns, end_ns, reverse=reverse):
-            for msg in (reversed(messages) if reverse else messages):
+            for msg in reversed(messages) if reverse else messages:
                 if (start_ns is None or msg.log_time_ns >= start_ns) and (
                     end_ns is None or msg.log_time_ns <= end_ns
                 ):
                     yield msg
 
-    def _iter_chunk_messages(self, start_ns: int | None, end_ns: int | None,
-                             *, reverse: bool) -> Iterator[list[RawMessage]]:
+    def _iter_chunk_messages(
+        self, start_ns: int | None, end_ns: int | None, *, reverse: bool
+    ) -> Iterator[list[RawMessage]]:
         chunks = [
-            c for c in self._chunks
-            if (start_ns is None or c.end_ns >= start_ns) and (end_ns is None or c.start_ns <= end_ns)
+            c
+            for c in self._chunks
+            if (start_ns is None or c.end_ns >= start_ns)
+            and (end_ns is None or c.start_ns <= end_ns)
         ]
         if self._loose and not reverse:
             yield self._loose
-        for chunk in (reversed(chunks) if reverse else chunks):
+        for chunk in reversed(chunks) if reverse else chunks:
             yield self._decode_chunk(chunk)
         if self._loose and reverse:
             yield self._loose
 
     # --- cycles ----------------------------------------------------------------------------
 
-    def iter_cycles(self, start_ns: int | None = None, end_ns: int | None = None,
-                    *, reverse: bool = False) -> Iterator[Cycle]:
+    def iter_cycles(
+        self, start_ns: int | None = None, end_ns: int | None = None, *, reverse: bool = False
+    ) -> Iterator[Cycle]:
         """Cycles with ``start_ns <= t_ns <= end_ns``, oldest first (or newest first)."""
         name = self.path.name
         for messages in self._iter_chunk_messages(start_ns, end_ns, reverse=reverse):
             cycles = self._assemble(messages, name)
-            for cycle in (reversed(cycles) if reverse else cycles):
+            for cycle in reversed(cycles) if reverse else cycles:
                 if (start_ns is None or cycle.t_ns >= start_ns) and (
                     end_ns is None or cycle.t_ns <= end_ns
                 ):
@@ -484,8 +487,11 @@ class Segment:
         # The chunk that starts last at or before t holds the answer unless t falls before
         # its first cycle (e.g. sensors earlier than the cycle): then step back one chunk.
         for chunk in reversed(self._chunks[max(0, index - 2) : index]):
-            cycles = [c for c in self._assemble(self._decode_chunk(chunk), self.path.name)
-                      if c.t_ns <= t_ns]
+            cycles = [
+                c
+                for c in self._assemble(self._decode_chunk(chunk), self.path.name)
+                if c.t_ns <= t_ns
+            ]
             if cycles:
                 return cycles[-1]
         if self._loose:
@@ -596,15 +602,17 @@ class Log:
     def recovered(self) -> bool:
         return any(s.info.recovered for s in self.segments)
 
-    def iter_cycles(self, start_ns: int | None = None, end_ns: int | None = None,
-                    *, reverse: bool = False) -> Iterator[Cycle]:
+    def iter_cycles(
+        self, start_ns: int | None = None, end_ns: int | None = None, *, reverse: bool = False
+    ) -> Iterator[Cycle]:
         """Every cycle in time order across segments (or newest first)."""
         segments = [
-            s for s in self.segments
+            s
+            for s in self.segments
             if (start_ns is None or s.info.end_ns >= start_ns)
             and (end_ns is None or s.info.start_ns <= end_ns)
         ]
-        for segment in (reversed(segments) if reverse else segments):
+        for segment in reversed(segments) if reverse else segments:
             yield from segment.iter_cycles(start_ns, end_ns, reverse=reverse)
 
     def cycle_at(self, t_ns: int) -> Cycle:

@@ -65,4 +65,4 @@ def write_schemas(directory: Path) -> list[Path]:
 if __name__ == "__main__":
     target = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("schemas")
     for path in write_schemas(target):
-        print(path)  # noqa: T201
+        print(path)

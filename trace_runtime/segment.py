@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import BinaryIO
 
 import zstandard
+from mcap.data_stream import RecordBuilder as _RecordBuilder
 from mcap.records import (
     Channel,
     ChunkIndex,
@@ -35,9 +36,6 @@ from mcap.records import (
 )
 from mcap.records import (
     MessageIndex as MessageIndexRecord,
-)
-from mcap.records import (
-    RecordBuilder as _RecordBuilder,
 )
 
 from trace_runtime.errors import TraceError
@@ -57,7 +55,12 @@ _OPCODE_METADATA = 0x0C
 def _encode(record: object) -> bytes:
     builder = _RecordBuilder()
     record.write(builder)  # type: ignore[attr-defined]
-    return bytes(builder.end())
+    return _end(builder)
+
+
+def _end(builder: _RecordBuilder) -> bytes:
+    """The builder's bytes (the mcap library leaves ``end`` unannotated)."""
+    return bytes(builder.end())  # type: ignore[no-untyped-call]
 
 
 class SegmentWriteError(TraceError):
@@ -121,7 +124,7 @@ class SegmentWriter:
         head = _RecordBuilder()
         head.write(MAGIC)
         Header(profile=PROFILE, library=LIBRARY).write(head)
-        self._write_now(head.end())
+        self._write_now(_end(head))
         for topic in (*LAYER_TOPICS, TOPIC_SEAL):
             self.channel(topic)
         self.add_metadata(SESSION_METADATA, session.to_metadata())
@@ -151,7 +154,9 @@ class SegmentWriter:
         name, schema_encoding, data = schema
         record = self._schemas.get(name)
         if record is None:
-            record = Schema(id=len(self._schemas) + 1, name=name, encoding=schema_encoding, data=data)
+            record = Schema(
+                id=len(self._schemas) + 1, name=name, encoding=schema_encoding, data=data
+            )
             self._schemas[name] = record
             self._pending += _encode(record)
         spec = _ChannelSpec(len(self._channels) + 1, topic, record.id, encoding)
@@ -227,7 +232,7 @@ class SegmentWriter:
             offsets[channel_id] = base + out.count
             MessageIndexRecord(channel_id=channel_id, records=entries).write(out)
         index_length = base + out.count - index_start
-        data = out.end()
+        data = _end(out)
         self._write_now(data)
 
         self._chunk_indexes.append(
@@ -307,11 +312,13 @@ class SegmentWriter:
         )
         group(0x08, self._chunk_indexes)
         group(_OPCODE_METADATA + 1, self._metadata_indexes)
-        summary_bytes = summary.end()
+        summary_bytes = _end(summary)
         offsets = _RecordBuilder()
         for opcode, begin, length in groups:
-            SummaryOffset(group_opcode=opcode, group_start=begin, group_length=length).write(offsets)
-        offset_bytes = offsets.end()
+            SummaryOffset(group_opcode=opcode, group_start=begin, group_length=length).write(
+                offsets
+            )
+        offset_bytes = _end(offsets)
         summary_offset_start = summary_start + len(summary_bytes)
         footer_prefix = struct.pack("<BQQQ", 0x02, 20, summary_start, summary_offset_start)
         crc = zlib.crc32(summary_bytes + offset_bytes + footer_prefix)
@@ -319,7 +326,7 @@ class SegmentWriter:
         Footer(
             summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=crc
         ).write(tail)
-        self._write_now(out.end() + summary_bytes + offset_bytes + tail.end() + MAGIC)
+        self._write_now(_end(out) + summary_bytes + offset_bytes + _end(tail) + MAGIC)
         self.finished = True
         self.sync()
 
@@ -351,5 +358,7 @@ class SegmentWriter:
             self._stream.flush()
         except (OSError, ValueError):
             self.broken = True
-            raise SegmentWriteError(f"write failed ({err}); rollback failed", rolled_back=False) from err
+            raise SegmentWriteError(
+                f"write failed ({err}); rollback failed", rolled_back=False
+            ) from err
         raise SegmentWriteError(f"write failed ({err})", rolled_back=True) from err

@@ -1,0 +1,9 @@
+#!/usr/bin/env bash
+# Everything CI checks: lint, format, strict types, and the test suite.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/bootstrap.sh
+.venv/bin/ruff check .
+.venv/bin/ruff format --check .
+.venv/bin/mypy trace_runtime trace_audit sim
+.venv/bin/python -m pytest "$@"
