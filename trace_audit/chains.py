@@ -1,0 +1,435 @@
+"""Causal chains of one decision: from each factor the action names down to a sensor reading.
+
+This is the one chain walker of the investigator. It reads plain JSON dicts (what
+``Cycle.layer(topic)`` returns, for full and warm-summary cycles alike) with dicts and sets
+only, so metrics over a long log stay fast.
+
+The documented chain of a factor, top to bottom (one *level* per line):
+
+1. ``factor_node``    the factor's ``node`` is a node of this cycle's belief graph;
+2. ``belief_path``    belief edges (parent -> child), walked from the factor node up through
+                      parents, reach a node with ``kind == "entity"``;
+3. ``entity``         that entity node's ``entity`` names an entity of this cycle's perception;
+4. ``evidence_ref``   that entity has evidence whose ``ref`` is recorded (not null);
+5. ``sensor_reading`` the ref resolves to a logged ``/sensors`` message: same topic and
+                      ``log_time_ns``, and, when the ref carries them, the same sequence and
+                      the SHA-256 of the message data.
+
+Expected depth is 5 for a factor on a derived-state node, and 4 for a factor whose node is
+itself an entity node (it has no belief path to document). A factor whose node is not in
+the belief graph is taken as a state factor (expected 5): nothing logged says otherwise.
+The documented depth is the number of consecutive documented levels from the top; a level
+below the first missing one is reported as missing ("not reached"), never skipped, because
+without it nothing says which entity or evidence the chain would have continued to.
+
+Where a factor has several routes (a node with several parents, an entity with several
+evidence items), the chain reported is the deepest one; the first fully documented route
+in breadth-first order (nearest entity first) wins ties.
+
+Evidence refs resolve against the sensor messages of the decision's own cycle and of the
+``SensorWindow.cycles`` cycles before it (default 50, i.e. 5 s at 10 Hz); a ref to a
+reading older than that, to a later cycle, or to an external recording does not resolve.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import deque
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from trace_runtime.reader import Cycle, RawMessage
+from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF, TOPIC_PERCEPTION
+
+__all__ = [
+    "DEFAULT_SENSOR_WINDOW",
+    "EXPECTED_DEPTH_ENTITY",
+    "EXPECTED_DEPTH_STATE",
+    "LEVELS",
+    "DecisionChains",
+    "FactorChain",
+    "Link",
+    "SensorWindow",
+    "trace_cycle",
+    "trace_layers",
+]
+
+LEVELS = ("factor_node", "belief_path", "entity", "evidence_ref", "sensor_reading")
+EXPECTED_DEPTH_STATE = 5
+EXPECTED_DEPTH_ENTITY = 4
+DEFAULT_SENSOR_WINDOW = 50
+
+_NOT_REACHED = "not reached: the chain is broken above"
+
+
+@dataclass(frozen=True, slots=True)
+class Link:
+    """One level of a factor's chain: what it points at, and whether the log documents it."""
+
+    level: str
+    documented: bool
+    ref: str
+    detail: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class FactorChain:
+    """The documented chain of one factor of a decision."""
+
+    node: str
+    name: str
+    links: tuple[Link, ...]
+    depth: int
+    expected_depth: int
+
+    @property
+    def traceable(self) -> bool:
+        return self.depth == self.expected_depth
+
+    @property
+    def partial(self) -> float:
+        return self.depth / self.expected_depth
+
+    @property
+    def missing(self) -> Link | None:
+        """The first missing link (where the chain breaks), or None when traceable."""
+        for link in self.links:
+            if not link.documented:
+                return link
+        return None
+
+
+@dataclass(frozen=True, slots=True)
+class DecisionChains:
+    """Every factor chain of one decision and its ET / ET_partial.
+
+    A decision whose action is not logged, or names no factor, has ET = ET_partial = 0:
+    nothing links it to evidence (``reason`` says which).
+    """
+
+    cycle: int
+    t_ns: int
+    factors: tuple[FactorChain, ...]
+    et: float
+    et_partial: float
+    reason: str = ""
+
+    @property
+    def fully_traceable(self) -> bool:
+        return bool(self.factors) and all(f.traceable for f in self.factors)
+
+
+class SensorWindow:
+    """The sensor messages of the current cycle and of a bounded number of cycles before it.
+
+    ``push`` once per cycle, oldest cycle first, before resolving that cycle's refs.
+    Memory is bounded by ``cycles`` cycles of sensor messages.
+    """
+
+    __slots__ = ("_batches", "_index", "cycles")
+
+    def __init__(self, cycles: int = DEFAULT_SENSOR_WINDOW) -> None:
+        if cycles < 0:
+            raise ValueError(f"sensor window must be >= 0 cycles, got {cycles}")
+        self.cycles = cycles
+        # (topic, log_time_ns) -> entries [message, digest or None]; digests are computed
+        # only for messages a ref with a digest actually points at.
+        self._index: dict[tuple[str, int], list[list[Any]]] = {}
+        self._batches: deque[list[tuple[str, int]]] = deque()
+
+    def push(self, sensors: Sequence[RawMessage]) -> None:
+        """Add one cycle's sensor messages; forget the cycle that falls out of the window."""
+        keys: list[tuple[str, int]] = []
+        index = self._index
+        for msg in sensors:
+            key = (msg.topic, msg.log_time_ns)
+            entries = index.get(key)
+            if entries is None:
+                index[key] = [[msg, None]]
+            else:
+                entries.append([msg, None])
+            keys.append(key)
+        self._batches.append(keys)
+        while len(self._batches) > self.cycles + 1:
+            for key in self._batches.popleft():
+                entries = index.get(key)
+                if entries is not None:
+                    entries.pop(0)
+                    if not entries:
+                        del index[key]
+
+    def clear(self) -> None:
+        self._index.clear()
+        self._batches.clear()
+
+    def resolve(self, ref: Mapping[str, Any]) -> str:
+        """'' when the ref resolves to a message in the window, else why it does not."""
+        topic = ref.get("topic")
+        t_ns = ref.get("log_time_ns")
+        if not isinstance(topic, str) or not isinstance(t_ns, int):
+            return "malformed ref (topic or log_time_ns missing)"
+        entries = self._index.get((topic, t_ns))
+        if not entries:
+            return f"no {topic} message at log_time_ns={t_ns} in the sensor window"
+        sequence = ref.get("sequence")
+        want = ref.get("digest")
+        why = ""
+        for entry in entries:
+            msg: RawMessage = entry[0]
+            if sequence is not None and msg.sequence != sequence:
+                why = why or f"sequence {sequence} does not match the logged {msg.sequence}"
+                continue
+            if want is not None:
+                got = entry[1]
+                if got is None:
+                    got = entry[1] = hashlib.sha256(msg.data).hexdigest()
+                if got != want:
+                    why = "digest does not match the logged message data"
+                    continue
+            return ""
+        return why
+
+
+def trace_cycle(cycle: Cycle, window: SensorWindow | None = None) -> DecisionChains:
+    """The factor chains of one cycle; ``window`` must already hold this cycle's sensors.
+
+    Without a window, refs resolve against this cycle's own sensor messages only.
+    """
+    if window is None:
+        window = SensorWindow(0)
+        window.push(cycle.sensors)
+    return trace_layers(
+        cycle.cycle,
+        cycle.t_ns,
+        cycle.layer(TOPIC_ACTION),
+        cycle.layer(TOPIC_BELIEF),
+        cycle.layer(TOPIC_PERCEPTION),
+        window=window,
+    )
+
+
+def trace_layers(
+    cycle: int,
+    t_ns: int,
+    action: Mapping[str, Any] | None,
+    belief: Mapping[str, Any] | None,
+    perception: Mapping[str, Any] | None,
+    *,
+    window: SensorWindow,
+) -> DecisionChains:
+    """The factor chains of one decision given its layer messages as plain JSON dicts."""
+    if not isinstance(action, Mapping):
+        return DecisionChains(cycle, t_ns, (), 0.0, 0.0, "action not logged")
+    rationale = action.get("rationale")
+    raw_factors = rationale.get("factors") if isinstance(rationale, Mapping) else None
+    if not raw_factors:
+        return DecisionChains(cycle, t_ns, (), 0.0, 0.0, "action names no factors")
+    walker = _Walker(belief, perception, window)
+    chains = tuple(walker.factor(f) for f in raw_factors if isinstance(f, Mapping))
+    if not chains:
+        return DecisionChains(cycle, t_ns, (), 0.0, 0.0, "action names no factors")
+    n = len(chains)
+    et = sum(1 for c in chains if c.depth == c.expected_depth) / n
+    et_partial = sum(c.depth / c.expected_depth for c in chains) / n
+    return DecisionChains(cycle, t_ns, chains, et, et_partial)
+
+
+# --- the walk ----------------------------------------------------------------------------
+
+
+class _Walker:
+    """Per-cycle lookups built once and shared by every factor of the decision."""
+
+    __slots__ = (
+        "_belief_missing",
+        "_entities",
+        "_entity_memo",
+        "_nodes",
+        "_parents",
+        "_perception_missing",
+        "_window",
+    )
+
+    def __init__(
+        self,
+        belief: Mapping[str, Any] | None,
+        perception: Mapping[str, Any] | None,
+        window: SensorWindow,
+    ) -> None:
+        self._window = window
+        self._belief_missing = not isinstance(belief, Mapping)
+        self._perception_missing = not isinstance(perception, Mapping)
+        nodes: dict[str, Mapping[str, Any]] = {}
+        parents: dict[str, list[str]] = {}
+        if isinstance(belief, Mapping):
+            for node in _dicts(belief.get("nodes")):
+                node_id = node.get("id")
+                if isinstance(node_id, str):
+                    nodes[node_id] = node
+            for edge in _dicts(belief.get("edges")):
+                parent, child = edge.get("parent"), edge.get("child")
+                if isinstance(parent, str) and isinstance(child, str):
+                    parents.setdefault(child, []).append(parent)
+        entities: dict[str, Mapping[str, Any]] = {}
+        if isinstance(perception, Mapping):
+            for entity in _dicts(perception.get("entities")):
+                entity_id = entity.get("id")
+                if isinstance(entity_id, str):
+                    entities[entity_id] = entity
+        self._nodes = nodes
+        self._parents = parents
+        self._entities = entities
+        self._entity_memo: dict[str, tuple[Link, ...]] = {}
+
+    def factor(self, factor: Mapping[str, Any]) -> FactorChain:
+        node_id = str(factor.get("node") or "")
+        name = str(factor.get("name") or "")
+        node = self._nodes.get(node_id)
+        if node is None:
+            why = (
+                "belief layer not logged"
+                if self._belief_missing
+                else f"node {node_id!r} is not in the belief graph"
+            )
+            links = (
+                Link("factor_node", False, node_id, why),
+                *(Link(level, False, "", _NOT_REACHED) for level in LEVELS[1:]),
+            )
+            return FactorChain(node_id, name, links, 0, EXPECTED_DEPTH_STATE)
+        top = Link("factor_node", True, node_id)
+        if node.get("kind") == "entity":
+            below = self._entity_links(node)
+            return _chain(node_id, name, (top, *below), EXPECTED_DEPTH_ENTITY)
+        reached = self._entity_nodes_above(node_id)
+        if not reached:
+            links = (
+                top,
+                Link(
+                    "belief_path",
+                    False,
+                    node_id,
+                    f"no documented belief edges lead from {node_id!r} to an entity node",
+                ),
+                *(Link(level, False, "", _NOT_REACHED) for level in LEVELS[2:]),
+            )
+            return FactorChain(node_id, name, links, 1, EXPECTED_DEPTH_STATE)
+        best: tuple[Link, ...] | None = None
+        best_depth = -1
+        for path in reached:
+            below = self._entity_links(self._nodes[path[-1]])
+            depth = _depth(below)
+            if depth > best_depth:
+                best, best_depth = (Link("belief_path", True, " <- ".join(path)), *below), depth
+                if depth == len(below):
+                    break
+        assert best is not None
+        return _chain(node_id, name, (top, *best), EXPECTED_DEPTH_STATE)
+
+    def _entity_nodes_above(self, start: str) -> list[list[str]]:
+        """Paths (factor node first) to every entity node reachable through parents, BFS."""
+        nodes, parents = self._nodes, self._parents
+        seen = {start}
+        queue: deque[list[str]] = deque([[start]])
+        found: list[list[str]] = []
+        while queue:
+            path = queue.popleft()
+            for parent in parents.get(path[-1], ()):
+                if parent in seen:
+                    continue
+                seen.add(parent)
+                node = nodes.get(parent)
+                if node is None:
+                    continue  # an edge to a node the graph does not hold documents nothing
+                step = [*path, parent]
+                if node.get("kind") == "entity":
+                    found.append(step)
+                else:
+                    queue.append(step)
+        return found
+
+    def _entity_links(self, node: Mapping[str, Any]) -> tuple[Link, ...]:
+        """The entity, evidence_ref and sensor_reading links below an entity node."""
+        entity_id = node.get("entity")
+        if not isinstance(entity_id, str) or not entity_id:
+            return (
+                Link(
+                    "entity",
+                    False,
+                    str(node.get("id", "")),
+                    "entity node names no perception entity",
+                ),
+                Link("evidence_ref", False, "", _NOT_REACHED),
+                Link("sensor_reading", False, "", _NOT_REACHED),
+            )
+        memo = self._entity_memo.get(entity_id)
+        if memo is not None:
+            return memo
+        links = self._entity_links_uncached(entity_id)
+        self._entity_memo[entity_id] = links
+        return links
+
+    def _entity_links_uncached(self, entity_id: str) -> tuple[Link, ...]:
+        entity = self._entities.get(entity_id)
+        if entity is None:
+            why = (
+                "perception layer not logged"
+                if self._perception_missing
+                else f"entity {entity_id!r} is not in this cycle's perception"
+            )
+            return (
+                Link("entity", False, entity_id, why),
+                Link("evidence_ref", False, "", _NOT_REACHED),
+                Link("sensor_reading", False, "", _NOT_REACHED),
+            )
+        top = Link("entity", True, entity_id)
+        evidence = list(_dicts(entity.get("evidence")))
+        refs = [e["ref"] for e in evidence if isinstance(e.get("ref"), Mapping)]
+        if not refs:
+            why = (
+                f"entity {entity_id!r} has no evidence"
+                if not evidence
+                else f"none of the {len(evidence)} evidence items of {entity_id!r} has a ref"
+            )
+            return (
+                top,
+                Link("evidence_ref", False, entity_id, why),
+                Link("sensor_reading", False, "", _NOT_REACHED),
+            )
+        first_why = ""
+        for ref in refs:
+            why = self._window.resolve(ref)
+            if not why:
+                label = _ref_label(ref)
+                return (top, Link("evidence_ref", True, label), Link("sensor_reading", True, label))
+            first_why = first_why or why
+        label = _ref_label(refs[0])
+        more = f" (and {len(refs) - 1} other refs)" if len(refs) > 1 else ""
+        return (
+            top,
+            Link("evidence_ref", True, label),
+            Link("sensor_reading", False, label, first_why + more),
+        )
+
+
+def _chain(node: str, name: str, links: tuple[Link, ...], expected: int) -> FactorChain:
+    return FactorChain(node, name, links, _depth(links), expected)
+
+
+def _depth(links: Iterable[Link]) -> int:
+    depth = 0
+    for link in links:
+        if not link.documented:
+            break
+        depth += 1
+    return depth
+
+
+def _dicts(value: Any) -> Iterable[Mapping[str, Any]]:
+    if isinstance(value, list):
+        return (v for v in value if isinstance(v, Mapping))
+    return ()
+
+
+def _ref_label(ref: Mapping[str, Any]) -> str:
+    return f"{ref.get('topic')}@{ref.get('log_time_ns')}"
