@@ -224,7 +224,10 @@ class AuditLogger:
         self._closed = False
         self._open_cycle: CycleBuilder | None = None
         self._sensor_seq: dict[str, int] = {}
-        self._dropped_since_seal = 0  # guarded by _lock: both threads add to it
+        # Drops are declared by the seal of the next cycle written after them. The control
+        # thread counts what it drops before the hand-over; the writer counts failed writes.
+        self._undeclared_control = 0  # control thread only
+        self._undeclared_writer = 0  # writer side only (under _lock)
         self._reported: set[str] = set()
         self._last_sync = time.monotonic()
 
@@ -329,8 +332,15 @@ class AuditLogger:
 
     def _commit(self, builder: CycleBuilder) -> None:
         self.stats.committed += 1
-        pending = _PendingCycle(builder.cycle, builder.t_ns, builder._layers, builder._sensors, 0)
+        pending = _PendingCycle(
+            builder.cycle,
+            builder.t_ns,
+            builder._layers,
+            builder._sensors,
+            self._undeclared_control,
+        )
         if self._queue is None:
+            self._undeclared_control = 0
             with self._lock:
                 self._write_batch([pending])
             return
@@ -340,15 +350,15 @@ class AuditLogger:
             else:
                 self._queue.put_nowait(pending)
         except queue.Full:
-            with self._lock:
-                self.stats.dropped_queue_full += 1
-                self._dropped_since_seal += 1
+            self.stats.dropped_queue_full += 1
+            self._undeclared_control += 1
             self._report_once("queue", "audit queue full: dropping cycles (writer too slow)")
+        else:
+            self._undeclared_control = 0
 
     def _abort(self, builder: CycleBuilder) -> None:
-        with self._lock:
-            self.stats.dropped_aborted += 1
-            self._dropped_since_seal += 1
+        self.stats.dropped_aborted += 1
+        self._undeclared_control += 1
 
     # --- writer side --------------------------------------------------------------------
 
@@ -398,7 +408,7 @@ class AuditLogger:
             self._lose(batch, err, abandon=True)
             return
         self._prev_seal = last_seal
-        self._dropped_since_seal = 0
+        self._undeclared_writer = 0
         self.stats.written += len(batch)
         if self._segment_start_ns is None:
             self._segment_start_ns = batch[0].t_ns
@@ -409,7 +419,7 @@ class AuditLogger:
     ) -> tuple[list[OutMessage], str]:
         messages: list[OutMessage] = []
         prev = self._prev_seal
-        dropped = self._dropped_since_seal
+        carried = self._undeclared_writer
         seal_channel = segment.channel(TOPIC_SEAL)
         for pending in batch:
             for topic, sequence, log_time, data in pending.sensors:
@@ -422,17 +432,21 @@ class AuditLogger:
                     OutMessage(segment.channel(topic), pending.cycle, pending.t_ns, data)
                 )
             seal = Seal(
-                cycle=pending.cycle, t_ns=pending.t_ns, digests=digests, prev=prev, dropped=dropped
+                cycle=pending.cycle,
+                t_ns=pending.t_ns,
+                digests=digests,
+                prev=prev,
+                dropped=carried + pending.dropped_before,
             )
             data = encode_seal(seal)
             messages.append(OutMessage(seal_channel, pending.cycle, pending.t_ns, data))
             prev = digest(data)
-            dropped = 0
+            carried = 0
         return messages, prev
 
     def _lose(self, batch: list[_PendingCycle], err: Exception, *, abandon: bool) -> None:
         self.stats.dropped_io += len(batch)
-        self._dropped_since_seal += len(batch)
+        self._undeclared_writer += len(batch) + sum(p.dropped_before for p in batch)
         self._report_once(f"io:{type(err).__name__}", f"audit write failed, dropping cycles: {err}")
         if abandon and self._segment is not None:
             # The file cannot be trusted past its last good batch; readers recover up to it.

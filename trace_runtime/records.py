@@ -324,3 +324,32 @@ LAYER_MODELS: dict[str, type[_Record]] = {
 }
 
 GENESIS = "0" * 64
+
+
+# --- integrity: signed checkpoints -------------------------------------------------------
+
+TOPIC_CHECKPOINT = "/trace/checkpoint"
+
+
+class Checkpoint(_Stamp):
+    """``/trace/checkpoint``: a (signed) statement of the chain head, CT's signed tree head.
+
+    ``cycle``/``t_ns`` are those of the head seal; ``head`` is the SHA-256 of that seal's data,
+    so the checkpoint vouches for every cycle the chain reaches back to. A checkpoint is not
+    part of any cycle. The signature is Ed25519 over ``trace_runtime.integrity.signing_bytes``
+    (see docs/integrity.md); both it and ``key_id`` are null when the logger has no key.
+    """
+
+    robot_id: str = Field(min_length=1)
+    segment: int = Field(ge=0, description="number of the segment the checkpoint was written in")
+    first_cycle: int = Field(ge=0, description="first cycle of that segment")
+    sealed: int = Field(ge=0, description="seals written in the segment, first_cycle..cycle")
+    head: str = Field(description="sha256 hex of the head seal's data")
+    final: bool = Field(default=False, description="written when the segment was closed")
+    key_id: str | None = Field(
+        default=None, description="sha256 hex of the raw 32-byte Ed25519 public key"
+    )
+    signature: str | None = Field(default=None, description="Ed25519 signature, hex")
+
+
+MESSAGE_MODELS[TOPIC_CHECKPOINT] = Checkpoint

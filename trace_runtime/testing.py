@@ -162,3 +162,148 @@ T = TypeVar("T")
 
 def _typed(record: object, kind: type[T]) -> T | None:
     return record if isinstance(record, kind) else None
+
+
+def synthetic_cycle(
+    index: int, *, pedestrians: int = 2, ref_topic: str = "/sensors/lidar"
+) -> tuple[Perception, Belief, Action, Execution]:
+    """A plausible 3-5 KB decision cycle whose values drift smoothly with ``index``.
+
+    For tests and benchmarks that need realistic records without running the simulator:
+    ``pedestrians`` entities with evidence, a belief graph of distance and risk states, a
+    STOP/SLOW/CONTINUE choice with alternatives, counterfactuals and a decision tree.
+    """
+    from trace_runtime.records import (
+        Alternative,
+        BeliefEdge,
+        BeliefNode,
+        ComplianceCheck,
+        Counterfactual,
+        DecisionTree,
+        Entity,
+        Evidence,
+        EvidenceRef,
+        Factor,
+        Motion,
+        Pose,
+        Rationale,
+        Region,
+        TreeEdge,
+        TreeNode,
+    )
+
+    t_ns = index * 100_000_000
+    entities, nodes, edges, factors = [], [], [], []
+    nearest = 99.0
+    for k in range(pedestrians):
+        distance = round(1.2 + k * 1.7 + 0.8 * ((index * (k + 1)) % 50) / 50, 3)
+        nearest = min(nearest, distance)
+        eid = f"ped_{k + 1}"
+        ref = EvidenceRef(topic=ref_topic, log_time_ns=t_ns, sequence=index, digest="0" * 64)
+        entities.append(
+            Entity(
+                id=eid,
+                cls="person",
+                pose=Pose(position=(distance, 0.3 * k, 0.0), orientation=(0.0, 0.0, 0.1, 0.995)),
+                velocity=(0.1, -0.4, 0.0),
+                confidence={"person": 0.91, "forklift": 0.04, "shelf": 0.05},
+                evidence=[
+                    Evidence(
+                        sensor="lidar",
+                        weight=0.7,
+                        region=Region(kind="beams", values=[100.0 + k, 112.0 + k]),
+                        ref=ref,
+                    ),
+                    Evidence(
+                        sensor="camera",
+                        weight=0.3,
+                        region=Region(kind="pixels", values=[320.0, 200.0, 380.0, 420.0]),
+                        ref=ref.model_copy(update={"topic": "/sensors/camera"}),
+                    ),
+                ],
+            )
+        )
+        risk = round(max(0.0, min(1.0, 1.4 / distance - 0.2)), 4)
+        nodes += [
+            BeliefNode(id=eid, kind="entity", label="pedestrian", p=0.91, entity=eid),
+            BeliefNode(id=f"{eid}.distance", kind="state", p=0.95, value=distance, unit="m"),
+            BeliefNode(id=f"{eid}.collision_risk", kind="state", p=0.9, value=risk),
+        ]
+        edges += [
+            BeliefEdge(parent=eid, child=f"{eid}.distance", p=0.95, rule="lidar_range"),
+            BeliefEdge(
+                parent=f"{eid}.distance", child=f"{eid}.collision_risk", p=0.9, rule="ttc_model"
+            ),
+        ]
+        factors.append(Factor(node=f"{eid}.distance", name="distance", value=distance, unit="m"))
+    command = "STOP" if nearest < 2.0 else "SLOW"
+    action = Action(
+        command=command,
+        parameters={"target_speed": 0.0 if command == "STOP" else 0.5},
+        score=0.82,
+        alternatives=[
+            Alternative(command=c, score=s, rejected_because=r)
+            for c, s, r in (
+                ("SLOW", 0.41, "pedestrian inside the 2 m stop radius"),
+                ("REROUTE", 0.22, "no free aisle within 10 m"),
+                ("CONTINUE", 0.05, "collision risk above 0.2"),
+            )
+            if c != command
+        ],
+        rationale=Rationale(
+            text=f"Pedestrian at {nearest:.2f} m; nearest entity governs the speed choice.",
+            factors=factors,
+        ),
+        counterfactuals=[
+            Counterfactual(
+                factor="ped_1.distance", comparison=">=", threshold=2.0, would_select="SLOW"
+            ),
+            Counterfactual(
+                factor="ped_1.collision_risk",
+                comparison="<",
+                threshold=0.2,
+                would_select="CONTINUE",
+            ),
+        ],
+        tree=DecisionTree(
+            nodes=[
+                TreeNode(id="root", label="Decision point"),
+                TreeNode(id="ped", label="pedestrian detected", test="d_ped < 2.0"),
+                TreeNode(id="path", label="path clear?", test="aisle_blocked"),
+                TreeNode(id="stop", label="STOP", command="STOP"),
+                TreeNode(id="slow", label="SLOW", command="SLOW"),
+                TreeNode(id="reroute", label="REROUTE", command="REROUTE"),
+                TreeNode(id="continue", label="CONTINUE", command="CONTINUE"),
+            ],
+            edges=[
+                TreeEdge(parent="root", child="ped", label="ped detected"),
+                TreeEdge(parent="root", child="path", label="no ped"),
+                TreeEdge(parent="ped", child="stop", label="yes"),
+                TreeEdge(parent="ped", child="slow", label="no"),
+                TreeEdge(parent="path", child="reroute", label="no"),
+                TreeEdge(parent="path", child="continue", label="yes"),
+            ],
+            taken_path=["root", "ped", "stop" if command == "STOP" else "slow"],
+        ),
+    )
+    speed = 0.0 if command == "STOP" else 0.5
+    execution = Execution(
+        intended=Motion(linear=speed, angular=0.0),
+        actual=Motion(linear=round(speed + 0.01 * (index % 7) / 7, 4), angular=0.0),
+        deviation=round(0.01 * (index % 7) / 7, 4),
+        checks=[
+            ComplianceCheck(
+                rule="speed_near_person",
+                passed=True,
+                value=speed,
+                limit=0.5,
+                detail="<= 0.5 m/s within 3 m of a person",
+            )
+        ],
+        flags=[],
+    )
+    perception = Perception(
+        entities=entities, sensors_used=["lidar", "camera"], sensors_unavailable=[]
+    )
+    belief = Belief(nodes=nodes, edges=edges)
+    return perception, belief, action, execution

@@ -1,0 +1,217 @@
+"""Records: validation at the call site, and lossless round trips through a real MCAP log."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from trace_runtime import (
+    Action,
+    AuditLogger,
+    Belief,
+    BeliefEdge,
+    BeliefNode,
+    Entity,
+    Evidence,
+    EvidenceRef,
+    Execution,
+    Factor,
+    LoggerConfig,
+    Motion,
+    Perception,
+    Pose,
+    Rationale,
+    RecordError,
+    open_log,
+)
+from trace_runtime.records import (
+    Alternative,
+    ComplianceCheck,
+    Counterfactual,
+    DecisionTree,
+    Region,
+    TreeEdge,
+    TreeNode,
+)
+
+names = st.text(st.characters(codec="utf-8", exclude_categories=("Cs",)), min_size=1, max_size=12)
+finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+unit = st.floats(min_value=0.0, max_value=1.0)
+scalars = st.one_of(finite, st.integers(-(2**53), 2**53), st.booleans(), names)
+
+refs = st.builds(
+    EvidenceRef,
+    topic=names.map(lambda s: "/sensors/" + s),
+    log_time_ns=st.integers(0, 2**63 - 1),
+    sequence=st.none() | st.integers(0, 2**32 - 1),
+    digest=st.none() | st.text("0123456789abcdef", min_size=64, max_size=64),
+)
+evidence = st.builds(
+    Evidence,
+    sensor=names,
+    weight=unit,
+    region=st.none()
+    | st.builds(
+        Region,
+        kind=st.sampled_from(["beams", "box", "cone", "pixels"]),
+        values=st.lists(finite, max_size=4),
+    ),
+    ref=st.none() | refs,
+)
+entities = st.builds(
+    Entity,
+    id=names,
+    cls=names,
+    pose=st.builds(
+        Pose,
+        position=st.tuples(finite, finite, finite),
+        orientation=st.tuples(finite, finite, finite, finite),
+    ),
+    velocity=st.none() | st.tuples(finite, finite, finite),
+    confidence=st.dictionaries(names, unit, max_size=3),
+    evidence=st.lists(evidence, max_size=3),
+)
+perceptions = st.builds(
+    Perception,
+    entities=st.lists(entities, max_size=3),
+    sensors_used=st.lists(names, max_size=2),
+    sensors_unavailable=st.lists(names, max_size=2),
+)
+beliefs = st.builds(
+    Belief,
+    nodes=st.lists(
+        st.builds(
+            BeliefNode,
+            id=names,
+            kind=st.sampled_from(["entity", "state"]),
+            label=st.text(max_size=8),
+            p=unit,
+            value=st.none() | scalars,
+            unit=st.none() | names,
+            entity=st.none() | names,
+        ),
+        max_size=4,
+    ),
+    edges=st.lists(
+        st.builds(BeliefEdge, parent=names, child=names, p=unit, rule=names), max_size=4
+    ),
+)
+actions = st.builds(
+    Action,
+    command=names,
+    parameters=st.dictionaries(names, finite, max_size=2),
+    score=st.none() | finite,
+    alternatives=st.lists(
+        st.builds(Alternative, command=names, score=finite, rejected_because=st.text(max_size=20)),
+        max_size=3,
+    ),
+    rationale=st.builds(
+        Rationale,
+        text=st.text(max_size=40),
+        factors=st.lists(
+            st.builds(
+                Factor, node=names, name=st.text(max_size=8), value=scalars, unit=st.none() | names
+            ),
+            max_size=3,
+        ),
+        truncated=st.booleans(),
+    ),
+    counterfactuals=st.lists(
+        st.builds(
+            Counterfactual,
+            factor=names,
+            comparison=st.sampled_from(["<", "<=", ">", ">=", "==", "!="]),
+            threshold=scalars,
+            would_select=names,
+        ),
+        max_size=3,
+    ),
+    counterfactuals_none_applicable=st.booleans(),
+    tree=st.none()
+    | st.builds(
+        DecisionTree,
+        nodes=st.lists(
+            st.builds(
+                TreeNode,
+                id=names,
+                label=st.text(max_size=8),
+                test=st.none() | names,
+                command=st.none() | names,
+            ),
+            max_size=3,
+        ),
+        edges=st.lists(
+            st.builds(TreeEdge, parent=names, child=names, label=st.text(max_size=5)), max_size=3
+        ),
+        taken_path=st.lists(names, max_size=3),
+    ),
+)
+executions = st.builds(
+    Execution,
+    intended=st.builds(Motion, linear=finite, angular=finite),
+    actual=st.builds(Motion, linear=finite, angular=finite),
+    deviation=st.floats(min_value=0.0, allow_nan=False, allow_infinity=False),
+    checks=st.lists(
+        st.builds(
+            ComplianceCheck,
+            rule=names,
+            passed=st.booleans(),
+            value=st.none() | finite,
+            limit=st.none() | finite,
+            detail=st.text(max_size=10),
+        ),
+        max_size=2,
+    ),
+    flags=st.lists(names, max_size=3),
+)
+
+
+@settings(
+    max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    cycles=st.lists(st.tuples(perceptions, beliefs, actions, executions), min_size=1, max_size=4)
+)
+def test_every_record_type_round_trips_through_mcap(tmp_path: Path, cycles: list) -> None:
+    path = tmp_path / f"rt-{abs(hash(str(cycles))) % 10**9}.mcap"
+    with AuditLogger(path, robot_id="rt", config=LoggerConfig(threaded=False)) as log:
+        for i, (p, b, a, e) in enumerate(cycles):
+            log.log_cycle(i * 1000, perception=p, belief=b, action=a, execution=e)
+    read = list(open_log(path).iter_cycles())
+    assert len(read) == len(cycles)
+    for got, (p, b, a, e) in zip(read, cycles, strict=True):
+        assert got.perception is not None and got.belief is not None
+        assert got.action is not None and got.execution is not None
+        assert Perception.model_validate(got.perception.model_dump(exclude={"cycle", "t_ns"})) == p
+        assert Belief.model_validate(got.belief.model_dump(exclude={"cycle", "t_ns"})) == b
+        assert Action.model_validate(got.action.model_dump(exclude={"cycle", "t_ns"})) == a
+        assert Execution.model_validate(got.execution.model_dump(exclude={"cycle", "t_ns"})) == e
+        assert got.seal is not None and got.seal.digests == got.digests()
+
+
+def test_nan_is_rejected_with_a_trace_error() -> None:
+    with pytest.raises(RecordError, match="deviation"):
+        Execution(intended=Motion(linear=0), actual=Motion(linear=0), deviation=math.nan)
+
+
+def test_wrong_types_in_a_dict_record_raise_at_the_call_site(tmp_path: Path) -> None:
+    with AuditLogger(tmp_path / "x.mcap", robot_id="r", config=LoggerConfig(threaded=False)) as log:
+        c = log.cycle(0)
+        with pytest.raises(RecordError, match="invalid Action: rationale"):
+            c.action({"command": "STOP", "rationale": "not an object"})
+        c.commit()
+
+
+def test_records_are_frozen_so_the_writer_sees_what_was_committed() -> None:
+    motion = Motion(linear=1.0)
+    with pytest.raises(Exception, match="frozen"):
+        motion.linear = 2.0  # type: ignore[misc]
+
+
+def test_entity_class_is_written_under_its_schema_name() -> None:
+    entity = Entity(id="e", cls="person", pose=Pose(position=(0, 0, 0)), confidence={"person": 1})
+    assert '"class":"person"' in entity.model_dump_json(by_alias=True)
