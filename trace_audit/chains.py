@@ -35,9 +35,9 @@ from __future__ import annotations
 
 import hashlib
 from collections import deque
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 from trace_runtime.reader import Cycle, RawMessage
 from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF, TOPIC_PERCEPTION
@@ -48,9 +48,11 @@ __all__ = [
     "EXPECTED_DEPTH_STATE",
     "LEVELS",
     "DecisionChains",
+    "DecisionScore",
     "FactorChain",
     "Link",
     "SensorWindow",
+    "score_layers",
     "trace_cycle",
     "trace_layers",
 ]
@@ -163,7 +165,7 @@ class SensorWindow:
         self._index.clear()
         self._batches.clear()
 
-    def resolve(self, ref: Mapping[str, Any]) -> str:
+    def resolve(self, ref: dict[str, Any]) -> str:
         """'' when the ref resolves to a message in the window, else why it does not."""
         topic = ref.get("topic")
         t_ns = ref.get("log_time_ns")
@@ -212,27 +214,66 @@ def trace_cycle(cycle: Cycle, window: SensorWindow | None = None) -> DecisionCha
 def trace_layers(
     cycle: int,
     t_ns: int,
-    action: Mapping[str, Any] | None,
-    belief: Mapping[str, Any] | None,
-    perception: Mapping[str, Any] | None,
+    action: Any,
+    belief: Any,
+    perception: Any,
     *,
     window: SensorWindow,
 ) -> DecisionChains:
     """The factor chains of one decision given its layer messages as plain JSON dicts."""
-    if not isinstance(action, Mapping):
+    if not isinstance(action, dict):
         return DecisionChains(cycle, t_ns, (), 0.0, 0.0, "action not logged")
     rationale = action.get("rationale")
-    raw_factors = rationale.get("factors") if isinstance(rationale, Mapping) else None
+    raw_factors = rationale.get("factors") if isinstance(rationale, dict) else None
     if not raw_factors:
         return DecisionChains(cycle, t_ns, (), 0.0, 0.0, "action names no factors")
     walker = _Walker(belief, perception, window)
-    chains = tuple(walker.factor(f) for f in raw_factors if isinstance(f, Mapping))
+    chains = tuple(walker.factor(f) for f in raw_factors if isinstance(f, dict))
     if not chains:
         return DecisionChains(cycle, t_ns, (), 0.0, 0.0, "action names no factors")
     n = len(chains)
     et = sum(1 for c in chains if c.depth == c.expected_depth) / n
     et_partial = sum(c.depth / c.expected_depth for c in chains) / n
     return DecisionChains(cycle, t_ns, chains, et, et_partial)
+
+
+class DecisionScore(NamedTuple):
+    """ET numbers of one decision without the links (what metrics need per cycle)."""
+
+    et: float
+    et_partial: float
+    factors: int
+    traceable: int
+    reason: str
+
+    @property
+    def fully_traceable(self) -> bool:
+        return self.factors > 0 and self.traceable == self.factors
+
+
+def score_layers(
+    action: Any, belief: Any, perception: Any, *, window: SensorWindow
+) -> DecisionScore:
+    """ET and ET_partial of one decision, as ``trace_layers`` gives them, without the links.
+
+    The fast path for metrics over long logs: same walk, same depths, no link objects.
+    """
+    if not isinstance(action, dict):
+        return DecisionScore(0.0, 0.0, 0, 0, "action not logged")
+    rationale = action.get("rationale")
+    raw_factors = rationale.get("factors") if isinstance(rationale, dict) else None
+    factors = _dicts(raw_factors)
+    if not factors:
+        return DecisionScore(0.0, 0.0, 0, 0, "action names no factors")
+    walker = _Walker(belief, perception, window)
+    traceable = 0
+    partial = 0.0
+    for factor in factors:
+        depth, expected = walker.depth(factor)
+        traceable += depth == expected
+        partial += depth / expected
+    n = len(factors)
+    return DecisionScore(traceable / n, partial / n, n, traceable, "")
 
 
 # --- the walk ----------------------------------------------------------------------------
@@ -243,6 +284,7 @@ class _Walker:
 
     __slots__ = (
         "_belief_missing",
+        "_depth_memo",
         "_entities",
         "_entity_memo",
         "_nodes",
@@ -253,36 +295,102 @@ class _Walker:
 
     def __init__(
         self,
-        belief: Mapping[str, Any] | None,
-        perception: Mapping[str, Any] | None,
+        belief: Any,
+        perception: Any,
         window: SensorWindow,
     ) -> None:
         self._window = window
-        self._belief_missing = not isinstance(belief, Mapping)
-        self._perception_missing = not isinstance(perception, Mapping)
-        nodes: dict[str, Mapping[str, Any]] = {}
+        self._belief_missing = not isinstance(belief, dict)
+        self._perception_missing = not isinstance(perception, dict)
+        nodes: dict[str, dict[str, Any]] = {}
         parents: dict[str, list[str]] = {}
-        if isinstance(belief, Mapping):
+        if isinstance(belief, dict):
             for node in _dicts(belief.get("nodes")):
                 node_id = node.get("id")
-                if isinstance(node_id, str):
+                if type(node_id) is str:
                     nodes[node_id] = node
             for edge in _dicts(belief.get("edges")):
                 parent, child = edge.get("parent"), edge.get("child")
-                if isinstance(parent, str) and isinstance(child, str):
-                    parents.setdefault(child, []).append(parent)
-        entities: dict[str, Mapping[str, Any]] = {}
-        if isinstance(perception, Mapping):
+                if type(parent) is str and type(child) is str:
+                    found = parents.get(child)
+                    if found is None:
+                        parents[child] = [parent]
+                    else:
+                        found.append(parent)
+        entities: dict[str, dict[str, Any]] = {}
+        if isinstance(perception, dict):
             for entity in _dicts(perception.get("entities")):
                 entity_id = entity.get("id")
-                if isinstance(entity_id, str):
+                if type(entity_id) is str:
                     entities[entity_id] = entity
         self._nodes = nodes
         self._parents = parents
         self._entities = entities
         self._entity_memo: dict[str, tuple[Link, ...]] = {}
+        self._depth_memo: dict[str, int] = {}
 
-    def factor(self, factor: Mapping[str, Any]) -> FactorChain:
+    def depth(self, factor: dict[str, Any]) -> tuple[int, int]:
+        """(documented depth, expected depth) of a factor: ``factor()`` without the links."""
+        nodes = self._nodes
+        start = factor.get("node")
+        if type(start) is not str:
+            return 0, EXPECTED_DEPTH_STATE
+        node = nodes.get(start)
+        if node is None:
+            return 0, EXPECTED_DEPTH_STATE
+        if node.get("kind") == "entity":
+            return 1 + self._entity_depth(node), EXPECTED_DEPTH_ENTITY
+        parents = self._parents
+        best = -1
+        seen = {start}
+        frontier: list[str] = [start]
+        while frontier:
+            upper: list[str] = []
+            for child in frontier:
+                for parent in parents.get(child, ()):
+                    if parent in seen:
+                        continue
+                    seen.add(parent)
+                    above = nodes.get(parent)
+                    if above is None:
+                        continue
+                    if above.get("kind") == "entity":
+                        found = self._entity_depth(above)
+                        if found == 3:
+                            return EXPECTED_DEPTH_STATE, EXPECTED_DEPTH_STATE
+                        best = max(best, found)
+                    else:
+                        upper.append(parent)
+            frontier = upper
+        if best < 0:
+            return 1, EXPECTED_DEPTH_STATE
+        return 2 + best, EXPECTED_DEPTH_STATE
+
+    def _entity_depth(self, node: dict[str, Any]) -> int:
+        """Documented levels below an entity node: entity, evidence_ref, sensor_reading."""
+        entity_id = node.get("entity")
+        if type(entity_id) is not str or not entity_id:
+            return 0
+        memo = self._depth_memo.get(entity_id)
+        if memo is not None:
+            return memo
+        entity = self._entities.get(entity_id)
+        if entity is None:
+            depth = 0
+        else:
+            depth = 1
+            resolve = self._window.resolve
+            for evidence in _dicts(entity.get("evidence")):
+                ref = evidence.get("ref")
+                if type(ref) is dict:
+                    depth = 2
+                    if not resolve(ref):
+                        depth = 3
+                        break
+        self._depth_memo[entity_id] = depth
+        return depth
+
+    def factor(self, factor: dict[str, Any]) -> FactorChain:
         node_id = str(factor.get("node") or "")
         name = str(factor.get("name") or "")
         node = self._nodes.get(node_id)
@@ -348,7 +456,7 @@ class _Walker:
                     queue.append(step)
         return found
 
-    def _entity_links(self, node: Mapping[str, Any]) -> tuple[Link, ...]:
+    def _entity_links(self, node: dict[str, Any]) -> tuple[Link, ...]:
         """The entity, evidence_ref and sensor_reading links below an entity node."""
         entity_id = node.get("entity")
         if not isinstance(entity_id, str) or not entity_id:
@@ -384,7 +492,7 @@ class _Walker:
             )
         top = Link("entity", True, entity_id)
         evidence = list(_dicts(entity.get("evidence")))
-        refs = [e["ref"] for e in evidence if isinstance(e.get("ref"), Mapping)]
+        refs = [e["ref"] for e in evidence if isinstance(e.get("ref"), dict)]
         if not refs:
             why = (
                 f"entity {entity_id!r} has no evidence"
@@ -425,11 +533,11 @@ def _depth(links: Iterable[Link]) -> int:
     return depth
 
 
-def _dicts(value: Any) -> Iterable[Mapping[str, Any]]:
-    if isinstance(value, list):
-        return (v for v in value if isinstance(v, Mapping))
-    return ()
+def _dicts(value: Any) -> list[dict[str, Any]]:
+    if type(value) is list:
+        return [v for v in value if type(v) is dict]
+    return []
 
 
-def _ref_label(ref: Mapping[str, Any]) -> str:
+def _ref_label(ref: dict[str, Any]) -> str:
     return f"{ref.get('topic')}@{ref.get('log_time_ns')}"

@@ -1,3 +1,333 @@
-"""trace-audit commands: metrics (registered on the shared app)."""
+"""``trace-audit metrics``: the paper's auditability tables (ET, ET_partial, TC, DR, TCS)."""
 
 from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from trace_audit.cli.app import (
+    EXIT_FINDINGS,
+    JsonOption,
+    PlainOption,
+    app,
+    console,
+    guarded,
+    print_json,
+)
+from trace_audit.metrics import (
+    GROUP_BYS,
+    MetricsConfig,
+    MetricsReport,
+    Stat,
+    TCSWeights,
+    compute_metrics,
+    parse_thresholds,
+)
+from trace_runtime.errors import UsageError
+
+_PROGRESS_MIN_CYCLES = 20_000
+
+_HELP = """Measure auditability from what was logged: the paper's Tables II and III.
+
+[bold]Definitions[/bold] (details in docs/metrics.md):
+
+- [bold]ET(d)[/bold]: share of the decision's factors (rationale.factors of /trace/action)
+  with a documented chain factor node -> belief edges (child to parent) -> entity node ->
+  perception entity -> evidence ref -> a logged /sensors message the ref resolves to (topic,
+  log time, sequence, sha256). Expected depth 5 (state-node factor) or 4 (entity-node
+  factor). No action or no factors: ET = 0. Shown as mean ± std across decisions, and the
+  number and share of fully traceable decisions.
+
+- [bold]ET_partial(d)[/bold]: mean over factors of documented depth / expected depth
+  (consecutive documented levels from the factor down).
+
+- [bold]TC[/bold] = 1 - sum(gaps) / window per robot. A gap is an interval between two
+  sealed cycles longer than (1 + gap tolerance) x the nominal period (trace.session
+  period_ns), counted as the time beyond one period; window = last - first sealed cycle +
+  one period. The seals' dropped counts are reported as declared drops.
+
+- [bold]DR(d)[/bold] = action logged x at least one alternative x complete rationale (not
+  truncated, factors present, counterfactuals present or counterfactuals_none_applicable).
+  A sealed cycle without an action is not reconstructable.
+
+- [bold]TCS(d)[/bold] in \\[0, 1]: weighted mean of ET, ET_partial, DR, continuity and
+  integrity (default weights 0.3/0.1/0.3/0.1/0.2), 0 when integrity fails (seal missing,
+  a layer not matching its seal digest, or the hash chain broken).
+
+Stds are population stds; each is labelled with what it is taken across. With --by, the
+std of the group values across groups is shown as well (the paper's footnote).
+
+[bold]Examples[/bold]:
+
+  trace-audit metrics run.mcap --by scenario
+
+  trace-audit metrics fleet/ --by robot --json --jobs 2
+
+  trace-audit metrics run.mcap --failures --fail-under ET=0.95,DR=95%
+"""
+
+
+def _parse_by(value: str | None) -> Any:
+    if value is not None and value not in GROUP_BYS:
+        raise UsageError(f"--by must be one of {', '.join(GROUP_BYS)}, got {value!r}")
+    return value
+
+
+@app.command("metrics", help=_HELP)
+def metrics_command(
+    logs: Annotated[
+        list[Path],
+        typer.Argument(
+            help="Log files, directories of segments, or log roots.", show_default=False
+        ),
+    ],
+    *,
+    by: Annotated[
+        str | None,
+        typer.Option("--by", help="Group decisions: scenario, segment, robot or hour (UTC)."),
+    ] = None,
+    failures: Annotated[
+        bool,
+        typer.Option("--failures", help="List each failing decision and gap, and what is missing."),
+    ] = False,
+    fail_under: Annotated[
+        str | None,
+        typer.Option(
+            "--fail-under",
+            help="Exit 1 when a metric is below its threshold, e.g. ET=0.95,DR=95%. "
+            "Metrics: ET, ET_full, ET_partial, TC, DR, TCS.",
+        ),
+    ] = None,
+    jobs: Annotated[
+        int, typer.Option("--jobs", "-j", help="Processes to spread segments over.", min=1)
+    ] = 1,
+    gap_tolerance: Annotated[
+        float,
+        typer.Option(
+            "--gap-tolerance",
+            help="Periods of lateness tolerated before an interval counts as a gap.",
+            min=0.0,
+        ),
+    ] = 0.5,
+    sensor_window: Annotated[
+        int,
+        typer.Option(
+            "--sensor-window",
+            help="Cycles before a decision whose sensor messages its refs may resolve to.",
+            min=0,
+        ),
+    ] = 50,
+    tcs_weights: Annotated[
+        str | None,
+        typer.Option(
+            "--tcs-weights",
+            help="e.g. et=0.3,et_partial=0.1,dr=0.3,continuity=0.1,integrity=0.2,gate=on",
+        ),
+    ] = None,
+    json_out: JsonOption = False,
+    plain: PlainOption = False,
+) -> None:
+    def run() -> MetricsReport:
+        config = MetricsConfig(
+            by=_parse_by(by),
+            gap_tolerance=gap_tolerance,
+            sensor_window=sensor_window,
+            weights=TCSWeights.parse(tcs_weights) if tcs_weights else TCSWeights(),
+            thresholds=parse_thresholds(fail_under) if fail_under else {},
+            workers=jobs,
+            max_listed=10_000 if failures else 0,
+        )
+        return _with_progress(logs, config, quiet=json_out or plain)
+
+    report = guarded(run)
+    if json_out:
+        print_json(_json(report, failures))
+    else:
+        _render(report, console(plain), failures=failures)
+    if not report.passed:
+        below = ", ".join(
+            f"{c.metric} {_pct(c.value)} < {c.threshold * 100:.1f}%"
+            for c in report.thresholds
+            if not c.passed
+        )
+        sys.stderr.write(f"trace-audit: below threshold: {below}\n")
+        raise typer.Exit(EXIT_FINDINGS)
+
+
+def _with_progress(logs: list[Path], config: MetricsConfig, *, quiet: bool) -> MetricsReport:
+    if quiet or not sys.stderr.isatty():
+        return compute_metrics(logs, config)
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    with Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    ) as bar:
+        task = bar.add_task("scoring cycles", total=None, visible=False)
+
+        def progress(done: int, expected: int | None) -> None:
+            visible = expected is None or expected >= _PROGRESS_MIN_CYCLES
+            bar.update(task, completed=done, total=expected, visible=visible)
+
+        return compute_metrics(logs, config, progress=progress)
+
+
+# --- rendering ----------------------------------------------------------------------------
+
+
+def _pct(value: float | None, digits: int = 1, *, unit: bool = True) -> str:
+    if value is None:
+        return "n/a"
+    return f"{value * 100:.{digits}f}" + ("%" if unit else "")
+
+
+def _pm(stat: Stat) -> str:
+    return f"{stat.mean * 100:.1f}±{stat.std * 100:.1f}"
+
+
+def _share(count: int, total: int) -> str:
+    return f"{count}/{total}"
+
+
+def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
+    from rich import box
+    from rich.table import Table
+
+    overall = report.overall
+    boxes = box.ASCII if out.no_color else box.SIMPLE_HEAVY
+    segs = len(report.segments)
+    out.print(
+        f"[bold]Auditability[/bold] of {overall.decisions} decisions in {segs} "
+        f"segment{'s' if segs != 1 else ''} ({', '.join(report.logs)})"
+    )
+
+    t2 = Table(
+        title="Table II: auditability metrics",
+        box=boxes,
+        title_justify="left",
+        show_edge=False,
+    )
+    for name in ("Method", "ET (%)", "fully tr.", "TC (%)", "gaps", "DR (%)", "not rec.", "Time"):
+        t2.add_column(name, justify="left" if name == "Method" else "right")
+    t2.add_row(
+        "TRACE (this log)",
+        _pm(overall.et),
+        _share(overall.fully_traceable, overall.decisions),
+        _pct(overall.tc, unit=False),
+        f"{overall.gaps} ({overall.gap_s:.2f} s)",
+        _pct(overall.dr, unit=False),
+        _share(overall.not_reconstructable, overall.decisions),
+        report.logging_time,
+    )
+    out.print(t2)
+    out.print(
+        "  ET: mean ± std across decisions; fully tr.: fully traceable decisions; "
+        f"gaps: count (gap time) in a {overall.window_s:.1f} s window; not rec.: not "
+        "reconstructable decisions."
+    )
+    if report.across_groups is not None:
+        a = report.across_groups
+        tc = _pm(a.tc) if a.tc else "n/a"
+        dr = _pm(a.dr) if a.dr else "n/a"
+        out.print(
+            f"  Across {a.groups} {a.by}s (mean ± std of the per-{a.by} values): "
+            f"ET {_pm(a.et)}, fully traceable {_pm(a.fully_traceable_share)}, "
+            f"ET_partial {a.et_partial.mean:.3f} ± {a.et_partial.std:.3f}, TC {tc}, DR {dr}."
+        )
+    out.print(
+        f"  ET_partial {overall.et_partial.mean:.3f} ± {overall.et_partial.std:.3f} and "
+        f"TCS {overall.tcs.mean:.3f} ± {overall.tcs.std:.3f} (across decisions); factors "
+        f"traceable {_share(overall.factors_traceable, overall.factors)}."
+    )
+    out.print(
+        f"  Sealed {overall.sealed}, unsealed {overall.unsealed}, integrity failed "
+        f"{overall.integrity_failed}; the gaps hold ~{overall.missing_cycles} missing cycles, "
+        f"the seals declare {overall.declared_dropped} dropped"
+        + (f", {overall.clock_anomalies} clock anomalies." if overall.clock_anomalies else ".")
+    )
+
+    if report.groups:
+        t3 = Table(
+            title=f"Table III: per {report.by}",
+            box=boxes,
+            title_justify="left",
+            show_edge=False,
+        )
+        for name in (
+            report.by or "group",
+            "cycles",
+            "ET (%)",
+            "fully tr.",
+            "ET_p",
+            "TC (%)",
+            "gaps",
+            "DR (%)",
+            "not rec.",
+            "TCS",
+        ):
+            t3.add_column(name, justify="left" if name == report.by else "right")
+        for g in report.groups:
+            t3.add_row(
+                g.name,
+                str(g.decisions),
+                _pm(g.et),
+                _share(g.fully_traceable, g.decisions),
+                f"{g.et_partial.mean:.3f}",
+                _pct(g.tc, unit=False),
+                str(g.gaps),
+                _pct(g.dr, unit=False),
+                str(g.not_reconstructable),
+                f"{g.tcs.mean:.3f}",
+            )
+        out.print(t3)
+        out.print("  ET std in each row is across that group's decisions; ET_p = ET_partial mean.")
+
+    if report.skipped_segments:
+        for skipped in report.skipped_segments:
+            out.print(f"  skipped duplicate segment {skipped}")
+
+    if failures:
+        listed = len(report.failures)
+        out.print(
+            f"\n[bold]Failing decisions[/bold]: {report.failures_total}"
+            + (f" (first {listed} listed)" if listed < report.failures_total else "")
+        )
+        for f in report.failures:
+            out.print(f"  cycle {f.cycle}  t={f.t_ns / 1e9:.3f} s  [{f.group}]", markup=False)
+            for problem in f.problems:
+                out.print(f"      {problem}", markup=False)
+        out.print(f"\n[bold]Gaps[/bold]: {report.gaps_total}")
+        for gap in report.gaps:
+            out.print(
+                f"  {gap.robot}: after cycle {gap.after_cycle} (t={gap.after_t_ns / 1e9:.3f} s) "
+                f"until cycle {gap.before_cycle} (t={gap.before_t_ns / 1e9:.3f} s): "
+                f"{gap.gap_ns / 1e9:.3f} s, ~{gap.missing_cycles} missing, "
+                f"{gap.declared_dropped} declared dropped",
+                markup=False,
+            )
+
+    for check in report.thresholds:
+        verdict = "ok" if check.passed else "BELOW"
+        out.print(
+            f"  threshold {check.metric} >= {check.threshold * 100:.1f}%: "
+            f"{_pct(check.value, 2)} {verdict}"
+        )
+
+
+def _json(report: MetricsReport, failures: bool) -> dict[str, Any]:
+    from trace_audit.jsonout import to_jsonable
+
+    data: dict[str, Any] = to_jsonable(report)
+    data["passed"] = report.passed
+    if not failures:
+        data.pop("failures")
+        data.pop("gaps")
+    return data

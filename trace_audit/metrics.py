@@ -1,0 +1,934 @@
+"""Auditability metrics from logged artifacts only: ET, ET_partial, TC, DR and TCS.
+
+Definitions (docs/metrics.md is the long form; every number here comes from the log):
+
+- A *decision* is a cycle the reader yields: sealed, or an unsealed tail of a crashed writer.
+  Its factors F_d are ``rationale.factors`` of its ``/trace/action`` record.
+- **ET(d)**: share of F_d whose chain (``trace_audit.chains``) is documented down to a
+  sensor reading its evidence ref resolves to. No action or no factors: ET(d) = 0.
+- **ET_partial(d)**: mean over F_d of documented depth / expected depth (5 for a factor on a
+  derived-state node, 4 for one on an entity node).
+- **TC** = 1 - sum(gaps) / window over the sealed cycles of each robot, in time order. The
+  interval between two consecutive sealed cycles is a gap when it exceeds the nominal period
+  (``trace.session`` ``period_ns``) by more than ``gap_tolerance`` periods; the gap is the
+  time beyond one period. The window is last - first sealed time + one period. A gap is
+  counted in the group of the sealed cycle that ends it. Seals' ``dropped`` counts are
+  summed separately as declared drops.
+- **DR(d)** = 1 when the action is logged (a command), its alternatives are logged (at
+  least one), and its rationale is complete: not truncated, factors present, and
+  counterfactuals present or ``counterfactuals_none_applicable``. A sealed cycle without an
+  action is not reconstructable.
+- **Integrity(d)** = 1 when the cycle is sealed, every layer payload it holds has the digest
+  its seal names, every layer the seal names is present (in full, or in the warm summary),
+  and the seal's ``prev`` is the digest of the robot's previous seal (the segment's
+  ``prev_seal`` for the first one read).
+- **TCS(d)** = weighted mean of ET, ET_partial, DR, continuity and integrity (``TCSWeights``),
+  forced to 0 when integrity fails and ``integrity_gate`` is on. Continuity(d) is 1, or
+  period / interval when the interval that ends at d holds a gap.
+
+Stds are population stds (ddof = 0); each ``Stat`` says what it is taken across.
+Nothing here reads an injected-fault flag or a simulator's ground truth.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import math
+import os
+import time
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal, get_args
+
+import orjson
+
+from trace_audit.chains import (
+    DEFAULT_SENSOR_WINDOW,
+    EXPECTED_DEPTH_ENTITY,
+    EXPECTED_DEPTH_STATE,
+    DecisionChains,
+    SensorWindow,
+    score_layers,
+    trace_layers,
+)
+from trace_runtime.errors import UsageError
+from trace_runtime.reader import Cycle, Segment, find_segments, open_segment
+from trace_runtime.records import (
+    TOPIC_ACTION,
+    TOPIC_BELIEF,
+    TOPIC_EXECUTION,
+    TOPIC_PERCEPTION,
+    TOPIC_SEAL,
+)
+
+__all__ = [
+    "GROUP_BYS",
+    "METRIC_NAMES",
+    "AcrossGroups",
+    "DecisionFailure",
+    "Gap",
+    "GroupBy",
+    "GroupMetrics",
+    "MetricsConfig",
+    "MetricsReport",
+    "Stat",
+    "TCSWeights",
+    "ThresholdCheck",
+    "compute_metrics",
+    "parse_thresholds",
+]
+
+GroupBy = Literal["scenario", "segment", "robot", "hour"]
+GROUP_BYS: tuple[str, ...] = get_args(GroupBy)
+NO_SCENARIO = "(none)"
+SCENARIO_FLAG = "scenario:"
+TIMING_METADATA = "trace.timing"
+
+ProgressCallback = Callable[[int, int | None], None]
+"""Called with (cycles done, cycles expected or None) as the scan advances."""
+
+_PROGRESS_EVERY = 2048
+_TIER_PREFERENCE = {"hot": 0, "cold": 1, "warm": 2}
+
+
+# --- configuration ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class TCSWeights:
+    """Weights of the per-decision trust score TCS(d); they need not sum to 1."""
+
+    et: float = 0.3
+    et_partial: float = 0.1
+    dr: float = 0.3
+    continuity: float = 0.1
+    integrity: float = 0.2
+    integrity_gate: bool = True
+    """TCS(d) = 0 when integrity fails: a record that may be altered earns no trust."""
+
+    def __post_init__(self) -> None:
+        values = (self.et, self.et_partial, self.dr, self.continuity, self.integrity)
+        if any(v < 0 or not math.isfinite(v) for v in values) or sum(values) <= 0:
+            raise UsageError("TCS weights must be finite, >= 0, and not all 0")
+
+    @classmethod
+    def parse(cls, text: str) -> TCSWeights:
+        """Parse ``et=0.3,et_partial=0.1,dr=0.3,continuity=0.1,integrity=0.2,gate=1``."""
+        values: dict[str, Any] = {}
+        for item in _items(text):
+            key, value = _split_pair(item, "TCS weight")
+            key = key.lower()
+            if key in ("gate", "integrity_gate"):
+                if value.lower() not in ("0", "1", "true", "false", "on", "off"):
+                    raise UsageError(f"TCS gate must be on or off, got {value!r}")
+                values["integrity_gate"] = value.lower() in ("1", "true", "on")
+            elif key in ("et", "et_partial", "dr", "continuity", "integrity"):
+                values[key] = _number(value, f"TCS weight {key}")
+            else:
+                raise UsageError(
+                    f"unknown TCS weight {key!r} "
+                    "(use et, et_partial, dr, continuity, integrity, gate)"
+                )
+        return cls(**values)
+
+
+METRIC_NAMES = ("ET", "ET_full", "ET_partial", "TC", "DR", "TCS")
+"""Names ``--fail-under`` accepts: ET mean, share fully traceable, ET_partial, TC, DR, TCS."""
+
+
+def parse_thresholds(text: str) -> dict[str, float]:
+    """Parse ``ET=0.95,DR=95%`` into fractions; raise ``UsageError`` on anything else."""
+    lookup = {name.lower(): name for name in METRIC_NAMES}
+    out: dict[str, float] = {}
+    for item in _items(text):
+        key, value = _split_pair(item, "threshold")
+        name = lookup.get(key.lower())
+        if name is None:
+            raise UsageError(
+                f"unknown metric {key!r} in thresholds (use {', '.join(METRIC_NAMES)})"
+            )
+        if value.endswith("%"):
+            number = _number(value[:-1], f"threshold {name}") / 100.0
+        else:
+            number = _number(value, f"threshold {name}")
+            if number > 1.0:
+                raise UsageError(f"threshold {name}={value} is above 1; write {value}% for percent")
+        if not 0.0 <= number <= 1.0:
+            raise UsageError(f"threshold {name}={value} is outside [0, 1]")
+        out[name] = number
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class MetricsConfig:
+    """How ``compute_metrics`` reads and scores a log."""
+
+    by: GroupBy | None = None
+    gap_tolerance: float = 0.5
+    """An interval between sealed cycles is a gap when > (1 + tolerance) x nominal period."""
+    sensor_window: int = DEFAULT_SENSOR_WINDOW
+    """Evidence refs resolve against this many cycles before the decision (and its own)."""
+    weights: TCSWeights = field(default_factory=TCSWeights)
+    thresholds: Mapping[str, float] = field(default_factory=dict)
+    max_listed: int = 10_000
+    """At most this many failing decisions and gaps are kept for listing (all are counted)."""
+    workers: int = 1
+    """Processes to spread segments over (1: in this process)."""
+    start_ns: int | None = None
+    end_ns: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.by is not None and self.by not in GROUP_BYS:
+            raise UsageError(f"cannot group by {self.by!r} (use {', '.join(GROUP_BYS)})")
+        if not (self.gap_tolerance >= 0 and math.isfinite(self.gap_tolerance)):
+            raise UsageError(f"gap tolerance must be >= 0, got {self.gap_tolerance}")
+        if self.sensor_window < 0:
+            raise UsageError(f"sensor window must be >= 0 cycles, got {self.sensor_window}")
+        if self.workers < 1:
+            raise UsageError(f"workers must be >= 1, got {self.workers}")
+        if self.max_listed < 0:
+            raise UsageError(f"max_listed must be >= 0, got {self.max_listed}")
+        unknown = set(self.thresholds) - set(METRIC_NAMES)
+        if unknown:
+            raise UsageError(f"unknown metric(s) in thresholds: {', '.join(sorted(unknown))}")
+
+
+# --- results ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Stat:
+    """A mean and its population std (ddof = 0), with what the std is taken across."""
+
+    mean: float
+    std: float
+    n: int
+    across: str
+
+
+@dataclass(frozen=True, slots=True)
+class GroupMetrics:
+    """The metrics of one group of decisions (or of all of them), with the counts behind them."""
+
+    name: str
+    decisions: int
+    sealed: int
+    unsealed: int
+    et: Stat
+    fully_traceable: int
+    fully_traceable_share: Stat
+    et_partial: Stat
+    factors: int
+    factors_traceable: int
+    dr: float | None
+    reconstructable: int
+    not_reconstructable: int
+    tc: float | None
+    window_s: float
+    gap_s: float
+    gaps: int
+    missing_cycles: int
+    """Cycles the gaps would have held at the nominal period (sum of round(gap / period))."""
+    declared_dropped: int
+    """Sum of the seals' ``dropped`` counts: cycles the logger says it could not write."""
+    clock_anomalies: int
+    """Sealed cycles whose time is not after the previous sealed cycle's (no interval)."""
+    integrity_ok: int
+    integrity_failed: int
+    tcs: Stat
+
+
+@dataclass(frozen=True, slots=True)
+class AcrossGroups:
+    """Mean and population std of each group's value, taken across the groups."""
+
+    by: str
+    groups: int
+    et: Stat
+    fully_traceable_share: Stat
+    et_partial: Stat
+    tc: Stat | None
+    dr: Stat | None
+
+
+@dataclass(frozen=True, slots=True)
+class DecisionFailure:
+    """A decision that is not fully traceable, not reconstructable, or fails integrity."""
+
+    cycle: int
+    t_ns: int
+    segment: str
+    group: str
+    problems: tuple[str, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Gap:
+    """An interval between two sealed cycles of one robot longer than the period allows."""
+
+    robot: str
+    after_cycle: int
+    after_t_ns: int
+    before_cycle: int
+    before_t_ns: int
+    gap_ns: int
+    missing_cycles: int
+    declared_dropped: int
+
+
+@dataclass(frozen=True, slots=True)
+class ThresholdCheck:
+    metric: str
+    threshold: float
+    value: float | None
+    passed: bool
+
+
+@dataclass(frozen=True, slots=True)
+class MetricsReport:
+    """Everything ``trace-audit metrics`` shows: definitions, tables, failures, thresholds."""
+
+    logs: tuple[str, ...]
+    segments: tuple[str, ...]
+    skipped_segments: tuple[str, ...]
+    by: str | None
+    definitions: dict[str, str]
+    overall: GroupMetrics
+    groups: tuple[GroupMetrics, ...]
+    across_groups: AcrossGroups | None
+    logging_time: str
+    failures: tuple[DecisionFailure, ...]
+    failures_total: int
+    gaps: tuple[Gap, ...]
+    gaps_total: int
+    thresholds: tuple[ThresholdCheck, ...]
+    elapsed_s: float
+    cycles_per_s: float
+
+    @property
+    def passed(self) -> bool:
+        return all(check.passed for check in self.thresholds)
+
+
+# --- accumulation ------------------------------------------------------------------------------
+
+
+@dataclass(slots=True)
+class _Acc:
+    """Running sums for one group; merged across segments and processes by addition."""
+
+    decisions: int = 0
+    sealed: int = 0
+    et_sum: float = 0.0
+    et_sq: float = 0.0
+    etp_sum: float = 0.0
+    etp_sq: float = 0.0
+    full: int = 0
+    factors: int = 0
+    factors_traceable: int = 0
+    dr_ok: int = 0
+    integrity_ok: int = 0
+    tcs_sum: float = 0.0
+    tcs_sq: float = 0.0
+    window_ns: int = 0
+    gap_ns: int = 0
+    gaps: int = 0
+    missing_cycles: int = 0
+    dropped: int = 0
+    anomalies: int = 0
+
+    def merge(self, other: _Acc) -> None:
+        for name in self.__slots__:
+            setattr(self, name, getattr(self, name) + getattr(other, name))
+
+
+@dataclass(slots=True)
+class _Stream:
+    """Where one robot's sealed sequence stands: the last sealed time and seal digest."""
+
+    prev_t_ns: int | None = None
+    prev_cycle: int = -1
+    prev_seal: str | None = None
+
+
+@dataclass(slots=True)
+class _Partial:
+    """What scanning one or more segments produced; merged in segment order."""
+
+    groups: dict[str, _Acc] = field(default_factory=dict)
+    failures: list[DecisionFailure] = field(default_factory=list)
+    failures_total: int = 0
+    gaps: list[Gap] = field(default_factory=list)
+    gaps_total: int = 0
+    cycles: int = 0
+    timing: list[tuple[float, int]] = field(default_factory=list)
+
+    def merge(self, other: _Partial, limit: int) -> None:
+        for name, acc in other.groups.items():
+            mine = self.groups.get(name)
+            if mine is None:
+                self.groups[name] = acc
+            else:
+                mine.merge(acc)
+        self.failures.extend(other.failures[: max(0, limit - len(self.failures))])
+        self.failures_total += other.failures_total
+        self.gaps.extend(other.gaps[: max(0, limit - len(self.gaps))])
+        self.gaps_total += other.gaps_total
+        self.cycles += other.cycles
+        self.timing.extend(other.timing)
+
+
+class _Scanner:
+    """Scores the cycles of one robot's segments in order, carrying chain and window state."""
+
+    def __init__(self, config: MetricsConfig, partial: _Partial) -> None:
+        self.config = config
+        self.partial = partial
+        self.window = SensorWindow(config.sensor_window)
+        self.stream = _Stream()
+
+    def scan(self, segment: Segment, progress: Callable[[int], None] | None = None) -> None:
+        cfg = self.config
+        session = segment.session
+        period = session.period_ns
+        limit_ns = period + int(period * cfg.gap_tolerance)
+        by = cfg.by
+        seg_name = segment.path.name
+        fixed_group = (
+            seg_name
+            if by == "segment"
+            else session.robot_id
+            if by == "robot"
+            else "all"
+            if by is None
+            else ""
+        )
+        if self.stream.prev_seal is None:
+            self.stream.prev_seal = session.prev_seal
+        groups = self.partial.groups
+        window = self.window
+        stream = self.stream
+        weights = cfg.weights
+        w_total = (
+            weights.et + weights.et_partial + weights.dr + weights.continuity + weights.integrity
+        )
+        partial = self.partial
+        limit = cfg.max_listed
+        done = 0
+        for cycle in segment.iter_cycles(cfg.start_ns, cfg.end_ns):
+            done += 1
+            if progress is not None and done % _PROGRESS_EVERY == 0:
+                progress(_PROGRESS_EVERY)
+            window.push(cycle.sensors)
+            action = cycle.layer(TOPIC_ACTION)
+            belief = cycle.layer(TOPIC_BELIEF)
+            perception = cycle.layer(TOPIC_PERCEPTION)
+            score = score_layers(action, belief, perception, window=window)
+            dr_problems = _dr_problems(action)
+            if fixed_group:
+                group = fixed_group
+            elif by == "scenario":
+                group = _scenario(cycle.layer(TOPIC_EXECUTION))
+            else:
+                group = time.strftime("%Y-%m-%d %H:00", time.gmtime(cycle.t_ns // 1_000_000_000))
+            acc = groups.get(group)
+            if acc is None:
+                acc = groups[group] = _Acc()
+
+            # integrity and continuity: only a sealed cycle closes an interval
+            integrity: list[str] = []
+            continuity = 0.0
+            seal_data = cycle.payloads.get(TOPIC_SEAL)
+            if seal_data is None:
+                integrity.append("not sealed")
+            else:
+                acc.sealed += 1
+                seal = orjson.loads(seal_data)
+                _check_digests(cycle, seal, integrity)
+                if seal.get("prev") != stream.prev_seal:
+                    integrity.append("hash chain broken: prev is not the previous seal's digest")
+                stream.prev_seal = hashlib.sha256(seal_data).hexdigest()
+                dropped = int(seal.get("dropped") or 0)
+                acc.dropped += dropped
+                continuity = 1.0
+                prev_t = stream.prev_t_ns
+                if prev_t is None:
+                    acc.window_ns += period
+                else:
+                    interval = cycle.t_ns - prev_t
+                    if interval <= 0:
+                        acc.anomalies += 1
+                    else:
+                        acc.window_ns += interval
+                        if period > 0 and interval > limit_ns:
+                            gap = interval - period
+                            missing = round(gap / period)
+                            acc.gap_ns += gap
+                            acc.gaps += 1
+                            acc.missing_cycles += missing
+                            continuity = period / interval
+                            partial.gaps_total += 1
+                            if len(partial.gaps) < limit:
+                                partial.gaps.append(
+                                    Gap(
+                                        session.robot_id,
+                                        stream.prev_cycle,
+                                        prev_t,
+                                        cycle.cycle,
+                                        cycle.t_ns,
+                                        gap,
+                                        missing,
+                                        dropped,
+                                    )
+                                )
+                stream.prev_t_ns = cycle.t_ns
+                stream.prev_cycle = cycle.cycle
+
+            et, etp = score.et, score.et_partial
+            full = score.fully_traceable
+            dr_ok = not dr_problems
+            intact = not integrity
+            acc.decisions += 1
+            acc.et_sum += et
+            acc.et_sq += et * et
+            acc.etp_sum += etp
+            acc.etp_sq += etp * etp
+            acc.full += full
+            acc.factors += score.factors
+            acc.factors_traceable += score.traceable
+            acc.dr_ok += dr_ok
+            acc.integrity_ok += intact
+            if intact or not weights.integrity_gate:
+                tcs = (
+                    weights.et * et
+                    + weights.et_partial * etp
+                    + weights.dr * dr_ok
+                    + weights.continuity * continuity
+                    + weights.integrity * intact
+                ) / w_total
+            else:
+                tcs = 0.0
+            acc.tcs_sum += tcs
+            acc.tcs_sq += tcs * tcs
+            if not (full and dr_ok and intact):
+                partial.failures_total += 1
+                if len(partial.failures) < limit:
+                    partial.failures.append(
+                        DecisionFailure(
+                            cycle.cycle,
+                            cycle.t_ns,
+                            seg_name,
+                            group,
+                            (
+                                *(
+                                    ()
+                                    if full
+                                    else _et_problems(
+                                        trace_layers(
+                                            cycle.cycle,
+                                            cycle.t_ns,
+                                            action,
+                                            belief,
+                                            perception,
+                                            window=window,
+                                        )
+                                    )
+                                ),
+                                *(f"DR: {p}" for p in dr_problems),
+                                *(f"integrity: {p}" for p in integrity),
+                            ),
+                        )
+                    )
+        partial.cycles += done
+        if progress is not None:
+            progress(done % _PROGRESS_EVERY)
+        timing = segment.metadata.get(TIMING_METADATA)
+        if timing:
+            with contextlib.suppress(KeyError, ValueError):
+                partial.timing.append(
+                    (float(timing["commit_mean_ns"]), int(timing.get("cycles", done)))
+                )
+
+    def prefill(self, segment: Segment) -> None:
+        """Load the chain and window state at the end of ``segment`` (the one before ours)."""
+        cfg = self.config
+        tail: list[Cycle] = []
+        last_sealed: Cycle | None = None
+        for cycle in segment.iter_cycles(None, cfg.end_ns, reverse=True):
+            if len(tail) <= cfg.sensor_window:
+                tail.append(cycle)
+            if last_sealed is None and TOPIC_SEAL in cycle.payloads:
+                last_sealed = cycle
+            if last_sealed is not None and len(tail) > cfg.sensor_window:
+                break
+        for cycle in reversed(tail):
+            self.window.push(cycle.sensors)
+        if last_sealed is not None:
+            self.stream.prev_t_ns = last_sealed.t_ns
+            self.stream.prev_cycle = last_sealed.cycle
+            self.stream.prev_seal = hashlib.sha256(last_sealed.payloads[TOPIC_SEAL]).hexdigest()
+        else:
+            self.stream.prev_seal = segment.session.prev_seal
+
+
+def _check_digests(cycle: Cycle, seal: dict[str, Any], problems: list[str]) -> None:
+    named = seal.get("digests")
+    if not isinstance(named, dict):
+        problems.append("seal names no digests")
+        return
+    for topic, data in cycle.payloads.items():
+        if topic == TOPIC_SEAL:
+            continue
+        want = named.get(topic)
+        if want is None:
+            problems.append(f"{topic} is not named by the seal")
+        elif hashlib.sha256(data).hexdigest() != want:
+            problems.append(f"{topic} does not match its seal digest")
+    summary = cycle.summary
+    for topic in named:
+        if topic not in cycle.payloads and not (summary is not None and topic in summary):
+            problems.append(f"{topic} is named by the seal but missing")
+
+
+def _dr_problems(action: Any) -> list[str]:
+    if not isinstance(action, dict) or not action.get("command"):
+        return ["action not logged"]
+    problems: list[str] = []
+    if not action.get("alternatives"):
+        problems.append("no alternatives logged")
+    rationale = action.get("rationale")
+    if not isinstance(rationale, dict):
+        problems.append("no rationale logged")
+        return problems
+    if rationale.get("truncated"):
+        problems.append("rationale truncated")
+    if not rationale.get("factors"):
+        problems.append("rationale names no factors")
+    if not action.get("counterfactuals") and not action.get("counterfactuals_none_applicable"):
+        problems.append("no counterfactuals and not declared none-applicable")
+    return problems
+
+
+def _et_problems(chains: DecisionChains) -> list[str]:
+    if chains.reason:
+        return [f"ET: {chains.reason}"]
+    out: list[str] = []
+    for factor in chains.factors:
+        link = factor.missing
+        if link is not None:
+            label = f"{factor.node} ({factor.name})" if factor.name else factor.node
+            out.append(
+                f"ET: factor {label}: {link.level} missing ({link.detail}); "
+                f"depth {factor.depth}/{factor.expected_depth}"
+            )
+    return out
+
+
+def _scenario(execution: Any) -> str:
+    if isinstance(execution, dict):
+        for flag in execution.get("flags") or ():
+            if isinstance(flag, str) and flag.startswith(SCENARIO_FLAG):
+                return flag[len(SCENARIO_FLAG) :] or NO_SCENARIO
+    return NO_SCENARIO
+
+
+# --- segments ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class _Task:
+    path: str
+    previous: str | None
+    config: MetricsConfig
+
+
+def _plan(paths: Sequence[str | Path]) -> tuple[list[tuple[str, list[Segment]]], list[str]]:
+    """Open every segment; order each robot's segments; drop tier duplicates of a segment."""
+    segments: list[Segment] = []
+    for path in paths:
+        for file in find_segments(Path(path)):
+            segments.append(open_segment(file))
+    if not segments:
+        raise UsageError("no segments to read")
+    chosen: dict[tuple[str, int], Segment] = {}
+    skipped: list[str] = []
+    for segment in segments:
+        key = (segment.session.robot_id, segment.session.segment)
+        other = chosen.get(key)
+        if other is None:
+            chosen[key] = segment
+            continue
+        if other.path.resolve() == segment.path.resolve():
+            continue
+        keep, drop = sorted((other, segment), key=_tier_rank)
+        chosen[key] = keep
+        skipped.append(f"{drop.path} (same robot and segment number as {keep.path})")
+    robots: dict[str, list[Segment]] = {}
+    for segment in chosen.values():
+        robots.setdefault(segment.session.robot_id, []).append(segment)
+    plan = [
+        (robot, sorted(segs, key=lambda s: (s.session.segment, s.info.start_ns)))
+        for robot, segs in robots.items()
+    ]
+    plan.sort(key=lambda item: min(s.info.start_ns for s in item[1]))
+    return plan, skipped
+
+
+def _tier_rank(segment: Segment) -> tuple[int, str]:
+    # hot and cold hold the same cycles losslessly; warm is lossy, so it loses ties.
+    return (_TIER_PREFERENCE.get(segment.session.tier, 3), str(segment.path))
+
+
+def _run_task(task: _Task) -> _Partial:
+    partial = _Partial()
+    scanner = _Scanner(task.config, partial)
+    if task.previous is not None:
+        scanner.prefill(open_segment(task.previous))
+    scanner.scan(open_segment(task.path))
+    return partial
+
+
+def _expected_cycles(segment: Segment) -> int:
+    return segment.info.channels.get(TOPIC_SEAL, 0)
+
+
+# --- the entry point ---------------------------------------------------------------------------
+
+
+def compute_metrics(
+    paths: Sequence[str | Path],
+    config: MetricsConfig | None = None,
+    *,
+    progress: ProgressCallback | None = None,
+) -> MetricsReport:
+    """Score every decision in the given logs (files, directories or log roots) in one pass.
+
+    Memory is bounded: cycles are streamed, sums accumulated, and at most
+    ``config.max_listed`` failing decisions and gaps kept for listing.
+    """
+    cfg = config or MetricsConfig()
+    started = time.perf_counter()
+    plan, skipped = _plan(paths)
+    expected = sum(_expected_cycles(s) for _, segs in plan for s in segs) or None
+    total = _Partial()
+    done = 0
+
+    def advance(n: int) -> None:
+        nonlocal done
+        done += n
+        if progress is not None:
+            progress(done, expected)
+
+    if cfg.workers == 1:
+        for _robot, segments in plan:
+            partial = _Partial()
+            scanner = _Scanner(cfg, partial)
+            for segment in segments:
+                scanner.scan(segment, advance)
+            total.merge(partial, cfg.max_listed)
+    else:
+        tasks = [
+            _Task(str(seg.path), str(segs[i - 1].path) if i else None, cfg)
+            for _robot, segs in plan
+            for i, seg in enumerate(segs)
+        ]
+        workers = min(cfg.workers, len(tasks), os.cpu_count() or 1)
+        with ProcessPoolExecutor(max_workers=max(1, workers)) as pool:
+            for partial in pool.map(_run_task, tasks):
+                total.merge(partial, cfg.max_listed)
+                advance(partial.cycles)
+    elapsed = time.perf_counter() - started
+    segments_read = tuple(str(s.path) for _, segs in plan for s in segs)
+    return _report(
+        paths, cfg, total=total, segments=segments_read, skipped=skipped, elapsed=elapsed
+    )
+
+
+def _report(
+    paths: Sequence[str | Path],
+    cfg: MetricsConfig,
+    *,
+    total: _Partial,
+    segments: tuple[str, ...],
+    skipped: list[str],
+    elapsed: float,
+) -> MetricsReport:
+    overall_acc = _Acc()
+    for acc in total.groups.values():
+        overall_acc.merge(acc)
+    overall = _group("all", overall_acc)
+    groups: tuple[GroupMetrics, ...] = ()
+    across: AcrossGroups | None = None
+    if cfg.by is not None:
+        groups = tuple(_group(name, acc) for name, acc in total.groups.items())
+        across = _across(cfg.by, groups)
+    checks = tuple(_check(name, threshold, overall) for name, threshold in cfg.thresholds.items())
+    failures = tuple(sorted(total.failures, key=lambda f: (f.t_ns, f.cycle)))
+    gaps = tuple(sorted(total.gaps, key=lambda g: (g.after_t_ns, g.robot)))
+    return MetricsReport(
+        logs=tuple(str(p) for p in paths),
+        segments=segments,
+        skipped_segments=tuple(skipped),
+        by=cfg.by,
+        definitions=_definitions(cfg),
+        overall=overall,
+        groups=groups,
+        across_groups=across,
+        logging_time=_timing(total.timing),
+        failures=failures,
+        failures_total=total.failures_total,
+        gaps=gaps,
+        gaps_total=total.gaps_total,
+        thresholds=checks,
+        elapsed_s=elapsed,
+        cycles_per_s=total.cycles / elapsed if elapsed > 0 else 0.0,
+    )
+
+
+def _stat(total: float, squares: float, n: int, across: str) -> Stat:
+    if n == 0:
+        return Stat(0.0, 0.0, 0, across)
+    mean = total / n
+    return Stat(mean, math.sqrt(max(0.0, squares / n - mean * mean)), n, across)
+
+
+def _group(name: str, acc: _Acc) -> GroupMetrics:
+    n = acc.decisions
+    return GroupMetrics(
+        name=name,
+        decisions=n,
+        sealed=acc.sealed,
+        unsealed=n - acc.sealed,
+        et=_stat(acc.et_sum, acc.et_sq, n, "decisions"),
+        fully_traceable=acc.full,
+        fully_traceable_share=_stat(acc.full, acc.full, n, "decisions"),
+        et_partial=_stat(acc.etp_sum, acc.etp_sq, n, "decisions"),
+        factors=acc.factors,
+        factors_traceable=acc.factors_traceable,
+        dr=acc.dr_ok / n if n else None,
+        reconstructable=acc.dr_ok,
+        not_reconstructable=n - acc.dr_ok,
+        tc=1.0 - acc.gap_ns / acc.window_ns if acc.window_ns > 0 else None,
+        window_s=acc.window_ns / 1e9,
+        gap_s=acc.gap_ns / 1e9,
+        gaps=acc.gaps,
+        missing_cycles=acc.missing_cycles,
+        declared_dropped=acc.dropped,
+        clock_anomalies=acc.anomalies,
+        integrity_ok=acc.integrity_ok,
+        integrity_failed=n - acc.integrity_ok,
+        tcs=_stat(acc.tcs_sum, acc.tcs_sq, n, "decisions"),
+    )
+
+
+def _spread(values: Iterable[float | None], across: str) -> Stat | None:
+    present = [v for v in values if v is not None]
+    if not present:
+        return None
+    mean = sum(present) / len(present)
+    var = sum((v - mean) ** 2 for v in present) / len(present)
+    return Stat(mean, math.sqrt(var), len(present), across)
+
+
+def _across(by: str, groups: Sequence[GroupMetrics]) -> AcrossGroups:
+    label = f"{by}s"
+    et = _spread((g.et.mean for g in groups), label)
+    full = _spread((g.fully_traceable_share.mean for g in groups), label)
+    etp = _spread((g.et_partial.mean for g in groups), label)
+    empty = Stat(0.0, 0.0, 0, label)
+    return AcrossGroups(
+        by=by,
+        groups=len(groups),
+        et=et or empty,
+        fully_traceable_share=full or empty,
+        et_partial=etp or empty,
+        tc=_spread((g.tc for g in groups), label),
+        dr=_spread((g.dr for g in groups), label),
+    )
+
+
+def _metric_value(name: str, g: GroupMetrics) -> float | None:
+    if g.decisions == 0 and name != "TC":
+        return None
+    return {
+        "ET": g.et.mean,
+        "ET_full": g.fully_traceable_share.mean,
+        "ET_partial": g.et_partial.mean,
+        "TC": g.tc,
+        "DR": g.dr,
+        "TCS": g.tcs.mean,
+    }[name]
+
+
+def _check(name: str, threshold: float, overall: GroupMetrics) -> ThresholdCheck:
+    value = _metric_value(name, overall)
+    # A metric that cannot be computed (no decisions, no interval) does not pass a threshold.
+    return ThresholdCheck(name, threshold, value, value is not None and value >= threshold)
+
+
+def _timing(entries: list[tuple[float, int]]) -> str:
+    weight = sum(n for _, n in entries)
+    if not entries or weight <= 0:
+        return "not logged"
+    mean_ns = sum(m * n for m, n in entries) / weight
+    return f"{mean_ns / 1e6:.3f} ms mean per cycle ({TIMING_METADATA} metadata, {weight} cycles)"
+
+
+def _definitions(cfg: MetricsConfig) -> dict[str, str]:
+    w = cfg.weights
+    return {
+        "decision": "every cycle in the log (sealed, or an unsealed tail of a crashed writer)",
+        "ET": "share of the action's factors with a documented chain to a resolving sensor "
+        "reading; 0 when the action or its factors are missing",
+        "chain": "factor node -> belief path (edges child->parent) -> entity node -> "
+        "perception entity -> evidence ref -> logged sensor message",
+        "expected_depth": f"{EXPECTED_DEPTH_STATE} for a factor on a derived-state node, "
+        f"{EXPECTED_DEPTH_ENTITY} for a factor on an entity node",
+        "ET_partial": "mean over factors of documented depth / expected depth",
+        "sensor_window": f"refs resolve against the decision's cycle and the "
+        f"{cfg.sensor_window} cycles before it (topic, log time, sequence, "
+        "sha256)",
+        "TC": f"1 - sum(gaps) / window per robot; a gap is an interval between sealed cycles "
+        f"longer than (1 + {cfg.gap_tolerance:g}) x the nominal period, counted as the "
+        "time beyond one period; window = last - first sealed time + one period",
+        "DR": "action logged x >= 1 alternative logged x rationale complete (not truncated, "
+        "factors present, counterfactuals present or none-applicable)",
+        "integrity": "sealed, every layer matches its seal digest, no named layer missing, "
+        "seal prev = digest of the previous seal",
+        "TCS": f"({w.et:g} ET + {w.et_partial:g} ET_partial + {w.dr:g} DR + "
+        f"{w.continuity:g} continuity + {w.integrity:g} integrity) / "
+        f"{w.et + w.et_partial + w.dr + w.continuity + w.integrity:g}"
+        + ("; 0 when integrity fails" if w.integrity_gate else ""),
+        "std": "population std (ddof=0); each value says whether it is across decisions or "
+        "across groups",
+    }
+
+
+# --- small parsing helpers ---------------------------------------------------------------------
+
+
+def _items(text: str) -> Iterator[str]:
+    for raw in text.split(","):
+        item = raw.strip()
+        if item:
+            yield item
+
+
+def _split_pair(item: str, what: str) -> tuple[str, str]:
+    if "=" not in item:
+        raise UsageError(f"{what} {item!r} is not NAME=VALUE")
+    key, value = item.split("=", 1)
+    return key.strip(), value.strip()
+
+
+def _number(text: str, what: str) -> float:
+    try:
+        value = float(text)
+    except ValueError as err:
+        raise UsageError(f"{what}: {text!r} is not a number") from err
+    if not math.isfinite(value):
+        raise UsageError(f"{what}: {text!r} is not a finite number")
+    return value
