@@ -327,6 +327,33 @@ def _json(report: MetricsReport, failures: bool) -> dict[str, Any]:
 
     data: dict[str, Any] = to_jsonable(report)
     data["passed"] = report.passed
+    o = report.overall
+    data["table_ii"] = {
+        "ET_mean": o.et.mean,
+        "ET_std_across_decisions": o.et.std,
+        "ET_std_across_groups": report.across_groups.et.std if report.across_groups else None,
+        "fully_traceable": o.fully_traceable,
+        "decisions": o.decisions,
+        "TC": o.tc,
+        "gaps": o.gaps,
+        "DR": o.dr,
+        "not_reconstructable": o.not_reconstructable,
+        "time_per_cycle": report.logging_time,
+    }
+    data["table_iii"] = [
+        {
+            "group": g.name,
+            "decisions": g.decisions,
+            "ET": g.et.mean,
+            "ET_partial": g.et_partial.mean,
+            "TC": g.tc,
+            "DR": g.dr,
+            "fully_traceable": g.fully_traceable,
+            "gaps": g.gaps,
+            "not_reconstructable": g.not_reconstructable,
+        }
+        for g in report.groups
+    ]
     if not failures:
         data.pop("failures")
         data.pop("gaps")
