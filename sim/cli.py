@@ -1,0 +1,155 @@
+"""``trace-sim``: parse, call ``sim.run``, render.
+
+Exit codes: 0 ok, 2 usage, 3 unwritable output.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from sim.faults import FaultRates
+from sim.runner import (
+    RunConfig,
+    RunResult,
+    SimOutputError,
+    SimUsageError,
+    parse_duration,
+    run,
+)
+from sim.scenarios import EPISODE_CYCLES, SCENARIOS
+
+EXIT_USAGE = 2
+EXIT_OUTPUT = 3
+
+app = typer.Typer(
+    name="trace-sim",
+    help="Warehouse robot simulator that writes TRACE audit logs (the paper's evaluation).",
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+)
+
+
+def _fail(message: str, code: int) -> None:
+    sys.stderr.write(f"trace-sim: {message}\n")
+    raise typer.Exit(code)
+
+
+@app.command("run")
+def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
+    out: Annotated[Path, typer.Option("--out", "-o", help="a .mcap file or a log root directory")],
+    scenario: Annotated[
+        str, typer.Option(help="all, or one of: " + ", ".join(SCENARIOS))
+    ] = "all",
+    cycles: Annotated[int, typer.Option(help="decision cycles per scenario (10 Hz)")] = 100,
+    seed: Annotated[int, typer.Option(help="random seed; same seed, same log")] = 0,
+    faults: Annotated[
+        str, typer.Option(help="on: inject faults at the paper's rates; off: none")
+    ] = "on",
+    duration: Annotated[
+        str | None,
+        typer.Option(help="routine operation for this long (e.g. 24h), cycling through scenarios"),
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="print the summary as JSON")] = False,
+) -> None:
+    """Simulate scenarios and write the TRACE log plus a fault ground-truth sidecar."""
+    try:
+        if faults not in ("on", "off"):
+            raise SimUsageError(f"--faults must be on or off, got {faults!r}")
+        total = parse_duration(duration) if duration is not None else None
+        config = RunConfig(
+            out=out,
+            scenario=scenario,
+            cycles=cycles,
+            seed=seed,
+            faults=FaultRates() if faults == "on" else FaultRates.off(),
+            total_cycles=total,
+        )
+        result = run(config) if as_json else _run_with_progress(config)
+    except SimUsageError as err:
+        _fail(str(err), EXIT_USAGE)
+        return
+    except SimOutputError as err:
+        _fail(str(err), EXIT_OUTPUT)
+        return
+    if as_json:
+        sys.stdout.write(json.dumps(result.as_dict(), indent=2) + "\n")
+    else:
+        _render(result)
+
+
+def _run_with_progress(config: RunConfig) -> RunResult:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    with Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        transient=True,
+    ) as bar:
+        task = bar.add_task("simulating", total=None)
+
+        def tick(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        return run(config, progress=tick)
+
+
+def _render(result: RunResult) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title="trace-sim run", show_header=False, title_justify="left")
+    table.add_column(style="bold")
+    table.add_column()
+    table.add_row("cycles", f"{result.cycles:,} ({result.written:,} written)")
+    table.add_row("dropped", f"{result.dropped:,}")
+    table.add_row(
+        "commands", ", ".join(f"{k} {v:,}" for k, v in sorted(result.commands.items()))
+    )
+    table.add_row("STOPs", f"{result.commands.get('STOP', 0):,}")
+    table.add_row(
+        "scenarios", ", ".join(f"{k} {v:,}" for k, v in result.scenarios.items())
+    )
+    faults = ", ".join(f"{k} {v:,}" for k, v in sorted(result.faults.items())) or "none"
+    table.add_row("faults injected", faults)
+    table.add_row("bytes written", f"{result.bytes_written:,}")
+    table.add_row("speed", f"{result.cycles_per_s:,.0f} cycles/s ({result.elapsed_s:.1f} s)")
+    table.add_row("log", str(result.out))
+    table.add_row("truth", f"{result.truth} (ground truth; metrics must not read it)")
+    Console().print(table)
+
+
+@app.command("scenarios")
+def scenarios_cmd(
+    as_json: Annotated[bool, typer.Option("--json", help="print as JSON")] = False,
+) -> None:
+    """List the scenarios."""
+    rows = [{"name": s.name, "description": s.description} for s in SCENARIOS.values()]
+    if as_json:
+        sys.stdout.write(json.dumps(rows, indent=2) + "\n")
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"scenarios (episodes of {EPISODE_CYCLES} cycles)")
+    table.add_column("name", style="bold")
+    table.add_column("description")
+    for row in rows:
+        table.add_row(row["name"], row["description"])
+    Console().print(table)
+
+
+def main() -> None:
+    """Entry point of ``trace-sim``."""
+    app()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,134 @@
+"""Counterfactuals found by probing the policy, not by reading its thresholds.
+
+For each factor of a decision, the prober intervenes on that one belief node (all others
+held), scans from the observed value towards each end of the factor's domain, and bisects
+the first bracket where the command changes. The boundary is then snapped to two decimals
+only if the policy confirms the snapped value. What is reported is therefore true of the
+policy by construction:
+
+- ``>= t`` / ``<= t``: re-running the policy with the factor at ``t`` selects ``would_select``;
+- ``> t`` / ``< t``: it does so at ``t +/- STRICT_EPS`` (and not at ``t``).
+
+Probing has a budget of policy evaluations. When it runs out the prober gives up and
+returns nothing: a partial set of counterfactuals would look complete to an investigator.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+from sim.policy import PolicyInput, choose
+
+STRICT_EPS = 1e-6
+DEFAULT_BUDGET = 400
+_GRID = 4
+_DOMAINS = {
+    "distance": (0.0, 30.0, 0.002),
+    "ttc": (0.0, 99.0, 0.002),
+    "collision_risk": (0.0, 1.0, 0.0005),
+    "aisle_blocked": (0.0, 1.0, 0.0005),
+    "clearance": (0.0, 10.0, 0.002),
+}
+
+
+class BudgetExhaustedError(Exception):
+    """The probing ran out of policy evaluations."""
+
+
+@dataclass(frozen=True, slots=True)
+class Found:
+    factor: str
+    comparison: str
+    threshold: float
+    would_select: str
+
+
+def domain_of(node: str) -> tuple[float, float, float]:
+    """(low, high, tolerance) of a factor, by the node id's suffix."""
+    return _DOMAINS[node.rsplit(".", 1)[-1]]
+
+
+def probe(
+    inp: PolicyInput,
+    values: Mapping[str, object],
+    factors: list[str],
+    budget: int = DEFAULT_BUDGET,
+) -> list[Found]:
+    """Counterfactuals for each numeric factor, in both directions; raise BudgetExhaustedError."""
+    spent = 0
+    v = dict(values)
+
+    def run(node: str, x: float) -> str:
+        nonlocal spent
+        spent += 1
+        if spent > budget:
+            raise BudgetExhaustedError(f"counterfactual probing exceeded {budget} evaluations")
+        v[node] = x
+        return choose(inp, v)
+
+    spent = 1
+    base = choose(inp, v)
+    found: list[Found] = []
+    for node in factors:
+        current = values[node]
+        if not isinstance(current, (int, float)) or isinstance(current, bool):
+            continue
+        lo_d, hi_d, tol = domain_of(node)
+        c = float(current)
+        for end in (hi_d, lo_d):
+            hit = _search(run, node, c, end, tol=tol, base=base)
+            if hit is not None:
+                found.append(hit)
+        v[node] = current
+    return found
+
+
+def _search(
+    run: Callable[[str, float], str], node: str, c: float, end: float, *, tol: float, base: str
+) -> Found | None:
+    if abs(end - c) <= tol:
+        return None
+    up = end > c
+    prev = c
+    flip: float | None = None
+    for k in range(1, _GRID + 1):
+        x = c + (end - c) * k / _GRID
+        if run(node, x) != base:
+            flip = x
+            break
+        prev = x
+    if flip is None:
+        return None
+    same, other = prev, flip
+    while abs(other - same) > tol:
+        mid = 0.5 * (same + other)
+        if run(node, mid) == base:
+            same = mid
+        else:
+            other = mid
+    would = run(node, other)
+    snapped = round(other, 2)
+    if up:
+        if snapped > c and run(node, snapped) == would:
+            return Found(node, ">=", snapped, would)
+        if run(node, snapped) == base and run(node, snapped + STRICT_EPS) == would:
+            return Found(node, ">", snapped, would)
+        return Found(node, ">=", other, would)
+    if snapped < c and snapped >= 0.0 and run(node, snapped) == would:
+        return Found(node, "<=", snapped, would)
+    if run(node, snapped) == base and run(node, snapped - STRICT_EPS) == would:
+        return Found(node, "<", snapped, would)
+    return Found(node, "<=", other, would)
+
+
+def holds(inp: PolicyInput, values: Mapping[str, object], cf: Found) -> bool:
+    """Re-run the policy with the counterfactual value: does it select ``would_select``?"""
+    x = cf.threshold
+    if cf.comparison == ">":
+        x += STRICT_EPS
+    elif cf.comparison == "<":
+        x -= STRICT_EPS
+    v = dict(values)
+    v[cf.factor] = x
+    return choose(inp, v) == cf.would_select

@@ -1,0 +1,399 @@
+"""Run the simulator: world -> sensors -> the four layers -> ``trace_runtime`` log.
+
+``run(RunConfig(...))`` is the library entry point; the CLI only parses and renders.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sim.belief import BeliefGraph, Edge, build_belief
+from sim.counterfactual import DEFAULT_BUDGET, BudgetExhaustedError, Found, probe
+from sim.execution import Actuator
+from sim.faults import (
+    CycleFaults,
+    FailingOpener,
+    FaultInjector,
+    FaultRates,
+    TruthLog,
+    truth_path_for,
+)
+from sim.perception import CORRIDOR_MAX_M, Perceiver, PerceptionOutput
+from sim.policy import (
+    REROUTE,
+    Outcome,
+    PolicyInput,
+    describe,
+    evaluate,
+    factors_of,
+    score_alternatives,
+)
+from sim.records import (
+    RATIONALE_CAPACITY,
+    RationaleBuffer,
+    action_record,
+    belief_record,
+    cut_edges,
+    entities_under,
+    execution_record,
+    perception_record,
+    rationale_size,
+    reaches_entity,
+    write_rationale,
+)
+from sim.scenarios import EPISODE_CYCLES, SCENARIOS
+from sim.sensors import detect_camera, range_ultrasonic, scan_lidar
+from sim.world import PERIOD_S, World
+from trace_runtime import AuditLogger, LoggerConfig, TraceError
+
+PERIOD_NS = 100_000_000
+CYCLES_PER_DAY = 864_000
+SOFTWARE_VERSION = "trace-sim 0.1"
+POLICY_VERSION = "fig2-v1"
+TIMEOUT_BUDGET = 2
+"""Probe budget (policy evaluations) left when a counterfactual timeout is injected."""
+REROUTE_COOLDOWN_S = 5.0
+EPISODE_ROOM_M = 28.0
+"""Straight aisle an episode needs ahead: the farthest spawn (~15 m) plus 10 s of driving."""
+
+
+class SimError(Exception):
+    """Base of the simulator's own errors."""
+
+
+class SimUsageError(SimError, ValueError):
+    """A bad option: unknown scenario, non-positive cycle count, bad rate."""
+
+
+class SimOutputError(SimError):
+    """The output path cannot be written."""
+
+
+@dataclass(frozen=True, slots=True)
+class RunConfig:
+    """What to simulate and where to log it."""
+
+    out: Path
+    scenario: str = "all"
+    cycles: int = 100
+    """Cycles per scenario (``all`` runs each scenario this many cycles, in order)."""
+    seed: int = 0
+    faults: FaultRates = field(default_factory=FaultRates)
+    total_cycles: int | None = None
+    """Routine operation: this many cycles, cycling through the scenarios episode by episode."""
+    robot_id: str = "amr-01"
+    start_ns: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class RunResult:
+    """What a run did."""
+
+    out: Path
+    truth: Path
+    segments: tuple[Path, ...]
+    cycles: int
+    written: int
+    dropped: int
+    commands: dict[str, int]
+    scenarios: dict[str, int]
+    faults: dict[str, int]
+    bytes_written: int
+    elapsed_s: float
+    seed: int
+
+    @property
+    def cycles_per_s(self) -> float:
+        return self.cycles / self.elapsed_s if self.elapsed_s > 0 else float("inf")
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "out": str(self.out),
+            "truth": str(self.truth),
+            "segments": [str(p) for p in self.segments],
+            "cycles": self.cycles,
+            "written": self.written,
+            "dropped": self.dropped,
+            "commands": self.commands,
+            "scenarios": self.scenarios,
+            "faults": self.faults,
+            "bytes_written": self.bytes_written,
+            "elapsed_s": round(self.elapsed_s, 3),
+            "cycles_per_s": round(self.cycles_per_s, 1),
+            "seed": self.seed,
+        }
+
+
+def parse_duration(text: str) -> int:
+    """``24h`` / ``90m`` / ``30s`` / ``1d`` -> number of 10 Hz cycles."""
+    units = {"s": 1, "m": 60, "h": 3600, "d": 86400}
+    t = text.strip().lower()
+    try:
+        seconds = float(t[:-1]) * units[t[-1]] if t and t[-1] in units else float(t)
+    except ValueError as err:
+        raise SimUsageError(f"bad duration {text!r}: use e.g. 24h, 90m, 30s") from err
+    if seconds <= 0:
+        raise SimUsageError(f"duration must be positive: {text!r}")
+    return max(1, round(seconds / PERIOD_S))
+
+
+def plan(config: RunConfig) -> Iterator[tuple[str, bool]]:
+    """(scenario, starts a new episode) for each cycle of the run."""
+    if config.total_cycles is not None:
+        names = list(SCENARIOS)
+        for k in range(config.total_cycles):
+            episode, offset = divmod(k, EPISODE_CYCLES)
+            yield names[episode % len(names)], offset == 0
+        return
+    names = list(SCENARIOS) if config.scenario == "all" else [config.scenario]
+    for name in names:
+        for k in range(config.cycles):
+            yield name, k % EPISODE_CYCLES == 0
+
+
+def _validate(config: RunConfig) -> int:
+    if config.total_cycles is not None:
+        if config.total_cycles <= 0:
+            raise SimUsageError("total cycles must be positive")
+        return config.total_cycles
+    if config.scenario != "all" and config.scenario not in SCENARIOS:
+        known = ", ".join(["all", *SCENARIOS])
+        raise SimUsageError(f"unknown scenario {config.scenario!r} (known: {known})")
+    if config.cycles <= 0:
+        raise SimUsageError(f"cycles must be positive, got {config.cycles}")
+    for name, rate in config.faults.as_dict().items():
+        if not 0.0 <= rate <= 1.0:
+            raise SimUsageError(f"fault rate {name} must be in [0, 1], got {rate}")
+    return config.cycles * (len(SCENARIOS) if config.scenario == "all" else 1)
+
+
+def run(config: RunConfig, progress: Callable[[int, int], None] | None = None) -> RunResult:
+    """Simulate and log; ``progress(done, total)`` is called every 1000 cycles and at the end."""
+    total = _validate(config)
+    out = Path(config.out)
+    truth_path = truth_path_for(out)
+    opener = FailingOpener()
+    try:
+        if out.suffix == ".mcap":
+            out.parent.mkdir(parents=True, exist_ok=True)
+        else:
+            out.mkdir(parents=True, exist_ok=True)
+        truth = TruthLog(truth_path)
+        logger = AuditLogger(
+            out,
+            robot_id=config.robot_id,
+            period_s=PERIOD_S,
+            software_version=SOFTWARE_VERSION,
+            policy_version=POLICY_VERSION,
+            clock="sim",
+            config=LoggerConfig(threaded=False, fsync_interval_s=None, opener=opener),
+        )
+    except OSError as err:
+        raise SimOutputError(f"cannot write {out}: {err.strerror or err}") from err
+    except TraceError as err:
+        raise SimOutputError(f"cannot write {out}: {err}") from err
+
+    sim = _Pipeline(config, logger, opener, truth)
+    commands: dict[str, int] = {}
+    per_scenario: dict[str, int] = {}
+    started = time.perf_counter()
+    done = 0
+    try:
+        for k, (scenario, new_episode) in enumerate(plan(config)):
+            if new_episode:
+                sim.world.make_room(EPISODE_ROOM_M)
+                sim.world.actors = SCENARIOS[scenario].spawn(sim.world)
+            command = sim.cycle(scenario, config.start_ns + k * PERIOD_NS)
+            commands[command] = commands.get(command, 0) + 1
+            per_scenario[scenario] = per_scenario.get(scenario, 0) + 1
+            done += 1
+            if progress is not None and done % 1000 == 0:
+                progress(done, total)
+    finally:
+        logger.close()
+        truth.close()
+    elapsed = time.perf_counter() - started
+    if progress is not None:
+        progress(done, total)
+    stats = logger.stats
+    return RunResult(
+        out=out,
+        truth=truth_path,
+        segments=tuple(stats.segments),
+        cycles=done,
+        written=stats.written,
+        dropped=stats.dropped,
+        commands=commands,
+        scenarios=per_scenario,
+        faults=dict(truth.counts),
+        bytes_written=stats.bytes_written,
+        elapsed_s=elapsed,
+        seed=config.seed,
+    )
+
+
+Pending = list[tuple[str, dict[str, Any]]]
+
+
+class _Pipeline:
+    """The robot: world, sensors, the four layers and the logger, one cycle at a time."""
+
+    def __init__(
+        self, config: RunConfig, logger: AuditLogger, opener: FailingOpener, truth: TruthLog
+    ) -> None:
+        seeds = np.random.SeedSequence(config.seed).spawn(4)
+        self.world = World(np.random.default_rng(seeds[0]))
+        self.sensor_rng = np.random.default_rng(seeds[1])
+        self.injector = FaultInjector(config.faults, np.random.default_rng(seeds[2]))
+        self.actuator = Actuator(np.random.default_rng(seeds[3]))
+        self.perceiver = Perceiver()
+        self.logger = logger
+        self.opener = opener
+        self.truth = truth
+
+    def cycle(self, scenario: str, t_ns: int) -> str:
+        """One decision cycle through the four layers, logged; then the world moves on."""
+        world, actuator = self.world, self.actuator
+        logger, opener = self.logger, self.opener
+        faults = self.injector.draw_cycle()
+        pending: Pending = []
+        pose = world.robot_pose()
+        scan = scan_lidar(world, self.sensor_rng)
+        detections = (
+            None if faults.camera_down else detect_camera(world, scan.truth, self.sensor_rng)
+        )
+        us_range = range_ultrasonic(scan.truth, self.sensor_rng)
+        for sensor, down in (("lidar", faults.lidar_down), ("camera", faults.camera_down)):
+            if down:
+                pending.append(("sensor_unavailable", {"sensor": sensor}))
+        corridor_len = min(
+            CORRIDOR_MAX_M, world.route.to_end(world.robot.s, world.robot.direction) + 1.0
+        )
+        dropped_before = logger.stats.dropped
+        opener.set_failing(faults.write_timeout)
+        try:
+            with logger.cycle(t_ns) as c:
+                cycle_no = c.cycle
+                # Layer 1: sensors -> entities; the readings used are logged as they are read.
+                seen = self.perceiver.step(
+                    cycle=cycle_no, pose=pose, speed=actuator.linear,
+                    scan=None if faults.lidar_down else scan, detections=detections,
+                    us_range=us_range, corridor_length=corridor_len, log_sensor=c.sensor,
+                )
+                # Layer 2
+                graph = build_belief(seen, pose, actuator.linear)
+                # Layer 3
+                outcome, action = self._decide(graph, faults, pending)
+                # Layer 4
+                executed = actuator.step(outcome.command, world.t, graph)
+                flip = (outcome.command == REROUTE
+                        and world.t - world.robot.last_flip_t >= REROUTE_COOLDOWN_S)
+                flags = [f"scenario:{scenario}"]
+                if any(not ch.passed for ch in executed.checks):
+                    flags.append("compliance_violation")
+                if seen.sensors_unavailable:
+                    flags.append("sensor_degraded")
+                logged_factors = [f["node"] for f in action["rationale"]["factors"]]
+                corrupt, skip = self._audit_faults(
+                    seen, graph, factors_of(outcome), logged_factors, faults, pending
+                )
+                action["parameters"] = {"linear": executed.intended[0],
+                                        "angular": executed.intended[1]}
+                c.perception(perception_record(seen, pose, corrupt))
+                c.belief(belief_record(graph, skip))
+                c.action(action)
+                c.execution(execution_record(executed, flags))
+        finally:
+            opener.set_failing(False)
+        if logger.stats.dropped > dropped_before:
+            # The whole cycle (its sensor messages too) is gone: nothing else of it is logged.
+            self.perceiver.forget_cycle(cycle_no)
+            kind = "audit_write_timeout" if faults.write_timeout else "audit_write_failed"
+            self.truth.write(cycle_no, t_ns, scenario, kind, {"dropped": True})
+        else:
+            for kind, detail in pending:
+                self.truth.write(cycle_no, t_ns, scenario, kind, detail)
+        world.apply_motion(actuator.linear, actuator.angular, flip)
+        world.step_actors()
+        return outcome.command
+
+    def _decide(
+        self, graph: BeliefGraph, faults: CycleFaults, pending: Pending
+    ) -> tuple[Outcome, dict[str, Any]]:
+        """Layer 3: choose, score the alternatives, probe counterfactuals, write the rationale."""
+        values = graph.values()
+        inp = PolicyInput.from_nodes(graph.nodes)
+        outcome = evaluate(inp, values)
+        factors = factors_of(outcome)
+        score, alternatives = score_alternatives(outcome, values)
+        cfs: list[Found] | None
+        try:
+            budget = TIMEOUT_BUDGET if faults.cf_timeout else DEFAULT_BUDGET
+            cfs = probe(inp, values, factors, budget)
+        except BudgetExhaustedError:
+            cfs = None
+            pending.append(
+                ("counterfactual_timeout", {"budget": TIMEOUT_BUDGET, "factors": factors})
+            )
+        phrases = describe(outcome, values)
+        capacity = RATIONALE_CAPACITY
+        if faults.truncate:
+            capacity = rationale_size(phrases, outcome.tests, outcome.command, graph) // 2
+        buffer = RationaleBuffer(capacity)
+        write_rationale(buffer, phrases, outcome.tests, outcome.command, graph)
+        rationale = buffer.rationale()
+        if faults.truncate:
+            kept = [f["node"] for f in rationale["factors"]]
+            pending.append(("rationale_truncation", {
+                "capacity": capacity,
+                "factors_kept": kept,
+                "factors_lost": [f for f in factors if f not in kept],
+            }))
+        action = action_record(
+            outcome, score=score, alternatives=alternatives, rationale=rationale,
+            counterfactuals=cfs, intended=(0.0, 0.0),
+        )
+        return outcome, action
+
+    def _audit_faults(  # noqa: PLR0917 - private step of cycle(), called once
+        self,
+        seen: PerceptionOutput,
+        graph: BeliefGraph,
+        factors: list[str],
+        logged_factors: list[str],
+        faults: CycleFaults,
+        pending: Pending,
+    ) -> tuple[dict[str, str], Edge | None]:
+        """Evidence-link corruption per entity, and the belief edge whose write fails."""
+        entity_ids = {n.id for n in graph.nodes if n.kind == "entity"}
+        corrupt: dict[str, str] = {}
+        for eid in [e.id for e in seen.entities] + ["corridor"]:
+            mode = self.injector.corrupt_entity()
+            if mode is not None:
+                corrupt[eid] = mode
+                affected = [f for f in logged_factors
+                            if eid in entities_under(f, graph.edges, entity_ids)]
+                pending.append(("evidence_corruption", {
+                    "entity": eid, "mode": mode, "factors_affected": affected,
+                }))
+        if not faults.edge_failure:
+            return corrupt, None
+        # Aim at an edge whose loss breaks some factor's chain to its entity.
+        candidates = [(f, cut_edges(f, graph.edges, entity_ids)) for f in factors]
+        candidates = [(f, cuts) for f, cuts in candidates if cuts]
+        if not candidates:
+            return corrupt, None
+        factor, cuts = candidates[self.injector.pick(len(candidates))]
+        edge = cuts[self.injector.pick(len(cuts))]
+        kept = [e for e in graph.edges if e is not edge]
+        broken = [f for f in logged_factors if not reaches_entity(f, kept, entity_ids)]
+        pending.append(("edge_write_failure", {
+            "edge": [edge.parent, edge.child], "factor": factor, "broken_factors": broken,
+        }))
+        return corrupt, edge

@@ -1,0 +1,174 @@
+"""The warehouse: a 50 m x 30 m floor with shelf rows, a looping robot route and actors.
+
+Everything here is ground truth. The robot's pipeline (sensors -> perception -> belief ->
+policy) only ever sees the world through ``sim.sensors``; nothing downstream reads an
+``Actor`` directly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+WIDTH_M = 50.0
+HEIGHT_M = 30.0
+PERIOD_S = 0.1
+
+# Shelf rows run along x and are split by a central cross-aisle (x 24..26); the outer
+# cross-aisles are x < 5 and x > 45. Aisles between rows are 4 m wide (centres y = 7, 13, 19, 25).
+SHELF_ROWS_Y: tuple[tuple[float, float], ...] = (
+    (3.0, 5.0),
+    (9.0, 11.0),
+    (15.0, 17.0),
+    (21.0, 23.0),
+    (27.0, 28.5),
+)
+SHELF_SPANS_X: tuple[tuple[float, float], ...] = ((5.0, 24.0), (26.0, 45.0))
+
+
+def shelf_boxes() -> np.ndarray:
+    """Static map: shelf boxes as rows of (xmin, ymin, xmax, ymax)."""
+    return np.array(
+        [(x0, y0, x1, y1) for (y0, y1) in SHELF_ROWS_Y for (x0, x1) in SHELF_SPANS_X],
+        dtype=np.float64,
+    )
+
+
+# The robot shuttles along the aisle y = 7 between the west and east cross-aisles, turning
+# around at each end (and whenever it reroutes). A straight route keeps "ahead" meaningful.
+ROUTE_START = (2.5, 7.0)
+ROUTE_END = (47.5, 7.0)
+
+
+class Route:
+    """A straight route parametrised by arc length ``s`` in [0, length]."""
+
+    def __init__(
+        self, start: tuple[float, float] = ROUTE_START, end: tuple[float, float] = ROUTE_END
+    ) -> None:
+        self.start = start
+        self.length = math.hypot(end[0] - start[0], end[1] - start[1])
+        self.direction = ((end[0] - start[0]) / self.length, (end[1] - start[1]) / self.length)
+
+    def point(self, s: float) -> tuple[float, float]:
+        """World position at arc length ``s`` (clamped to the route)."""
+        s = min(self.length, max(0.0, s))
+        return self.start[0] + s * self.direction[0], self.start[1] + s * self.direction[1]
+
+    def tangent(self, s: float) -> tuple[float, float]:
+        """Unit direction of increasing ``s``."""
+        return self.direction
+
+    def to_end(self, s: float, direction: int) -> float:
+        """Distance left before the robot must turn around, driving in ``direction``."""
+        return self.length - s if direction > 0 else s
+
+
+@dataclass(slots=True)
+class RobotState:
+    """Ground-truth robot state. ``s`` runs along the route; ``direction`` flips on REROUTE."""
+
+    s: float = 0.0
+    direction: int = 1
+    linear: float = 0.0
+    angular: float = 0.0
+    last_flip_t: float = -1e9
+
+
+@dataclass(slots=True)
+class Actor:
+    """A person, forklift or pallet. Moves through ``legs`` of (duration_s, vx, vy)."""
+
+    kind: str  # "person" | "forklift" | "pallet"
+    x: float
+    y: float
+    length: float  # along heading; a person is a circle of diameter ``length``
+    width: float
+    heading: float = 0.0
+    legs: list[tuple[float, float, float]] = field(default_factory=list)
+    leg_t: float = 0.0
+    brake_within_m: float = 0.0  # a driver / walker stops when this close to the robot
+    vx: float = 0.0
+    vy: float = 0.0
+    name: str = ""
+
+    def step(self, dt: float, robot_xy: tuple[float, float]) -> None:
+        """Advance by ``dt``: follow the current leg, or brake near the robot."""
+        vx = vy = 0.0
+        if self.legs:
+            duration, vx, vy = self.legs[0]
+            self.leg_t += dt
+            if self.leg_t >= duration:
+                self.legs.pop(0)
+                self.leg_t = 0.0
+        if self.brake_within_m > 0.0:
+            gap = math.hypot(self.x - robot_xy[0], self.y - robot_xy[1])
+            if gap < self.brake_within_m:
+                vx = vy = 0.0
+        self.vx, self.vy = vx, vy
+        self.x += vx * dt
+        self.y += vy * dt
+
+
+class World:
+    """The warehouse, the robot on its route, and the actors of the current episode."""
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self.rng = rng
+        self.route = Route()
+        self.robot = RobotState(s=float(rng.uniform(0.0, 20.0)))
+        self.actors: list[Actor] = []
+        self.shelves = shelf_boxes()
+        self.t = 0.0
+
+    # --- robot pose -----------------------------------------------------------------
+
+    def robot_pose(self) -> tuple[float, float, float]:
+        """(x, y, heading) of the robot."""
+        x, y = self.route.point(self.robot.s)
+        tx, ty = self.route.tangent(self.robot.s)
+        if self.robot.direction < 0:
+            tx, ty = -tx, -ty
+        return x, y, math.atan2(ty, tx)
+
+    def along_route(self, ahead_m: float, lateral_m: float) -> tuple[float, float, float]:
+        """A point ``ahead_m`` along the robot's route and ``lateral_m`` to its left.
+
+        Returns (x, y, heading of the route there).
+        """
+        s = self.robot.s + self.robot.direction * ahead_m
+        x, y = self.route.point(s)
+        tx, ty = self.route.tangent(s)
+        if self.robot.direction < 0:
+            tx, ty = -tx, -ty
+        return x - ty * lateral_m, y + tx * lateral_m, math.atan2(ty, tx)
+
+    # --- dynamics -------------------------------------------------------------------
+
+    def apply_motion(self, linear: float, angular: float, flip: bool) -> None:
+        """Move the robot one period with its actual (post-actuator) speeds."""
+        robot = self.robot
+        robot.linear, robot.angular = linear, angular
+        if flip:
+            robot.direction = -robot.direction
+            robot.last_flip_t = self.t
+        robot.s += robot.direction * linear * PERIOD_S
+        if not 0.0 < robot.s < self.route.length:  # end of the aisle: turn around
+            robot.s = min(self.route.length, max(0.0, robot.s))
+            robot.direction = -robot.direction
+
+    def make_room(self, needed_m: float) -> None:
+        """Before an episode: turn around if the aisle ahead is shorter than ``needed_m``."""
+        robot = self.robot
+        here = self.route.to_end(robot.s, robot.direction)
+        if here < needed_m and self.route.to_end(robot.s, -robot.direction) > here:
+            robot.direction = -robot.direction
+
+    def step_actors(self) -> None:
+        """Advance every actor one period and the clock."""
+        x, y, _ = self.robot_pose()
+        for actor in self.actors:
+            actor.step(PERIOD_S, (x, y))
+        self.t += PERIOD_S
