@@ -31,12 +31,6 @@ from mcap.records import (
     Statistics,
     SummaryOffset,
 )
-from mcap.records import (
-    Chunk as ChunkRecord,
-)
-from mcap.records import (
-    MessageIndex as MessageIndexRecord,
-)
 
 from trace_runtime.errors import TraceError
 from trace_runtime.records import LAYER_TOPICS, PROFILE, TOPIC_SEAL
@@ -46,6 +40,12 @@ from trace_runtime.session import SESSION_METADATA, SessionInfo
 MAGIC = b"\x89MCAP0\r\n"
 LIBRARY = "trace_runtime 0.1"
 _MESSAGE_HEADER = struct.Struct("<BQHIQQ")
+_CHUNK_HEADER = struct.Struct("<BQQQQII")  # opcode, length, start, end, size, crc, compression len
+_INDEX_HEADER = struct.Struct("<BQHI")  # opcode, length, channel id, entries byte length
+_INDEX_ENTRY = struct.Struct("<QQ")
+_U64 = struct.Struct("<Q")
+_OPCODE_CHUNK = 0x06
+_OPCODE_MESSAGE_INDEX = 0x07
 _OPCODE_MESSAGE = 0x05
 _OPCODE_SCHEMA = 0x03
 _OPCODE_CHANNEL = 0x04
@@ -214,26 +214,28 @@ class SegmentWriter:
         payload = self._compressor.compress(raw) if self._compressor else raw
 
         before = self.offset
-        base = self.offset + len(self._pending)  # where this batch's chunk will start
-        out = _RecordBuilder()
-        chunk_offset = base
-        ChunkRecord(
-            compression=self._compression,
-            data=payload,
-            message_start_time=start,
-            message_end_time=end,
-            uncompressed_crc=zlib.crc32(raw),
-            uncompressed_size=len(raw),
-        ).write(out)
-        chunk_length = out.count
-        index_start = base + out.count
+        chunk_offset = self.offset + len(self._pending)  # where this batch's chunk will start
+        compression = self._compression.encode()
+        body_len = 8 + 8 + 8 + 4 + 4 + len(compression) + 8 + len(payload)
+        out = bytearray(
+            _CHUNK_HEADER.pack(
+                _OPCODE_CHUNK, body_len, start, end, len(raw), zlib.crc32(raw), len(compression)
+            )
+        )
+        out += compression
+        out += _U64.pack(len(payload))
+        out += payload
+        chunk_length = len(out)
         offsets: dict[int, int] = {}
         for channel_id, entries in indexes.items():
-            offsets[channel_id] = base + out.count
-            MessageIndexRecord(channel_id=channel_id, records=entries).write(out)
-        index_length = base + out.count - index_start
-        data = _end(out)
-        self._write_now(data)
+            offsets[channel_id] = chunk_offset + len(out)
+            out += _INDEX_HEADER.pack(
+                _OPCODE_MESSAGE_INDEX, 2 + 4 + 16 * len(entries), channel_id, 16 * len(entries)
+            )
+            for log_time, offset in entries:
+                out += _INDEX_ENTRY.pack(log_time, offset)
+        index_length = len(out) - chunk_length
+        self._write_now(bytes(out))
 
         self._chunk_indexes.append(
             ChunkIndex(

@@ -31,8 +31,9 @@ def test_mcap_library_reads_summary_chunk_indexes_and_metadata(
         assert reader.get_header().profile == "trace"
         summary = reader.get_summary()
         assert summary is not None
-        assert len(summary.chunk_indexes) == 30  # one chunk per synchronous commit
-        assert summary.statistics.message_count == 30 * 6
+        seals = [c for c in summary.channels.values() if c.topic == "/trace/seal"]
+        assert summary.statistics.channel_message_counts[seals[0].id] == 30
+        assert len(summary.chunk_indexes) >= 30  # a chunk per synchronous commit
         metadata = {m.name: m.metadata for m in reader.iter_metadata()}
         assert metadata["trace.session"]["robot_id"] == "amr-1"
         assert {c.topic for c in summary.channels.values()} >= {
@@ -74,7 +75,7 @@ def test_every_message_validates_against_its_schema_file(
                 assert json.loads(schema.data) == published  # the log carries the same schema
                 validators[channel.topic] = jsonschema.Draft202012Validator(published)
             validators[channel.topic].validate(orjson.loads(message.data))
-    assert len(validators) == 6
+    assert len(validators) >= 6  # four layers, seal, sensor (+ checkpoints)
 
 
 def test_our_reader_reads_a_log_written_with_the_plain_mcap_writer(tmp_path: Path) -> None:

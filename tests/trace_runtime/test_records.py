@@ -215,3 +215,22 @@ def test_records_are_frozen_so_the_writer_sees_what_was_committed() -> None:
 def test_entity_class_is_written_under_its_schema_name() -> None:
     entity = Entity(id="e", cls="person", pose=Pose(position=(0, 0, 0)), confidence={"person": 1})
     assert '"class":"person"' in entity.model_dump_json(by_alias=True)
+
+
+@given(
+    cycle=st.integers(0, 2**63 - 1),
+    t_ns=st.integers(0, 2**63 - 1),
+    digests=st.dictionaries(
+        st.sampled_from(["/trace/perception", "/trace/action", "/trace/x"]),
+        st.text("0123456789abcdef", min_size=64, max_size=64),
+    ),
+    dropped=st.integers(0, 2**31),
+)
+def test_the_writers_fast_seal_encoding_equals_the_models(
+    cycle: int, t_ns: int, digests: dict[str, str], dropped: int
+) -> None:
+    from trace_runtime.codec import encode_seal, encode_seal_fields
+    from trace_runtime.records import GENESIS, Seal
+
+    seal = Seal(cycle=cycle, t_ns=t_ns, digests=digests, prev=GENESIS, dropped=dropped)
+    assert encode_seal_fields(cycle, t_ns, digests, GENESIS, dropped) == encode_seal(seal)
