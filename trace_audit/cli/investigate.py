@@ -1,3 +1,823 @@
-"""trace-audit commands: investigate (registered on the shared app)."""
+"""trace-audit commands for investigators: explain, why, timeline, info, export.
+
+Each command parses its arguments, calls one library function and renders the result:
+rich on a terminal, plain text with ``--plain`` or in a pipe, JSON with ``--json``.
+Times are seconds in the log's own clock (``--t 12.3``) or after the log's start
+(``--t +12.3``); see ``trace_audit.timeline.TimePoint``.
+"""
 
 from __future__ import annotations
+
+import struct
+import sys
+from collections.abc import Callable, Mapping, Sequence
+from itertools import pairwise
+from pathlib import Path
+from typing import Annotated, Any, TypeVar
+
+import typer
+import zstandard
+
+from trace_audit.causal import FactorValue, format_value
+from trace_audit.chains import FactorChain
+from trace_audit.cli.app import (
+    EXIT_UNREADABLE,
+    EXIT_USAGE,
+    JsonOption,
+    PlainOption,
+    app,
+    fail,
+    guarded,
+    print_json,
+)
+from trace_audit.cli.render import Column, Doc, Item, Seg, fmt_duration, fmt_t, setup_logging, show
+from trace_audit.explain import DEFAULT_LOOKBACK_S, Explanation, explain
+from trace_audit.export import FORMATS, export_decision
+from trace_audit.info import LogInfo, log_info
+from trace_audit.timeline import Timeline, WhyResult, timeline, why
+
+T = TypeVar("T")
+
+LogArgument = Annotated[
+    Path,
+    typer.Argument(
+        help="A TRACE segment (.mcap), a directory of segments, or a log root (hot/ warm/ cold/).",
+        show_default=False,
+    ),
+]
+TimeOption = Annotated[
+    str | None,
+    typer.Option(
+        "--t",
+        help="Seconds in the log's clock (12.3), or seconds after the log start (+12.3).",
+        show_default=False,
+    ),
+]
+
+_OK = Seg("✔", "green", "[ok]")
+_MISSING = Seg("✘ MISSING", "bold red", "[MISSING]")
+_UNREACHED = Seg("· not reached", "dim", "[--] not reached")
+
+
+def _run(call: Callable[[], T]) -> T:
+    """``guarded`` plus the read errors a damaged file can raise below the reader."""
+    setup_logging()
+    try:
+        return guarded(call)
+    except zstandard.ZstdError as err:
+        fail(f"cannot read the log: corrupt compressed data ({err})", EXIT_UNREADABLE)
+    except (struct.error, ValueError, OSError) as err:
+        # Damage below what the reader checks (a corrupt record inside a valid chunk):
+        # still one line and the unreadable-input code, never a traceback.
+        message = f"cannot read the log: {type(err).__name__}: {err}".splitlines()[0]
+        fail(message, EXIT_UNREADABLE)
+
+
+# --- explain -----------------------------------------------------------------------------------
+
+_EXPLAIN_HELP = """Explain the decision in force at a time: what the robot did and why.
+
+Shows the action, rationale, factors with their values, the alternatives and why each
+lost, the counterfactuals, the counterfactual decision tree with the taken path, every
+factor's causal chain down to the sensor reading (each link documented or MISSING), the
+execution record, this decision's ET / ET_partial, whether its seal verifies, and since
+when the action has held.
+
+The decision in force at t is the last cycle at or before t. A time outside the log's
+range is a usage error (exit 2) that names the range.
+
+[bold]Examples[/bold]:
+
+  trace-audit explain run.mcap --t 12.3
+
+  trace-audit explain logs/amr-7/ --t +600 --plain
+
+  trace-audit explain run.mcap --cycle 4242 --json
+"""
+
+
+@app.command("explain", help=_EXPLAIN_HELP)
+def explain_command(  # noqa: PLR0917 - typer maps each parameter to an option
+    log: LogArgument,
+    t: TimeOption = None,
+    cycle: Annotated[
+        int | None,
+        typer.Option(
+            "--cycle", help="Explain this cycle number instead of a time.", show_default=False
+        ),
+    ] = None,
+    lookback: Annotated[
+        float,
+        typer.Option(
+            "--lookback",
+            help="Seconds of log to walk back looking for the cycle "
+            "where the current action began.",
+        ),
+    ] = DEFAULT_LOOKBACK_S,
+    json_out: JsonOption = False,
+    plain: PlainOption = False,
+) -> None:
+    result = _run(lambda: explain(log, t=t, cycle=cycle, lookback_s=lookback))
+    if json_out:
+        print_json(result)
+        return
+    show(explain_doc(result, lookback), plain=plain)
+
+
+def explain_doc(r: Explanation, lookback_s: float = DEFAULT_LOOKBACK_S) -> Doc:
+    """The explain report as a document."""
+    d = r.decision
+    doc = Doc()
+    when = f"t={fmt_t(r.query_t_ns)}" if r.query_t_ns is not None else f"cycle {r.cycle}"
+    doc.title([f"{r.robot} at {when}: ", Seg(d.command or "no action logged", "bold yellow")])
+    where = f"{r.path}"
+    if r.recovered:
+        where += " (recovered from an unfinished segment)"
+    if r.query_t_ns is None:
+        decided = f"cycle {r.cycle} at {fmt_t(r.t_ns)}"
+    elif r.offset_ns == 0:
+        decided = f"cycle {r.cycle}, decided exactly at the asked time"
+    else:
+        decided = (
+            f"cycle {r.cycle} at {fmt_t(r.t_ns)}, {fmt_duration(r.offset_ns)} before the asked time"
+        )
+    rows: list[tuple[str, Any]] = [("Log", where), ("Decision", decided)]
+    if r.stale:
+        rows.append(
+            (
+                "Gap",
+                Seg(
+                    f"no decision was logged in the {fmt_duration(r.offset_ns)} "
+                    "before the asked time",
+                    "bold red",
+                    None,
+                ),
+            )
+        )
+    if d.summary:
+        rows.append(("Tier", "warm summary: only what the summary kept is shown"))
+    action = d.command or "?"
+    extras = [f"{k}={format_value(v)}" for k, v in d.parameters.items()]
+    if d.score is not None:
+        extras.append(f"score {d.score:.2f}")
+    rows.append(
+        ("Action", [Seg(action, "bold yellow"), f"  ({', '.join(extras)})" if extras else ""])
+    )
+    rows.append(("Held", _held_line(r, lookback_s)))
+    rationale: list[str | Seg] = [d.rationale if d.rationale is not None else "not logged"]
+    if d.truncated:
+        rationale.append(Seg("  [TRUNCATED]", "bold red"))
+    rows.append(("Rationale", rationale))
+    doc.fields(rows)
+
+    doc.heading("Factors")
+    if d.factors:
+        doc.table(
+            [Column("factor"), Column("value", "right"), Column("belief node", wrap=True)],
+            [[_factor_name(f, i == 0), f.shown, f.node] for i, f in enumerate(d.factors)],
+        )
+    else:
+        doc.line(Seg("none logged: the decision cannot be traced to evidence", "red"), 2)
+
+    doc.heading("Alternatives (why each lost)")
+    if d.alternatives:
+        doc.table(
+            [Column("command"), Column("score", "right"), Column("rejected because", wrap=True)],
+            [
+                [a.command, "-" if a.score is None else f"{a.score:.2f}", a.rejected_because]
+                for a in d.alternatives
+            ],
+        )
+    else:
+        doc.line(Seg("none logged", "red"), 2)
+
+    doc.heading("Counterfactuals")
+    if d.counterfactuals:
+        for cf in d.counterfactuals:
+            now = f"  (now {format_value(cf.value, cf.unit)})" if cf.value is not None else ""
+            doc.line([Seg(cf.text, "bold"), now], 2)
+    elif d.counterfactuals_none_applicable:
+        doc.line("none applicable (declared by the policy)", 2)
+    else:
+        doc.line(Seg("none logged", "red"), 2)
+
+    if d.tree is not None:
+        doc.heading("Counterfactual tree (=> taken path)")
+        doc.tree(_tree_item(r))
+        for problem in d.tree.problems:
+            doc.line(Seg(f"! {problem}", "red"), 2)
+
+    doc.heading("Causal chains (sensor evidence -> action)")
+    if not r.chains.factors:
+        doc.line(Seg(f"no chain: {r.chains.reason}", "red"), 2)
+    for chain in r.chains.factors:
+        doc.tree(_chain_item(r, chain))
+
+    doc.heading("Execution")
+    ex = d.execution
+    if ex is None:
+        doc.line(Seg("not logged", "red"), 2)
+    else:
+        doc.fields(
+            [
+                ("Intended", _motion(ex.intended)),
+                ("Actual", _motion(ex.actual)),
+                ("Deviation", format_value(ex.deviation)),
+                (
+                    "Checks",
+                    "; ".join(
+                        f"{c.rule} {'passed' if c.passed else 'FAILED'}"
+                        + (
+                            f" ({format_value(c.value)} vs limit {format_value(c.limit)})"
+                            if c.value is not None and c.limit is not None
+                            else ""
+                        )
+                        for c in ex.checks
+                    )
+                    or "none logged",
+                ),
+                ("Flags", Seg(", ".join(ex.flags), "bold red") if ex.flags else "none"),
+            ]
+        )
+
+    doc.heading("Auditability of this decision")
+    s = r.scores
+    traceable = sum(1 for c in r.chains.factors if c.traceable)
+    score_rows: list[tuple[str, Any]] = [
+        (
+            "ET",
+            f"{s.et:.2f}  ({traceable} of {len(r.chains.factors)} factors traced to "
+            "a sensor reading)",
+        ),
+        ("ET_partial", f"{s.et_partial:.2f}"),
+        ("DR", "-" if s.dr is None else f"{s.dr:.0f}"),
+        ("TCS", "-" if s.tcs is None else f"{s.tcs:.2f}"),
+    ]
+    if s.dr is None or s.tcs is None:
+        score_rows.append(("Note", f"scores from {s.source}"))
+    doc.fields(score_rows)
+    for problem in s.problems:
+        doc.line(Seg(f"- {problem}", "yellow"), 2)
+
+    doc.heading("Integrity")
+    seal = r.seal
+    if seal.verified:
+        status = Seg("✔ seal verifies", "bold green", "[ok] seal verifies")
+    elif not seal.sealed:
+        status = Seg("✘ not sealed", "bold red", "[FAILED] not sealed")
+    else:
+        status = Seg("✘ seal does NOT verify", "bold red", "[FAILED] seal does not verify")
+    rows = [("Seal", status)]
+    if seal.sealed:
+        compared = (
+            "digests of the logged layers match"
+            if seal.digests_ok
+            else ("layer digests: " + ("; ".join(seal.problems) or "nothing to compare"))
+        )
+        if seal.summarised:
+            compared += f" ({len(seal.summarised)} summarised layers not comparable)"
+        rows.append(("Digests", compared))
+        rows.append(
+            ("Chain", f"prev {'matches' if seal.prev_ok else 'does NOT match'} {seal.prev_source}")
+        )
+        if seal.dropped_before:
+            rows.append(
+                (
+                    "Dropped",
+                    Seg(
+                        f"{seal.dropped_before} cycles dropped just before "
+                        "this one (declared by the seal)",
+                        "yellow",
+                    ),
+                )
+            )
+    doc.fields(rows)
+    return doc
+
+
+def _held_line(r: Explanation, lookback_s: float) -> Any:
+    h = r.held
+    span = fmt_duration(r.t_ns - h.since_t_ns)
+    if h.cycles <= 1 and h.bound == "change":
+        return f"new at this cycle (before: {h.previous or '?'}, cycle {h.previous_cycle})"
+    base = f"since {fmt_t(h.since_t_ns)} (cycle {h.since_cycle}; {span}, {h.cycles} cycles)"
+    if h.bound == "change":
+        return f"{base}; before it: {h.previous or '?'} (cycle {h.previous_cycle})"
+    if h.bound == "lookback":
+        return (
+            f"at least {base}; stopped looking after {fmt_duration(int(lookback_s * 1e9))}"
+            " (--lookback)"
+        )
+    return f"at least {base}: the log starts there"
+
+
+def _factor_name(f: FactorValue, leading: bool) -> Any:
+    return [f.label, Seg(" (leading)", "dim")] if leading else f.label
+
+
+def _motion(m: tuple[float | None, float | None]) -> str:
+    lin, ang = m
+    return f"{format_value(lin)} m/s, {format_value(ang)} rad/s"
+
+
+def _tree_item(r: Explanation) -> Item:
+    tree = r.tree
+    assert tree is not None
+    nodes = {n["id"]: n for n in tree["nodes"]}
+    children: dict[str, list[Mapping[str, Any]]] = {}
+    for edge in tree["edges"]:
+        children.setdefault(edge["source"], []).append(edge)
+    root_id = tree["graph"].get("root")
+
+    def line(node_id: str, label: str) -> list[Any]:
+        node = nodes.get(node_id, {"label": node_id})
+        taken = bool(node.get("taken"))
+        text = str(node.get("label") or node_id)
+        prefix = f"[{label}] " if label else ""
+        chosen = taken and node.get("command") is not None
+        return [
+            Seg("=> ", "bold green") if taken else "   ",
+            Seg(prefix, "dim"),
+            Seg(text, "bold green" if taken else ""),
+            Seg("  <- chosen", "bold green") if chosen else "",
+        ]
+
+    seen: set[str] = set()
+
+    def build(node_id: str, label: str) -> Item:
+        item = Item(line(node_id, label))
+        if node_id in seen:
+            return item  # a malformed tree with a cycle: show the node once
+        seen.add(node_id)
+        for edge in children.get(node_id, ()):
+            item.children.append(build(edge["target"], str(edge.get("label") or "")))
+        return item
+
+    return build(root_id if root_id is not None else next(iter(nodes), "?"), "")
+
+
+_LEVEL_NAMES = {
+    "sensor_reading": "sensor reading",
+    "evidence_ref": "evidence",
+    "entity": "perception",
+    "belief_path": "belief path",
+    "factor_node": "factor",
+}
+
+
+def _chain_item(r: Explanation, chain: FactorChain) -> Item:
+    graph = r.graph
+    labels = {n["id"]: str(n.get("label", n["id"])) for n in graph["nodes"]}
+    mine = [e for e in graph["edges"] if chain.node in e.get("factors", ())]
+    by_level: dict[str, list[Mapping[str, Any]]] = {}
+    for edge in mine:
+        by_level.setdefault(str(edge.get("level")), []).append(edge)
+    value = next((f for f in r.decision.factors if f.node == chain.node), None)
+    shown = f" = {value.shown}" if value is not None else ""
+    status = Seg("traceable", "bold green") if chain.traceable else Seg("NOT traceable", "bold red")
+    root = Item(
+        [
+            Seg(f"{chain.name or chain.node}{shown}", "bold"),
+            f"  depth {chain.depth}/{chain.expected_depth}, ",
+            status,
+        ]
+    )
+    kinds = {n["id"]: n.get("belief_kind") for n in graph["nodes"]}
+    # The belief entity node mirrors the perception entity: one mention is enough here.
+    path = [p for p in _chain_path(mine) if kinds.get(p) != "entity"]
+    if path:
+        root.add(Seg(" -> ".join(labels.get(p, p) for p in path), "dim"))
+    for link in reversed(chain.links):
+        edges = by_level.get(link.level, [])
+        name = _LEVEL_NAMES.get(link.level, link.level)
+        if link.level == "belief_path" and link.documented:
+            what = _belief_path_text(graph, link.ref)
+        elif link.level == "factor_node":
+            what = f"{labels.get('belief:' + chain.node, chain.node)} -> {r.decision.command}"
+        elif edges:
+            what = labels.get(edges[0]["source"], link.ref)
+        else:
+            what = link.ref
+        if link.documented:
+            marker: Seg = _OK
+        elif link.detail.startswith("not reached"):
+            marker = _UNREACHED
+        else:
+            marker = _MISSING
+        line: list[Any] = [marker, f" {name}: ", what if link.documented or what else ""]
+        if not link.documented and not link.detail.startswith("not reached"):
+            line.append(Seg(f"{' ' if what else ''}({link.detail})", "red"))
+        root.add(line)
+    return root
+
+
+def _belief_path_text(graph: Mapping[str, Any], ref: str) -> str:
+    """``ped_1 -> ped_1.distance -> collision_risk (rules: a, b)``, bottom-up."""
+    rules = {(e["source"], e["target"]): e.get("rule") for e in graph["edges"] if e.get("rule")}
+    path = list(reversed(ref.split(" <- ")))
+    used = [
+        str(rules[key])
+        for key in ((f"belief:{a}", f"belief:{b}") for a, b in pairwise(path))
+        if key in rules
+    ]
+    text = " -> ".join(path)
+    return f"{text} (rules: {', '.join(used)})" if used else text
+
+
+def _chain_path(edges: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The chain's nodes from the bottom (sensor or placeholder) up to the action."""
+    succ = {e["source"]: e["target"] for e in edges}
+    targets = set(succ.values())
+    starts = [s for s in succ if s not in targets]
+    if len(starts) != 1:
+        return []
+    path = [starts[0]]
+    while path[-1] in succ and len(path) <= len(edges):
+        path.append(succ[path[-1]])
+    return path
+
+
+# --- why ---------------------------------------------------------------------------------------
+
+_WHY_HELP = """Why did the robot take an action? Every transition into it, with the reason.
+
+A transition is a cycle whose command is ACTION while the previous logged cycle's was not.
+For each: when, what it changed from, how long it held, the rationale, the factors with
+their values (the leading one first), the counterfactuals and any execution flags. With
+--t, only the transition that led to the state at that time. ACTION is matched without
+regard to case; one the log never shows is a usage error (exit 2) listing those it does.
+
+[bold]Examples[/bold]:
+
+  trace-audit why run.mcap --action STOP
+
+  trace-audit why run.mcap --action STOP --t 12.3
+
+  trace-audit why logs/amr-7/ --action reroute --json
+"""
+
+
+@app.command("why", help=_WHY_HELP)
+def why_command(  # noqa: PLR0917 - typer maps each parameter to an option
+    log: LogArgument,
+    action: Annotated[
+        str, typer.Option("--action", help="The command to explain, e.g. STOP.", show_default=False)
+    ],
+    t: TimeOption = None,
+    all_: Annotated[
+        bool, typer.Option("--all", help="Every transition in the log (the default without --t).")
+    ] = False,
+    json_out: JsonOption = False,
+    plain: PlainOption = False,
+) -> None:
+    if all_ and t is not None:
+        fail("give either --t or --all, not both", EXIT_USAGE)
+    result = _run(lambda: why(log, action, t=t))
+    if json_out:
+        print_json(result)
+        return
+    show(why_doc(result), plain=plain)
+
+
+def why_doc(r: WhyResult) -> Doc:
+    doc = Doc()
+    n = len(r.transitions)
+    scope = (
+        f"in force at t={fmt_t(r.t_ns)}"
+        if r.t_ns is not None
+        else (f"{n} transition{'s' if n != 1 else ''}")
+    )
+    doc.title([f"Why {r.action}? ", f"{r.robot}, {scope}"])
+    if r.recovered:
+        doc.line("(log recovered from an unfinished segment)")
+    for i, tr in enumerate(r.transitions, 1):
+        doc.heading(f"#{i}  t={fmt_t(tr.t_ns)}  cycle {tr.cycle}")
+        before = (
+            f"{tr.previous} (cycle {tr.previous_cycle})"
+            if tr.previous is not None
+            else "nothing: the log starts here"
+        )
+        held = fmt_duration(tr.held_ns)
+        if tr.ongoing:
+            until = "and still holds at the end of the log"
+        else:
+            until = f"until {fmt_t(tr.ended_t_ns or 0)}, then {tr.next_command or '?'}"
+        rows: list[tuple[str, Any]] = [
+            ("Changed from", before),
+            ("Held", f"{held} ({tr.held_cycles} cycles) {until}"),
+        ]
+        rationale: list[Any] = [tr.rationale if tr.rationale is not None else "not logged"]
+        if tr.truncated:
+            rationale.append(Seg("  [TRUNCATED]", "bold red"))
+        rows.append(("Reason", rationale))
+        if tr.factors:
+            lead = tr.factors[0]
+            rows.append(
+                (
+                    "Leading factor",
+                    [Seg(f"{lead.label} = {lead.shown}", "bold"), f"  ({lead.node})"],
+                )
+            )
+            others = "; ".join(f"{f.label} = {f.shown}" for f in tr.factors[1:])
+            if others:
+                rows.append(("Other factors", others))
+        else:
+            rows.append(("Factors", Seg("none logged", "red")))
+        if tr.counterfactuals:
+            rows.append(("What-ifs", "; ".join(c.text for c in tr.counterfactuals)))
+        rows.append(("Flags", Seg(", ".join(tr.flags), "bold red") if tr.flags else "none"))
+        doc.fields(rows)
+    if r.t_ns is None and len(r.actions_present) > 1:
+        doc.heading("Cycles per command")
+        doc.line(", ".join(f"{c}: {k}" for c, k in r.actions_present.items()), 2)
+    return doc
+
+
+# --- timeline ----------------------------------------------------------------------------------
+
+_TIMELINE_HELP = """The decisions over time: a row per decision change, with the leading
+factor and execution flags, and the gaps where no cycle was logged.
+
+Each row is a stretch of cycles with one command: when it began, how long it held, the
+leading factor (the first the rationale names) and the flags raised while it held.
+--every gives a row per cycle instead.
+
+[bold]Examples[/bold]:
+
+  trace-audit timeline run.mcap
+
+  trace-audit timeline run.mcap --from 10 --to 20 --every
+
+  trace-audit timeline logs/amr-7/ --from +3600 --to +3900 --json
+"""
+
+
+@app.command("timeline", help=_TIMELINE_HELP)
+def timeline_command(  # noqa: PLR0917 - typer maps each parameter to an option
+    log: LogArgument,
+    start: Annotated[
+        str | None,
+        typer.Option(
+            "--from",
+            help="Start of the window (seconds, or +seconds after the log "
+            "start). Default: the log start.",
+            show_default=False,
+        ),
+    ] = None,
+    end: Annotated[
+        str | None,
+        typer.Option(
+            "--to", help="End of the window (same forms). Default: the log end.", show_default=False
+        ),
+    ] = None,
+    every: Annotated[bool, typer.Option("--every", help="A row per cycle.")] = False,
+    json_out: JsonOption = False,
+    plain: PlainOption = False,
+) -> None:
+    result = _run(lambda: timeline(log, start=start, end=end, every=every))
+    if json_out:
+        print_json(result)
+        return
+    show(timeline_doc(result), plain=plain)
+
+
+def timeline_doc(r: Timeline) -> Doc:
+    doc = Doc()
+    doc.title(f"{r.robot}: {fmt_t(r.start_ns)} .. {fmt_t(r.end_ns)}")
+    changes = r.changes
+    doc.line(
+        f"{r.cycles} cycles, {changes} decision change{'s' if changes != 1 else ''}, "
+        f"{len(r.gaps)} gap{'s' if len(r.gaps) != 1 else ''}"
+        + ("; recovered from an unfinished segment" if r.recovered else "")
+    )
+    events: list[tuple[int, int, list[Any]]] = []
+    for row in r.rows:
+        lead = f"{row.leading.label} = {row.leading.shown}" if row.leading else "-"
+        flags = ", ".join(f"{k} x{v}" if v > 1 else k for k, v in row.flag_counts.items())
+        what: list[Any] = [lead]
+        if flags:
+            what.append(Seg(f"; flags: {flags}", "bold red"))
+        command = row.command or "?"
+        held = fmt_duration(row.held_ns)
+        events.append(
+            (
+                row.t_ns,
+                0,
+                [
+                    f"{row.t_ns / 1e9:.3f}",
+                    str(row.cycle),
+                    Seg(command, "bold yellow" if row.previous != row.command else ""),
+                    f"{held} / {row.cycles}" if not r.every else held,
+                    what,
+                ],
+            )
+        )
+    for gap in r.gaps:
+        dropped = f", {gap.dropped} dropped" if gap.dropped else ""
+        events.append(
+            (
+                gap.start_ns,
+                1,
+                [
+                    f"{gap.start_ns / 1e9:.3f}",
+                    "",
+                    Seg("GAP", "bold red"),
+                    fmt_duration(gap.duration_ns),
+                    Seg(
+                        f"no cycle between {gap.after_cycle} and {gap.before_cycle}{dropped}", "red"
+                    ),
+                ],
+            )
+        )
+    events.sort(key=lambda e: (e[0], e[1]))
+    doc.table(
+        [
+            Column("t (s)", "right"),
+            Column("cycle", "right"),
+            Column("decision"),
+            Column("held / cycles" if not r.every else "held", "right"),
+            Column("leading factor, flags", wrap=True),
+        ],
+        [e[2] for e in events],
+    )
+    return doc
+
+
+# --- info --------------------------------------------------------------------------------------
+
+_INFO_HELP = """What a log holds: robot, time range, cycles, segments and tiers, channels,
+dropped cycles and gaps, and whether each segment was finished or recovered.
+
+Dropped cycles and gaps need every seal (a scan of the log); --quick answers from the
+segment summaries alone.
+
+[bold]Examples[/bold]:
+
+  trace-audit info run.mcap
+
+  trace-audit info logs/amr-7/ --quick --json
+"""
+
+
+@app.command("info", help=_INFO_HELP)
+def info_command(
+    log: LogArgument,
+    quick: Annotated[
+        bool, typer.Option("--quick", help="Skip the scan of every seal (no drops or gaps).")
+    ] = False,
+    json_out: JsonOption = False,
+    plain: PlainOption = False,
+) -> None:
+    result = _run(lambda: log_info(log, scan=not quick))
+    if json_out:
+        print_json(result)
+        return
+    show(info_doc(result), plain=plain)
+
+
+def _size(n: int) -> str:
+    for unit, scale in (("GB", 1 << 30), ("MB", 1 << 20), ("kB", 1 << 10)):
+        if n >= scale:
+            return f"{n / scale:.1f} {unit}"
+    return f"{n} B"
+
+
+def info_doc(r: LogInfo) -> Doc:
+    doc = Doc()
+    doc.title(f"{', '.join(r.robots)}: {r.path}")
+    state = (
+        Seg("RECOVERED (a segment has no summary: read by scan)", "bold yellow")
+        if r.recovered
+        else Seg("finished", "green")
+        if r.finished
+        else "unfinished"
+    )
+    tiers = ", ".join(f"{k} x{v}" for k, v in sorted(r.tiers.items()))
+    period = f"{r.period_ns / 1e6:g} ms" if r.period_ns else "?"
+    rows: list[tuple[str, Any]] = [
+        ("Time range", f"{fmt_t(r.start_ns)} .. {fmt_t(r.end_ns)} ({fmt_duration(r.duration_ns)})"),
+        (
+            "Cycles",
+            f"{r.cycles} (nominal period {period})"
+            + ("" if r.scanned else "; sealed cycles per the summaries"),
+        ),
+        ("Segments", f"{len(r.segments)} ({tiers})"),
+        ("State", state),
+    ]
+    if r.scanned:
+        dropped = r.dropped or 0
+        rows.append(
+            (
+                "Dropped",
+                Seg(f"{dropped} cycles (sum of the seals' dropped)", "yellow" if dropped else ""),
+            )
+        )
+        rows.append(
+            (
+                "Gaps",
+                Seg(
+                    f"{len(r.gaps)}, {fmt_duration(r.gap_ns)} beyond the period",
+                    "yellow" if r.gaps else "",
+                ),
+            )
+        )
+    else:
+        rows.append(("Dropped, gaps", "not counted (--quick)"))
+    doc.fields(rows)
+    doc.heading("Segments")
+    doc.table(
+        [
+            Column("file", wrap=True),
+            Column("tier"),
+            Column("time range (s)"),
+            Column("cycles"),
+            Column("size", "right"),
+            Column("state"),
+        ],
+        [
+            [
+                Path(s.path).name,
+                s.tier,
+                f"{s.start_ns / 1e9:.3f}..{s.end_ns / 1e9:.3f}",
+                f"{s.first_cycle}..{s.last_cycle}" if s.first_cycle is not None else "-",
+                _size(s.bytes),
+                Seg("recovered", "yellow") if s.recovered else "finished",
+            ]
+            for s in r.segments
+        ],
+    )
+    doc.heading("Channels")
+    doc.table(
+        [Column("topic", wrap=True), Column("messages", "right")],
+        [[topic, str(n)] for topic, n in r.channels.items()],
+    )
+    if r.gaps:
+        doc.heading("Gaps")
+        shown = r.gaps[:20]
+        doc.table(
+            [
+                Column("after cycle", "right"),
+                Column("from (s)", "right"),
+                Column("length", "right"),
+                Column("dropped", "right"),
+            ],
+            [
+                [
+                    str(g.after_cycle),
+                    f"{g.start_ns / 1e9:.3f}",
+                    fmt_duration(g.duration_ns),
+                    str(g.dropped),
+                ]
+                for g in shown
+            ],
+        )
+        if len(r.gaps) > len(shown):
+            doc.line(f"... and {len(r.gaps) - len(shown)} more (--json lists them all)", 2)
+    return doc
+
+
+# --- export ------------------------------------------------------------------------------------
+
+_EXPORT_HELP = """Export a decision's causal graph and counterfactual tree for a report.
+
+dot (Graphviz), mermaid (Markdown-friendly) or json. Undocumented links are dashed and
+labelled MISSING; the tree's taken path is bold.
+
+[bold]Examples[/bold]:
+
+  trace-audit export run.mcap --t 12.3 --format dot --out stop.dot
+
+  trace-audit export run.mcap --t 12.3 --format mermaid >> incident.md
+
+  trace-audit export run.mcap --cycle 4242 --format json
+"""
+
+
+@app.command("export", help=_EXPORT_HELP)
+def export_command(
+    log: LogArgument,
+    t: TimeOption = None,
+    cycle: Annotated[
+        int | None,
+        typer.Option(
+            "--cycle", help="Export this cycle number instead of a time.", show_default=False
+        ),
+    ] = None,
+    fmt: Annotated[str, typer.Option("--format", help=f"One of {', '.join(FORMATS)}.")] = "dot",
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", help="Write to this file instead of stdout.", show_default=False),
+    ] = None,
+) -> None:
+    result = _run(lambda: export_decision(log, t=t, cycle=cycle, fmt=fmt))
+    if out is None:
+        sys.stdout.write(result.text)
+        return
+    try:
+        out.write_text(result.text, encoding="utf-8")
+    except OSError as err:
+        fail(f"{out}: cannot write ({err.strerror or err})", EXIT_USAGE)
+    sys.stderr.write(
+        f"trace-audit: wrote {out} ({result.format}: cycle {result.cycle}, "
+        f"{result.nodes} nodes, {result.edges} edges, {result.undocumented} undocumented)\n"
+    )

@@ -1,0 +1,387 @@
+"""Explain one decision: what the robot did at t, why, what else it weighed, and can we trust it.
+
+``explain(log, t=...)`` finds the decision in force at ``t`` (the last cycle at or before it,
+through the segment's chunk index: one chunk is decoded, however long the log) and gathers:
+the action and its rationale, factors, alternatives and why each lost, counterfactuals, the
+counterfactual decision tree with the taken path, every factor's causal chain down to the
+sensor reading (each link documented or not), the causal graph, the execution record, this
+decision's ET / ET_partial (and DR / TCS from the metrics library), whether its seal
+verifies, and since when the action has held.
+
+Looking back is bounded: one reverse walk from the decision, at most ``lookback_s`` of log
+time, finds the previous seal (for the hash chain), the sensor readings of the cycles before
+(evidence refs may point at them), and the cycle where the current action began. When the
+walk reaches the bound first, the action has held "at least since" the oldest cycle seen.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from trace_audit.causal import Decision, causal_graph, graph_data, read_decision, tree_graph
+from trace_audit.chains import DEFAULT_SENSOR_WINDOW, DecisionChains, SensorWindow, trace_cycle
+from trace_audit.timeline import (
+    LogSource,
+    TimeArg,
+    as_log,
+    command_of,
+    require_cycles,
+    resolve_time,
+    seal_dropped,
+)
+from trace_runtime.chain import GENESIS, digest
+from trace_runtime.errors import TimeOutOfRangeError, UsageError
+from trace_runtime.reader import Cycle, Log
+from trace_runtime.records import TOPIC_SEAL
+
+__all__ = [
+    "DEFAULT_LOOKBACK_S",
+    "DecisionScores",
+    "Explanation",
+    "HeldSince",
+    "SealCheck",
+    "explain",
+    "find_cycle",
+]
+
+DEFAULT_LOOKBACK_S = 600.0
+
+
+@dataclass(frozen=True, slots=True)
+class SealCheck:
+    """Whether the decision's seal verifies: its digests, and its link to the previous seal.
+
+    ``prev_source`` says what ``prev`` was compared with: the previous sealed cycle in this
+    log, the segment's recorded ``prev_seal`` (when the previous segment is not in the log),
+    or genesis.
+    """
+
+    sealed: bool
+    digests_ok: bool | None
+    mismatched: tuple[str, ...]
+    unnamed: tuple[str, ...]
+    absent: tuple[str, ...]
+    summarised: tuple[str, ...]
+    prev_ok: bool | None
+    prev_cycle: int | None
+    prev_source: str
+    dropped_before: int
+    verified: bool
+    problems: tuple[str, ...]
+
+
+def _seal_problems(
+    *,
+    sealed: bool,
+    mismatched: tuple[str, ...],
+    unnamed: tuple[str, ...],
+    absent: tuple[str, ...],
+    prev_ok: bool | None,
+    prev_source: str,
+) -> tuple[str, ...]:
+    out: list[str] = []
+    if not sealed:
+        out.append("the cycle is not sealed")
+    out += [f"{t} does not match its seal digest" for t in mismatched]
+    out += [f"{t} is logged but not named by the seal" for t in unnamed]
+    out += [f"{t} is named by the seal but missing" for t in absent]
+    if prev_ok is False:
+        out.append(f"prev does not match the digest of {prev_source}")
+    return tuple(out)
+
+
+@dataclass(frozen=True, slots=True)
+class HeldSince:
+    """Since when the current command has held, and the cycle that began it.
+
+    ``bound`` is ``change`` (the cycle before ``since_cycle`` had another command,
+    ``previous``), ``lookback`` (the walk stopped at its bound: held at least since) or
+    ``log_start`` (held since the first cycle of the log, perhaps longer).
+    """
+
+    command: str | None
+    since_cycle: int
+    since_t_ns: int
+    cycles: int
+    bound: Literal["change", "lookback", "log_start"]
+    previous: str | None
+    previous_cycle: int | None
+    at_least: bool
+
+
+@dataclass(frozen=True, slots=True)
+class DecisionScores:
+    """This decision's auditability scores and where they come from.
+
+    ``et`` and ``et_partial`` come from the chain walker; ``dr`` and ``tcs`` from the metrics
+    library's per-decision scoring (None when it is not available). ``problems`` lists why
+    a score is below 1.
+    """
+
+    et: float
+    et_partial: float
+    fully_traceable: bool
+    dr: float | None
+    tcs: float | None
+    problems: tuple[str, ...]
+    source: str
+
+
+@dataclass(frozen=True, slots=True)
+class Explanation:
+    """Everything ``trace-audit explain`` shows about one decision."""
+
+    path: str
+    robot: str
+    log_start_ns: int
+    log_end_ns: int
+    recovered: bool
+    query_t_ns: int | None
+    query_cycle: int | None
+    cycle: int
+    t_ns: int
+    offset_ns: int
+    """query time - decision time (0 when asked by cycle number)."""
+    period_ns: int
+    decision: Decision
+    chains: DecisionChains
+    scores: DecisionScores
+    seal: SealCheck
+    held: HeldSince
+    graph: dict[str, Any]
+    tree: dict[str, Any] | None
+
+    @property
+    def stale(self) -> bool:
+        """True when no decision was logged for more than 1.5 periods before the query."""
+        return self.period_ns > 0 and self.offset_ns > self.period_ns * 3 // 2
+
+
+def find_cycle(log: Log, number: int) -> Cycle:
+    """The cycle with this number: a binary search over time through ``Log.cycle_at``."""
+    lo, hi = log.start_ns, log.end_ns
+    first: Cycle | None = None
+    while lo <= hi:
+        mid = (lo + hi) // 2
+        try:
+            found = log.cycle_at(mid)
+        except TimeOutOfRangeError:
+            lo = mid + 1
+            continue
+        if found.cycle == number:
+            return found
+        if found.cycle < number:
+            lo = mid + 1
+        else:
+            hi = mid - 1
+        first = first or found
+    last = next(log.iter_cycles(reverse=True), None)
+    oldest = next(log.iter_cycles(), None)
+    span = f"cycles {oldest.cycle}..{last.cycle}" if oldest and last else "no cycles"
+    raise UsageError(f"cycle {number} is not in this log ({span})")
+
+
+def explain(
+    source: LogSource,
+    *,
+    t: TimeArg = None,
+    cycle: int | None = None,
+    lookback_s: float = DEFAULT_LOOKBACK_S,
+    sensor_window: int = DEFAULT_SENSOR_WINDOW,
+) -> Explanation:
+    """Explain the decision in force at ``t`` (or cycle number ``cycle``) in a log."""
+    if (t is None) == (cycle is None):
+        raise UsageError("give exactly one of a time (--t) or a cycle number (--cycle)")
+    if lookback_s < 0:
+        raise UsageError(f"lookback must be >= 0 s, got {lookback_s}")
+    log = as_log(source)
+    require_cycles(log)
+    t_ns = resolve_time(t, log)
+    if t_ns is not None:
+        target = log.cycle_at(t_ns)
+        offset = t_ns - target.t_ns
+    else:
+        assert cycle is not None
+        target = find_cycle(log, cycle)
+        offset = 0
+    decision = read_decision(target)
+    back = _look_back(log, target, decision.command, int(lookback_s * 1e9), sensor_window)
+
+    window = SensorWindow(sensor_window)
+    for earlier in reversed(back.window):
+        window.push(earlier.sensors)
+    window.push(target.sensors)
+    chains = trace_cycle(target, window)
+    seal = _check_seal(log, target, back.prev_sealed)
+    period = max((s.session.period_ns for s in log.segments), default=0)
+    scores = _scores(decision, chains, seal)
+    graph = causal_graph(target, chains, decision)
+    tree = graph_data(tree_graph(decision.tree)) if decision.tree else None
+    return Explanation(
+        path=str(log.root),
+        robot=log.segments[0].session.robot_id,
+        log_start_ns=log.start_ns,
+        log_end_ns=log.end_ns,
+        recovered=log.recovered,
+        query_t_ns=t_ns,
+        query_cycle=cycle,
+        cycle=target.cycle,
+        t_ns=target.t_ns,
+        offset_ns=offset,
+        period_ns=period,
+        decision=decision,
+        chains=chains,
+        scores=scores,
+        seal=seal,
+        held=back.held,
+        graph=graph_data(graph),
+        tree=tree,
+    )
+
+
+# --- looking back ----------------------------------------------------------------------------
+
+
+@dataclass(slots=True)
+class _Back:
+    window: list[Cycle]
+    prev_sealed: Cycle | None
+    held: HeldSince
+
+
+def _look_back(
+    log: Log, target: Cycle, command: str | None, lookback_ns: int, window_cycles: int
+) -> _Back:
+    """One reverse walk: sensor window, previous seal, and where the current command began."""
+    window: list[Cycle] = []
+    prev_sealed: Cycle | None = None
+    since, count = target, 1
+    bound: Literal["change", "lookback", "log_start"] = "log_start"
+    previous: Cycle | None = None
+    holding = True
+    floor = target.t_ns - lookback_ns
+    for earlier in log.iter_cycles(end_ns=target.t_ns, reverse=True):
+        if earlier.cycle >= target.cycle:
+            continue
+        if len(window) < window_cycles:
+            window.append(earlier)
+        if prev_sealed is None and TOPIC_SEAL in earlier.payloads:
+            prev_sealed = earlier
+        if holding:
+            if earlier.t_ns < floor:
+                holding, bound = False, "lookback"
+            elif command_of(earlier) == command:
+                since, count = earlier, count + 1
+            else:
+                holding, bound, previous = False, "change", earlier
+        if not holding and prev_sealed is not None and len(window) >= window_cycles:
+            break
+    held = HeldSince(
+        command=command,
+        since_cycle=since.cycle,
+        since_t_ns=since.t_ns,
+        cycles=count,
+        bound=bound,
+        previous=command_of(previous) if previous is not None else None,
+        previous_cycle=previous.cycle if previous is not None else None,
+        at_least=bound != "change",
+    )
+    return _Back(window, prev_sealed, held)
+
+
+def _check_seal(log: Log, target: Cycle, prev_sealed: Cycle | None) -> SealCheck:
+    data = target.payloads.get(TOPIC_SEAL)
+    if data is None:
+        return SealCheck(
+            False,
+            None,
+            (),
+            (),
+            (),
+            (),
+            None,
+            None,
+            "no seal",
+            0,
+            False,
+            ("the cycle is not sealed",),
+        )
+    seal = target.seal
+    assert seal is not None
+    named = seal.digests
+    mismatched: list[str] = []
+    unnamed: list[str] = []
+    for topic, payload in target.payloads.items():
+        if topic == TOPIC_SEAL:
+            continue
+        want = named.get(topic)
+        if want is None:
+            unnamed.append(topic)
+        elif digest(payload) != want:
+            mismatched.append(topic)
+    summary = target.summary or {}
+    absent = tuple(t for t in named if t not in target.payloads and t not in summary)
+    summarised = tuple(t for t in named if t not in target.payloads and t in summary)
+    compared = len(named) - len(absent) - len(summarised)
+    bad = bool(mismatched or unnamed or absent)
+    digests_ok = None if not (compared or bad) else not bad
+    if prev_sealed is not None:
+        prev_data = prev_sealed.payloads[TOPIC_SEAL]
+        prev_ok = seal.prev == digest(prev_data)
+        prev_cycle: int | None = prev_sealed.cycle
+        source = f"the previous seal (cycle {prev_sealed.cycle})"
+    else:
+        segment = next((s for s in log.segments if s.path.name == target.segment), None)
+        expected = segment.session.prev_seal if segment is not None else GENESIS
+        prev_ok = seal.prev == expected
+        prev_cycle = None
+        source = (
+            "genesis (first seal of the robot)"
+            if expected == GENESIS
+            else "the segment's recorded prev_seal (previous segment not in this log)"
+        )
+    return SealCheck(
+        sealed=True,
+        digests_ok=digests_ok,
+        mismatched=tuple(mismatched),
+        unnamed=tuple(unnamed),
+        absent=absent,
+        summarised=summarised,
+        prev_ok=prev_ok,
+        prev_cycle=prev_cycle,
+        prev_source=source,
+        dropped_before=seal_dropped(target),
+        verified=digests_ok is True and prev_ok,
+        problems=_seal_problems(
+            sealed=True,
+            mismatched=tuple(mismatched),
+            unnamed=tuple(unnamed),
+            absent=absent,
+            prev_ok=prev_ok,
+            prev_source=source,
+        ),
+    )
+
+
+def _scores(decision: Decision, chains: DecisionChains, seal: SealCheck) -> DecisionScores:
+    problems: list[str] = []
+    if chains.reason:
+        problems.append(f"ET: {chains.reason}")
+    for factor in chains.factors:
+        link = factor.missing
+        if link is not None:
+            problems.append(
+                f"ET: {factor.name or factor.node}: {link.level} not documented "
+                f"({link.detail}); depth {factor.depth}/{factor.expected_depth}"
+            )
+    problems += [f"integrity: {p}" for p in seal.problems]
+    return DecisionScores(
+        et=chains.et,
+        et_partial=chains.et_partial,
+        fully_traceable=chains.fully_traceable,
+        dr=None,
+        tcs=None,
+        problems=tuple(problems),
+        source="chains (DR and TCS need trace_audit.metrics per-decision scoring)",
+    )

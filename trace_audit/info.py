@@ -1,0 +1,142 @@
+"""What a log is: robot, time range, cycles, segments and tiers, channels, drops and gaps.
+
+The header facts (segments, tiers, time ranges, channel counts) come from each segment's
+summary, so they cost the same for a minute or a day of log. Dropped cycles (the sum of the
+seals' ``dropped``) and gaps in time need every seal: ``log_info(scan=True)`` (the default)
+reads them all; ``scan=False`` answers from the summaries alone and says so.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from trace_audit.timeline import GAP_FACTOR, Gap, LogSource, as_log, require_cycles, seal_dropped
+from trace_runtime.records import TOPIC_SEAL
+
+__all__ = ["LogInfo", "SegmentRow", "log_info"]
+
+
+@dataclass(frozen=True, slots=True)
+class SegmentRow:
+    """One segment file of the log."""
+
+    path: str
+    tier: str
+    robot: str
+    segment: int
+    start_ns: int
+    end_ns: int
+    first_cycle: int | None
+    last_cycle: int | None
+    cycles: int
+    bytes: int
+    chunks: int
+    finished: bool
+    recovered: bool
+    software_version: str
+    policy_version: str
+
+
+@dataclass(frozen=True, slots=True)
+class LogInfo:
+    """A log at a glance. ``scanned`` says whether drops and gaps were counted."""
+
+    path: str
+    robots: tuple[str, ...]
+    start_ns: int
+    end_ns: int
+    period_ns: int
+    cycles: int
+    segments: tuple[SegmentRow, ...]
+    tiers: dict[str, int]
+    channels: dict[str, int]
+    finished: bool
+    recovered: bool
+    scanned: bool
+    dropped: int | None
+    gaps: tuple[Gap, ...]
+
+    @property
+    def duration_ns(self) -> int:
+        return self.end_ns - self.start_ns
+
+    @property
+    def gap_ns(self) -> int:
+        """Time in gaps beyond the nominal period (what temporal continuity counts as lost)."""
+        return sum(max(0, g.duration_ns - self.period_ns) for g in self.gaps)
+
+
+def log_info(source: LogSource, *, scan: bool = True) -> LogInfo:
+    """Describe a log; ``scan`` reads every seal to count dropped cycles and gaps."""
+    log = as_log(source)
+    require_cycles(log)
+    period = max((s.session.period_ns for s in log.segments), default=0)
+    counts: dict[str, int] = {}
+    first: dict[str, int] = {}
+    last: dict[str, int] = {}
+    dropped: int | None = None
+    gaps: list[Gap] = []
+    if scan:
+        dropped = 0
+        limit = period * GAP_FACTOR
+        prev_cycle, prev_t = -1, -1
+        for cycle in log.iter_cycles():
+            name = cycle.segment
+            counts[name] = counts.get(name, 0) + 1
+            first.setdefault(name, cycle.cycle)
+            last[name] = cycle.cycle
+            lost = seal_dropped(cycle)
+            dropped += lost
+            if prev_t >= 0 and (lost or (limit and cycle.t_ns - prev_t > limit)):
+                gaps.append(Gap(prev_cycle, cycle.cycle, prev_t, cycle.t_ns, lost))
+            prev_cycle, prev_t = cycle.cycle, cycle.t_ns
+    rows: list[SegmentRow] = []
+    channels: dict[str, int] = {}
+    tiers: dict[str, int] = {}
+    for segment in log.segments:
+        info = segment.info
+        name = segment.path.name
+        if not scan:
+            counts[name] = info.channels.get(TOPIC_SEAL, 0)
+            newest = next(segment.iter_cycles(reverse=True), None)
+            if newest is not None:
+                last[name] = newest.cycle
+                first[name] = segment.session.first_cycle
+        for topic, n in info.channels.items():
+            channels[topic] = channels.get(topic, 0) + n
+        tiers[info.tier] = tiers.get(info.tier, 0) + 1
+        rows.append(
+            SegmentRow(
+                path=str(segment.path),
+                tier=info.tier,
+                robot=segment.session.robot_id,
+                segment=segment.session.segment,
+                start_ns=info.start_ns,
+                end_ns=info.end_ns,
+                first_cycle=first.get(name),
+                last_cycle=last.get(name),
+                cycles=counts.get(name, 0),
+                bytes=info.bytes,
+                chunks=info.chunk_count,
+                finished=info.finished,
+                recovered=info.recovered,
+                software_version=segment.session.software_version,
+                policy_version=segment.session.policy_version,
+            )
+        )
+    return LogInfo(
+        path=str(log.root),
+        robots=tuple(dict.fromkeys(s.session.robot_id for s in log.segments)),
+        start_ns=log.start_ns,
+        end_ns=log.end_ns,
+        period_ns=period,
+        cycles=sum(r.cycles for r in rows),
+        segments=tuple(rows),
+        tiers=tiers,
+        channels=dict(sorted(channels.items())),
+        finished=all(r.finished for r in rows),
+        recovered=log.recovered,
+        scanned=scan,
+        dropped=dropped,
+        gaps=tuple(gaps),
+    )

@@ -1,0 +1,479 @@
+"""Decisions over time: the timeline of decision changes, and why the robot took an action.
+
+Times: the library takes integer nanoseconds in the log's own clock (``t_ns``). At the CLI a
+time is seconds in that clock (``12.3`` means t_ns = 12_300_000_000); ``+12.3`` means 12.3 s
+after the log's first record. ``TimePoint.parse`` reads both and ``TimePoint.resolve`` turns
+them into ``t_ns`` for a given log, so every command reads times the same way.
+
+A *decision change* is a cycle whose command differs from the previous logged cycle's. The
+first cycle of a window always opens a row. Cycles that were never logged (dropped, a gap in
+time) are reported as gaps between rows, not papered over.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from decimal import Decimal, InvalidOperation
+from pathlib import Path
+
+import orjson
+
+from trace_audit.causal import CounterfactualView, FactorValue, read_decision
+from trace_runtime.errors import LogReadError, UsageError
+from trace_runtime.reader import Cycle, Log, open_log
+from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION, TOPIC_SEAL
+
+__all__ = [
+    "Gap",
+    "LogSource",
+    "Span",
+    "TimePoint",
+    "Timeline",
+    "Transition",
+    "WhyResult",
+    "as_log",
+    "command_of",
+    "require_cycles",
+    "timeline",
+    "why",
+]
+
+LogSource = Log | str | Path
+
+# A cycle further than this many nominal periods after the previous one leaves a gap.
+GAP_FACTOR = 1.5
+
+
+@dataclass(frozen=True, slots=True)
+class TimePoint:
+    """A time as given at the CLI: seconds in the log's clock, or ``+S`` after its start."""
+
+    ns: int
+    relative: bool = False
+
+    @classmethod
+    def parse(cls, text: str) -> TimePoint:
+        """Read ``12.3``, ``12.3s`` or ``+12.3`` (relative to the log start); UsageError else."""
+        raw = text.strip()
+        relative = raw.startswith("+")
+        number = raw[1:] if relative else raw
+        number = number[:-1] if number.endswith("s") else number
+        try:
+            seconds = Decimal(number)
+        except InvalidOperation:
+            seconds = Decimal("NaN")
+        if not seconds.is_finite() or seconds < 0 or number.strip() != number or not number:
+            raise UsageError(
+                f"invalid time {text!r}: give seconds in the log's clock (e.g. 12.3) "
+                "or +seconds after the log start (e.g. +5)"
+            )
+        return cls(int(seconds * 1_000_000_000), relative)
+
+    def resolve(self, log: Log) -> int:
+        """This time as ``t_ns`` in ``log``'s clock."""
+        return log.start_ns + self.ns if self.relative else self.ns
+
+
+TimeArg = TimePoint | int | str | None
+
+
+def resolve_time(value: TimeArg, log: Log) -> int | None:
+    """``t_ns`` for a time given as TimePoint, int nanoseconds or CLI text (None stays None)."""
+    if value is None:
+        return None
+    if isinstance(value, int):
+        return value
+    if isinstance(value, str):
+        value = TimePoint.parse(value)
+    return value.resolve(log)
+
+
+def as_log(source: LogSource) -> Log:
+    """An open ``Log`` for a path (file, directory or log root) or an already open one."""
+    return source if isinstance(source, Log) else open_log(source)
+
+
+def require_cycles(log: Log) -> None:
+    """Raise ``LogReadError`` when the log holds no decision cycle at all (an empty log)."""
+    for segment in log.segments:
+        counts = segment.info.channels
+        if any(n > 0 for topic, n in counts.items() if topic.startswith("/trace/")):
+            return
+    if next(log.iter_cycles(), None) is None:
+        recovered = " (recovered from an unfinished segment)" if log.recovered else ""
+        raise LogReadError(str(log.root), f"the log holds no decision cycles{recovered}")
+
+
+def command_of(cycle: Cycle) -> str | None:
+    """The command of a cycle's action, read without parsing the whole record."""
+    data = cycle.payloads.get(TOPIC_ACTION)
+    if data is not None:
+        # Canonical bytes put the action's own "command" first after the stamp; anything
+        # else (another writer's key order, escapes) takes the full parse below.
+        at = data.find(b'"command":"')
+        if at > 0 and data.count(b"{", 0, at) == 1:
+            end = data.find(b'"', at + 11)
+            value = data[at + 11 : end]
+            if end > 0 and b"\\" not in value:
+                return value.decode()
+    layer = cycle.layer(TOPIC_ACTION)
+    if isinstance(layer, dict):
+        command = layer.get("command")
+        return command if isinstance(command, str) else None
+    return None
+
+
+def _flags_of(cycle: Cycle) -> tuple[str, ...]:
+    data = cycle.payloads.get(TOPIC_EXECUTION)
+    layer = orjson.loads(data) if data is not None else cycle.layer(TOPIC_EXECUTION)
+    if not isinstance(layer, dict):
+        return ()
+    return tuple(f for f in layer.get("flags") or () if isinstance(f, str))
+
+
+def seal_dropped(cycle: Cycle) -> int:
+    data = cycle.payloads.get(TOPIC_SEAL)
+    if data is None:
+        return 0
+    at = data.rfind(b'"dropped":')
+    if at < 0:
+        return 0
+    digits = bytearray()
+    for byte in data[at + 10 :]:
+        if 48 <= byte <= 57:
+            digits.append(byte)
+        else:
+            break
+    return int(digits) if digits else 0
+
+
+def _period_ns(log: Log) -> int:
+    return max((s.session.period_ns for s in log.segments), default=0)
+
+
+# --- timeline ------------------------------------------------------------------------------
+
+
+@dataclass(slots=True)
+class Span:
+    """A stretch of cycles with one command: the cycle that began it and what it held.
+
+    ``held_ns`` runs from this cycle to the next row's (or one period past the last cycle
+    of the window), so back-to-back rows add up to the window.
+    """
+
+    cycle: int
+    t_ns: int
+    command: str | None
+    previous: str | None
+    leading: FactorValue | None
+    rationale: str | None
+    flags: tuple[str, ...]
+    end_cycle: int
+    end_t_ns: int
+    cycles: int = 0
+    held_ns: int = 0
+    flagged_cycles: int = 0
+    flag_counts: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class Gap:
+    """Time between two logged cycles beyond the nominal period, and what the seal says."""
+
+    after_cycle: int
+    before_cycle: int
+    start_ns: int
+    end_ns: int
+    dropped: int
+
+    @property
+    def duration_ns(self) -> int:
+        return self.end_ns - self.start_ns
+
+
+@dataclass(frozen=True, slots=True)
+class Timeline:
+    """Rows of decision changes (or of every cycle) in a window, with gaps."""
+
+    path: str
+    robot: str
+    start_ns: int
+    end_ns: int
+    every: bool
+    cycles: int
+    changes: int
+    rows: tuple[Span, ...]
+    gaps: tuple[Gap, ...]
+    recovered: bool
+
+
+def _window(log: Log, start: TimeArg, end: TimeArg) -> tuple[int, int]:
+    start_ns = resolve_time(start, log)
+    end_ns = resolve_time(end, log)
+    lo = log.start_ns if start_ns is None else start_ns
+    hi = log.end_ns if end_ns is None else end_ns
+    if hi < lo:
+        raise UsageError(f"the window ends before it starts ({lo / 1e9:.3f} s > {hi / 1e9:.3f} s)")
+    if lo > log.end_ns or hi < log.start_ns:
+        raise UsageError(
+            f"the window [{lo / 1e9:.3f} s, {hi / 1e9:.3f} s] does not overlap the log's "
+            f"range [{log.start_ns / 1e9:.3f} s, {log.end_ns / 1e9:.3f} s]"
+        )
+    return lo, hi
+
+
+def timeline(
+    source: LogSource,
+    *,
+    start: TimeArg = None,
+    end: TimeArg = None,
+    every: bool = False,
+) -> Timeline:
+    """A row per decision change (per cycle with ``every``) between ``start`` and ``end``."""
+    log = as_log(source)
+    require_cycles(log)
+    lo, hi = _window(log, start, end)
+    period = _period_ns(log)
+    limit = period * GAP_FACTOR
+    rows: list[Span] = []
+    gaps: list[Gap] = []
+    current: Span | None = None
+    prev: Cycle | None = None
+    count = changes = 0
+    for cycle in log.iter_cycles(lo, hi):
+        count += 1
+        command = command_of(cycle)
+        flags = _flags_of(cycle)
+        dropped = seal_dropped(cycle)
+        if prev is not None and (dropped or (limit and cycle.t_ns - prev.t_ns > limit)):
+            gaps.append(Gap(prev.cycle, cycle.cycle, prev.t_ns, cycle.t_ns, dropped))
+        changed = current is not None and command != current.command
+        changes += changed
+        if current is None or every or changed:
+            if current is not None:
+                current.held_ns = cycle.t_ns - current.t_ns
+            decision = read_decision(cycle)
+            current = Span(
+                cycle=cycle.cycle,
+                t_ns=cycle.t_ns,
+                command=command,
+                previous=None if current is None else current.command,
+                leading=decision.leading,
+                rationale=decision.rationale,
+                flags=flags,
+                end_cycle=cycle.cycle,
+                end_t_ns=cycle.t_ns,
+            )
+            rows.append(current)
+        current.cycles += 1
+        current.end_cycle, current.end_t_ns = cycle.cycle, cycle.t_ns
+        if flags:
+            current.flagged_cycles += 1
+            for flag in flags:
+                current.flag_counts[flag] = current.flag_counts.get(flag, 0) + 1
+        prev = cycle
+    if current is not None:
+        current.held_ns = current.end_t_ns + period - current.t_ns
+    robot = log.segments[0].session.robot_id
+    return Timeline(
+        str(log.root),
+        robot,
+        lo,
+        hi,
+        every,
+        count,
+        changes,
+        tuple(rows),
+        tuple(gaps),
+        log.recovered,
+    )
+
+
+# --- why ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Transition:
+    """A cycle where the command changed to the action asked about, and the reason logged.
+
+    It held for ``held_cycles`` cycles, until ``ended_t_ns`` (the first cycle with another
+    command, ``next_command``), or to the end of the log when ``ongoing``. ``held_ns`` runs
+    to ``ended_t_ns``, or one period past the last cycle when ongoing.
+    """
+
+    cycle: int
+    t_ns: int
+    command: str
+    previous: str | None
+    previous_cycle: int | None
+    rationale: str | None
+    truncated: bool
+    factors: tuple[FactorValue, ...]
+    counterfactuals: tuple[CounterfactualView, ...]
+    flags: tuple[str, ...]
+    held_cycles: int
+    held_ns: int
+    last_t_ns: int
+    ended_t_ns: int | None
+    next_command: str | None
+    ongoing: bool
+
+    @property
+    def leading(self) -> FactorValue | None:
+        return self.factors[0] if self.factors else None
+
+
+@dataclass(frozen=True, slots=True)
+class WhyResult:
+    """The transitions into ``action`` (all of them, or the one in force at ``t_ns``)."""
+
+    path: str
+    robot: str
+    action: str
+    t_ns: int | None
+    transitions: tuple[Transition, ...]
+    actions_present: dict[str, int]
+    """Cycles per command in the log (only the action asked about with ``t``)."""
+    recovered: bool
+
+
+def _match(action: str, command: str | None) -> bool:
+    return command is not None and command.casefold() == action.casefold()
+
+
+@dataclass(slots=True)
+class _Run:
+    """A run of cycles with the action: first and last cycle, the ones around it."""
+
+    first: Cycle
+    before: Cycle | None
+    last: Cycle
+    cycles: int = 1
+    after: Cycle | None = None
+
+    def transition(self, period_ns: int) -> Transition:
+        decision = read_decision(self.first)
+        after = self.after
+        end = after.t_ns if after is not None else self.last.t_ns + period_ns
+        return Transition(
+            cycle=self.first.cycle,
+            t_ns=self.first.t_ns,
+            command=decision.command or "?",
+            previous=None if self.before is None else command_of(self.before),
+            previous_cycle=None if self.before is None else self.before.cycle,
+            rationale=decision.rationale,
+            truncated=decision.truncated,
+            factors=decision.factors,
+            counterfactuals=decision.counterfactuals,
+            flags=decision.execution.flags if decision.execution else (),
+            held_cycles=self.cycles,
+            held_ns=end - self.first.t_ns,
+            last_t_ns=self.last.t_ns,
+            ended_t_ns=None if after is None else after.t_ns,
+            next_command=None if after is None else command_of(after),
+            ongoing=after is None,
+        )
+
+
+def _unknown_action(action: str, present: Counter[str]) -> UsageError:
+    listed = ", ".join(f"{c} ({n})" for c, n in present.most_common()) or "none"
+    return UsageError(f"action {action!r} is never taken in this log; actions present: {listed}")
+
+
+def why(source: LogSource, action: str, *, t: TimeArg = None) -> WhyResult:
+    """Why the robot took ``action``: each transition into it with its logged reason.
+
+    With ``t``, only the transition that led to the state at ``t`` (the latest one at or
+    before ``t``). Without, every transition in the log. The action is matched without
+    regard to case. An action the log never shows raises ``UsageError`` naming those it does.
+    """
+    if not action.strip():
+        raise UsageError("--action must name a command, e.g. STOP")
+    log = as_log(source)
+    require_cycles(log)
+    robot = log.segments[0].session.robot_id
+    period = _period_ns(log)
+    t_ns = resolve_time(t, log)
+    if t_ns is not None:
+        log.cycle_at(t_ns)  # raises TimeOutOfRangeError outside the log, naming its range
+        run = _run_before(log, action, t_ns)
+        if run is None:
+            present = Counter(command_of(c) or "?" for c in log.iter_cycles())
+            name = next((c for c in present if _match(action, c)), None)
+            if name is None:
+                raise _unknown_action(action, present)
+            first = next(c for c in log.iter_cycles() if _match(action, command_of(c)))
+            raise UsageError(
+                f"{name} is not taken at or before t={t_ns / 1e9:.3f} s; it is first taken "
+                f"at t={first.t_ns / 1e9:.3f} s (cycle {first.cycle})"
+            )
+        found = run.transition(period)
+        return WhyResult(
+            str(log.root),
+            robot,
+            found.command,
+            t_ns,
+            (found,),
+            {found.command: found.held_cycles},
+            log.recovered,
+        )
+    runs, present = _all_runs(log, action)
+    if not runs:
+        raise _unknown_action(action, present)
+    transitions = tuple(r.transition(period) for r in runs)
+    return WhyResult(
+        str(log.root),
+        robot,
+        transitions[0].command,
+        None,
+        transitions,
+        dict(present.most_common()),
+        log.recovered,
+    )
+
+
+def _all_runs(log: Log, action: str) -> tuple[list[_Run], Counter[str]]:
+    present: Counter[str] = Counter()
+    runs: list[_Run] = []
+    current: _Run | None = None
+    prev: Cycle | None = None
+    for cycle in log.iter_cycles():
+        command = command_of(cycle)
+        present[command or "?"] += 1
+        if _match(action, command):
+            if current is None:
+                current = _Run(cycle, prev, cycle)
+                runs.append(current)
+            else:
+                current.last = cycle
+                current.cycles += 1
+        elif current is not None:
+            current.after = cycle
+            current = None
+        prev = cycle
+    return runs, present
+
+
+def _run_before(log: Log, action: str, t_ns: int) -> _Run | None:
+    """The latest run of ``action`` that began at or before ``t_ns``, followed to its end."""
+    run: _Run | None = None
+    for cycle in log.iter_cycles(end_ns=t_ns, reverse=True):
+        if _match(action, command_of(cycle)):
+            if run is None:
+                run = _Run(cycle, None, cycle, cycles=0)
+            run.first = cycle
+            run.cycles += 1
+        elif run is not None:
+            run.before = cycle
+            break
+    if run is None:
+        return None
+    for cycle in log.iter_cycles(start_ns=run.last.t_ns + 1):
+        if not _match(action, command_of(cycle)):
+            run.after = cycle
+            break
+        run.last = cycle
+        run.cycles += 1
+    return run
