@@ -1,0 +1,114 @@
+"""The policy, its counterfactual prober and the rationale buffer, without a log."""
+
+from __future__ import annotations
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sim.counterfactual import BudgetExhaustedError, holds, probe
+from sim.policy import (
+    CONTINUE,
+    REROUTE,
+    SLOW,
+    STOP,
+    PolicyInput,
+    evaluate,
+    factors_of,
+    score_alternatives,
+)
+from sim.records import RationaleBuffer
+
+PED = PolicyInput(peds=(("ped_1", "ped_1.collision_risk", "ped_1.distance"),))
+
+
+def _ped_close_values() -> dict[str, object]:
+    return {"ped_1.collision_risk": 0.7, "ped_1.distance": 1.5, "aisle_blocked": 0.01}
+
+
+def test_paper_example_stops_and_its_counterfactuals_match_the_paper() -> None:
+    """Worker at 1.5 m, risk 0.70: STOP; would SLOW if d >= 2.0, CONTINUE if risk < 0.2."""
+    values = _ped_close_values()
+    outcome = evaluate(PED, values)
+    assert outcome.command == STOP
+    assert outcome.path == ("root", "ped_in_path", "ped_close", "stop_ped")
+    assert factors_of(outcome) == ["ped_1.collision_risk", "ped_1.distance"]
+    found = {(c.factor, c.comparison, c.threshold, c.would_select)
+             for c in probe(PED, values, factors_of(outcome))}
+    assert ("ped_1.distance", ">=", 2.0, SLOW) in found
+    assert ("ped_1.collision_risk", "<", 0.2, CONTINUE) in found
+
+
+def test_alternatives_score_below_the_choice_and_say_why() -> None:
+    values = _ped_close_values()
+    outcome = evaluate(PED, values)
+    score, alts = score_alternatives(outcome, values)
+    assert {a.command for a in alts} == {SLOW, REROUTE, CONTINUE}
+    assert all(a.score < score for a in alts)
+    slow = next(a for a in alts if a.command == SLOW)
+    assert "ped_1.distance" in slow.rejected_because and "stop distance" in slow.rejected_because
+
+
+def test_a_second_pedestrian_keeps_the_stop_so_no_distance_counterfactual_is_claimed() -> None:
+    inp = PolicyInput(peds=(("a", "a.collision_risk", "a.distance"),
+                            ("b", "b.collision_risk", "b.distance")))
+    values: dict[str, object] = {"a.collision_risk": 0.7, "a.distance": 1.5,
+                                 "b.collision_risk": 0.6, "b.distance": 1.6, "aisle_blocked": 0.0}
+    found = probe(inp, values, ["a.distance"])
+    # Moving a away leaves b inside the stop distance: STOP stays; no SLOW counterfactual.
+    assert all(c.would_select != SLOW for c in found)
+
+
+def test_budget_cut_raises_instead_of_returning_a_partial_set() -> None:
+    values = _ped_close_values()
+    factors = factors_of(evaluate(PED, values))
+    try:
+        probe(PED, values, factors, budget=2)
+    except BudgetExhaustedError:
+        return
+    raise AssertionError("probing finished within a budget of 2 evaluations")
+
+
+_risk = st.floats(0.0, 1.0)
+_dist = st.floats(0.0, 30.0)
+
+
+@settings(max_examples=150, deadline=None)
+@given(r1=_risk, d1=_dist, r2=_risk, d2=_dist, vr=_risk, ttc=st.floats(0.0, 99.0),
+       blocked=_risk)
+def test_every_counterfactual_holds_when_the_policy_is_rerun(
+    r1: float, d1: float, r2: float, d2: float, vr: float, ttc: float, blocked: float
+) -> None:
+    inp = PolicyInput(
+        peds=(("p1", "p1.collision_risk", "p1.distance"), ("p2", "p2.collision_risk", "p2.distance")),
+        vehicles=(("f1", "f1.collision_risk", "f1.ttc"),),
+    )
+    values: dict[str, object] = {
+        "p1.collision_risk": r1, "p1.distance": d1, "p2.collision_risk": r2, "p2.distance": d2,
+        "f1.collision_risk": vr, "f1.ttc": ttc, "aisle_blocked": blocked,
+    }
+    outcome = evaluate(inp, values)
+    for cf in probe(inp, values, factors_of(outcome)):
+        assert cf.would_select != outcome.command
+        assert holds(inp, values, cf), cf
+
+
+def test_vehicle_branch_stops_when_close_and_reroutes_when_far() -> None:
+    inp = PolicyInput(vehicles=(("f", "f.collision_risk", "f.ttc"),))
+    assert evaluate(inp, {"f.collision_risk": 0.8, "f.ttc": 2.0, "aisle_blocked": 0.0}).command == STOP
+    assert evaluate(inp, {"f.collision_risk": 0.8, "f.ttc": 4.0, "aisle_blocked": 0.0}).command \
+        == REROUTE
+    assert evaluate(inp, {"f.collision_risk": 0.1, "f.ttc": 4.0, "aisle_blocked": 0.0}).command \
+        == CONTINUE
+
+
+def test_rationale_buffer_truncates_text_and_factors_when_full() -> None:
+    full = RationaleBuffer(1024)
+    small = RationaleBuffer(30)
+    for buf in (full, small):
+        buf.add_text("pedestrian in path (ped_1.collision_risk 0.70 >= 0.20)")
+        buf.add_factor({"node": "ped_1.collision_risk", "value": 0.7})
+    assert not full.truncated and len(full.factors) == 1
+    r = small.rationale()
+    assert r["truncated"] is True
+    assert r["factors"] == []
+    assert len(r["text"].encode()) == 30
