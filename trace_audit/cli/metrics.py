@@ -30,44 +30,53 @@ from trace_runtime.errors import UsageError
 
 _PROGRESS_MIN_CYCLES = 20_000
 
-_HELP = """Measure auditability from what was logged: the paper's Tables II and III.
-
-[bold]Definitions[/bold] (details in docs/metrics.md):
-
-- [bold]ET(d)[/bold]: share of the decision's factors (rationale.factors of /trace/action)
-  with a documented chain factor node -> belief edges (child to parent) -> entity node ->
-  perception entity -> evidence ref -> a logged /sensors message the ref resolves to (topic,
-  log time, sequence, sha256). Expected depth 5 (state-node factor) or 4 (entity-node
-  factor). No action or no factors: ET = 0. Shown as mean ± std across decisions, and the
-  number and share of fully traceable decisions.
-
-- [bold]ET_partial(d)[/bold]: mean over factors of documented depth / expected depth
-  (consecutive documented levels from the factor down).
-
-- [bold]TC[/bold] = 1 - sum(gaps) / window per robot. A gap is an interval between two
-  sealed cycles longer than (1 + gap tolerance) x the nominal period (trace.session
-  period_ns), counted as the time beyond one period; window = last - first sealed cycle +
-  one period. The seals' dropped counts are reported as declared drops.
-
-- [bold]DR(d)[/bold] = action logged x at least one alternative x complete rationale (not
-  truncated, factors present, counterfactuals present or counterfactuals_none_applicable).
-  A sealed cycle without an action is not reconstructable.
-
-- [bold]TCS(d)[/bold] in \\[0, 1]: weighted mean of ET, ET_partial, DR, continuity and
-  integrity (default weights 0.3/0.1/0.3/0.1/0.2), 0 when integrity fails (seal missing,
-  a layer not matching its seal digest, or the hash chain broken).
-
-Stds are population stds; each is labelled with what it is taken across. With --by, the
-std of the group values across groups is shown as well (the paper's footnote).
-
-[bold]Examples[/bold]:
-
-  trace-audit metrics run.mcap --by scenario
-
-  trace-audit metrics fleet/ --by robot --json --jobs 2
-
-  trace-audit metrics run.mcap --failures --fail-under ET=0.95,DR=95%
-"""
+_HELP = "\n\n".join(
+    [
+        ("Measure auditability from what was logged: the paper's Tables II and III."),
+        ("[bold]Definitions[/bold] (details in docs/metrics.md):"),
+        (
+            "- [bold]ET(d)[/bold]: share of the decision's factors (rationale.factors of "
+            "/trace/action) with a documented chain factor node -> belief edges (child to "
+            "parent) -> entity node -> perception entity -> evidence ref -> a logged /sensors "
+            "message the ref resolves to (topic, log time, sequence, sha256). Expected depth "
+            "5 (state-node factor) or 4 (entity-node factor). No action or no factors: ET = "
+            "0. Shown as mean ± std across decisions, and the number and share of fully "
+            "traceable decisions."
+        ),
+        (
+            "- [bold]ET_partial(d)[/bold]: mean over factors of documented depth / expected "
+            "depth (consecutive documented levels from the factor down)."
+        ),
+        (
+            "- [bold]TC[/bold] = 1 - sum(gaps) / window per robot. A gap is an interval "
+            "between two sealed cycles longer than (1 + gap tolerance) x the nominal period "
+            "(trace.session period_ns), counted as the time beyond one period; window = last "
+            "- first sealed cycle + one period. The seals' dropped counts are reported as "
+            "declared drops."
+        ),
+        (
+            "- [bold]DR(d)[/bold] = action logged x at least one alternative x complete "
+            "rationale (not truncated, factors present, counterfactuals present or "
+            "counterfactuals_none_applicable). A sealed cycle without an action is not "
+            "reconstructable."
+        ),
+        (
+            "- [bold]TCS(d)[/bold] in [0, 1]: weighted mean of ET, ET_partial, DR, "
+            "continuity and integrity (default weights 0.3/0.1/0.3/0.1/0.2), 0 when integrity "
+            "fails (seal missing, a layer not matching its seal digest, or the hash chain "
+            "broken)."
+        ),
+        (
+            "Stds are population stds; each is labelled with what it is taken across. With "
+            "--by, the std of the group values across groups is shown as well (the paper's "
+            "footnote)."
+        ),
+        ("[bold]Examples[/bold]:"),
+        ("  trace-audit metrics run.mcap --by scenario"),
+        ("  trace-audit metrics fleet/ --by robot --json --jobs 2"),
+        ("  trace-audit metrics run.mcap --failures --fail-under ET=0.95,DR=95%"),
+    ]
+)
 
 
 def _parse_by(value: str | None) -> Any:
@@ -124,7 +133,8 @@ def metrics_command(
         str | None,
         typer.Option(
             "--tcs-weights",
-            help="e.g. et=0.3,et_partial=0.1,dr=0.3,continuity=0.1,integrity=0.2,gate=on",
+            help="TCS weights and gate, e.g. et=0.4,dr=0.4,gate=off (keys: et, et_partial, "
+            "dr, continuity, integrity, gate).",
         ),
     ] = None,
     json_out: JsonOption = False,
@@ -301,9 +311,13 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
             + (f" (first {listed} listed)" if listed < report.failures_total else "")
         )
         for f in report.failures:
-            out.print(f"  cycle {f.cycle}  t={f.t_ns / 1e9:.3f} s  [{f.group}]", markup=False)
+            out.print(
+                f"  cycle {f.cycle}  t={f.t_ns / 1e9:.3f} s  [{f.group}]",
+                markup=False,
+                soft_wrap=True,
+            )
             for problem in f.problems:
-                out.print(f"      {problem}", markup=False)
+                out.print(f"      {problem}", markup=False, soft_wrap=True)
         out.print(f"\n[bold]Gaps[/bold]: {report.gaps_total}")
         for gap in report.gaps:
             out.print(
@@ -312,6 +326,7 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
                 f"{gap.gap_ns / 1e9:.3f} s, ~{gap.missing_cycles} missing, "
                 f"{gap.declared_dropped} declared dropped",
                 markup=False,
+                soft_wrap=True,
             )
 
     for check in report.thresholds:
