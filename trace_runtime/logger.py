@@ -28,12 +28,14 @@ from typing import Any, BinaryIO, Literal, Protocol
 from trace_runtime.chain import digest
 from trace_runtime.codec import encode_json, encode_layer, encode_seal
 from trace_runtime.errors import RecordError, UsageError
+from trace_runtime.integrity import Signer, encode_checkpoint, load_signer, make_checkpoint
 from trace_runtime.records import (
     GENESIS,
     LAYER_MODELS,
     SENSOR_PREFIX,
     TOPIC_ACTION,
     TOPIC_BELIEF,
+    TOPIC_CHECKPOINT,
     TOPIC_EXECUTION,
     TOPIC_PERCEPTION,
     TOPIC_SEAL,
@@ -75,6 +77,12 @@ class LoggerConfig:
     compression_level: int = 3
     opener: Opener | None = None
     """How segment files are opened; a plug point for custom storage and fault injection."""
+    checkpoint_interval_s: float | None = 10.0
+    """Write a /trace/checkpoint (the chain head) after the seal once this much log time has
+    passed since the last one; one is always written when a segment closes. None: only then."""
+    checkpoint_key: str | Path | Signer | None = None
+    """Sign checkpoints: an Ed25519 private key file (``trace-audit keygen``) or a ``Signer``.
+    None writes unsigned checkpoints (chain-head anchors only)."""
 
 
 @dataclass(slots=True)
@@ -88,6 +96,8 @@ class LoggerStats:
     dropped_aborted: int = 0
     segments: list[Path] = field(default_factory=list)
     bytes_written: int = 0
+    checkpoints: int = 0
+    checkpoint_failures: int = 0
 
     @property
     def dropped(self) -> int:
@@ -216,6 +226,12 @@ class AuditLogger:
         if period_s <= 0:
             raise UsageError(f"period_s must be positive, got {period_s}")
         self.config = config or LoggerConfig()
+        interval = self.config.checkpoint_interval_s
+        if interval is not None and interval <= 0:
+            raise UsageError(f"checkpoint_interval_s must be positive or None, got {interval}")
+        # A bad key file is a set-up error the integrator must see: it raises here.
+        key = self.config.checkpoint_key
+        self._signer: Signer | None = load_signer(key) if isinstance(key, str | Path) else key
         self.path = Path(path)
         self.is_root = self.path.suffix != ".mcap"
         self.stats = LoggerStats()
@@ -248,6 +264,9 @@ class AuditLogger:
         )
         self._segment: SegmentWriter | None = None
         self._segment_start_ns: int | None = None
+        self._head: tuple[int, int] | None = None  # (cycle, t_ns) of the segment's last seal
+        self._sealed_in_segment = 0
+        self._last_checkpoint: tuple[int, int] | None = None  # (cycle, t_ns) it vouched for
         # Opening the first segment may fail (bad path, no permission): that is a set-up
         # error the integrator must see, so it raises here, unlike every later I/O failure.
         self._open_segment(self._session)
@@ -400,6 +419,9 @@ class AuditLogger:
             if segment is None:
                 raise SegmentWriteError("no segment could be opened", rolled_back=False)
             messages, last_seal = self._seal(segment, batch)
+            checkpoint = self._checkpoint_if_due(segment, batch, last_seal)
+            if checkpoint is not None:
+                messages.append(checkpoint)
             self.stats.bytes_written += segment.write_batch(messages)
         except SegmentWriteError as err:
             self._lose(batch, err, abandon=not err.rolled_back)
@@ -410,6 +432,11 @@ class AuditLogger:
         self._prev_seal = last_seal
         self._undeclared_writer = 0
         self.stats.written += len(batch)
+        self._head = (batch[-1].cycle, batch[-1].t_ns)
+        self._sealed_in_segment += len(batch)
+        if checkpoint is not None:
+            self._last_checkpoint = self._head
+            self.stats.checkpoints += 1
         if self._segment_start_ns is None:
             self._segment_start_ns = batch[0].t_ns
         self._maybe_sync()
@@ -469,12 +496,28 @@ class AuditLogger:
         self._segment = SegmentWriter(stream, session, level=self.config.compression_level)
         self._session = session
         self._segment_start_ns = None
+        self._head = None
+        self._sealed_in_segment = 0
+        self._last_checkpoint = None
         self.stats.segments.append(path)
 
     def _close_segment(self) -> None:
         segment, self._segment = self._segment, None
         if segment is None:
             return
+        if self._head is not None and not segment.broken:
+            # The closing checkpoint: a finished segment without one was cut (docs/integrity.md).
+            cycle, t_ns = self._head
+            message = self._checkpoint_message(
+                segment, cycle, t_ns, self._prev_seal, self._sealed_in_segment, final=True
+            )
+            if message is not None:
+                try:
+                    self.stats.bytes_written += segment.write_batch([message])
+                    self.stats.checkpoints += 1
+                except Exception as err:
+                    self.stats.checkpoint_failures += 1
+                    self._report_once("checkpoint", f"could not write a checkpoint: {err}")
         try:
             segment.close()
         except Exception as err:
@@ -486,6 +529,50 @@ class AuditLogger:
                 return self.path
             return self.path.with_name(f"{self.path.stem}.{session.segment:06d}.mcap")
         return self.path / "hot" / f"{session.robot_id}_{session.segment:06d}.mcap"
+
+    def _checkpoint_if_due(
+        self, segment: SegmentWriter, batch: list[_PendingCycle], head: str
+    ) -> OutMessage | None:
+        """The periodic checkpoint to append after this batch's last seal, when one is due."""
+        interval = self.config.checkpoint_interval_s
+        if interval is None:
+            return None
+        since = self._last_checkpoint[1] if self._last_checkpoint else self._segment_start_ns
+        last = batch[-1]
+        if last.t_ns - (batch[0].t_ns if since is None else since) < interval * 1e9:
+            return None
+        sealed = self._sealed_in_segment + len(batch)
+        return self._checkpoint_message(segment, last.cycle, last.t_ns, head, sealed, final=False)
+
+    def _checkpoint_message(
+        self,
+        segment: SegmentWriter,
+        cycle: int,
+        t_ns: int,
+        head: str,
+        sealed: int,
+        *,
+        final: bool,
+    ) -> OutMessage | None:
+        """Build (and sign) a checkpoint message; None if that fails: never raises."""
+        try:
+            checkpoint = make_checkpoint(
+                robot_id=self._session.robot_id,
+                segment=self._session.segment,
+                first_cycle=self._session.first_cycle,
+                cycle=cycle,
+                t_ns=t_ns,
+                sealed=sealed,
+                head=head,
+                final=final,
+                signer=self._signer,
+            )
+            data = encode_checkpoint(checkpoint)
+            return OutMessage(segment.channel(TOPIC_CHECKPOINT), cycle, t_ns, data)
+        except Exception as err:  # a failing signer (HSM gone) must not stop the audit trail
+            self.stats.checkpoint_failures += 1
+            self._report_once("checkpoint", f"could not build a checkpoint: {err}")
+            return None
 
     def _maybe_sync(self) -> None:
         interval = self.config.fsync_interval_s
@@ -512,10 +599,12 @@ def _resume_point(hot: Path, robot_id: str) -> tuple[int, str, int]:
         return 0, GENESIS, 0
     from trace_runtime.reader import last_seal  # deferred: the reader is not needed otherwise
 
-    newest = segments[-1]
-    number = int(newest.stem.rsplit("_", 1)[-1])
-    found = last_seal(newest)
-    if found is None:
-        return 0, GENESIS, number + 1
-    seal, seal_digest = found
-    return seal.cycle + 1, seal_digest, number + 1
+    number = int(segments[-1].stem.rsplit("_", 1)[-1])
+    # The chain continues from the newest seal on disk. A segment a crash left without any
+    # seal (killed before its first write) is skipped, so the chain does not restart.
+    for path in reversed(segments):
+        found = last_seal(path)
+        if found is not None:
+            seal, seal_digest = found
+            return seal.cycle + 1, seal_digest, number + 1
+    return 0, GENESIS, number + 1

@@ -34,6 +34,7 @@ from trace_runtime.records import (
     PROFILE,
     TOPIC_ACTION,
     TOPIC_BELIEF,
+    TOPIC_CHECKPOINT,
     TOPIC_EXECUTION,
     TOPIC_PERCEPTION,
     TOPIC_SEAL,
@@ -189,6 +190,8 @@ def assemble_hot(messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
     payloads: dict[str, bytes] = {}
     sensors: list[RawMessage] = []
     for msg in messages:
+        if msg.topic == TOPIC_CHECKPOINT:
+            continue  # a chain-head anchor, not part of any cycle (trace_runtime.integrity)
         if msg.topic.startswith("/trace/"):
             payloads[msg.topic] = msg.data
             if msg.topic == TOPIC_SEAL:
