@@ -150,6 +150,10 @@ def _to_world(x: float, y: float, pose: tuple[float, float, float]) -> tuple[flo
     return ox + c * x - s * y, oy + s * x + c * y
 
 
+_COS = np.cos(BEAM_ANGLES).tolist()
+_SIN = np.sin(BEAM_ANGLES).tolist()
+
+
 def cluster_scan(scan: LidarScan) -> list[Cluster]:
     """Group foreground returns (closer than the map predicts) into clusters."""
     fg = np.flatnonzero(scan.ranges < scan.expected - FOREGROUND_MARGIN_M)
@@ -157,27 +161,30 @@ def cluster_scan(scan: LidarScan) -> list[Cluster]:
     if len(fg) == 0:
         return clusters
     ranges = scan.ranges
-    groups: list[list[int]] = [[int(fg[0])]]
-    for i in fg[1:]:
-        j = groups[-1][-1]
-        if i - j <= 1 and abs(float(ranges[i]) - float(ranges[j])) < CLUSTER_JUMP_M:
-            groups[-1].append(int(i))
+    idx = fg.tolist()
+    rs = ranges[fg].tolist()
+    groups: list[list[int]] = [[idx[0]]]
+    for k in range(1, len(idx)):
+        i = idx[k]
+        if i - idx[k - 1] <= 1 and abs(rs[k] - rs[k - 1]) < CLUSTER_JUMP_M:
+            groups[-1].append(i)
         else:
-            groups.append([int(i)])
+            groups.append([i])
     for g in groups:
         if len(g) < MIN_CLUSTER_BEAMS:
             continue
-        r = ranges[g[0] : g[-1] + 1]
-        a = BEAM_ANGLES[g[0] : g[-1] + 1]
-        xs, ys = r * np.cos(a), r * np.sin(a)
-        width = math.hypot(float(xs[-1] - xs[0]), float(ys[-1] - ys[0]))
-        cx, cy = float(xs.mean()), float(ys.mean())
+        r = ranges[g[0] : g[-1] + 1].tolist()
+        cos, sin = _COS[g[0] : g[-1] + 1], _SIN[g[0] : g[-1] + 1]
+        xs = [ri * ci for ri, ci in zip(r, cos, strict=True)]
+        ys = [ri * si for ri, si in zip(r, sin, strict=True)]
+        width = math.hypot(xs[-1] - xs[0], ys[-1] - ys[0])
+        cx, cy = sum(xs) / len(xs), sum(ys) / len(ys)
         clusters.append(
             Cluster(
                 index=len(clusters),
                 first=g[0],
                 last=g[-1],
-                ranges=[round(float(v), 3) for v in r],
+                ranges=[round(v, 3) for v in r],
                 x=cx,
                 y=cy,
                 width=width,

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 STOP, SLOW, REROUTE, CONTINUE = "STOP", "SLOW", "REROUTE", "CONTINUE"
 COMMANDS = (STOP, SLOW, REROUTE, CONTINUE)
@@ -161,9 +161,27 @@ def evaluate(inp: PolicyInput, v: Mapping[str, object]) -> Outcome:
     return Outcome(REROUTE, LEAF_PATHS["reroute_path"], tests)
 
 
-def choose(inp: PolicyInput, v: Mapping[str, object]) -> str:
-    """The command alone."""
-    return evaluate(inp, v).command
+def choose(inp: PolicyInput, v: Mapping[str, Any]) -> str:
+    """The command alone: ``evaluate(inp, v).command`` without the bookkeeping.
+
+    The prober calls this thousands of times per second; a test pins it to ``evaluate``.
+    """
+    veh_risk, veh_ttc = -1.0, ""
+    for _, risk, ttc in inp.vehicles:
+        r = v[risk]
+        if r > veh_risk:
+            veh_risk, veh_ttc = r, ttc
+    if veh_risk >= VEHICLE_RISK:
+        return STOP if v[veh_ttc] < TTC_STOP_S else REROUTE
+    nearest = -1.0
+    for _, risk, dist in inp.peds:
+        if v[risk] >= PED_RISK:
+            d = v[dist]
+            if nearest < 0.0 or d < nearest:
+                nearest = d
+    if nearest >= 0.0:
+        return STOP if nearest < PED_STOP_M else SLOW
+    return CONTINUE if v[inp.aisle] < BLOCKED else REROUTE
 
 
 def factors_of(outcome: Outcome) -> list[str]:

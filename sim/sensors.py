@@ -13,10 +13,10 @@ import numpy as np
 
 from sim.world import HEIGHT_M, WIDTH_M, Actor, World
 
-# LiDAR: 270 deg field of view at 0.5 deg, 20 m range, 1.5 cm noise (a safety-rated 2-D scanner).
-LIDAR_BEAMS = 541
+# LiDAR: 270 deg field of view at 1 deg, 20 m range, 1.5 cm noise (a 2-D safety scanner).
+LIDAR_BEAMS = 271
 LIDAR_ANGLE_MIN = -math.radians(135.0)
-LIDAR_ANGLE_INC = math.radians(0.5)
+LIDAR_ANGLE_INC = math.radians(1.0)
 LIDAR_RANGE_MAX = 20.0
 LIDAR_NOISE_M = 0.015
 BEAM_ANGLES = LIDAR_ANGLE_MIN + LIDAR_ANGLE_INC * np.arange(LIDAR_BEAMS)
@@ -60,16 +60,32 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def _static_ranges(
-    world: World, ox: float, oy: float, dx: np.ndarray, dy: np.ndarray
-) -> np.ndarray:
+_Rays = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+_RAYS: dict[float, _Rays] = {}
+
+
+def _rays(heading: float) -> _Rays:
+    """Beam directions and their inverses for a heading (cached: the route has two)."""
+    rays = _RAYS.get(heading)
+    if rays is None:
+        ang = BEAM_ANGLES + heading
+        dx, dy = np.cos(ang), np.sin(ang)
+        dxs = np.where(np.abs(dx) < 1e-12, 1e-12, dx)
+        dys = np.where(np.abs(dy) < 1e-12, 1e-12, dy)
+        inv_x, inv_y = 1.0 / dxs, 1.0 / dys
+        rays = (dx, dy, inv_x[:, None], inv_y[:, None], dxs > 0, dys > 0)
+        if len(_RAYS) < 64:
+            _RAYS[heading] = rays
+    return rays
+
+
+def _static_ranges(world: World, ox: float, oy: float, heading: float) -> np.ndarray:
     """Ranges to the map (shelves and outer walls) along each beam: the slab method."""
-    dxs = np.where(np.abs(dx) < 1e-12, 1e-12, dx)
-    dys = np.where(np.abs(dy) < 1e-12, 1e-12, dy)
-    inv_x, inv_y = 1.0 / dxs, 1.0 / dys
+    _, _, inv_xc, inv_yc, pos_x, pos_y = _rays(heading)
+    inv_x, inv_y = inv_xc[:, 0], inv_yc[:, 0]
     # Walls: where the ray leaves the warehouse rectangle.
-    tx = np.where(dxs > 0, (WIDTH_M - ox) * inv_x, -ox * inv_x)
-    ty = np.where(dys > 0, (HEIGHT_M - oy) * inv_y, -oy * inv_y)
+    tx = np.where(pos_x, (WIDTH_M - ox) * inv_x, -ox * inv_x)
+    ty = np.where(pos_y, (HEIGHT_M - oy) * inv_y, -oy * inv_y)
     best = np.minimum(tx, ty)
     boxes = world.shelves
     # Only shelves within range can be hit.
@@ -77,10 +93,10 @@ def _static_ranges(
     cy = np.clip(oy, boxes[:, 1], boxes[:, 3]) - oy
     near = boxes[cx * cx + cy * cy < LIDAR_RANGE_MAX**2]
     if len(near):
-        x0 = (near[:, 0] - ox)[None, :] * inv_x[:, None]
-        x1 = (near[:, 2] - ox)[None, :] * inv_x[:, None]
-        y0 = (near[:, 1] - oy)[None, :] * inv_y[:, None]
-        y1 = (near[:, 3] - oy)[None, :] * inv_y[:, None]
+        x0 = (near[:, 0] - ox) * inv_xc
+        x1 = (near[:, 2] - ox) * inv_xc
+        y0 = (near[:, 1] - oy) * inv_yc
+        y1 = (near[:, 3] - oy) * inv_yc
         tmin = np.maximum(np.minimum(x0, x1), np.minimum(y0, y1))
         tmax = np.minimum(np.maximum(x0, x1), np.maximum(y0, y1))
         hit = (tmax >= tmin) & (tmin > 0.0)
@@ -131,9 +147,7 @@ def _actor_ranges(
 def scan_lidar(world: World, rng: np.random.Generator) -> LidarScan:
     """Ray-cast one scan from the robot's pose, with range noise."""
     ox, oy, heading = world.robot_pose()
-    ang = BEAM_ANGLES + heading
-    dx, dy = np.cos(ang), np.sin(ang)
-    expected = _static_ranges(world, ox, oy, dx, dy)
+    expected = _static_ranges(world, ox, oy, heading)
     truth = expected.copy()
     for actor in world.actors:
         _actor_ranges(actor, ox, oy, heading, truth)

@@ -12,6 +12,7 @@ from sim.policy import (
     SLOW,
     STOP,
     PolicyInput,
+    choose,
     evaluate,
     factors_of,
     score_alternatives,
@@ -75,11 +76,14 @@ _dist = st.floats(0.0, 30.0)
 @settings(max_examples=150, deadline=None)
 @given(r1=_risk, d1=_dist, r2=_risk, d2=_dist, vr=_risk, ttc=st.floats(0.0, 99.0),
        blocked=_risk)
-def test_every_counterfactual_holds_when_the_policy_is_rerun(
+def test_every_counterfactual_holds_when_the_policy_is_rerun(  # noqa: PLR0917
     r1: float, d1: float, r2: float, d2: float, vr: float, ttc: float, blocked: float
 ) -> None:
     inp = PolicyInput(
-        peds=(("p1", "p1.collision_risk", "p1.distance"), ("p2", "p2.collision_risk", "p2.distance")),
+        peds=(
+            ("p1", "p1.collision_risk", "p1.distance"),
+            ("p2", "p2.collision_risk", "p2.distance"),
+        ),
         vehicles=(("f1", "f1.collision_risk", "f1.ttc"),),
     )
     values: dict[str, object] = {
@@ -94,7 +98,8 @@ def test_every_counterfactual_holds_when_the_policy_is_rerun(
 
 def test_vehicle_branch_stops_when_close_and_reroutes_when_far() -> None:
     inp = PolicyInput(vehicles=(("f", "f.collision_risk", "f.ttc"),))
-    assert evaluate(inp, {"f.collision_risk": 0.8, "f.ttc": 2.0, "aisle_blocked": 0.0}).command == STOP
+    assert evaluate(inp, {"f.collision_risk": 0.8, "f.ttc": 2.0, "aisle_blocked": 0.0}).command \
+        == STOP
     assert evaluate(inp, {"f.collision_risk": 0.8, "f.ttc": 4.0, "aisle_blocked": 0.0}).command \
         == REROUTE
     assert evaluate(inp, {"f.collision_risk": 0.1, "f.ttc": 4.0, "aisle_blocked": 0.0}).command \
@@ -112,3 +117,17 @@ def test_rationale_buffer_truncates_text_and_factors_when_full() -> None:
     assert r["truncated"] is True
     assert r["factors"] == []
     assert len(r["text"].encode()) == 30
+
+
+@settings(max_examples=200, deadline=None)
+@given(values=st.lists(st.floats(0.0, 5.0), min_size=7, max_size=7))
+def test_fast_choose_agrees_with_evaluate(values: list[float]) -> None:
+    inp = PolicyInput(
+        peds=(("a", "a.collision_risk", "a.distance"), ("b", "b.collision_risk", "b.distance")),
+        vehicles=(("f", "f.collision_risk", "f.ttc"),),
+    )
+    keys = ["a.collision_risk", "a.distance", "b.collision_risk", "b.distance",
+            "f.collision_risk", "f.ttc", "aisle_blocked"]
+    v: dict[str, object] = {k: x / 5.0 if "risk" in k or k == "aisle_blocked" else x
+                            for k, x in zip(keys, values, strict=True)}
+    assert choose(inp, v) == evaluate(inp, v).command

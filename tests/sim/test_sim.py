@@ -122,7 +122,7 @@ def test_forklift_causes_a_stop_or_reroute(which: str, request: pytest.FixtureRe
 @pytest.mark.parametrize("seed", [1, 2, 3, 4])
 def test_clear_path_never_stops_for_a_person(seed: int, tmp_path: Path) -> None:
     result = run(RunConfig(out=tmp_path / "c.mcap", scenario="clear_path", cycles=100, seed=seed))
-    commands = Counter()
+    commands: Counter[str] = Counter()
     for c in _cycles(result):
         assert c.action is not None
         commands[c.action.command] += 1
