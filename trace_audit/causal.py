@@ -41,6 +41,7 @@ __all__ = [
     "format_value",
     "graph_data",
     "read_decision",
+    "split_flags",
     "tree_graph",
 ]
 
@@ -119,15 +120,36 @@ class CheckView:
     detail: str
 
 
+SCENARIO_FLAG = "scenario:"
+"""A flag of this form labels the situation (e.g. a test scenario); it reports no problem."""
+
+
+def split_flags(flags: Iterable[str]) -> tuple[tuple[str, ...], str | None]:
+    """(flags that report something, the scenario label if a ``scenario:`` flag names one)."""
+    real: list[str] = []
+    scenario: str | None = None
+    for flag in flags:
+        if flag.startswith(SCENARIO_FLAG):
+            scenario = scenario or flag[len(SCENARIO_FLAG) :]
+        else:
+            real.append(flag)
+    return tuple(real), scenario
+
+
 @dataclass(frozen=True, slots=True)
 class ExecutionView:
-    """Layer 4: intended vs actual motion, deviation, compliance checks and flags."""
+    """Layer 4: intended vs actual motion, deviation, compliance checks and flags.
+
+    ``flags`` are as logged; ``problems`` are those that are not a ``scenario:`` label.
+    """
 
     intended: tuple[float | None, float | None]
     actual: tuple[float | None, float | None]
     deviation: float | None
     checks: tuple[CheckView, ...]
     flags: tuple[str, ...]
+    problems: tuple[str, ...]
+    scenario: str | None
 
 
 @dataclass(frozen=True, slots=True)
@@ -276,6 +298,8 @@ def _counterfactual(
 
 
 def _execution(raw: Mapping[str, Any]) -> ExecutionView:
+    flags = tuple(str(f) for f in raw.get("flags") or () if isinstance(f, str))
+    problems, scenario = split_flags(flags)
     intended = _mapping(raw.get("intended")) or {}
     actual = _mapping(raw.get("actual")) or {}
     return ExecutionView(
@@ -292,7 +316,9 @@ def _execution(raw: Mapping[str, Any]) -> ExecutionView:
             )
             for c in _dicts(raw.get("checks"))
         ),
-        flags=tuple(str(f) for f in raw.get("flags") or () if isinstance(f, str)),
+        flags=flags,
+        problems=problems,
+        scenario=scenario,
     )
 
 
@@ -403,16 +429,19 @@ class _GraphBuilder:
             self.g.add_node(node_id, **attrs)
         return node_id
 
-    def _placeholder(self, chain: FactorChain, level: str, link: Link) -> str:
+    def _placeholder(self, level: str, link: Link, above: str) -> str:
+        """A node for what the log does not document at ``level`` below node ``above``.
+
+        Keyed by where it attaches, so factor chains that break at the same place share it.
+        """
         what = {
-            "factor_node": "belief node",
             "belief_path": "entity node",
             "entity": "perception entity",
             "evidence_ref": "evidence",
             "sensor_reading": "sensor reading",
         }.get(level, level)
         return self._node(
-            f"missing:{chain.node}:{level}",
+            f"missing:{level}:{above}",
             kind="missing",
             missing=True,
             label=f"? {what} (not documented)",
@@ -479,8 +508,9 @@ class _GraphBuilder:
                 below = upper
             entity_node = path[-1]
         elif path_link is not None:
-            self._edge(self._placeholder(chain, "belief_path", path_link), below, chain, path_link)
-            below = self._placeholder(chain, "belief_path", path_link)
+            upper = self._placeholder("belief_path", path_link, below)
+            self._edge(upper, below, chain, path_link)
+            below = upper
         self._below_entity(chain, links, below, entity_node)
 
     def _below_entity(
@@ -501,7 +531,7 @@ class _GraphBuilder:
                 entity_id=entity_id,
             )
         else:
-            entity_key = self._placeholder(chain, "entity", entity_link)
+            entity_key = self._placeholder("entity", entity_link, below)
         self._edge(entity_key, below, chain, entity_link)
 
         ref_link = links.get("evidence_ref")
@@ -518,7 +548,7 @@ class _GraphBuilder:
                 label=_evidence_label(item),
             )
         else:
-            evidence_key = self._placeholder(chain, "evidence_ref", ref_link)
+            evidence_key = self._placeholder("evidence_ref", ref_link, entity_key)
         self._edge(evidence_key, entity_key, chain, ref_link)
 
         sensor_link = links.get("sensor_reading")
@@ -535,7 +565,7 @@ class _GraphBuilder:
                 in_cycle=logged,
             )
         else:
-            sensor_key = self._placeholder(chain, "sensor_reading", sensor_link)
+            sensor_key = self._placeholder("sensor_reading", sensor_link, evidence_key)
         self._edge(sensor_key, evidence_key, chain, sensor_link)
 
 

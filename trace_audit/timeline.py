@@ -19,7 +19,7 @@ from pathlib import Path
 
 import orjson
 
-from trace_audit.causal import CounterfactualView, FactorValue, read_decision
+from trace_audit.causal import CounterfactualView, FactorValue, read_decision, split_flags
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.reader import Cycle, Log, open_log
 from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION, TOPIC_SEAL
@@ -82,6 +82,8 @@ def resolve_time(value: TimeArg, log: Log) -> int | None:
     """``t_ns`` for a time given as TimePoint, int nanoseconds or CLI text (None stays None)."""
     if value is None:
         return None
+    if isinstance(value, bool) or not isinstance(value, int | str | TimePoint):
+        raise TypeError(f"a time is int ns, CLI text or a TimePoint, not {type(value).__name__}")
     if isinstance(value, int):
         return value
     if isinstance(value, str):
@@ -174,8 +176,10 @@ class Span:
     end_t_ns: int
     cycles: int = 0
     held_ns: int = 0
+    scenario: str | None = None
     flagged_cycles: int = 0
     flag_counts: dict[str, int] = field(default_factory=dict)
+    """Flags raised while the command held (``scenario:`` labels left out), with counts."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -245,7 +249,7 @@ def timeline(
     for cycle in log.iter_cycles(lo, hi):
         count += 1
         command = command_of(cycle)
-        flags = _flags_of(cycle)
+        flags, scenario = split_flags(_flags_of(cycle))
         dropped = seal_dropped(cycle)
         if prev is not None and (dropped or (limit and cycle.t_ns - prev.t_ns > limit)):
             gaps.append(Gap(prev.cycle, cycle.cycle, prev.t_ns, cycle.t_ns, dropped))
@@ -265,6 +269,7 @@ def timeline(
                 flags=flags,
                 end_cycle=cycle.cycle,
                 end_t_ns=cycle.t_ns,
+                scenario=scenario,
             )
             rows.append(current)
         current.cycles += 1
@@ -367,7 +372,7 @@ class _Run:
             truncated=decision.truncated,
             factors=decision.factors,
             counterfactuals=decision.counterfactuals,
-            flags=decision.execution.flags if decision.execution else (),
+            flags=decision.execution.problems if decision.execution else (),
             held_cycles=self.cycles,
             held_ns=end - self.first.t_ns,
             last_t_ns=self.last.t_ns,

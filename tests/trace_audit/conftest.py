@@ -16,8 +16,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from mcap.writer import Writer
 
-from trace_runtime import AuditLogger, CycleBuilder, LoggerConfig
+from trace_runtime import AuditLogger, CycleBuilder, LoggerConfig, RawMessage, open_segment
+from trace_runtime.session import SESSION_METADATA
 
 T0_NS = 100_000_000_000  # the fixture logs start at t = 100 s (not 0: relative times matter)
 PERIOD_NS = 100_000_000
@@ -61,7 +63,7 @@ DEFAULT_SCRIPT = (
 def fill_cycle(c: CycleBuilder, situation: str, faults: frozenset[str] = frozenset()) -> None:
     """Add the four layers of one cycle in ``situation`` to ``c``."""
     command, distance, risk = SITUATIONS[situation]
-    scan = {"angle_min": -1.57, "angle_increment": 0.0175, "ranges": [4.0] * 24}
+    scan: dict[str, Any] = {"angle_min": -1.57, "angle_increment": 0.0175, "ranges": [4.0] * 24}
     if distance is not None:
         scan["ranges"][10:14] = [distance] * 4
     ref = c.sensor("/sensors/lidar", scan)
@@ -185,12 +187,12 @@ def fill_cycle(c: CycleBuilder, situation: str, faults: frozenset[str] = frozens
     c.perception({"entities": entities, "sensors_used": ["lidar"]})
     c.belief({"nodes": nodes, "edges": edges})
     c.action(_action(command, distance, risk, faults))
-    flags = ["deviation_high"] if "flag" in faults else []
+    flags = [f"scenario:{situation}"] + (["deviation_high"] if "flag" in faults else [])
     c.execution(
         {
             "intended": {"linear": _speed(command)},
-            "actual": {"linear": _speed(command) + (0.3 if flags else 0.01)},
-            "deviation": 0.3 if flags else 0.01,
+            "actual": {"linear": _speed(command) + (0.3 if "flag" in faults else 0.01)},
+            "deviation": 0.3 if "flag" in faults else 0.01,
             "checks": [
                 {"rule": "min_clearance", "passed": True, "value": distance or 4.0, "limit": 0.5}
             ],
@@ -314,17 +316,19 @@ def write_log(
     robot_id: str = "amr-7",
     finish: bool = True,
     skip: Callable[[int], bool] | None = None,
+    max_segment_s: float = 3600.0,
 ) -> Path:
     """Write ``script`` as a log at ``path`` (a .mcap file or a log root directory).
 
     ``skip(i)`` drops cycle ``i`` (it is aborted, so the next seal counts it as dropped);
     ``finish=False`` leaves the segment as a crashed robot would: no summary, no footer.
+    A log root rotates to a new segment every ``max_segment_s`` of log time.
     """
     logger = AuditLogger(
         path,
         robot_id=robot_id,
         period_s=PERIOD_NS / 1e9,
-        config=LoggerConfig(threaded=False, fsync_interval_s=None),
+        config=LoggerConfig(threaded=False, fsync_interval_s=None, max_segment_s=max_segment_s),
     )
     i = 0
     for part in script:
@@ -351,9 +355,42 @@ def write_log(
     return path
 
 
-def t_of(index: int, t0_ns: int = T0_NS) -> float:
-    """Seconds (log clock) of cycle ``index`` of a fixture log."""
-    return (t0_ns + index * PERIOD_NS) / 1e9
+def rewrite_segment(src: Path, dst: Path, mutate: Callable[[RawMessage], bytes | None]) -> Path:
+    """Copy a segment message by message with the plain ``mcap`` Writer, through ``mutate``.
+
+    ``mutate`` returns the data to write (changed or not) or None to leave the message out:
+    how a test tampers with a log. Everything goes in one chunk, so no cycle is split.
+    """
+    segment = open_segment(src)
+    with open(dst, "wb") as f:
+        writer = Writer(f, chunk_size=1 << 30)
+        writer.start(profile="trace", library="tests")
+        writer.add_metadata(SESSION_METADATA, segment.metadata[SESSION_METADATA])
+        channels: dict[str, int] = {}
+        for msg in segment.iter_messages():
+            data = mutate(msg)
+            if data is None:
+                continue
+            if msg.topic not in channels:
+                schema = writer.register_schema(name=msg.topic, encoding="jsonschema", data=b"{}")
+                channels[msg.topic] = writer.register_channel(
+                    topic=msg.topic, message_encoding="json", schema_id=schema
+                )
+            writer.add_message(
+                channels[msg.topic], msg.log_time_ns, data, msg.log_time_ns, sequence=msg.sequence
+            )
+        writer.finish()  # type: ignore[no-untyped-call]
+    return dst
+
+
+def t_ns(index: int, t0_ns: int = T0_NS) -> int:
+    """Log time of cycle ``index`` of a fixture log, in ns."""
+    return t0_ns + index * PERIOD_NS
+
+
+def t_s(index: int, t0_ns: int = T0_NS) -> str:
+    """The same as the CLI takes it: seconds in the log's clock, as text."""
+    return f"{t_ns(index, t0_ns) / 1e9:.3f}"
 
 
 @pytest.fixture()

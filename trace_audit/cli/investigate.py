@@ -236,7 +236,8 @@ def explain_doc(r: Explanation, lookback_s: float = DEFAULT_LOOKBACK_S) -> Doc:
                     )
                     or "none logged",
                 ),
-                ("Flags", Seg(", ".join(ex.flags), "bold red") if ex.flags else "none"),
+                ("Flags", Seg(", ".join(ex.problems), "bold red") if ex.problems else "none"),
+                *([("Scenario", ex.scenario)] if ex.scenario else []),
             ]
         )
 
@@ -597,6 +598,8 @@ def timeline_doc(r: Timeline) -> Doc:
         what: list[Any] = [lead]
         if flags:
             what.append(Seg(f"; flags: {flags}", "bold red"))
+        if row.scenario:
+            what.append(Seg(f" [{row.scenario}]", "dim"))
         command = row.command or "?"
         held = fmt_duration(row.held_ns)
         events.append(

@@ -144,21 +144,25 @@ def _width() -> int:
     return max(40, shutil.get_terminal_size((80, 24)).columns)
 
 
-class _OneLine(logging.Formatter):
-    def format(self, record: logging.LogRecord) -> str:
-        return f"trace-audit: {record.levelname.lower()}: {record.getMessage()}"
+class _StderrLine(logging.Handler):
+    """One ``trace-audit: warning: ...`` line on whatever ``sys.stderr`` is at the time."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            sys.stderr.write(f"trace-audit: {record.levelname.lower()}: {record.getMessage()}\n")
+        except Exception:
+            self.handleError(record)
 
 
 def setup_logging() -> None:
     """Library warnings (e.g. a recovered segment) as one ``trace-audit: warning:`` line."""
     logger = logging.getLogger("trace_runtime")
-    if not any(getattr(h, "_trace_audit", False) for h in logger.handlers):
-        handler = logging.StreamHandler(sys.stderr)
-        handler.setFormatter(_OneLine())
-        handler._trace_audit = True  # type: ignore[attr-defined]
-        logger.addHandler(handler)
-        logger.propagate = False
-    logger.setLevel(logging.WARNING)
+    # With a handler here Python's last-resort printer stays quiet; propagation is left on
+    # so an application (or pytest) that configured the root logger still sees the record.
+    if not any(isinstance(h, _StderrLine) for h in logger.handlers):
+        logger.addHandler(_StderrLine(logging.WARNING))
+    if logger.level == logging.NOTSET:
+        logger.setLevel(logging.WARNING)
 
 
 # --- rendering -----------------------------------------------------------------------------------

@@ -1,0 +1,170 @@
+"""The investigator CLI on bad input: one line on stderr, the documented exit code, no traceback.
+
+Also: every command has help with an example, plain output fits 80 columns, --json parses.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from mcap.writer import Writer
+from typer.testing import CliRunner, Result
+
+from tests.trace_audit.conftest import write_log
+from trace_audit.cli import app
+from trace_runtime import AuditLogger, LoggerConfig
+
+COMMANDS = ("explain", "why", "timeline", "info", "export")
+
+
+def _run(*args: str, width: int = 80) -> Result:
+    return CliRunner(env={"COLUMNS": str(width)}).invoke(app, list(args))
+
+
+def _one_error_line(result: Result, code: int, *needles: str) -> None:
+    assert result.exit_code == code, (result.stdout, result.stderr)
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("trace-audit: ")
+    assert "Traceback" not in result.output
+    for needle in needles:
+        assert needle in lines[0]
+
+
+@pytest.fixture()
+def foreign_mcap(tmp_path: Path) -> Path:
+    """A valid MCAP file of another profile (a rosbag2-style recording)."""
+    path = tmp_path / "ros.mcap"
+    with open(path, "wb") as f:
+        writer = Writer(f)
+        writer.start(profile="ros2", library="tests")
+        schema = writer.register_schema(name="std_msgs/String", encoding="ros2msg", data=b"x")
+        channel = writer.register_channel(
+            topic="/chatter", message_encoding="cdr", schema_id=schema
+        )
+        writer.add_message(channel, 1, b"\x00\x01", 1)
+        writer.finish()  # type: ignore[no-untyped-call]
+    return path
+
+
+@pytest.fixture()
+def empty_log(tmp_path: Path) -> Path:
+    path = tmp_path / "empty.mcap"
+    AuditLogger(path, robot_id="r", config=LoggerConfig(threaded=False)).close()
+    return path
+
+
+@pytest.mark.parametrize("command", ["explain", "timeline", "info", "why", "export"])
+def test_missing_file(command: str, tmp_path: Path) -> None:
+    extra = {"explain": ["--t", "1"], "why": ["--action", "STOP"], "export": ["--t", "1"]}
+    result = _run(command, str(tmp_path / "nope.mcap"), *extra.get(command, []))
+    _one_error_line(result, 3, "no such file")
+
+
+def test_directory_without_segments(tmp_path: Path) -> None:
+    (tmp_path / "notes.txt").write_text("hello")
+    _one_error_line(_run("info", str(tmp_path)), 3, "no .mcap segments")
+
+
+def test_not_mcap(tmp_path: Path) -> None:
+    path = tmp_path / "run.mcap"
+    path.write_bytes(b"this is not an mcap file at all" * 10)
+    _one_error_line(_run("info", str(path)), 3, "not an MCAP file")
+
+
+def test_foreign_profile(foreign_mcap: Path) -> None:
+    _one_error_line(_run("explain", str(foreign_mcap), "--t", "0"), 3, "'ros2'", "not a TRACE")
+
+
+def test_empty_trace_log(empty_log: Path) -> None:
+    _one_error_line(_run("explain", str(empty_log), "--t", "0"), 3, "no decision cycles")
+
+
+def test_truncated_inside_the_header(sample_log: Path, tmp_path: Path) -> None:
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(sample_log.read_bytes()[:20])
+    _one_error_line(_run("info", str(cut)), 3, "truncated")
+
+
+def test_truncated_mid_file_is_recovered_with_one_warning(sample_log: Path, tmp_path: Path) -> None:
+    data = sample_log.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    result = _run("info", str(cut), "--plain")
+    assert result.exit_code == 0, result.stderr
+    assert "RECOVERED" in result.stdout
+    warnings = result.stderr.strip().splitlines()
+    assert len(warnings) == 1 and warnings[0].startswith("trace-audit: warning: ")
+
+
+def test_time_outside_the_range(sample_log: Path) -> None:
+    result = _run("explain", str(sample_log), "--t", "5")
+    _one_error_line(result, 2, "outside the log's range", "[100.000 s, 109.900 s]")
+
+
+def test_bad_time_text(sample_log: Path) -> None:
+    _one_error_line(_run("explain", str(sample_log), "--t", "noon"), 2, "invalid time")
+
+
+def test_time_and_cycle_together(sample_log: Path) -> None:
+    _one_error_line(_run("explain", str(sample_log), "--t", "101", "--cycle", "3"), 2)
+    _one_error_line(_run("explain", str(sample_log)), 2, "--t")
+
+
+def test_unknown_action(sample_log: Path) -> None:
+    result = _run("why", str(sample_log), "--action", "FLY")
+    _one_error_line(result, 2, "'FLY' is never taken", "CONTINUE (55)", "STOP (25)")
+
+
+def test_why_t_and_all(sample_log: Path) -> None:
+    _one_error_line(_run("why", str(sample_log), "--action", "STOP", "--t", "104", "--all"), 2)
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_every_command_has_help_with_an_example(command: str) -> None:
+    result = _run(command, "--help", width=100)
+    assert result.exit_code == 0
+    assert "Example" in result.stdout and f"trace-audit {command}" in result.stdout
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["explain", "{log}", "--t", "+4.5"],
+        ["explain", "{log}", "--t", "+8.2"],
+        ["why", "{log}", "--action", "STOP"],
+        ["timeline", "{log}"],
+        ["info", "{log}"],
+    ],
+)
+def test_plain_output_fits_80_columns_and_json_parses(args: list[str], sample_log: Path) -> None:
+    argv = [a.replace("{log}", str(sample_log)) for a in args]
+    plain = _run(*argv, "--plain")
+    assert plain.exit_code == 0, plain.stderr
+    assert plain.stdout.strip() and "\x1b[" not in plain.stdout
+    # only an unbreakable token (the log's path) may run past the edge
+    too_wide = [
+        line for line in plain.stdout.splitlines() if len(line) > 80 and str(sample_log) not in line
+    ]
+    assert not too_wide
+    data = json.loads(_run(*argv, "--json").stdout)
+    assert isinstance(data, dict)
+
+
+def test_explain_plain_shows_the_chain_and_the_missing_link(sample_log: Path) -> None:
+    good = _run("explain", str(sample_log), "--t", "+4.5", "--plain").stdout
+    assert "[ok] sensor reading: /sensors/lidar @ 104.500 s" in good
+    assert "=> [yes] STOP  <- chosen" in good
+    assert "would SLOW if distance >= 2.0 m" in good
+    assert "since 104.000 s (cycle 40" in good and "seal verifies" in good
+    broken = _run("explain", str(sample_log), "--t", "+8.2", "--plain").stdout
+    assert "[MISSING] evidence" in broken and "[--] not reached" in broken
+    assert "NOT traceable" in broken
+
+
+def test_a_log_root_works_like_a_file(tmp_path: Path) -> None:
+    root = write_log(tmp_path / "root", max_segment_s=3.0)
+    result = _run("explain", str(root), "--t", "+4.5", "--plain")
+    assert result.exit_code == 0 and "STOP" in result.stdout

@@ -1,0 +1,241 @@
+"""explain: the decision in force at t, its reasons, chains, causal graph, seal and history."""
+
+from __future__ import annotations
+
+import logging
+from itertools import pairwise
+from pathlib import Path
+
+import networkx as nx
+import orjson
+import pytest
+
+from tests.trace_audit.conftest import (
+    PERIOD_NS,
+    T0_NS,
+    rewrite_segment,
+    stretch,
+    t_ns,
+    write_log,
+)
+from trace_audit.causal import causal_graph, read_decision, tree_graph
+from trace_audit.chains import trace_cycle
+from trace_audit.explain import explain, find_cycle
+from trace_runtime import RawMessage, open_log
+from trace_runtime.errors import TimeOutOfRangeError, UsageError
+from trace_runtime.records import TOPIC_ACTION, TOPIC_SEAL
+
+
+def _graph(result: object) -> nx.DiGraph:
+    data = result.graph  # type: ignore[attr-defined]
+    g = nx.DiGraph()
+    for node in data["nodes"]:
+        g.add_node(node["id"], **{k: v for k, v in node.items() if k != "id"})
+    for edge in data["edges"]:
+        g.add_edge(edge["source"], edge["target"], **edge)
+    return g
+
+
+def test_stop_for_a_close_pedestrian_reads_like_the_paper(sample_log: Path) -> None:
+    r = explain(sample_log, t=t_ns(45))
+    d = r.decision
+    assert (r.cycle, d.command) == (45, "STOP")
+    assert d.rationale == "Pedestrian detected at 1.5m with collision risk 0.70."
+    assert [(f.name, f.value) for f in d.factors] == [("distance", 1.5), ("collision_risk", 0.7)]
+    assert [a.command for a in d.alternatives] == ["SLOW", "REROUTE", "CONTINUE"]
+    assert all(a.rejected_because for a in d.alternatives)
+    assert [c.text for c in d.counterfactuals] == [
+        "would SLOW if distance >= 2.0 m",
+        "would CONTINUE if collision_risk < 0.2",
+    ]
+    assert d.tree is not None
+    assert d.tree.taken_path == ("root", "ped", "stop") and not d.tree.problems
+    assert r.scores.et == 1.0 and r.scores.et_partial == 1.0 and not r.scores.problems
+    assert r.seal.verified and r.seal.prev_cycle == 44
+
+
+def test_causal_graph_runs_from_the_lidar_reading_to_the_action(sample_log: Path) -> None:
+    g = _graph(explain(sample_log, t=t_ns(45)))
+    sensor = f"sensor:/sensors/lidar@{T0_NS + 45 * PERIOD_NS}"
+    chain = [
+        sensor,
+        "evidence:ped_1:0",
+        "entity:ped_1",
+        "belief:ped_1",
+        "belief:ped_1.distance",
+        "belief:collision_risk",
+        "action",
+    ]
+    assert all(g.has_edge(u, v) for u, v in pairwise(chain))
+    assert g.nodes["entity:ped_1"]["label"] == "person 0.92 (ped_1)"
+    assert g.nodes["evidence:ped_1:0"]["label"] == "lidar beams [10, 13] w=0.80"
+    assert all(g.edges[u, v]["documented"] for u, v in g.edges)
+    assert g.edges["belief:ped_1.distance", "belief:collision_risk"]["rule"] == "ttc_risk"
+    # both factors feed the action; the shared edges name both factor chains
+    assert set(g.predecessors("action")) == {"belief:ped_1.distance", "belief:collision_risk"}
+    assert set(g.edges["entity:ped_1", "belief:ped_1"]["factors"]) == {
+        "ped_1.distance",
+        "collision_risk",
+    }
+
+
+def test_a_null_evidence_ref_is_shown_missing_not_skipped(sample_log: Path) -> None:
+    r = explain(sample_log, t=t_ns(82))  # the ped_close stretch logged with null refs
+    assert r.decision.command == "STOP"
+    assert r.scores.et == 0.0 and 0 < r.scores.et_partial < 1
+    g = _graph(r)
+    missing = [(u, v) for u, v, data in g.edges(data=True) if not data["documented"]]
+    levels = {g.edges[e]["level"] for e in missing}
+    assert levels == {"evidence_ref", "sensor_reading"}
+    # the evidence item exists (sensor, region), only its link to the reading is gone
+    assert ("evidence:ped_1:0", "entity:ped_1") in missing
+    placeholder = next(u for u, v in missing if v == "evidence:ped_1:0")
+    assert g.nodes[placeholder]["missing"]
+    assert any("evidence_ref" in p for p in r.scores.problems)
+
+
+def test_a_missing_belief_edge_breaks_the_chain_at_the_belief_path(tmp_path: Path) -> None:
+    log = write_log(tmp_path / "r.mcap", [stretch("ped_close", 3, "no_edge")])
+    r = explain(log, t=t_ns(1))
+    chains = {c.node: c for c in r.chains.factors}
+    assert chains["ped_1.distance"].traceable
+    risk = chains["collision_risk"]
+    assert (risk.depth, risk.expected_depth) == (1, 5)
+    g = _graph(r)
+    placeholder = "missing:belief_path:belief:collision_risk"
+    assert g.nodes[placeholder]["missing"]
+    assert not g.edges[placeholder, "belief:collision_risk"]["documented"]
+    assert r.scores.et == 0.5
+
+
+def test_time_between_cycles_gives_the_cycle_before_and_how_far(sample_log: Path) -> None:
+    r = explain(sample_log, t="104.53")
+    assert r.cycle == 45 and r.offset_ns == 30_000_000 and not r.stale
+
+
+def test_relative_time_and_cycle_number_find_the_same_decision(sample_log: Path) -> None:
+    by_abs = explain(sample_log, t=t_ns(45))
+    by_rel = explain(sample_log, t="+4.5")
+    by_cycle = explain(sample_log, cycle=45)
+    assert by_abs.cycle == by_rel.cycle == by_cycle.cycle == 45
+    assert by_cycle.offset_ns == 0 and by_cycle.query_t_ns is None
+
+
+def test_time_outside_the_log_names_the_range(sample_log: Path) -> None:
+    with pytest.raises(TimeOutOfRangeError, match=r"\[100.000 s, 109.900 s\]"):
+        explain(sample_log, t="99.9")
+    with pytest.raises(TimeOutOfRangeError):
+        explain(sample_log, t="+60")
+
+
+def test_exactly_one_of_time_and_cycle(sample_log: Path) -> None:
+    with pytest.raises(UsageError):
+        explain(sample_log)
+    with pytest.raises(UsageError):
+        explain(sample_log, t="+1", cycle=3)
+    with pytest.raises(UsageError, match=r"cycle 500 is not in this log \(cycles 0..99\)"):
+        explain(sample_log, cycle=500)
+
+
+def test_held_since_points_to_the_cycle_that_began_the_action(sample_log: Path) -> None:
+    held = explain(sample_log, t=t_ns(55)).held
+    assert (held.since_cycle, held.cycles, held.bound) == (40, 16, "change")
+    assert (held.previous, held.previous_cycle, held.at_least) == ("SLOW", 39, False)
+
+
+def test_held_since_is_bounded_and_says_at_least(sample_log: Path) -> None:
+    held = explain(sample_log, t=t_ns(55), lookback_s=0.5).held
+    assert held.bound == "lookback" and held.at_least
+    assert held.since_cycle == 50 and held.previous is None
+    from_start = explain(sample_log, t=t_ns(20)).held
+    assert (from_start.since_cycle, from_start.bound) == (0, "log_start")
+
+
+def test_a_gap_before_t_is_reported_stale_and_the_seal_counts_the_drop(tmp_path: Path) -> None:
+    log = write_log(tmp_path / "g.mcap", [stretch("clear", 20)], skip=lambda i: 8 <= i < 12)
+    r = explain(log, t=t_ns(10))
+    assert r.cycle == 7 and r.stale
+    after = explain(log, t=t_ns(12))
+    assert after.seal.dropped_before == 4 and after.seal.verified
+    assert after.seal.prev_cycle == 7
+
+
+def test_a_changed_payload_fails_the_seal(sample_log: Path, tmp_path: Path) -> None:
+    def mutate(msg: RawMessage) -> bytes:
+        if msg.topic == TOPIC_ACTION and msg.sequence == 45:
+            return msg.data.replace(b'"STOP"', b'"CONTINUE"', 1)
+        return msg.data
+
+    tampered = rewrite_segment(sample_log, tmp_path / "t.mcap", mutate)
+    r = explain(tampered, t=t_ns(45))
+    assert r.decision.command == "CONTINUE"
+    assert not r.seal.verified and r.seal.mismatched == (TOPIC_ACTION,)
+    assert r.seal.prev_ok  # the chain itself is intact
+    assert explain(tampered, t=t_ns(44)).seal.verified
+
+
+def test_a_removed_seal_breaks_the_next_link(sample_log: Path, tmp_path: Path) -> None:
+    def mutate(msg: RawMessage) -> bytes | None:
+        if msg.topic == TOPIC_SEAL and msg.sequence == 44:
+            return None
+        return msg.data
+
+    tampered = rewrite_segment(sample_log, tmp_path / "t.mcap", mutate)
+    r = explain(tampered, t=t_ns(45))
+    assert r.seal.digests_ok and r.seal.prev_ok is False and r.seal.prev_cycle == 43
+    assert any("prev does not match" in p for p in r.seal.problems)
+
+
+def test_first_cycle_of_a_later_segment_links_to_the_previous_segment(tmp_path: Path) -> None:
+    root = write_log(tmp_path / "root", max_segment_s=3.0)
+    log = open_log(root)
+    assert len(log.segments) >= 3
+    first = log.segments[1].session.first_cycle
+    r = explain(log, cycle=first)
+    assert r.seal.verified and r.seal.prev_cycle == first - 1
+    # only the later segment present: the link is checked against its recorded prev_seal
+    alone = explain(log.segments[1].path, cycle=first)
+    assert alone.seal.verified and alone.seal.prev_cycle is None
+    assert "prev_seal" in alone.seal.prev_source
+
+
+def test_a_crashed_segment_is_recovered_and_said_so(
+    crashed_log: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    with caplog.at_level(logging.WARNING, logger="trace_runtime"):
+        r = explain(crashed_log, t=t_ns(45))
+    assert r.recovered and r.decision.command == "STOP" and r.seal.verified
+    assert sum("no summary" in m for m in caplog.messages) == 1
+
+
+def test_refs_to_an_earlier_cycles_reading_resolve_through_the_window(sample_log: Path) -> None:
+    log = open_log(sample_log)
+    cycle = log.cycle_at(t_ns(45))
+    alone = trace_cycle(cycle)
+    assert alone.et == 1.0  # the fixture's refs point into the same cycle
+    decision = read_decision(cycle)
+    g = causal_graph(cycle, alone, decision)
+    assert g.graph["command"] == "STOP"
+    assert decision.tree is not None
+    t = tree_graph(decision.tree)
+    assert [n for n, taken in t.nodes(data="taken") if taken] == ["root", "ped", "stop"]
+
+
+def test_warm_summary_cycles_are_read_leniently(sample_log: Path) -> None:
+    cycle = open_log(sample_log).cycle_at(t_ns(45))
+    action = orjson.loads(cycle.payloads.pop(TOPIC_ACTION))
+    cycle.summary = {
+        TOPIC_ACTION: {
+            "command": action["command"],
+            "rationale": {"text": "summary", "factors": action["rationale"]["factors"]},
+        }
+    }
+    d = read_decision(cycle)
+    assert d.summary and d.command == "STOP" and d.rationale == "summary"
+    assert [f.node for f in d.factors] == ["ped_1.distance", "collision_risk"]
+    assert d.alternatives == () and d.tree is None
+
+
+def test_find_cycle_uses_time_search(sample_log: Path) -> None:
+    log = open_log(sample_log)
+    assert [find_cycle(log, n).cycle for n in (0, 1, 50, 98, 99)] == [0, 1, 50, 98, 99]

@@ -1,0 +1,103 @@
+"""timeline: rows per decision change (or per cycle), leading factor, flags, gaps; time parsing."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.trace_audit.conftest import PERIOD_NS, T0_NS, stretch, t_ns, write_log
+from trace_audit.timeline import TimePoint, command_of, timeline
+from trace_runtime import open_log
+from trace_runtime.errors import UsageError
+
+
+def test_a_row_per_decision_change(sample_log: Path) -> None:
+    r = timeline(sample_log)
+    assert [(row.cycle, row.command, row.cycles) for row in r.rows] == [
+        (0, "CONTINUE", 30),
+        (30, "SLOW", 10),
+        (40, "STOP", 20),
+        (60, "CONTINUE", 10),
+        (70, "REROUTE", 10),
+        (80, "STOP", 5),
+        (85, "CONTINUE", 15),
+    ]
+    assert r.cycles == 100 and r.changes == 6 and r.gaps == ()
+    assert sum(row.held_ns for row in r.rows) == 100 * PERIOD_NS
+    stop = r.rows[2]
+    assert stop.previous == "SLOW" and stop.leading is not None
+    assert (stop.leading.name, stop.leading.value, stop.leading.unit) == ("distance", 1.5, "m")
+    assert r.rows[4].leading is not None and r.rows[4].leading.name == "aisle_blocked"
+    assert stop.scenario == "ped_close" and stop.flag_counts == {}
+
+
+def test_every_gives_a_row_per_cycle(sample_log: Path) -> None:
+    r = timeline(sample_log, every=True)
+    assert len(r.rows) == 100 and r.changes == 6
+    assert all(row.cycles == 1 for row in r.rows)
+
+
+def test_window_by_absolute_and_relative_time(sample_log: Path) -> None:
+    r = timeline(sample_log, start="+3.5", end=t_ns(72))
+    assert [row.cycle for row in r.rows] == [35, 40, 60, 70]
+    assert r.rows[0].command == "SLOW" and r.rows[0].previous is None
+    assert r.cycles == 72 - 35 + 1
+
+
+def test_flags_are_counted_over_the_stretch(tmp_path: Path) -> None:
+    log = write_log(
+        tmp_path / "r.mcap",
+        [stretch("clear", 4), stretch("clear", 3, "flag"), stretch("ped_close", 2)],
+    )
+    rows = timeline(log).rows
+    assert rows[0].flag_counts == {"deviation_high": 3} and rows[0].flagged_cycles == 3
+    assert rows[1].flag_counts == {}
+
+
+def test_dropped_cycles_show_as_gaps(tmp_path: Path) -> None:
+    log = write_log(tmp_path / "r.mcap", [stretch("clear", 20)], skip=lambda i: i in (5, 6, 7))
+    r = timeline(log)
+    (gap,) = r.gaps
+    assert (gap.after_cycle, gap.before_cycle, gap.dropped) == (4, 8, 3)
+    assert gap.duration_ns == 4 * PERIOD_NS
+    assert r.cycles == 17 and len(r.rows) == 1
+
+
+def test_window_errors(sample_log: Path) -> None:
+    with pytest.raises(UsageError, match="ends before it starts"):
+        timeline(sample_log, start="+5", end="+2")
+    with pytest.raises(UsageError, match="does not overlap"):
+        timeline(sample_log, start="500", end="600")
+
+
+@pytest.mark.parametrize(
+    ("text", "ns", "relative"),
+    [
+        ("12.3", 12_300_000_000, False),
+        ("12.3s", 12_300_000_000, False),
+        ("+0.5", 500_000_000, True),
+        ("1700000000.123456789", 1_700_000_000_123_456_789, False),
+        ("0", 0, False),
+    ],
+)
+def test_time_point_parses_seconds_exactly(text: str, ns: int, relative: bool) -> None:
+    assert TimePoint.parse(text) == TimePoint(ns, relative)
+
+
+@pytest.mark.parametrize("text", ["", "abc", "-1", "nan", "inf", "1e400x", "+", "12 s"])
+def test_time_point_rejects_nonsense(text: str) -> None:
+    with pytest.raises(UsageError, match="invalid time"):
+        TimePoint.parse(text)
+
+
+def test_relative_time_resolves_against_the_log_start(sample_log: Path) -> None:
+    log = open_log(sample_log)
+    assert TimePoint.parse("+1.5").resolve(log) == T0_NS + 1_500_000_000
+    assert TimePoint.parse("101.5").resolve(log) == T0_NS + 1_500_000_000
+
+
+def test_command_of_matches_the_full_parse(sample_log: Path) -> None:
+    for cycle in open_log(sample_log).iter_cycles():
+        action = cycle.action
+        assert action is not None and command_of(cycle) == action.command
