@@ -223,6 +223,8 @@ class GroupMetrics:
     et_partial: Stat
     factors: int
     factors_traceable: int
+    no_factors: int
+    """Decisions whose action is missing or names no factors (ET(d) = 0 by definition)."""
     dr: float | None
     reconstructable: int
     not_reconstructable: int
@@ -329,6 +331,7 @@ class _Acc:
     full: int = 0
     factors: int = 0
     factors_traceable: int = 0
+    no_factors: int = 0
     dr_ok: int = 0
     integrity_ok: int = 0
     tcs_sum: float = 0.0
@@ -499,6 +502,7 @@ class _Scanner:
             acc.full += full
             acc.factors += score.factors
             acc.factors_traceable += score.traceable
+            acc.no_factors += score.factors == 0
             acc.dr_ok += dr_ok
             acc.integrity_ok += intact
             if intact or not weights.integrity_gate:
@@ -808,6 +812,7 @@ def _group(name: str, acc: _Acc) -> GroupMetrics:
         et_partial=_stat(acc.etp_sum, acc.etp_sq, n, "decisions"),
         factors=acc.factors,
         factors_traceable=acc.factors_traceable,
+        no_factors=acc.no_factors,
         dr=acc.dr_ok / n if n else None,
         reconstructable=acc.dr_ok,
         not_reconstructable=n - acc.dr_ok,

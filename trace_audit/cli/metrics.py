@@ -257,6 +257,14 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
         f"TCS {overall.tcs.mean:.3f} ± {overall.tcs.std:.3f} (across decisions); factors "
         f"traceable {_share(overall.factors_traceable, overall.factors)}."
     )
+    if overall.no_factors:
+        named = overall.decisions - overall.no_factors
+        et_named = overall.et.mean * overall.decisions / named if named else None
+        out.print(
+            f"  {overall.no_factors} decisions name no factors (action missing or rationale "
+            f"truncated away): ET(d) = 0 by definition; over the {named} that name factors, "
+            f"ET {_pct(et_named)}."
+        )
     out.print(
         f"  Sealed {overall.sealed}, unsealed {overall.unsealed}, integrity failed "
         f"{overall.integrity_failed}; the gaps hold ~{overall.missing_cycles} missing cycles, "
