@@ -12,12 +12,14 @@ their own assembler with ``register_assembler``.
 
 from __future__ import annotations
 
+import array
 import bisect
 import contextlib
 import logging
 import mmap
 import os
 import struct
+import sys
 import zlib
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -44,7 +46,7 @@ from trace_runtime.records import (
     PerceptionMessage,
     Seal,
 )
-from trace_runtime.segment import MAGIC
+from trace_runtime.segment import CHUNK_TABLE_ATTACHMENT, MAGIC
 from trace_runtime.session import SESSION_METADATA, SessionInfo
 
 log = logging.getLogger("trace_runtime")
@@ -55,6 +57,7 @@ _CHUNK_FIXED = struct.Struct("<QQQI")
 _FOOTER_SIZE = 9 + 20
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
 _OP_CHUNK_INDEX, _OP_METADATA, _OP_DATA_END = 8, 12, 15
+_OP_ATTACHMENT_INDEX, _OP_STATISTICS, _OP_METADATA_INDEX, _OP_SUMMARY_OFFSET = 10, 11, 13, 14
 _MAX_RECORD = 1 << 34
 
 
@@ -239,7 +242,13 @@ class Segment:
             raise LogReadError(str(path), "not an MCAP file (bad magic)")
         self._schemas: dict[int, str] = {}
         self._topics: dict[int, str] = {}
-        self._chunks: list[ChunkInfo] = []
+        # The chunk table: start times, end times and file offsets, sorted by start time.
+        # Loaded lazily from the segment's own compact index (or the MCAP chunk indexes),
+        # so opening a long segment does not pay for parsing tens of thousands of records.
+        self._table: tuple[Sequence[int], Sequence[int], Sequence[int]] | None = None
+        self._table_source: tuple[str, int, int] = ("none", 0, 0)
+        self._ends_sorted = True
+        self._statistics: tuple[int, int, int, dict[int, int]] | None = None
         self._loose: list[RawMessage] = []  # messages written outside chunks
         self._metadata: dict[str, dict[str, str]] = {}
         self._decompressor = zstandard.ZstdDecompressor()
@@ -252,8 +261,6 @@ class Segment:
             raise NotTraceLogError(str(path), f"MCAP profile is {label}, not a TRACE log")
         if SESSION_METADATA not in self._metadata:
             raise NotTraceLogError(str(path), "no trace.session metadata record")
-        self._chunks.sort(key=lambda c: (c.start_ns, c.offset))
-        self._chunk_starts = [c.start_ns for c in self._chunks]
         self._assemble = _assembler_for(self.session.tier)
         self.info = self._make_info(finished)
         if not finished:
@@ -284,28 +291,125 @@ class Segment:
         opcode, length = _RECORD_HEADER.unpack_from(data, footer_at)
         if opcode != _OP_FOOTER or length != 20:
             return False
-        summary_start, _summary_offset_start, _crc = struct.unpack_from("<QQI", data, footer_at + 9)
+        summary_start, offsets_start, _crc = struct.unpack_from("<QQI", data, footer_at + 9)
         if summary_start == 0:
             return False  # a finished file written without a summary: scan it
-        pos = summary_start
-        while pos < footer_at:
+        ranges = self._summary_groups(offsets_start or footer_at, footer_at)
+        if not ranges:  # no summary offsets: walk the whole summary section once
+            ranges = {0: [(summary_start, offsets_start or footer_at)]}
+        for opcode, spans in ranges.items():
+            if opcode == _OP_CHUNK_INDEX:
+                self._table_source = ("chunk_index", spans[0][0], spans[-1][1])
+                continue
+            for begin, end in spans:
+                self._parse_summary_records(begin, end)
+        if self._table_source[0] == "none" and 0 in ranges:
+            self._table_source = ("chunk_index", summary_start, offsets_start or footer_at)
+        if not self._metadata:
+            return False
+        if (
+            self._statistics is not None
+            and self._statistics[2] == 0
+            and (self._table_source[0] == "none")
+        ):
+            self._scan_loose_messages()  # an unchunked file: its messages sit in the data section
+        return True
+
+    def _summary_groups(self, begin: int, end: int) -> dict[int, list[tuple[int, int]]]:
+        """Summary Offset records: where each group of summary records lives."""
+        groups: dict[int, list[tuple[int, int]]] = {}
+        pos = begin
+        while pos + 9 <= end:
+            opcode, length = _RECORD_HEADER.unpack_from(self._data, pos)
+            if opcode == _OP_SUMMARY_OFFSET:
+                group, start, size = struct.unpack_from("<BQQ", self._data, pos + 9)
+                groups.setdefault(group, []).append((start, start + size))
+            pos += 9 + length
+        return groups
+
+    def _parse_summary_records(self, begin: int, end: int) -> None:
+        data = self._data
+        pos = begin
+        while pos + 9 <= end:
             opcode, length = _RECORD_HEADER.unpack_from(data, pos)
             body = pos + 9
             if opcode == _OP_SCHEMA:
                 self._parse_schema(body)
             elif opcode == _OP_CHANNEL:
                 self._parse_channel(body)
-            elif opcode == _OP_CHUNK_INDEX:
-                start, end, offset, chunk_len = struct.unpack_from("<QQQQ", data, body)
-                self._chunks.append(ChunkInfo(offset, chunk_len, start, end))
-            elif opcode == _OP_METADATA + 1:  # metadata index
+            elif opcode == _OP_STATISTICS:
+                self._parse_statistics(body)
+            elif opcode == _OP_METADATA_INDEX:
                 offset, _len = struct.unpack_from("<QQ", data, body)
                 self._parse_metadata_at(offset)
+            elif opcode == _OP_ATTACHMENT_INDEX:
+                offset, _len, _log, _create, size = struct.unpack_from("<QQQQQ", data, body)
+                name, _ = _read_str(data, body + 40)
+                if name == CHUNK_TABLE_ATTACHMENT:
+                    self._table_source = ("attachment", offset, size)
             pos = body + length
-        if not self._chunks and not self._metadata:
-            return False
-        self._scan_loose_messages()
-        return True
+
+    def _parse_statistics(self, body: int) -> None:
+        data = self._data
+        (chunk_count,) = struct.unpack_from("<I", data, body + 8 + 2 + 4 + 4 + 4)
+        start, end = struct.unpack_from("<QQ", data, body + 8 + 2 + 4 + 4 + 4 + 4)
+        (map_len,) = struct.unpack_from("<I", data, body + 42)
+        counts: dict[int, int] = {}
+        pos = body + 46
+        while pos < body + 46 + map_len:
+            channel_id, n = struct.unpack_from("<HQ", data, pos)
+            counts[channel_id] = n
+            pos += 10
+        self._statistics = (start, end, chunk_count, counts)
+
+    # --- the chunk table -------------------------------------------------------------
+
+    def _chunk_table(self) -> tuple[Sequence[int], Sequence[int], Sequence[int]]:
+        if self._table is None:
+            kind, first, second = self._table_source
+            if kind == "attachment":
+                self._load_table_attachment(first)
+            elif kind == "chunk_index":
+                self._set_table(self._load_chunk_indexes(first, second))
+            else:
+                self._set_table([])
+        assert self._table is not None
+        return self._table
+
+    def _set_table(self, rows: list[tuple[int, int, int]]) -> None:
+        self._set_columns([r[0] for r in rows], [r[1] for r in rows], [r[2] for r in rows])
+
+    def _set_columns(self, starts: list[int], ends: list[int], offsets: list[int]) -> None:
+        # Timsort on sorted input is one linear pass in C: cheap enough to check every time.
+        if starts != sorted(starts):
+            rows = sorted(zip(starts, ends, offsets, strict=True))
+            starts, ends, offsets = [r[0] for r in rows], [r[1] for r in rows], [r[2] for r in rows]
+        self._ends_sorted = ends == sorted(ends)
+        self._table = (starts, ends, offsets)
+
+    def _load_table_attachment(self, offset: int) -> None:
+        data = self._data
+        pos = offset + 9 + 16
+        _name, pos = _read_str(data, pos)
+        _media, pos = _read_str(data, pos)
+        (size,) = struct.unpack_from("<Q", data, pos)
+        values = array.array("Q")
+        values.frombytes(data[pos + 8 : pos + 8 + size])
+        if sys.byteorder == "big":
+            values.byteswap()
+        self._set_columns(values[0::3].tolist(), values[1::3].tolist(), values[2::3].tolist())
+
+    def _load_chunk_indexes(self, begin: int, end: int) -> list[tuple[int, int, int]]:
+        data = self._data
+        rows = []
+        pos = begin
+        while pos + 9 <= end:
+            opcode, length = _RECORD_HEADER.unpack_from(data, pos)
+            if opcode == _OP_CHUNK_INDEX:
+                start, stop, offset = struct.unpack_from("<QQQ", data, pos + 9)
+                rows.append((start, stop, offset))
+            pos += 9 + length
+        return rows
 
     def _parse_header(self, pos: int) -> int | None:
         data = self._data
@@ -320,6 +424,7 @@ class Segment:
 
     def _scan(self) -> None:
         """Walk every record after the header; stop at the first incomplete one."""
+        rows: list[tuple[int, int, int]] = []
         data = self._data
         pos = self._parse_header(8) or len(data)
         end = len(data)
@@ -337,12 +442,13 @@ class Segment:
             elif opcode == _OP_CHUNK:
                 start, stop = struct.unpack_from("<QQ", data, body)
                 if self._chunk_valid(pos):
-                    self._chunks.append(ChunkInfo(pos, 9 + length, start, stop))
+                    rows.append((start, stop, pos))
             elif opcode == _OP_MESSAGE:
                 self._loose.append(self._parse_message(body, length, data))
             elif opcode in (_OP_DATA_END, _OP_FOOTER):
                 break
             pos = body + length
+        self._set_table(rows)
 
     def _scan_loose_messages(self) -> None:
         """Messages written outside chunks are not indexed; find them between chunks."""
@@ -361,7 +467,7 @@ class Segment:
 
     def _chunk_valid(self, pos: int) -> bool:
         try:
-            self._decode_chunk(ChunkInfo(pos, 0, 0, 0))
+            self._decode_chunk_at(pos)
         except (LogReadError, zstandard.ZstdError, struct.error):
             return False
         return True
@@ -400,9 +506,9 @@ class Segment:
 
     # --- chunks ----------------------------------------------------------------------------
 
-    def _decode_chunk(self, chunk: ChunkInfo) -> list[RawMessage]:
+    def _decode_chunk_at(self, offset: int) -> list[RawMessage]:
         data = self._data
-        body = chunk.offset + 9
+        body = offset + 9
         _start, _end, size, crc = _CHUNK_FIXED.unpack_from(data, body)
         compression, pos = _read_str(data, body + 28)
         (records_len,) = struct.unpack_from("<Q", data, pos)
@@ -415,7 +521,7 @@ class Segment:
         else:
             raise LogReadError(str(self.path), f"unsupported chunk compression {compression!r}")
         if crc and zlib.crc32(raw) != crc:
-            raise LogReadError(str(self.path), f"chunk at offset {chunk.offset} fails its CRC")
+            raise LogReadError(str(self.path), f"chunk at offset {offset} fails its CRC")
         messages: list[RawMessage] = []
         pos, end = 0, len(raw)
         while pos + 9 <= end:
@@ -440,7 +546,9 @@ class Segment:
             self._topics[channel_id] = topic
 
     def chunks(self) -> list[ChunkInfo]:
-        return list(self._chunks)
+        """Every chunk's offset and time range, in time order."""
+        starts, ends, offsets = self._chunk_table()
+        return [ChunkInfo(o, 0, s, e) for s, e, o in zip(starts, ends, offsets, strict=True)]
 
     def iter_messages(
         self, start_ns: int | None = None, end_ns: int | None = None, *, reverse: bool = False
@@ -456,16 +564,16 @@ class Segment:
     def _iter_chunk_messages(
         self, start_ns: int | None, end_ns: int | None, *, reverse: bool
     ) -> Iterator[list[RawMessage]]:
-        chunks = [
-            c
-            for c in self._chunks
-            if (start_ns is None or c.end_ns >= start_ns)
-            and (end_ns is None or c.start_ns <= end_ns)
-        ]
+        starts, ends, offsets = self._chunk_table()
+        hi = len(starts) if end_ns is None else bisect.bisect_right(starts, end_ns)
+        lo = 0
+        if start_ns is not None and self._ends_sorted:
+            lo = bisect.bisect_left(ends, start_ns)
+        chosen = [i for i in range(lo, hi) if start_ns is None or ends[i] >= start_ns]
         if self._loose and not reverse:
             yield self._loose
-        for chunk in reversed(chunks) if reverse else chunks:
-            yield self._decode_chunk(chunk)
+        for i in reversed(chosen) if reverse else chosen:
+            yield self._decode_chunk_at(offsets[i])
         if self._loose and reverse:
             yield self._loose
 
@@ -486,13 +594,14 @@ class Segment:
 
     def cycle_at(self, t_ns: int) -> Cycle | None:
         """The cycle in force at ``t_ns``: the last one at or before it (None if none)."""
-        index = bisect.bisect_right(self._chunk_starts, t_ns)
+        starts, _ends, offsets = self._chunk_table()
+        index = bisect.bisect_right(starts, t_ns)
         # The chunk that starts last at or before t holds the answer unless t falls before
         # its first cycle (e.g. sensors earlier than the cycle): then step back one chunk.
-        for chunk in reversed(self._chunks[max(0, index - 2) : index]):
+        for offset in reversed(offsets[max(0, index - 2) : index]):
             cycles = [
                 c
-                for c in self._assemble(self._decode_chunk(chunk), self.path.name)
+                for c in self._assemble(self._decode_chunk_at(offset), self.path.name)
                 if c.t_ns <= t_ns
             ]
             if cycles:
@@ -505,20 +614,19 @@ class Segment:
 
     def _make_info(self, finished: bool) -> SegmentInfo:
         channels: dict[str, int] = {}
-        start = min((c.start_ns for c in self._chunks), default=0)
-        end = max((c.end_ns for c in self._chunks), default=0)
-        count = 0
-        if finished:
-            channels = self._statistics_counts()
-            count = sum(channels.values())
+        if finished and self._statistics is not None:
+            start, end, chunk_count, counts = self._statistics
+            channels = {self._topics.get(cid, str(cid)): n for cid, n in counts.items()}
         else:
+            starts, ends, _offsets = self._chunk_table()
+            start, end = min(starts, default=0), max(ends, default=0)
             for messages in self._iter_chunk_messages(None, None, reverse=False):
                 for msg in messages:
                     channels[msg.topic] = channels.get(msg.topic, 0) + 1
-                    count += 1
+            chunk_count = len(starts)
         if self._loose:
             times = [m.log_time_ns for m in self._loose]
-            start = min(times) if not self._chunks else min(start, *times)
+            start = min(times) if not channels else min(start, *times)
             end = max(end, *times)
         return SegmentInfo(
             path=self.path,
@@ -527,31 +635,12 @@ class Segment:
             recovered=not finished,
             start_ns=start,
             end_ns=end,
-            message_count=count,
-            chunk_count=len(self._chunks),
+            message_count=sum(channels.values()),
+            chunk_count=chunk_count,
             channels=channels,
             bytes=len(self._data),
             metadata=dict(self._metadata),
         )
-
-    def _statistics_counts(self) -> dict[str, int]:
-        data = self._data
-        footer_at = len(data) - 8 - _FOOTER_SIZE
-        (summary_start,) = struct.unpack_from("<Q", data, footer_at + 9)
-        pos = summary_start
-        counts: dict[str, int] = {}
-        while pos < footer_at:
-            opcode, length = _RECORD_HEADER.unpack_from(data, pos)
-            if opcode == 0x0B:
-                body = pos + 9 + 8 + 2 + 4 + 4 + 4 + 4 + 8 + 8
-                (map_len,) = struct.unpack_from("<I", data, body)
-                p = body + 4
-                while p < body + 4 + map_len:
-                    channel_id, n = struct.unpack_from("<HQ", data, p)
-                    counts[self._topics.get(channel_id, str(channel_id))] = n
-                    p += 10
-            pos += 9 + length
-        return counts
 
 
 def _map_file(path: Path) -> bytes:
