@@ -264,6 +264,8 @@ class DecisionFailure:
     t_ns: int
     segment: str
     group: str
+    et: float
+    et_partial: float
     problems: tuple[str, ...]
 
 
@@ -526,6 +528,8 @@ class _Scanner:
                             cycle.t_ns,
                             seg_name,
                             group,
+                            et,
+                            etp,
                             (
                                 *(
                                     ()

@@ -320,7 +320,8 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
         )
         for f in report.failures:
             out.print(
-                f"  cycle {f.cycle}  t={f.t_ns / 1e9:.3f} s  [{f.group}]",
+                f"  cycle {f.cycle}  t={f.t_ns / 1e9:.3f} s  [{f.group}]  "
+                f"ET {f.et:.2f}, ET_partial {f.et_partial:.2f}",
                 markup=False,
                 soft_wrap=True,
             )
