@@ -49,6 +49,10 @@ class _Record(BaseModel):
         except ValidationError as err:
             raise RecordError(_describe(type(self).__name__, err)) from err
 
+    # Tell pydantic this __init__ only wraps errors: nested records validated from dicts then
+    # stay on pydantic's fast path instead of calling back into Python once per object.
+    __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]
+
 
 def _describe(model: str, err: ValidationError) -> str:
     first = err.errors()[0]
