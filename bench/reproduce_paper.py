@@ -276,7 +276,8 @@ def _differences(main: Run, sweep: list[Run]) -> list[str]:
         "two rates alone put at least 1 - 0.97 x 0.98 = 4.9% of decisions out of full "
         "traceability, not the paper's 1.4%. Decisions whose factors were all truncated "
         "away have no factor to trace: we count ET(d) = 0 for them (a choice, see "
-        f"metrics.md); over the decisions that do name factors, ET is {_et_named(main.report) * 100:.1f}%.",
+        "metrics.md); over the decisions that do name factors, ET is "
+        f"{_et_named(main.report) * 100:.1f}%.",
         "**ET_partial.** The paper quotes 0.98 for the decisions that are not fully "
         "traceable. Ours, over the same kind of decisions (those naming factors), is "
         f"{mean_partial:.2f}: a broken belief edge leaves a factor at depth 1 of 5, a null "
