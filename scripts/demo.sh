@@ -11,5 +11,5 @@ echo
 .venv/bin/trace-audit why "$out" --action STOP
 echo
 t=$(.venv/bin/trace-audit why "$out" --action STOP --json | .venv/bin/python -c \
-  'import json,sys; print(json.load(sys.stdin)["transitions"][0]["t_s"])')
+  'import json,sys; print(json.load(sys.stdin)["transitions"][0]["t_ns"] / 1e9)')
 .venv/bin/trace-audit explain "$out" --t "$t"

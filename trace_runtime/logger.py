@@ -26,7 +26,7 @@ from types import TracebackType
 from typing import Any, BinaryIO, Literal, Protocol
 
 from trace_runtime.chain import digest
-from trace_runtime.codec import encode_json, encode_layer, encode_seal
+from trace_runtime.codec import encode_json, encode_layer, encode_seal_fields
 from trace_runtime.errors import RecordError, UsageError
 from trace_runtime.integrity import Signer, encode_checkpoint, load_signer, make_checkpoint
 from trace_runtime.records import (
@@ -40,7 +40,6 @@ from trace_runtime.records import (
     TOPIC_PERCEPTION,
     TOPIC_SEAL,
     EvidenceRef,
-    Seal,
     _Record,
     validate_record,
 )
@@ -62,6 +61,9 @@ class LoggerConfig:
 
     threaded: bool = True
     """Write on a background thread (robots). False writes at ``commit()`` (simulators, tests)."""
+    batch_cycles: int = 1
+    """With ``threaded=False``: cycles per chunk. Above 1, a crash can lose that many cycles,
+    and a failed write drops them all; for simulators and log generators, not robots."""
     queue_cycles: int = 256
     """Bound of the hand-over queue, in cycles."""
     when_full: Literal["drop", "block"] = "drop"
@@ -271,6 +273,7 @@ class AuditLogger:
         # error the integrator must see, so it raises here, unlike every later I/O failure.
         self._open_segment(self._session)
 
+        self._sync_batch: list[_PendingCycle] = []  # threaded=False, batch_cycles > 1
         self._queue: queue.Queue[_PendingCycle | None] | None = None
         self._thread: threading.Thread | None = None
         if self.config.threaded:
@@ -334,6 +337,9 @@ class AuditLogger:
             self._queue.put(None)
             self._thread.join()
         with self._lock:
+            if self._sync_batch:
+                batch, self._sync_batch = self._sync_batch, []
+                self._write_batch(batch)
             self._close_segment()
 
     def __enter__(self) -> AuditLogger:
@@ -360,8 +366,11 @@ class AuditLogger:
         )
         if self._queue is None:
             self._undeclared_control = 0
-            with self._lock:
-                self._write_batch([pending])
+            self._sync_batch.append(pending)
+            if len(self._sync_batch) >= self.config.batch_cycles:
+                batch, self._sync_batch = self._sync_batch, []
+                with self._lock:
+                    self._write_batch(batch)
             return
         try:
             if self.config.when_full == "block":
@@ -458,14 +467,8 @@ class AuditLogger:
                 messages.append(
                     OutMessage(segment.channel(topic), pending.cycle, pending.t_ns, data)
                 )
-            seal = Seal(
-                cycle=pending.cycle,
-                t_ns=pending.t_ns,
-                digests=digests,
-                prev=prev,
-                dropped=carried + pending.dropped_before,
-            )
-            data = encode_seal(seal)
+            dropped = carried + pending.dropped_before
+            data = encode_seal_fields(pending.cycle, pending.t_ns, digests, prev, dropped)
             messages.append(OutMessage(seal_channel, pending.cycle, pending.t_ns, data))
             prev = digest(data)
             carried = 0

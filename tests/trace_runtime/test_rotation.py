@@ -69,13 +69,20 @@ def test_a_restarted_robot_continues_its_chain_and_cycle_numbers(
     assert _chain_ok(root) == list(range(11))
 
 
-def test_threaded_and_synchronous_writers_seal_identically(
+def test_threaded_synchronous_and_batched_writers_seal_identically(
     tmp_path: Path, log_writer: Callable[..., AuditLogger]
 ) -> None:
-    a = tmp_path / "a.mcap"
-    b = tmp_path / "b.mcap"
-    log_writer(a, 25, config=LoggerConfig(threaded=True))
-    log_writer(b, 25, config=LoggerConfig(threaded=False))
-    seals_a = [c.payloads[TOPIC_SEAL] for c in open_log(a).iter_cycles()]
-    seals_b = [c.payloads[TOPIC_SEAL] for c in open_log(b).iter_cycles()]
-    assert seals_a == seals_b and len(seals_a) == 25
+    configs = {
+        "threaded": LoggerConfig(threaded=True),
+        "sync": LoggerConfig(threaded=False),
+        "sync-batched": LoggerConfig(threaded=False, batch_cycles=10),
+    }
+    seals = {}
+    for name, config in configs.items():
+        log_writer(tmp_path / f"{name}.mcap", 25, config=config)
+        log = open_log(tmp_path / f"{name}.mcap")
+        seals[name] = [c.payloads[TOPIC_SEAL] for c in log.iter_cycles()]
+        if name == "sync-batched":
+            assert log.segments[0].info.chunk_count <= 4  # 10 + 10 + 5 cycles (+ checkpoint)
+    assert len(seals["sync"]) == 25
+    assert seals["threaded"] == seals["sync"] == seals["sync-batched"]
