@@ -206,13 +206,22 @@ def explain(
         target = find_cycle(log, cycle)
         offset = 0
     decision = read_decision(target)
-    back = _look_back(log, target, decision.command, int(lookback_s * 1e9), sensor_window)
-
-    window = SensorWindow(sensor_window)
-    for earlier in reversed(back.window):
-        window.push(earlier.sensors)
-    window.push(target.sensors)
-    chains = trace_cycle(target, window)
+    # Refs usually point into the decision's own cycle; the earlier cycles of the sensor
+    # window are read only when a chain stops at an unresolved reading (same result as
+    # resolving against the whole window, as the metrics do).
+    chains = trace_cycle(target)
+    needs_window = sensor_window > 0 and any(
+        c.missing is not None and c.missing.level == "sensor_reading" for c in chains.factors
+    )
+    back = _look_back(
+        log, target, decision.command, int(lookback_s * 1e9), sensor_window if needs_window else 0
+    )
+    if needs_window:
+        window = SensorWindow(sensor_window)
+        for earlier in reversed(back.window):
+            window.push(earlier.sensors)
+        window.push(target.sensors)
+        chains = trace_cycle(target, window)
     seal = _check_seal(log, target, back.prev_sealed)
     period = max((s.session.period_ns for s in log.segments), default=0)
     scores = _scores(decision, chains, seal)
@@ -251,9 +260,18 @@ class _Back:
 
 
 def _look_back(
-    log: Log, target: Cycle, command: str | None, lookback_ns: int, window_cycles: int
+    log: Log,
+    target: Cycle,
+    command: str | None,
+    lookback_ns: int,
+    window_cycles: int,
 ) -> _Back:
-    """One reverse walk: sensor window, previous seal, and where the current command began."""
+    """One reverse walk: previous seal, where the current command began, sensor window.
+
+    The walk reads at most ``lookback_ns`` of log (or the sensor window, if longer) and
+    stops as soon as it has what it needs; ``window_cycles=0`` skips the window. Only a gap
+    longer than that before the decision sends it further back, for the previous seal.
+    """
     window: list[Cycle] = []
     prev_sealed: Cycle | None = None
     since, count = target, 1
@@ -261,7 +279,9 @@ def _look_back(
     previous: Cycle | None = None
     holding = True
     floor = target.t_ns - lookback_ns
-    for earlier in log.iter_cycles(end_ns=target.t_ns, reverse=True):
+    period = max((s.session.period_ns for s in log.segments), default=0)
+    start = max(0, min(floor, target.t_ns - 2 * (window_cycles + 1) * period))
+    for earlier in log.iter_cycles(start_ns=start, end_ns=target.t_ns, reverse=True):
         if earlier.cycle >= target.cycle:
             continue
         if len(window) < window_cycles:
@@ -277,6 +297,14 @@ def _look_back(
                 holding, bound, previous = False, "change", earlier
         if not holding and prev_sealed is not None and len(window) >= window_cycles:
             break
+    else:
+        if holding and start > log.start_ns:
+            bound = "lookback"  # the walk's bound, not the log's start, stopped it
+        if prev_sealed is None and start > log.start_ns:
+            prev_sealed = next(
+                (c for c in log.iter_cycles(end_ns=start - 1, reverse=True) if c.sealed),
+                None,
+            )
     held = HeldSince(
         command=command,
         since_cycle=since.cycle,

@@ -18,7 +18,14 @@ from typing import Any
 import pytest
 from mcap.writer import Writer
 
-from trace_runtime import AuditLogger, CycleBuilder, LoggerConfig, RawMessage, open_segment
+from trace_runtime import (
+    AuditLogger,
+    CycleBuilder,
+    EvidenceRef,
+    LoggerConfig,
+    RawMessage,
+    open_segment,
+)
 from trace_runtime.session import SESSION_METADATA
 
 T0_NS = 100_000_000_000  # the fixture logs start at t = 100 s (not 0: relative times matter)
@@ -33,7 +40,7 @@ SITUATIONS: dict[str, tuple[str, float | None, float]] = {
 }
 
 # Faults a stretch of cycles can carry (each breaks one documented link on purpose).
-FAULTS = frozenset({"null_ref", "no_edge", "truncated", "no_cf", "no_evidence", "flag"})
+FAULTS = frozenset({"null_ref", "no_edge", "truncated", "no_cf", "no_evidence", "flag", "old_ref"})
 
 
 @dataclass(frozen=True)
@@ -60,13 +67,23 @@ DEFAULT_SCRIPT = (
 )
 
 
-def fill_cycle(c: CycleBuilder, situation: str, faults: frozenset[str] = frozenset()) -> None:
-    """Add the four layers of one cycle in ``situation`` to ``c``."""
+def fill_cycle(
+    c: CycleBuilder,
+    situation: str,
+    faults: frozenset[str] = frozenset(),
+    previous: EvidenceRef | None = None,
+) -> EvidenceRef:
+    """Add the four layers of one cycle in ``situation`` to ``c``; return its lidar ref.
+
+    With the ``old_ref`` fault the evidence points at ``previous`` (an earlier cycle's
+    reading) instead of this cycle's.
+    """
     command, distance, risk = SITUATIONS[situation]
     scan: dict[str, Any] = {"angle_min": -1.57, "angle_increment": 0.0175, "ranges": [4.0] * 24}
     if distance is not None:
         scan["ranges"][10:14] = [distance] * 4
-    ref = c.sensor("/sensors/lidar", scan)
+    own = c.sensor("/sensors/lidar", scan)
+    ref = previous if "old_ref" in faults and previous is not None else own
     entities: list[dict[str, Any]] = []
     nodes: list[dict[str, Any]] = []
     edges: list[dict[str, Any]] = []
@@ -199,6 +216,7 @@ def fill_cycle(c: CycleBuilder, situation: str, faults: frozenset[str] = frozens
             "flags": flags,
         }
     )
+    return own
 
 
 def _speed(command: str) -> float:
@@ -331,13 +349,14 @@ def write_log(
         config=LoggerConfig(threaded=False, fsync_interval_s=None, max_segment_s=max_segment_s),
     )
     i = 0
+    last_ref: EvidenceRef | None = None
     for part in script:
         for _ in range(part.cycles):
             c = logger.cycle(t0_ns + i * PERIOD_NS)
             if skip is not None and skip(i):
                 c.abort()
             else:
-                fill_cycle(c, part.situation, part.faults)
+                last_ref = fill_cycle(c, part.situation, part.faults, last_ref)
                 c.commit()
             i += 1
     if finish:

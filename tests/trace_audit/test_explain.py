@@ -208,7 +208,21 @@ def test_a_crashed_segment_is_recovered_and_said_so(
     assert sum("no summary" in m for m in caplog.messages) == 1
 
 
-def test_refs_to_an_earlier_cycles_reading_resolve_through_the_window(sample_log: Path) -> None:
+def test_refs_to_an_earlier_cycles_reading_resolve_through_the_window(tmp_path: Path) -> None:
+    log = write_log(
+        tmp_path / "r.mcap", [stretch("ped_close", 3), stretch("ped_close", 3, "old_ref")]
+    )
+    r = explain(log, t=t_ns(4))
+    assert r.scores.et == 1.0  # the reading of cycle 3 is in the sensor window
+    alone = explain(log, t=t_ns(4), sensor_window=0)
+    assert alone.scores.et == 0.0
+    assert {c.missing.level for c in alone.chains.factors if c.missing} == {"sensor_reading"}
+    g = _graph(alone)
+    sensor = f"sensor:/sensors/lidar@{t_ns(3)}"
+    assert g.nodes[sensor]["missing"] and not g.edges[sensor, "evidence:ped_1:0"]["documented"]
+
+
+def test_graph_and_tree_from_a_cycle(sample_log: Path) -> None:
     log = open_log(sample_log)
     cycle = log.cycle_at(t_ns(45))
     alone = trace_cycle(cycle)

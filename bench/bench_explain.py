@@ -1,0 +1,154 @@
+"""Benchmark: ``explain`` at random t on a 24 h log (864,000 cycles) vs a 1-minute log.
+
+Budget (DESIGN.md): explain at t on the 24 h log <= 1.5x the same on the 1-minute log,
+both measured here in the same run. Reported per log, as medians over ``--samples`` random
+times (the same fractions of each log's range):
+
+- ``call``:  ``explain(path, t=...)`` as the CLI runs it: open the log, seek, reconstruct.
+- ``open``:  ``open_log(path)`` alone.
+- ``warm``:  ``explain(log, t=...)`` on an already open ``Log`` (seek + reconstruct).
+- ``seek``:  ``Log.cycle_at(t)`` alone.
+
+Logs are made with the simulator when missing (a log root; the day takes a while: ~10-15
+min at ~1,200 cycles/s). ``--profile`` prints where a day's ``call`` spends its time.
+
+    .venv/bin/python bench/bench_explain.py --day /tmp/bench/day --minute /tmp/bench/minute
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import io
+import json
+import pstats
+import random
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from trace_audit.explain import explain
+from trace_runtime.reader import open_log
+
+DAY_CYCLES = 864_000
+MINUTE_CYCLES = 600
+BUDGET = 1.5
+
+
+def _ensure(path: Path, cycles: int, seed: int) -> None:
+    if path.exists():
+        return
+    from sim.runner import RunConfig, run
+
+    print(f"generating {path} ({cycles:,} cycles) with the simulator ...", file=sys.stderr)
+    started = time.perf_counter()
+    result = run(RunConfig(out=path, total_cycles=cycles, seed=seed))
+    print(
+        f"  {result.written:,} cycles written in {time.perf_counter() - started:.0f} s",
+        file=sys.stderr,
+    )
+
+
+def _time(call: Callable[[], Any]) -> float:
+    started = time.perf_counter()
+    call()
+    return time.perf_counter() - started
+
+
+def _measure(path: Path, fractions: list[float]) -> dict[str, Any]:
+    log = open_log(path)
+    start, end = log.start_ns, log.end_ns
+    times = [start + int(f * (end - start)) for f in fractions]
+    explain(path, t=times[0])  # warm the page cache and imports; not counted
+    calls = [_time(lambda t=t: explain(path, t=t)) for t in times]
+    opens = [_time(lambda: open_log(path)) for _ in times]
+    warm = [_time(lambda t=t: explain(log, t=t)) for t in times]
+    seeks = [_time(lambda t=t: log.cycle_at(t)) for t in times]
+    held = [explain(log, t=t).held.cycles for t in times]
+    chunks = sum(s.info.chunk_count for s in log.segments)
+    return {
+        "path": str(path),
+        "segments": len(log.segments),
+        "chunks": chunks,
+        "cycles_approx": sum(s.info.channels.get("/trace/seal", 0) for s in log.segments),
+        "hours": (end - start) / 3.6e12,
+        "call_ms": statistics.median(calls) * 1e3,
+        "call_p90_ms": sorted(calls)[int(0.9 * (len(calls) - 1))] * 1e3,
+        "open_ms": statistics.median(opens) * 1e3,
+        "warm_ms": statistics.median(warm) * 1e3,
+        "seek_ms": statistics.median(seeks) * 1e3,
+        "held_cycles_median": statistics.median(held),
+    }
+
+
+def _profile(path: Path, fractions: list[float], top: int) -> str:
+    log = open_log(path)
+    times = [log.start_ns + int(f * (log.end_ns - log.start_ns)) for f in fractions]
+    profiler = cProfile.Profile()
+    profiler.enable()
+    for t in times:
+        explain(path, t=t)
+    profiler.disable()
+    out = io.StringIO()
+    pstats.Stats(profiler, stream=out).sort_stats("cumulative").print_stats(top)
+    return out.getvalue()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--day", type=Path, default=Path("/tmp/trace-bench/day"))
+    parser.add_argument("--minute", type=Path, default=Path("/tmp/trace-bench/minute"))
+    parser.add_argument("--samples", type=int, default=25)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--profile", action="store_true", help="profile the day's calls")
+    parser.add_argument("--json", action="store_true", help="print the results as JSON")
+    args = parser.parse_args()
+    if args.samples < 20:
+        parser.error("--samples must be >= 20")
+    _ensure(args.minute, MINUTE_CYCLES, args.seed)
+    _ensure(args.day, DAY_CYCLES, args.seed)
+    rng = random.Random(args.seed)
+    fractions = [rng.random() for _ in range(args.samples)]
+    minute = _measure(args.minute, fractions)
+    day = _measure(args.day, fractions)
+    ratios = {
+        key: day[key] / minute[key] if minute[key] > 0 else float("inf")
+        for key in ("call_ms", "open_ms", "warm_ms", "seek_ms")
+    }
+    result = {
+        "samples": args.samples,
+        "minute": minute,
+        "day": day,
+        "ratio": ratios,
+        "budget": BUDGET,
+        "within_budget": ratios["call_ms"] <= BUDGET,
+    }
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(f"explain at {args.samples} random t (medians; same fractions of each range)")
+        print(f"{'':14}{'1-minute log':>16}{'24 h log':>16}{'ratio':>10}")
+        for key, label in (
+            ("call_ms", "call (ms)"),
+            ("open_ms", "  open (ms)"),
+            ("warm_ms", "  warm (ms)"),
+            ("seek_ms", "  seek (ms)"),
+        ):
+            print(f"{label:14}{minute[key]:16.2f}{day[key]:16.2f}{ratios[key]:9.2f}x")
+        for key, label in (("segments", "segments"), ("chunks", "chunks")):
+            print(f"{label:14}{minute[key]:16,}{day[key]:16,}")
+        print(
+            f"held-since walk, median cycles: {minute['held_cycles_median']:.0f} (minute), "
+            f"{day['held_cycles_median']:.0f} (day)"
+        )
+        verdict = "within" if result["within_budget"] else "OVER"
+        print(f"call ratio {ratios['call_ms']:.2f}x: {verdict} the {BUDGET}x budget")
+    if args.profile:
+        print(_profile(args.day, fractions, 25))
+
+
+if __name__ == "__main__":
+    main()
