@@ -28,10 +28,10 @@ from trace_audit.timeline import (
     command_of,
     require_cycles,
     resolve_time,
-    seal_dropped,
 )
 from trace_runtime.chain import GENESIS, digest
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
+from trace_runtime.integrity import verify_cycle
 from trace_runtime.reader import Cycle, Log
 from trace_runtime.records import TOPIC_SEAL
 
@@ -52,43 +52,27 @@ DEFAULT_LOOKBACK_S = 600.0
 class SealCheck:
     """Whether the decision's seal verifies: its digests, and its link to the previous seal.
 
-    ``prev_source`` says what ``prev`` was compared with: the previous sealed cycle in this
-    log, the segment's recorded ``prev_seal`` (when the previous segment is not in the log),
-    or genesis.
+    The check is ``trace_runtime.integrity.verify_cycle`` (``state`` is its verdict: the
+    layer messages and the evidenced sensor readings against the seal). ``prev_source`` says
+    what the seal's ``prev`` was compared with: the previous sealed cycle in this log, the
+    segment's recorded ``prev_seal`` (the previous segment is not in the log), or genesis.
     """
 
+    state: str
     sealed: bool
     digests_ok: bool | None
     mismatched: tuple[str, ...]
     unnamed: tuple[str, ...]
     absent: tuple[str, ...]
     summarised: tuple[str, ...]
+    evidence_checked: int
+    evidence_mismatch: tuple[str, ...]
     prev_ok: bool | None
     prev_cycle: int | None
     prev_source: str
     dropped_before: int
     verified: bool
     problems: tuple[str, ...]
-
-
-def _seal_problems(
-    *,
-    sealed: bool,
-    mismatched: tuple[str, ...],
-    unnamed: tuple[str, ...],
-    absent: tuple[str, ...],
-    prev_ok: bool | None,
-    prev_source: str,
-) -> tuple[str, ...]:
-    out: list[str] = []
-    if not sealed:
-        out.append("the cycle is not sealed")
-    out += [f"{t} does not match its seal digest" for t in mismatched]
-    out += [f"{t} is logged but not named by the seal" for t in unnamed]
-    out += [f"{t} is named by the seal but missing" for t in absent]
-    if prev_ok is False:
-        out.append(f"prev does not match the digest of {prev_source}")
-    return tuple(out)
 
 
 @dataclass(frozen=True, slots=True)
@@ -319,76 +303,51 @@ def _look_back(
 
 
 def _check_seal(log: Log, target: Cycle, prev_sealed: Cycle | None) -> SealCheck:
-    data = target.payloads.get(TOPIC_SEAL)
-    if data is None:
-        return SealCheck(
-            False,
-            None,
-            (),
-            (),
-            (),
-            (),
-            None,
-            None,
-            "no seal",
-            0,
-            False,
-            ("the cycle is not sealed",),
-        )
-    seal = target.seal
-    assert seal is not None
-    named = seal.digests
-    mismatched: list[str] = []
-    unnamed: list[str] = []
-    for topic, payload in target.payloads.items():
-        if topic == TOPIC_SEAL:
-            continue
-        want = named.get(topic)
-        if want is None:
-            unnamed.append(topic)
-        elif digest(payload) != want:
-            mismatched.append(topic)
-    summary = target.summary or {}
-    absent = tuple(t for t in named if t not in target.payloads and t not in summary)
-    summarised = tuple(t for t in named if t not in target.payloads and t in summary)
-    compared = len(named) - len(absent) - len(summarised)
-    bad = bool(mismatched or unnamed or absent)
-    digests_ok = None if not (compared or bad) else not bad
     if prev_sealed is not None:
-        prev_data = prev_sealed.payloads[TOPIC_SEAL]
-        prev_ok = seal.prev == digest(prev_data)
+        expected = digest(prev_sealed.payloads[TOPIC_SEAL])
         prev_cycle: int | None = prev_sealed.cycle
         source = f"the previous seal (cycle {prev_sealed.cycle})"
     else:
         segment = next((s for s in log.segments if s.path.name == target.segment), None)
         expected = segment.session.prev_seal if segment is not None else GENESIS
-        prev_ok = seal.prev == expected
         prev_cycle = None
         source = (
             "genesis (first seal of the robot)"
             if expected == GENESIS
             else "the segment's recorded prev_seal (previous segment not in this log)"
         )
+    status = verify_cycle(target, expected)
+    sealed = status.state != "unsealed"
+    content_bad = bool(status.modified or status.missing or status.extra)
+    compared = sealed and (content_bad or len(target.payloads) > 1)
+    prev_ok = {"ok": True, "broken": False}.get(status.link) if sealed else None
+    problems: list[str] = []
+    if not sealed:
+        problems.append("the cycle is not sealed")
+    problems += [f"{t} does not match its seal digest" for t in status.modified]
+    problems += [f"{t} is logged but not named by the seal" for t in status.extra]
+    problems += [f"{t} is named by the seal but missing" for t in status.missing]
+    problems += [f"evidenced reading {r} differs from its ref" for r in status.evidence_mismatch]
+    if status.state == "modified" and not content_bad and status.detail:
+        problems.append(status.detail)  # e.g. a malformed seal, or one naming another cycle
+    if prev_ok is False:
+        problems.append(f"prev does not match the digest of {source}")
     return SealCheck(
-        sealed=True,
-        digests_ok=digests_ok,
-        mismatched=tuple(mismatched),
-        unnamed=tuple(unnamed),
-        absent=absent,
-        summarised=summarised,
+        state=status.state,
+        sealed=sealed,
+        digests_ok=(not content_bad) if compared else None,
+        mismatched=status.modified,
+        unnamed=status.extra,
+        absent=status.missing,
+        summarised=status.summarised,
+        evidence_checked=status.evidence_checked,
+        evidence_mismatch=status.evidence_mismatch,
         prev_ok=prev_ok,
         prev_cycle=prev_cycle,
         prev_source=source,
-        dropped_before=seal_dropped(target),
-        verified=digests_ok is True and prev_ok,
-        problems=_seal_problems(
-            sealed=True,
-            mismatched=tuple(mismatched),
-            unnamed=tuple(unnamed),
-            absent=absent,
-            prev_ok=prev_ok,
-            prev_source=source,
-        ),
+        dropped_before=status.dropped,
+        verified=sealed and not problems,
+        problems=tuple(problems),
     )
 
 

@@ -268,19 +268,30 @@ def explain_doc(r: Explanation, lookback_s: float = DEFAULT_LOOKBACK_S) -> Doc:
         status = Seg("✘ not sealed", "bold red", "[FAILED] not sealed")
     else:
         status = Seg("✘ seal does NOT verify", "bold red", "[FAILED] seal does not verify")
-    rows = [("Seal", status)]
+    rows = [("Seal", [status, f" ({seal.state})"])]
     if seal.sealed:
-        compared = (
-            "digests of the logged layers match"
-            if seal.digests_ok
-            else ("layer digests: " + ("; ".join(seal.problems) or "nothing to compare"))
-        )
+        if seal.digests_ok is None:
+            layers = "nothing to compare (no layer messages kept)"
+        elif seal.digests_ok:
+            layers = "every logged layer matches its seal digest"
+        else:
+            layers = "MISMATCH: " + ", ".join(
+                [
+                    *seal.mismatched,
+                    *(f"{t} not sealed" for t in seal.unnamed),
+                    *(f"{t} missing" for t in seal.absent),
+                ]
+            )
         if seal.summarised:
-            compared += f" ({len(seal.summarised)} summarised layers not comparable)"
-        rows.append(("Digests", compared))
-        rows.append(
-            ("Chain", f"prev {'matches' if seal.prev_ok else 'does NOT match'} {seal.prev_source}")
-        )
+            layers += f"; {len(seal.summarised)} layers summarised (warm tier), not comparable"
+        rows.append(("Layers", layers))
+        if seal.evidence_checked or seal.evidence_mismatch:
+            evidence = f"{seal.evidence_checked} evidenced sensor readings checked"
+            if seal.evidence_mismatch:
+                evidence += "; DIFFER: " + ", ".join(seal.evidence_mismatch)
+            rows.append(("Evidence", evidence))
+        link = "matches" if seal.prev_ok else "does NOT match"
+        rows.append(("Chain", f"prev {link} {seal.prev_source}"))
         if seal.dropped_before:
             rows.append(
                 (
@@ -293,6 +304,8 @@ def explain_doc(r: Explanation, lookback_s: float = DEFAULT_LOOKBACK_S) -> Doc:
                 )
             )
     doc.fields(rows)
+    for problem in seal.problems:
+        doc.line(Seg(f"- {problem}", "red"), 2)
     return doc
 
 
