@@ -313,6 +313,9 @@ class Transition:
     command: str
     previous: str | None
     previous_cycle: int | None
+    unlogged_before: int
+    """Cycles between ``previous_cycle`` and this one that are not in the log (dropped):
+    the change may have happened in one of them."""
     rationale: str | None
     truncated: bool
     factors: tuple[FactorValue, ...]
@@ -368,6 +371,9 @@ class _Run:
             command=decision.command or "?",
             previous=None if self.before is None else command_of(self.before),
             previous_cycle=None if self.before is None else self.before.cycle,
+            unlogged_before=0
+            if self.before is None
+            else max(0, self.first.cycle - self.before.cycle - 1),
             rationale=decision.rationale,
             truncated=decision.truncated,
             factors=decision.factors,

@@ -82,3 +82,13 @@ def test_a_truncated_rationale_is_marked(tmp_path: Path) -> None:
     )
     (x,) = why(log, "STOP").transitions
     assert x.truncated and x.rationale == "Pedestrian d"
+
+
+def test_dropped_cycles_before_a_transition_are_said(tmp_path: Path) -> None:
+    log = write_log(
+        tmp_path / "r.mcap",
+        [stretch("clear", 5), stretch("ped_close", 5)],
+        skip=lambda i: i in (4, 5),
+    )
+    (x,) = why(log, "STOP").transitions
+    assert (x.cycle, x.previous_cycle, x.unlogged_before) == (6, 3, 2)

@@ -511,6 +511,9 @@ def why_doc(r: WhyResult) -> Doc:
             if tr.previous is not None
             else "nothing: the log starts here"
         )
+        if tr.unlogged_before:
+            n = tr.unlogged_before
+            before += f"; {n} cycle{'s' if n != 1 else ''} in between not logged"
         held = fmt_duration(tr.held_ns)
         if tr.ongoing:
             until = "and still holds at the end of the log"
