@@ -59,6 +59,20 @@ _MISSING = Seg("✘ MISSING", "bold red", "[MISSING]")
 _UNREACHED = Seg("· not reached", "dim", "[--] not reached")
 
 
+def _help(text: str) -> str:
+    """Help text with each prose paragraph on one line, so typer re-wraps it to the terminal.
+
+    Indented paragraphs (the examples) keep their lines.
+    """
+    out = []
+    for para in text.strip().split("\n\n"):
+        if para.startswith("  "):
+            out.append(para)
+        else:
+            out.append(" ".join(line.strip() for line in para.splitlines()))
+    return "\n\n".join(out)
+
+
 def _run(call: Callable[[], T]) -> T:
     """``guarded`` plus the read errors a damaged file can raise below the reader."""
     setup_logging()
@@ -96,7 +110,7 @@ range is a usage error (exit 2) that names the range.
 """
 
 
-@app.command("explain", help=_EXPLAIN_HELP)
+@app.command("explain", help=_help(_EXPLAIN_HELP))
 def explain_command(  # noqa: PLR0917 - typer maps each parameter to an option
     log: LogArgument,
     t: TimeOption = None,
@@ -471,7 +485,7 @@ regard to case; one the log never shows is a usage error (exit 2) listing those 
 """
 
 
-@app.command("why", help=_WHY_HELP)
+@app.command("why", help=_help(_WHY_HELP))
 def why_command(  # noqa: PLR0917 - typer maps each parameter to an option
     log: LogArgument,
     action: Annotated[
@@ -569,7 +583,7 @@ leading factor (the first the rationale names) and the flags raised while it hel
 """
 
 
-@app.command("timeline", help=_TIMELINE_HELP)
+@app.command("timeline", help=_help(_TIMELINE_HELP))
 def timeline_command(  # noqa: PLR0917 - typer maps each parameter to an option
     log: LogArgument,
     start: Annotated[
@@ -678,7 +692,7 @@ segment summaries alone.
 """
 
 
-@app.command("info", help=_INFO_HELP)
+@app.command("info", help=_help(_INFO_HELP))
 def info_command(
     log: LogArgument,
     quick: Annotated[
@@ -812,7 +826,7 @@ labelled MISSING; the tree's taken path is bold.
 """
 
 
-@app.command("export", help=_EXPORT_HELP)
+@app.command("export", help=_help(_EXPORT_HELP))
 def export_command(
     log: LogArgument,
     t: TimeOption = None,
