@@ -430,10 +430,10 @@ def why(source: LogSource, action: str, *, t: TimeArg = None) -> WhyResult:
             {found.command: found.held_cycles},
             log.recovered,
         )
-    runs, present = _all_runs(log, action)
-    if not runs:
+    found, present = _all_transitions(log, action, period)
+    if not found:
         raise _unknown_action(action, present)
-    transitions = tuple(r.transition(period) for r in runs)
+    transitions = tuple(found)
     return WhyResult(
         str(log.root),
         robot,
@@ -445,9 +445,12 @@ def why(source: LogSource, action: str, *, t: TimeArg = None) -> WhyResult:
     )
 
 
-def _all_runs(log: Log, action: str) -> tuple[list[_Run], Counter[str]]:
+def _all_transitions(
+    log: Log, action: str, period_ns: int
+) -> tuple[list[Transition], Counter[str]]:
+    """Every transition into ``action`` in one pass; a run's cycles are let go as it ends."""
     present: Counter[str] = Counter()
-    runs: list[_Run] = []
+    transitions: list[Transition] = []
     current: _Run | None = None
     prev: Cycle | None = None
     for cycle in log.iter_cycles():
@@ -456,15 +459,17 @@ def _all_runs(log: Log, action: str) -> tuple[list[_Run], Counter[str]]:
         if _match(action, command):
             if current is None:
                 current = _Run(cycle, prev, cycle)
-                runs.append(current)
             else:
                 current.last = cycle
                 current.cycles += 1
         elif current is not None:
             current.after = cycle
+            transitions.append(current.transition(period_ns))
             current = None
         prev = cycle
-    return runs, present
+    if current is not None:
+        transitions.append(current.transition(period_ns))
+    return transitions, present
 
 
 def _run_before(log: Log, action: str, t_ns: int) -> _Run | None:
