@@ -420,20 +420,20 @@ def why(source: LogSource, action: str, *, t: TimeArg = None) -> WhyResult:
                 f"{name} is not taken at or before t={t_ns / 1e9:.3f} s; it is first taken "
                 f"at t={first.t_ns / 1e9:.3f} s (cycle {first.cycle})"
             )
-        found = run.transition(period)
+        one = run.transition(period)
         return WhyResult(
             str(log.root),
             robot,
-            found.command,
+            one.command,
             t_ns,
-            (found,),
-            {found.command: found.held_cycles},
+            (one,),
+            {one.command: one.held_cycles},
             log.recovered,
         )
-    found, present = _all_transitions(log, action, period)
-    if not found:
+    every, present = _all_transitions(log, action, period)
+    if not every:
         raise _unknown_action(action, present)
-    transitions = tuple(found)
+    transitions = tuple(every)
     return WhyResult(
         str(log.root),
         robot,
