@@ -135,29 +135,28 @@ class SensorWindow:
         if cycles < 0:
             raise ValueError(f"sensor window must be >= 0 cycles, got {cycles}")
         self.cycles = cycles
-        # (topic, log_time_ns) -> entries [message, digest or None]; digests are computed
-        # only for messages a ref with a digest actually points at.
-        self._index: dict[tuple[str, int], list[list[Any]]] = {}
-        self._batches: deque[list[tuple[str, int]]] = deque()
+        # (topic, log_time_ns) -> the messages logged under it, oldest first
+        self._index: dict[tuple[str, int], list[RawMessage]] = {}
+        self._batches: deque[Sequence[RawMessage]] = deque()
 
     def push(self, sensors: Sequence[RawMessage]) -> None:
         """Add one cycle's sensor messages; forget the cycle that falls out of the window."""
-        keys: list[tuple[str, int]] = []
         index = self._index
         for msg in sensors:
             key = (msg.topic, msg.log_time_ns)
             entries = index.get(key)
             if entries is None:
-                index[key] = [[msg, None]]
+                index[key] = [msg]
             else:
-                entries.append([msg, None])
-            keys.append(key)
-        self._batches.append(keys)
-        while len(self._batches) > self.cycles + 1:
-            for key in self._batches.popleft():
+                entries.append(msg)
+        batches = self._batches
+        batches.append(sensors)
+        if len(batches) > self.cycles + 1:
+            for msg in batches.popleft():
+                key = (msg.topic, msg.log_time_ns)
                 entries = index.get(key)
                 if entries is not None:
-                    entries.pop(0)
+                    del entries[0]
                     if not entries:
                         del index[key]
 
@@ -169,7 +168,7 @@ class SensorWindow:
         """'' when the ref resolves to a message in the window, else why it does not."""
         topic = ref.get("topic")
         t_ns = ref.get("log_time_ns")
-        if not isinstance(topic, str) or not isinstance(t_ns, int):
+        if type(topic) is not str or type(t_ns) is not int:
             return "malformed ref (topic or log_time_ns missing)"
         entries = self._index.get((topic, t_ns))
         if not entries:
@@ -177,18 +176,13 @@ class SensorWindow:
         sequence = ref.get("sequence")
         want = ref.get("digest")
         why = ""
-        for entry in entries:
-            msg: RawMessage = entry[0]
+        for msg in entries:
             if sequence is not None and msg.sequence != sequence:
                 why = why or f"sequence {sequence} does not match the logged {msg.sequence}"
                 continue
-            if want is not None:
-                got = entry[1]
-                if got is None:
-                    got = entry[1] = hashlib.sha256(msg.data).hexdigest()
-                if got != want:
-                    why = "digest does not match the logged message data"
-                    continue
+            if want is not None and hashlib.sha256(msg.data).hexdigest() != want:
+                why = "digest does not match the logged message data"
+                continue
             return ""
         return why
 
@@ -261,18 +255,20 @@ def score_layers(
     if not isinstance(action, dict):
         return DecisionScore(0.0, 0.0, 0, 0, "action not logged")
     rationale = action.get("rationale")
-    raw_factors = rationale.get("factors") if isinstance(rationale, dict) else None
-    factors = _dicts(raw_factors)
-    if not factors:
+    raw_factors = rationale.get("factors") if type(rationale) is dict else None
+    if not raw_factors or type(raw_factors) is not list:
         return DecisionScore(0.0, 0.0, 0, 0, "action names no factors")
     walker = _Walker(belief, perception, window)
-    traceable = 0
+    n = traceable = 0
     partial = 0.0
-    for factor in factors:
-        depth, expected = walker.depth(factor)
-        traceable += depth == expected
-        partial += depth / expected
-    n = len(factors)
+    for factor in raw_factors:
+        if type(factor) is dict:
+            depth, expected = walker.depth(factor)
+            n += 1
+            traceable += depth == expected
+            partial += depth / expected
+    if not n:
+        return DecisionScore(0.0, 0.0, 0, 0, "action names no factors")
     return DecisionScore(traceable / n, partial / n, n, traceable, "")
 
 
@@ -289,6 +285,7 @@ class _Walker:
         "_entity_memo",
         "_nodes",
         "_parents",
+        "_perception",
         "_perception_missing",
         "_window",
     )
@@ -300,34 +297,28 @@ class _Walker:
         window: SensorWindow,
     ) -> None:
         self._window = window
-        self._belief_missing = not isinstance(belief, dict)
-        self._perception_missing = not isinstance(perception, dict)
-        nodes: dict[str, dict[str, Any]] = {}
-        parents: dict[str, list[str]] = {}
-        if isinstance(belief, dict):
-            for node in _dicts(belief.get("nodes")):
-                node_id = node.get("id")
-                if type(node_id) is str:
-                    nodes[node_id] = node
-            for edge in _dicts(belief.get("edges")):
-                parent, child = edge.get("parent"), edge.get("child")
-                if type(parent) is str and type(child) is str:
-                    found = parents.get(child)
-                    if found is None:
-                        parents[child] = [parent]
-                    else:
-                        found.append(parent)
-        entities: dict[str, dict[str, Any]] = {}
-        if isinstance(perception, dict):
-            for entity in _dicts(perception.get("entities")):
-                entity_id = entity.get("id")
-                if type(entity_id) is str:
-                    entities[entity_id] = entity
-        self._nodes = nodes
-        self._parents = parents
-        self._entities = entities
+        self._belief_missing = type(belief) is not dict
+        self._perception_missing = type(perception) is not dict
+        self._perception = perception
+        self._nodes: dict[str, dict[str, Any]] = {}
+        self._parents: dict[str, list[str]] = {}
+        if type(belief) is dict:
+            self._nodes, self._parents = _index_belief(belief)
+        self._entities: dict[str, dict[str, Any]] | None = None
         self._entity_memo: dict[str, tuple[Link, ...]] = {}
         self._depth_memo: dict[str, int] = {}
+
+    def _entity(self, entity_id: str) -> dict[str, Any] | None:
+        entities = self._entities
+        if entities is None:
+            entities = self._entities = {}
+            perception = self._perception
+            if type(perception) is dict:
+                for entity in _dicts(perception.get("entities")):
+                    key = entity.get("id")
+                    if type(key) is str:
+                        entities[key] = entity
+        return entities.get(entity_id)
 
     def depth(self, factor: dict[str, Any]) -> tuple[int, int]:
         """(documented depth, expected depth) of a factor: ``factor()`` without the links."""
@@ -374,7 +365,7 @@ class _Walker:
         memo = self._depth_memo.get(entity_id)
         if memo is not None:
             return memo
-        entity = self._entities.get(entity_id)
+        entity = self._entity(entity_id)
         if entity is None:
             depth = 0
         else:
@@ -391,7 +382,8 @@ class _Walker:
         return depth
 
     def factor(self, factor: dict[str, Any]) -> FactorChain:
-        node_id = str(factor.get("node") or "")
+        raw = factor.get("node")
+        node_id = raw if type(raw) is str else ""
         name = str(factor.get("name") or "")
         node = self._nodes.get(node_id)
         if node is None:
@@ -478,7 +470,7 @@ class _Walker:
         return links
 
     def _entity_links_uncached(self, entity_id: str) -> tuple[Link, ...]:
-        entity = self._entities.get(entity_id)
+        entity = self._entity(entity_id)
         if entity is None:
             why = (
                 "perception layer not logged"
@@ -531,6 +523,25 @@ def _depth(links: Iterable[Link]) -> int:
             break
         depth += 1
     return depth
+
+
+def _index_belief(belief: dict[str, Any]) -> tuple[dict[str, Any], dict[str, list[str]]]:
+    """Node by id, and the parents of each child, from a belief message's JSON."""
+    nodes: dict[str, dict[str, Any]] = {}
+    parents: dict[str, list[str]] = {}
+    for node in _dicts(belief.get("nodes")):
+        node_id = node.get("id")
+        if type(node_id) is str:
+            nodes[node_id] = node
+    for edge in _dicts(belief.get("edges")):
+        parent, child = edge.get("parent"), edge.get("child")
+        if type(parent) is str and type(child) is str:
+            found = parents.get(child)
+            if found is None:
+                parents[child] = [parent]
+            else:
+                found.append(parent)
+    return nodes, parents
 
 
 def _dicts(value: Any) -> list[dict[str, Any]]:
