@@ -8,11 +8,14 @@ from typing import Any
 
 import orjson
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from trace_audit.chains import (
     EXPECTED_DEPTH_ENTITY,
     EXPECTED_DEPTH_STATE,
     SensorWindow,
+    score_layers,
     trace_cycle,
     trace_layers,
 )
@@ -214,3 +217,105 @@ def test_on_a_logged_cycle(tmp_path: Path) -> None:
     assert len(cycles) == 3
     for cycle in cycles:
         assert trace_cycle(cycle).fully_traceable
+
+
+# --- properties: the fast score and the full walk agree, and nothing malformed raises ----
+
+_IDS = st.sampled_from(["a", "b", "c", "d", "e", "f"])
+
+
+@st.composite
+def _decision(draw: st.DrawFn) -> tuple[Any, Any, Any, list[RawMessage]]:
+    kinds = draw(st.dictionaries(_IDS, st.sampled_from(["entity", "state"]), max_size=6))
+    nodes = [
+        {
+            "id": i,
+            "kind": k,
+            "entity": draw(st.sampled_from([None, i, "x"])) if k == "entity" else None,
+            "p": 1.0,
+        }
+        for i, k in kinds.items()
+    ]
+    edges = [
+        {"parent": p, "child": c, "p": 1.0, "rule": "r"}
+        for p, c in draw(st.lists(st.tuples(_IDS, _IDS), max_size=10))
+    ]
+    msgs = [_msg(t_ns=t, seq=t) for t in range(3)]
+    entities = []
+    for entity_id in draw(st.lists(st.sampled_from(["a", "b", "c", "x"]), max_size=4, unique=True)):
+        evidence = []
+        for _ in range(draw(st.integers(0, 2))):
+            t = draw(st.integers(0, 4))
+            ref = draw(
+                st.sampled_from(
+                    [
+                        None,
+                        _ref(t_ns=t, seq=t),
+                        _ref(t_ns=t, seq=t + 1),
+                        _ref(t_ns=t, seq=None, data=b"x"),
+                    ]
+                )
+            )
+            evidence.append({"sensor": "lidar", "weight": 1.0, "ref": ref})
+        entities.append({"id": entity_id, "evidence": evidence})
+    factors = [
+        {"node": n} for n in draw(st.lists(st.sampled_from(["a", "b", "c", "d", "zz"]), max_size=4))
+    ]
+    action = {"command": "STOP", "rationale": {"factors": factors}}
+    return action, {"nodes": nodes, "edges": edges}, {"entities": entities}, msgs
+
+
+@settings(max_examples=300, deadline=None)
+@given(_decision())
+def test_score_layers_matches_trace_layers(decision: tuple[Any, Any, Any, Any]) -> None:
+    action, belief, perception, msgs = decision
+    window = _window(*msgs)
+    full = trace_layers(0, 0, action, belief, perception, window=window)
+    fast = score_layers(action, belief, perception, window=window)
+    assert (fast.et, fast.et_partial) == pytest.approx((full.et, full.et_partial))
+    assert fast.fully_traceable == full.fully_traceable
+    for chain in full.factors:
+        documented = [link.documented for link in chain.links]
+        assert chain.depth == [*documented, False].index(False)
+        assert len(chain.links) == chain.expected_depth
+
+
+_JUNK = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.text(max_size=3),
+    lambda inner: (
+        st.lists(inner, max_size=3)
+        | st.dictionaries(
+            st.sampled_from(
+                [
+                    "id",
+                    "kind",
+                    "entity",
+                    "nodes",
+                    "edges",
+                    "parent",
+                    "child",
+                    "entities",
+                    "evidence",
+                    "ref",
+                    "topic",
+                    "log_time_ns",
+                    "rationale",
+                    "factors",
+                    "node",
+                ]
+            ),
+            inner,
+            max_size=4,
+        )
+    ),
+    max_leaves=12,
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(_JUNK, _JUNK, _JUNK)
+def test_malformed_layers_never_raise(action: Any, belief: Any, perception: Any) -> None:
+    window = _window(_msg())
+    full = trace_layers(0, 0, action, belief, perception, window=window)
+    fast = score_layers(action, belief, perception, window=window)
+    assert (fast.et, fast.et_partial) == pytest.approx((full.et, full.et_partial))
