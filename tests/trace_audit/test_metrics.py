@@ -500,3 +500,46 @@ def test_bad_config_is_a_usage_error() -> None:
         MetricsConfig(by="weekday")  # type: ignore[arg-type]
     with pytest.raises(UsageError):
         MetricsConfig(workers=0)
+
+
+def test_robots_are_separate_streams_and_groups(tmp_path: Path) -> None:
+    """Two robots interleaved in time: no false gaps, one chain each, grouped by robot."""
+    (tmp_path / "fleet").mkdir()
+    logs = [HandLog(tmp_path / "fleet" / f"{name}.mcap", robot=name) for name in ("r1", "r2")]
+    for i in range(5):
+        for k, log in enumerate(logs):
+            if log.robot == "r2" and i == 2:
+                continue  # r2 misses one cycle; r1 does not
+            at = t(i) + k * 30_000_000  # r2 runs 30 ms after r1
+            log.cycle(i, at, layers(log.sensor(at, {"i": i})))
+    for log in logs:
+        log.close()
+    report = compute_metrics([tmp_path / "fleet"], MetricsConfig(by="robot"))
+    groups = {g.name: g for g in report.groups}
+    assert (groups["r1"].gaps, groups["r2"].gaps) == (0, 1)
+    assert groups["r1"].window_s == pytest.approx(0.5) and groups["r1"].tc == 1.0
+    assert groups["r2"].tc == pytest.approx(1 - 0.1 / 0.5)
+    assert report.overall.integrity_failed == 0
+    assert report.overall.window_s == pytest.approx(1.0)
+
+
+def test_group_by_segment_and_hour(tmp_path: Path) -> None:
+    root = _two_segments(tmp_path)
+    by_segment = compute_metrics([root], MetricsConfig(by="segment"))
+    assert [g.name for g in by_segment.groups] == ["amr-7_000000.mcap", "amr-7_000001.mcap"]
+    assert [g.decisions for g in by_segment.groups] == [4, 4]
+    by_hour = compute_metrics([root], MetricsConfig(by="hour"))
+    assert [g.name for g in by_hour.groups] == ["1970-01-01 00:00"]
+
+
+def test_the_same_segment_in_two_tiers_is_read_once(tmp_path: Path) -> None:
+    root = _two_segments(tmp_path)
+    (root / "cold").mkdir()
+    copy = root / "cold" / "amr-7_000000.mcap"
+    copy.write_bytes((root / "amr-7_000000.mcap").read_bytes())
+    report = compute_metrics([root])
+    assert report.overall.decisions == 8
+    assert (
+        len(report.skipped_segments) == 1
+        and "same robot and segment" in (report.skipped_segments[0])
+    )
