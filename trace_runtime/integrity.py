@@ -395,6 +395,9 @@ class SealStatus:
     evidence_checked: int = 0
     evidence_unresolved: int = 0
     evidence_mismatch: tuple[str, ...] = ()
+    sensors_uncited: int = 0
+    """Sensor readings in the cycle that no digest-carrying evidence ref names: the chain
+    does not cover them."""
     detail: str = ""
 
     @property
@@ -405,8 +408,10 @@ class SealStatus:
         """One line for people, e.g. ``modified: /trace/action differs from its seal``."""
         evidence = ""
         if self.evidence_mismatch:
-            evidence = (f"; sensor reading {', '.join(self.evidence_mismatch)} does not match "
-                        "the digest its evidence ref names")
+            evidence = (
+                f"; sensor reading {', '.join(self.evidence_mismatch)} does not match "
+                "the digest its evidence ref names"
+            )
         if self.state == "verified":
             link = "" if self.link == "ok" else " (link to the previous seal not checked)"
             return f"seal verifies{link}{evidence}"
@@ -475,20 +480,16 @@ def verify_cycle(cycle: Cycle, prev_seal_digest: str | None = None) -> SealStatu
         elif digest(data) != expected:
             modified.append(topic)
     extra = [t for t in cycle.payloads if t != TOPIC_SEAL and t not in digests]
-    checked, unresolved = 0, 0
+    checked, unresolved, uncited = 0, 0, len(cycle.sensors)
     bad: list[str] = []
     perception = cycle.payloads.get(TOPIC_PERCEPTION)
     if perception is not None and TOPIC_PERCEPTION not in modified:
         # Sensor readings are not sealed themselves: the evidence refs that name them carry
         # their digests, and the refs are sealed with the perception message.
-        checked, unresolved, bad = _check_evidence(cycle, perception)
+        checked, unresolved, bad, uncited = _check_evidence(cycle, perception)
     if modified:
-        problems.append(
-            ", ".join(modified)
-            + " differ"
-            + ("s" if len(modified) == 1 else "")
-            + " from the seal's digest"
-        )
+        verb = "differs" if len(modified) == 1 else "differ"
+        problems.append(f"{', '.join(modified)} {verb} from the seal's digest")
     if missing:
         problems.append(", ".join(missing) + " named by the seal but not in the log")
     if extra:
@@ -513,29 +514,34 @@ def verify_cycle(cycle: Cycle, prev_seal_digest: str | None = None) -> SealStatu
         cycle.cycle,
         cycle.t_ns,
         state,
-        seal_digest,
-        prev,
-        link,
-        dropped,
-        tuple(modified),
-        tuple(missing),
-        tuple(extra),
-        tuple(summarised),
-        checked,
-        unresolved,
-        tuple(bad),
-        detail,
+        seal_digest=seal_digest,
+        prev=prev,
+        link=link,
+        dropped=dropped,
+        modified=tuple(modified),
+        missing=tuple(missing),
+        extra=tuple(extra),
+        summarised=tuple(summarised),
+        evidence_checked=checked,
+        evidence_unresolved=unresolved,
+        evidence_mismatch=tuple(bad),
+        sensors_uncited=uncited,
+        detail=detail,
     )
 
 
-def _check_evidence(cycle: Cycle, perception: bytes) -> tuple[int, int, list[str]]:
-    """Check evidence refs that carry a digest: (checked, unresolved, mismatching readings)."""
+def _check_evidence(cycle: Cycle, perception: bytes) -> tuple[int, int, list[str], int]:
+    """Check the evidence refs that carry a digest against the cycle's sensor messages.
+
+    Returns (refs checked, refs unresolved, readings that differ, readings no ref cites).
+    """
     try:
         entities = orjson.loads(perception).get("entities") or ()
     except (orjson.JSONDecodeError, AttributeError):
-        return 0, 0, []
-    by_sequence = {(m.topic, m.sequence): m for m in cycle.sensors}
-    by_time = {(m.topic, m.log_time_ns): m for m in cycle.sensors}
+        return 0, 0, [], len(cycle.sensors)
+    by_sequence = {(m.topic, m.sequence): i for i, m in enumerate(cycle.sensors)}
+    by_time = {(m.topic, m.log_time_ns): i for i, m in enumerate(cycle.sensors)}
+    digests: dict[int, str] = {}
     checked = unresolved = 0
     bad: list[str] = []
     for entity in entities:
@@ -543,17 +549,18 @@ def _check_evidence(cycle: Cycle, perception: bytes) -> tuple[int, int, list[str
             ref = evidence.get("ref")
             if not ref or not ref.get("digest"):
                 continue
-            topic = ref.get("topic")
-            seq = ref.get("sequence")
-            msg = by_sequence.get((topic, seq)) if seq is not None else None
-            if msg is None:
-                msg = by_time.get((topic, ref.get("log_time_ns")))
-            if msg is None:
+            topic, seq = ref.get("topic"), ref.get("sequence")
+            index = by_sequence.get((topic, seq)) if seq is not None else None
+            if index is None:
+                index = by_time.get((topic, ref.get("log_time_ns")))
+            if index is None:
                 unresolved += 1
                 continue
             checked += 1
-            if digest(msg.data) != ref["digest"]:
-                label = f"{topic}#{msg.sequence}"
+            if index not in digests:
+                digests[index] = digest(cycle.sensors[index].data)
+            if digests[index] != ref["digest"]:
+                label = f"{topic}#{cycle.sensors[index].sequence}"
                 if label not in bad:
                     bad.append(label)
-    return checked, unresolved, bad
+    return checked, unresolved, bad, len(cycle.sensors) - len(digests)

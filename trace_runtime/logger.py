@@ -268,7 +268,7 @@ class AuditLogger:
         self._segment_start_ns: int | None = None
         self._head: tuple[int, int] | None = None  # (cycle, t_ns) of the segment's last seal
         self._sealed_in_segment = 0
-        self._last_checkpoint: tuple[int, int] | None = None  # (cycle, t_ns) it vouched for
+        self._checkpoint_tried_ns: int | None = None  # log time of the last periodic attempt
         # Opening the first segment may fail (bad path, no permission): that is a set-up
         # error the integrator must see, so it raises here, unlike every later I/O failure.
         self._open_segment(self._session)
@@ -444,7 +444,6 @@ class AuditLogger:
         self._head = (batch[-1].cycle, batch[-1].t_ns)
         self._sealed_in_segment += len(batch)
         if checkpoint is not None:
-            self._last_checkpoint = self._head
             self.stats.checkpoints += 1
         if self._segment_start_ns is None:
             self._segment_start_ns = batch[0].t_ns
@@ -501,7 +500,7 @@ class AuditLogger:
         self._segment_start_ns = None
         self._head = None
         self._sealed_in_segment = 0
-        self._last_checkpoint = None
+        self._checkpoint_tried_ns = None
         self.stats.segments.append(path)
 
     def _close_segment(self) -> None:
@@ -540,10 +539,15 @@ class AuditLogger:
         interval = self.config.checkpoint_interval_s
         if interval is None:
             return None
-        since = self._last_checkpoint[1] if self._last_checkpoint else self._segment_start_ns
+        since = self._checkpoint_tried_ns
+        if since is None:
+            since = batch[0].t_ns if self._segment_start_ns is None else self._segment_start_ns
         last = batch[-1]
-        if last.t_ns - (batch[0].t_ns if since is None else since) < interval * 1e9:
+        if last.t_ns - since < interval * 1e9:
             return None
+        # Counted as tried even if signing fails: a signer that is down (an HSM that times
+        # out) is asked again an interval later, not on every cycle.
+        self._checkpoint_tried_ns = last.t_ns
         sealed = self._sealed_in_segment + len(batch)
         return self._checkpoint_message(segment, last.cycle, last.t_ns, head, sealed, final=False)
 
