@@ -1,3 +1,341 @@
-"""trace-audit commands: storage (registered on the shared app)."""
+"""``trace-audit compact`` and ``trace-audit catalog``: storage tiers of a log root."""
 
 from __future__ import annotations
+
+import sys
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from trace_audit.cli.app import (
+    EXIT_FINDINGS,
+    JsonOption,
+    PlainOption,
+    app,
+    console,
+    guarded,
+    print_json,
+)
+from trace_runtime.errors import UsageError
+from trace_runtime.tiers import (
+    DEFAULT_RETENTION_NS,
+    Catalog,
+    ColdOptions,
+    CompactionReport,
+    Progress,
+    WarmPolicy,
+    compact,
+    parse_duration,
+    refresh_catalog,
+)
+
+_COMPACT_HELP = "\n\n".join(
+    [
+        "Move old segments of a log root (hot/ warm/ cold/) into the warm or cold tier.",
+        (
+            "[bold]warm[/bold]: flagged cycles (execution flags other than scenario:*, failed "
+            "checks, command changes, gaps, documentation gaps) and --context around them "
+            "stay byte for byte; routine cycles keep their seal and a pruned summary. Lossy "
+            "by design. [bold]cold[/bold]: lossless columnar re-encoding (dictionary + delta "
+            "coding, zstd) of hot or warm segments; every message decodes byte for byte."
+        ),
+        (
+            "A segment moves when its newest log time is --older-than before the newest log "
+            "time in the root (sim logs age in sim time), or before now with --now. Defaults: "
+            "24h for warm (the hot window), 7d for cold. Each segment is written aside, "
+            "fsynced, verified by decoding, renamed in, and only then is its source removed; "
+            "a killed run is completed by the next one. Retention deletes cold segments older "
+            "than --retention (default 183d) that verify; nothing else is ever deleted."
+        ),
+        "[bold]Examples[/bold]:",
+        "  trace-audit compact fleet/robot-7 --tier warm",
+        "  trace-audit compact run/ --tier cold --older-than 0 --json",
+        "  trace-audit compact /logs --tier cold --from hot --now --dry-run",
+    ]
+)
+
+_CATALOG_HELP = "\n\n".join(
+    [
+        "List the segments of a log root across tiers, from its catalog (catalog.json).",
+        (
+            "The catalog is rebuilt from the segment files (only changed files are re-read); "
+            "--refresh also writes it back. Per segment: robot, tier, segment number, time "
+            "and cycle range, first and last seal digest, file SHA-256 and size."
+        ),
+        "[bold]Examples[/bold]:",
+        "  trace-audit catalog fleet/robot-7",
+        "  trace-audit catalog run/ --refresh --json",
+    ]
+)
+
+
+def _duration(text: str | None, name: str) -> int | None:
+    if text is None:
+        return None
+    if text.strip().lower() in ("off", "none", "never"):
+        if name != "--retention":
+            raise UsageError(f"{name} needs a duration, e.g. 24h")
+        return None
+    return parse_duration(text)
+
+
+@app.command("compact", help=_COMPACT_HELP)
+def compact_command(
+    root: Annotated[Path, typer.Argument(help="A log root (with hot/ warm/ cold/).")],
+    *,
+    tier: Annotated[str, typer.Option("--tier", help="Target tier: warm or cold.")],
+    older_than: Annotated[
+        str | None,
+        typer.Option(
+            "--older-than",
+            help="Age a segment must have, e.g. 24h, 7d, 0 (default 24h warm, 7d cold).",
+        ),
+    ] = None,
+    robot: Annotated[
+        str | None, typer.Option("--robot", help="Only this robot's segments.")
+    ] = None,
+    source: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--from",
+            help="Source tier(s): hot for warm; hot and/or warm for cold (default both).",
+        ),
+    ] = None,
+    dry_run: Annotated[
+        bool, typer.Option("--dry-run", help="Show what would move; change nothing.")
+    ] = False,
+    now: Annotated[
+        bool,
+        typer.Option("--now", help="Measure age against the wall clock, not the newest log time."),
+    ] = False,
+    retention: Annotated[
+        str,
+        typer.Option(
+            "--retention", help="Delete verified cold segments older than this (or 'off')."
+        ),
+    ] = f"{DEFAULT_RETENTION_NS // 86_400_000_000_000}d",
+    context: Annotated[
+        str,
+        typer.Option("--context", help="Warm: time kept in full around each flagged cycle."),
+    ] = "2s",
+    keep_readings: Annotated[
+        bool,
+        typer.Option(
+            "--keep-readings",
+            help="Warm: keep the sensor readings a summary's evidence refs point at.",
+        ),
+    ] = False,
+    block_cycles: Annotated[
+        int,
+        typer.Option("--block-cycles", min=1, help="Cold: cycles per block (a seek decodes one)."),
+    ] = ColdOptions().block_cycles,
+    include_unfinished: Annotated[
+        bool,
+        typer.Option(
+            "--include-unfinished",
+            help="Also compact a robot's newest unfinished hot segment (a crashed robot's).",
+        ),
+    ] = False,
+    json_out: JsonOption = False,
+    plain: PlainOption = False,
+) -> None:
+    def run() -> CompactionReport:
+        context_ns = parse_duration(context)
+        return _with_progress(
+            lambda progress: compact(
+                root,
+                tier,
+                older_than_ns=_duration(older_than, "--older-than"),
+                robot=robot,
+                sources=source or None,
+                dry_run=dry_run,
+                wall_clock=now,
+                retention_ns=_duration(retention, "--retention"),
+                include_unfinished=include_unfinished,
+                warm=WarmPolicy(context_s=context_ns / 1e9, keep_readings=keep_readings),
+                cold=ColdOptions(block_cycles=block_cycles),
+                progress=progress,
+            ),
+            quiet=json_out or plain,
+        )
+
+    report = guarded(run)
+    if json_out:
+        print_json(_report_json(report))
+    else:
+        _render_report(report, console(plain))
+    if report.failed:
+        names = ", ".join(s.source for s in report.failed)
+        sys.stderr.write(f"trace-audit: compaction failed for {names}; sources kept\n")
+        raise typer.Exit(EXIT_FINDINGS)
+
+
+def _with_progress(call: Any, *, quiet: bool) -> CompactionReport:
+    if quiet or not sys.stderr.isatty():
+        result: CompactionReport = call(None)
+        return result
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, TimeRemainingColumn
+    from rich.progress import Progress as Bar
+
+    with Bar(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    ) as bar:
+        task = bar.add_task("compacting", total=None)
+
+        def progress(event: Progress) -> None:
+            bar.update(
+                task,
+                description=f"compacting {event.segment}",
+                completed=event.cycles_done,
+                total=event.cycles_total,
+            )
+
+        result = call(progress)
+        return result
+
+
+def _report_json(report: CompactionReport) -> dict[str, Any]:
+    return {
+        "root": str(report.root),
+        "tier": report.tier,
+        "sources": list(report.sources),
+        "dry_run": report.dry_run,
+        "reference": report.reference,
+        "reference_ns": report.reference_ns,
+        "older_than_ns": report.older_than_ns,
+        "cutoff_ns": report.cutoff_ns,
+        "retention_ns": report.retention_ns,
+        "cycles": report.cycles,
+        "bytes_before": report.bytes_before,
+        "bytes_after": report.bytes_after,
+        "seconds": round(report.seconds, 3),
+        "segments": report.segments,
+        "skipped": report.skipped,
+        "leftovers": report.leftovers,
+        "retention": report.retention,
+    }
+
+
+def _size(n: int | None) -> str:
+    if n is None:
+        return "-"
+    value = float(n)
+    for unit in ("B", "KB", "MB", "GB"):
+        if value < 1024 or unit == "GB":
+            return f"{value:.0f} {unit}" if unit == "B" else f"{value:.1f} {unit}"
+        value /= 1024
+    return f"{n} B"
+
+
+def _when(t_ns: int | None) -> str:
+    if t_ns is None:
+        return "-"
+    return datetime.fromtimestamp(t_ns / 1e9, tz=UTC).strftime("%Y-%m-%d %H:%M:%S")
+
+
+def _render_report(report: CompactionReport, out: Any) -> None:
+    from rich import box
+    from rich.table import Table
+
+    boxes = box.ASCII if out.no_color else box.SIMPLE_HEAVY
+    verb = "would move" if report.dry_run else "moved"
+    out.print(
+        f"[bold]compact[/bold] {report.root} -> {report.tier} (from {', '.join(report.sources)}): "
+        f"segments older than {report.older_than_ns / 3.6e12:g} h before the {report.reference} "
+        f"{_when(report.reference_ns)} UTC"
+    )
+    for leftover in report.leftovers:
+        out.print(f"  leftover {leftover.path}: {leftover.action}")
+    if report.segments:
+        table = Table(box=boxes, show_edge=False)
+        for name in ("segment", "from", "cycles", "before", "after", "ratio", "status"):
+            table.add_column(name, justify="left" if name in ("segment", "status") else "right")
+        for s in report.segments:
+            ratio = f"{s.bytes_before / s.bytes_after:.1f}x" if s.bytes_after else "-"
+            status = s.status + (f": {s.detail}" if s.detail else "")
+            if s.full_cycles is not None:
+                status += f" ({s.full_cycles} full, {s.cycles - s.full_cycles} summarised)"
+            table.add_row(
+                s.source.rsplit("/", 1)[-1],
+                s.source_tier,
+                str(s.cycles),
+                _size(s.bytes_before),
+                _size(s.bytes_after),
+                ratio,
+                status,
+            )
+        out.print(table)
+    compacted = report.compacted
+    if compacted:
+        rate = report.cycles / report.seconds if report.seconds > 0 else 0.0
+        out.print(
+            f"  {verb} {len(compacted)} segment(s), {report.cycles} cycles: "
+            f"{_size(report.bytes_before)} -> {_size(report.bytes_after)} "
+            f"({report.bytes_before / max(1, report.bytes_after):.1f}x) in {report.seconds:.1f} s "
+            f"({rate:,.0f} cycles/s)"
+        )
+    elif report.dry_run and report.segments:
+        out.print(f"  {verb} {len(report.segments)} segment(s), {report.cycles} cycles")
+    else:
+        out.print("  nothing to move")
+    reasons: dict[str, int] = {}
+    for s in report.skipped:
+        reasons[s.detail] = reasons.get(s.detail, 0) + 1
+    for reason, count in sorted(reasons.items()):
+        out.print(f"  left {count} segment(s): {reason}")
+    for r in report.retention:
+        detail = f" ({r.detail})" if r.detail else ""
+        out.print(f"  retention: {r.path} {r.status}{detail}")
+
+
+@app.command("catalog", help=_CATALOG_HELP)
+def catalog_command(
+    root: Annotated[Path, typer.Argument(help="A log root (with hot/ warm/ cold/).")],
+    *,
+    refresh: Annotated[
+        bool, typer.Option("--refresh", help="Write the rebuilt catalog to catalog.json.")
+    ] = False,
+    json_out: JsonOption = False,
+    plain: PlainOption = False,
+) -> None:
+    catalog = guarded(lambda: refresh_catalog(root, write=refresh))
+    if json_out:
+        print_json({"root": str(root), "segments": catalog.entries, "problems": catalog.problems})
+        return
+    _render_catalog(catalog, console(plain))
+
+
+def _render_catalog(catalog: Catalog, out: Any) -> None:
+    from rich import box
+    from rich.table import Table
+
+    boxes = box.ASCII if out.no_color else box.SIMPLE_HEAVY
+    table = Table(box=boxes, show_edge=False, title=f"catalog of {catalog.root}")
+    for name in ("robot", "seg", "tier", "start (UTC)", "end (UTC)", "cycles", "size", "seals"):
+        table.add_column(name, justify="right" if name in ("seg", "cycles", "size") else "left")
+    for e in catalog.entries:
+        seals = f"{(e.first_seal or '-')[:8]}..{(e.last_seal or '-')[:8]}"
+        tier = e.tier + (" (lossy)" if e.lossy else "") + ("" if e.finished else " unfinished")
+        table.add_row(
+            e.robot,
+            str(e.segment),
+            tier,
+            _when(e.start_ns),
+            _when(e.end_ns),
+            str(e.cycles),
+            _size(e.bytes),
+            seals,
+        )
+    out.print(table)
+    total = sum(e.bytes for e in catalog.entries)
+    out.print(f"  {len(catalog.entries)} segment(s), {_size(total)}")
+    for problem in catalog.problems:
+        out.print(f"  unreadable: {problem}")

@@ -1,0 +1,217 @@
+"""Shapes: the structure of a JSON message with its scalar leaves taken out.
+
+The cold codec splits every JSON message into a *shape* (objects with their keys in order,
+arrays of objects or arrays with their lengths, ``0`` where a scalar sits and ``1`` where an
+non-empty array of scalars sits, whatever its length) and the tuple of its leaf values. Messages of
+one shape then become columns, one per leaf path. Arrays of scalars are leaves of their own
+(*vectors*) so that a reading whose length varies (a cluster of beams, a list of flags)
+does not make a new shape every time.
+
+A shape is compiled once into two small Python functions: ``extract`` pulls the leaves out
+of a parsed message in shape order and raises when the message does not have exactly this
+shape (every container's type, key order and length are checked, so nothing can be
+dropped silently), and ``build`` puts leaves back into a new message. Generating straight-
+line code instead of walking the tree per message is what makes compaction fast enough;
+the code is generated from the shape only (keys enter it as ``repr`` literals), never from
+values, and shapes read from a file are validated before they are compiled.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+MAX_DEPTH = 32
+MAX_LEAVES = 1 << 16
+_SMALL_LIST = 8
+
+SCALAR = 0
+VECTOR = 1
+Descriptor = Any  # dict[str, Descriptor] | list[Descriptor] | SCALAR | VECTOR
+Path = tuple[str | int, ...]
+
+
+class ShapeError(ValueError):
+    """A value cannot be given a shape (a bare scalar, too deep, too big) or a shape is bad."""
+
+
+class Shape:
+    """A compiled shape: its descriptor, leaf paths (and which are vectors), extract, build."""
+
+    __slots__ = ("build", "descriptor", "extract", "key", "paths", "vectors")
+
+    def __init__(
+        self,
+        descriptor: Descriptor,
+        key: bytes,
+        *,
+        paths: list[Path],
+        vectors: frozenset[int],
+        extract: Callable[[Any], tuple[Any, ...]],
+        build: Callable[[Any], Any],
+    ) -> None:
+        self.descriptor = descriptor
+        self.key = key
+        self.paths = paths
+        self.vectors = vectors
+        self.extract = extract
+        self.build = build
+
+
+def describe(value: Any) -> Descriptor:
+    """The shape descriptor of a parsed JSON value (a non-empty object or array)."""
+    if not isinstance(value, dict | list) or not value:
+        raise ShapeError("only a non-empty object or array has a shape")
+    count = [0]
+    if type(value) is list:  # the root is a container even when it holds only scalars
+        return [_describe(v, 1, count) for v in value]
+    return _describe(value, 0, count)
+
+
+def _describe(value: Any, depth: int, count: list[int]) -> Descriptor:
+    if depth > MAX_DEPTH:
+        raise ShapeError(f"nested deeper than {MAX_DEPTH}")
+    if type(value) is dict:
+        return {k: _describe(v, depth + 1, count) for k, v in value.items()}
+    count[0] += 1
+    if count[0] > MAX_LEAVES:
+        raise ShapeError(f"more than {MAX_LEAVES} leaves")
+    if type(value) is list:
+        if not value or any(type(v) is dict or type(v) is list for v in value):
+            return [_describe(v, depth + 1, count) for v in value]
+        return VECTOR
+    return SCALAR
+
+
+def check_descriptor(descriptor: Any) -> None:
+    """Raise ``ShapeError`` unless ``descriptor`` is a well-formed shape (read from a file)."""
+    if not isinstance(descriptor, dict | list) or not descriptor:
+        raise ShapeError("a shape must be a non-empty object or array")
+    count = [0]
+    _check(descriptor, 0, count)
+
+
+def _check(desc: Any, depth: int, count: list[int]) -> None:
+    if depth > MAX_DEPTH:
+        raise ShapeError(f"shape nested deeper than {MAX_DEPTH}")
+    if type(desc) is dict:
+        for key, child in desc.items():
+            if type(key) is not str:
+                raise ShapeError("shape object keys must be strings")
+            _check(child, depth + 1, count)
+    elif type(desc) is list:
+        for child in desc:
+            _check(child, depth + 1, count)
+    elif type(desc) is int and desc in (SCALAR, VECTOR):
+        count[0] += 1
+        if count[0] > MAX_LEAVES:
+            raise ShapeError(f"shape has more than {MAX_LEAVES} leaves")
+    else:
+        raise ShapeError(f"bad shape node {desc!r}")
+
+
+def compile_shape(descriptor: Descriptor, key: bytes) -> Shape:
+    """Generate and compile the extractor and builder of a (checked) descriptor."""
+    if type(descriptor) is not dict and type(descriptor) is not list:
+        raise ShapeError("a shape's root must be an object or an array")
+    gen = _Generator()
+    body = gen.container(descriptor, "c0", ())
+    extract_src = "\n".join(
+        [
+            "def extract(c0):",
+            *(f"    {line}" for line in gen.checks),
+            f"    return ({', '.join(gen.out)},)",
+        ]
+    )
+    build_src = f"def build(v):\n    return {body}"
+    namespace: dict[str, Any] = {"K": tuple(gen.keys), "_CONTAINERS": (dict, list)}
+    exec(compile(extract_src + "\n" + build_src + "\n", "<trace-shape>", "exec"), namespace)
+    return Shape(
+        descriptor,
+        key,
+        paths=gen.paths,
+        vectors=frozenset(gen.vectors),
+        extract=namespace["extract"],
+        build=namespace["build"],
+    )
+
+
+class _Generator:
+    """Emits straight-line code for one shape, depth first in key / index order."""
+
+    def __init__(self) -> None:
+        self.checks: list[str] = []
+        self.out: list[str] = []
+        self.paths: list[Path] = []
+        self.keys: list[tuple[str, ...]] = []
+        self.vectors: list[int] = []
+        self._vars = 0
+
+    def _leaf(self, path: Path) -> str:
+        self.paths.append(path)
+        return f"v[{len(self.paths) - 1}]"
+
+    def _var(self) -> str:
+        self._vars += 1
+        return f"c{self._vars}"
+
+    def container(self, desc: Descriptor, var: str, path: Path) -> str:
+        if type(desc) is dict:
+            return self._object(desc, var, path)
+        return self._array(desc, var, path)
+
+    def _object(self, desc: dict[str, Descriptor], var: str, path: Path) -> str:
+        index = len(self.keys)
+        self.keys.append(tuple(desc))
+        self.checks.append(
+            f"if type({var}) is not dict or tuple({var}) != K[{index}]: raise KeyError"
+        )
+        if all(child == SCALAR and type(child) is int for child in desc.values()):
+            self.out.append(f"*{var}.values()")
+            items = [f"{k!r}: {self._leaf((*path, k))}" for k in desc]
+            return "{" + ", ".join(items) + "}"
+        items = []
+        for k, child in desc.items():
+            items.append(f"{k!r}: {self._child(child, f'{var}[{k!r}]', (*path, k))}")
+        return "{" + ", ".join(items) + "}"
+
+    def _array(self, desc: list[Descriptor], var: str, path: Path) -> str:
+        self.checks.append(
+            f"if type({var}) is not list or len({var}) != {len(desc)}: raise KeyError"
+        )
+        if all(child == SCALAR and type(child) is int for child in desc):
+            self.out.append(f"*{var}")
+            first = len(self.paths)
+            for i in range(len(desc)):
+                self.paths.append((*path, i))
+            if len(desc) <= _SMALL_LIST:
+                return "[" + ", ".join(f"v[{first + i}]" for i in range(len(desc))) + "]"
+            return f"list(v[{first}:{first + len(desc)}])"
+        items = [self._child(child, f"{var}[{i}]", (*path, i)) for i, child in enumerate(desc)]
+        return "[" + ", ".join(items) + "]"
+
+    def _child(self, child: Descriptor, access: str, path: Path) -> str:
+        if child == VECTOR and type(child) is int:
+            var = self._var()
+            self.checks.append(f"{var} = {access}")
+            # Only the first element is looked at: a vector holding containers after it is
+            # still stored exactly (as JSON), just less compactly.
+            self.checks.append(
+                f"if type({var}) is not list or not {var} or type({var}[0]) in _CONTAINERS: "
+                "raise KeyError"
+            )
+            self.out.append(var)
+            self.vectors.append(len(self.paths))
+            return self._leaf(path)
+        if type(child) is int:
+            self.out.append(access)
+            return self._leaf(path)
+        if not child:
+            kind = "dict" if type(child) is dict else "list"
+            var = self._var()
+            self.checks.append(f"{var} = {access}")
+            self.checks.append(f"if type({var}) is not {kind} or {var}: raise KeyError")
+            return "{}" if kind == "dict" else "[]"
+        var = self._var()
+        self.checks.append(f"{var} = {access}")
+        return self.container(child, var, path)

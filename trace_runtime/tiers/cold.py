@@ -1,0 +1,754 @@
+"""The cold tier: a lossless columnar codec for blocks of cycles, stored inside MCAP.
+
+A cold segment holds, per block of ``block_cycles`` whole cycles, one MCAP chunk with two
+messages: the block itself on ``/trace/cold/block`` (message encoding ``trace-cold-v1``,
+log time = the earliest log time in the block) and a small JSON index entry on
+``/trace/cold/index`` (log time = the latest), so the chunk index spans exactly the time the
+block covers and a seek to t decodes one block. Decoding a block gives back every message of
+the input (topic, sequence, log time and the data, byte for byte), which the input tier's
+assembler then turns into cycles: seals verify because the bytes they digest are unchanged.
+
+Inside a block (see docs/storage.md for the byte layout), each JSON message is split into a
+*shape* (keys, array lengths) and its leaf values; the values of one leaf path across the
+block form a column, and each column gets the cheapest exact coding that fits it: one
+constant, delta-coded integers, decimals as delta-coded scaled integers, raw doubles,
+dictionary-coded strings, or, for SHA-256 hex strings that are the digest of an earlier
+message of the block (seal digests, ``prev``, evidence ref digests), a back-reference to that
+message. The whole block is then compressed with zstd. Messages that are not canonical
+compact JSON are stored verbatim, so any input round-trips.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import struct
+from array import array
+from collections import Counter
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from itertools import accumulate, repeat, zip_longest
+from operator import mul, sub, truediv
+from typing import Any
+
+import orjson
+import zstandard
+
+from trace_runtime.reader import Cycle, RawMessage, assemble_hot
+from trace_runtime.records import TOPIC_CHECKPOINT, TOPIC_SEAL
+from trace_runtime.tiers._shapes import Shape, ShapeError, check_descriptor, compile_shape, describe
+
+CODEC = "trace-cold-v1"
+BLOCK_TOPIC = "/trace/cold/block"
+INDEX_TOPIC = "/trace/cold/index"
+BLOCK_SCHEMA = ("trace.ColdBlock", "", b"")
+INDEX_SCHEMA = (
+    "trace.ColdIndex",
+    "jsonschema",
+    b'{"type":"object","title":"Cold block index entry","properties":{'
+    b'"messages":{"type":"integer"},"cycles":{"type":"integer"},'
+    b'"first_cycle":{"type":["integer","null"]},"last_cycle":{"type":["integer","null"]},'
+    b'"first_seal":{"type":["string","null"]},"last_seal":{"type":["string","null"]}}}',
+)
+PLAIN_TOPICS = frozenset({TOPIC_CHECKPOINT})
+"""Topics kept out of blocks, as ordinary MCAP messages in the block's chunk: signed chain
+heads stay readable by any MCAP tool without decoding. The block records where they were."""
+DEFAULT_BLOCK_CYCLES = 512
+DEFAULT_LEVEL = 9
+_MAGIC = b"TCB\x01"
+_MAX_BLOCK_BYTES = 1 << 31
+_MAX_NEW_SHAPES_PER_TOPIC = 64
+_SHAPE_CACHE_LIMIT = 4096
+_NEG_ZERO = struct.pack("<d", -0.0)
+_SCALES = tuple(10.0**k for k in range(23))
+_DEC_TRIES = 10
+_MISMATCH = (KeyError, IndexError, TypeError, AttributeError)
+
+# column codecs
+_CONST, _INT, _DEC, _F64, _BOOL, _STR, _DIGEST, _JSON = "c", "i", "d", "f", "b", "s", "h", "j"
+_NULLABLE = "n"
+
+Assembler = Callable[[Sequence[RawMessage], str], list[Cycle]]
+
+
+class ColdFormatError(ValueError):
+    """A cold block is malformed (wrapped into ``LogReadError`` by callers)."""
+
+
+# --- compiled shapes, shared by encoders and decoders ------------------------------------
+
+_COMPILED: dict[bytes, Shape] = {}
+
+
+def _shape_for(descriptor: Any, key: bytes) -> Shape:
+    shape = _COMPILED.get(key)
+    if shape is None:
+        if len(_COMPILED) >= _SHAPE_CACHE_LIMIT:
+            _COMPILED.clear()
+        shape = compile_shape(descriptor, key)
+        _COMPILED[key] = shape
+    return shape
+
+
+# --- integers and byte planes ------------------------------------------------------------
+
+
+def _shuffle(raw: bytes, width: int) -> bytes:
+    """Byte planes: all first bytes, then all second bytes, ... (zstd likes the result)."""
+    return b"".join(raw[i::width] for i in range(width))
+
+
+def _unshuffle(data: bytes, width: int) -> bytes:
+    n = len(data) // width
+    out = bytearray(len(data))
+    for i in range(width):
+        out[i::width] = data[i * n : (i + 1) * n]
+    return bytes(out)
+
+
+def _pack_i64(values: Sequence[int], *, delta: bool) -> bytes | None:
+    """Delta-coded (optionally) little-endian int64 byte planes; None if out of range."""
+    if delta and values:
+        values = [values[0], *map(sub, values[1:], values[:-1])]
+    try:
+        return _shuffle(array("q", values).tobytes(), 8)
+    except OverflowError:
+        return None
+
+
+def _unpack_i64(data: bytes, *, delta: bool) -> list[int]:
+    values = array("q")
+    values.frombytes(_unshuffle(data, 8))
+    return list(accumulate(values)) if delta else values.tolist()
+
+
+def _pack_small(values: Sequence[int]) -> tuple[str, bytes]:
+    top = max(values, default=0)
+    code = "B" if top < 1 << 8 else "H" if top < 1 << 16 else "I"
+    return code, array(code, values).tobytes()
+
+
+def _unpack_small(code: str, data: bytes) -> list[int]:
+    if code not in ("B", "H", "I"):
+        raise ColdFormatError(f"bad integer width {code!r}")
+    values = array(code)
+    values.frombytes(data)
+    return values.tolist()
+
+
+# --- column coding -------------------------------------------------------------------------
+
+
+@dataclass(slots=True)
+class _Column:
+    """The values of one (topic, leaf path) across a block and where they came from.
+
+    ``groups`` lists the shape groups whose rows the values are, in order; it is None for
+    the element columns of vectors, whose values are not one per row.
+    """
+
+    values: list[Any] = field(default_factory=list)
+    groups: list[int] | None = field(default_factory=list)
+
+
+_GAP = object()
+LENGTHS = -1
+"""Last path element of a vector's lengths column (element columns end in the index)."""
+
+
+def _add_vector(
+    columns: dict[tuple[int, tuple[Any, ...]], _Column],
+    topic_id: int,
+    path: tuple[Any, ...],
+    vectors: tuple[list[Any], ...],
+) -> None:
+    """A vector leaf: one column of lengths, one column per element index."""
+    lengths = list(map(len, vectors))
+    _extend(columns, (topic_id, (*path, LENGTHS)), lengths)
+    if not lengths:
+        return
+    if lengths.count(lengths[0]) == len(lengths):
+        by_index: Iterable[tuple[Any, ...] | list[Any]] = zip(*vectors, strict=True)
+    else:
+        by_index = (
+            [x for x in column if x is not _GAP] for column in zip_longest(*vectors, fillvalue=_GAP)
+        )
+    for index, values in enumerate(by_index):
+        _extend(columns, (topic_id, (*path, index)), values)
+
+
+def _extend(
+    columns: dict[tuple[int, tuple[Any, ...]], _Column],
+    key: tuple[int, tuple[Any, ...]],
+    values: Iterable[Any],
+) -> None:
+    column = columns.get(key)
+    if column is None:
+        column = columns[key] = _Column(groups=None)
+    column.groups = None  # shared with a vector's elements: no longer one value per row
+    column.values += values
+
+
+class BlockEncoder:
+    """Encodes blocks of messages; keeps shapes and per-column hints from block to block."""
+
+    def __init__(self, level: int = DEFAULT_LEVEL) -> None:
+        self._zstd = zstandard.ZstdCompressor(level=level)
+        self._by_sig: dict[tuple[str, int, int], list[Shape]] = {}
+        self._hints: dict[tuple[str, tuple[Any, ...]], int] = {}
+        self.raw_messages = 0
+        self.messages = 0
+
+    def encode(self, messages: Sequence[RawMessage], tier: str, plain: Sequence[int] = ()) -> bytes:
+        """One block: ``messages`` in file order, ``tier`` = how their cycles assemble.
+
+        ``plain``: positions (in the whole stream) of the messages stored beside the block.
+        """
+        topics: dict[str, int] = {}
+        topic_ids: list[int] = []
+        shape_ids: list[int] = []
+        seq_deltas: list[int] = []
+        raw: list[bytes] = []
+        groups: dict[tuple[int, Shape], int] = {}
+        group_rows: list[list[tuple[Any, ...]]] = []
+        group_msgs: list[list[int]] = []
+        group_keys: list[tuple[int, Shape]] = []
+        new_shapes: Counter[str] = Counter()
+        last_seq: dict[int, int] = {}
+        digests: dict[str, int] = {}
+        sha256 = hashlib.sha256
+        loads, dumps = orjson.loads, orjson.dumps
+        by_sig = self._by_sig
+
+        for index, msg in enumerate(messages):
+            topic_id = topics.setdefault(msg.topic, len(topics))
+            topic_ids.append(topic_id)
+            seq_deltas.append(msg.sequence - last_seq.get(topic_id, 0))
+            last_seq[topic_id] = msg.sequence
+            data = msg.data
+            digests.setdefault(sha256(data).hexdigest(), index)
+            shape: Shape | None = None
+            row: tuple[Any, ...] = ()
+            try:
+                value = loads(data)
+            except orjson.JSONDecodeError:
+                value = None
+            if type(value) is dict or type(value) is list:
+                # Candidate shapes are found by the message's count of objects and arrays:
+                # one dict lookup, and a shape that would take a container for a scalar
+                # (valid, but coded poorly) is never even tried.
+                sig = (msg.topic, data.count(b"{"), data.count(b"["))
+                for candidate in by_sig.get(sig, ()):
+                    try:
+                        row = candidate.extract(value)
+                    except _MISMATCH:
+                        continue
+                    shape = candidate
+                    break
+                if shape is None and new_shapes[msg.topic] < _MAX_NEW_SHAPES_PER_TOPIC:
+                    shape = self._new_shape(value)
+                    if shape is not None:
+                        new_shapes[msg.topic] += 1
+                        row = shape.extract(value)
+                        if len(by_sig) >= _SHAPE_CACHE_LIMIT:
+                            by_sig.clear()
+                        by_sig.setdefault(sig, []).insert(0, shape)
+                if shape is not None:
+                    try:
+                        canonical = dumps(value) == data
+                    except orjson.JSONEncodeError:
+                        canonical = False
+                    if not canonical:
+                        shape = None
+            if shape is None:
+                raw.append(data)
+                shape_ids.append(0)
+                continue
+            key = (topic_id, shape)
+            group = groups.get(key)
+            if group is None:
+                group = groups[key] = len(group_rows)
+                group_rows.append([])
+                group_msgs.append([])
+                group_keys.append(key)
+            group_rows[group].append(row)
+            group_msgs[group].append(index)
+            shape_ids.append(group + 1)
+
+        self.messages += len(messages)
+        self.raw_messages += len(raw)
+        topic_names = list(topics)
+        columns: dict[tuple[int, tuple[Any, ...]], _Column] = {}
+        for group, (topic_id, shape) in enumerate(group_keys):
+            vectors = shape.vectors
+            slots = zip(*group_rows[group], strict=True)
+            for slot, (path, values) in enumerate(zip(shape.paths, slots, strict=True)):
+                if slot in vectors:
+                    _add_vector(columns, topic_id, path, values)
+                    continue
+                column = columns.get((topic_id, path))
+                if column is None:
+                    column = columns[(topic_id, path)] = _Column()
+                column.values += values
+                if column.groups is not None:
+                    column.groups.append(group)
+
+        payload: list[bytes] = []
+        col_headers: list[list[Any]] = []
+        for (topic_id, path), column in columns.items():
+            hint_key = (topic_names[topic_id], path)
+            codec, param, body = self._encode_column(column, hint_key, digests, group_msgs)
+            payload.append(body)
+            col_headers.append([topic_id, list(path), codec, len(body), param])
+
+        time_body = _pack_i64([m.log_time_ns for m in messages], delta=True)
+        seq_body = _pack_i64(seq_deltas, delta=False)
+        if time_body is None or seq_body is None:
+            raise ValueError("log time or sequence outside the int64 range")
+        topic_code, topic_body = _pack_small(topic_ids)
+        shape_code, shape_body = _pack_small(shape_ids)
+        raw_len_body = _pack_i64([len(r) for r in raw], delta=False) or b""
+        fixed = [topic_body, shape_body, seq_body, time_body, raw_len_body, b"".join(raw)]
+        header = {
+            "tier": tier,
+            "n": len(messages),
+            "topics": topic_names,
+            "shapes": [[t, s.descriptor] for t, s in group_keys],
+            "msg": [topic_code, shape_code, *(len(b) for b in fixed)],
+            "cols": col_headers,
+            "plain": list(plain),
+        }
+        head = orjson.dumps(header)
+        body = b"".join([struct.pack("<I", len(head)), head, *fixed, *payload])
+        return _MAGIC + self._zstd.compress(body)
+
+    def _new_shape(self, value: Any) -> Shape | None:
+        try:
+            descriptor = describe(value)
+        except ShapeError:
+            return None
+        return _shape_for(descriptor, orjson.dumps(descriptor))
+
+    def _encode_column(
+        self,
+        column: _Column,
+        hint_key: tuple[str, tuple[Any, ...]],
+        digests: dict[str, int],
+        group_msgs: list[list[int]],
+    ) -> tuple[str, Any, bytes]:
+        values = column.values
+        types = set(map(type, values))
+        if types <= {str, type(None)} and str in types:
+            if values.count(values[0]) == len(values):
+                return _CONST, values[0], b""
+            return _encode_strings(values, digests, lambda: _message_indexes(column, group_msgs))
+        if len(types) == 2 and type(None) in types:
+            kind = (types - {type(None)}).pop()
+            if kind is float or kind is int or kind is bool:
+                # Nullable numbers: a presence mask, and the numbers coded as a column.
+                mask = bytes([v is not None for v in values])
+                present = [v for v in values if v is not None]
+                codec, param, body = self._encode_typed(kind, present, hint_key)
+                return _NULLABLE, [codec, param, len(mask)], mask + body
+        if len(types) == 1:
+            return self._encode_typed(types.pop(), values, hint_key)
+        return _JSON, None, orjson.dumps(values)
+
+    def _encode_typed(
+        self, kind: type, values: list[Any], hint_key: tuple[str, tuple[Any, ...]]
+    ) -> tuple[str, Any, bytes]:
+        """A column whose values all have type ``kind`` (and are not strings)."""
+        n = len(values)
+        if kind is float:
+            raw = array("d", values).tobytes()
+            if raw == raw[:8] * n:
+                return _CONST, values[0], b""
+            return self._encode_floats(values, raw, hint_key)
+        if values.count(values[0]) == n:
+            return _CONST, values[0], b""
+        if kind is int:
+            packed = _pack_i64(values, delta=True)
+            if packed is not None:
+                return _INT, None, packed
+        elif kind is bool:
+            return _BOOL, None, bytes(values)
+        return _JSON, None, orjson.dumps(values)
+
+    def _encode_floats(
+        self, values: list[float], raw: bytes, hint_key: tuple[str, tuple[Any, ...]]
+    ) -> tuple[str, Any, bytes]:
+        hint = self._hints.get(hint_key)
+        if hint != -1:
+            # -0.0 == 0.0, so the check below cannot see a lost sign: list where they were.
+            negative_zeros = _negative_zeros(values, raw)
+            tries = range(_DEC_TRIES) if hint is None else (hint, *range(_DEC_TRIES))
+            for k in tries:
+                scale = _SCALES[k]
+                ints = list(map(round, map(mul, values, repeat(scale))))
+                if list(map(truediv, ints, repeat(scale))) == values:
+                    packed = _pack_i64(ints, delta=True)
+                    if packed is not None:
+                        self._hints[hint_key] = k
+                        return _DEC, [k, negative_zeros], packed
+        self._hints[hint_key] = -1
+        return _F64, None, _shuffle(raw, 8)
+
+
+def _negative_zeros(values: list[float], raw: bytes) -> list[int]:
+    """Positions of -0.0 in ``values`` (``raw`` is their float64 bytes)."""
+    if 0.0 not in values:
+        return []
+    found = []
+    at = raw.find(_NEG_ZERO)
+    while at != -1:
+        if at % 8 == 0:
+            found.append(at // 8)
+        at = raw.find(_NEG_ZERO, at + 1)
+    return found
+
+
+def _message_indexes(column: _Column, group_msgs: list[list[int]]) -> list[int] | None:
+    if column.groups is None:
+        return None
+    out: list[int] = []
+    for group in column.groups:
+        out += group_msgs[group]
+    return out
+
+
+def _encode_strings(
+    values: list[str], digests: dict[str, int], indexes: Callable[[], list[int] | None]
+) -> tuple[str, Any, bytes]:
+    refs = list(map(digests.get, values))
+    at_rows = indexes() if refs.count(None) * 2 < len(refs) else None
+    if at_rows is not None:
+        # Mostly digests of earlier messages: store how far back each one is.
+        offsets: list[int] = []
+        literals: list[str] = []
+        for value, ref, at in zip(values, refs, at_rows, strict=True):
+            if ref is not None and ref < at:
+                offsets.append(at - ref)
+            else:
+                offsets.append(0)
+                literals.append(value)
+        code, body = _pack_small(offsets)
+        return _DIGEST, [code, literals], body
+    table = list(dict.fromkeys(values))
+    position = {s: i for i, s in enumerate(table)}
+    code, body = _pack_small(list(map(position.__getitem__, values)))
+    return _STR, [code, table], body
+
+
+# --- decoding --------------------------------------------------------------------------------
+
+_DECOMPRESSOR = zstandard.ZstdDecompressor()
+
+
+@dataclass(frozen=True, slots=True)
+class DecodedBlock:
+    """A block's messages as they were, the tier they assemble as, and where the messages
+    stored beside the block (``PLAIN_TOPICS``) go back in."""
+
+    tier: str
+    messages: list[RawMessage]
+    plain: list[int]
+
+
+def decode_block(block: bytes) -> DecodedBlock:
+    """Decode one block: every message byte for byte, in order (plain ones left out)."""
+    if block[:4] != _MAGIC:
+        raise ColdFormatError("not a trace-cold-v1 block (bad magic)")
+    try:
+        body = _DECOMPRESSOR.decompress(block[4:], max_output_size=_MAX_BLOCK_BYTES)
+        return _decode_body(body)
+    except ColdFormatError:
+        raise
+    except (zstandard.ZstdError, orjson.JSONDecodeError, struct.error) as err:
+        raise ColdFormatError(f"corrupt cold block ({err})") from err
+    except (KeyError, IndexError, TypeError, ValueError, ShapeError) as err:
+        raise ColdFormatError(f"malformed cold block ({type(err).__name__}: {err})") from err
+
+
+def _decode_body(body: bytes) -> DecodedBlock:
+    (head_len,) = struct.unpack_from("<I", body, 0)
+    header = orjson.loads(body[4 : 4 + head_len])
+    pos = 4 + head_len
+    n = int(header["n"])
+    topic_code, shape_code, *sizes = header["msg"]
+    parts: list[bytes] = []
+    for size in sizes:
+        parts.append(body[pos : pos + size])
+        pos += size
+    topic_body, shape_body, seq_body, time_body, raw_len_body, raw_body = parts
+    topic_names: list[str] = header["topics"]
+    topic_ids = _unpack_small(topic_code, topic_body)
+    shape_ids = _unpack_small(shape_code, shape_body)
+    seq_deltas = _unpack_i64(seq_body, delta=False)
+    times = _unpack_i64(time_body, delta=True)
+    raw_lens = _unpack_i64(raw_len_body, delta=False) if raw_len_body else []
+    if not (len(topic_ids) == len(shape_ids) == len(seq_deltas) == len(times) == n):
+        raise ColdFormatError("message streams disagree on the message count")
+
+    shapes: list[tuple[int, Shape]] = []
+    for topic_id, descriptor in header["shapes"]:
+        check_descriptor(descriptor)
+        shapes.append((int(topic_id), _shape_for(descriptor, orjson.dumps(descriptor))))
+
+    reader = _ColumnReader()
+    for topic_id, path, codec, size, param in header["cols"]:
+        key = (int(topic_id), tuple(path))
+        if codec == _CONST:
+            reader.constants[key] = param  # no body: one value, repeated for every row
+        else:
+            reader.columns[key] = _decode_column(codec, param, body[pos : pos + size])
+        if codec == _DIGEST:
+            reader.digests.add(key)
+        pos += size
+
+    positions: list[list[int]] = [[] for _ in range(len(shapes) + 1)]
+    for index, group in enumerate(shape_ids):
+        positions[group].append(index)
+    if len(positions) != len(shapes) + 1:
+        raise ColdFormatError("a message names a shape the block does not have")
+    datas: list[bytes] = [b""] * n
+    raw_at = 0
+    for index, size in zip(positions[0], raw_lens, strict=True):
+        datas[index] = raw_body[raw_at : raw_at + size]
+        raw_at += size
+
+    # Messages whose shape holds digests of earlier messages are built in message order,
+    # after everything else (what they point at must exist first); the rest in bulk.
+    dumps = orjson.dumps
+    chained: list[tuple[int, Shape, Iterator[Sequence[Any]], tuple[int, ...]]] = []
+    for group, (topic_id, shape) in enumerate(shapes, start=1):
+        count = len(positions[group])
+        slices: list[list[Any]] = []
+        slots: list[int] = []
+        for slot, path in enumerate(shape.paths):
+            key = (topic_id, path)
+            if slot in shape.vectors:
+                slices.append(reader.take_vectors(key, count))
+                continue
+            slices.append(reader.take(key, count))
+            if key in reader.digests:
+                slots.append(slot)
+        rows = zip(*slices, strict=True)
+        if slots:
+            chained.append((group, shape, iter(rows), tuple(slots)))
+            continue
+        for index, data in zip(positions[group], map(dumps, map(shape.build, rows)), strict=True):
+            datas[index] = data
+    if chained:
+        order = sorted((i, entry) for entry in chained for i in positions[entry[0]])
+        hexes: dict[int, str] = {}
+        for index, (_group, shape, rows_left, digest_slots) in order:
+            row = list(next(rows_left))
+            for slot in digest_slots:
+                back = row[slot]
+                if type(back) is int:
+                    row[slot] = _hex_of(datas, hexes, index - back)
+            datas[index] = dumps(shape.build(row))
+
+    sequences: list[int] = []
+    last_seq: dict[int, int] = {}
+    for topic_id, delta in zip(topic_ids, seq_deltas, strict=True):
+        sequence = last_seq.get(topic_id, 0) + delta
+        last_seq[topic_id] = sequence
+        sequences.append(sequence)
+    topics = list(map(topic_names.__getitem__, topic_ids))
+    messages = list(map(RawMessage, topics, sequences, times, datas))
+    plain = [int(p) for p in header.get("plain", [])]
+    return DecodedBlock(str(header["tier"]), messages, plain)
+
+
+class _ColumnReader:
+    """Hands out the next values of each decoded column, shape group by shape group."""
+
+    def __init__(self) -> None:
+        self.columns: dict[tuple[int, tuple[Any, ...]], list[Any]] = {}
+        self.constants: dict[tuple[int, tuple[Any, ...]], Any] = {}
+        self.digests: set[tuple[int, tuple[Any, ...]]] = set()
+        self._taken: dict[tuple[int, tuple[Any, ...]], int] = {}
+
+    def take(self, key: tuple[int, tuple[Any, ...]], count: int) -> list[Any]:
+        if key in self.constants:
+            return [self.constants[key]] * count
+        values = self.columns[key]
+        start = self._taken.get(key, 0)
+        if start + count > len(values):
+            raise ColdFormatError("a column is shorter than its shapes need")
+        self._taken[key] = start + count
+        return values[start : start + count]
+
+    def take_vectors(self, key: tuple[int, tuple[Any, ...]], count: int) -> list[Any]:
+        topic_id, path = key
+        lengths = self.take((topic_id, (*path, LENGTHS)), count)
+        if not lengths:
+            return []
+        longest = max(lengths)
+        elements = [
+            self.take((topic_id, (*path, i)), sum(1 for n in lengths if n > i))
+            for i in range(longest)
+        ]
+        if longest == 0:
+            return [[] for _ in lengths]
+        if lengths.count(longest) == len(lengths):
+            return list(map(list, zip(*elements, strict=True)))
+        pending = [iter(column) for column in elements]
+        return [[next(pending[i]) for i in range(n)] for n in lengths]
+
+
+def _hex_of(datas: list[bytes], cache: dict[int, str], at: int) -> str:
+    if at < 0:
+        raise ColdFormatError("a digest reference points before the block")
+    value = cache.get(at)
+    if value is None:
+        value = cache[at] = hashlib.sha256(datas[at]).hexdigest()
+    return value
+
+
+def _decode_column(codec: str, param: Any, data: bytes, count: int | None = None) -> list[Any]:
+    if codec == _CONST:
+        if count is None:
+            raise ColdFormatError("a constant column outside a nullable one")
+        return [param] * count
+    if codec == _INT:
+        return _unpack_i64(data, delta=True)
+    if codec == _DEC:
+        k, negative_zeros = param
+        floats = list(map(truediv, _unpack_i64(data, delta=True), repeat(_SCALES[int(k)])))
+        for at in negative_zeros:
+            floats[at] = -0.0
+        return floats
+    if codec == _NULLABLE:
+        inner, inner_param, count = param
+        mask = data[:count]
+        present = iter(_decode_column(inner, inner_param, data[count:], mask.count(1)))
+        return [next(present) if flag else None for flag in mask]
+    if codec == _F64:
+        values = array("d")
+        values.frombytes(_unshuffle(data, 8))
+        return values.tolist()
+    if codec == _STR:
+        code, table = param
+        return list(map(table.__getitem__, _unpack_small(code, data)))
+    if codec == _DIGEST:
+        code, literals = param
+        offsets: list[Any] = _unpack_small(code, data)
+        if literals:
+            pending = iter(literals)
+            offsets = [x if x else next(pending) for x in offsets]
+        return offsets
+    if codec == _BOOL:
+        return [b != 0 for b in data]
+    if codec == _JSON:
+        values = orjson.loads(data)
+        if not isinstance(values, list):
+            raise ColdFormatError("a JSON column is not an array")
+        return values
+    raise ColdFormatError(f"unknown column codec {codec!r}")
+
+
+# --- blocks of cycles --------------------------------------------------------------------
+
+
+def iter_blocks(messages: Iterable[RawMessage], block_cycles: int) -> Iterator[list[RawMessage]]:
+    """Split a message stream into blocks of ``block_cycles`` sealed cycles each."""
+    block: list[RawMessage] = []
+    seals = 0
+    for msg in messages:
+        block.append(msg)
+        if msg.topic == TOPIC_SEAL:
+            seals += 1
+            if seals == block_cycles:
+                yield block
+                block, seals = [], 0
+    if block:
+        yield block
+
+
+def split_plain(
+    block: Sequence[RawMessage],
+) -> tuple[list[RawMessage], list[RawMessage], list[int]]:
+    """(messages for the block, messages stored beside it, their positions in ``block``)."""
+    kept: list[RawMessage] = []
+    plain: list[RawMessage] = []
+    positions: list[int] = []
+    for position, msg in enumerate(block):
+        if msg.topic in PLAIN_TOPICS:
+            plain.append(msg)
+            positions.append(position)
+        else:
+            kept.append(msg)
+    return kept, plain, positions
+
+
+def index_entry(block: Sequence[RawMessage]) -> dict[str, Any]:
+    """The JSON index entry stored next to a block: counts and the chain anchors."""
+    seals = [m for m in block if m.topic == TOPIC_SEAL]
+    first = orjson.loads(seals[0].data) if seals else None
+    last = orjson.loads(seals[-1].data) if seals else None
+    return {
+        "messages": len(block),
+        "cycles": len(seals),
+        "first_cycle": first.get("cycle") if isinstance(first, dict) else None,
+        "last_cycle": last.get("cycle") if isinstance(last, dict) else None,
+        "first_seal": hashlib.sha256(seals[0].data).hexdigest() if seals else None,
+        "last_seal": hashlib.sha256(seals[-1].data).hexdigest() if seals else None,
+    }
+
+
+_INNER: dict[str, Assembler] = {"hot": assemble_hot}
+
+
+def register_inner(tier: str, assembler: Assembler) -> None:
+    """Let cold blocks hold messages of another tier (warm registers itself here)."""
+    _INNER[tier] = assembler
+
+
+def assemble_cold(messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
+    """The reader's assembler for cold chunks: decode each block, assemble its cycles."""
+    cycles: list[Cycle] = []
+    for msg in messages:
+        if msg.topic != BLOCK_TOPIC:
+            continue
+        block = decode_block(msg.data)
+        assembler = _INNER.get(block.tier)
+        if assembler is None:
+            raise ColdFormatError(f"cold block holds messages of unknown tier {block.tier!r}")
+        cycles += assembler(block.messages, segment)
+    return cycles
+
+
+def iter_decoded(messages: Iterable[RawMessage]) -> Iterator[RawMessage]:
+    """The original message stream behind a cold segment's messages, in the original order.
+
+    ``messages`` is what ``Segment.iter_messages()`` gives for the whole segment: the plain
+    messages of each chunk come before its block and are put back where they were.
+    """
+    beside: list[RawMessage] = []
+    for msg in messages:
+        if msg.topic == BLOCK_TOPIC:
+            block = decode_block(msg.data)
+            if len(block.plain) != len(beside):
+                raise ColdFormatError("a block's plain messages are missing from its chunk")
+            yield from _merge(block.messages, beside, block.plain)
+            beside = []
+        elif msg.topic in PLAIN_TOPICS:
+            beside.append(msg)
+        elif msg.topic != INDEX_TOPIC:
+            yield msg
+    yield from beside
+
+
+def _merge(
+    inner: list[RawMessage], plain: list[RawMessage], positions: list[int]
+) -> Iterator[RawMessage]:
+    pending = iter(inner)
+    at = 0
+    for position, msg in zip(positions, plain, strict=True):
+        while at < position:
+            yield next(pending)
+            at += 1
+        yield msg
+        at += 1
+    yield from pending

@@ -1,0 +1,783 @@
+"""Compaction of a log root into the warm or cold tier, and retention of the cold tier.
+
+Each segment moves in one crash-safe sequence: write the new tier's file aside as
+``<name>.mcap.partial``, fsync it, verify it against the source by decoding it, rename it
+into ``warm/`` or ``cold/``, fsync the directory, update the catalog, and only then remove
+the source. A run killed at any point is completed by the next one: a ``.partial`` is
+discarded; a finished replacement whose source still exists is verified against it and
+the source removed (or, if it does not verify, the replacement is discarded and redone).
+So a segment is never lost, and once the next run has finished it is never in two tiers.
+
+Which segments move: those whose newest log time is ``older_than`` before the reference
+time, which is the newest log time anywhere in the root (so a simulator's log, in sim
+time, ages by its own clock) or, with ``wall_clock``, the current time. The newest hot
+segment of a robot that is not finished is the one its logger may still be writing, and
+is left alone unless ``include_unfinished``.
+
+Retention deletes only cold segments (already compacted) whose newest log time is more
+than ``retention_ns`` before the reference, and only if they verify (every seal links to the
+one before, every full layer message matches its seal digest); each deletion is recorded
+in ``retention.jsonl`` in the root first.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import time
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field, replace
+from itertools import zip_longest
+from pathlib import Path
+from typing import Any, Literal
+
+import orjson
+
+from trace_runtime.chain import digest
+from trace_runtime.errors import LogReadError, UsageError
+from trace_runtime.reader import RawMessage, Segment
+from trace_runtime.records import MESSAGE_MODELS, TOPIC_SEAL
+from trace_runtime.segment import OutMessage, SegmentWriteError, SegmentWriter
+from trace_runtime.session import SessionInfo
+from trace_runtime.tiers._files import (
+    PARTIAL_SUFFIX,
+    fsync_dir,
+    partial_path,
+    root_lock,
+)
+from trace_runtime.tiers.catalog import TIER_METADATA, TIERS, file_digest, refresh_catalog
+from trace_runtime.tiers.cold import (
+    BLOCK_SCHEMA,
+    BLOCK_TOPIC,
+    CODEC,
+    DEFAULT_BLOCK_CYCLES,
+    DEFAULT_LEVEL,
+    INDEX_SCHEMA,
+    INDEX_TOPIC,
+    BlockEncoder,
+    ColdFormatError,
+    index_entry,
+    iter_blocks,
+    iter_decoded,
+    split_plain,
+)
+from trace_runtime.tiers.warm import SUMMARY_SCHEMA, SUMMARY_TOPIC, WarmPolicy, warm_cycles
+
+SECOND_NS = 1_000_000_000
+DAY_NS = 86_400 * SECOND_NS
+DEFAULT_OLDER_THAN_NS = {"warm": DAY_NS, "cold": 7 * DAY_NS}
+DEFAULT_SOURCES = {"warm": ("hot",), "cold": ("hot", "warm")}
+DEFAULT_RETENTION_NS = 183 * DAY_NS
+RETENTION_LOG = "retention.jsonl"
+WARM_CHUNK_CYCLES = 256
+WARM_LEVEL = 9
+
+Tier = Literal["warm", "cold"]
+Status = Literal["compacted", "planned", "failed", "skipped"]
+
+_UNITS = {"s": 1, "m": 60, "h": 3600, "d": 86_400, "w": 7 * 86_400}
+_DURATION = re.compile(r"\s*(\d+(?:\.\d+)?)\s*([smhdw]?)\s*")
+
+
+def parse_duration(text: str) -> int:
+    """Nanoseconds in ``90s``, ``30m``, ``24h``, ``7d``, ``2w`` or a bare number of seconds."""
+    match = _DURATION.fullmatch(text)
+    if match is None:
+        raise UsageError(f"bad duration {text!r}: use e.g. 90s, 30m, 24h, 7d, 2w or 0")
+    return round(float(match.group(1)) * _UNITS[match.group(2) or "s"] * SECOND_NS)
+
+
+@dataclass(frozen=True, slots=True)
+class ColdOptions:
+    """How cold segments are encoded."""
+
+    block_cycles: int = DEFAULT_BLOCK_CYCLES
+    """Cycles per block; a seek decodes one block."""
+    level: int = DEFAULT_LEVEL
+    """zstd level of each block."""
+
+
+@dataclass(frozen=True, slots=True)
+class Progress:
+    """Reported while compacting: cycles done out of all cycles this run will compact."""
+
+    segment: str
+    cycles_done: int
+    cycles_total: int
+
+
+ProgressCallback = Callable[[Progress], None]
+
+
+@dataclass(slots=True)
+class SegmentResult:
+    """What happened (or, in a dry run, would happen) to one segment."""
+
+    source: str
+    target: str | None
+    robot: str
+    segment: int
+    source_tier: str
+    cycles: int
+    bytes_before: int
+    bytes_after: int | None
+    status: Status
+    detail: str = ""
+    seconds: float = 0.0
+    full_cycles: int | None = None
+    """Warm only: cycles kept in full (the rest are summaries)."""
+
+
+@dataclass(slots=True)
+class Leftover:
+    """Something a killed run left behind, and what this run did about it."""
+
+    path: str
+    action: str
+
+
+@dataclass(slots=True)
+class RetentionResult:
+    path: str
+    end_ns: int
+    status: Literal["deleted", "would delete", "kept"]
+    detail: str = ""
+
+
+@dataclass(slots=True)
+class CompactionReport:
+    """The result of ``compact``: per-segment results, leftovers handled, retention."""
+
+    root: Path
+    tier: str
+    sources: tuple[str, ...]
+    dry_run: bool
+    reference_ns: int | None
+    reference: Literal["newest log time", "wall clock", "given"]
+    older_than_ns: int
+    cutoff_ns: int | None
+    retention_ns: int | None
+    segments: list[SegmentResult] = field(default_factory=list)
+    leftovers: list[Leftover] = field(default_factory=list)
+    retention: list[RetentionResult] = field(default_factory=list)
+    skipped: list[SegmentResult] = field(default_factory=list)
+    seconds: float = 0.0
+
+    @property
+    def compacted(self) -> list[SegmentResult]:
+        return [s for s in self.segments if s.status == "compacted"]
+
+    @property
+    def failed(self) -> list[SegmentResult]:
+        return [s for s in self.segments if s.status == "failed"]
+
+    @property
+    def bytes_before(self) -> int:
+        return sum(s.bytes_before for s in self.segments if s.status != "failed")
+
+    @property
+    def bytes_after(self) -> int:
+        return sum(s.bytes_after or 0 for s in self.segments if s.status == "compacted")
+
+    @property
+    def cycles(self) -> int:
+        return sum(s.cycles for s in self.segments if s.status != "failed")
+
+
+class VerificationError(Exception):
+    """A replacement does not match its source (internal; reported per segment)."""
+
+
+# --- the entry point -----------------------------------------------------------------------
+
+
+def compact(
+    root: str | Path,
+    tier: str,
+    *,
+    older_than_ns: int | None = None,
+    robot: str | None = None,
+    sources: Iterable[str] | None = None,
+    dry_run: bool = False,
+    wall_clock: bool = False,
+    now_ns: int | None = None,
+    retention_ns: int | None = DEFAULT_RETENTION_NS,
+    include_unfinished: bool = False,
+    warm: WarmPolicy | None = None,
+    cold: ColdOptions | None = None,
+    progress: ProgressCallback | None = None,
+) -> CompactionReport:
+    """Move every eligible segment of ``root`` into ``tier`` ("warm" or "cold"); see module doc.
+
+    ``older_than_ns`` defaults to 24 h for warm and 7 days for cold; ``sources`` to hot for
+    warm and hot + warm for cold. ``now_ns`` fixes the reference time (tests, replays).
+    ``retention_ns=None`` turns retention off. A dry run changes nothing on disk.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise LogReadError(str(root), "not a log root (no such directory)")
+    if tier not in ("warm", "cold"):
+        raise UsageError(f"unknown target tier {tier!r}: use warm or cold")
+    chosen = tuple(sources) if sources is not None else DEFAULT_SOURCES[tier]
+    allowed = TIERS[: TIERS.index(tier)]
+    bad = [s for s in chosen if s not in allowed]
+    if bad or not chosen:
+        what = ", ".join(bad) or "nothing"
+        raise UsageError(f"cannot compact {what} into {tier}: sources are {', '.join(allowed)}")
+    older = DEFAULT_OLDER_THAN_NS[tier] if older_than_ns is None else older_than_ns
+    if older < 0 or (retention_ns is not None and retention_ns < 0):
+        raise UsageError("durations must not be negative")
+    warm_policy = warm or WarmPolicy()
+    cold_options = cold or ColdOptions()
+    if cold_options.block_cycles < 1:
+        raise UsageError("block_cycles must be at least 1")
+    started = time.perf_counter()
+    lock = contextlib.nullcontext() if dry_run else root_lock(root)
+    with lock:
+        settings = _Settings(
+            tier=tier,
+            sources=chosen,
+            older_than_ns=older,
+            robot=robot,
+            dry_run=dry_run,
+            wall_clock=wall_clock,
+            now_ns=now_ns,
+            retention_ns=retention_ns,
+            include_unfinished=include_unfinished,
+            warm=warm_policy,
+            cold=cold_options,
+        )
+        report = _run(root, settings, progress)
+    report.seconds = time.perf_counter() - started
+    return report
+
+
+@dataclass(frozen=True, slots=True)
+class _Settings:
+    tier: str
+    sources: tuple[str, ...]
+    older_than_ns: int
+    robot: str | None
+    dry_run: bool
+    wall_clock: bool
+    now_ns: int | None
+    retention_ns: int | None
+    include_unfinished: bool
+    warm: WarmPolicy
+    cold: ColdOptions
+
+
+def _run(root: Path, settings: _Settings, progress: ProgressCallback | None) -> CompactionReport:
+    tier, sources, robot = settings.tier, settings.sources, settings.robot
+    dry_run, now_ns, retention_ns = settings.dry_run, settings.now_ns, settings.retention_ns
+    older_than_ns = settings.older_than_ns
+    leftovers = recover(root, dry_run=dry_run)
+    segments, unreadable = _scan(root)
+    if now_ns is not None:
+        reference: int | None = now_ns
+        label: Literal["newest log time", "wall clock", "given"] = "given"
+    elif settings.wall_clock:
+        reference, label = time.time_ns(), "wall clock"
+    else:
+        reference = max((s.info.end_ns for s in segments.values()), default=None)
+        label = "newest log time"
+    cutoff = None if reference is None else reference - older_than_ns
+    report = CompactionReport(
+        root=root,
+        tier=tier,
+        sources=sources,
+        dry_run=dry_run,
+        reference_ns=reference,
+        reference=label,
+        older_than_ns=older_than_ns,
+        cutoff_ns=cutoff,
+        retention_ns=retention_ns,
+        leftovers=leftovers,
+    )
+    for path, reason in unreadable:
+        report.skipped.append(
+            SegmentResult(
+                _rel(root, path),
+                None,
+                "",
+                -1,
+                path.parent.name,
+                0,
+                _size(path),
+                None,
+                "skipped",
+                reason,
+            )
+        )
+    live = _live_segments(segments)
+    plan: list[tuple[Path, Segment]] = []
+    for path, segment in sorted(segments.items(), key=lambda item: _order(item[1])):
+        session = segment.session
+        if session.tier not in sources or (robot is not None and session.robot_id != robot):
+            continue
+        why = ""
+        if cutoff is None or segment.info.end_ns > cutoff:
+            why = "newer than the cutoff"
+        elif path in live and not settings.include_unfinished:
+            why = "unfinished newest hot segment: its logger may still be writing it"
+        if why:
+            report.skipped.append(_result(root, path, segment, None, status="skipped", detail=why))
+            continue
+        plan.append((path, segment))
+
+    total = sum(_cycle_estimate(s) for _, s in plan)
+    done = 0
+    for path, segment in plan:
+        target = root / tier / path.name
+        if dry_run:
+            report.segments.append(
+                _result(root, path, segment, target, status="planned", detail="")
+            )
+            continue
+
+        def advance(cycles: int, name: str = path.name) -> None:
+            nonlocal done
+            done += cycles
+            if progress is not None:
+                progress(Progress(name, min(done, total), total))
+
+        result = compact_segment(
+            root,
+            path,
+            segment,
+            tier,
+            warm_policy=settings.warm,
+            cold_options=settings.cold,
+            advance=advance,
+        )
+        report.segments.append(result)
+        del segments[path]
+    if retention_ns is not None and reference is not None:
+        report.retention = _retention(root, reference - retention_ns, robot, dry_run)
+    refresh_catalog(root, write=not dry_run)
+    return report
+
+
+def _order(segment: Segment) -> tuple[str, int]:
+    return segment.session.robot_id, segment.session.segment
+
+
+def _scan(root: Path) -> tuple[dict[Path, Segment], list[tuple[Path, str]]]:
+    segments: dict[Path, Segment] = {}
+    unreadable: list[tuple[Path, str]] = []
+    for tier in TIERS:
+        directory = root / tier
+        if not directory.is_dir():
+            continue
+        for path in sorted(directory.glob("*.mcap")):
+            try:
+                segments[path] = Segment(path)
+            except LogReadError as err:
+                unreadable.append((path, err.reason))
+    return segments, unreadable
+
+
+def _live_segments(segments: dict[Path, Segment]) -> set[Path]:
+    newest: dict[str, tuple[int, Path, Segment]] = {}
+    for path, segment in segments.items():
+        if segment.session.tier != "hot":
+            continue
+        key = segment.session.robot_id
+        if key not in newest or segment.session.segment > newest[key][0]:
+            newest[key] = (segment.session.segment, path, segment)
+    return {path for _, path, segment in newest.values() if not segment.info.finished}
+
+
+def _cycle_estimate(segment: Segment) -> int:
+    if segment.info.finished and TOPIC_SEAL in segment.info.channels:
+        return segment.info.channels[TOPIC_SEAL]
+    if segment.session.tier == "cold":
+        return sum(
+            int(orjson.loads(m.data).get("cycles", 0))
+            for m in segment.iter_messages()
+            if m.topic == INDEX_TOPIC
+        )
+    period = max(1, segment.session.period_ns)
+    return max(1, (segment.info.end_ns - segment.info.start_ns) // period + 1)
+
+
+def _result(
+    root: Path, path: Path, segment: Segment, target: Path | None, *, status: Status, detail: str
+) -> SegmentResult:
+    return SegmentResult(
+        source=_rel(root, path),
+        target=_rel(root, target) if target is not None else None,
+        robot=segment.session.robot_id,
+        segment=segment.session.segment,
+        source_tier=segment.session.tier,
+        cycles=_cycle_estimate(segment),
+        bytes_before=segment.info.bytes,
+        bytes_after=None,
+        status=status,
+        detail=detail,
+    )
+
+
+# --- one segment ---------------------------------------------------------------------------
+
+
+def compact_segment(
+    root: Path,
+    path: Path,
+    segment: Segment,
+    tier: str,
+    *,
+    warm_policy: WarmPolicy,
+    cold_options: ColdOptions,
+    advance: Callable[[int], None] = lambda _n: None,
+) -> SegmentResult:
+    """Write, verify and swap in the ``tier`` copy of one segment; remove the source last."""
+    started = time.perf_counter()
+    target_dir = root / tier
+    target_dir.mkdir(parents=True, exist_ok=True)
+    target = target_dir / path.name
+    partial = partial_path(target)
+    result = _result(root, path, segment, target, status="compacted", detail="")
+    try:
+        source_sha = file_digest(path)
+        with open(partial, "wb") as stream:
+            if tier == "cold":
+                full = None
+                _write_cold(segment, stream, source_sha, cold_options, advance)
+            else:
+                full = _write_warm(segment, stream, source_sha, warm_policy, advance)
+        verify_replacement(segment, partial)
+    except (VerificationError, LogReadError, ColdFormatError, SegmentWriteError, OSError) as err:
+        with contextlib.suppress(OSError):
+            partial.unlink()
+        result.status = "failed"
+        result.detail = str(err)
+        result.seconds = time.perf_counter() - started
+        return result
+    os.replace(partial, target)
+    fsync_dir(target_dir)
+    refresh_catalog(root)
+    path.unlink()
+    fsync_dir(path.parent)
+    result.bytes_after = target.stat().st_size
+    result.full_cycles = full
+    result.seconds = time.perf_counter() - started
+    return result
+
+
+def _tier_session(segment: Segment, tier: str) -> SessionInfo:
+    return replace(segment.session, tier=tier)
+
+
+def _tier_metadata(segment: Segment, tier: str, source_sha: str, **extra: str) -> dict[str, str]:
+    lossy = (
+        "true"
+        if tier == "warm" or segment.metadata.get(TIER_METADATA, {}).get("lossy") == "true"
+        else "false"
+    )
+    note = (
+        "lossy: routine cycles are summaries (seal kept in full; layer messages pruned; "
+        "sensor readings dropped unless keep_readings); flagged cycles and their context are "
+        "byte-exact copies"
+        if tier == "warm"
+        else "lossless re-encoding of its source: decoding gives back every message byte for byte"
+    )
+    if tier == "cold" and lossy == "true":
+        note += " (the source was a lossy warm segment)"
+    return {
+        "tier": tier,
+        "source_tier": segment.session.tier,
+        "source_sha256": source_sha,
+        "source_bytes": str(segment.info.bytes),
+        "lossy": lossy,
+        "note": note,
+        **extra,
+    }
+
+
+def _write_cold(
+    segment: Segment,
+    stream: Any,
+    source_sha: str,
+    options: ColdOptions,
+    advance: Callable[[int], None],
+) -> None:
+    # Blocks are zstd-compressed already; a second compression of the chunk would only cost time.
+    writer = SegmentWriter(stream, _tier_session(segment, "cold"), compression="")
+    block_channel = writer.channel(BLOCK_TOPIC, encoding=CODEC, schema=BLOCK_SCHEMA)
+    index_channel = writer.channel(INDEX_TOPIC, encoding="json", schema=INDEX_SCHEMA)
+    encoder = BlockEncoder(options.level)
+    source_tier = segment.session.tier
+    blocks = cycles = 0
+    for number, block in enumerate(iter_blocks(segment.iter_messages(), options.block_cycles)):
+        kept, plain, positions = split_plain(block)
+        data = encoder.encode(kept, source_tier, positions)
+        entry = index_entry(block)
+        first = min(m.log_time_ns for m in block)
+        last = max(m.log_time_ns for m in block)
+        writer.write_batch(
+            [
+                *(
+                    OutMessage(writer.channel(m.topic), m.sequence, m.log_time_ns, m.data)
+                    for m in plain
+                ),
+                OutMessage(block_channel, number, first, data),
+                OutMessage(index_channel, number, last, orjson.dumps(entry)),
+            ]
+        )
+        blocks += 1
+        cycles += entry["cycles"]
+        advance(entry["cycles"])
+    writer.add_metadata(
+        TIER_METADATA,
+        _tier_metadata(
+            segment,
+            "cold",
+            source_sha,
+            codec=CODEC,
+            block_cycles=str(options.block_cycles),
+            blocks=str(blocks),
+            cycles=str(cycles),
+            messages=str(encoder.messages),
+            verbatim_messages=str(encoder.raw_messages),
+        ),
+    )
+    writer.finish()
+
+
+def _write_warm(
+    segment: Segment,
+    stream: Any,
+    source_sha: str,
+    policy: WarmPolicy,
+    advance: Callable[[int], None],
+) -> int:
+    writer = SegmentWriter(stream, _tier_session(segment, "warm"), level=WARM_LEVEL)
+    writer.channel(SUMMARY_TOPIC, schema=SUMMARY_SCHEMA)
+    batch: list[OutMessage] = []
+    in_batch = full = summaries = 0
+    for cycle in warm_cycles(segment.iter_messages(), policy, segment.session.period_ns):
+        for msg in cycle.messages:
+            batch.append(
+                OutMessage(_channel(writer, msg.topic), msg.sequence, msg.log_time_ns, msg.data)
+            )
+        full += cycle.full
+        summaries += not cycle.full
+        in_batch += 1
+        if in_batch >= WARM_CHUNK_CYCLES:
+            writer.write_batch(batch)
+            advance(in_batch)
+            batch, in_batch = [], 0
+    if batch:
+        writer.write_batch(batch)
+        advance(in_batch)
+    writer.add_metadata(
+        TIER_METADATA,
+        _tier_metadata(
+            segment,
+            "warm",
+            source_sha,
+            full_cycles=str(full),
+            summary_cycles=str(summaries),
+            **policy.to_metadata(),
+        ),
+    )
+    writer.finish()
+    return full
+
+
+def _channel(writer: SegmentWriter, topic: str) -> int:
+    if topic.startswith("/trace/") and topic not in MESSAGE_MODELS and topic != SUMMARY_TOPIC:
+        # A /trace topic this version has no schema for (a newer writer): keep it, schemaless.
+        return writer.channel(topic, schema=("trace.Unknown", "", b""))
+    return writer.channel(topic)
+
+
+# --- verification --------------------------------------------------------------------------
+
+
+def verify_replacement(source: Segment, replacement: Path) -> None:
+    """Raise ``VerificationError`` unless ``replacement`` is exactly what ``source`` becomes."""
+    target = Segment(replacement)
+    tier = target.session.tier
+    if replace(target.session, tier=source.session.tier) != source.session:
+        raise VerificationError(f"{replacement.name}: session record differs from the source's")
+    if tier == "cold":
+        _same(source.iter_messages(), iter_decoded(target.iter_messages()), replacement)
+        if (target.info.start_ns, target.info.end_ns) != (source.info.start_ns, source.info.end_ns):
+            raise VerificationError(f"{replacement.name}: time range differs from the source's")
+    elif tier == "warm":
+        policy = WarmPolicy.from_metadata(target.metadata.get(TIER_METADATA, {}))
+        expected = (
+            m
+            for c in warm_cycles(source.iter_messages(), policy, source.session.period_ns)
+            for m in c.messages
+        )
+        _same(expected, target.iter_messages(), replacement)
+        # Independently of how summaries are made: every seal must be there, byte for byte.
+        _same(
+            (m for m in source.iter_messages() if m.topic == TOPIC_SEAL),
+            (m for m in target.iter_messages() if m.topic == TOPIC_SEAL),
+            replacement,
+        )
+    else:
+        raise VerificationError(f"{replacement.name}: tier {tier!r} is not a compaction target")
+
+
+def _same(expected: Iterator[RawMessage], actual: Iterator[RawMessage], path: Path) -> None:
+    for count, (want, got) in enumerate(zip_longest(expected, actual)):
+        if want != got:
+            if want is None or got is None:
+                raise VerificationError(f"{path.name}: message count differs from the source's")
+            raise VerificationError(
+                f"{path.name}: message {count} ({want.topic} at {want.log_time_ns}) differs"
+            )
+
+
+def chain_problems(segment: Segment, limit: int = 10) -> list[str]:
+    """Breaks in a segment's hash chain: seals that do not link, payloads that do not match."""
+    problems: list[str] = []
+    prev = segment.session.prev_seal
+    for cycle in segment.iter_cycles():
+        data = cycle.payloads.get(TOPIC_SEAL)
+        if data is None:
+            problems.append(f"cycle {cycle.cycle}: not sealed")
+        else:
+            seal = orjson.loads(data)
+            if seal.get("prev") != prev:
+                problems.append(f"cycle {cycle.cycle}: seal does not link to the previous seal")
+            named = seal.get("digests", {})
+            for topic, payload in cycle.payloads.items():
+                if topic != TOPIC_SEAL and named.get(topic) != digest(payload):
+                    problems.append(f"cycle {cycle.cycle}: {topic} does not match its seal digest")
+            prev = digest(data)
+        if len(problems) >= limit:
+            break
+    return problems
+
+
+# --- leftovers of a killed run ---------------------------------------------------------------
+
+
+def recover(root: Path, *, dry_run: bool = False) -> list[Leftover]:
+    """Finish or undo what a killed compaction left in ``root`` (report only, if dry run)."""
+    done: list[Leftover] = []
+    for tier in TIERS:
+        directory = root / tier
+        if not directory.is_dir():
+            continue
+        for partial in sorted(directory.glob(f"*{PARTIAL_SUFFIX}")):
+            if not dry_run:
+                partial.unlink()
+                fsync_dir(directory)
+            done.append(Leftover(_rel(root, partial), "unfinished write discarded"))
+    by_name: dict[str, list[Path]] = {}
+    for tier in TIERS:
+        directory = root / tier
+        if directory.is_dir():
+            for path in sorted(directory.glob("*.mcap")):
+                by_name.setdefault(path.name, []).append(path)
+    for copies in by_name.values():
+        if len(copies) < 2:
+            continue
+        # TIERS order: the least compacted copy is the source, the next one its replacement;
+        # a third copy (never made by compact) is left for the next run to settle.
+        done.append(_settle(root, copies[0], copies[1], dry_run))
+    return done
+
+
+def _settle(root: Path, source_path: Path, replacement: Path, dry_run: bool) -> Leftover:
+    try:
+        source = Segment(source_path)
+        verify_replacement(source, replacement)
+    except (VerificationError, LogReadError, ColdFormatError) as err:
+        if not dry_run:
+            replacement.unlink()
+            fsync_dir(replacement.parent)
+        return Leftover(_rel(root, replacement), f"replacement did not verify ({err}); discarded")
+    if not dry_run:
+        source_path.unlink()
+        fsync_dir(source_path.parent)
+    return Leftover(
+        _rel(root, source_path), f"replacement {_rel(root, replacement)} verified; source removed"
+    )
+
+
+# --- retention -------------------------------------------------------------------------------
+
+
+def _retention(
+    root: Path, cutoff_ns: int, robot: str | None, dry_run: bool
+) -> list[RetentionResult]:
+    out: list[RetentionResult] = []
+    directory = root / "cold"
+    if not directory.is_dir():
+        return out
+    for path in sorted(directory.glob("*.mcap")):
+        try:
+            segment = Segment(path)
+        except LogReadError as err:
+            out.append(RetentionResult(_rel(root, path), 0, "kept", f"unreadable: {err.reason}"))
+            continue
+        if robot is not None and segment.session.robot_id != robot:
+            continue
+        end = segment.info.end_ns
+        if end >= cutoff_ns:
+            continue
+        try:
+            problems = chain_problems(segment)
+        except (LogReadError, ColdFormatError) as err:
+            problems = [str(err)]
+        if problems:
+            out.append(
+                RetentionResult(_rel(root, path), end, "kept", "does not verify: " + problems[0])
+            )
+            continue
+        if dry_run:
+            out.append(RetentionResult(_rel(root, path), end, "would delete"))
+            continue
+        _record_retired(root, path, segment)
+        del segment
+        path.unlink()
+        fsync_dir(directory)
+        out.append(RetentionResult(_rel(root, path), end, "deleted"))
+    return out
+
+
+def _record_retired(root: Path, path: Path, segment: Segment) -> None:
+    last = None
+    for cycle in segment.iter_cycles(reverse=True):
+        data = cycle.payloads.get(TOPIC_SEAL)
+        if data is not None:
+            last = digest(data)
+            break
+    line = {
+        "path": _rel(root, path),
+        "robot": segment.session.robot_id,
+        "segment": segment.session.segment,
+        "start_ns": segment.info.start_ns,
+        "end_ns": segment.info.end_ns,
+        "prev_seal": segment.session.prev_seal,
+        "last_seal": last,
+        "sha256": file_digest(path),
+        "deleted_at_ns": time.time_ns(),
+    }
+    with open(root / RETENTION_LOG, "ab") as log:
+        log.write(orjson.dumps(line) + b"\n")
+        log.flush()
+        os.fsync(log.fileno())
+
+
+def _rel(root: Path, path: Path) -> str:
+    try:
+        return path.relative_to(root).as_posix()
+    except ValueError:
+        return str(path)
+
+
+def _size(path: Path) -> int:
+    try:
+        return path.stat().st_size
+    except OSError:
+        return 0
