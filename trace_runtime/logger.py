@@ -251,7 +251,7 @@ class AuditLogger:
 
         first_cycle, prev_seal, segment_no = 0, GENESIS, 0
         if self.is_root:
-            first_cycle, prev_seal, segment_no = _resume_point(self.path / "hot", robot_id)
+            first_cycle, prev_seal, segment_no = _resume_point(self.path, robot_id)
         self._next_cycle = first_cycle
         self._prev_seal = prev_seal
         self._session = SessionInfo(
@@ -599,17 +599,31 @@ class AuditLogger:
             log.warning("%s (reported once; see AuditLogger.stats)", message)
 
 
-def _resume_point(hot: Path, robot_id: str) -> tuple[int, str, int]:
-    """(next cycle, last seal digest, next segment number) after the newest segment in ``hot``."""
-    segments = sorted(hot.glob(f"{robot_id}_*.mcap")) if hot.is_dir() else []
-    if not segments:
+def _resume_point(root: Path, robot_id: str) -> tuple[int, str, int]:
+    """(next cycle, last seal digest, next segment number) after the robot's newest segment.
+
+    Segments move from ``hot/`` to ``warm/`` and ``cold/`` as they age (trace_runtime.tiers),
+    so all three are searched: the highest segment number wins, wherever it lives.
+    """
+    name = re.compile(re.escape(robot_id) + r"_(\d+)\.mcap")
+    numbered: list[tuple[int, int, Path]] = []
+    for rank, tier in enumerate(("hot", "warm", "cold")):
+        directory = root / tier
+        if directory.is_dir():
+            for path in directory.glob(f"{robot_id}_*.mcap"):
+                match = name.fullmatch(path.name)
+                if match:
+                    # A segment in two tiers (mid-compaction): the less compacted copy first.
+                    numbered.append((int(match.group(1)), -rank, path))
+    if not numbered:
         return 0, GENESIS, 0
     from trace_runtime.reader import last_seal  # deferred: the reader is not needed otherwise
 
-    number = int(segments[-1].stem.rsplit("_", 1)[-1])
+    numbered.sort()
+    number = numbered[-1][0]
     # The chain continues from the newest seal on disk. A segment a crash left without any
     # seal (killed before its first write) is skipped, so the chain does not restart.
-    for path in reversed(segments):
+    for _number, _rank, path in reversed(numbered):
         found = last_seal(path)
         if found is not None:
             seal, seal_digest = found

@@ -44,6 +44,7 @@ SUMMARY_SCHEMA = (
     b'"t_ns":{"type":"integer"},"layers":{"type":"object"}}}',
 )
 DEFAULT_CONTEXT_S = 2.0
+_MAX_PENDING = 100_000  # bounds memory if log times ever run backwards
 INFORMATIONAL_PREFIXES = ("scenario:",)
 
 
@@ -57,12 +58,6 @@ class WarmPolicy:
     """Keep the sensor readings that a summary's evidence refs point at (same cycle)."""
     informational_prefixes: tuple[str, ...] = INFORMATIONAL_PREFIXES
     """Execution flags with these prefixes do not flag a cycle."""
-
-    def context_cycles(self, period_ns: int) -> int:
-        """The context window in cycles at the segment's nominal period."""
-        if period_ns <= 0:
-            return 0
-        return max(0, round(self.context_s * 1e9 / period_ns))
 
     def to_metadata(self) -> dict[str, str]:
         return {
@@ -351,29 +346,40 @@ def warm_cycles(
 ) -> Iterator[WarmCycle]:
     """Turn a hot message stream into the warm tier's cycles, in order.
 
-    Deterministic: the same input and policy give the same output, which is how a warm
-    segment is verified against its source.
+    The context window is in log time: every cycle within ``context_s`` of a flagged cycle
+    (before or after) is kept in full, however many cycles that is around a gap. Memory is
+    bounded by the cycles of one window. Deterministic: the same input and policy give the
+    same output, which is how a warm segment is verified against its source.
     """
-    window = policy.context_cycles(period_ns)
+    window_ns = round(policy.context_s * 1e9)
     flagger = _Flagger(policy, period_ns)
-    pending: deque[tuple[_Parsed, list[str], bool]] = deque()
-    keep_until = -1
-    for index, group in enumerate(iter_message_cycles(messages)):
+    pending: deque[list[Any]] = deque()  # [cycle, reasons, full], oldest first
+    keep_until_ns: int | None = None
+    for group in iter_message_cycles(messages):
         cycle = _parse(group)
         if cycle.seal is None and not cycle.layers:
             # No cycle here (e.g. the closing checkpoint after the last seal): copy it as is.
-            pending.append((cycle, [], True))
+            pending.append([cycle, [], True])
             continue
         reasons = flagger.reasons(cycle)
         if reasons:
-            for i, (held, why, _full) in enumerate(pending):
-                pending[i] = (held, why, True)
-            keep_until = index + window
-        pending.append((cycle, reasons, bool(reasons) or index <= keep_until))
-        while len(pending) > window:
-            yield _emit(*pending.popleft(), policy)
+            for held in pending:
+                if held[0].t_ns >= cycle.t_ns - window_ns:
+                    held[2] = True
+            keep_until_ns = cycle.t_ns + window_ns
+        full = bool(reasons) or (keep_until_ns is not None and cycle.t_ns <= keep_until_ns)
+        pending.append([cycle, reasons, full])
+        # Cycles more than one window older than this one cannot be reached by a later flag.
+        while pending and (
+            pending[0][0].t_ns < cycle.t_ns - window_ns or len(pending) > _MAX_PENDING
+        ):
+            yield _emit(*_unpack(pending.popleft()), policy)
     while pending:
-        yield _emit(*pending.popleft(), policy)
+        yield _emit(*_unpack(pending.popleft()), policy)
+
+
+def _unpack(held: list[Any]) -> tuple[_Parsed, list[str], bool]:
+    return held[0], held[1], held[2]
 
 
 def _emit(cycle: _Parsed, reasons: list[str], full: bool, policy: WarmPolicy) -> WarmCycle:
