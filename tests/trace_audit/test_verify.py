@@ -1,0 +1,283 @@
+"""``verify_log``, ``trace-audit verify`` and ``keygen`` on clean, crashed, gapped, damaged logs.
+
+The tamper campaign lives in test_verify_tamper.py; this file pins what a clean log looks
+like (zero findings, the validated range, what is anchored) and what the CLI prints and exits.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from tests.trace_audit.conftest import PERIOD_NS, T0_NS, fill_cycle, write_log
+from tests.trace_audit.test_verify_tamper import decode, flip_byte, write, write_signed_log
+from trace_audit.cli import app
+from trace_audit.verify import seal_status, verify_log
+from trace_runtime import AuditLogger, LoggerConfig, open_log
+from trace_runtime.errors import LogReadError
+from trace_runtime.integrity import Ed25519Signer, generate_keypair, load_public_key, load_signer
+from trace_runtime.records import TOPIC_ACTION
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _kinds(items: list) -> list[str]:  # type: ignore[type-arg]
+    return [f.kind for f in items]
+
+
+# --- clean logs -------------------------------------------------------------------------------
+
+
+def test_a_clean_log_reports_its_validated_range(sample_log: Path) -> None:
+    report = verify_log(sample_log)
+    assert report.ok and report.findings == []
+    assert (report.first_cycle, report.last_cycle) == (0, 99)
+    assert (report.start_ns, report.end_ns) == (T0_NS, T0_NS + 99 * PERIOD_NS)
+    assert report.cycles == report.cycles_valid == 100
+    assert report.checkpoints == report.checkpoints_valid == 1  # the closing one
+    (robot,) = report.robots
+    assert (robot.robot_id, robot.anchored_cycle, robot.unanchored_cycles) == ("amr-7", 99, 0)
+    # The fixture's "clear" cycles log a scan no evidence cites: said, not hidden.
+    assert set(_kinds(report.notes)) == {"signatures_unchecked", "uncovered_sensors"}
+    assert not report.signatures_checked
+
+
+def test_declared_drops_are_gaps_not_tampering(tmp_path: Path) -> None:
+    skipped = {5, 6, 40}
+    path = write_log(tmp_path / "gaps.mcap", skip=lambda i: i in skipped)
+    report = verify_log(path)
+    assert report.ok, report.findings
+    gaps = [n for n in report.notes if n.kind == "declared_gap"]
+    assert [(g.first_cycle, g.last_cycle) for g in gaps] == [(5, 6), (40, 40)]
+    assert report.declared_dropped == 3 and report.cycles_valid == 97
+
+
+def test_a_crashed_log_has_an_unanchored_tail_but_no_finding(crashed_log: Path) -> None:
+    report = verify_log(crashed_log)
+    assert report.ok, report.findings
+    assert {"recovered", "unanchored"} <= set(_kinds(report.notes))
+    (robot,) = report.robots
+    assert robot.anchored_cycle is None and robot.unanchored_cycles == 100
+
+
+def test_two_robots_in_one_root_are_verified_separately(tmp_path: Path) -> None:
+    root = tmp_path / "fleet"
+    write_log(root, robot_id="amr-1")
+    write_log(root, robot_id="amr-2")
+    report = verify_log(root)
+    assert report.ok and [r.robot_id for r in report.robots] == ["amr-1", "amr-2"]
+    assert report.cycles_valid == 200
+
+
+def test_a_signed_log_without_the_key_is_checked_but_says_so(tmp_path: Path) -> None:
+    signer = Ed25519Signer.generate()
+    path = write_signed_log(tmp_path / "run.mcap", signer, 30)
+    unchecked = verify_log(path)
+    assert unchecked.ok and "signatures_unchecked" in _kinds(unchecked.notes)
+    checked = verify_log(path, key=signer.public_key)
+    assert checked.ok and checked.signatures_checked and checked.key_id == signer.key_id
+    assert checked.checkpoints_valid == checked.checkpoints == 3  # at 1 s, 2 s and the close
+
+
+def test_unsigned_checkpoints_are_findings_when_a_key_is_expected(sample_log: Path) -> None:
+    report = verify_log(sample_log, key=Ed25519Signer.generate().public_key)
+    assert _kinds(report.findings) == ["unsigned_checkpoint"]
+    assert report.findings[0].covers(99)
+
+
+def test_simulator_log_is_clean_and_its_drops_are_the_injected_ones(tmp_path: Path) -> None:
+    sim = pytest.importorskip("sim")
+    result = sim.run(sim.RunConfig(out=tmp_path / "run.mcap", cycles=60, seed=7))
+    report = verify_log(result.out)
+    assert report.ok, report.findings
+    truth = sim.read_truth(result.truth)
+    dropped = sorted(f["cycle"] for f in truth if f["kind"] == "audit_write_timeout")
+    gaps = [(n.first_cycle, n.last_cycle) for n in report.notes if n.kind == "declared_gap"]
+    declared = sorted(
+        c for a, b in gaps if a is not None and b is not None for c in range(a, b + 1)
+    )
+    assert declared == dropped
+    assert report.cycles_valid == 300 - len(dropped)
+
+
+# --- a robot killed with SIGKILL, then restarted -------------------------------------------------
+
+ROBOT = """
+import sys, time
+from tests.trace_audit.conftest import fill_cycle
+from trace_runtime import AuditLogger, LoggerConfig
+
+root, key, cycles = sys.argv[1], sys.argv[2], int(sys.argv[3])
+config = LoggerConfig(checkpoint_key=key, checkpoint_interval_s=0.1, fsync_interval_s=None)
+with AuditLogger(root, robot_id="amr-9", period_s=0.01, config=config) as log:
+    for i in range(cycles):
+        with log.cycle() as c:
+            fill_cycle(c, "ped_close" if i % 20 < 10 else "blocked")
+        print(c.cycle, flush=True)
+        time.sleep(0.01)
+"""
+
+
+def _robot(root: Path, key: Path, cycles: int, kill_after: int | None) -> int:
+    """Run the robot in a subprocess; SIGKILL it after ``kill_after`` cycles. Last cycle seen."""
+    command = [sys.executable, "-c", ROBOT, str(root), str(key), str(cycles)]
+    with subprocess.Popen(command, stdout=subprocess.PIPE, text=True, cwd=REPO) as proc:
+        assert proc.stdout is not None
+        last = -1
+        deadline = time.monotonic() + 60
+        for line in proc.stdout:
+            last = int(line)
+            if (kill_after is not None and last >= kill_after) or time.monotonic() > deadline:
+                os.kill(proc.pid, signal.SIGKILL)
+                break
+        proc.wait()
+    return last
+
+
+def test_a_robot_killed_mid_run_and_restarted_verifies_clean(tmp_path: Path) -> None:
+    keys = generate_keypair(tmp_path / "keys")
+    public = load_public_key(keys.public_path)
+    root = tmp_path / "root"
+    _robot(root, keys.private_path, 10_000, kill_after=45)
+    crashed = verify_log(root, key=public)
+    assert crashed.ok, crashed.findings
+    assert "recovered" in _kinds(crashed.notes)
+    (robot,) = crashed.robots
+    assert robot.last_cycle is not None and robot.last_cycle >= 44
+
+    _robot(root, keys.private_path, 30, kill_after=None)  # restarts, continues, closes
+    report = verify_log(root, key=public)
+    assert report.ok, report.findings
+    (robot,) = report.robots
+    assert len(report.segments) == 2 and robot.first_cycle == 0
+    # The restarted robot's checkpoints vouch for the crashed tail too: the chain goes on.
+    assert robot.unanchored_cycles == 0 and robot.anchored_cycle == robot.last_cycle
+    numbers = [c.cycle for c in open_log(root).iter_cycles()]
+    assert numbers == list(range(len(numbers)))
+
+
+# --- one decision ---------------------------------------------------------------------------------
+
+
+def test_seal_status_of_one_decision(tmp_path: Path) -> None:
+    root = tmp_path / "root"
+    logger = AuditLogger(
+        root,
+        robot_id="amr-7",
+        config=LoggerConfig(threaded=False, fsync_interval_s=None, max_segment_s=2.0),
+    )
+    for i in range(50):
+        with logger.cycle(T0_NS + i * PERIOD_NS) as c:
+            fill_cycle(c, "ped_close")
+    logger.close()
+    log = open_log(root)
+    for number in (0, 7, 20, 21, 49):  # 20 opens the second segment
+        cycle = log.get_cycle(number)
+        assert cycle is not None
+        status = seal_status(log, cycle)
+        assert status.state == "verified" and status.link == "ok", (number, status)
+    cycle = log.get_cycle(7)
+    assert cycle is not None
+    cycle.payloads[TOPIC_ACTION] = cycle.payloads[TOPIC_ACTION].replace(b"STOP", b"GO!!")
+    status = seal_status(log, cycle)
+    assert status.state == "modified" and status.modified == (TOPIC_ACTION,)
+
+
+# --- the command line ---------------------------------------------------------------------
+
+runner = CliRunner()
+
+
+def _run(*args: str) -> tuple[int, str, str]:
+    result = runner.invoke(app, list(args))
+    return result.exit_code, result.stdout, result.stderr
+
+
+def test_cli_verify_clean_prints_the_range_and_exits_0(sample_log: Path) -> None:
+    code, out, err = _run("verify", str(sample_log), "--plain")
+    assert code == 0, err
+    assert "CLEAN" in out and "cycles 0..99" in out and "t = 100.000 s .. 109.900 s" in out
+    assert "anchored" in out and "through cycle 99" in out
+    assert "not checked (no --key)" in out
+
+
+def test_cli_verify_with_a_key_and_json(tmp_path: Path) -> None:
+    keys = generate_keypair(tmp_path / "keys")
+    path = write_signed_log(tmp_path / "run.mcap", load_signer(keys.private_path), 25)
+    code, out, err = _run("verify", str(path), "--key", str(keys.public_path), "--json")
+    assert code == 0, err
+    data = json.loads(out)
+    assert data["ok"] is True and data["findings"] == [] and data["key_id"] == keys.key_id
+    assert data["robots"][0]["anchored_cycle"] == 24 and data["cycles_valid"] == 25
+
+
+def test_cli_verify_findings_exit_1_and_are_located(tmp_path: Path) -> None:
+    signer = Ed25519Signer.generate()
+    path = write_signed_log(tmp_path / "run.mcap", signer, 30)
+    decoded = decode(path)
+    expect = flip_byte(decoded, random.Random(3), signer)
+    write(decoded, path, random.Random(3))
+    (tmp_path / "robot.pub").write_bytes(signer.public_key.raw)
+    code, out, _err = _run("verify", str(path), "--key", str(tmp_path / "robot.pub"), "--plain")
+    assert code == 1
+    assert "FINDING" in out and "Findings" in out and str(expect.cycle) in out
+    code, out, _err = _run("verify", str(path), "--key", str(tmp_path / "robot.pub"), "--json")
+    data = json.loads(out)
+    assert code == 1 and data["ok"] is False
+    assert any(
+        f["first_cycle"] <= expect.cycle <= (f["last_cycle"] or f["first_cycle"])
+        for f in data["findings"]
+        if f["first_cycle"] is not None
+    )
+
+
+def test_cli_verify_unreadable_input_exits_3(tmp_path: Path) -> None:
+    code, _out, err = _run("verify", str(tmp_path / "nope.mcap"))
+    assert code == 3 and err.startswith("trace-audit: ") and len(err.splitlines()) == 1
+    junk = tmp_path / "junk.mcap"
+    junk.write_bytes(b"this is not an mcap file at all")
+    code, _out, err = _run("verify", str(junk))
+    assert code == 3 and "not an MCAP file" in err
+
+
+def test_cli_verify_bad_key_is_a_usage_error(sample_log: Path, tmp_path: Path) -> None:
+    (tmp_path / "bad.pub").write_text("hello\n")
+    code, _out, err = _run("verify", str(sample_log), "--key", str(tmp_path / "bad.pub"))
+    assert code == 2 and "public key" in err and len(err.splitlines()) == 1
+
+
+def test_a_damaged_segment_in_a_root_is_a_finding_not_a_crash(tmp_path: Path) -> None:
+    root = tmp_path / "root"
+    write_log(root)
+    (root / "hot" / "amr-7_000001.mcap").write_bytes(b"\x89MCAP0\r\n garbage")
+    report = verify_log(root)
+    assert "damaged" in _kinds(report.findings) and report.cycles_valid == 100
+    with pytest.raises(LogReadError):
+        verify_log(root / "hot" / "amr-7_000001.mcap")
+
+
+def test_cli_keygen_writes_a_key_pair_and_refuses_to_overwrite(tmp_path: Path) -> None:
+    out = tmp_path / "keys"
+    code, stdout, err = _run("keygen", "--out", str(out), "--name", "amr-7", "--plain")
+    assert code == 0, err
+    assert (out / "amr-7.key").exists() and (out / "amr-7.pub").exists()
+    assert "trace-audit verify LOG --key" in stdout
+    code, _stdout, err = _run("keygen", "--out", str(out), "--name", "amr-7")
+    assert code == 2 and "refusing to overwrite" in err
+    code, stdout, err = _run("keygen", "--out", str(out), "--name", "amr-7", "--force", "--json")
+    assert code == 0 and len(json.loads(stdout)["key_id"]) == 64
+
+
+def test_every_integrity_command_has_help_with_an_example() -> None:
+    for command in ("verify", "keygen"):
+        code, out, _err = _run(command, "--help")
+        assert code == 0 and "Examples" in out and f"trace-audit {command}" in out
