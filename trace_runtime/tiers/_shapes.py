@@ -120,7 +120,7 @@ def compile_shape(descriptor: Descriptor, key: bytes) -> Shape:
         [
             "def extract(c0):",
             *(f"    {line}" for line in gen.checks),
-            f"    return ({', '.join(gen.out)},)",
+            f"    return ({', '.join(gen.out)},)" if gen.out else "    return ()",
         ]
     )
     build_src = f"def build(v):\n    return {body}"

@@ -33,6 +33,7 @@ from typing import Any
 import orjson
 import zstandard
 
+from trace_runtime.errors import LogReadError
 from trace_runtime.reader import Cycle, RawMessage, assemble_hot
 from trace_runtime.records import TOPIC_CHECKPOINT, TOPIC_SEAL
 from trace_runtime.tiers._shapes import Shape, ShapeError, check_descriptor, compile_shape, describe
@@ -119,6 +120,24 @@ def _unpack_i64(data: bytes, *, delta: bool) -> list[int]:
     values = array("q")
     values.frombytes(_unshuffle(data, 8))
     return list(accumulate(values)) if delta else values.tolist()
+
+
+def _pack_stream(values: Sequence[int], *, delta: bool) -> bytes:
+    """A message-level integer stream: ``Q`` + int64 byte planes, or (MCAP times are uint64,
+    beyond int64 in no real log) ``J`` + the values as JSON."""
+    packed = _pack_i64(values, delta=delta)
+    return b"Q" + packed if packed is not None else b"J" + orjson.dumps(list(values))
+
+
+def _unpack_stream(data: bytes, *, delta: bool) -> list[int]:
+    if data[:1] == b"J":
+        values = orjson.loads(data[1:])
+        if not isinstance(values, list) or not all(type(v) is int for v in values):
+            raise ColdFormatError("bad integer stream")
+        return values
+    if data[:1] != b"Q":
+        raise ColdFormatError("bad integer stream tag")
+    return _unpack_i64(data[1:], delta=delta)
 
 
 def _pack_small(values: Sequence[int]) -> tuple[str, bytes]:
@@ -300,10 +319,8 @@ class BlockEncoder:
             payload.append(body)
             col_headers.append([topic_id, list(path), codec, len(body), param])
 
-        time_body = _pack_i64([m.log_time_ns for m in messages], delta=True)
-        seq_body = _pack_i64(seq_deltas, delta=False)
-        if time_body is None or seq_body is None:
-            raise ValueError("log time or sequence outside the int64 range")
+        time_body = _pack_stream([m.log_time_ns for m in messages], delta=True)
+        seq_body = _pack_stream(seq_deltas, delta=False)
         topic_code, topic_body = _pack_small(topic_ids)
         shape_code, shape_body = _pack_small(shape_ids)
         raw_len_body = _pack_i64([len(r) for r in raw], delta=False) or b""
@@ -383,7 +400,10 @@ class BlockEncoder:
             tries = range(_DEC_TRIES) if hint is None else (hint, *range(_DEC_TRIES))
             for k in tries:
                 scale = _SCALES[k]
-                ints = list(map(round, map(mul, values, repeat(scale))))
+                try:
+                    ints = list(map(round, map(mul, values, repeat(scale))))
+                except OverflowError:  # beyond the float range once scaled: not a decimal
+                    break
                 if list(map(truediv, ints, repeat(scale))) == values:
                     packed = _pack_i64(ints, delta=True)
                     if packed is not None:
@@ -482,8 +502,8 @@ def _decode_body(body: bytes) -> DecodedBlock:
     topic_names: list[str] = header["topics"]
     topic_ids = _unpack_small(topic_code, topic_body)
     shape_ids = _unpack_small(shape_code, shape_body)
-    seq_deltas = _unpack_i64(seq_body, delta=False)
-    times = _unpack_i64(time_body, delta=True)
+    seq_deltas = _unpack_stream(seq_body, delta=False)
+    times = _unpack_stream(time_body, delta=True)
     raw_lens = _unpack_i64(raw_len_body, delta=False) if raw_len_body else []
     if not (len(topic_ids) == len(shape_ids) == len(seq_deltas) == len(times) == n):
         raise ColdFormatError("message streams disagree on the message count")
@@ -531,7 +551,7 @@ def _decode_body(body: bytes) -> DecodedBlock:
             slices.append(reader.take(key, count))
             if key in reader.digests:
                 slots.append(slot)
-        rows = zip(*slices, strict=True)
+        rows: Iterable[Sequence[Any]] = zip(*slices, strict=True) if slices else repeat((), count)
         if slots:
             chained.append((group, shape, iter(rows), tuple(slots)))
             continue
@@ -711,10 +731,13 @@ def assemble_cold(messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
     for msg in messages:
         if msg.topic != BLOCK_TOPIC:
             continue
-        block = decode_block(msg.data)
+        try:
+            block = decode_block(msg.data)
+        except ColdFormatError as err:
+            raise LogReadError(segment, f"cold block {msg.sequence}: {err}") from err
         assembler = _INNER.get(block.tier)
         if assembler is None:
-            raise ColdFormatError(f"cold block holds messages of unknown tier {block.tier!r}")
+            raise LogReadError(segment, f"cold block holds messages of unknown tier {block.tier!r}")
         cycles += assembler(block.messages, segment)
     return cycles
 

@@ -1,0 +1,258 @@
+"""The cold codec is lossless: any message stream decodes byte for byte, seals verify, and a
+seek into a cold segment decodes one block and finds the same cycle as the hot original."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import random
+from pathlib import Path
+from typing import Any
+
+import orjson
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from trace_runtime import LogReadError, open_log, open_segment
+from trace_runtime.chain import digest
+from trace_runtime.reader import RawMessage
+from trace_runtime.records import TOPIC_CHECKPOINT, TOPIC_SEAL
+from trace_runtime.tiers import ColdOptions, WarmPolicy, chain_problems, compact, decode_block
+from trace_runtime.tiers import cold as cold_module
+from trace_runtime.tiers.cold import BlockEncoder, ColdFormatError, iter_blocks, split_plain
+
+from .test_tiers import make_root
+
+# --- the codec on arbitrary input ---------------------------------------------------------------
+
+_scalars = (
+    st.none()
+    | st.booleans()
+    | st.integers(min_value=-(2**70), max_value=2**70)
+    | st.floats(allow_nan=False, allow_infinity=False)
+    | st.decimals(places=3, min_value=-1000, max_value=1000, allow_nan=False).map(float)
+    | st.text(max_size=12)
+    | st.sampled_from(["ped_1", "ped_2", "person", "lidar", "m", ""])
+)
+_json = st.recursive(
+    _scalars,
+    lambda inner: (
+        st.lists(inner, max_size=5)
+        | st.dictionaries(
+            st.sampled_from(["id", "p", "x", "y", "value", "ref", "é", "k"]), inner, max_size=5
+        )
+    ),
+    max_leaves=25,
+)
+_TOPICS = ["/trace/perception", "/trace/action", "/sensors/lidar", TOPIC_SEAL, TOPIC_CHECKPOINT]
+
+
+@st.composite
+def _streams(draw: st.DrawFn) -> list[RawMessage]:
+    """Message streams as a block sees them: JSON (canonical or not), bytes, and digests of
+    earlier messages (what seals and evidence refs carry)."""
+    messages: list[RawMessage] = []
+    for _ in range(draw(st.integers(min_value=0, max_value=24))):
+        kind = draw(st.sampled_from(["json", "json", "json", "pretty", "bytes", "digest"]))
+        value = draw(_json)
+        if kind == "bytes":
+            data = draw(st.binary(max_size=40))
+        elif kind == "pretty":
+            data = json.dumps(value, indent=1).encode()
+        else:
+            if kind == "digest" and messages:
+                earlier = draw(st.sampled_from(messages))
+                value = {"d": hashlib.sha256(earlier.data).hexdigest(), "v": value}
+            try:
+                data = orjson.dumps(value)
+            except orjson.JSONEncodeError:  # integers beyond 64 bits: keep them as text
+                data = json.dumps(value, separators=(",", ":")).encode()
+        messages.append(
+            RawMessage(
+                draw(st.sampled_from(_TOPICS)),
+                draw(st.integers(min_value=0, max_value=2**32 - 1)),  # MCAP sequence: u32
+                draw(st.integers(min_value=0, max_value=2**64 - 1)),  # log time: u64
+                data,
+            )
+        )
+    return messages
+
+
+def _round_trip(encoder: BlockEncoder, block: list[RawMessage]) -> list[RawMessage]:
+    kept, plain, positions = split_plain(block)
+    decoded = decode_block(encoder.encode(kept, "hot", positions))
+    assert decoded.plain == positions
+    return list(cold_module._merge(decoded.messages, plain, decoded.plain))
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(stream=_streams())
+def test_any_message_stream_decodes_byte_for_byte(stream: list[RawMessage]) -> None:
+    encoder = BlockEncoder(level=1)
+    assert _round_trip(encoder, stream) == stream
+    # and again with the encoder's shape and scale caches warm from the first block
+    assert _round_trip(encoder, stream[::-1]) == stream[::-1]
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    rows=st.lists(
+        st.tuples(
+            st.floats(allow_nan=False, allow_infinity=False, width=64),
+            st.integers(min_value=-(2**63), max_value=2**63 - 1),
+            st.one_of(st.none(), st.floats(-5, 5).map(lambda x: round(x, 2))),
+            st.lists(st.floats(0, 50).map(lambda x: round(x, 3)), max_size=6),
+            st.sampled_from([0.0, -0.0, 1.5, -1.5]),
+        ),
+        min_size=1,
+        max_size=40,
+    )
+)
+def test_columns_of_one_shape_round_trip(rows: list[tuple[Any, ...]]) -> None:
+    """Many messages of one shape: the column codecs (delta, decimal, nullable, vectors)."""
+    stream = [
+        RawMessage("/trace/x", i, 1000 + i, orjson.dumps({"f": f, "i": n, "o": o, "v": v, "z": z}))
+        for i, (f, n, o, v, z) in enumerate(rows)
+    ]
+    assert _round_trip(BlockEncoder(level=1), stream) == stream
+
+
+def test_corrupt_blocks_raise_a_format_error() -> None:
+    encoder = BlockEncoder()
+    block = encoder.encode([RawMessage("/t", 0, 0, b'{"a":1}')], "hot")
+    with pytest.raises(ColdFormatError):
+        decode_block(b"XXXX" + block[4:])
+    with pytest.raises(ColdFormatError):
+        decode_block(block[:-3])
+
+
+# --- cold segments ------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def hot_and_cold(tmp_path: Path) -> tuple[Path, Path]:
+    hot = make_root(tmp_path / "hot", cycles=150, segments=2)
+    cold = tmp_path / "cold"
+    import shutil
+
+    shutil.copytree(hot, cold)
+    report = compact(cold, "cold", older_than_ns=0, cold=ColdOptions(block_cycles=16))
+    assert [s.status for s in report.segments] == ["compacted", "compacted"]
+    assert not list((cold / "hot").glob("*.mcap"))
+    return hot, cold
+
+
+def test_cold_segments_give_the_same_cycles(hot_and_cold: tuple[Path, Path]) -> None:
+    hot, cold = (open_log(p) for p in hot_and_cold)
+    assert [s.session.tier for s in cold.segments] == ["cold", "cold"]
+    assert (cold.start_ns, cold.end_ns) == (hot.start_ns, hot.end_ns)
+    hot_cycles = list(hot.iter_cycles())
+    assert list(cold.iter_cycles()) == hot_cycles
+    assert list(cold.iter_cycles(reverse=True)) == hot_cycles[::-1]
+    # payloads byte for byte, sensors included
+    for a, b in zip(hot_cycles, cold.iter_cycles(), strict=True):
+        assert a.payloads == b.payloads and a.sensors == b.sensors
+    # windows that start and end inside blocks
+    rng = random.Random(7)
+    for _ in range(20):
+        start = rng.randrange(hot.start_ns, hot.end_ns)
+        end = start + rng.randrange(0, 3_000_000_000)
+        assert list(cold.iter_cycles(start, end)) == list(hot.iter_cycles(start, end))
+    assert cold.get_cycle(hot_cycles[200].cycle) == hot_cycles[200]
+
+
+def test_seek_into_a_cold_segment_decodes_one_block(
+    hot_and_cold: tuple[Path, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    hot, cold = (open_log(p) for p in hot_and_cold)
+    calls = []
+    real = cold_module.decode_block
+
+    def counting(block: bytes) -> Any:
+        calls.append(1)
+        return real(block)
+
+    monkeypatch.setattr(cold_module, "decode_block", counting)
+    rng = random.Random(3)
+    for t_ns in [
+        hot.start_ns,
+        hot.end_ns,
+        *(rng.randrange(hot.start_ns, hot.end_ns) for _ in range(30)),
+    ]:
+        calls.clear()
+        assert cold.cycle_at(t_ns) == hot.cycle_at(t_ns)
+        assert len(calls) <= 2  # the block that starts at or before t (and, rarely, the one before)
+    middle = hot.start_ns + (hot.end_ns - hot.start_ns) // 2
+    calls.clear()
+    found = cold.cycle_at(middle)
+    assert found.t_ns <= middle < found.t_ns + 100_000_000
+    assert len(calls) == 1
+
+
+def test_seals_verify_after_cold_reencoding(hot_and_cold: tuple[Path, Path]) -> None:
+    _hot, cold = hot_and_cold
+    segments = open_log(cold).segments
+    prev = None
+    for segment in segments:
+        assert chain_problems(segment) == []
+        if prev is not None:
+            assert segment.session.prev_seal == prev
+        for cycle in segment.iter_cycles():
+            seal = orjson.loads(cycle.payloads[TOPIC_SEAL])
+            assert seal["digests"] == cycle.digests()
+            prev = digest(cycle.payloads[TOPIC_SEAL])
+
+
+def test_cold_keeps_checkpoints_readable_without_decoding(hot_and_cold: tuple[Path, Path]) -> None:
+    hot, cold = hot_and_cold
+    for name in ("amr-1_000000.mcap", "amr-1_000001.mcap"):
+        source = open_segment(hot / "hot" / name)
+        target = open_segment(cold / "cold" / name)
+        want = [m for m in source.iter_messages() if m.topic == TOPIC_CHECKPOINT]
+        assert want  # at least the closing checkpoint
+        assert [m for m in target.iter_messages() if m.topic == TOPIC_CHECKPOINT] == want
+        assert list(cold_module.iter_decoded(target.iter_messages())) == list(
+            source.iter_messages()
+        )
+        meta = target.metadata["trace.tier"]
+        assert meta["lossy"] == "false" and meta["codec"] == "trace-cold-v1"
+        assert meta["verbatim_messages"] == "0"
+
+
+def test_cold_from_warm_keeps_the_summaries(tmp_path: Path) -> None:
+    root = make_root(tmp_path / "log", cycles=120)
+    compact(root, "warm", older_than_ns=0, warm=WarmPolicy(context_s=0.5))
+    warm = list(open_log(root).iter_cycles())
+    assert any(c.is_summary for c in warm)
+    report = compact(root, "cold", older_than_ns=0, cold=ColdOptions(block_cycles=32))
+    assert [s.source_tier for s in report.segments] == ["warm"]
+    assert list(open_log(root).iter_cycles()) == warm
+    segment = open_log(root).segments[0]
+    assert segment.metadata["trace.tier"]["lossy"] == "true"  # lossless of a lossy source
+
+
+def test_a_damaged_cold_block_is_an_unreadable_log_not_a_crash(
+    hot_and_cold: tuple[Path, Path],
+) -> None:
+    _hot, cold = hot_and_cold
+    path = cold / "cold" / "amr-1_000000.mcap"
+    data = bytearray(path.read_bytes())
+    at = data.find(b"TCB\x01") + 200
+    data[at] ^= 0xFF
+    path.write_bytes(bytes(data))
+    with pytest.raises(LogReadError):
+        list(open_segment(path).iter_cycles())
+
+
+def test_blocks_split_on_whole_cycles() -> None:
+    stream = [
+        RawMessage(t, i, i, b"{}")
+        for i, t in enumerate(["/s", "/trace/a", TOPIC_SEAL, "/trace/a", TOPIC_SEAL, "/trace/a"])
+    ]
+    blocks = list(iter_blocks(stream, 1))
+    assert [[m.topic for m in b] for b in blocks] == [
+        ["/s", "/trace/a", TOPIC_SEAL],
+        ["/trace/a", TOPIC_SEAL],
+        ["/trace/a"],
+    ]
