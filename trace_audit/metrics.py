@@ -217,6 +217,8 @@ class GroupMetrics:
     decisions: int
     sealed: int
     unsealed: int
+    summarized: int
+    """Decisions read from warm-tier summaries (sensor readings not kept, by design)."""
     et: Stat
     fully_traceable: int
     fully_traceable_share: Stat
@@ -326,6 +328,7 @@ class _Acc:
 
     decisions: int = 0
     sealed: int = 0
+    summarized: int = 0
     et_sum: float = 0.0
     et_sq: float = 0.0
     etp_sum: float = 0.0
@@ -497,6 +500,8 @@ class _Scanner:
             dr_ok = not dr_problems
             intact = not integrity
             acc.decisions += 1
+            if cycle.summary is not None:
+                acc.summarized += 1
             acc.et_sum += et
             acc.et_sq += et * et
             acc.etp_sum += etp
@@ -810,6 +815,7 @@ def _group(name: str, acc: _Acc) -> GroupMetrics:
         decisions=n,
         sealed=acc.sealed,
         unsealed=n - acc.sealed,
+        summarized=acc.summarized,
         et=_stat(acc.et_sum, acc.et_sq, n, "decisions"),
         fully_traceable=acc.full,
         fully_traceable_share=_stat(acc.full, acc.full, n, "decisions"),

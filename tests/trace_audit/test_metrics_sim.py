@@ -187,3 +187,49 @@ def test_sim_root_and_file_agree(tmp_path: Path) -> None:
     assert ra.overall.decisions == rb.overall.decisions
     assert ra.overall.et == rb.overall.et and ra.overall.tc == rb.overall.tc
     assert [f.cycle for f in ra.failures] == [f.cycle for f in rb.failures]
+
+
+def test_metrics_across_tiers(tmp_path: Path) -> None:
+    """Cold is lossless: the same metrics. Warm summaries keep DR and TC, lose readings."""
+    from trace_runtime.tiers import WarmPolicy, compact
+
+    rates = FaultRates(
+        evidence_corruption=0.05, rationale_truncation=0.05, audit_write_timeout=0.03
+    )
+    roots = {}
+    for tier in ("hot", "cold", "warm"):
+        roots[tier] = tmp_path / tier
+        run(RunConfig(out=roots[tier], total_cycles=400, seed=8, faults=rates))
+    compact(roots["cold"], "cold", older_than_ns=0, sources=["hot"], retention_ns=None)
+    compact(roots["warm"], "warm", older_than_ns=0, warm=WarmPolicy(context_s=0), retention_ns=None)
+    assert not list((roots["cold"] / "hot").glob("*.mcap"))
+    assert not list((roots["warm"] / "hot").glob("*.mcap"))
+    config = MetricsConfig(by="scenario", max_listed=10_000)
+    hot, cold, warm = (compute_metrics([roots[t]], config) for t in ("hot", "cold", "warm"))
+    assert _tables(cold) == _tables(hot)
+    assert [f.problems for f in cold.failures] == [f.problems for f in hot.failures]
+
+    w, h = warm.overall, hot.overall
+    summaries = {c.cycle for c in open_log(roots["warm"]).iter_cycles() if c.is_summary}
+    assert w.decisions == h.decisions and w.summarized == len(summaries) > 100
+    assert (w.tc, w.gaps, w.declared_dropped) == (h.tc, h.gaps, h.declared_dropped)
+    assert (w.dr, w.not_reconstructable) == (h.dr, h.not_reconstructable)
+    assert w.integrity_failed == 0
+    hot_bad, warm_bad = _untraceable(hot), _untraceable(warm)
+    # Summaries keep every ref but drop the readings, so chains only lose their last link:
+    # on summary cycles, and on full cycles that cite a reading logged in a summary cycle.
+    assert hot_bad <= warm_bad
+    assert len((warm_bad - hot_bad) & summaries) > 100
+    for failure in warm.failures:
+        if failure.cycle in warm_bad - hot_bad:
+            et = [p for p in failure.problems if p.startswith("ET:")]
+            assert all("sensor_reading missing" in p for p in et), failure
+    assert w.et_partial.mean < h.et_partial.mean
+
+
+def _untraceable(report: MetricsReport) -> set[int]:
+    return {f.cycle for f in report.failures if any(p.startswith("ET:") for p in f.problems)}
+
+
+def _tables(report: MetricsReport) -> tuple[object, ...]:
+    return (report.overall, report.groups, report.gaps)

@@ -257,6 +257,12 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
         f"TCS {overall.tcs.mean:.3f} ± {overall.tcs.std:.3f} (across decisions); factors "
         f"traceable {_share(overall.factors_traceable, overall.factors)}."
     )
+    if overall.summarized:
+        out.print(
+            f"  {overall.summarized} decisions come from warm-tier summaries, which keep the "
+            "evidence refs but not the sensor readings: on those ET stops one link short "
+            "by design, ET_partial still measures the chain."
+        )
     if overall.no_factors:
         named = overall.decisions - overall.no_factors
         et_named = overall.et.mean * overall.decisions / named if named else None
