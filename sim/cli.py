@@ -44,9 +44,7 @@ def _fail(message: str, code: int) -> None:
 @app.command("run")
 def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
     out: Annotated[Path, typer.Option("--out", "-o", help="a .mcap file or a log root directory")],
-    scenario: Annotated[
-        str, typer.Option(help="all, or one of: " + ", ".join(SCENARIOS))
-    ] = "all",
+    scenario: Annotated[str, typer.Option(help="all, or one of: " + ", ".join(SCENARIOS))] = "all",
     cycles: Annotated[int, typer.Option(help="decision cycles per scenario (10 Hz)")] = 100,
     seed: Annotated[int, typer.Option(help="random seed; same seed, same log")] = 0,
     faults: Annotated[
@@ -113,13 +111,9 @@ def _render(result: RunResult) -> None:
     table.add_column()
     table.add_row("cycles", f"{result.cycles:,} ({result.written:,} written)")
     table.add_row("dropped", f"{result.dropped:,}")
-    table.add_row(
-        "commands", ", ".join(f"{k} {v:,}" for k, v in sorted(result.commands.items()))
-    )
+    table.add_row("commands", ", ".join(f"{k} {v:,}" for k, v in sorted(result.commands.items())))
     table.add_row("STOPs", f"{result.commands.get('STOP', 0):,}")
-    table.add_row(
-        "scenarios", ", ".join(f"{k} {v:,}" for k, v in result.scenarios.items())
-    )
+    table.add_row("scenarios", ", ".join(f"{k} {v:,}" for k, v in result.scenarios.items()))
     faults = ", ".join(f"{k} {v:,}" for k, v in sorted(result.faults.items())) or "none"
     table.add_row("faults injected", faults)
     table.add_row("bytes written", f"{result.bytes_written:,}")

@@ -69,35 +69,62 @@ class Actuator:
         else:
             self._stop_since = None
         checks = [
-            Check("max_speed", v <= MAX_SPEED, round(v, 3), MAX_SPEED,
-                  f"actual linear speed {v:.2f} m/s"),
+            Check(
+                "max_speed",
+                v <= MAX_SPEED,
+                round(v, 3),
+                MAX_SPEED,
+                f"actual linear speed {v:.2f} m/s",
+            ),
         ]
         nearest: tuple[float, str] | None = None
         for n in belief.nodes:
             if n.kind == "entity" and n.value == "person":
                 for m in belief.nodes:
-                    if (m.id == f"{n.id}.distance" and isinstance(m.value, float)
-                            and (nearest is None or m.value < nearest[0])):
+                    if (
+                        m.id == f"{n.id}.distance"
+                        and isinstance(m.value, float)
+                        and (nearest is None or m.value < nearest[0])
+                    ):
                         nearest = (m.value, n.id)
         if nearest is not None and nearest[0] < PERSON_ZONE_M:
             checks.append(
-                Check("person_speed_limit", v <= PERSON_SPEED, round(v, 3), PERSON_SPEED,
-                      f"{nearest[1]} at {nearest[0]:.2f} m (< {PERSON_ZONE_M} m)")
+                Check(
+                    "person_speed_limit",
+                    v <= PERSON_SPEED,
+                    round(v, 3),
+                    PERSON_SPEED,
+                    f"{nearest[1]} at {nearest[0]:.2f} m (< {PERSON_ZONE_M} m)",
+                )
             )
         else:
             checks.append(
-                Check("person_speed_limit", True, None, PERSON_SPEED,
-                      f"no person within {PERSON_ZONE_M} m")
+                Check(
+                    "person_speed_limit",
+                    True,
+                    None,
+                    PERSON_SPEED,
+                    f"no person within {PERSON_ZONE_M} m",
+                )
             )
         if self._stop_since is not None and t - self._stop_since >= STOP_GRACE_S:
             checks.append(
-                Check("stop_response", v <= STOP_SPEED, round(v, 3), STOP_SPEED,
-                      f"STOP held {t - self._stop_since:.1f} s")
+                Check(
+                    "stop_response",
+                    v <= STOP_SPEED,
+                    round(v, 3),
+                    STOP_SPEED,
+                    f"STOP held {t - self._stop_since:.1f} s",
+                )
             )
         envelope = prev_err * (1.0 - self._alpha) + ENVELOPE_SLACK
         checks.append(
-            Check("command_tracking", abs(want_v - v) <= envelope, round(abs(want_v - v), 3),
-                  round(envelope, 3), "speed error within the actuator's lag envelope")
+            Check(
+                "command_tracking",
+                abs(want_v - v) <= envelope,
+                round(abs(want_v - v), 3),
+                round(envelope, 3),
+                "speed error within the actuator's lag envelope",
+            )
         )
-        return Executed((want_v, want_w), (round(v, 4), round(w, 4)), round(dev, 4),
-                        tuple(checks))
+        return Executed((want_v, want_w), (round(v, 4), round(w, 4)), round(dev, 4), tuple(checks))

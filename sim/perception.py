@@ -55,7 +55,11 @@ Ref = Any
 LogSensor = Callable[[str, dict[str, Any]], Ref]
 
 
-@dataclass(frozen=True, slots=True)
+# Hot per-cycle value types are plain slotted dataclasses, not frozen ones: a frozen
+# dataclass's __init__ costs ~4x as much, and nothing here mutates them after creation.
+
+
+@dataclass(slots=True)
 class EvidenceItem:
     """One member of an evidence set: where, how much, and the logged reading it names."""
 
@@ -82,7 +86,7 @@ class Cluster:
 @dataclass(slots=True)
 class Track:
     id: str
-    logp: np.ndarray
+    logp: list[float]  # log class posterior, in CLASSES order
     x: float
     y: float
     vx: float = 0.0
@@ -94,17 +98,18 @@ class Track:
     observed: bool = True
 
     def confidence(self) -> dict[str, float]:
-        p = np.exp(self.logp - self.logp.max())
-        p /= p.sum()
+        m = max(self.logp)
+        p = [math.exp(v - m) for v in self.logp]
+        total = sum(p)
         return {
-            c: round(min(0.999, max(0.001, float(v))), 4) for c, v in zip(CLASSES, p, strict=True)
+            c: round(min(0.999, max(0.001, v / total)), 4) for c, v in zip(CLASSES, p, strict=True)
         }
 
     def cls(self) -> str:
-        return CLASSES[int(np.argmax(self.logp))]
+        return CLASSES[_argmax(self.logp)]
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class PerceivedEntity:
     """A tracked object as layer 1 reports it (world frame)."""
 
@@ -152,57 +157,100 @@ def _to_world(x: float, y: float, pose: tuple[float, float, float]) -> tuple[flo
 
 _COS = np.cos(BEAM_ANGLES).tolist()
 _SIN = np.sin(BEAM_ANGLES).tolist()
+_BEAM_COS = [math.cos(a) for a in BEAM_ANGLES.tolist()]
+_BEAM_SIN = [math.sin(a) for a in BEAM_ANGLES.tolist()]
+_HALF_CORRIDOR_ANGLE = math.atan2(CORRIDOR_HALF_WIDTH_M, 0.5)
+_CORRIDOR_BEAMS = (
+    max(0, math.ceil((-_HALF_CORRIDOR_ANGLE - LIDAR_ANGLE_MIN) / LIDAR_ANGLE_INC)),
+    min(LIDAR_BEAMS - 1, math.floor((_HALF_CORRIDOR_ANGLE - LIDAR_ANGLE_MIN) / LIDAR_ANGLE_INC)),
+)
+"""First and last beam that can see into the corridor strip."""
+_BEARING_SLACK = math.radians(1.5)
+_LIDAR_HEADER = {
+    "frame": "base_link",
+    "angle_min": round(LIDAR_ANGLE_MIN, 6),
+    "angle_increment": round(LIDAR_ANGLE_INC, 6),
+    "beams": LIDAR_BEAMS,
+    "range_max": LIDAR_RANGE_MAX,
+    "foreground_margin": FOREGROUND_MARGIN_M,
+}
+_CAMERA_HEADER = {
+    "frame": "camera",
+    "width": IMAGE_W,
+    "height": IMAGE_H,
+    "hfov": round(2 * CAMERA_HALF_FOV, 6),
+    "classes": list(CLASSES),
+}
+_US_HEADER = {
+    "frame": "base_link",
+    "half_angle": round(US_HALF_ANGLE, 6),
+    "range_max": US_RANGE_MAX,
+}
 
 
 def cluster_scan(scan: LidarScan) -> list[Cluster]:
     """Group foreground returns (closer than the map predicts) into clusters."""
     fg = np.flatnonzero(scan.ranges < scan.expected - FOREGROUND_MARGIN_M)
+    return _clusters(fg.tolist(), scan.ranges[fg].tolist())
+
+
+def _clusters(idx: list[int], rs: list[float]) -> list[Cluster]:
+    """Clusters of the foreground beams ``idx`` (ascending) with ranges ``rs``."""
     clusters: list[Cluster] = []
-    if len(fg) == 0:
-        return clusters
-    ranges = scan.ranges
-    idx = fg.tolist()
-    rs = ranges[fg].tolist()
-    groups: list[list[int]] = [[idx[0]]]
-    for k in range(1, len(idx)):
-        i = idx[k]
-        if i - idx[k - 1] <= 1 and abs(rs[k] - rs[k - 1]) < CLUSTER_JUMP_M:
-            groups[-1].append(i)
-        else:
-            groups.append([i])
-    for g in groups:
-        if len(g) < MIN_CLUSTER_BEAMS:
+    n = len(idx)
+    start = 0
+    for k in range(1, n + 1):
+        # A cluster is a run of adjacent beams without a range jump.
+        if k < n and idx[k] - idx[k - 1] <= 1 and abs(rs[k] - rs[k - 1]) < CLUSTER_JUMP_M:
             continue
-        r = ranges[g[0] : g[-1] + 1].tolist()
-        cos, sin = _COS[g[0] : g[-1] + 1], _SIN[g[0] : g[-1] + 1]
-        xs = [ri * ci for ri, ci in zip(r, cos, strict=True)]
-        ys = [ri * si for ri, si in zip(r, sin, strict=True)]
-        width = math.hypot(xs[-1] - xs[0], ys[-1] - ys[0])
-        cx, cy = sum(xs) / len(xs), sum(ys) / len(ys)
-        clusters.append(
-            Cluster(
-                index=len(clusters),
-                first=g[0],
-                last=g[-1],
-                ranges=[round(v, 3) for v in r],
-                x=cx,
-                y=cy,
-                width=width,
-                bearing=math.atan2(cy, cx),
+        if k - start >= MIN_CLUSTER_BEAMS:
+            first, last = idx[start], idx[k - 1]
+            r = rs[start:k]
+            xs = [ri * ci for ri, ci in zip(r, _COS[first : last + 1], strict=True)]
+            ys = [ri * si for ri, si in zip(r, _SIN[first : last + 1], strict=True)]
+            width = math.hypot(xs[-1] - xs[0], ys[-1] - ys[0])
+            cx, cy = sum(xs) / len(xs), sum(ys) / len(ys)
+            clusters.append(
+                Cluster(
+                    index=len(clusters),
+                    first=first,
+                    last=last,
+                    ranges=[round(v, 3) for v in r],
+                    x=cx,
+                    y=cy,
+                    width=width,
+                    bearing=math.atan2(cy, cx),
+                )
             )
-        )
+        start = k
     return clusters
 
 
-def _width_loglik(width: float) -> np.ndarray:
-    return np.array(
-        [-0.5 * ((width - mu) / sd) ** 2 - math.log(sd) for mu, sd in _WIDTH_MODEL.values()]
-    )
+# The class posterior has three entries: plain floats and ``math`` are several times faster
+# than numpy at this size, and do not depend on which SIMD code numpy picks for exp and log.
 
 
-def _normalize(logp: np.ndarray) -> np.ndarray:
-    m = float(logp.max())
-    return logp - (m + math.log(float(np.exp(logp - m).sum())))
+def _argmax(values: list[float]) -> int:
+    """Index of the first largest value."""
+    best = 0
+    for i in range(1, len(values)):
+        if values[i] > values[best]:
+            best = i
+    return best
+
+
+def _width_loglik(width: float) -> list[float]:
+    return [-0.5 * ((width - mu) / sd) ** 2 - math.log(sd) for mu, sd in _WIDTH_MODEL.values()]
+
+
+def _score_loglik(scores: tuple[float, ...]) -> list[float]:
+    return [math.log(s + 0.05) for s in scores]
+
+
+def _normalize(logp: list[float]) -> list[float]:
+    m = max(logp)
+    z = m + math.log(sum(math.exp(v - m) for v in logp))
+    return [v - z for v in logp]
 
 
 def _weights(sensors: list[str], scale: float = 1.0) -> list[float]:
@@ -247,7 +295,12 @@ class Perceiver:
         log_sensor: LogSensor,
     ) -> PerceptionOutput:
         """Run layer 1 for one cycle; readings it uses are logged through ``log_sensor``."""
-        clusters = cluster_scan(scan) if scan is not None else []
+        fg: list[int] = []
+        fg_ranges: list[float] = []
+        if scan is not None:
+            fg_idx = np.flatnonzero(scan.ranges < scan.expected - FOREGROUND_MARGIN_M)
+            fg, fg_ranges = fg_idx.tolist(), scan.ranges[fg_idx].tolist()
+        clusters = _clusters(fg, fg_ranges)
 
         # --- predict and associate clusters with tracks (greedy nearest neighbour) ------
         for t in self.tracks:
@@ -277,8 +330,8 @@ class Perceiver:
             taken: set[int] = set()
             if scan is not None:
                 for c in clusters:
-                    lo = LIDAR_ANGLE_MIN + c.first * LIDAR_ANGLE_INC - math.radians(1.5)
-                    hi = LIDAR_ANGLE_MIN + c.last * LIDAR_ANGLE_INC + math.radians(1.5)
+                    lo = LIDAR_ANGLE_MIN + c.first * LIDAR_ANGLE_INC - _BEARING_SLACK
+                    hi = LIDAR_ANGLE_MIN + c.last * LIDAR_ANGLE_INC + _BEARING_SLACK
                     best = None
                     for di, det in enumerate(detections):
                         if di not in taken and lo <= det.bearing <= hi:
@@ -303,34 +356,27 @@ class Perceiver:
         lidar_ref = camera_ref = None
         corridor_returns: list[tuple[int, float]] = []
         if scan is not None:
-            ranges = scan.ranges
-            fg = ranges < scan.expected - FOREGROUND_MARGIN_M
             # Corridor: foreground returns inside the strip ahead of the robot.
-            half = math.atan2(CORRIDOR_HALF_WIDTH_M, 0.5)
-            c0 = max(0, math.ceil((-half - LIDAR_ANGLE_MIN) / LIDAR_ANGLE_INC))
-            c1 = min(LIDAR_BEAMS - 1, math.floor((half - LIDAR_ANGLE_MIN) / LIDAR_ANGLE_INC))
-            for i in np.flatnonzero(fg[c0 : c1 + 1]) + c0:
-                r = float(ranges[i])
-                a = float(BEAM_ANGLES[i])
-                x, y = r * math.cos(a), r * math.sin(a)
-                if 0.0 < x <= corridor_length and abs(y) <= CORRIDOR_HALF_WIDTH_M:
-                    corridor_returns.append((int(i), round(r, 3)))
+            for i, r in zip(fg, fg_ranges, strict=True):
+                if _CORRIDOR_BEAMS[0] <= i <= _CORRIDOR_BEAMS[1]:
+                    x, y = r * _BEAM_COS[i], r * _BEAM_SIN[i]
+                    if 0.0 < x <= corridor_length and abs(y) <= CORRIDOR_HALF_WIDTH_M:
+                        corridor_returns.append((i, round(r, 3)))
             lidar_ref = log_sensor(
                 TOPIC_LIDAR,
                 {
-                    "frame": "base_link",
-                    "angle_min": round(LIDAR_ANGLE_MIN, 6),
-                    "angle_increment": round(LIDAR_ANGLE_INC, 6),
-                    "beams": LIDAR_BEAMS,
-                    "range_max": LIDAR_RANGE_MAX,
-                    "foreground_margin": FOREGROUND_MARGIN_M,
+                    **_LIDAR_HEADER,
                     "clusters": [
                         {"id": c.index, "first": c.first, "last": c.last, "ranges": c.ranges}
                         for c in clusters
                     ],
                     "corridor": {
-                        "box": [0.0, -CORRIDOR_HALF_WIDTH_M, round(corridor_length, 3),
-                                CORRIDOR_HALF_WIDTH_M],
+                        "box": [
+                            0.0,
+                            -CORRIDOR_HALF_WIDTH_M,
+                            round(corridor_length, 3),
+                            CORRIDOR_HALF_WIDTH_M,
+                        ],
                         "returns": corridor_returns,
                     },
                 },
@@ -339,11 +385,7 @@ class Perceiver:
             camera_ref = log_sensor(
                 TOPIC_CAMERA,
                 {
-                    "frame": "camera",
-                    "width": IMAGE_W,
-                    "height": IMAGE_H,
-                    "hfov": round(2 * CAMERA_HALF_FOV, 6),
-                    "classes": list(CLASSES),
+                    **_CAMERA_HEADER,
                     "detections": [
                         {
                             "id": i,
@@ -357,12 +399,7 @@ class Perceiver:
             )
         us_ref = log_sensor(
             TOPIC_ULTRASONIC,
-            {
-                "frame": "base_link",
-                "half_angle": round(US_HALF_ANGLE, 6),
-                "range_max": US_RANGE_MAX,
-                "range": None if us_range is None else round(us_range, 3),
-            },
+            {**_US_HEADER, "range": None if us_range is None else round(us_range, 3)},
         )
 
         # --- update tracks ------------------------------------------------------------
@@ -376,14 +413,14 @@ class Perceiver:
             cam_ev = None
             if det_i is not None and detections is not None:
                 det = detections[det_i]
-                ll = ll + np.log(np.array(det.scores) + 0.05)
+                ll = [a + b for a, b in zip(ll, _score_loglik(det.scores), strict=True)]
                 cam_ev = EvidenceItem("camera", 0.0, "pixels", det.box, camera_ref, cycle)
             known = track_of.get(c.index)
             if known is None:
                 logp = _normalize(ll)
-                top = int(np.argmax(logp))
+                top = _argmax(logp)
                 # Name by class only when the first look is fairly sure; ids never change.
-                cls = CLASSES[top] if math.exp(float(logp[top])) >= 0.6 else "pallet"
+                cls = CLASSES[top] if math.exp(logp[top]) >= 0.6 else "pallet"
                 t = Track(self._new_id(cls), logp, wx, wy, width=c.width)
                 self.tracks.append(t)
             else:
@@ -396,8 +433,8 @@ class Perceiver:
                 t.width = 0.7 * t.width + 0.3 * c.width
                 moving = math.hypot(t.vx, t.vy) > 0.4
                 if moving:  # pallets do not move
-                    ll = ll + np.array([0.0, 0.0, -2.0])
-                t.logp = _normalize(0.8 * t.logp + ll)
+                    ll[2] += -2.0
+                t.logp = _normalize([0.8 * a + b for a, b in zip(t.logp, ll, strict=True)])
                 t.hits += 1
                 t.missed = 0
             t.observed = True
@@ -409,8 +446,12 @@ class Perceiver:
             if us_range is not None and in_cone and abs(rng_c - us_range) < 0.4:
                 sensors.append("ultrasonic")
                 us_ev = EvidenceItem(
-                    "ultrasonic", 0.0, "cone",
-                    (0.0, round(US_HALF_ANGLE, 4), round(us_range, 3)), us_ref, cycle,
+                    "ultrasonic",
+                    0.0,
+                    "cone",
+                    (0.0, round(US_HALF_ANGLE, 4), round(us_range, 3)),
+                    us_ref,
+                    cycle,
                 )
             w = _weights(sensors)
             items = [lidar_ev, cam_ev, us_ev]
@@ -423,24 +464,29 @@ class Perceiver:
                 t = self.tracks[ti]
                 assert detections is not None
                 det = detections[di]
-                t.logp = _normalize(0.8 * t.logp + np.log(np.array(det.scores) + 0.05))
+                ll = _score_loglik(det.scores)
+                t.logp = _normalize([0.8 * a + b for a, b in zip(t.logp, ll, strict=True)])
                 t.observed = True
                 t.missed = 0
                 # Bearing-only: keep the predicted range, rotate onto the measured bearing.
                 rx, ry = _to_robot(t.x, t.y, pose)
                 r = math.hypot(rx, ry)
                 t.x, t.y = _to_world(r * math.cos(det.bearing), r * math.sin(det.bearing), pose)
-                t.evidence = [
-                    EvidenceItem("camera", 1.0, "pixels", det.box, camera_ref, cycle)
-                ]
+                t.evidence = [EvidenceItem("camera", 1.0, "pixels", det.box, camera_ref, cycle)]
 
         for t in self.tracks:
             if not t.observed:
                 t.missed += 1
                 # Coasting: the last observation still supports the track, at half weight.
                 t.evidence = [
-                    EvidenceItem(e.sensor, round(e.weight * 0.5, 3), e.region_kind,
-                                 e.region_values, e.ref, e.cycle)
+                    EvidenceItem(
+                        e.sensor,
+                        round(e.weight * 0.5, 3),
+                        e.region_kind,
+                        e.region_values,
+                        e.ref,
+                        e.cycle,
+                    )
                     for e in t.evidence
                 ]
         self.tracks = [t for t in self.tracks if t.missed < DELETE_AFTER_MISSES]
@@ -451,20 +497,38 @@ class Perceiver:
                 continue
             entities.append(
                 PerceivedEntity(
-                    t.id, t.cls(), t.confidence(), t.x, t.y, t.vx, t.vy, t.observed,
+                    t.id,
+                    t.cls(),
+                    t.confidence(),
+                    t.x,
+                    t.y,
+                    t.vx,
+                    t.vy,
+                    t.observed,
                     tuple(t.evidence),
                 )
             )
 
         corridor = self._corridor_view(
-            cycle=cycle, speed=speed, scan=scan, clusters=clusters, track_of=track_of,
-            returns=corridor_returns, length=corridor_length, lidar_ref=lidar_ref,
-            us_range=us_range, us_ref=us_ref,
+            cycle=cycle,
+            speed=speed,
+            scan=scan,
+            clusters=clusters,
+            track_of=track_of,
+            returns=corridor_returns,
+            length=corridor_length,
+            lidar_ref=lidar_ref,
+            us_range=us_range,
+            us_ref=us_ref,
         )
-        used = [s for s, ok in (("lidar", scan is not None), ("camera", detections is not None))
-                if ok] + ["ultrasonic"]
-        down = [s for s, ok in (("lidar", scan is not None), ("camera", detections is not None))
-                if not ok]
+        used = [
+            s for s, ok in (("lidar", scan is not None), ("camera", detections is not None)) if ok
+        ] + ["ultrasonic"]
+        down = [
+            s
+            for s, ok in (("lidar", scan is not None), ("camera", detections is not None))
+            if not ok
+        ]
         return PerceptionOutput(tuple(entities), corridor, tuple(used), tuple(down))
 
     def _corridor_view(
@@ -482,29 +546,43 @@ class Perceiver:
         us_ref: Ref,
     ) -> CorridorView:
         us_ev = EvidenceItem(
-            "ultrasonic", 0.0, "cone",
-            (0.0, round(US_HALF_ANGLE, 4), round(us_range if us_range is not None else
-                                                  US_RANGE_MAX, 3)),
-            us_ref, cycle,
+            "ultrasonic",
+            0.0,
+            "cone",
+            (
+                0.0,
+                round(US_HALF_ANGLE, 4),
+                round(us_range if us_range is not None else US_RANGE_MAX, 3),
+            ),
+            us_ref,
+            cycle,
         )
         if scan is None:
             prev = self._corridor
             if prev is None:
                 ev: tuple[EvidenceItem, ...] = (
-                    EvidenceItem("ultrasonic", 1.0, us_ev.region_kind, us_ev.region_values,
-                                 us_ref, cycle),
+                    EvidenceItem(
+                        "ultrasonic", 1.0, us_ev.region_kind, us_ev.region_values, us_ref, cycle
+                    ),
                 )
                 view = CorridorView(CORRIDOR_MAX_M, length, None, ev)
             else:
                 kept = [e for e in prev.evidence if e.sensor == "lidar"]
                 ev_list = [
-                    EvidenceItem(e.sensor, round(e.weight * 0.5, 3), e.region_kind,
-                                 e.region_values, e.ref, e.cycle)
+                    EvidenceItem(
+                        e.sensor,
+                        round(e.weight * 0.5, 3),
+                        e.region_kind,
+                        e.region_values,
+                        e.ref,
+                        e.cycle,
+                    )
                     for e in kept
                 ]
                 ev_list.append(
-                    EvidenceItem("ultrasonic", 0.2, us_ev.region_kind, us_ev.region_values,
-                                 us_ref, cycle)
+                    EvidenceItem(
+                        "ultrasonic", 0.2, us_ev.region_kind, us_ev.region_values, us_ref, cycle
+                    )
                 )
                 clearance = max(0.0, prev.clearance - speed * PERIOD_S)
                 view = CorridorView(min(clearance, length), length, prev.blocker, tuple(ev_list))
@@ -512,23 +590,30 @@ class Perceiver:
             return view
         # Which tracked class does each corridor return belong to? People are excluded:
         # they are handled by the pedestrian rules and walk away; obstacles block.
-        owner: dict[int, Track | None] = {}
+        spans = []
         for c in clusters:
-            for i in range(c.first, c.last + 1):
-                owner[i] = track_of.get(c.index)
+            t = track_of.get(c.index)
+            spans.append((c.first, c.last, t, t is not None and t.cls() == "person"))
         clearance, blocker = CORRIDOR_MAX_M, None
         for i, r in returns:
-            owner_t = owner.get(int(i))
-            if owner_t is not None and owner_t.cls() == "person":
+            owner_t, person = None, False
+            for first, last, t, is_person in spans:
+                if first <= i <= last:
+                    owner_t, person = t, is_person
+                    break
+            if person:
                 continue
-            x = r * math.cos(float(BEAM_ANGLES[int(i)]))
+            x = r * _BEAM_COS[i]
             if x < clearance:
                 clearance, blocker = x, (owner_t.id if owner_t is not None else None)
         seen_ev = (
             EvidenceItem(
-                "lidar", 0.8, "box",
+                "lidar",
+                0.8,
+                "box",
                 (0.0, -CORRIDOR_HALF_WIDTH_M, round(length, 3), CORRIDOR_HALF_WIDTH_M),
-                lidar_ref, cycle,
+                lidar_ref,
+                cycle,
             ),
             EvidenceItem("ultrasonic", 0.2, us_ev.region_kind, us_ev.region_values, us_ref, cycle),
         )

@@ -215,19 +215,34 @@ def _why(test: str, node: str | None, v: Mapping[str, object], branch: str) -> s
     shown = f"{value:.2f}" if isinstance(value, float) else str(value)
     if test == "root":
         op = ">=" if branch == "yes" else "<"
-        return f"vehicle on a collision course ({node} {shown} {op} {t:.2f})" if branch == "yes" \
+        return (
+            f"vehicle on a collision course ({node} {shown} {op} {t:.2f})"
+            if branch == "yes"
             else f"no vehicle on a collision course ({node} {shown} {op} {t:.2f})"
+        )
     if test == "vehicle_close":
-        return (f"vehicle too close to manoeuvre ({node} {shown} s < {t:.1f} s)" if branch == "yes"
-                else f"vehicle far enough to avoid ({node} {shown} s >= {t:.1f} s)")
+        return (
+            f"vehicle too close to manoeuvre ({node} {shown} s < {t:.1f} s)"
+            if branch == "yes"
+            else f"vehicle far enough to avoid ({node} {shown} s >= {t:.1f} s)"
+        )
     if test == "ped_in_path":
-        return (f"pedestrian in path ({node} {shown} >= {t:.2f})" if branch == "yes"
-                else f"no pedestrian in path ({node} {shown} < {t:.2f})")
+        return (
+            f"pedestrian in path ({node} {shown} >= {t:.2f})"
+            if branch == "yes"
+            else f"no pedestrian in path ({node} {shown} < {t:.2f})"
+        )
     if test == "ped_close":
-        return (f"pedestrian inside stop distance ({node} {shown} m < {t:.1f} m)" if branch == "yes"
-                else f"pedestrian beyond stop distance ({node} {shown} m >= {t:.1f} m)")
-    return (f"path clear ({node} {shown} < {t:.2f})" if branch == "yes"
-            else f"aisle blocked ({node} {shown} >= {t:.2f})")
+        return (
+            f"pedestrian inside stop distance ({node} {shown} m < {t:.1f} m)"
+            if branch == "yes"
+            else f"pedestrian beyond stop distance ({node} {shown} m >= {t:.1f} m)"
+        )
+    return (
+        f"path clear ({node} {shown} < {t:.2f})"
+        if branch == "yes"
+        else f"aisle blocked ({node} {shown} >= {t:.2f})"
+    )
 
 
 def _margin(test: str, node: str | None, v: Mapping[str, object]) -> float:

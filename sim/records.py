@@ -17,14 +17,31 @@ from sim.counterfactual import Found
 from sim.execution import Executed
 from sim.perception import EvidenceItem, PerceptionOutput
 from sim.policy import TREE, TREE_EDGES, Outcome, Scored
+from trace_runtime import DecisionTree
 
 RATIONALE_CAPACITY = 1024
 DANGLING_SHIFT_NS = 37_000_000  # between two 10 Hz cycles: no sensor message is ever there
 
-_TREE_NODES = [
-    {"id": s.id, "label": s.label, "test": s.test, "command": s.command} for s in TREE
-]
+_TREE_NODES = [{"id": s.id, "label": s.label, "test": s.test, "command": s.command} for s in TREE]
 _TREE_EDGES = [{"parent": p, "child": c, "label": lbl} for p, c, lbl in TREE_EDGES]
+_TREES: dict[tuple[str, ...], DecisionTree] = {}
+
+
+def _tree(path: tuple[str, ...]) -> DecisionTree:
+    """The decision tree with its taken path, validated once per path (there are five).
+
+    The logger accepts a model inside a dict record as already validated, so the 21 nodes
+    and edges are not re-checked every cycle (a third of the action record's validation).
+    """
+    tree = _TREES.get(path)
+    if tree is None:
+        tree = DecisionTree.model_validate(
+            {"nodes": _TREE_NODES, "edges": _TREE_EDGES, "taken_path": list(path)}
+        )
+        _TREES[path] = tree
+    return tree
+
+
 _REGION_FRAME = {"beams": "lidar", "pixels": "camera", "cone": "ultrasonic", "box": "base_link"}
 
 
@@ -70,8 +87,10 @@ def perception_record(
             {
                 "id": e.id,
                 "class": e.cls,
-                "pose": {"position": (round(e.x, 3), round(e.y, 3), 0.0),
-                         "orientation": _quat(yaw)},
+                "pose": {
+                    "position": (round(e.x, 3), round(e.y, 3), 0.0),
+                    "orientation": _quat(yaw),
+                },
                 "velocity": (round(e.vx, 3), round(e.vy, 3), 0.0),
                 "confidence": e.confidence,
                 "evidence": _evidence(e.evidence, corrupt.get(e.id)),
@@ -85,8 +104,11 @@ def perception_record(
             "id": "corridor",
             "class": "corridor",
             "pose": {
-                "position": (round(ox + ahead * math.cos(h), 3), round(oy + ahead * math.sin(h), 3),
-                             0.0),
+                "position": (
+                    round(ox + ahead * math.cos(h), 3),
+                    round(oy + ahead * math.sin(h), 3),
+                    0.0,
+                ),
                 "orientation": _quat(h),
             },
             "confidence": {"corridor": 0.99},
@@ -104,8 +126,15 @@ def belief_record(graph: BeliefGraph, skip: Edge | None = None) -> dict[str, Any
     """Layer 2 record; ``skip`` is an edge whose write failed."""
     return {
         "nodes": [
-            {"id": n.id, "kind": n.kind, "label": n.label, "p": n.p, "value": n.value,
-             "unit": n.unit, "entity": n.entity}
+            {
+                "id": n.id,
+                "kind": n.kind,
+                "label": n.label,
+                "p": n.p,
+                "value": n.value,
+                "unit": n.unit,
+                "entity": n.entity,
+            }
             for n in graph.nodes
         ],
         "edges": [
@@ -208,12 +237,16 @@ def action_record(
         ],
         "rationale": rationale,
         "counterfactuals": [
-            {"factor": c.factor, "comparison": c.comparison, "threshold": c.threshold,
-             "would_select": c.would_select}
+            {
+                "factor": c.factor,
+                "comparison": c.comparison,
+                "threshold": c.threshold,
+                "would_select": c.would_select,
+            }
             for c in (counterfactuals or [])
         ],
         "counterfactuals_none_applicable": counterfactuals is not None and not counterfactuals,
-        "tree": {"nodes": _TREE_NODES, "edges": _TREE_EDGES, "taken_path": list(outcome.path)},
+        "tree": _tree(outcome.path),
     }
 
 
@@ -224,8 +257,13 @@ def execution_record(executed: Executed, flags: list[str]) -> dict[str, Any]:
         "actual": {"linear": executed.actual[0], "angular": executed.actual[1]},
         "deviation": executed.deviation,
         "checks": [
-            {"rule": c.rule, "passed": c.passed, "value": c.value, "limit": c.limit,
-             "detail": c.detail}
+            {
+                "rule": c.rule,
+                "passed": c.passed,
+                "value": c.value,
+                "limit": c.limit,
+                "detail": c.detail,
+            }
             for c in executed.checks
         ],
         "flags": flags,
@@ -286,6 +324,7 @@ def cut_edges(node: str, edges: tuple[Edge, ...], entities: set[str]) -> list[Ed
                 seen.add(e.parent)
                 stack.append(e.parent)
     return [
-        e for e in ancestors_edges
+        e
+        for e in ancestors_edges
         if not reaches_entity(node, [x for x in edges if x is not e], entities)
     ]

@@ -81,8 +81,15 @@ def _forklift(world: World) -> list[Actor]:
     legs = [(10.0, -fx * speed, -fy * speed)]
     return [
         Actor(
-            "forklift", x, y, FORKLIFT_L, FORKLIFT_W, heading=h + math.pi, legs=legs,
-            brake_within_m=4.0, name="forklift",
+            "forklift",
+            x,
+            y,
+            FORKLIFT_L,
+            FORKLIFT_W,
+            heading=h + math.pi,
+            legs=legs,
+            brake_within_m=4.0,
+            name="forklift",
         )
     ]
 

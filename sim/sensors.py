@@ -60,55 +60,161 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-_Rays = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
-_RAYS: dict[float, _Rays] = {}
+@dataclass(frozen=True, slots=True)
+class _Pairs:
+    """(beam, shelf) pairs a scan must slab-test: per pair, the shelf's x-slab bounds in the
+    order the beam meets them, and its y-slab entry and exit ranges (fixed for a given y)."""
+
+    beam: np.ndarray
+    box: np.ndarray
+    inv_x: np.ndarray
+    x_in: np.ndarray  # the shelf's x bound the beam enters through (x0 or x1)
+    x_out: np.ndarray
+    y_in: np.ndarray  # ranges at which the beam enters and leaves the shelf's y-slab
+    y_out: np.ndarray
+    ahead: bool  # every y-slab starts ahead of the robot, so every slab entry is at t > 0
+
+    def subset(self, keep: np.ndarray) -> _Pairs:
+        return _Pairs(
+            beam=self.beam[keep],
+            box=self.box[keep],
+            inv_x=self.inv_x[keep],
+            x_in=self.x_in[keep],
+            x_out=self.x_out[keep],
+            y_in=self.y_in[keep],
+            y_out=self.y_out[keep],
+            ahead=bool((self.y_in[keep] > 0.0).all()),
+        )
 
 
-def _rays(heading: float) -> _Rays:
-    """Beam directions and their inverses for a heading (cached: the route has two)."""
-    rays = _RAYS.get(heading)
-    if rays is None:
-        ang = BEAM_ANGLES + heading
-        dx, dy = np.cos(ang), np.sin(ang)
-        dxs = np.where(np.abs(dx) < 1e-12, 1e-12, dx)
-        dys = np.where(np.abs(dy) < 1e-12, 1e-12, dy)
-        inv_x, inv_y = 1.0 / dxs, 1.0 / dys
-        rays = (dx, dy, inv_x[:, None], inv_y[:, None], dxs > 0, dys > 0)
-        if len(_RAYS) < 64:
-            _RAYS[heading] = rays
+_Local = tuple[np.ndarray, np.ndarray, list[float], list[float]]
+
+
+@dataclass(slots=True)
+class _Rays:
+    """Beam directions for one heading, and the map geometry that does not move with ``x``.
+
+    The route is straight, so the robot's heading takes two values and its ``y`` one: per
+    (heading, y, map) the y-slabs of the shelves and the side walls are fixed, and a scan only
+    recomputes the x-slabs, of the (beam, shelf) pairs that can meet at all. Every range is
+    computed with the same floating-point operations as a direct slab test of every beam
+    against every shelf in range, so scans are bit-for-bit what that test gives.
+    """
+
+    dx: np.ndarray
+    dy: np.ndarray
+    dx_list: list[float]
+    dy_list: list[float]
+    inv_x: np.ndarray
+    pos_x: np.ndarray
+    wall_y: np.ndarray  # range to the wall the beam meets in y
+    boxes: tuple[tuple[float, float, float, float], ...]
+    cy2: tuple[float, ...]  # squared y-distance to each shelf
+    pairs: _Pairs
+    by_near: dict[tuple[bool, ...], _Pairs]  # ``pairs`` restricted to the shelves in range
+    local: dict[float, _Local]  # see _local_dirs
+
+
+_RAYS: dict[tuple[float, float, bytes], _Rays] = {}
+
+
+def _rays(heading: float, oy: float, shelves: np.ndarray) -> _Rays:
+    """The cached ray geometry of ``heading`` from height ``oy`` among ``shelves``."""
+    key = (heading, oy, shelves.tobytes())
+    rays = _RAYS.get(key)
+    if rays is not None:
+        return rays
+    ang = BEAM_ANGLES + heading
+    dx, dy = np.cos(ang), np.sin(ang)
+    dxs = np.where(np.abs(dx) < 1e-12, 1e-12, dx)
+    dys = np.where(np.abs(dy) < 1e-12, 1e-12, dy)
+    inv_x, inv_y = 1.0 / dxs, 1.0 / dys
+    y0 = (shelves[:, 1] - oy) * inv_y[:, None]
+    y1 = (shelves[:, 3] - oy) * inv_y[:, None]
+    y_in, y_out = np.minimum(y0, y1), np.maximum(y0, y1)
+    # A pair whose y-slab is behind the robot never hits (the hit needs 0 < t <= y_out); one
+    # whose y-slab starts beyond the LiDAR's range can only lower a range that is beyond it
+    # to another such range, and every range beyond LIDAR_RANGE_MAX reads as "no return".
+    beam, box = np.nonzero((y_out > 0.0) & (y_in <= LIDAR_RANGE_MAX))
+    pos = inv_x[beam] > 0.0
+    boxes = tuple((float(a), float(b), float(c), float(d)) for a, b, c, d in shelves)
+    pairs = _Pairs(
+        beam=beam,
+        box=box,
+        inv_x=inv_x[beam],
+        x_in=np.where(pos, shelves[box, 0], shelves[box, 2]),
+        x_out=np.where(pos, shelves[box, 2], shelves[box, 0]),
+        y_in=y_in[beam, box],
+        y_out=y_out[beam, box],
+        ahead=bool((y_in[beam, box] > 0.0).all()),
+    )
+    rays = _Rays(
+        dx=dx,
+        dy=dy,
+        dx_list=dx.tolist(),
+        dy_list=dy.tolist(),
+        inv_x=inv_x,
+        pos_x=dxs > 0,
+        wall_y=np.where(dys > 0, (HEIGHT_M - oy) * inv_y, -oy * inv_y),
+        boxes=boxes,
+        cy2=tuple((min(max(oy, b[1]), b[3]) - oy) ** 2 for b in boxes),
+        pairs=pairs,
+        by_near={},
+        local={},
+    )
+    if len(_RAYS) < 64:
+        _RAYS[key] = rays
     return rays
 
 
-def _static_ranges(world: World, ox: float, oy: float, heading: float) -> np.ndarray:
+def _static_ranges(rays: _Rays, ox: float, oy: float) -> np.ndarray:
     """Ranges to the map (shelves and outer walls) along each beam: the slab method."""
-    _, _, inv_xc, inv_yc, pos_x, pos_y = _rays(heading)
-    inv_x, inv_y = inv_xc[:, 0], inv_yc[:, 0]
     # Walls: where the ray leaves the warehouse rectangle.
-    tx = np.where(pos_x, (WIDTH_M - ox) * inv_x, -ox * inv_x)
-    ty = np.where(pos_y, (HEIGHT_M - oy) * inv_y, -oy * inv_y)
-    best = np.minimum(tx, ty)
-    boxes = world.shelves
+    best: np.ndarray = np.minimum(np.where(rays.pos_x, WIDTH_M - ox, -ox) * rays.inv_x, rays.wall_y)
     # Only shelves within range can be hit.
-    cx = np.clip(ox, boxes[:, 0], boxes[:, 2]) - ox
-    cy = np.clip(oy, boxes[:, 1], boxes[:, 3]) - oy
-    near = boxes[cx * cx + cy * cy < LIDAR_RANGE_MAX**2]
-    if len(near):
-        x0 = (near[:, 0] - ox) * inv_xc
-        x1 = (near[:, 2] - ox) * inv_xc
-        y0 = (near[:, 1] - oy) * inv_yc
-        y1 = (near[:, 3] - oy) * inv_yc
-        tmin = np.maximum(np.minimum(x0, x1), np.minimum(y0, y1))
-        tmax = np.minimum(np.maximum(x0, x1), np.maximum(y0, y1))
-        hit = (tmax >= tmin) & (tmin > 0.0)
-        t = np.where(hit, tmin, np.inf).min(axis=1)
-        best = np.minimum(best, t)
+    near = tuple(
+        (min(max(ox, box[0]), box[2]) - ox) ** 2 + cy2 < LIDAR_RANGE_MAX**2
+        for box, cy2 in zip(rays.boxes, rays.cy2, strict=True)
+    )
+    pairs = rays.by_near.get(near)
+    if pairs is None:
+        pairs = rays.pairs.subset(np.array(near)[rays.pairs.box])
+        rays.by_near[near] = pairs
+    if not len(pairs.beam):
+        return best
+    # Entering the x-slab through x_in is min(x0, x1) of the textbook slab test, exactly.
+    t_in = np.maximum((pairs.x_in - ox) * pairs.inv_x, pairs.y_in)
+    t_out = np.minimum((pairs.x_out - ox) * pairs.inv_x, pairs.y_out)
+    hit = t_out >= t_in
+    if not pairs.ahead:
+        hit &= t_in > 0.0
+    np.minimum.at(best, pairs.beam[hit], t_in[hit])
     return best
 
 
+def _local_dirs(rays: _Rays, heading: float, c: float, s: float) -> _Local:
+    """Every beam's direction in the frame of a box actor with ``heading`` (c, s its cos, sin);
+    actors keep their heading (pallets, a forklift on the aisle), so this is mostly cached."""
+    local = rays.local.get(heading)
+    if local is None:
+        ldx, ldy = c * rays.dx + s * rays.dy, -s * rays.dx + c * rays.dy
+        ldx = np.where(np.abs(ldx) < 1e-12, 1e-12, ldx)
+        ldy = np.where(np.abs(ldy) < 1e-12, 1e-12, ldy)
+        local = (ldx, ldy, ldx.tolist(), ldy.tolist())
+        if len(rays.local) < 64:
+            rays.local[heading] = local
+    return local
+
+
+_FEW_BEAMS = 20
+"""Up to this many beams, a Python loop is cheaper than numpy's per-call cost."""
+
+
 def _actor_ranges(
-    actor: Actor, ox: float, oy: float, heading: float, out: np.ndarray
+    actor: Actor, pose: tuple[float, float, float], rays: _Rays, out: np.ndarray
 ) -> None:
     """Lower ``out`` where beams hit ``actor`` (a circle, or an oriented box)."""
+    ox, oy, heading = pose
     rx, ry = actor.x - ox, actor.y - oy
     dist = math.hypot(rx, ry)
     bound = 0.5 * math.hypot(actor.length, actor.width)
@@ -120,37 +226,55 @@ def _actor_ranges(
     i1 = min(LIDAR_BEAMS - 1, math.floor((bearing + half - LIDAR_ANGLE_MIN) / LIDAR_ANGLE_INC))
     if i1 < i0:
         return
-    ang = BEAM_ANGLES[i0 : i1 + 1] + heading
-    dx, dy = np.cos(ang), np.sin(ang)
     if actor.kind == "person":
+        # A handful of beams.
         r = 0.5 * actor.length
-        b = dx * rx + dy * ry
-        disc = b * b - (dist * dist - r * r)
-        t = np.where(disc >= 0.0, b - np.sqrt(np.maximum(disc, 0.0)), np.inf)
-    else:
-        c, s = math.cos(actor.heading), math.sin(actor.heading)
-        # Ray origin and direction in the actor's frame.
-        lx, ly = -(c * rx + s * ry), -(-s * rx + c * ry)
-        ldx, ldy = c * dx + s * dy, -s * dx + c * dy
-        ldx = np.where(np.abs(ldx) < 1e-12, 1e-12, ldx)
-        ldy = np.where(np.abs(ldy) < 1e-12, 1e-12, ldy)
-        hl, hw = 0.5 * actor.length, 0.5 * actor.width
-        x0, x1 = (-hl - lx) / ldx, (hl - lx) / ldx
-        y0, y1 = (-hw - ly) / ldy, (hw - ly) / ldy
-        tmin = np.maximum(np.minimum(x0, x1), np.minimum(y0, y1))
-        tmax = np.minimum(np.maximum(x0, x1), np.maximum(y0, y1))
-        t = np.where((tmax >= tmin) & (tmin > 0.0), tmin, np.inf)
+        c = dist * dist - r * r
+        dxs, dys = rays.dx_list, rays.dy_list
+        for i in range(i0, i1 + 1):
+            b = dxs[i] * rx + dys[i] * ry
+            disc = b * b - c
+            if disc >= 0.0:
+                out[i] = min(out[i], b - math.sqrt(disc))
+        return
+    c, s = math.cos(actor.heading), math.sin(actor.heading)
+    # Ray origin and direction in the actor's frame (directions cached per actor heading).
+    lx, ly = -(c * rx + s * ry), -(-s * rx + c * ry)
+    ldx_all, ldy_all, ldx_list, ldy_list = _local_dirs(rays, actor.heading, c, s)
+    hl, hw = 0.5 * actor.length, 0.5 * actor.width
+    ax, bx, ay, by = -hl - lx, hl - lx, -hw - ly, hw - ly
+    if i1 - i0 < _FEW_BEAMS:
+        # The slab test below, beam by beam, with the same operations in the same order.
+        for i in range(i0, i1 + 1):
+            ldx, ldy = ldx_list[i], ldy_list[i]
+            x0, x1, y0, y1 = ax / ldx, bx / ldx, ay / ldy, by / ldy
+            if x0 > x1:
+                x0, x1 = x1, x0
+            if y0 > y1:
+                y0, y1 = y1, y0
+            t_in = x0 if x0 > y0 else y0
+            t_out = x1 if x1 < y1 else y1
+            if t_out >= t_in > 0.0:
+                out[i] = min(out[i], t_in)
+        return
+    ldx_v, ldy_v = ldx_all[i0 : i1 + 1], ldy_all[i0 : i1 + 1]
+    x0_v, x1_v = ax / ldx_v, bx / ldx_v
+    y0_v, y1_v = ay / ldy_v, by / ldy_v
+    tmin = np.maximum(np.minimum(x0_v, x1_v), np.minimum(y0_v, y1_v))
+    tmax = np.minimum(np.maximum(x0_v, x1_v), np.maximum(y0_v, y1_v))
+    hits = np.where((tmax >= tmin) & (tmin > 0.0), tmin, np.inf)
     seg = out[i0 : i1 + 1]
-    np.minimum(seg, t, out=seg)
+    np.minimum(seg, hits, out=seg)
 
 
 def scan_lidar(world: World, rng: np.random.Generator) -> LidarScan:
     """Ray-cast one scan from the robot's pose, with range noise."""
     ox, oy, heading = world.robot_pose()
-    expected = _static_ranges(world, ox, oy, heading)
+    rays = _rays(heading, oy, world.shelves)
+    expected = _static_ranges(rays, ox, oy)
     truth = expected.copy()
     for actor in world.actors:
-        _actor_ranges(actor, ox, oy, heading, truth)
+        _actor_ranges(actor, (ox, oy, heading), rays, truth)
     ranges = truth + rng.normal(0.0, LIDAR_NOISE_M, LIDAR_BEAMS)
     ranges[truth > LIDAR_RANGE_MAX] = np.inf
     expected = np.where(expected > LIDAR_RANGE_MAX, np.inf, expected)
@@ -203,9 +327,7 @@ def detect_camera(
             min(float(IMAGE_W), u + half),
             min(float(IMAGE_H), v_bot),
         )
-        detections.append(
-            CameraDetection(b, box, (scores[0], scores[1], scores[2]))
-        )
+        detections.append(CameraDetection(b, box, (scores[0], scores[1], scores[2])))
     return detections
 
 
