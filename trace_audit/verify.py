@@ -38,6 +38,7 @@ from trace_runtime.integrity import (
 )
 from trace_runtime.reader import Cycle, Log, Segment, find_segments, open_segment
 from trace_runtime.records import GENESIS, Checkpoint
+from trace_runtime.tiers.catalog import TIER_METADATA
 
 __all__ = [
     "Finding",
@@ -288,6 +289,14 @@ class _SegmentCheck:
             self.tail = _Tail(scan.last_digest, scan.num[-1], scan.t[-1])
         s.findings = len(self.sink.findings) - self.findings_before
         s.ok = s.findings == 0
+        if scan.summarised:
+            first, last = scan.summarised[0], scan.summarised[-1]
+            self.note(
+                "summarised",
+                f"{len(scan.summarised)} cycle(s) are warm-tier summaries: summarised (chain "
+                "verified, payloads not retained)",
+                (scan.num[first], scan.num[last], scan.t[first], scan.t[last]),
+            )
         if scan.uncited:
             self.note(
                 "uncovered_sensors",
@@ -358,14 +367,27 @@ class _SegmentCheck:
             scan.prev.append(_prefix(prev))
             scan.dropped.append(status.dropped)
             scan.link_ok.append(1 if expected is not None and prev == expected else 0)
-            if expected is None and position == 0:
-                scan.link_ok[0] = 2  # entry unknown: nothing to compare with
+            if position == 0:
+                self._check_entry(prev, cycle)
             expected = status.seal_digest
             scan.last_digest = status.seal_digest
             if cycle.cycle in wanted:
                 scan.heads.setdefault(cycle.cycle, []).append(status.seal_digest)
             scan.uncited += status.sensors_uncited
             self._content_findings(status, position)
+
+    def _check_entry(self, prev: str, cycle: Cycle) -> None:
+        """The first seal against where the chain entered the segment."""
+        if self.entry is None:
+            self.scan.link_ok[0] = 2  # the previous segment is missing: nothing to compare
+        elif self.scan.link_ok[0] and prev != self.session.prev_seal:
+            # The chain links up, but the segment's own metadata says otherwise: edited.
+            self.finding(
+                "modified",
+                "the segment's trace.session metadata names another previous seal than its "
+                "first seal does (the metadata was edited)",
+                (cycle.cycle, cycle.cycle, cycle.t_ns, cycle.t_ns),
+            )
 
     def _content_findings(self, status: SealStatus, position: int) -> None:
         if status.state == "modified":
@@ -509,9 +531,9 @@ class _SegmentCheck:
                 window_start = c.cycle + 1
             if c.final:
                 final_seen = c
-        # A segment the logger closed ends with its closing checkpoint. Hot segments are the
-        # logger's own files; compacted tiers carry the checkpoints over with the cycles.
-        if self.summary.finished and last_cycle is not None:
+        # A segment its logger closed ends with its closing checkpoint; one without a summary
+        # (a crash) cannot have one. Compacted tiers carry checkpoints over with the cycles.
+        if _closed_by_logger(self.segment) and last_cycle is not None:
             if final_seen is None:
                 anchored = f"cycle {self.anchor.cycle}" if self.anchor else "none"
                 self.finding(
@@ -537,6 +559,10 @@ class _SegmentCheck:
         session = self.session
         if c.robot_id != session.robot_id:
             problems.append(("checkpoint_mismatch", f"names robot {c.robot_id!r}"))
+        if c.segment != session.segment:
+            problems.append(
+                ("checkpoint_mismatch", f"it was written in segment {c.segment}, not this one")
+            )
         heads = self.scan.heads.get(c.cycle)
         if not heads:
             if last_cycle is not None and c.cycle > last_cycle:
@@ -822,6 +848,19 @@ def _longest_increasing(values: list[int]) -> set[int]:
     return kept
 
 
+def _closed_by_logger(segment: Segment) -> bool | None:
+    """Whether the segment's logger closed it (so it must end with a closing checkpoint).
+
+    A hot segment is the logger's own file: closed when it has a summary. A compacted one is
+    always finished; its ``trace.tier`` metadata says whether its hot source was
+    (``source_finished``). None when it does not say: the closing checkpoint is not required.
+    """
+    if segment.session.tier == "hot":
+        return segment.info.finished
+    value = segment.metadata.get(TIER_METADATA, {}).get("source_finished")
+    return None if value is None else value == "true"
+
+
 def _runs(positions: list[int]) -> list[list[int]]:
     runs: list[list[int]] = []
     for p in positions:
@@ -891,6 +930,11 @@ def verify_log(path: str | Path, *, key: PublicKey | None = None) -> VerifyRepor
             if len(files) == 1:
                 raise
             sink.finding(Finding("damaged", f"{file.name}: {err.reason}", segment=file.name))
+        except Exception as err:  # damage below what the reader checks: still a finding
+            reason = f"damaged ({type(err).__name__}: {err})".splitlines()[0]
+            if len(files) == 1:
+                raise LogReadError(str(file), reason) from err
+            sink.finding(Finding("damaged", f"{file.name}: {reason}", segment=file.name))
     if not segments:
         raise LogReadError(str(root), "no readable TRACE segments")
     report = VerifyReport(str(root), key.key_id if key else None, key is not None)

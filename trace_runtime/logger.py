@@ -14,6 +14,7 @@ and the next seal that is written carries the count in ``dropped``.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import queue
 import re
@@ -561,22 +562,34 @@ class AuditLogger:
         *,
         final: bool,
     ) -> OutMessage | None:
-        """Build (and sign) a checkpoint message; None if that fails: never raises."""
+        """Build (and sign) a checkpoint message; None if that fails: never raises.
+
+        When signing fails (an HSM gone) the checkpoint is written unsigned: it still
+        anchors the chain head and marks a closed segment, and verify reports it unsigned.
+        """
+        build = functools.partial(
+            make_checkpoint,
+            robot_id=self._session.robot_id,
+            segment=self._session.segment,
+            first_cycle=self._session.first_cycle,
+            cycle=cycle,
+            t_ns=t_ns,
+            sealed=sealed,
+            head=head,
+            final=final,
+        )
         try:
-            checkpoint = make_checkpoint(
-                robot_id=self._session.robot_id,
-                segment=self._session.segment,
-                first_cycle=self._session.first_cycle,
-                cycle=cycle,
-                t_ns=t_ns,
-                sealed=sealed,
-                head=head,
-                final=final,
-                signer=self._signer,
-            )
+            try:
+                checkpoint = build(signer=self._signer)
+            except Exception as err:
+                if self._signer is None:
+                    raise
+                self.stats.checkpoint_failures += 1
+                self._report_once("sign", f"could not sign a checkpoint, wrote it unsigned: {err}")
+                checkpoint = build()
             data = encode_checkpoint(checkpoint)
             return OutMessage(segment.channel(TOPIC_CHECKPOINT), cycle, t_ns, data)
-        except Exception as err:  # a failing signer (HSM gone) must not stop the audit trail
+        except Exception as err:  # the audit trail goes on without this checkpoint
             self.stats.checkpoint_failures += 1
             self._report_once("checkpoint", f"could not build a checkpoint: {err}")
             return None

@@ -10,6 +10,7 @@ import json
 import os
 import random
 import signal
+import struct
 import subprocess
 import sys
 import time
@@ -22,7 +23,7 @@ from tests.trace_audit.conftest import PERIOD_NS, T0_NS, fill_cycle, write_log
 from tests.trace_audit.test_verify_tamper import decode, flip_byte, write, write_signed_log
 from trace_audit.cli import app
 from trace_audit.verify import seal_status, verify_log
-from trace_runtime import AuditLogger, LoggerConfig, open_log
+from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
 from trace_runtime.errors import LogReadError
 from trace_runtime.integrity import Ed25519Signer, generate_keypair, load_public_key, load_signer
 from trace_runtime.records import TOPIC_ACTION
@@ -165,6 +166,80 @@ def test_a_robot_killed_mid_run_and_restarted_verifies_clean(tmp_path: Path) -> 
     assert numbers == list(range(len(numbers)))
 
 
+# --- compacted tiers ---------------------------------------------------------------------------
+
+
+def _compact(root: Path, tier: str) -> None:
+    from trace_runtime.tiers import compact
+
+    report = compact(root, tier, older_than_ns=0, now_ns=10**20, retention_ns=None)
+    assert report.segments and all(s.status == "compacted" for s in report.segments)
+
+
+def test_warm_and_cold_segments_verify_clean(tmp_path: Path) -> None:
+    """Warm keeps seals and checkpoints (summaries say so); cold decodes to the same bytes."""
+    signer = Ed25519Signer.generate()
+    root = tmp_path / "root"
+    routine = ("ped_far",) * 5 + ("ped_close",)  # long routine stretches get summarised
+    write_signed_log(root, signer, 160, max_segment_s=4.0, situations=routine)
+    hot = verify_log(root, key=signer.public_key)
+    assert hot.ok and hot.cycles_summarised == 0
+    _compact(root, "warm")
+    warm = verify_log(root, key=signer.public_key)
+    assert warm.ok, warm.findings
+    assert {s.tier for s in warm.segments} == {"warm"}
+    assert 0 < warm.cycles_summarised < 160 and warm.cycles_valid == 160
+    assert warm.checkpoints == warm.checkpoints_valid == hot.checkpoints
+    notes = [n for n in warm.notes if n.kind == "summarised"]
+    assert notes and "chain verified, payloads not retained" in notes[0].message
+    _compact(root, "cold")
+    cold = verify_log(root, key=signer.public_key)
+    assert cold.ok, cold.findings
+    assert {s.tier for s in cold.segments} == {"cold"}
+    assert (cold.cycles_valid, cold.cycles_summarised) == (160, warm.cycles_summarised)
+    assert cold.robots[0].anchored_cycle == 159
+
+
+def test_a_crashed_segment_compacted_later_is_not_called_truncated(tmp_path: Path) -> None:
+    """Compaction writes a finished file from a crashed one; that is not a cut."""
+    signer = Ed25519Signer.generate()
+    root = tmp_path / "root"
+    config = LoggerConfig(
+        threaded=False, fsync_interval_s=None, checkpoint_interval_s=1.0, checkpoint_key=signer
+    )
+    crashed = AuditLogger(root, robot_id="amr-7", config=config)
+    for i in range(45):
+        with crashed.cycle(T0_NS + i * PERIOD_NS) as c:
+            fill_cycle(c, "ped_far")
+    assert crashed._segment is not None
+    crashed._segment._stream.close()  # killed: no closing checkpoint, no summary
+    crashed._segment, crashed._closed = None, True
+    restarted = AuditLogger(root, robot_id="amr-7", config=config)
+    for i in range(45, 80):
+        with restarted.cycle(T0_NS + i * PERIOD_NS) as c:
+            fill_cycle(c, "ped_close")
+    restarted.close()
+    for tier in ("hot", "warm", "cold"):
+        if tier != "hot":
+            _compact(root, tier)
+        report = verify_log(root, key=signer.public_key)
+        assert report.ok, (tier, report.findings)
+        assert report.cycles_valid == 80 and report.robots[0].unanchored_cycles == 0
+
+
+def test_a_damaged_cold_segment_is_a_finding(tmp_path: Path) -> None:
+    root = tmp_path / "root"
+    write_signed_log(root, Ed25519Signer.generate(), 60, max_segment_s=2.0)
+    _compact(root, "cold")
+    victim = root / "cold" / "amr-7_000001.mcap"
+    data = bytearray(victim.read_bytes())
+    data[open_segment(victim).chunks()[0].offset + 200] ^= 0x55  # inside the cold block
+    victim.write_bytes(bytes(data))
+    report = verify_log(root)
+    assert not report.ok
+    assert any(f.segment.endswith(victim.name) for f in report.findings), report.findings
+
+
 # --- one decision ---------------------------------------------------------------------------------
 
 
@@ -263,6 +338,29 @@ def test_a_damaged_segment_in_a_root_is_a_finding_not_a_crash(tmp_path: Path) ->
     assert "damaged" in _kinds(report.findings) and report.cycles_valid == 100
     with pytest.raises(LogReadError):
         verify_log(root / "hot" / "amr-7_000001.mcap")
+
+
+def test_bytes_flipped_anywhere_in_a_segment_never_crash_verify(tmp_path: Path) -> None:
+    """Damage in any record (schemas, metadata, chunks, summary): a report or exit 3."""
+    root = tmp_path / "root"
+    write_log(root)
+    path = root / "hot" / "amr-7_000000.mcap"
+    original = path.read_bytes()
+    # The compressed records of each chunk (past its header: times, sizes, CRC, compression).
+    chunks = [
+        (c.offset + 64, c.offset + 9 + struct.unpack_from("<Q", original, c.offset + 1)[0])
+        for c in open_segment(path).chunks()
+    ]
+    for at in range(8, len(original) - 8, len(original) // 150):
+        data = bytearray(original)
+        data[at] ^= 0xA5
+        path.write_bytes(bytes(data))
+        try:
+            report = verify_log(root)
+        except LogReadError:
+            continue
+        if any(a <= at < b for a, b in chunks):
+            assert not report.ok, at  # message data is covered
 
 
 def test_cli_keygen_writes_a_key_pair_and_refuses_to_overwrite(tmp_path: Path) -> None:

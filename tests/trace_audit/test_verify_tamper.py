@@ -62,6 +62,7 @@ def write_signed_log(
     interval_s: float = 1.0,
     max_segment_s: float = 3600.0,
     skip: Callable[[int], bool] | None = None,
+    situations: tuple[str, ...] = SITUATIONS,
 ) -> Path:
     """A log written through ``AuditLogger`` with signed checkpoints every ``interval_s``."""
     config = LoggerConfig(
@@ -77,7 +78,7 @@ def write_signed_log(
         if skip is not None and skip(i):
             c.abort()
             continue
-        fill_cycle(c, SITUATIONS[(i // 7) % len(SITUATIONS)])
+        fill_cycle(c, situations[(i // 7) % len(situations)])
         c.commit()
     logger.close()
     return path
