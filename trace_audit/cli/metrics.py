@@ -224,8 +224,10 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
         box=boxes,
         title_justify="left",
         show_edge=False,
+        collapse_padding=not out.no_color,
+        pad_edge=False,
     )
-    for name in ("Method", "ET (%)", "fully tr.", "TC (%)", "gaps", "DR (%)", "not rec.", "Time"):
+    for name in ("Method", "ET%", "fully tr.", "TC%", "gaps", "DR%", "not rec.", "Time"):
         t2.add_column(name, justify="left" if name == "Method" else "right")
     t2.add_row(
         "TRACE (this log)",
@@ -237,6 +239,7 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
         _share(overall.not_reconstructable, overall.decisions),
         report.logging_time,
     )
+    t2.columns[1].min_width = len(_pm(overall.et))
     out.print(t2)
     out.print(
         "  ET: mean ± std across decisions; fully tr.: fully traceable decisions; "
@@ -279,25 +282,31 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
     )
 
     if report.groups:
+        wide = out.width >= 90
         t3 = Table(
             title=f"Table III: per {report.by}",
             box=boxes,
             title_justify="left",
             show_edge=False,
+            collapse_padding=not out.no_color,
+            pad_edge=False,
         )
         for name in (
             report.by or "group",
             "cycles",
-            "ET (%)",
+            "ET%",
             "fully tr.",
             "ET_p",
-            "TC (%)",
+            "TC%",
             "gaps",
-            "DR (%)",
+            "DR%",
             "not rec.",
-            "TCS",
+            *(("TCS",) if wide else ()),
         ):
             t3.add_column(name, justify="left" if name == report.by else "right")
+        # The name and ET columns must not be cut; the count columns may wrap their headers.
+        t3.columns[0].min_width = max(len(g.name) for g in report.groups)
+        t3.columns[2].min_width = max(len(_pm(g.et)) for g in report.groups)
         for g in report.groups:
             t3.add_row(
                 g.name,
@@ -309,10 +318,13 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
                 str(g.gaps),
                 _pct(g.dr, unit=False),
                 str(g.not_reconstructable),
-                f"{g.tcs.mean:.3f}",
+                *((f"{g.tcs.mean:.3f}",) if wide else ()),
             )
         out.print(t3)
-        out.print("  ET std in each row is across that group's decisions; ET_p = ET_partial mean.")
+        out.print(
+            "  ET std in each row is across that group's decisions; ET_p = ET_partial mean"
+            + ("." if wide else "; TCS per group in --json (the terminal is too narrow).")
+        )
 
     if report.skipped_segments:
         for skipped in report.skipped_segments:
