@@ -543,3 +543,13 @@ def test_the_same_segment_in_two_tiers_is_read_once(tmp_path: Path) -> None:
         len(report.skipped_segments) == 1
         and "same robot and segment" in (report.skipped_segments[0])
     )
+
+
+def test_logging_time_is_shown_only_where_logged(tmp_path: Path, known_log: Path) -> None:
+    assert compute_metrics([known_log]).logging_time == "not logged"
+    log = HandLog(tmp_path / "timed.mcap")
+    log.writer.add_metadata("trace.timing", {"commit_mean_ns": "118000", "cycles": "3"})
+    for i in range(3):
+        log.cycle(i, t(i), layers(log.sensor(t(i), {"i": i})))
+    log.close()
+    assert compute_metrics([log.path]).logging_time.startswith("0.118 ms mean per cycle")
