@@ -22,7 +22,7 @@ from trace_runtime.tiers.cold import (
     iter_decoded,
     register_inner,
 )
-from trace_runtime.tiers.compact import (
+from trace_runtime.tiers.compaction import (
     DEFAULT_OLDER_THAN_NS,
     DEFAULT_RETENTION_NS,
     ColdOptions,

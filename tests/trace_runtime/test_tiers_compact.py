@@ -1,0 +1,355 @@
+"""Compaction is atomic and resumable, idempotent, ages segments as documented, and retention
+deletes only compacted segments that verify."""
+
+from __future__ import annotations
+
+import os
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import orjson
+import pytest
+
+from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
+from trace_runtime.reader import RawMessage
+from trace_runtime.testing import synthetic_cycle
+from trace_runtime.tiers import (
+    CATALOG_NAME,
+    ColdOptions,
+    compact,
+    load_catalog,
+    parse_duration,
+    refresh_catalog,
+)
+from trace_runtime.tiers import compaction as compact_module
+from trace_runtime.tiers.cold import BlockEncoder
+from trace_runtime.tiers.compaction import DAY_NS, RETENTION_LOG
+
+from .test_tiers import T0_NS, cycle_key, make_root
+
+REPO = Path(__file__).resolve().parents[2]
+SMALL_BLOCKS = ColdOptions(block_cycles=16)
+
+
+def _state(root: Path) -> dict[str, bytes]:
+    """Every file under the root (but the lock) and its bytes."""
+    return {
+        p.relative_to(root).as_posix(): p.read_bytes()
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and p.name != ".compact.lock"
+    }
+
+
+def _segment_names(root: Path) -> list[str]:
+    return sorted(p.relative_to(root).as_posix() for p in root.glob("*/*.mcap"))
+
+
+def test_parse_duration() -> None:
+    assert parse_duration("24h") == 24 * 3600 * 10**9
+    assert parse_duration("7d") == 7 * DAY_NS
+    assert parse_duration("90s") == parse_duration("1.5m") == 90 * 10**9
+    assert parse_duration("0") == 0
+    for bad in ("", "h", "-1h", "3 days", "1y"):
+        with pytest.raises(Exception, match="bad duration"):
+            parse_duration(bad)
+
+
+def test_compacting_twice_changes_nothing(tmp_path: Path) -> None:
+    root = make_root(tmp_path / "log", cycles=60, segments=3)
+    first = compact(root, "cold", older_than_ns=0, cold=SMALL_BLOCKS)
+    assert [s.status for s in first.segments] == ["compacted"] * 3
+    assert first.bytes_after < first.bytes_before
+    before = _state(root)
+    second = compact(root, "cold", older_than_ns=0, cold=SMALL_BLOCKS)
+    assert second.segments == [] and second.leftovers == []
+    assert _state(root) == before
+    # warm after cold has nothing to take either (warm takes only from hot)
+    assert compact(root, "warm", older_than_ns=0).segments == []
+    assert _state(root) == before
+
+
+def test_dry_run_changes_nothing(tmp_path: Path) -> None:
+    root = make_root(tmp_path / "log", cycles=40, segments=2)
+    (root / "cold").mkdir()
+    (root / "cold" / "x.mcap.partial").write_bytes(b"left by a killed run")
+    before = _state(root)
+    report = compact(root, "cold", older_than_ns=0, dry_run=True)
+    assert [s.status for s in report.segments] == ["planned", "planned"]
+    assert [leftover.path for leftover in report.leftovers] == ["cold/x.mcap.partial"]
+    assert _state(root) == before
+
+
+def test_age_is_measured_against_the_newest_log_time(tmp_path: Path) -> None:
+    # segments 0 and 1 end 2 and 1 hours before the newest log time; segment 2 is the newest
+    root = tmp_path / "log"
+    for hours in (0, 1, 2):
+        make_root(root, cycles=20, t0_ns=T0_NS + hours * 3600 * 10**9, drop_at=None)
+    report = compact(root, "warm", older_than_ns=parse_duration("90m"))
+    assert [s.segment for s in report.segments] == [0]
+    assert report.reference == "newest log time"
+    assert report.reference_ns == open_log(root).end_ns
+    assert {s.detail for s in report.skipped} == {"newer than the cutoff"}
+    # a given reference time, or the wall clock (these logs are from 1970: all old)
+    later = compact(root, "warm", older_than_ns=parse_duration("30m"), now_ns=report.reference_ns)
+    assert [s.segment for s in later.segments] == [1]
+    final = compact(root, "warm", wall_clock=True)
+    assert final.reference == "wall clock" and [s.segment for s in final.segments] == [2]
+
+
+def test_the_newest_unfinished_hot_segment_is_left_to_its_logger(tmp_path: Path) -> None:
+    root = make_root(tmp_path / "log", cycles=20)
+    config = LoggerConfig(threaded=False, fsync_interval_s=None)
+    logger = AuditLogger(root, robot_id="amr-1", period_s=0.1, config=config)
+    for i in range(10):
+        p, b, a, e = synthetic_cycle(i)
+        logger.log_cycle(T0_NS + (100 + i) * 10**8, perception=p, belief=b, action=a, execution=e)
+    try:
+        report = compact(root, "cold", older_than_ns=0)
+        assert [s.segment for s in report.segments] == [0]
+        assert [s.detail for s in report.skipped] == [
+            "unfinished newest hot segment: its logger may still be writing it"
+        ]
+        live = next((root / "hot").glob("*.mcap"))
+        cycles = list(open_segment(live).iter_cycles())
+        report = compact(root, "cold", older_than_ns=0, include_unfinished=True)
+        assert [s.segment for s in report.segments] == [1]
+        assert list(open_segment(root / "cold" / live.name).iter_cycles()) == cycles
+    finally:
+        logger.close()
+
+
+def test_a_replacement_that_does_not_verify_leaves_the_source(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    root = make_root(tmp_path / "log", cycles=40)
+    before = _state(root)
+    real = BlockEncoder.encode
+
+    def lossy(self: BlockEncoder, messages: Any, tier: str, plain: Any = ()) -> bytes:
+        first, *rest = messages
+        damaged = RawMessage(first.topic, first.sequence, first.log_time_ns, b'{"lost":true}')
+        return real(self, [damaged, *rest], tier, plain)
+
+    monkeypatch.setattr(BlockEncoder, "encode", lossy)
+    report = compact(root, "cold", older_than_ns=0)
+    assert [s.status for s in report.segments] == ["failed"]
+    assert "differs" in report.segments[0].detail
+    after = _state(root)
+    assert {k: v for k, v in after.items() if k != CATALOG_NAME} == before
+    assert not list(root.rglob("*.partial"))
+
+
+def test_leftovers_of_a_killed_run_are_completed_or_discarded(tmp_path: Path) -> None:
+    template = make_root(tmp_path / "template", cycles=40, segments=2)
+    done = tmp_path / "done"
+    shutil.copytree(template, done)
+    compact(done, "cold", older_than_ns=0, cold=SMALL_BLOCKS)
+    name0, name1 = (p.name for p in sorted((template / "hot").glob("*.mcap")))
+
+    # killed after the rename of segment 0, before its source was removed; and mid-write of 1
+    root = tmp_path / "root"
+    shutil.copytree(template, root)
+    (root / "cold").mkdir()
+    shutil.copy(done / "cold" / name0, root / "cold" / name0)
+    (root / "cold" / (name1 + ".partial")).write_bytes((done / "cold" / name1).read_bytes()[:999])
+    original = [cycle_key(c) for c in open_log(template).iter_cycles()]
+    report = compact(root, "cold", older_than_ns=parse_duration("1000d"))  # recovery only
+    actions = {leftover.path: leftover.action for leftover in report.leftovers}
+    assert "unfinished write discarded" in actions[f"cold/{name1}.partial"]
+    assert "verified; source removed" in actions[f"hot/{name0}"]
+    assert _segment_names(root) == [f"cold/{name0}", f"hot/{name1}"]
+    assert [cycle_key(c) for c in open_log(root).iter_cycles()] == original
+
+    # a replacement that is not what its source becomes is discarded, then redone
+    shutil.copy(done / "cold" / name0, root / "cold" / name1)
+    report = compact(root, "cold", older_than_ns=0, cold=SMALL_BLOCKS)
+    assert "did not verify" in report.leftovers[0].action
+    assert [s.status for s in report.segments] == ["compacted"]
+    assert _segment_names(root) == [f"cold/{name0}", f"cold/{name1}"]
+    assert [cycle_key(c) for c in open_log(root).iter_cycles()] == original
+
+
+# --- kill -9 ------------------------------------------------------------------------------
+
+_CHILD = """
+import os, signal, sys
+from pathlib import Path
+sys.path.insert(0, {repo!r})
+from trace_runtime.tiers import ColdOptions, compact
+from trace_runtime.tiers import compaction as module
+
+target, when, nth = {kill!r}
+calls = [0]
+
+def wrap(owner, name):
+    real = getattr(owner, name)
+    def wrapped(*args, **kwargs):
+        calls[0] += 1
+        if calls[0] == nth and when == "before":
+            os.kill(os.getpid(), signal.SIGKILL)
+        result = real(*args, **kwargs)
+        if calls[0] == nth and when == "after":
+            os.kill(os.getpid(), signal.SIGKILL)
+        return result
+    setattr(owner, name, wrapped)
+
+if target == "replace":
+    wrap(module.os, "replace")
+elif target == "unlink":
+    wrap(Path, "unlink")
+elif target == "fsync":
+    wrap(os, "fsync")
+elif target == "write_batch":
+    from trace_runtime.segment import SegmentWriter
+    wrap(SegmentWriter, "write_batch")
+print("start", flush=True)
+compact(
+    {root!r}, {tier!r}, older_than_ns=0, cold=ColdOptions(block_cycles=16),
+    progress=lambda event: print("progress", event.cycles_done, flush=True),
+)
+print("done", flush=True)
+"""
+
+
+def _child(root: Path, tier: str, kill: tuple[str, str, int]) -> subprocess.Popen[str]:
+    code = _CHILD.format(repo=str(REPO), root=str(root), tier=tier, kill=kill)
+    return subprocess.Popen(
+        [sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, cwd=str(REPO)
+    )
+
+
+def _check_resumed(root: Path, tier: str, original: list[Any], names: list[str]) -> None:
+    report = compact(root, tier, older_than_ns=0, cold=SMALL_BLOCKS)
+    assert not report.failed
+    assert not list(root.rglob("*.partial"))
+    assert _segment_names(root) == [f"{tier}/{n}" for n in names]  # each segment exactly once
+    cycles = list(open_log(root).iter_cycles())
+    if tier == "cold":
+        assert [cycle_key(c) for c in cycles] == original
+    else:
+        assert [(c.cycle, c.t_ns) for c in cycles] == [(k[0], k[1]) for k in original]
+    catalog = load_catalog(root)
+    assert catalog is not None
+    assert [e.path for e in catalog.entries] == [e.path for e in refresh_catalog(root).entries]
+
+
+@pytest.fixture(scope="module")
+def template(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[Any], list[str]]:
+    root = make_root(tmp_path_factory.mktemp("kill") / "log", cycles=90, segments=3)
+    original = [cycle_key(c) for c in open_log(root).iter_cycles()]
+    names = sorted(p.name for p in (root / "hot").glob("*.mcap"))
+    return root, original, names
+
+
+@pytest.mark.parametrize(
+    ("tier", "kill"),
+    [
+        ("cold", ("write_batch", "after", 2)),  # mid-write of the first segment
+        ("cold", ("fsync", "after", 1)),  # first replacement written and synced, not verified
+        ("cold", ("replace", "before", 1)),  # verified, not renamed in
+        ("cold", ("replace", "after", 1)),  # renamed in, source still there
+        ("cold", ("unlink", "before", 1)),  # catalog updated, source still there
+        ("cold", ("unlink", "after", 2)),  # second source removed, directory not yet synced
+        ("cold", ("replace", "after", 5)),  # later: around the third segment
+        ("warm", ("write_batch", "after", 1)),
+        ("warm", ("replace", "after", 1)),
+        ("warm", ("unlink", "before", 2)),
+    ],
+)
+def test_kill_9_at_each_step_loses_and_duplicates_nothing(
+    tmp_path: Path, template: tuple[Path, list[Any], list[str]], kill: Any, tier: str
+) -> None:
+    source, original, names = template
+    root = tmp_path / "root"
+    shutil.copytree(source, root)
+    proc = _child(root, tier, kill)
+    out, _ = proc.communicate(timeout=60)
+    assert proc.returncode == -signal.SIGKILL, out
+    _check_resumed(root, tier, original, names)
+
+
+def test_kill_9_at_random_moments(
+    tmp_path: Path, template: tuple[Path, list[Any], list[str]]
+) -> None:
+    source, original, names = template
+    rng = random.Random(int(os.environ.get("TRACE_KILL_SEED", "11")))
+    for attempt in range(4):
+        root = tmp_path / f"root{attempt}"
+        shutil.copytree(source, root)
+        proc = _child(root, "cold", ("none", "never", 0))
+        assert proc.stdout is not None
+        assert proc.stdout.readline().strip() == "start"
+        # somewhere after a random block of the 17 this run writes, up to 20 ms later
+        for _ in range(rng.randrange(0, 17)):
+            proc.stdout.readline()
+        time.sleep(rng.uniform(0.0, 0.02))
+        proc.send_signal(signal.SIGKILL)
+        proc.communicate(timeout=60)
+        _check_resumed(root, "cold", original, names)
+
+
+# --- retention ----------------------------------------------------------------------------
+
+
+def test_retention_deletes_only_old_cold_segments_that_verify(tmp_path: Path) -> None:
+    root = tmp_path / "log"
+    for days in (0, 10, 300, 400):
+        make_root(root, cycles=20, t0_ns=T0_NS + days * DAY_NS, drop_at=None)
+    # the newest is day 400: days 0 and 10 are past 183 days, 300 is not
+    compact(root, "cold", older_than_ns=0, sources=["hot"], retention_ns=None, cold=SMALL_BLOCKS)
+    segments = sorted((root / "cold").glob("*.mcap"))
+    tampered = segments[1]
+    data = bytearray(tampered.read_bytes())
+    mark = data.find(b"/trace/cold/index")
+    data[data.find(b"TCB\x01") + 100] ^= 0x01  # damage a block
+    assert mark > 0
+    tampered.write_bytes(bytes(data))
+    report = compact(root, "cold", older_than_ns=parse_duration("1000d"))
+    by_path = {r.path: r for r in report.retention}
+    assert by_path[f"cold/{segments[0].name}"].status == "deleted"
+    assert by_path[f"cold/{segments[1].name}"].status == "kept"
+    assert "does not verify" in by_path[f"cold/{segments[1].name}"].detail
+    assert len(by_path) == 2
+    assert sorted(p.name for p in (root / "cold").glob("*.mcap")) == [s.name for s in segments[1:]]
+    tombstones = [orjson.loads(line) for line in (root / RETENTION_LOG).read_bytes().splitlines()]
+    assert [t["path"] for t in tombstones] == [f"cold/{segments[0].name}"]
+    assert tombstones[0]["last_seal"] and tombstones[0]["sha256"]
+
+
+def test_retention_never_deletes_hot_or_warm(tmp_path: Path) -> None:
+    root = tmp_path / "log"
+    for days in (0, 400):
+        make_root(root, cycles=20, t0_ns=T0_NS + days * DAY_NS, drop_at=None)
+    compact(root, "warm", older_than_ns=parse_duration("300d"))  # day 0 -> warm
+    before = _segment_names(root)
+    report = compact(root, "cold", older_than_ns=parse_duration("1000d"), retention_ns=DAY_NS)
+    assert report.retention == []
+    assert _segment_names(root) == before == ["hot/amr-1_000001.mcap", "warm/amr-1_000000.mcap"]
+
+
+def test_compaction_rejects_bad_arguments(tmp_path: Path) -> None:
+    root = make_root(tmp_path / "log", cycles=5)
+    from trace_runtime.errors import LogReadError, UsageError
+
+    with pytest.raises(UsageError):
+        compact(root, "lukewarm")
+    with pytest.raises(UsageError):
+        compact(root, "warm", sources=["cold"])
+    with pytest.raises(UsageError):
+        compact(root, "cold", older_than_ns=-1)
+    with pytest.raises(LogReadError):
+        compact(tmp_path / "missing", "cold")
+
+
+def test_one_compaction_per_root(tmp_path: Path) -> None:
+    root = make_root(tmp_path / "log", cycles=5)
+    from trace_runtime.errors import UsageError
+
+    with compact_module.root_lock(root), pytest.raises(UsageError, match="another compaction"):
+        compact(root, "cold", older_than_ns=0)
