@@ -54,7 +54,7 @@ from trace_audit.chains import (
     score_layers,
     trace_layers,
 )
-from trace_runtime.errors import UsageError
+from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.reader import Cycle, Segment, find_segments, open_segment
 from trace_runtime.records import (
     TOPIC_ACTION,
@@ -660,12 +660,14 @@ class _Task:
 
 def _plan(paths: Sequence[str | Path]) -> tuple[list[tuple[str, list[Segment]]], list[str]]:
     """Open every segment; order each robot's segments; drop tier duplicates of a segment."""
+    if not paths:
+        raise UsageError("no log given")
     segments: list[Segment] = []
     for path in paths:
-        for file in find_segments(Path(path)):
-            segments.append(open_segment(file))
-    if not segments:
-        raise UsageError("no segments to read")
+        files = find_segments(Path(path))
+        if not files:
+            raise LogReadError(str(path), "directory holds no .mcap segments")
+        segments.extend(open_segment(file) for file in files)
     chosen: dict[tuple[str, int], Segment] = {}
     skipped: list[str] = []
     for segment in segments:

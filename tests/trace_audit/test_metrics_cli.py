@@ -113,3 +113,8 @@ def test_jobs_gives_the_same_json(small_log: Path) -> None:
         data.pop("elapsed_s")
         data.pop("cycles_per_s")
     assert a == b
+
+
+def test_empty_directory_is_unreadable(tmp_path: Path) -> None:
+    code, _, err = run(str(tmp_path))
+    assert code == 3 and "no .mcap segments" in err
