@@ -256,8 +256,9 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
             f"ET_partial {a.et_partial.mean:.3f} ± {a.et_partial.std:.3f}, TC {tc}, DR {dr}."
         )
     out.print(
-        f"  ET_partial {overall.et_partial.mean:.3f} ± {overall.et_partial.std:.3f} and "
-        f"TCS {overall.tcs.mean:.3f} ± {overall.tcs.std:.3f} (across decisions); factors "
+        f"  Fully traceable {_pm(overall.fully_traceable_share)}%, ET_partial "
+        f"{overall.et_partial.mean:.3f} ± {overall.et_partial.std:.3f}, TCS "
+        f"{overall.tcs.mean:.3f} ± {overall.tcs.std:.3f} (std across decisions); factors "
         f"traceable {_share(overall.factors_traceable, overall.factors)}."
     )
     if overall.summarized:
