@@ -16,6 +16,7 @@ walk reaches the bound first, the action has held "at least since" the oldest cy
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -265,7 +266,7 @@ def _look_back(
     floor = target.t_ns - lookback_ns
     period = max((s.session.period_ns for s in log.segments), default=0)
     start = max(0, min(floor, target.t_ns - 2 * (window_cycles + 1) * period))
-    for earlier in log.iter_cycles(start_ns=start, end_ns=target.t_ns, reverse=True):
+    for earlier in _reverse_from(log, target.t_ns, start):
         if earlier.cycle >= target.cycle:
             continue
         if len(window) < window_cycles:
@@ -300,6 +301,20 @@ def _look_back(
         at_least=bound != "change",
     )
     return _Back(window, prev_sealed, held)
+
+
+def _reverse_from(log: Log, t_ns: int, start_ns: int) -> Iterator[Cycle]:
+    """Cycles from ``t_ns`` back to ``start_ns``, newest first, in widening windows.
+
+    The reader lists the chunks of a window before decoding any, so a walk that usually
+    stops within a second should not ask for ten minutes at once: windows of 1 s, 10 s,
+    100 s, ... up to ``start_ns``.
+    """
+    hi, span = t_ns, 1_000_000_000
+    while hi >= start_ns:
+        lo = max(start_ns, t_ns - span)
+        yield from log.iter_cycles(start_ns=lo, end_ns=hi, reverse=True)
+        hi, span = lo - 1, span * 10
 
 
 def _check_seal(log: Log, target: Cycle, prev_sealed: Cycle | None) -> SealCheck:
