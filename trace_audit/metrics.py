@@ -737,7 +737,9 @@ def compute_metrics(
         if progress is not None:
             progress(done, expected)
 
-    if cfg.workers == 1:
+    n_segments = sum(len(segs) for _, segs in plan)
+    workers = min(cfg.workers, n_segments, os.cpu_count() or 1)
+    if workers <= 1:
         for _robot, segments in plan:
             partial = _Partial()
             scanner = _Scanner(cfg, partial)
@@ -745,13 +747,14 @@ def compute_metrics(
                 scanner.scan(segment, advance)
             total.merge(partial, cfg.max_listed)
     else:
+        # Each task scores one segment; it first reads the tail of the robot's previous
+        # segment, so chain links, gaps and refs across the boundary come out as in one pass.
         tasks = [
             _Task(str(seg.path), str(segs[i - 1].path) if i else None, cfg)
             for _robot, segs in plan
             for i, seg in enumerate(segs)
         ]
-        workers = min(cfg.workers, len(tasks), os.cpu_count() or 1)
-        with ProcessPoolExecutor(max_workers=max(1, workers)) as pool:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
             for partial in pool.map(_run_task, tasks):
                 total.merge(partial, cfg.max_listed)
                 advance(partial.cycles)
