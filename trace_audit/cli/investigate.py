@@ -13,13 +13,11 @@ import sys
 from collections.abc import Callable, Mapping, Sequence
 from itertools import pairwise
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 import typer
 import zstandard
 
-from trace_audit.causal import FactorValue, format_value
-from trace_audit.chains import FactorChain
 from trace_audit.cli.app import (
     EXIT_UNREADABLE,
     EXIT_USAGE,
@@ -31,10 +29,17 @@ from trace_audit.cli.app import (
     print_json,
 )
 from trace_audit.cli.render import Column, Doc, Item, Seg, fmt_duration, fmt_t, setup_logging, show
-from trace_audit.explain import DEFAULT_LOOKBACK_S, Explanation, explain
-from trace_audit.export import FORMATS, export_decision
-from trace_audit.info import LogInfo, log_info
-from trace_audit.timeline import Timeline, WhyResult, timeline, why
+
+if TYPE_CHECKING:
+    from trace_audit.causal import FactorValue
+    from trace_audit.chains import FactorChain
+    from trace_audit.explain import Explanation
+    from trace_audit.info import LogInfo
+    from trace_audit.timeline import Timeline, WhyResult
+
+# The library (networkx, pydantic models) is imported inside each command, so that
+# ``--help`` and the other command groups start without it.
+EXPORT_FORMATS = ("dot", "mermaid", "json")
 
 T = TypeVar("T")
 
@@ -57,6 +62,12 @@ TimeOption = Annotated[
 _OK = Seg("✔", "green", "[ok]")
 _MISSING = Seg("✘ MISSING", "bold red", "[MISSING]")
 _UNREACHED = Seg("· not reached", "dim", "[--] not reached")
+
+
+def format_value(value: Any, unit: str | None = None) -> str:
+    from trace_audit.causal import format_value as fmt
+
+    return fmt(value, unit)
 
 
 def _help(text: str) -> str:
@@ -127,10 +138,12 @@ def explain_command(  # noqa: PLR0917 - typer maps each parameter to an option
             help="Seconds of log to walk back looking for the cycle "
             "where the current action began.",
         ),
-    ] = DEFAULT_LOOKBACK_S,
+    ] = 600.0,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
+    from trace_audit.explain import explain
+
     result = _run(lambda: explain(log, t=t, cycle=cycle, lookback_s=lookback))
     if json_out:
         print_json(result)
@@ -138,7 +151,7 @@ def explain_command(  # noqa: PLR0917 - typer maps each parameter to an option
     show(explain_doc(result, lookback), plain=plain)
 
 
-def explain_doc(r: Explanation, lookback_s: float = DEFAULT_LOOKBACK_S) -> Doc:
+def explain_doc(r: Explanation, lookback_s: float = 600.0) -> Doc:
     """The explain report as a document."""
     d = r.decision
     doc = Doc()
@@ -500,6 +513,8 @@ def why_command(  # noqa: PLR0917 - typer maps each parameter to an option
 ) -> None:
     if all_ and t is not None:
         fail("give either --t or --all, not both", EXIT_USAGE)
+    from trace_audit.timeline import why
+
     result = _run(lambda: why(log, action, t=t))
     if json_out:
         print_json(result)
@@ -605,6 +620,8 @@ def timeline_command(  # noqa: PLR0917 - typer maps each parameter to an option
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
+    from trace_audit.timeline import timeline
+
     result = _run(lambda: timeline(log, start=start, end=end, every=every))
     if json_out:
         print_json(result)
@@ -701,6 +718,8 @@ def info_command(
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
+    from trace_audit.info import log_info
+
     result = _run(lambda: log_info(log, scan=not quick))
     if json_out:
         print_json(result)
@@ -836,12 +855,16 @@ def export_command(
             "--cycle", help="Export this cycle number instead of a time.", show_default=False
         ),
     ] = None,
-    fmt: Annotated[str, typer.Option("--format", help=f"One of {', '.join(FORMATS)}.")] = "dot",
+    fmt: Annotated[
+        str, typer.Option("--format", help=f"One of {', '.join(EXPORT_FORMATS)}.")
+    ] = "dot",
     out: Annotated[
         Path | None,
         typer.Option("--out", help="Write to this file instead of stdout.", show_default=False),
     ] = None,
 ) -> None:
+    from trace_audit.export import export_decision
+
     result = _run(lambda: export_decision(log, t=t, cycle=cycle, fmt=fmt))
     if out is None:
         sys.stdout.write(result.text)
