@@ -750,7 +750,7 @@ def info_doc(r: LogInfo) -> Doc:
         ("Time range", f"{fmt_t(r.start_ns)} .. {fmt_t(r.end_ns)} ({fmt_duration(r.duration_ns)})"),
         (
             "Cycles",
-            f"{r.cycles} (nominal period {period})"
+            f"{r.cycles:,} (nominal period {period})"
             + ("" if r.scanned else "; sealed cycles per the summaries"),
         ),
         ("Segments", f"{len(r.segments)} ({tiers})"),
@@ -761,7 +761,7 @@ def info_doc(r: LogInfo) -> Doc:
         rows.append(
             (
                 "Dropped",
-                Seg(f"{dropped} cycles (sum of the seals' dropped)", "yellow" if dropped else ""),
+                Seg(f"{dropped:,} cycles (sum of the seals' dropped)", "yellow" if dropped else ""),
             )
         )
         rows.append(
@@ -781,7 +781,7 @@ def info_doc(r: LogInfo) -> Doc:
         [
             Column("file", wrap=True),
             Column("tier"),
-            Column("time range (s)"),
+            Column("time (s)"),
             Column("cycles"),
             Column("size", "right"),
             Column("state"),
@@ -790,10 +790,10 @@ def info_doc(r: LogInfo) -> Doc:
             [
                 Path(s.path).name,
                 s.tier,
-                f"{s.start_ns / 1e9:.3f}..{s.end_ns / 1e9:.3f}",
+                f"{s.start_ns / 1e9:.1f}..{s.end_ns / 1e9:.1f}",
                 f"{s.first_cycle}..{s.last_cycle}" if s.first_cycle is not None else "-",
                 _size(s.bytes),
-                Seg("recovered", "yellow") if s.recovered else "finished",
+                Seg("recovered", "yellow") if s.recovered else "ok",
             ]
             for s in r.segments
         ],
