@@ -12,14 +12,13 @@ against the chain and its signature against the robot's public key. Problems are
   warm-tier summary cycles (chain verified, payloads not retained), and the tail of a crashed
   segment that no checkpoint vouches for yet (it still chain-verifies up to the cut).
 
-``verify_log`` is the library call behind ``trace-audit verify``; ``seal_status`` answers
-the same question for one decision (``explain``). See docs/integrity.md.
+``verify_log`` is the library call behind ``trace-audit verify``; for one decision
+(``explain``) the check is ``trace_runtime.integrity.verify_cycle``. See docs/integrity.md.
 """
 
 from __future__ import annotations
 
 import bisect
-import logging
 from array import array
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -36,7 +35,7 @@ from trace_runtime.integrity import (
     iter_checkpoints,
     verify_cycle,
 )
-from trace_runtime.reader import Cycle, Log, Segment, find_segments, open_segment
+from trace_runtime.reader import Cycle, Segment, find_segments, open_segment
 from trace_runtime.records import GENESIS, Checkpoint
 from trace_runtime.tiers.catalog import TIER_METADATA
 
@@ -47,11 +46,8 @@ __all__ = [
     "RobotSummary",
     "SegmentSummary",
     "VerifyReport",
-    "seal_status",
     "verify_log",
 ]
-
-log = logging.getLogger("trace_audit")
 
 FindingKind = Literal[
     "modified",
@@ -1136,29 +1132,3 @@ def _count_after(segments: list[SegmentSummary], robot_id: str, after: int) -> i
         elif s.last_cycle > after:
             total += s.last_cycle - after
     return total
-
-
-# --- one decision ------------------------------------------------------------------------------
-
-
-def seal_status(log: Log, cycle: Cycle) -> SealStatus:
-    """Does this decision's seal verify? Its messages against its seal, and the seal's link.
-
-    The previous seal is found by time (one chunk decode), or read from the segment's
-    ``trace.session`` metadata for a segment's first cycle; cheap enough for ``explain``.
-    """
-    segment = next((s for s in log.segments if s.path.name == cycle.segment), None)
-    prev: str | None = None
-    if segment is not None and cycle.cycle == segment.session.first_cycle:
-        prev = segment.session.prev_seal
-    else:
-        before = segment.cycle_at(cycle.t_ns - 1) if segment is not None else None
-        if before is None:
-            try:
-                before = log.cycle_at(cycle.t_ns - 1)
-            except Exception:  # no earlier cycle: the link stays unchecked
-                before = None
-        if before is not None and before.cycle < cycle.cycle:
-            status = verify_cycle(before)
-            prev = status.seal_digest
-    return verify_cycle(cycle, prev)

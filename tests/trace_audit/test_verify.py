@@ -22,11 +22,10 @@ from typer.testing import CliRunner
 from tests.trace_audit.conftest import PERIOD_NS, T0_NS, fill_cycle, write_log
 from tests.trace_audit.test_verify_tamper import decode, flip_byte, write, write_signed_log
 from trace_audit.cli import app
-from trace_audit.verify import seal_status, verify_log
+from trace_audit.verify import verify_log
 from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
 from trace_runtime.errors import LogReadError
 from trace_runtime.integrity import Ed25519Signer, generate_keypair, load_public_key, load_signer
-from trace_runtime.records import TOPIC_ACTION
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -238,33 +237,6 @@ def test_a_damaged_cold_segment_is_a_finding(tmp_path: Path) -> None:
     report = verify_log(root)
     assert not report.ok
     assert any(f.segment.endswith(victim.name) for f in report.findings), report.findings
-
-
-# --- one decision ---------------------------------------------------------------------------------
-
-
-def test_seal_status_of_one_decision(tmp_path: Path) -> None:
-    root = tmp_path / "root"
-    logger = AuditLogger(
-        root,
-        robot_id="amr-7",
-        config=LoggerConfig(threaded=False, fsync_interval_s=None, max_segment_s=2.0),
-    )
-    for i in range(50):
-        with logger.cycle(T0_NS + i * PERIOD_NS) as c:
-            fill_cycle(c, "ped_close")
-    logger.close()
-    log = open_log(root)
-    for number in (0, 7, 20, 21, 49):  # 20 opens the second segment
-        cycle = log.get_cycle(number)
-        assert cycle is not None
-        status = seal_status(log, cycle)
-        assert status.state == "verified" and status.link == "ok", (number, status)
-    cycle = log.get_cycle(7)
-    assert cycle is not None
-    cycle.payloads[TOPIC_ACTION] = cycle.payloads[TOPIC_ACTION].replace(b"STOP", b"GO!!")
-    status = seal_status(log, cycle)
-    assert status.state == "modified" and status.modified == (TOPIC_ACTION,)
 
 
 # --- the command line ---------------------------------------------------------------------
