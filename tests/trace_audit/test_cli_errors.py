@@ -160,7 +160,7 @@ def test_explain_plain_shows_the_chain_and_the_missing_link(sample_log: Path) ->
     assert "would SLOW if distance >= 2.0 m" in good
     assert "since 104.000 s (cycle 40" in good and "[ok] seal verifies (verified)" in good
     broken = _run("explain", str(sample_log), "--t", "+8.2", "--plain").stdout
-    assert "[MISSING] evidence" in broken and "[--] not reached" in broken
+    assert "[MISSING] evidence ref" in broken and "[--] sensor reading: not reached" in broken
     assert "NOT traceable" in broken
 
 

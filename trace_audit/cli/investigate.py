@@ -61,7 +61,7 @@ TimeOption = Annotated[
 
 _OK = Seg("✔", "green", "[ok]")
 _MISSING = Seg("✘ MISSING", "bold red", "[MISSING]")
-_UNREACHED = Seg("· not reached", "dim", "[--] not reached")
+_UNREACHED = Seg("·", "dim", "[--]")
 
 
 def format_value(value: Any, unit: str | None = None) -> str:
@@ -399,7 +399,7 @@ def _tree_item(r: Explanation) -> Item:
 
 _LEVEL_NAMES = {
     "sensor_reading": "sensor reading",
-    "evidence_ref": "evidence",
+    "evidence_ref": "evidence ref",
     "entity": "perception",
     "belief_path": "belief path",
     "factor_node": "factor",
@@ -439,15 +439,15 @@ def _chain_item(r: Explanation, chain: FactorChain) -> Item:
             what = labels.get(edges[0]["source"], link.ref)
         else:
             what = link.ref
+        line: list[Any]
         if link.documented:
-            marker: Seg = _OK
+            line = [_OK, f" {name}: {what}"]
         elif link.detail.startswith("not reached"):
-            marker = _UNREACHED
+            line = [_UNREACHED, f" {name}: ", Seg("not reached (the chain breaks above)", "dim")]
         else:
-            marker = _MISSING
-        line: list[Any] = [marker, f" {name}: ", what if link.documented or what else ""]
-        if not link.documented and not link.detail.startswith("not reached"):
-            line.append(Seg(f"{' ' if what else ''}({link.detail})", "red"))
+            # a placeholder label says nothing the detail does not: show the logged part only
+            logged = "" if what.startswith("? ") else f"{what} "
+            line = [_MISSING, f" {name}: {logged}", Seg(f"({link.detail})", "red")]
         root.add(line)
     return root
 
