@@ -191,6 +191,8 @@ class MetricsConfig:
             raise UsageError(f"workers must be >= 1, got {self.workers}")
         if self.max_listed < 0:
             raise UsageError(f"max_listed must be >= 0, got {self.max_listed}")
+        if self.start_ns is not None and self.end_ns is not None and self.end_ns < self.start_ns:
+            raise UsageError("the analysis window ends before it starts")
         unknown = set(self.thresholds) - set(METRIC_NAMES)
         if unknown:
             raise UsageError(f"unknown metric(s) in thresholds: {', '.join(sorted(unknown))}")
@@ -414,8 +416,10 @@ class _Scanner:
             if by is None
             else ""
         )
-        if self.stream.prev_seal is None:
-            self.stream.prev_seal = session.prev_seal
+        # The first seal read links to the session's prev_seal, unless a start time cut the
+        # segment: then the seal before it was not read and the link cannot be checked here.
+        cut = cfg.start_ns is not None and segment.info.start_ns < cfg.start_ns
+        session_prev: str | None = None if cut else session.prev_seal
         groups = self.partial.groups
         window = self.window
         stream = self.stream
@@ -456,7 +460,8 @@ class _Scanner:
                 acc.sealed += 1
                 seal = orjson.loads(seal_data)
                 _check_digests(cycle, seal, integrity)
-                if seal.get("prev") != stream.prev_seal:
+                expected = stream.prev_seal if stream.prev_seal is not None else session_prev
+                if expected is not None and seal.get("prev") != expected:
                     integrity.append("hash chain broken: prev is not the previous seal's digest")
                 stream.prev_seal = hashlib.sha256(seal_data).hexdigest()
                 dropped = int(seal.get("dropped") or 0)
@@ -570,7 +575,7 @@ class _Scanner:
         cfg = self.config
         tail: list[Cycle] = []
         last_sealed: Cycle | None = None
-        for cycle in segment.iter_cycles(None, cfg.end_ns, reverse=True):
+        for cycle in segment.iter_cycles(cfg.start_ns, cfg.end_ns, reverse=True):
             if len(tail) <= cfg.sensor_window:
                 tail.append(cycle)
             if last_sealed is None and TOPIC_SEAL in cycle.payloads:
@@ -583,8 +588,6 @@ class _Scanner:
             self.stream.prev_t_ns = last_sealed.t_ns
             self.stream.prev_cycle = last_sealed.cycle
             self.stream.prev_seal = hashlib.sha256(last_sealed.payloads[TOPIC_SEAL]).hexdigest()
-        else:
-            self.stream.prev_seal = segment.session.prev_seal
 
 
 def _check_digests(cycle: Cycle, seal: dict[str, Any], problems: list[str]) -> None:

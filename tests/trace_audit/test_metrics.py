@@ -553,3 +553,19 @@ def test_logging_time_is_shown_only_where_logged(tmp_path: Path, known_log: Path
         log.cycle(i, t(i), layers(log.sensor(t(i), {"i": i})))
     log.close()
     assert compute_metrics([log.path]).logging_time.startswith("0.118 ms mean per cycle")
+
+
+def test_analysis_window_cuts_without_false_chain_breaks(tmp_path: Path) -> None:
+    root = _two_segments(tmp_path)
+    config = MetricsConfig(start_ns=t(2), end_ns=t(7), max_listed=50)
+    one = compute_metrics([root], config)
+    two = compute_metrics(
+        [root], MetricsConfig(start_ns=t(2), end_ns=t(7), max_listed=50, workers=2)
+    )
+    o = one.overall
+    assert o.decisions == 5  # cycles 2, 3, 4, 6 and 7 (5 was dropped); both ends inclusive
+    assert o.integrity_failed == 0 and o.gaps == 1
+    assert o.window_s == pytest.approx(0.6)
+    assert _comparable(one) == _comparable(two)
+    with pytest.raises(UsageError):
+        MetricsConfig(start_ns=t(5), end_ns=t(1))

@@ -129,6 +129,14 @@ def metrics_command(
             min=0,
         ),
     ] = 50,
+    start: Annotated[
+        float | None,
+        typer.Option("--start", help="Analysis window start, log time in seconds (t1)."),
+    ] = None,
+    end: Annotated[
+        float | None,
+        typer.Option("--end", help="Analysis window end, log time in seconds (t2)."),
+    ] = None,
     tcs_weights: Annotated[
         str | None,
         typer.Option(
@@ -148,6 +156,8 @@ def metrics_command(
             weights=TCSWeights.parse(tcs_weights) if tcs_weights else TCSWeights(),
             thresholds=parse_thresholds(fail_under) if fail_under else {},
             workers=jobs,
+            start_ns=None if start is None else round(start * 1e9),
+            end_ns=None if end is None else round(end * 1e9),
             max_listed=10_000 if failures else 0,
         )
         return _with_progress(logs, config, quiet=json_out or plain)
