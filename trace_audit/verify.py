@@ -37,7 +37,6 @@ from trace_runtime.integrity import (
 )
 from trace_runtime.reader import Cycle, Segment, find_segments, open_segment
 from trace_runtime.records import GENESIS, Checkpoint
-from trace_runtime.tiers.catalog import TIER_METADATA
 
 __all__ = [
     "Finding",
@@ -853,6 +852,8 @@ def _closed_by_logger(segment: Segment) -> bool | None:
     """
     if segment.session.tier == "hot":
         return segment.info.finished
+    from trace_runtime.tiers.catalog import TIER_METADATA  # the tiers, only when met
+
     value = segment.metadata.get(TIER_METADATA, {}).get("source_finished")
     return None if value is None else value == "true"
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import struct
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 import zstandard
@@ -25,8 +25,10 @@ from trace_audit.cli.app import (
     print_json,
 )
 from trace_audit.cli.render import Column, Doc, Seg, fmt_duration, fmt_t, setup_logging, show
-from trace_audit.verify import Finding, RobotSummary, VerifyReport, verify_log
-from trace_runtime.integrity import KeyPair, generate_keypair, load_public_key
+
+if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
+    from trace_audit.verify import Finding, RobotSummary, VerifyReport
+    from trace_runtime.integrity import KeyPair
 
 _VERIFY_HELP = """Verify that a log is what the robot wrote: all of it, unaltered, in order.
 
@@ -103,6 +105,9 @@ def verify_command(
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
+    from trace_audit.verify import verify_log
+    from trace_runtime.integrity import load_public_key
+
     setup_logging()
 
     def run() -> VerifyReport:
@@ -242,6 +247,8 @@ def keygen_command(
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
+    from trace_runtime.integrity import generate_keypair
+
     pair = guarded(lambda: generate_keypair(out, name=name, overwrite=force))
     if json_out:
         print_json(pair)
