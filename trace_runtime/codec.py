@@ -17,11 +17,13 @@ from trace_runtime.records import Seal, _Record
 
 def encode_layer(cycle: int, t_ns: int, record: _Record) -> bytes:
     """Canonical bytes of one layer record stamped with its cycle and time."""
-    body = record.model_dump_json(by_alias=True).encode()
+    # The serializer itself: the bytes of ``model_dump_json(by_alias=True)`` without the
+    # str round trip (a writer's hot path: four records per cycle).
+    body = record.__pydantic_serializer__.to_json(record, by_alias=True)
     stamp = b'{"cycle":%d,"t_ns":%d' % (cycle, t_ns)
     if body == b"{}":
         return stamp + b"}"
-    return stamp + b"," + body[1:]
+    return b"".join((stamp, b",", memoryview(body)[1:]))
 
 
 def encode_seal(seal: Seal) -> bytes:

@@ -202,25 +202,30 @@ class SegmentWriter:
         if not messages:
             return 0
         records = bytearray()
-        indexes: dict[int, list[tuple[int, int]]] = {}
-        start = messages[0].log_time_ns
-        end = start
-        pack = _MESSAGE_HEADER.pack
+        # Per channel: its message-index entries, packed as they are made.
+        indexes: dict[int, bytearray] = {}
+        start = end = messages[0].log_time_ns
+        pack, pack_entry = _MESSAGE_HEADER.pack, _INDEX_ENTRY.pack
         for msg in messages:
-            indexes.setdefault(msg.channel_id, []).append((msg.log_time_ns, len(records)))
+            log_time, channel_id = msg.log_time_ns, msg.channel_id
+            index = indexes.get(channel_id)
+            if index is None:
+                index = indexes[channel_id] = bytearray()
+            index += pack_entry(log_time, len(records))
             records += pack(
                 _OPCODE_MESSAGE,
                 22 + len(msg.data),
-                msg.channel_id,
+                channel_id,
                 msg.sequence,
-                msg.log_time_ns,
-                msg.log_time_ns,
+                log_time,
+                log_time,
             )
             records += msg.data
-            start = min(start, msg.log_time_ns)
-            end = max(end, msg.log_time_ns)
-        raw = bytes(records)
-        payload = self._compressor.compress(raw) if self._compressor else raw
+            if log_time < start:
+                start = log_time
+            elif log_time > end:
+                end = log_time
+        payload = self._compressor.compress(records) if self._compressor else bytes(records)
 
         before = self.offset
         chunk_offset = self.offset + len(self._pending)  # where this batch's chunk will start
@@ -228,7 +233,13 @@ class SegmentWriter:
         body_len = 8 + 8 + 8 + 4 + 4 + len(compression) + 8 + len(payload)
         out = bytearray(
             _CHUNK_HEADER.pack(
-                _OPCODE_CHUNK, body_len, start, end, len(raw), zlib.crc32(raw), len(compression)
+                _OPCODE_CHUNK,
+                body_len,
+                start,
+                end,
+                len(records),
+                zlib.crc32(records),
+                len(compression),
             )
         )
         out += compression
@@ -239,10 +250,9 @@ class SegmentWriter:
         for channel_id, entries in indexes.items():
             offsets[channel_id] = chunk_offset + len(out)
             out += _INDEX_HEADER.pack(
-                _OPCODE_MESSAGE_INDEX, 2 + 4 + 16 * len(entries), channel_id, 16 * len(entries)
+                _OPCODE_MESSAGE_INDEX, 2 + 4 + len(entries), channel_id, len(entries)
             )
-            for log_time, offset in entries:
-                out += _INDEX_ENTRY.pack(log_time, offset)
+            out += entries
         index_length = len(out) - chunk_length
         self._write_now(bytes(out))
 
@@ -256,11 +266,12 @@ class SegmentWriter:
                 message_index_length=index_length,
                 compression=self._compression,
                 compressed_size=len(payload),
-                uncompressed_size=len(raw),
+                uncompressed_size=len(records),
             )
         )
-        for msg in messages:
-            self._message_counts[msg.channel_id] = self._message_counts.get(msg.channel_id, 0) + 1
+        counts = self._message_counts
+        for channel_id, entries in indexes.items():
+            counts[channel_id] = counts.get(channel_id, 0) + len(entries) // _INDEX_ENTRY.size
         self._start_ns = start if self._start_ns is None else min(self._start_ns, start)
         self._end_ns = max(self._end_ns, end)
         return self.offset - before
