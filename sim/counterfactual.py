@@ -36,7 +36,7 @@ class BudgetExhaustedError(Exception):
     """The probing ran out of policy evaluations."""
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: ~4x cheaper to create
 class Found:
     factor: str
     comparison: str

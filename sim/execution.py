@@ -25,7 +25,7 @@ STOP_SPEED = 0.05
 ENVELOPE_SLACK = 0.1
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: ~4x cheaper to create
 class Check:
     rule: str
     passed: bool
@@ -34,7 +34,7 @@ class Check:
     detail: str
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: ~4x cheaper to create
 class Executed:
     intended: tuple[float, float]
     actual: tuple[float, float]

@@ -42,7 +42,7 @@ class FaultRates:
         return asdict(self)
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: ~4x cheaper to create
 class CycleFaults:
     """The faults drawn for one cycle (per-entity corruption is drawn later, per entity)."""
 

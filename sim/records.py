@@ -217,13 +217,34 @@ def rationale_size(
     return probe.used
 
 
+def alternative_records(alternatives: list[Scored]) -> list[dict[str, Any]]:
+    """The alternatives as the action record lists them."""
+    return [
+        {"command": a.command, "score": a.score, "rejected_because": a.rejected_because}
+        for a in alternatives
+    ]
+
+
+def counterfactual_records(found: list[Found]) -> list[dict[str, Any]]:
+    """The counterfactuals as the action record lists them."""
+    return [
+        {
+            "factor": c.factor,
+            "comparison": c.comparison,
+            "threshold": c.threshold,
+            "would_select": c.would_select,
+        }
+        for c in found
+    ]
+
+
 def action_record(
     outcome: Outcome,
     *,
     score: float,
-    alternatives: list[Scored],
+    alternatives: list[dict[str, Any]],
     rationale: dict[str, Any],
-    counterfactuals: list[Found] | None,
+    counterfactuals: list[dict[str, Any]] | None,
     intended: tuple[float, float],
 ) -> dict[str, Any]:
     """Layer 3 record; ``counterfactuals`` None means probing did not finish."""
@@ -231,20 +252,9 @@ def action_record(
         "command": outcome.command,
         "parameters": {"linear": intended[0], "angular": intended[1]},
         "score": score,
-        "alternatives": [
-            {"command": a.command, "score": a.score, "rejected_because": a.rejected_because}
-            for a in alternatives
-        ],
+        "alternatives": alternatives,
         "rationale": rationale,
-        "counterfactuals": [
-            {
-                "factor": c.factor,
-                "comparison": c.comparison,
-                "threshold": c.threshold,
-                "would_select": c.would_select,
-            }
-            for c in (counterfactuals or [])
-        ],
+        "counterfactuals": counterfactuals or [],
         "counterfactuals_none_applicable": counterfactuals is not None and not counterfactuals,
         "tree": _tree(outcome.path),
     }

@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from sim.belief import BeliefGraph, Edge, build_belief
-from sim.counterfactual import DEFAULT_BUDGET, BudgetExhaustedError, Found, probe
+from sim.counterfactual import BudgetExhaustedError, probe
+from sim.decision import Decider, Decision
 from sim.execution import Actuator
 from sim.faults import (
     CycleFaults,
@@ -27,20 +28,12 @@ from sim.faults import (
     truth_path_for,
 )
 from sim.perception import CORRIDOR_MAX_M, Perceiver, PerceptionOutput
-from sim.policy import (
-    REROUTE,
-    Outcome,
-    PolicyInput,
-    describe,
-    evaluate,
-    factors_of,
-    score_alternatives,
-)
+from sim.policy import REROUTE
 from sim.records import (
-    RATIONALE_CAPACITY,
     RationaleBuffer,
     action_record,
     belief_record,
+    counterfactual_records,
     cut_edges,
     entities_under,
     execution_record,
@@ -300,6 +293,7 @@ class _Pipeline:
         self.injector = FaultInjector(config.faults, np.random.default_rng(seeds[2]))
         self.actuator = Actuator(np.random.default_rng(seeds[3]))
         self.perceiver = Perceiver()
+        self.decider = Decider()
         self.logger = logger
         self.opener = opener
         self.truth = truth
@@ -345,7 +339,8 @@ class _Pipeline:
                 # Layer 2
                 graph = build_belief(seen, pose, actuator.linear)
                 # Layer 3
-                outcome, action = self._decide(graph, faults, pending)
+                decision, action = self._decide(graph, faults, pending)
+                outcome = decision.outcome
                 # Layer 4
                 executed = actuator.step(outcome.command, world.t, graph)
                 flip = (
@@ -359,7 +354,7 @@ class _Pipeline:
                     flags.append("sensor_degraded")
                 logged_factors = [f["node"] for f in action["rationale"]["factors"]]
                 corrupt, skip = self._audit_faults(
-                    seen, graph, factors_of(outcome), logged_factors, faults, pending
+                    seen, graph, decision.factors, logged_factors, faults, pending
                 )
                 action["parameters"] = {
                     "linear": executed.intended[0],
@@ -405,30 +400,27 @@ class _Pipeline:
 
     def _decide(
         self, graph: BeliefGraph, faults: CycleFaults, pending: Pending
-    ) -> tuple[Outcome, dict[str, Any]]:
-        """Layer 3: choose, score the alternatives, probe counterfactuals, write the rationale."""
-        values = graph.values()
-        inp = PolicyInput.from_nodes(graph.nodes)
-        outcome = evaluate(inp, values)
-        factors = factors_of(outcome)
-        score, alternatives = score_alternatives(outcome, values)
-        cfs: list[Found] | None
-        try:
-            budget = TIMEOUT_BUDGET if faults.cf_timeout else DEFAULT_BUDGET
-            cfs = probe(inp, values, factors, budget)
-        except BudgetExhaustedError:
-            cfs = None
+    ) -> tuple[Decision, dict[str, Any]]:
+        """Layer 3: the (remembered) decision, with this cycle's probing and rationale faults."""
+        inp, values, decision = self.decider.decide(graph)
+        outcome = decision.outcome
+        cfs = decision.counterfactuals
+        if faults.cf_timeout:
+            try:
+                cfs = counterfactual_records(probe(inp, values, decision.factors, TIMEOUT_BUDGET))
+            except BudgetExhaustedError:
+                cfs = None
+        if cfs is None:
             pending.append(
-                ("counterfactual_timeout", {"budget": TIMEOUT_BUDGET, "factors": factors})
+                ("counterfactual_timeout", {"budget": TIMEOUT_BUDGET, "factors": decision.factors})
             )
-        phrases = describe(outcome, values)
-        capacity = RATIONALE_CAPACITY
+        rationale = decision.rationale
         if faults.truncate:
-            capacity = rationale_size(phrases, outcome.tests, outcome.command, graph) // 2
-        buffer = RationaleBuffer(capacity)
-        write_rationale(buffer, phrases, outcome.tests, outcome.command, graph)
-        rationale = buffer.rationale()
-        if faults.truncate:
+            phrases, tests, command = decision.phrases, outcome.tests, outcome.command
+            capacity = rationale_size(phrases, tests, command, graph) // 2
+            buffer = RationaleBuffer(capacity)
+            write_rationale(buffer, phrases, tests, command, graph)
+            rationale = buffer.rationale()
             kept = [f["node"] for f in rationale["factors"]]
             pending.append(
                 (
@@ -436,19 +428,19 @@ class _Pipeline:
                     {
                         "capacity": capacity,
                         "factors_kept": kept,
-                        "factors_lost": [f for f in factors if f not in kept],
+                        "factors_lost": [f for f in decision.factors if f not in kept],
                     },
                 )
             )
         action = action_record(
             outcome,
-            score=score,
-            alternatives=alternatives,
+            score=decision.score,
+            alternatives=decision.alternatives,
             rationale=rationale,
             counterfactuals=cfs,
             intended=(0.0, 0.0),
         )
-        return outcome, action
+        return decision, action
 
     def _audit_faults(  # noqa: PLR0917 - private step of cycle(), called once
         self,

@@ -47,7 +47,7 @@ class LidarScan:
     truth: np.ndarray  # noise-free ranges, for the other sensors' occlusion tests
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: ~4x cheaper to create
 class CameraDetection:
     """A detector output: bearing (rad, robot frame), pixel box and class scores."""
 

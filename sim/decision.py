@@ -1,0 +1,106 @@
+"""Layer 3 for one cycle: the choice, the scored alternatives, the counterfactuals and the
+rationale, remembered per policy input.
+
+All of it is a pure function of the values of the belief nodes the policy reads (each
+pedestrian's collision risk and distance, each vehicle's risk and time to collision, the
+aisle state) and of which nodes those are. A robot waiting in a clear aisle, or behind a
+worker who stands still, sees the same input cycle after cycle: the decision is then
+taken from a small cache instead of being re-derived, probes included. The counterfactuals
+stay true of the policy by construction: they are the prober's answer for exactly this
+input. Faults that act on one cycle (a cut probing budget, a short rationale buffer) are
+applied by the caller on top.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from sim.belief import BeliefGraph
+from sim.counterfactual import DEFAULT_BUDGET, BudgetExhaustedError, Found, probe
+from sim.policy import Outcome, PolicyInput, describe, evaluate, factors_of, score_alternatives
+from sim.records import (
+    RATIONALE_CAPACITY,
+    RationaleBuffer,
+    alternative_records,
+    counterfactual_records,
+    write_rationale,
+)
+
+CACHE_SIZE = 512
+
+
+@dataclass(slots=True)
+class Decision:
+    """What layer 3 derives from one policy input (records as the logger takes them)."""
+
+    outcome: Outcome
+    factors: list[str]
+    score: float
+    alternatives: list[dict[str, Any]]
+    counterfactuals: list[dict[str, Any]] | None
+    """None: probing ran out of its budget (then nothing is claimed)."""
+    phrases: list[str]
+    rationale: dict[str, Any]
+    """Written into a buffer of ``RATIONALE_CAPACITY`` bytes."""
+
+
+class Decider:
+    """Derives decisions, remembering the last ``CACHE_SIZE`` distinct policy inputs."""
+
+    def __init__(self, size: int = CACHE_SIZE) -> None:
+        self._size = size
+        self._cache: dict[tuple[PolicyInput, tuple[Any, ...]], Decision] = {}
+        self.hits = 0
+        self.misses = 0
+
+    def decide(self, graph: BeliefGraph) -> tuple[PolicyInput, dict[str, Any], Decision]:
+        """The policy input and node values of ``graph``, and the decision on them."""
+        values: dict[str, Any] = {n.id: n.value for n in graph.nodes}
+        inp = PolicyInput.from_nodes(graph.nodes)
+        read = tuple(values[n] for n in _read_nodes(inp))
+        key = (inp, read)
+        decision = self._cache.get(key)
+        if decision is not None:
+            self.hits += 1
+            return inp, values, decision
+        self.misses += 1
+        decision = derive(inp, values, graph)
+        # -0.0 == 0.0, but the two print differently in the rationale: never share those.
+        if not any(x == 0.0 and math.copysign(1.0, x) < 0 for x in read):
+            if len(self._cache) >= self._size:
+                del self._cache[next(iter(self._cache))]  # the oldest entry
+            self._cache[key] = decision
+        return inp, values, decision
+
+
+def _read_nodes(inp: PolicyInput) -> list[str]:
+    """Every belief node ``choose``/``evaluate`` may read for this input."""
+    nodes = [n for _, risk, other in (*inp.peds, *inp.vehicles) for n in (risk, other)]
+    nodes.append(inp.aisle)
+    return nodes
+
+
+def derive(inp: PolicyInput, values: dict[str, Any], graph: BeliefGraph) -> Decision:
+    """Evaluate the policy, score the alternatives, probe, and write the rationale."""
+    outcome = evaluate(inp, values)
+    factors = factors_of(outcome)
+    score, alternatives = score_alternatives(outcome, values)
+    found: list[Found] | None
+    try:
+        found = probe(inp, values, factors, DEFAULT_BUDGET)
+    except BudgetExhaustedError:
+        found = None
+    phrases = describe(outcome, values)
+    buffer = RationaleBuffer(RATIONALE_CAPACITY)
+    write_rationale(buffer, phrases, outcome.tests, outcome.command, graph)
+    return Decision(
+        outcome=outcome,
+        factors=factors,
+        score=score,
+        alternatives=alternative_records(alternatives),
+        counterfactuals=None if found is None else counterfactual_records(found),
+        phrases=phrases,
+        rationale=buffer.rationale(),
+    )
