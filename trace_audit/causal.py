@@ -476,7 +476,10 @@ class _GraphBuilder:
             )
         value = raw.get("value")
         label = str(raw.get("label") or node_id)
-        if value is not None:
+        if raw.get("kind") == "entity":
+            # the belief graph's node for a perceived entity: name it by its entity id
+            label = f"{label} [{raw.get('entity') or node_id}]"
+        elif value is not None:
             label = f"{label} = {format_value(value, _str(raw.get('unit')))}"
         return self._node(
             f"belief:{node_id}",

@@ -185,6 +185,7 @@ def _dot(result: Explanation) -> str:
 def _mm_text(text: str) -> str:
     # Mermaid labels go inside double quotes; it has entity codes for what would break them.
     text = text.replace('"', "#quot;").replace("<", "#lt;").replace(">", "#gt;")
+    text = text.replace("|", "#124;")  # a bar would end an edge label early
     return re.sub(r"\s+", " ", text)
 
 
