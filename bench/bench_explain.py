@@ -55,10 +55,14 @@ def _ensure(path: Path, cycles: int, seed: int) -> None:
     )
 
 
-def _time(call: Callable[[], Any]) -> float:
-    started = time.perf_counter()
-    call()
-    return time.perf_counter() - started
+def _each(call: Callable[[int], object], times: list[int]) -> list[float]:
+    """Seconds each ``call(t)`` took."""
+    out = []
+    for t in times:
+        started = time.perf_counter()
+        call(t)
+        out.append(time.perf_counter() - started)
+    return out
 
 
 def _measure(path: Path, fractions: list[float]) -> dict[str, Any]:
@@ -66,13 +70,13 @@ def _measure(path: Path, fractions: list[float]) -> dict[str, Any]:
     start, end = log.start_ns, log.end_ns
     times = [start + int(f * (end - start)) for f in fractions]
     explain(path, t=times[0])  # warm the page cache and imports; not counted
-    calls = [_time(lambda t=t: explain(path, t=t)) for t in times]
-    opens = [_time(lambda: open_log(path)) for _ in times]
-    firsts = [_time(lambda t=t: open_log(path).cycle_at(t)) for t in times]
+    calls = _each(lambda t: explain(path, t=t), times)
+    opens = _each(lambda _t: open_log(path), times)
+    firsts = _each(lambda t: open_log(path).cycle_at(t), times)
     for segment in log.segments:  # load every chunk table: what remains is explain's own
         segment.cycle_at(segment.info.start_ns)
-    hot = [_time(lambda t=t: explain(log, t=t)) for t in times]
-    seeks = [_time(lambda t=t: log.cycle_at(t)) for t in times]
+    hot = _each(lambda t: explain(log, t=t), times)
+    seeks = _each(log.cycle_at, times)
     held = [explain(log, t=t).held.cycles for t in times]
     chunks = sum(s.info.chunk_count for s in log.segments)
     return {
