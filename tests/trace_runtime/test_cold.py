@@ -83,7 +83,7 @@ def _round_trip(encoder: BlockEncoder, block: list[RawMessage]) -> list[RawMessa
     kept, plain, positions = split_plain(block)
     decoded = decode_block(encoder.encode(kept, "hot", positions))
     assert decoded.plain == positions
-    return list(cold_module._merge(decoded.messages, plain, decoded.plain))
+    return list(cold_module.merge_plain(decoded.messages, plain, decoded.plain))
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])

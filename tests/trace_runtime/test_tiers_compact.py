@@ -124,22 +124,36 @@ def test_the_newest_unfinished_hot_segment_is_left_to_its_logger(tmp_path: Path)
         logger.close()
 
 
+def _lose_one_message(messages: list[RawMessage]) -> list[RawMessage]:
+    first, *rest = messages
+    return [RawMessage(first.topic, first.sequence, first.log_time_ns, b'{"lost":true}'), *rest]
+
+
+@pytest.mark.parametrize("where", ["codec", "pipeline"])
 def test_a_replacement_that_does_not_verify_leaves_the_source(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, where: str
 ) -> None:
+    """A codec that loses data, or a pipeline that hands it the wrong messages, is caught."""
     root = make_root(tmp_path / "log", cycles=40)
     before = _state(root)
-    real = BlockEncoder.encode
+    if where == "codec":
+        real_encode = BlockEncoder._encode
 
-    def lossy(self: BlockEncoder, messages: Any, tier: str, plain: Any = ()) -> bytes:
-        first, *rest = messages
-        damaged = RawMessage(first.topic, first.sequence, first.log_time_ns, b'{"lost":true}')
-        return real(self, [damaged, *rest], tier, plain)
+        def lossy(self: BlockEncoder, messages: Any, *args: Any, **kwargs: Any) -> bytes:
+            return real_encode(self, _lose_one_message(messages), *args, **kwargs)
 
-    monkeypatch.setattr(BlockEncoder, "encode", lossy)
+        monkeypatch.setattr(BlockEncoder, "_encode", lossy)
+    else:
+        real_split = compact_module.split_plain
+
+        def dropping(block: Any) -> Any:
+            kept, plain, positions = real_split(block)
+            return _lose_one_message(kept), plain, positions
+
+        monkeypatch.setattr(compact_module, "split_plain", dropping)
     report = compact(root, "cold", older_than_ns=0)
     assert [s.status for s in report.segments] == ["failed"]
-    assert "differs" in report.segments[0].detail
+    assert "codec bug" in report.segments[0].detail or "differ" in report.segments[0].detail
     after = _state(root)
     assert {k: v for k, v in after.items() if k != CATALOG_NAME} == before
     assert not list(root.rglob("*.partial"))

@@ -38,7 +38,7 @@ class ShapeError(ValueError):
 class Shape:
     """A compiled shape: its descriptor, leaf paths (and which are vectors), extract, build."""
 
-    __slots__ = ("build", "descriptor", "extract", "key", "paths", "vectors")
+    __slots__ = ("build", "descriptor", "extract", "key", "paths", "plans", "vectors")
 
     def __init__(
         self,
@@ -56,6 +56,8 @@ class Shape:
         self.vectors = vectors
         self.extract = extract
         self.build = build
+        self.plans: dict[int, Any] = {}
+        """Per-topic decoding plans, filled in by the codec."""
 
 
 def describe(value: Any) -> Descriptor:

@@ -20,6 +20,8 @@ compact JSON are stored verbatim, so any input round-trips.
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import hashlib
 import struct
 from array import array
@@ -73,6 +75,23 @@ Assembler = Callable[[Sequence[RawMessage], str], list[Cycle]]
 
 class ColdFormatError(ValueError):
     """A cold block is malformed (wrapped into ``LogReadError`` by callers)."""
+
+
+@contextlib.contextmanager
+def _gc_paused() -> Iterator[None]:
+    """Pause the cyclic GC while a block is taken apart or put together.
+
+    A block makes and keeps hundreds of thousands of small acyclic objects (parsed messages,
+    rows, columns); the collector would walk them again and again for nothing, which more
+    than doubles the time. Reference counting still frees everything as usual.
+    """
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was_enabled:
+            gc.enable()
 
 
 # --- compiled shapes, shared by encoders and decoders ------------------------------------
@@ -214,14 +233,49 @@ class BlockEncoder:
         self._zstd = zstandard.ZstdCompressor(level=level)
         self._by_sig: dict[tuple[str, int, int], list[Shape]] = {}
         self._hints: dict[tuple[str, tuple[Any, ...]], int] = {}
+        self._noncanonical: set[str] = set()
+        self._strict = False
+        self._last_raw = 0
         self.raw_messages = 0
         self.messages = 0
+        self.retries = 0
+        """Blocks whose fast encoding did not decode exactly and were encoded again, strictly."""
 
     def encode(self, messages: Sequence[RawMessage], tier: str, plain: Sequence[int] = ()) -> bytes:
         """One block: ``messages`` in file order, ``tier`` = how their cycles assemble.
 
         ``plain``: positions (in the whole stream) of the messages stored beside the block.
         """
+        return self.encode_checked(messages, tier, plain)[0]
+
+    def encode_checked(
+        self, messages: Sequence[RawMessage], tier: str, plain: Sequence[int] = ()
+    ) -> tuple[bytes, DecodedBlock]:
+        """``encode``, and the block as it decodes (which equals ``messages``).
+
+        Every block is decoded again before it is returned and must give back ``messages``
+        exactly: the fast encoding trusts a column's decimal scale from earlier blocks and
+        a topic's messages to be canonical JSON; when that does not hold the block is encoded
+        again with every value checked, and failing that, with every message verbatim.
+        """
+        expected = list(messages)
+        with _gc_paused():
+            for strict, verbatim in ((False, False), (True, False), (True, True)):
+                self._strict = strict
+                data = self._encode(expected, tier, plain, verbatim=verbatim)
+                decoded = decode_block(data)
+                if decoded.messages == expected and decoded.plain == list(plain):
+                    break
+                self.retries += 1
+            else:
+                raise ColdFormatError("a block does not decode to its messages (codec bug)")
+        self.messages += len(expected)
+        self.raw_messages += self._last_raw
+        return data, decoded
+
+    def _encode(
+        self, messages: Sequence[RawMessage], tier: str, plain: Sequence[int], *, verbatim: bool
+    ) -> bytes:
         topics: dict[str, int] = {}
         topic_ids: list[int] = []
         shape_ids: list[int] = []
@@ -237,6 +291,7 @@ class BlockEncoder:
         sha256 = hashlib.sha256
         loads, dumps = orjson.loads, orjson.dumps
         by_sig = self._by_sig
+        strict, noncanonical = self._strict, self._noncanonical
 
         for index, msg in enumerate(messages):
             topic_id = topics.setdefault(msg.topic, len(topics))
@@ -248,7 +303,7 @@ class BlockEncoder:
             shape: Shape | None = None
             row: tuple[Any, ...] = ()
             try:
-                value = loads(data)
+                value = None if verbatim else loads(data)
             except orjson.JSONDecodeError:
                 value = None
             if type(value) is dict or type(value) is list:
@@ -271,12 +326,13 @@ class BlockEncoder:
                         if len(by_sig) >= _SHAPE_CACHE_LIMIT:
                             by_sig.clear()
                         by_sig.setdefault(sig, []).insert(0, shape)
-                if shape is not None:
+                if shape is not None and (strict or msg.topic in noncanonical):
                     try:
                         canonical = dumps(value) == data
                     except orjson.JSONEncodeError:
                         canonical = False
                     if not canonical:
+                        noncanonical.add(msg.topic)
                         shape = None
             if shape is None:
                 raw.append(data)
@@ -293,8 +349,7 @@ class BlockEncoder:
             group_msgs[group].append(index)
             shape_ids.append(group + 1)
 
-        self.messages += len(messages)
-        self.raw_messages += len(raw)
+        self._last_raw = len(raw)
         topic_names = list(topics)
         columns: dict[tuple[int, tuple[Any, ...]], _Column] = {}
         for group, (topic_id, shape) in enumerate(group_keys):
@@ -329,7 +384,8 @@ class BlockEncoder:
             "tier": tier,
             "n": len(messages),
             "topics": topic_names,
-            "shapes": [[t, s.descriptor] for t, s in group_keys],
+            # descriptors as JSON text: a decoder looks its compiled shape up by these bytes
+            "shapes": [[t, s.key.decode()] for t, s in group_keys],
             "msg": [topic_code, shape_code, *(len(b) for b in fixed)],
             "cols": col_headers,
             "plain": list(plain),
@@ -397,6 +453,15 @@ class BlockEncoder:
         if hint != -1:
             # -0.0 == 0.0, so the check below cannot see a lost sign: list where they were.
             negative_zeros = _negative_zeros(values, raw)
+            if hint is not None and not self._strict:
+                # Fast path: the scale that fitted this column before; encode() checks it.
+                try:
+                    ints = list(map(round, map(mul, values, repeat(_SCALES[hint]))))
+                    packed = _pack_i64(ints, delta=True)
+                except OverflowError:
+                    packed = None
+                if packed is not None:
+                    return _DEC, [hint, negative_zeros], packed
             tries = range(_DEC_TRIES) if hint is None else (hint, *range(_DEC_TRIES))
             for k in tries:
                 scale = _SCALES[k]
@@ -479,7 +544,8 @@ def decode_block(block: bytes) -> DecodedBlock:
         raise ColdFormatError("not a trace-cold-v1 block (bad magic)")
     try:
         body = _DECOMPRESSOR.decompress(block[4:], max_output_size=_MAX_BLOCK_BYTES)
-        return _decode_body(body)
+        with _gc_paused():
+            return _decode_body(body)
     except ColdFormatError:
         raise
     except (zstandard.ZstdError, orjson.JSONDecodeError, struct.error) as err:
@@ -509,9 +575,14 @@ def _decode_body(body: bytes) -> DecodedBlock:
         raise ColdFormatError("message streams disagree on the message count")
 
     shapes: list[tuple[int, Shape]] = []
-    for topic_id, descriptor in header["shapes"]:
-        check_descriptor(descriptor)
-        shapes.append((int(topic_id), _shape_for(descriptor, orjson.dumps(descriptor))))
+    for topic_id, text in header["shapes"]:
+        key = text.encode()
+        shape = _COMPILED.get(key)
+        if shape is None:
+            descriptor = orjson.loads(key)
+            check_descriptor(descriptor)
+            shape = _shape_for(descriptor, key)
+        shapes.append((int(topic_id), shape))
 
     reader = _ColumnReader()
     for topic_id, path, codec, size, param in header["cols"]:
@@ -535,31 +606,44 @@ def _decode_body(body: bytes) -> DecodedBlock:
         datas[index] = raw_body[raw_at : raw_at + size]
         raw_at += size
 
-    # Messages whose shape holds digests of earlier messages are built in message order,
-    # after everything else (what they point at must exist first); the rest in bulk.
+    # A shape whose leaves hold digests of earlier messages (seals, evidence refs) can be
+    # built only once those messages are. Everything else is built first, in bulk; then
+    # each waiting group whose targets are all built (refs to sensor readings), in bulk;
+    # what is left (seals, which name the previous seal) in message order.
     dumps = orjson.dumps
-    chained: list[tuple[int, Shape, Iterator[Sequence[Any]], tuple[int, ...]]] = []
+    built = bytearray(n)
+    for index in positions[0]:
+        built[index] = 1
+    waiting: list[tuple[int, Shape, list[Sequence[Any]], list[int]]] = []
     for group, (topic_id, shape) in enumerate(shapes, start=1):
         count = len(positions[group])
-        slices: list[list[Any]] = []
-        slots: list[int] = []
-        for slot, path in enumerate(shape.paths):
-            key = (topic_id, path)
-            if slot in shape.vectors:
-                slices.append(reader.take_vectors(key, count))
-                continue
-            slices.append(reader.take(key, count))
-            if key in reader.digests:
-                slots.append(slot)
+        keys, vectors = _plan(shape, topic_id)
+        slices = [
+            reader.take_vectors(key, count) if vector else reader.take(key, count)
+            for key, vector in zip(keys, vectors, strict=True)
+        ]
         rows: Iterable[Sequence[Any]] = zip(*slices, strict=True) if slices else repeat((), count)
+        slots = [i for i, key in enumerate(keys) if key in reader.digests] if reader.digests else []
         if slots:
-            chained.append((group, shape, iter(rows), tuple(slots)))
+            waiting.append((group, shape, list(rows), slots))
             continue
         for index, data in zip(positions[group], map(dumps, map(shape.build, rows)), strict=True):
             datas[index] = data
-    if chained:
-        order = sorted((i, entry) for entry in chained for i in positions[entry[0]])
-        hexes: dict[int, str] = {}
+            built[index] = 1
+    hexes: dict[int, str] = {}
+    sequential = []
+    for group, shape, rows_list, slots in waiting:
+        filled = _fill_digests(
+            positions[group], rows_list, slots, datas=datas, built=built, hexes=hexes
+        )
+        if filled is None:
+            sequential.append((group, shape, iter(rows_list), slots))
+            continue
+        for index, data in zip(positions[group], map(dumps, map(shape.build, filled)), strict=True):
+            datas[index] = data
+            built[index] = 1
+    if sequential:
+        order = sorted((i, entry) for entry in sequential for i in positions[entry[0]])
         for index, (_group, shape, rows_left, digest_slots) in order:
             row = list(next(rows_left))
             for slot in digest_slots:
@@ -605,16 +689,52 @@ class _ColumnReader:
         if not lengths:
             return []
         longest = max(lengths)
-        elements = [
-            self.take((topic_id, (*path, i)), sum(1 for n in lengths if n > i))
-            for i in range(longest)
-        ]
+        histogram = Counter(lengths)
+        longer = len(lengths)  # rows with more than i elements, for i = 0, 1, ...
+        elements = []
+        for i in range(longest):
+            longer -= histogram.get(i, 0)
+            elements.append(self.take((topic_id, (*path, i)), longer))
         if longest == 0:
             return [[] for _ in lengths]
         if lengths.count(longest) == len(lengths):
             return list(map(list, zip(*elements, strict=True)))
         pending = [iter(column) for column in elements]
         return [[next(pending[i]) for i in range(n)] for n in lengths]
+
+
+def _plan(shape: Shape, topic_id: int) -> tuple[list[tuple[int, tuple[Any, ...]]], list[bool]]:
+    """Column keys of a shape's slots on a topic, and which slots are vectors (cached)."""
+    plan = shape.plans.get(topic_id)
+    if plan is None:
+        keys = [(topic_id, path) for path in shape.paths]
+        vectors = [slot in shape.vectors for slot in range(len(keys))]
+        plan = shape.plans[topic_id] = (keys, vectors)
+    return plan
+
+
+def _fill_digests(
+    positions: list[int],
+    rows: list[Sequence[Any]],
+    slots: list[int],
+    *,
+    datas: list[bytes],
+    built: bytearray,
+    hexes: dict[int, str],
+) -> list[Sequence[Any]] | None:
+    """Rows with their digest references resolved, or None if one points at an unbuilt message."""
+    out: list[Sequence[Any]] = []
+    for index, row in zip(positions, rows, strict=True):
+        fixed = list(row)
+        for slot in slots:
+            back = fixed[slot]
+            if type(back) is int:
+                at = index - back
+                if at < 0 or not built[at]:
+                    return None
+                fixed[slot] = _hex_of(datas, hexes, at)
+        out.append(fixed)
+    return out
 
 
 def _hex_of(datas: list[bytes], cache: dict[int, str], at: int) -> str:
@@ -754,7 +874,7 @@ def iter_decoded(messages: Iterable[RawMessage]) -> Iterator[RawMessage]:
             block = decode_block(msg.data)
             if len(block.plain) != len(beside):
                 raise ColdFormatError("a block's plain messages are missing from its chunk")
-            yield from _merge(block.messages, beside, block.plain)
+            yield from merge_plain(block.messages, beside, block.plain)
             beside = []
         elif msg.topic in PLAIN_TOPICS:
             beside.append(msg)
@@ -763,9 +883,10 @@ def iter_decoded(messages: Iterable[RawMessage]) -> Iterator[RawMessage]:
     yield from beside
 
 
-def _merge(
+def merge_plain(
     inner: list[RawMessage], plain: list[RawMessage], positions: list[int]
 ) -> Iterator[RawMessage]:
+    """A block's messages with the plain ones put back at ``positions``."""
     pending = iter(inner)
     at = 0
     for position, msg in zip(positions, plain, strict=True):

@@ -23,6 +23,7 @@ in ``retention.jsonl`` in the root first.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import re
 import time
@@ -60,6 +61,7 @@ from trace_runtime.tiers.cold import (
     index_entry,
     iter_blocks,
     iter_decoded,
+    merge_plain,
     split_plain,
 )
 from trace_runtime.tiers.warm import SUMMARY_SCHEMA, SUMMARY_TOPIC, WarmPolicy, warm_cycles
@@ -443,11 +445,10 @@ def compact_segment(
         source_sha = file_digest(path)
         with open(partial, "wb") as stream:
             if tier == "cold":
-                full = None
-                _write_cold(segment, stream, source_sha, cold_options, advance)
+                written = _write_cold(segment, stream, source_sha, cold_options, advance)
             else:
-                full = _write_warm(segment, stream, source_sha, warm_policy, advance)
-        verify_replacement(segment, partial)
+                written = _write_warm(segment, stream, source_sha, warm_policy, advance)
+        _check_written(segment, partial, written)
     except (VerificationError, LogReadError, ColdFormatError, SegmentWriteError, OSError) as err:
         with contextlib.suppress(OSError):
             partial.unlink()
@@ -461,7 +462,7 @@ def compact_segment(
     path.unlink()
     fsync_dir(path.parent)
     result.bytes_after = target.stat().st_size
-    result.full_cycles = full
+    result.full_cycles = written.full_cycles
     result.seconds = time.perf_counter() - started
     return result
 
@@ -496,30 +497,87 @@ def _tier_metadata(segment: Segment, tier: str, source_sha: str, **extra: str) -
     }
 
 
+class _Tally:
+    """A running digest of a message stream: what was written, or what is read back."""
+
+    def __init__(self) -> None:
+        self._sha = hashlib.sha256()
+        self.count = 0
+
+    def add(self, topic: str, sequence: int, log_time_ns: int, data: bytes) -> None:
+        self._sha.update(b"%d %d %d %d " % (len(topic), sequence, log_time_ns, len(data)))
+        self._sha.update(topic.encode())
+        self._sha.update(data)
+        self.count += 1
+
+    @property
+    def digest(self) -> str:
+        return self._sha.hexdigest()
+
+
+@dataclass(slots=True)
+class _Written:
+    """What a tier writer wrote (its running digest) and, for warm, the seals it carried."""
+
+    stream: _Tally
+    seals: _Tally
+    full_cycles: int | None = None
+
+
+class _TallyWriter:
+    """A SegmentWriter that keeps a running digest of every message it writes."""
+
+    def __init__(self, writer: SegmentWriter) -> None:
+        self.writer = writer
+        self.tally = _Tally()
+        self._topics: dict[int, str] = {}
+
+    def channel(self, topic: str, **kwargs: Any) -> int:
+        channel = self.writer.channel(topic, **kwargs)
+        self._topics[channel] = topic
+        return channel
+
+    def write_batch(self, batch: list[OutMessage]) -> None:
+        self.writer.write_batch(batch)
+        for m in batch:
+            self.tally.add(self._topics[m.channel_id], m.sequence, m.log_time_ns, m.data)
+
+
 def _write_cold(
     segment: Segment,
     stream: Any,
     source_sha: str,
     options: ColdOptions,
     advance: Callable[[int], None],
-) -> None:
+) -> _Written:
     # Blocks are zstd-compressed already; a second compression of the chunk would only cost time.
-    writer = SegmentWriter(stream, _tier_session(segment, "cold"), compression="")
-    block_channel = writer.channel(BLOCK_TOPIC, encoding=CODEC, schema=BLOCK_SCHEMA)
-    index_channel = writer.channel(INDEX_TOPIC, encoding="json", schema=INDEX_SCHEMA)
+    out = _TallyWriter(SegmentWriter(stream, _tier_session(segment, "cold"), compression=""))
+    block_channel = out.channel(BLOCK_TOPIC, encoding=CODEC, schema=BLOCK_SCHEMA)
+    index_channel = out.channel(INDEX_TOPIC, encoding="json", schema=INDEX_SCHEMA)
     encoder = BlockEncoder(options.level)
     source_tier = segment.session.tier
+    read, decoded = _Tally(), _Tally()
+
+    def source() -> Iterator[RawMessage]:
+        for msg in segment.iter_messages():
+            read.add(msg.topic, msg.sequence, msg.log_time_ns, msg.data)
+            yield msg
+
     blocks = cycles = 0
-    for number, block in enumerate(iter_blocks(segment.iter_messages(), options.block_cycles)):
+    for number, block in enumerate(iter_blocks(source(), options.block_cycles)):
         kept, plain, positions = split_plain(block)
-        data = encoder.encode(kept, source_tier, positions)
+        # Each block is decoded again as it is encoded; the decoded stream, tallied, must
+        # equal the source stream as read (checked once the source is exhausted).
+        data, check = encoder.encode_checked(kept, source_tier, positions)
+        for msg in merge_plain(check.messages, plain, check.plain):
+            decoded.add(msg.topic, msg.sequence, msg.log_time_ns, msg.data)
         entry = index_entry(block)
         first = min(m.log_time_ns for m in block)
         last = max(m.log_time_ns for m in block)
-        writer.write_batch(
+        out.write_batch(
             [
                 *(
-                    OutMessage(writer.channel(m.topic), m.sequence, m.log_time_ns, m.data)
+                    OutMessage(out.channel(m.topic), m.sequence, m.log_time_ns, m.data)
                     for m in plain
                 ),
                 OutMessage(block_channel, number, first, data),
@@ -529,7 +587,7 @@ def _write_cold(
         blocks += 1
         cycles += entry["cycles"]
         advance(entry["cycles"])
-    writer.add_metadata(
+    out.writer.add_metadata(
         TIER_METADATA,
         _tier_metadata(
             segment,
@@ -543,7 +601,10 @@ def _write_cold(
             verbatim_messages=str(encoder.raw_messages),
         ),
     )
-    writer.finish()
+    if (read.count, read.digest) != (decoded.count, decoded.digest):
+        raise VerificationError("the decoded blocks differ from the source messages")
+    out.writer.finish()
+    return _Written(out.tally, _Tally())
 
 
 def _write_warm(
@@ -552,27 +613,35 @@ def _write_warm(
     source_sha: str,
     policy: WarmPolicy,
     advance: Callable[[int], None],
-) -> int:
-    writer = SegmentWriter(stream, _tier_session(segment, "warm"), level=WARM_LEVEL)
-    writer.channel(SUMMARY_TOPIC, schema=SUMMARY_SCHEMA)
+) -> _Written:
+    out = _TallyWriter(SegmentWriter(stream, _tier_session(segment, "warm"), level=WARM_LEVEL))
+    out.channel(SUMMARY_TOPIC, schema=SUMMARY_SCHEMA)
+    seals = _Tally()
+
+    def source() -> Iterator[RawMessage]:
+        # The seals of the source, tallied as they are read, to check the copy independently.
+        for msg in segment.iter_messages():
+            if msg.topic == TOPIC_SEAL:
+                seals.add(msg.topic, msg.sequence, msg.log_time_ns, msg.data)
+            yield msg
+
     batch: list[OutMessage] = []
     in_batch = full = summaries = 0
-    for cycle in warm_cycles(segment.iter_messages(), policy, segment.session.period_ns):
+    for cycle in warm_cycles(source(), policy, segment.session.period_ns):
         for msg in cycle.messages:
-            batch.append(
-                OutMessage(_channel(writer, msg.topic), msg.sequence, msg.log_time_ns, msg.data)
-            )
+            channel = _channel(out, msg.topic)
+            batch.append(OutMessage(channel, msg.sequence, msg.log_time_ns, msg.data))
         full += cycle.full
         summaries += not cycle.full
         in_batch += 1
         if in_batch >= WARM_CHUNK_CYCLES:
-            writer.write_batch(batch)
+            out.write_batch(batch)
             advance(in_batch)
             batch, in_batch = [], 0
     if batch:
-        writer.write_batch(batch)
+        out.write_batch(batch)
         advance(in_batch)
-    writer.add_metadata(
+    out.writer.add_metadata(
         TIER_METADATA,
         _tier_metadata(
             segment,
@@ -583,11 +652,30 @@ def _write_warm(
             **policy.to_metadata(),
         ),
     )
-    writer.finish()
-    return full
+    out.writer.finish()
+    return _Written(out.tally, seals, full)
 
 
-def _channel(writer: SegmentWriter, topic: str) -> int:
+def _check_written(source: Segment, partial: Path, written: _Written) -> None:
+    """The file on disk holds exactly what was written (and verified), nothing else."""
+    target = Segment(partial)
+    if replace(target.session, tier=source.session.tier) != source.session:
+        raise VerificationError(f"{partial.name}: session record differs from the source's")
+    back, seals = _Tally(), _Tally()
+    for msg in target.iter_messages():
+        back.add(msg.topic, msg.sequence, msg.log_time_ns, msg.data)
+        if msg.topic == TOPIC_SEAL:
+            seals.add(msg.topic, msg.sequence, msg.log_time_ns, msg.data)
+    if (back.count, back.digest) != (written.stream.count, written.stream.digest):
+        raise VerificationError(f"{partial.name}: the file does not hold what was written")
+    if target.session.tier == "warm":
+        if (seals.count, seals.digest) != (written.seals.count, written.seals.digest):
+            raise VerificationError(f"{partial.name}: seals differ from the source's")
+    elif (target.info.start_ns, target.info.end_ns) != (source.info.start_ns, source.info.end_ns):
+        raise VerificationError(f"{partial.name}: time range differs from the source's")
+
+
+def _channel(writer: _TallyWriter, topic: str) -> int:
     if topic.startswith("/trace/") and topic not in MESSAGE_MODELS and topic != SUMMARY_TOPIC:
         # A /trace topic this version has no schema for (a newer writer): keep it, schemaless.
         return writer.channel(topic, schema=("trace.Unknown", "", b""))
