@@ -16,10 +16,10 @@ from __future__ import annotations
 import contextlib
 import functools
 import logging
-import queue
 import re
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -114,6 +114,65 @@ class _PendingCycle:
     layers: dict[str, _Record]
     sensors: list[tuple[str, int, int, bytes]]
     dropped_before: int
+
+
+class _Handover:
+    """The bounded hand-over from the control thread to the writer thread.
+
+    One producer, one consumer. ``collections.deque`` appends and pops are atomic, so the
+    control thread pays for an append and an event, not for a lock-guarded ``queue.Queue``;
+    each counter is written by one thread only.
+    """
+
+    def __init__(self, bound: int) -> None:
+        self._items: deque[_PendingCycle] = deque()
+        self._bound = bound
+        self._wake = threading.Event()
+        self._space = threading.Event()
+        self._closed = False
+        self._put = 0  # producer only
+        self._done = 0  # consumer only
+
+    def put(self, item: _PendingCycle, *, block: bool) -> bool:
+        """Hand ``item`` over; False when full and not blocking."""
+        while len(self._items) >= self._bound:
+            if not block:
+                return False
+            self._space.clear()
+            if len(self._items) >= self._bound:
+                self._space.wait(0.01)
+        self._put += 1
+        self._items.append(item)
+        self._wake.set()
+        return True
+
+    def take(self, most: int) -> list[_PendingCycle]:
+        """Up to ``most`` items, waiting for at least one; [] once closed and drained."""
+        while True:
+            batch: list[_PendingCycle] = []
+            while self._items and len(batch) < most:
+                batch.append(self._items.popleft())
+            if batch:
+                self._space.set()
+                return batch
+            if self._closed:
+                return []
+            self._wake.wait()
+            self._wake.clear()
+
+    def done(self, count: int) -> None:
+        self._done += count
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        """Poll until everything handed over is written (flush is rare; polling is simple)."""
+        deadline = time.monotonic() + timeout_s
+        while self._done != self._put and time.monotonic() < deadline:
+            time.sleep(0.0005)
+        return self._done == self._put
+
+    def close(self) -> None:
+        self._closed = True
+        self._wake.set()
 
 
 class CycleSink(Protocol):
@@ -275,10 +334,10 @@ class AuditLogger:
         self._open_segment(self._session)
 
         self._sync_batch: list[_PendingCycle] = []  # threaded=False, batch_cycles > 1
-        self._queue: queue.Queue[_PendingCycle | None] | None = None
+        self._queue: _Handover | None = None
         self._thread: threading.Thread | None = None
         if self.config.threaded:
-            self._queue = queue.Queue(maxsize=self.config.queue_cycles)
+            self._queue = _Handover(self.config.queue_cycles)
             self._thread = threading.Thread(
                 target=self._run_writer, name=f"trace-writer-{robot_id}", daemon=True
             )
@@ -324,10 +383,7 @@ class AuditLogger:
         """Wait until every committed cycle has been written; True if it got there."""
         if self._queue is None:
             return True
-        deadline = time.monotonic() + timeout_s
-        while self._queue.unfinished_tasks and time.monotonic() < deadline:
-            time.sleep(0.0005)
-        return not self._queue.unfinished_tasks
+        return self._queue.wait_idle(timeout_s)
 
     def close(self) -> None:
         """Write what is queued, then the segment's summary and indexes. Idempotent."""
@@ -335,7 +391,7 @@ class AuditLogger:
             return
         self._closed = True
         if self._queue is not None and self._thread is not None:
-            self._queue.put(None)
+            self._queue.close()
             self._thread.join()
         with self._lock:
             if self._sync_batch:
@@ -373,17 +429,12 @@ class AuditLogger:
                 with self._lock:
                     self._write_batch(batch)
             return
-        try:
-            if self.config.when_full == "block":
-                self._queue.put(pending)
-            else:
-                self._queue.put_nowait(pending)
-        except queue.Full:
+        if self._queue.put(pending, block=self.config.when_full == "block"):
+            self._undeclared_control = 0
+        else:
             self.stats.dropped_queue_full += 1
             self._undeclared_control += 1
             self._report_once("queue", "audit queue full: dropping cycles (writer too slow)")
-        else:
-            self._undeclared_control = 0
 
     def _abort(self, builder: CycleBuilder) -> None:
         self.stats.dropped_aborted += 1
@@ -392,32 +443,15 @@ class AuditLogger:
     # --- writer side --------------------------------------------------------------------
 
     def _run_writer(self) -> None:
-        assert self._queue is not None
-        q = self._queue
-        stop = False
-        while not stop:
-            item = q.get()
-            batch: list[_PendingCycle] = []
-            taken = 1
-            if item is None:
-                stop = True
-            else:
-                batch.append(item)
-            while not stop and len(batch) < self.config.max_batch_cycles:
-                try:
-                    more = q.get_nowait()
-                except queue.Empty:
-                    break
-                taken += 1
-                if more is None:
-                    stop = True
-                else:
-                    batch.append(more)
-            if batch:
-                with self._lock:
-                    self._write_batch(batch)
-            for _ in range(taken):
-                q.task_done()
+        handover = self._queue
+        assert handover is not None
+        while True:
+            batch = handover.take(self.config.max_batch_cycles)
+            if not batch:
+                return  # closed and drained
+            with self._lock:
+                self._write_batch(batch)
+            handover.done(len(batch))
 
     def _write_batch(self, batch: list[_PendingCycle]) -> None:
         """Seal and write cycles; called with ``_lock`` held. Swallows every failure."""
