@@ -78,15 +78,17 @@ class Actuator:
             ),
         ]
         nearest: tuple[float, str] | None = None
-        for n in belief.nodes:
-            if n.kind == "entity" and n.value == "person":
-                for m in belief.nodes:
-                    if (
-                        m.id == f"{n.id}.distance"
-                        and isinstance(m.value, float)
-                        and (nearest is None or m.value < nearest[0])
-                    ):
-                        nearest = (m.value, n.id)
+        people = [n.id for n in belief.nodes if n.kind == "entity" and n.value == "person"]
+        if people:
+            by_id = {m.id: m for m in belief.nodes}  # node ids are unique
+            for pid in people:
+                m = by_id.get(f"{pid}.distance")
+                if (
+                    m is not None
+                    and isinstance(m.value, float)
+                    and (nearest is None or m.value < nearest[0])
+                ):
+                    nearest = (m.value, pid)
         if nearest is not None and nearest[0] < PERSON_ZONE_M:
             checks.append(
                 Check(

@@ -239,8 +239,11 @@ def _argmax(values: list[float]) -> int:
     return best
 
 
+_WIDTH_TERMS = [(mu, sd, math.log(sd)) for mu, sd in _WIDTH_MODEL.values()]
+
+
 def _width_loglik(width: float) -> list[float]:
-    return [-0.5 * ((width - mu) / sd) ** 2 - math.log(sd) for mu, sd in _WIDTH_MODEL.values()]
+    return [-0.5 * ((width - mu) / sd) ** 2 - log_sd for mu, sd, log_sd in _WIDTH_TERMS]
 
 
 def _score_loglik(scores: tuple[float, ...]) -> list[float]:
@@ -256,6 +259,15 @@ def _normalize(logp: list[float]) -> list[float]:
 def _weights(sensors: list[str], scale: float = 1.0) -> list[float]:
     total = sum(_SENSOR_WEIGHT[s] for s in sensors)
     return [round(scale * _SENSOR_WEIGHT[s] / total, 3) for s in sensors]
+
+
+_FUSED_WEIGHTS = {
+    (camera, echo): _weights(["lidar"] + ["camera"] * camera + ["ultrasonic"] * echo)
+    for camera in (False, True)
+    for echo in (False, True)
+}
+"""Evidence weights of a LiDAR cluster, by whether the camera and the ultrasonic back it."""
+_US_HALF_ANGLE_4 = round(US_HALF_ANGLE, 4)
 
 
 class Perceiver:
@@ -405,16 +417,11 @@ class Perceiver:
         # --- update tracks ------------------------------------------------------------
         for c in clusters:
             wx, wy = world_c[c.index]
-            lidar_ev = EvidenceItem(
-                "lidar", 0.0, "beams", (float(c.first), float(c.last)), lidar_ref, cycle
-            )
             ll = _width_loglik(c.width)
             det_i = det_of_cluster.get(c.index)
-            cam_ev = None
-            if det_i is not None and detections is not None:
-                det = detections[det_i]
+            det = None if det_i is None or detections is None else detections[det_i]
+            if det is not None:
                 ll = [a + b for a, b in zip(ll, _score_loglik(det.scores), strict=True)]
-                cam_ev = EvidenceItem("camera", 0.0, "pixels", det.box, camera_ref, cycle)
             known = track_of.get(c.index)
             if known is None:
                 logp = _normalize(ll)
@@ -438,27 +445,21 @@ class Perceiver:
                 t.hits += 1
                 t.missed = 0
             t.observed = True
-            sensors = ["lidar"] + (["camera"] if cam_ev else [])
-            rx, ry = c.x, c.y
-            in_cone = abs(math.atan2(ry, rx)) <= US_HALF_ANGLE
-            rng_c = min(c.ranges)
-            us_ev = None
-            if us_range is not None and in_cone and abs(rng_c - us_range) < 0.4:
-                sensors.append("ultrasonic")
-                us_ev = EvidenceItem(
-                    "ultrasonic",
-                    0.0,
-                    "cone",
-                    (0.0, round(US_HALF_ANGLE, 4), round(us_range, 3)),
-                    us_ref,
-                    cycle,
+            in_cone = abs(math.atan2(c.y, c.x)) <= US_HALF_ANGLE
+            echo = us_range is not None and in_cone and abs(min(c.ranges) - us_range) < 0.4
+            w = _FUSED_WEIGHTS[det is not None, echo]
+            evidence = [
+                EvidenceItem(
+                    "lidar", w[0], "beams", (float(c.first), float(c.last)), lidar_ref, cycle
                 )
-            w = _weights(sensors)
-            items = [lidar_ev, cam_ev, us_ev]
-            t.evidence = [
-                EvidenceItem(e.sensor, wi, e.region_kind, e.region_values, e.ref, e.cycle)
-                for e, wi in zip([e for e in items if e is not None], w, strict=True)
             ]
+            if det is not None:
+                evidence.append(EvidenceItem("camera", w[1], "pixels", det.box, camera_ref, cycle))
+            if echo:
+                assert us_range is not None
+                cone = (0.0, _US_HALF_ANGLE_4, round(us_range, 3))
+                evidence.append(EvidenceItem("ultrasonic", w[-1], "cone", cone, us_ref, cycle))
+            t.evidence = evidence
         if scan is None:
             for ti, di in det_of_track.items():
                 t = self.tracks[ti]

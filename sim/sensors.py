@@ -331,10 +331,13 @@ def detect_camera(
     return detections
 
 
+_US_BEAMS = slice(beam_of(-US_HALF_ANGLE), beam_of(US_HALF_ANGLE) + 1)
+"""The LiDAR beams inside the ultrasonic cone (its echo is the nearest surface there)."""
+
+
 def range_ultrasonic(truth_ranges: np.ndarray, rng: np.random.Generator) -> float | None:
     """Nearest echo in the forward cone, or None beyond range."""
-    i0, i1 = beam_of(-US_HALF_ANGLE), beam_of(US_HALF_ANGLE)
-    nearest = float(truth_ranges[i0 : i1 + 1].min())
+    nearest = float(truth_ranges[_US_BEAMS].min())
     if nearest > US_RANGE_MAX:
         return None
     return max(0.02, nearest + float(rng.normal(0.0, US_NOISE_M)))

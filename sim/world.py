@@ -122,16 +122,23 @@ class World:
         self.actors: list[Actor] = []
         self.shelves = shelf_boxes()
         self.t = 0.0
+        self._pose_key: tuple[float, int] | None = None
+        self._pose = (0.0, 0.0, 0.0)
 
     # --- robot pose -----------------------------------------------------------------
 
     def robot_pose(self) -> tuple[float, float, float]:
         """(x, y, heading) of the robot."""
-        x, y = self.route.point(self.robot.s)
-        tx, ty = self.route.tangent(self.robot.s)
-        if self.robot.direction < 0:
+        robot = self.robot
+        key = (robot.s, robot.direction)
+        if key == self._pose_key:  # asked for several times a cycle
+            return self._pose
+        x, y = self.route.point(robot.s)
+        tx, ty = self.route.tangent(robot.s)
+        if robot.direction < 0:
             tx, ty = -tx, -ty
-        return x, y, math.atan2(ty, tx)
+        self._pose_key, self._pose = key, (x, y, math.atan2(ty, tx))
+        return self._pose
 
     def along_route(self, ahead_m: float, lateral_m: float) -> tuple[float, float, float]:
         """A point ``ahead_m`` along the robot's route and ``lateral_m`` to its left.
