@@ -27,6 +27,7 @@ import hashlib
 import os
 import re
 import time
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from itertools import zip_longest
@@ -56,6 +57,7 @@ from trace_runtime.tiers.cold import (
     DEFAULT_LEVEL,
     INDEX_SCHEMA,
     INDEX_TOPIC,
+    PLAIN_TOPICS,
     BlockEncoder,
     ColdFormatError,
     index_entry,
@@ -98,6 +100,8 @@ class ColdOptions:
     """Cycles per block; a seek decodes one block."""
     level: int = DEFAULT_LEVEL
     """zstd level of each block."""
+    jobs: int = 1
+    """Processes encoding blocks in parallel; 1 encodes in the calling process."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -232,8 +236,8 @@ def compact(
         raise UsageError("durations must not be negative")
     warm_policy = warm or WarmPolicy()
     cold_options = cold or ColdOptions()
-    if cold_options.block_cycles < 1:
-        raise UsageError("block_cycles must be at least 1")
+    if cold_options.block_cycles < 1 or cold_options.jobs < 1:
+        raise UsageError("block_cycles and jobs must be at least 1")
     started = time.perf_counter()
     lock = contextlib.nullcontext() if dry_run else root_lock(root)
     with lock:
@@ -543,6 +547,39 @@ class _TallyWriter:
             self.tally.add(self._topics[m.channel_id], m.sequence, m.log_time_ns, m.data)
 
 
+_WORKER_ENCODERS: dict[int, BlockEncoder] = {}
+
+
+def _encode_block(
+    level: int,
+    tier: str,
+    kept: list[tuple[str, int, int, bytes]],
+    plain_at: list[int],
+    plain: list[tuple[str, int, int, bytes]],
+) -> tuple[bytes, str, int, int, int]:
+    """Encode one block (in this process or a worker): the data, and the digest of the
+    stream it decodes to with the plain messages put back, for the caller to check."""
+    encoder = _WORKER_ENCODERS.get(level)
+    if encoder is None:
+        encoder = _WORKER_ENCODERS[level] = BlockEncoder(level)
+    raw_before, retries_before = encoder.raw_messages, encoder.retries
+    data, check = encoder.encode_checked([RawMessage(*m) for m in kept], tier, plain_at)
+    tally = _Tally()
+    for msg in merge_plain(check.messages, [RawMessage(*m) for m in plain], check.plain):
+        tally.add(msg.topic, msg.sequence, msg.log_time_ns, msg.data)
+    return (
+        data,
+        tally.digest,
+        tally.count,
+        encoder.raw_messages - raw_before,
+        encoder.retries - retries_before,
+    )
+
+
+def _as_tuples(messages: list[RawMessage]) -> list[tuple[str, int, int, bytes]]:
+    return [(m.topic, m.sequence, m.log_time_ns, m.data) for m in messages]
+
+
 def _write_cold(
     segment: Segment,
     stream: Any,
@@ -554,26 +591,31 @@ def _write_cold(
     out = _TallyWriter(SegmentWriter(stream, _tier_session(segment, "cold"), compression=""))
     block_channel = out.channel(BLOCK_TOPIC, encoding=CODEC, schema=BLOCK_SCHEMA)
     index_channel = out.channel(INDEX_TOPIC, encoding="json", schema=INDEX_SCHEMA)
-    encoder = BlockEncoder(options.level)
     source_tier = segment.session.tier
-    read, decoded = _Tally(), _Tally()
+    counts = {"blocks": 0, "cycles": 0, "messages": 0, "verbatim": 0}
+    pool = None
+    if options.jobs > 1:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
 
-    def source() -> Iterator[RawMessage]:
-        for msg in segment.iter_messages():
+        # spawn: a worker never inherits the threads or locks of an embedding process
+        pool = ProcessPoolExecutor(options.jobs, mp_context=multiprocessing.get_context("spawn"))
+    pending: deque[tuple[int, list[RawMessage], Any]] = deque()
+
+    def finish_one() -> None:
+        number, block, job = pending.popleft()
+        data, digest_, count, verbatim, _retries = job.result() if pool else job
+        # The block, decoded again with its plain messages put back, must be the source
+        # block as it was read (a digest over every message, in order).
+        read = _Tally()
+        for msg in block:
             read.add(msg.topic, msg.sequence, msg.log_time_ns, msg.data)
-            yield msg
-
-    blocks = cycles = 0
-    for number, block in enumerate(iter_blocks(source(), options.block_cycles)):
-        kept, plain, positions = split_plain(block)
-        # Each block is decoded again as it is encoded; the decoded stream, tallied, must
-        # equal the source stream as read (checked once the source is exhausted).
-        data, check = encoder.encode_checked(kept, source_tier, positions)
-        for msg in merge_plain(check.messages, plain, check.plain):
-            decoded.add(msg.topic, msg.sequence, msg.log_time_ns, msg.data)
+        if (read.count, read.digest) != (count, digest_):
+            raise VerificationError(f"block {number} does not decode to the source messages")
         entry = index_entry(block)
         first = min(m.log_time_ns for m in block)
         last = max(m.log_time_ns for m in block)
+        plain = [m for m in block if m.topic in PLAIN_TOPICS]
         out.write_batch(
             [
                 *(
@@ -584,9 +626,26 @@ def _write_cold(
                 OutMessage(index_channel, number, last, orjson.dumps(entry)),
             ]
         )
-        blocks += 1
-        cycles += entry["cycles"]
+        counts["blocks"] += 1
+        counts["cycles"] += entry["cycles"]
+        counts["messages"] += len(block) - len(plain)
+        counts["verbatim"] += verbatim
         advance(entry["cycles"])
+
+    try:
+        for number, block in enumerate(iter_blocks(segment.iter_messages(), options.block_cycles)):
+            kept, plain, positions = split_plain(block)
+            args = (options.level, source_tier, _as_tuples(kept), positions, _as_tuples(plain))
+            job = pool.submit(_encode_block, *args) if pool else _encode_block(*args)
+            pending.append((number, block, job))
+            while len(pending) > (2 * options.jobs if pool else 0):
+                finish_one()
+        while pending:
+            finish_one()
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
+    blocks, cycles = counts["blocks"], counts["cycles"]
     out.writer.add_metadata(
         TIER_METADATA,
         _tier_metadata(
@@ -597,12 +656,10 @@ def _write_cold(
             block_cycles=str(options.block_cycles),
             blocks=str(blocks),
             cycles=str(cycles),
-            messages=str(encoder.messages),
-            verbatim_messages=str(encoder.raw_messages),
+            messages=str(counts["messages"]),
+            verbatim_messages=str(counts["verbatim"]),
         ),
     )
-    if (read.count, read.digest) != (decoded.count, decoded.digest):
-        raise VerificationError("the decoded blocks differ from the source messages")
     out.writer.finish()
     return _Written(out.tally, _Tally())
 
