@@ -733,15 +733,28 @@ class _Structure:
             while k + 1 < len(rest) and rest[k + 1] in moved:
                 k += 1
             run = [rest[x] for x in range(j, k + 1)]
-            around = [rest[x] for x in (j - 1, k + 1) if 0 <= x < len(rest)]
+            before = rest[j - 1] if j > 0 else None
+            after = rest[k + 1] if k + 1 < len(rest) else None
+            around = [i for i in (before, after) if i is not None]
             numbers = [scan.num[i] for i in run]
             span = [scan.num[i] for i in run + around]
             times = [scan.t[i] for i in run + around]
-            between = " and ".join(str(scan.num[i]) for i in around) or "nothing"
+            if before is not None and after is not None:
+                where = f"between cycles {scan.num[before]} and {scan.num[after]}"
+            elif before is not None:
+                where = f"after cycle {scan.num[before]}, at the end"
+            elif after is not None:
+                where = f"before cycle {scan.num[after]}, at the start"
+            else:
+                where = "alone"
+            what = (
+                f"cycle {numbers[0]} is"
+                if len(run) == 1
+                else (f"cycles {_describe_numbers(sorted(numbers))} are")
+            )
             self.check.finding(
                 "reordered",
-                f"cycle(s) {_describe_numbers(numbers)} are out of chain order "
-                f"(found between cycles {between})",
+                f"{what} out of chain order (found {where})",
                 (min(span), max(span), min(times), max(times)),
             )
             j = k + 1
