@@ -30,7 +30,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
-from itertools import zip_longest
+from itertools import islice, zip_longest
 from pathlib import Path
 from typing import Any, Literal
 
@@ -519,21 +519,29 @@ class _Tally:
         return self._sha.hexdigest()
 
 
+def _batch_digest(rows: Iterable[tuple[str, int, int, bytes]]) -> str:
+    """SHA-256 of a batch of messages: their (topic, sequence, log time, size) and data."""
+    rows = list(rows)
+    sha = hashlib.sha256(orjson.dumps([(t, s, at, len(d)) for t, s, at, d in rows]))
+    sha.update(b"".join(row[3] for row in rows))
+    return sha.hexdigest()
+
+
 @dataclass(slots=True)
 class _Written:
-    """What a tier writer wrote (its running digest) and, for warm, the seals it carried."""
+    """What a tier writer wrote (a digest per chunk) and, for warm, the seals it carried."""
 
-    stream: _Tally
+    batches: list[tuple[int, str]]
     seals: _Tally
     full_cycles: int | None = None
 
 
 class _TallyWriter:
-    """A SegmentWriter that keeps a running digest of every message it writes."""
+    """A SegmentWriter that records a digest of every batch (chunk) it writes."""
 
     def __init__(self, writer: SegmentWriter) -> None:
         self.writer = writer
-        self.tally = _Tally()
+        self.batches: list[tuple[int, str]] = []
         self._topics: dict[int, str] = {}
 
     def channel(self, topic: str, **kwargs: Any) -> int:
@@ -543,8 +551,9 @@ class _TallyWriter:
 
     def write_batch(self, batch: list[OutMessage]) -> None:
         self.writer.write_batch(batch)
-        for m in batch:
-            self.tally.add(self._topics[m.channel_id], m.sequence, m.log_time_ns, m.data)
+        topics = self._topics
+        rows = ((topics[m.channel_id], m.sequence, m.log_time_ns, m.data) for m in batch)
+        self.batches.append((len(batch), _batch_digest(rows)))
 
 
 _WORKER_ENCODERS: dict[int, BlockEncoder] = {}
@@ -564,13 +573,11 @@ def _encode_block(
         encoder = _WORKER_ENCODERS[level] = BlockEncoder(level)
     raw_before, retries_before = encoder.raw_messages, encoder.retries
     data, check = encoder.encode_checked([RawMessage(*m) for m in kept], tier, plain_at)
-    tally = _Tally()
-    for msg in merge_plain(check.messages, [RawMessage(*m) for m in plain], check.plain):
-        tally.add(msg.topic, msg.sequence, msg.log_time_ns, msg.data)
+    stream = list(merge_plain(check.messages, [RawMessage(*m) for m in plain], check.plain))
     return (
         data,
-        tally.digest,
-        tally.count,
+        _batch_digest(_as_tuples(stream)),
+        len(stream),
         encoder.raw_messages - raw_before,
         encoder.retries - retries_before,
     )
@@ -607,10 +614,7 @@ def _write_cold(
         data, digest_, count, verbatim, _retries = job.result() if pool else job
         # The block, decoded again with its plain messages put back, must be the source
         # block as it was read (a digest over every message, in order).
-        read = _Tally()
-        for msg in block:
-            read.add(msg.topic, msg.sequence, msg.log_time_ns, msg.data)
-        if (read.count, read.digest) != (count, digest_):
+        if (len(block), _batch_digest(_as_tuples(block))) != (count, digest_):
             raise VerificationError(f"block {number} does not decode to the source messages")
         entry = index_entry(block)
         first = min(m.log_time_ns for m in block)
@@ -661,7 +665,7 @@ def _write_cold(
         ),
     )
     out.writer.finish()
-    return _Written(out.tally, _Tally())
+    return _Written(out.batches, _Tally())
 
 
 def _write_warm(
@@ -710,7 +714,7 @@ def _write_warm(
         ),
     )
     out.writer.finish()
-    return _Written(out.tally, seals, full)
+    return _Written(out.batches, seals, full)
 
 
 def _check_written(source: Segment, partial: Path, written: _Written) -> None:
@@ -718,13 +722,17 @@ def _check_written(source: Segment, partial: Path, written: _Written) -> None:
     target = Segment(partial)
     if replace(target.session, tier=source.session.tier) != source.session:
         raise VerificationError(f"{partial.name}: session record differs from the source's")
-    back, seals = _Tally(), _Tally()
-    for msg in target.iter_messages():
-        back.add(msg.topic, msg.sequence, msg.log_time_ns, msg.data)
-        if msg.topic == TOPIC_SEAL:
-            seals.add(msg.topic, msg.sequence, msg.log_time_ns, msg.data)
-    if (back.count, back.digest) != (written.stream.count, written.stream.digest):
-        raise VerificationError(f"{partial.name}: the file does not hold what was written")
+    seals = _Tally()
+    messages = target.iter_messages()
+    for count, want in written.batches:
+        batch = list(islice(messages, count))
+        for msg in batch:
+            if msg.topic == TOPIC_SEAL:
+                seals.add(msg.topic, msg.sequence, msg.log_time_ns, msg.data)
+        if len(batch) != count or _batch_digest(_as_tuples(batch)) != want:
+            raise VerificationError(f"{partial.name}: the file does not hold what was written")
+    if next(messages, None) is not None:
+        raise VerificationError(f"{partial.name}: the file holds more than was written")
     if target.session.tier == "warm":
         if (seals.count, seals.digest) != (written.seals.count, written.seals.digest):
             raise VerificationError(f"{partial.name}: seals differ from the source's")
