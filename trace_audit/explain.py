@@ -22,6 +22,7 @@ from typing import Any, Literal
 
 from trace_audit.causal import Decision, causal_graph, graph_data, read_decision, tree_graph
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, DecisionChains, SensorWindow, trace_cycle
+from trace_audit.metrics import MetricsConfig, continuity_of, dr_problems, trust_score
 from trace_audit.timeline import (
     LogSource,
     TimeArg,
@@ -34,7 +35,7 @@ from trace_runtime.chain import GENESIS, digest
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
 from trace_runtime.integrity import verify_cycle
 from trace_runtime.reader import Cycle, Log
-from trace_runtime.records import TOPIC_SEAL
+from trace_runtime.records import TOPIC_ACTION, TOPIC_SEAL
 
 __all__ = [
     "DEFAULT_LOOKBACK_S",
@@ -100,15 +101,15 @@ class DecisionScores:
     """This decision's auditability scores and where they come from.
 
     ``et`` and ``et_partial`` come from the chain walker; ``dr`` and ``tcs`` from the metrics
-    library's per-decision scoring (None when it is not available). ``problems`` lists why
-    a score is below 1.
+    library's definitions (the same ones ``trace-audit metrics`` uses). ``problems`` lists
+    why a score is below 1.
     """
 
     et: float
     et_partial: float
     fully_traceable: bool
-    dr: float | None
-    tcs: float | None
+    dr: float
+    tcs: float
     problems: tuple[str, ...]
     source: str
 
@@ -209,7 +210,7 @@ def explain(
         chains = trace_cycle(target, window)
     seal = _check_seal(log, target, back.prev_sealed)
     period = max((s.session.period_ns for s in log.segments), default=0)
-    scores = _scores(decision, chains, seal)
+    scores = _scores(target, chains, seal, prev_sealed=back.prev_sealed, period_ns=period)
     graph = causal_graph(target, chains, decision)
     tree = graph_data(tree_graph(decision.tree)) if decision.tree else None
     return Explanation(
@@ -366,7 +367,17 @@ def _check_seal(log: Log, target: Cycle, prev_sealed: Cycle | None) -> SealCheck
     )
 
 
-def _scores(decision: Decision, chains: DecisionChains, seal: SealCheck) -> DecisionScores:
+def _scores(
+    target: Cycle,
+    chains: DecisionChains,
+    seal: SealCheck,
+    *,
+    prev_sealed: Cycle | None,
+    period_ns: int,
+    config: MetricsConfig | None = None,
+) -> DecisionScores:
+    """This decision's ET, ET_partial, DR and TCS, by the same definitions as the metrics."""
+    config = config or MetricsConfig()
     problems: list[str] = []
     if chains.reason:
         problems.append(f"ET: {chains.reason}")
@@ -377,13 +388,26 @@ def _scores(decision: Decision, chains: DecisionChains, seal: SealCheck) -> Deci
                 f"ET: {factor.name or factor.node}: {link.level} not documented "
                 f"({link.detail}); depth {factor.depth}/{factor.expected_depth}"
             )
+    missing_dr = dr_problems(target.layer(TOPIC_ACTION))
+    problems += [f"DR: {p}" for p in missing_dr]
     problems += [f"integrity: {p}" for p in seal.problems]
+    continuity = 1.0
+    if prev_sealed is not None and target.t_ns > prev_sealed.t_ns:
+        continuity = continuity_of(target.t_ns - prev_sealed.t_ns, period_ns, config.gap_tolerance)
+    tcs = trust_score(
+        config.weights,
+        et=chains.et,
+        et_partial=chains.et_partial,
+        dr_ok=not missing_dr,
+        continuity=continuity,
+        intact=seal.verified,
+    )
     return DecisionScores(
         et=chains.et,
         et_partial=chains.et_partial,
         fully_traceable=chains.fully_traceable,
-        dr=None,
-        tcs=None,
+        dr=0.0 if missing_dr else 1.0,
+        tcs=tcs,
         problems=tuple(problems),
-        source="chains (DR and TCS need trace_audit.metrics per-decision scoring)",
+        source="trace_audit.metrics definitions (docs/metrics.md), default TCS weights",
     )

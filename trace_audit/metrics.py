@@ -424,9 +424,6 @@ class _Scanner:
         window = self.window
         stream = self.stream
         weights = cfg.weights
-        w_total = (
-            weights.et + weights.et_partial + weights.dr + weights.continuity + weights.integrity
-        )
         partial = self.partial
         limit = cfg.max_listed
         done = 0
@@ -439,7 +436,7 @@ class _Scanner:
             belief = cycle.layer(TOPIC_BELIEF)
             perception = cycle.layer(TOPIC_PERCEPTION)
             score = score_layers(action, belief, perception, window=window)
-            dr_problems = _dr_problems(action)
+            dr_problems_ = dr_problems(action)
             if fixed_group:
                 group = fixed_group
             elif by == "scenario":
@@ -482,7 +479,7 @@ class _Scanner:
                             acc.gap_ns += gap
                             acc.gaps += 1
                             acc.missing_cycles += missing
-                            continuity = period / interval
+                            continuity = continuity_of(interval, period, cfg.gap_tolerance)
                             partial.gaps_total += 1
                             if len(partial.gaps) < limit:
                                 partial.gaps.append(
@@ -502,7 +499,7 @@ class _Scanner:
 
             et, etp = score.et, score.et_partial
             full = score.fully_traceable
-            dr_ok = not dr_problems
+            dr_ok = not dr_problems_
             intact = not integrity
             acc.decisions += 1
             if cycle.summary is not None:
@@ -517,16 +514,9 @@ class _Scanner:
             acc.no_factors += score.factors == 0
             acc.dr_ok += dr_ok
             acc.integrity_ok += intact
-            if intact or not weights.integrity_gate:
-                tcs = (
-                    weights.et * et
-                    + weights.et_partial * etp
-                    + weights.dr * dr_ok
-                    + weights.continuity * continuity
-                    + weights.integrity * intact
-                ) / w_total
-            else:
-                tcs = 0.0
+            tcs = trust_score(
+                weights, et=et, et_partial=etp, dr_ok=dr_ok, continuity=continuity, intact=intact
+            )
             acc.tcs_sum += tcs
             acc.tcs_sq += tcs * tcs
             if not (full and dr_ok and intact):
@@ -555,7 +545,7 @@ class _Scanner:
                                         )
                                     )
                                 ),
-                                *(f"DR: {p}" for p in dr_problems),
+                                *(f"DR: {p}" for p in dr_problems_),
                                 *(f"integrity: {p}" for p in integrity),
                             ),
                         )
@@ -590,6 +580,36 @@ class _Scanner:
             self.stream.prev_seal = hashlib.sha256(last_sealed.payloads[TOPIC_SEAL]).hexdigest()
 
 
+def continuity_of(interval_ns: int, period_ns: int, gap_tolerance: float) -> float:
+    """A decision's continuity: 1 unless the interval since the previous sealed cycle is a gap
+    (longer than (1 + tolerance) periods), then period / interval."""
+    limit = period_ns + int(period_ns * gap_tolerance)
+    return period_ns / interval_ns if period_ns > 0 and interval_ns > limit else 1.0
+
+
+def trust_score(
+    weights: TCSWeights,
+    *,
+    et: float,
+    et_partial: float,
+    dr_ok: bool,
+    continuity: float,
+    intact: bool,
+) -> float:
+    """TCS(d): the weighted mean of ET, ET_partial, DR, continuity and integrity (docs/metrics.md);
+    0 when integrity fails and the gate is on."""
+    if not intact and weights.integrity_gate:
+        return 0.0
+    total = weights.et + weights.et_partial + weights.dr + weights.continuity + weights.integrity
+    return (
+        weights.et * et
+        + weights.et_partial * et_partial
+        + weights.dr * dr_ok
+        + weights.continuity * continuity
+        + weights.integrity * intact
+    ) / total
+
+
 def _check_digests(cycle: Cycle, seal: dict[str, Any], problems: list[str]) -> None:
     named = seal.get("digests")
     if not isinstance(named, dict):
@@ -609,7 +629,8 @@ def _check_digests(cycle: Cycle, seal: dict[str, Any], problems: list[str]) -> N
             problems.append(f"{topic} is named by the seal but missing")
 
 
-def _dr_problems(action: Any) -> list[str]:
+def dr_problems(action: Any) -> list[str]:
+    """Why a decision is not reconstructable (DR = 0); [] when DR = 1. ``action`` is JSON."""
     if not isinstance(action, dict) or not action.get("command"):
         return ["action not logged"]
     problems: list[str] = []

@@ -339,3 +339,27 @@ def test_sim_injected_null_evidence_shows_as_a_missing_link(sim_log: Path) -> No
         )
         or not hit
     )
+
+
+def test_explain_scores_each_decision_as_the_metrics_do(sim_log: Path) -> None:
+    """explain's per-decision ET / DR agree with what `trace-audit metrics` lists as failing."""
+    from trace_audit.explain import explain
+    from trace_audit.metrics import MetricsConfig, compute_metrics
+
+    report = compute_metrics([sim_log], MetricsConfig())
+    failing = {f.cycle: f for f in report.failures}
+    after_gap = {g.before_cycle for g in report.gaps}
+    checked = 0
+    for cycle in [c.cycle for c in open_log(sim_log).iter_cycles()]:
+        scores = explain(sim_log, cycle=cycle).scores
+        listed = failing.get(cycle)
+        dr_listed = listed is not None and any(p.startswith("DR:") for p in listed.problems)
+        assert (scores.dr == 0.0) == dr_listed, cycle
+        if listed is not None:
+            assert scores.et == pytest.approx(listed.et)
+        else:
+            assert scores.fully_traceable and scores.dr == 1.0
+            # TCS is 1 unless the decision follows a gap (its continuity is then < 1).
+            assert (scores.tcs < 1.0) == (cycle in after_gap), cycle
+        checked += 1
+    assert checked > 400 and failing  # the run has injected faults to disagree about

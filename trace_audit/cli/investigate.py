@@ -278,11 +278,9 @@ def explain_doc(r: Explanation, lookback_s: float = 600.0) -> Doc:
             "a sensor reading)",
         ),
         ("ET_partial", f"{s.et_partial:.2f}"),
-        ("DR", "-" if s.dr is None else f"{s.dr:.0f}"),
-        ("TCS", "-" if s.tcs is None else f"{s.tcs:.2f}"),
+        ("DR", f"{s.dr:.0f}"),
+        ("TCS", f"{s.tcs:.2f}"),
     ]
-    if s.dr is None or s.tcs is None:
-        score_rows.append(("Note", f"scores from {s.source}"))
     doc.fields(score_rows)
     for problem in s.problems:
         doc.line(Seg(f"- {problem}", "yellow"), 2)
