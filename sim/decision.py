@@ -49,8 +49,8 @@ class Decision:
 class Decider:
     """Derives decisions, remembering the last ``CACHE_SIZE`` distinct policy inputs."""
 
-    def __init__(self, size: int = CACHE_SIZE) -> None:
-        self._size = size
+    def __init__(self, size: int | None = None) -> None:
+        self._size = CACHE_SIZE if size is None else size
         self._cache: dict[tuple[PolicyInput, tuple[Any, ...]], Decision] = {}
         self.hits = 0
         self.misses = 0
@@ -67,12 +67,17 @@ class Decider:
             return inp, values, decision
         self.misses += 1
         decision = derive(inp, values, graph)
-        # -0.0 == 0.0, but the two print differently in the rationale: never share those.
-        if not any(x == 0.0 and math.copysign(1.0, x) < 0 for x in read):
+        if self._size > 0 and _shareable(read):
             if len(self._cache) >= self._size:
                 del self._cache[next(iter(self._cache))]  # the oldest entry
             self._cache[key] = decision
         return inp, values, decision
+
+
+def _shareable(read: tuple[Any, ...]) -> bool:
+    """Whether inputs equal to ``read`` are the same input: equal values can print
+    differently (1 and 1.0, 0.0 and -0.0), and the rationale quotes them."""
+    return all(type(x) is float and (x != 0.0 or math.copysign(1.0, x) > 0) for x in read)
 
 
 def _read_nodes(inp: PolicyInput) -> list[str]:

@@ -419,9 +419,11 @@ class Perceiver:
             wx, wy = world_c[c.index]
             ll = _width_loglik(c.width)
             det_i = det_of_cluster.get(c.index)
-            det = None if det_i is None or detections is None else detections[det_i]
-            if det is not None:
-                ll = [a + b for a, b in zip(ll, _score_loglik(det.scores), strict=True)]
+            seen_by: CameraDetection | None = None  # the camera detection fused in, if any
+            if det_i is not None and detections is not None:
+                seen_by = detections[det_i]
+            if seen_by is not None:
+                ll = [a + b for a, b in zip(ll, _score_loglik(seen_by.scores), strict=True)]
             known = track_of.get(c.index)
             if known is None:
                 logp = _normalize(ll)
@@ -447,14 +449,16 @@ class Perceiver:
             t.observed = True
             in_cone = abs(math.atan2(c.y, c.x)) <= US_HALF_ANGLE
             echo = us_range is not None and in_cone and abs(min(c.ranges) - us_range) < 0.4
-            w = _FUSED_WEIGHTS[det is not None, echo]
+            w = _FUSED_WEIGHTS[seen_by is not None, echo]
             evidence = [
                 EvidenceItem(
                     "lidar", w[0], "beams", (float(c.first), float(c.last)), lidar_ref, cycle
                 )
             ]
-            if det is not None:
-                evidence.append(EvidenceItem("camera", w[1], "pixels", det.box, camera_ref, cycle))
+            if seen_by is not None:
+                evidence.append(
+                    EvidenceItem("camera", w[1], "pixels", seen_by.box, camera_ref, cycle)
+                )
             if echo:
                 assert us_range is not None
                 cone = (0.0, _US_HALF_ANGLE_4, round(us_range, 3))

@@ -53,6 +53,8 @@ SOFTWARE_VERSION = "trace-sim 0.1"
 POLICY_VERSION = "fig2-v1"
 TIMEOUT_BUDGET = 2
 """Probe budget (policy evaluations) left when a counterfactual timeout is injected."""
+DURATION_BATCH = 50
+"""Cycles per write that ``trace-sim run --duration`` uses unless told otherwise."""
 REROUTE_COOLDOWN_S = 5.0
 EPISODE_ROOM_M = 28.0
 """Straight aisle an episode needs ahead: the farthest spawn (~15 m) plus 10 s of driving."""
@@ -106,6 +108,7 @@ class RunResult:
     bytes_written: int
     elapsed_s: float
     seed: int
+    batch_cycles: int = 1
 
     @property
     def cycles_per_s(self) -> float:
@@ -126,6 +129,7 @@ class RunResult:
             "elapsed_s": round(self.elapsed_s, 3),
             "cycles_per_s": round(self.cycles_per_s, 1),
             "seed": self.seed,
+            "batch_cycles": self.batch_cycles,
         }
 
 
@@ -245,6 +249,7 @@ def run(config: RunConfig, progress: Callable[[int, int], None] | None = None) -
         bytes_written=stats.bytes_written,
         elapsed_s=elapsed,
         seed=config.seed,
+        batch_cycles=config.batch_cycles,
     )
 
 

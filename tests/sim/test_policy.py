@@ -33,8 +33,10 @@ def test_paper_example_stops_and_its_counterfactuals_match_the_paper() -> None:
     assert outcome.command == STOP
     assert outcome.path == ("root", "ped_in_path", "ped_close", "stop_ped")
     assert factors_of(outcome) == ["ped_1.collision_risk", "ped_1.distance"]
-    found = {(c.factor, c.comparison, c.threshold, c.would_select)
-             for c in probe(PED, values, factors_of(outcome))}
+    found = {
+        (c.factor, c.comparison, c.threshold, c.would_select)
+        for c in probe(PED, values, factors_of(outcome))
+    }
     assert ("ped_1.distance", ">=", 2.0, SLOW) in found
     assert ("ped_1.collision_risk", "<", 0.2, CONTINUE) in found
 
@@ -50,10 +52,16 @@ def test_alternatives_score_below_the_choice_and_say_why() -> None:
 
 
 def test_a_second_pedestrian_keeps_the_stop_so_no_distance_counterfactual_is_claimed() -> None:
-    inp = PolicyInput(peds=(("a", "a.collision_risk", "a.distance"),
-                            ("b", "b.collision_risk", "b.distance")))
-    values: dict[str, object] = {"a.collision_risk": 0.7, "a.distance": 1.5,
-                                 "b.collision_risk": 0.6, "b.distance": 1.6, "aisle_blocked": 0.0}
+    inp = PolicyInput(
+        peds=(("a", "a.collision_risk", "a.distance"), ("b", "b.collision_risk", "b.distance"))
+    )
+    values: dict[str, object] = {
+        "a.collision_risk": 0.7,
+        "a.distance": 1.5,
+        "b.collision_risk": 0.6,
+        "b.distance": 1.6,
+        "aisle_blocked": 0.0,
+    }
     found = probe(inp, values, ["a.distance"])
     # Moving a away leaves b inside the stop distance: STOP stays; no SLOW counterfactual.
     assert all(c.would_select != SLOW for c in found)
@@ -74,8 +82,7 @@ _dist = st.floats(0.0, 30.0)
 
 
 @settings(max_examples=150, deadline=None)
-@given(r1=_risk, d1=_dist, r2=_risk, d2=_dist, vr=_risk, ttc=st.floats(0.0, 99.0),
-       blocked=_risk)
+@given(r1=_risk, d1=_dist, r2=_risk, d2=_dist, vr=_risk, ttc=st.floats(0.0, 99.0), blocked=_risk)
 def test_every_counterfactual_holds_when_the_policy_is_rerun(  # noqa: PLR0917
     r1: float, d1: float, r2: float, d2: float, vr: float, ttc: float, blocked: float
 ) -> None:
@@ -87,8 +94,13 @@ def test_every_counterfactual_holds_when_the_policy_is_rerun(  # noqa: PLR0917
         vehicles=(("f1", "f1.collision_risk", "f1.ttc"),),
     )
     values: dict[str, object] = {
-        "p1.collision_risk": r1, "p1.distance": d1, "p2.collision_risk": r2, "p2.distance": d2,
-        "f1.collision_risk": vr, "f1.ttc": ttc, "aisle_blocked": blocked,
+        "p1.collision_risk": r1,
+        "p1.distance": d1,
+        "p2.collision_risk": r2,
+        "p2.distance": d2,
+        "f1.collision_risk": vr,
+        "f1.ttc": ttc,
+        "aisle_blocked": blocked,
     }
     outcome = evaluate(inp, values)
     for cf in probe(inp, values, factors_of(outcome)):
@@ -98,12 +110,17 @@ def test_every_counterfactual_holds_when_the_policy_is_rerun(  # noqa: PLR0917
 
 def test_vehicle_branch_stops_when_close_and_reroutes_when_far() -> None:
     inp = PolicyInput(vehicles=(("f", "f.collision_risk", "f.ttc"),))
-    assert evaluate(inp, {"f.collision_risk": 0.8, "f.ttc": 2.0, "aisle_blocked": 0.0}).command \
-        == STOP
-    assert evaluate(inp, {"f.collision_risk": 0.8, "f.ttc": 4.0, "aisle_blocked": 0.0}).command \
+    assert (
+        evaluate(inp, {"f.collision_risk": 0.8, "f.ttc": 2.0, "aisle_blocked": 0.0}).command == STOP
+    )
+    assert (
+        evaluate(inp, {"f.collision_risk": 0.8, "f.ttc": 4.0, "aisle_blocked": 0.0}).command
         == REROUTE
-    assert evaluate(inp, {"f.collision_risk": 0.1, "f.ttc": 4.0, "aisle_blocked": 0.0}).command \
+    )
+    assert (
+        evaluate(inp, {"f.collision_risk": 0.1, "f.ttc": 4.0, "aisle_blocked": 0.0}).command
         == CONTINUE
+    )
 
 
 def test_rationale_buffer_truncates_text_and_factors_when_full() -> None:
@@ -126,8 +143,17 @@ def test_fast_choose_agrees_with_evaluate(values: list[float]) -> None:
         peds=(("a", "a.collision_risk", "a.distance"), ("b", "b.collision_risk", "b.distance")),
         vehicles=(("f", "f.collision_risk", "f.ttc"),),
     )
-    keys = ["a.collision_risk", "a.distance", "b.collision_risk", "b.distance",
-            "f.collision_risk", "f.ttc", "aisle_blocked"]
-    v: dict[str, object] = {k: x / 5.0 if "risk" in k or k == "aisle_blocked" else x
-                            for k, x in zip(keys, values, strict=True)}
+    keys = [
+        "a.collision_risk",
+        "a.distance",
+        "b.collision_risk",
+        "b.distance",
+        "f.collision_risk",
+        "f.ttc",
+        "aisle_blocked",
+    ]
+    v: dict[str, object] = {
+        k: x / 5.0 if "risk" in k or k == "aisle_blocked" else x
+        for k, x in zip(keys, values, strict=True)
+    }
     assert choose(inp, v) == evaluate(inp, v).command

@@ -30,7 +30,7 @@ def _scenario(cycle: Cycle) -> str:
     assert execution is not None
     flags = [f for f in execution.flags if f.startswith(SCENARIO_FLAG)]
     assert len(flags) == 1
-    return flags[0][len(SCENARIO_FLAG):]
+    return flags[0][len(SCENARIO_FLAG) :]
 
 
 @pytest.fixture(scope="module")
@@ -112,7 +112,8 @@ def test_forklift_causes_a_stop_or_reroute(which: str, request: pytest.FixtureRe
     caused = [
         c.cycle
         for c in _cycles(result)
-        if _scenario(c) == "forklift" and c.action is not None
+        if _scenario(c) == "forklift"
+        and c.action is not None
         and c.action.command in ("STOP", "REROUTE")
         and any(_entity_class(c, f.node) == "forklift" for f in c.action.rationale.factors)
     ]
@@ -194,8 +195,12 @@ def test_ped_close_stop_chain_reaches_a_logged_lidar_cluster(clean: RunResult) -
 
 def test_injected_faults_are_exactly_what_the_log_shows(tmp_path: Path) -> None:
     rates = FaultRates(
-        lidar_unavailable=0.05, camera_unavailable=0.1, evidence_corruption=0.08,
-        edge_write_failure=0.08, rationale_truncation=0.08, counterfactual_timeout=0.08,
+        lidar_unavailable=0.05,
+        camera_unavailable=0.1,
+        evidence_corruption=0.08,
+        edge_write_failure=0.08,
+        rationale_truncation=0.08,
+        counterfactual_timeout=0.08,
         audit_write_timeout=0.05,
     )
     result = run(RunConfig(out=tmp_path / "f.mcap", total_cycles=2000, seed=9, faults=rates))
@@ -229,9 +234,13 @@ def test_injected_faults_are_exactly_what_the_log_shows(tmp_path: Path) -> None:
 
     timeouts = {t["cycle"] for t in by_kind["counterfactual_timeout"]}
     within(len(timeouts), written, rates.counterfactual_timeout)
-    no_cf = {k for k, c in cycles.items()
-             if c.action and not c.action.counterfactuals
-             and not c.action.counterfactuals_none_applicable}
+    no_cf = {
+        k
+        for k, c in cycles.items()
+        if c.action
+        and not c.action.counterfactuals
+        and not c.action.counterfactuals_none_applicable
+    }
     assert timeouts == no_cf
 
     edges = by_kind["edge_write_failure"]
@@ -280,10 +289,28 @@ def test_cli_run_json_and_scenarios(tmp_path: Path) -> None:
     listed = runner.invoke(app, ["scenarios", "--json"])
     assert listed.exit_code == 0
     assert [s["name"] for s in orjson.loads(listed.stdout)] == [
-        "clear_path", "ped_crossing", "ped_close", "multi_ped", "forklift"]
+        "clear_path",
+        "ped_crossing",
+        "ped_close",
+        "multi_ped",
+        "forklift",
+    ]
     out = tmp_path / "cli.mcap"
-    res = runner.invoke(app, ["run", "--scenario", "ped_close", "--cycles", "12", "--out",
-                              str(out), "--faults", "off", "--json"])
+    res = runner.invoke(
+        app,
+        [
+            "run",
+            "--scenario",
+            "ped_close",
+            "--cycles",
+            "12",
+            "--out",
+            str(out),
+            "--faults",
+            "off",
+            "--json",
+        ],
+    )
     assert res.exit_code == 0, res.output
     summary = orjson.loads(res.stdout)
     assert summary["cycles"] == 12 and summary["commands"].get("STOP", 0) >= 8
