@@ -1,0 +1,67 @@
+"""trace_audit: the investigator's library behind the ``trace-audit`` command.
+
+Open a log (a segment, a directory or a log root, in any tier), then ask it questions::
+
+    from trace_audit import open_log, explain, why, compute_metrics, verify_log
+
+    result = explain("run.mcap", t=20.5)          # the decision in force at t, reconstructed
+    stops = why("run.mcap", "STOP")               # every transition into STOP, with its reason
+    report = compute_metrics(["run.mcap"])        # ET, ET_partial, TC, DR, TCS
+    integrity = verify_log("logs/")               # chain, checkpoints, signatures
+
+Names are imported on first use, so ``import trace_audit`` (and the CLI's start-up) stays fast.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+_EXPORTS = {
+    "open_log": "trace_runtime.reader",
+    "explain": "trace_audit.explain",
+    "Explanation": "trace_audit.explain",
+    "why": "trace_audit.timeline",
+    "timeline": "trace_audit.timeline",
+    "WhyResult": "trace_audit.timeline",
+    "Timeline": "trace_audit.timeline",
+    "log_info": "trace_audit.info",
+    "LogInfo": "trace_audit.info",
+    "export_decision": "trace_audit.export",
+    "read_decision": "trace_audit.causal",
+    "causal_graph": "trace_audit.causal",
+    "tree_graph": "trace_audit.causal",
+    "trace_cycle": "trace_audit.chains",
+    "DecisionChains": "trace_audit.chains",
+    "compute_metrics": "trace_audit.metrics",
+    "MetricsConfig": "trace_audit.metrics",
+    "MetricsReport": "trace_audit.metrics",
+    "verify_log": "trace_audit.verify",
+    "VerifyReport": "trace_audit.verify",
+}
+
+__all__ = sorted(_EXPORTS)
+
+if TYPE_CHECKING:
+    from trace_audit.causal import causal_graph, read_decision, tree_graph
+    from trace_audit.chains import DecisionChains, trace_cycle
+    from trace_audit.explain import Explanation, explain
+    from trace_audit.export import export_decision
+    from trace_audit.info import LogInfo, log_info
+    from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
+    from trace_audit.timeline import Timeline, WhyResult, timeline, why
+    from trace_audit.verify import VerifyReport, verify_log
+    from trace_runtime.reader import open_log
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'trace_audit' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return __all__
