@@ -4,7 +4,7 @@ Open a log (a segment, a directory or a log root, in any tier), then ask it ques
 
     from trace_audit import open_log, explain, why, compute_metrics, verify_log
 
-    result = explain("run.mcap", t=20.5)          # the decision in force at t, reconstructed
+    result = explain("run.mcap", t="20.5")        # in force at t = 20.5 s (int: nanoseconds)
     stops = why("run.mcap", "STOP")               # every transition into STOP, with its reason
     report = compute_metrics(["run.mcap"])        # ET, ET_partial, TC, DR, TCS
     integrity = verify_log("logs/")               # chain, checkpoints, signatures
@@ -40,7 +40,28 @@ _EXPORTS = {
     "VerifyReport": "trace_audit.verify",
 }
 
-__all__ = sorted(_EXPORTS)
+__all__ = [
+    "DecisionChains",
+    "Explanation",
+    "LogInfo",
+    "MetricsConfig",
+    "MetricsReport",
+    "Timeline",
+    "VerifyReport",
+    "WhyResult",
+    "causal_graph",
+    "compute_metrics",
+    "explain",
+    "export_decision",
+    "log_info",
+    "open_log",
+    "read_decision",
+    "timeline",
+    "trace_cycle",
+    "tree_graph",
+    "verify_log",
+    "why",
+]
 
 if TYPE_CHECKING:
     from trace_audit.causal import causal_graph, read_decision, tree_graph

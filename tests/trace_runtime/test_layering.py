@@ -4,6 +4,8 @@ investigator, and typer/rich stay inside the CLI modules."""
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -48,3 +50,14 @@ def test_typer_and_rich_live_only_in_cli_modules() -> None:
             if rel.startswith("trace_audit/cli/") or rel == "sim/cli.py":
                 continue
             assert not names & {"typer", "rich"}, rel
+
+
+def test_the_investigator_package_exports_import_lazily_and_resolve() -> None:
+    code = (
+        "import sys, trace_audit\n"
+        "assert 'networkx' not in sys.modules, 'import trace_audit must stay light'\n"
+        "assert sorted(trace_audit.__all__) == sorted(trace_audit._EXPORTS)\n"
+        "for name in trace_audit.__all__:\n"
+        "    getattr(trace_audit, name)\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
