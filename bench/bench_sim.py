@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import gc
 import io
+import logging
 import statistics
 import tempfile
 import time
@@ -263,6 +264,8 @@ def _sim_stages(config: RunConfig) -> tuple[dict[str, float], float]:
 
 
 def main() -> None:
+    # Injected audit-write timeouts make the logger warn; the run's counts say the same.
+    logging.getLogger("trace_runtime").setLevel(logging.ERROR)
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--cycles", type=int, default=20_000)
     parser.add_argument("--runs", type=int, default=3)
