@@ -28,7 +28,7 @@ from array import array
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from itertools import accumulate, repeat, zip_longest
+from itertools import accumulate, chain, repeat
 from operator import attrgetter, mul, sub, truediv
 from typing import Any
 
@@ -188,31 +188,33 @@ class _Column:
     groups: list[int] | None = field(default_factory=list)
 
 
-_GAP = object()
 _FIELDS = attrgetter("topic", "sequence", "log_time_ns", "data")
 LENGTHS = -1
 """Last path element of a vector's lengths column (element columns end in the index)."""
 
 
-def _add_vector(
+FLAT = -2
+"""Last path element of a vector's flat column: every element of every row, in row order."""
+
+
+def _add_vectors(
     columns: dict[tuple[int, tuple[Any, ...]], _Column],
-    topic_id: int,
-    path: tuple[Any, ...],
-    vectors: tuple[list[Any], ...],
+    key: tuple[int, tuple[Any, ...]],
+    vectors: list[list[Any]],
 ) -> None:
-    """A vector leaf: one column of lengths, one column per element index."""
+    """A vector leaf's values across the block: a column of lengths, then either one column
+    per element index (every vector as long as the others, e.g. positions) or one flat
+    column of all elements (lengths vary, e.g. the ranges of clusters of beams)."""
+    topic_id, path = key
     lengths = list(map(len, vectors))
     _extend(columns, (topic_id, (*path, LENGTHS)), lengths)
     if not lengths:
         return
     if lengths.count(lengths[0]) == len(lengths):
-        by_index: Iterable[tuple[Any, ...] | list[Any]] = zip(*vectors, strict=True)
+        for index, values in enumerate(zip(*vectors, strict=True)):
+            _extend(columns, (topic_id, (*path, index)), values)
     else:
-        by_index = (
-            [x for x in column if x is not _GAP] for column in zip_longest(*vectors, fillvalue=_GAP)
-        )
-    for index, values in enumerate(by_index):
-        _extend(columns, (topic_id, (*path, index)), values)
+        _extend(columns, (topic_id, (*path, FLAT)), chain.from_iterable(vectors))
 
 
 def _extend(
@@ -255,9 +257,10 @@ class BlockEncoder:
         """``encode``, and the block as it decodes (which equals ``messages``).
 
         Every block is decoded again before it is returned and must give back ``messages``
-        exactly: the fast encoding trusts a column's decimal scale from earlier blocks and
-        a topic's messages to be canonical JSON; when that does not hold the block is encoded
-        again with every value checked, and failing that, with every message verbatim.
+        exactly. The fast encoding trusts a topic's messages to be canonical JSON (compact,
+        as orjson writes it) unless one of them was not before; when the block does not
+        decode exactly it is encoded again with every message checked, and failing that,
+        with every message verbatim.
         """
         expected = list(messages)
         with _gc_paused():
@@ -355,12 +358,13 @@ class BlockEncoder:
         self._last_raw = len(raw)
         topic_names = list(topics)
         columns: dict[tuple[int, tuple[Any, ...]], _Column] = {}
+        vector_values: dict[tuple[int, tuple[Any, ...]], list[list[Any]]] = {}
         for group, (topic_id, shape) in enumerate(group_keys):
             vectors = shape.vectors
             slots = zip(*group_rows[group], strict=True)
             for slot, (path, values) in enumerate(zip(shape.paths, slots, strict=True)):
                 if slot in vectors:
-                    _add_vector(columns, topic_id, path, values)
+                    vector_values.setdefault((topic_id, path), []).extend(values)
                     continue
                 column = columns.get((topic_id, path))
                 if column is None:
@@ -368,6 +372,9 @@ class BlockEncoder:
                 column.values += values
                 if column.groups is not None:
                     column.groups.append(group)
+
+        for vector_key, vectors_at in vector_values.items():
+            _add_vectors(columns, vector_key, vectors_at)
 
         payload: list[bytes] = []
         col_headers: list[list[Any]] = []
@@ -456,15 +463,6 @@ class BlockEncoder:
         if hint != -1:
             # -0.0 == 0.0, so the check below cannot see a lost sign: list where they were.
             negative_zeros = _negative_zeros(values, raw)
-            if hint is not None and not self._strict:
-                # Fast path: the scale that fitted this column before; encode() checks it.
-                try:
-                    ints = list(map(round, map(mul, values, repeat(_SCALES[hint]))))
-                    packed = _pack_i64(ints, delta=True)
-                except OverflowError:
-                    packed = None
-                if packed is not None:
-                    return _DEC, [hint, negative_zeros], packed
             tries = range(_DEC_TRIES) if hint is None else (hint, *range(_DEC_TRIES))
             for k in tries:
                 scale = _SCALES[k]
@@ -691,19 +689,18 @@ class _ColumnReader:
         lengths = self.take((topic_id, (*path, LENGTHS)), count)
         if not lengths:
             return []
-        longest = max(lengths)
-        histogram = Counter(lengths)
-        longer = len(lengths)  # rows with more than i elements, for i = 0, 1, ...
-        elements = []
-        for i in range(longest):
-            longer -= histogram.get(i, 0)
-            elements.append(self.take((topic_id, (*path, i)), longer))
-        if longest == 0:
+        flat_key = (topic_id, (*path, FLAT))
+        if flat_key in self.columns or flat_key in self.constants:
+            flat = self.take(flat_key, sum(lengths))
+            ends = list(accumulate(lengths))
+            return [flat[end - n : end] for n, end in zip(lengths, ends, strict=True)]
+        width = lengths[0]
+        if lengths.count(width) != len(lengths):
+            raise ColdFormatError("vectors of different lengths without a flat column")
+        if width == 0:
             return [[] for _ in lengths]
-        if lengths.count(longest) == len(lengths):
-            return list(map(list, zip(*elements, strict=True)))
-        pending = [iter(column) for column in elements]
-        return [[next(pending[i]) for i in range(n)] for n in lengths]
+        elements = [self.take((topic_id, (*path, i)), count) for i in range(width)]
+        return list(map(list, zip(*elements, strict=True)))
 
 
 def _plan(shape: Shape, topic_id: int) -> tuple[list[tuple[int, tuple[Any, ...]]], list[bool]]:
