@@ -99,7 +99,9 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
 ) -> None:
     """Simulate scenarios and write the TRACE log plus a fault ground-truth sidecar."""
     # Injected audit-write timeouts make the logger warn; the summary reports them instead.
-    logging.getLogger("trace_runtime").setLevel(logging.ERROR)
+    runtime_log = logging.getLogger("trace_runtime")
+    level = runtime_log.level
+    runtime_log.setLevel(logging.ERROR)
     try:
         if faults not in ("on", "off"):
             raise SimUsageError(f"--faults must be on or off, got {faults!r}")
@@ -122,6 +124,8 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
     except SimOutputError as err:
         _fail(str(err), EXIT_OUTPUT)
         return
+    finally:
+        runtime_log.setLevel(level)  # the caller's logging is theirs (e.g. a test session)
     if as_json:
         sys.stdout.write(json.dumps(result.as_dict(), indent=2) + "\n")
     else:

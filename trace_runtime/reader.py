@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import orjson
 import zstandard
@@ -64,9 +64,11 @@ _MAX_RECORD = 1 << 34
 # --- values ------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True, slots=True)
-class RawMessage:
-    """A message as stored: topic, per-channel sequence, log time, data."""
+class RawMessage(NamedTuple):
+    """A message as stored: topic, per-channel sequence, log time, data.
+
+    A named tuple: readers make hundreds of thousands of these, and a tuple is the cheapest
+    immutable record Python builds."""
 
     topic: str
     sequence: int
