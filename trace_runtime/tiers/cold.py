@@ -24,8 +24,9 @@ import contextlib
 import gc
 import hashlib
 import struct
+import threading
 from array import array
-from collections import Counter
+from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from itertools import accumulate, chain, repeat
@@ -845,6 +846,29 @@ def register_inner(tier: str, assembler: Assembler) -> None:
     _INNER[tier] = assembler
 
 
+_RECENT: OrderedDict[bytes, DecodedBlock] = OrderedDict()
+_RECENT_BLOCKS = 4
+_RECENT_LOCK = threading.Lock()
+
+
+def _recently_decoded(data: bytes) -> DecodedBlock:
+    """decode_block, remembering the last few blocks: an investigation asks about nearby times
+    (a decision, the cycles before it, their sensor readings) and each ask reads the block
+    again. Keyed by the block's digest, so the same bytes in any file share an entry."""
+    key = hashlib.sha256(data).digest()
+    with _RECENT_LOCK:
+        found = _RECENT.get(key)
+        if found is not None:
+            _RECENT.move_to_end(key)
+            return found
+    block = decode_block(data)
+    with _RECENT_LOCK:
+        _RECENT[key] = block
+        while len(_RECENT) > _RECENT_BLOCKS:
+            _RECENT.popitem(last=False)
+    return block
+
+
 def assemble_cold(messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
     """The reader's assembler for cold chunks: decode each block, assemble its cycles."""
     cycles: list[Cycle] = []
@@ -852,7 +876,7 @@ def assemble_cold(messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
         if msg.topic != BLOCK_TOPIC:
             continue
         try:
-            block = decode_block(msg.data)
+            block = _recently_decoded(msg.data)
         except ColdFormatError as err:
             raise LogReadError(segment, f"cold block {msg.sequence}: {err}") from err
         assembler = _INNER.get(block.tier)
