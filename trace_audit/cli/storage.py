@@ -30,6 +30,7 @@ from trace_runtime.tiers import (
     parse_duration,
     refresh_catalog,
 )
+from trace_runtime.tiers.warm import INFORMATIONAL_PREFIXES
 
 _COMPACT_HELP = "\n\n".join(
     [
@@ -127,6 +128,14 @@ def compact_command(
             help="Warm: keep the sensor readings a summary's evidence refs point at.",
         ),
     ] = False,
+    informational: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--informational",
+            help="Warm: execution flags starting with this do not flag a cycle "
+            "(repeatable; scenario: always).",
+        ),
+    ] = None,
     block_cycles: Annotated[
         int,
         typer.Option("--block-cycles", min=1, help="Cold: cycles per block (a seek decodes one)."),
@@ -154,7 +163,11 @@ def compact_command(
                 wall_clock=now,
                 retention_ns=_duration(retention, "--retention"),
                 include_unfinished=include_unfinished,
-                warm=WarmPolicy(context_s=context_ns / 1e9, keep_readings=keep_readings),
+                warm=WarmPolicy(
+                    context_s=context_ns / 1e9,
+                    keep_readings=keep_readings,
+                    informational_prefixes=(*INFORMATIONAL_PREFIXES, *(informational or [])),
+                ),
                 cold=ColdOptions(block_cycles=block_cycles),
                 progress=progress,
             ),

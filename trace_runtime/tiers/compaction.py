@@ -692,7 +692,8 @@ def _write_warm(
         for msg in cycle.messages:
             channel = _channel(out, msg.topic)
             batch.append(OutMessage(channel, msg.sequence, msg.log_time_ns, msg.data))
-        full += cycle.full
+        sealed = cycle.messages[-1].topic == TOPIC_SEAL  # not the closing checkpoint alone
+        full += cycle.full and sealed
         summaries += not cycle.full
         in_batch += 1
         if in_batch >= WARM_CHUNK_CYCLES:
