@@ -129,6 +129,8 @@ class SegmentSummary:
     end_ns: int | None = None
     findings: int = 0
     ok: bool = True
+    copy: bool = False
+    """A second copy of a segment (mid-compaction): verified, but not counted twice."""
 
 
 @dataclass(slots=True)
@@ -914,6 +916,13 @@ class _Sink:
     def note(self, f: Finding) -> None:
         self.notes.append(f)
 
+    def quiet(self) -> _Sink:
+        """A sink that shares this one's findings and drops notes and counts."""
+        other = _Sink()
+        other.findings = self.findings
+        other._seen = self._seen
+        return other
+
 
 def verify_log(path: str | Path, *, key: PublicKey | None = None) -> VerifyReport:
     """Verify a segment file, a directory of segments or a log root; never raises on tampering.
@@ -968,6 +977,8 @@ def verify_log(path: str | Path, *, key: PublicKey | None = None) -> VerifyRepor
     report.ok = not sink.findings
     report.declared_dropped = sink.declared
     for s in report.segments:
+        if s.copy:
+            continue
         report.cycles += s.cycles
         report.cycles_valid += s.cycles_valid
         report.cycles_summarised += s.cycles_summarised
@@ -1040,9 +1051,11 @@ def _verify_robot(
             entry = tail.digest if tail is not None else session.prev_seal
             entry_cycle = tail.cycle if tail is not None else None
         results: list[_SegmentCheck] = []
-        for copy in copies:
-            check = _SegmentCheck(copy, entry, entry_cycle, key, sink)
+        for n, copy in enumerate(copies):
+            # Further copies report their findings; their notes would repeat the first's.
+            check = _SegmentCheck(copy, entry, entry_cycle, key, sink if n == 0 else sink.quiet())
             check.run()
+            check.summary.copy = n > 0
             results.append(check)
             report.segments.append(check.summary)
             if copy.session.prev_seal != session.prev_seal:

@@ -226,6 +226,23 @@ def test_a_crashed_segment_compacted_later_is_not_called_truncated(tmp_path: Pat
         assert report.cycles_valid == 80 and report.robots[0].unanchored_cycles == 0
 
 
+def test_a_segment_in_two_tiers_mid_compaction_is_verified_once_counted_once(
+    tmp_path: Path,
+) -> None:
+    signer = Ed25519Signer.generate()
+    root = tmp_path / "root"
+    write_signed_log(root, signer, 60, max_segment_s=2.0)
+    hot_copy = (root / "hot" / "amr-7_000001.mcap").read_bytes()
+    _compact(root, "cold")
+    (root / "hot" / "amr-7_000001.mcap").write_bytes(hot_copy)  # as if the swap was cut short
+    report = verify_log(root, key=signer.public_key)
+    assert report.ok, report.findings
+    assert (report.cycles, report.cycles_valid, report.declared_dropped) == (60, 60, 0)
+    assert len(report.segments) == 4 and [s.copy for s in report.segments].count(True) == 1
+    (note,) = [n for n in report.notes if n.kind == "duplicate_segment"]
+    assert note.segment_no == 1 and "hot, cold" in note.message
+
+
 def test_a_damaged_cold_segment_is_a_finding(tmp_path: Path) -> None:
     root = tmp_path / "root"
     write_signed_log(root, Ed25519Signer.generate(), 60, max_segment_s=2.0)
