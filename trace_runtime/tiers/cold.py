@@ -1,12 +1,13 @@
 """The cold tier: a lossless columnar codec for blocks of cycles, stored inside MCAP.
 
-A cold segment holds, per block of ``block_cycles`` whole cycles, one MCAP chunk with two
-messages: the block itself on ``/trace/cold/block`` (message encoding ``trace-cold-v1``,
-log time = the earliest log time in the block) and a small JSON index entry on
-``/trace/cold/index`` (log time = the latest), so the chunk index spans exactly the time the
-block covers and a seek to t decodes one block. Decoding a block gives back every message of
-the input (topic, sequence, log time and the data, byte for byte), which the input tier's
-assembler then turns into cycles: seals verify because the bytes they digest are unchanged.
+A cold segment holds, per block of ``block_cycles`` whole cycles, one MCAP chunk: the
+block's signed checkpoints as plain messages, the block itself on ``/trace/cold/block``
+(message encoding ``trace-cold-v1``, log time = the earliest log time in the block) and a
+small JSON index entry on ``/trace/cold/index`` (log time = the latest), so the chunk index
+spans exactly the time the block covers and a seek to t decodes one block. Decoding a block
+gives back every message of the input (topic, sequence, log time and the data, byte for
+byte), which the input tier's assembler then turns into cycles: seals verify because the
+bytes they digest are unchanged.
 
 Inside a block (see docs/storage.md for the byte layout), each JSON message is split into a
 *shape* (keys, array lengths) and its leaf values; the values of one leaf path across the
@@ -24,6 +25,7 @@ import contextlib
 import gc
 import hashlib
 import struct
+import sys
 import threading
 from array import array
 from collections import Counter, OrderedDict
@@ -83,8 +85,8 @@ def _gc_paused() -> Iterator[None]:
     """Pause the cyclic GC while a block is taken apart or put together.
 
     A block makes and keeps hundreds of thousands of small acyclic objects (parsed messages,
-    rows, columns); the collector would walk them again and again for nothing, which more
-    than doubles the time. Reference counting still frees everything as usual.
+    rows, columns); the collector would walk them again and again for nothing, a large
+    share of the time. Reference counting still frees everything as usual.
     """
     was_enabled = gc.isenabled()
     gc.disable()
@@ -113,6 +115,26 @@ def _shape_for(descriptor: Any, key: bytes) -> Shape:
 # --- integers and byte planes ------------------------------------------------------------
 
 
+# Width codes in the format -> array typecodes of exactly 1, 2 and 4 bytes on this platform.
+_WIDTHS = {"B": "B", "H": "H", "I": "I" if array("I").itemsize == 4 else "L"}
+_BIG_ENDIAN = sys.byteorder == "big"
+
+
+def _le_bytes(values: array[Any]) -> bytes:
+    """The array's items as little-endian bytes (the format's byte order on every platform)."""
+    if _BIG_ENDIAN:
+        values = array(values.typecode, values)
+        values.byteswap()
+    return values.tobytes()
+
+
+def _from_le(values: array[Any], data: bytes) -> array[Any]:
+    values.frombytes(data)
+    if _BIG_ENDIAN:
+        values.byteswap()
+    return values
+
+
 def _shuffle(raw: bytes, width: int) -> bytes:
     """Byte planes: all first bytes, then all second bytes, ... (zstd likes the result)."""
     return b"".join(raw[i::width] for i in range(width))
@@ -131,14 +153,13 @@ def _pack_i64(values: Sequence[int], *, delta: bool) -> bytes | None:
     if delta and values:
         values = [values[0], *map(sub, values[1:], values[:-1])]
     try:
-        return _shuffle(array("q", values).tobytes(), 8)
+        return _shuffle(_le_bytes(array("q", values)), 8)
     except OverflowError:
         return None
 
 
 def _unpack_i64(data: bytes, *, delta: bool) -> list[int]:
-    values = array("q")
-    values.frombytes(_unshuffle(data, 8))
+    values = _from_le(array("q"), _unshuffle(data, 8))
     return list(accumulate(values)) if delta else values.tolist()
 
 
@@ -163,14 +184,13 @@ def _unpack_stream(data: bytes, *, delta: bool) -> list[int]:
 def _pack_small(values: Sequence[int]) -> tuple[str, bytes]:
     top = max(values, default=0)
     code = "B" if top < 1 << 8 else "H" if top < 1 << 16 else "I"
-    return code, array(code, values).tobytes()
+    return code, _le_bytes(array(_WIDTHS[code], values))
 
 
 def _unpack_small(code: str, data: bytes) -> list[int]:
-    if code not in ("B", "H", "I"):
+    if code not in _WIDTHS:
         raise ColdFormatError(f"bad integer width {code!r}")
-    values = array(code)
-    values.frombytes(data)
+    values = _from_le(array(_WIDTHS[code]), data)
     return values.tolist()
 
 
@@ -443,7 +463,7 @@ class BlockEncoder:
         """A column whose values all have type ``kind`` (and are not strings)."""
         n = len(values)
         if kind is float:
-            raw = array("d", values).tobytes()
+            raw = _le_bytes(array("d", values))
             if raw == raw[:8] * n:
                 return _CONST, values[0], b""
             return self._encode_floats(values, raw, hint_key)
@@ -766,8 +786,7 @@ def _decode_column(codec: str, param: Any, data: bytes, count: int | None = None
         present = iter(_decode_column(inner, inner_param, data[count:], mask.count(1)))
         return [next(present) if flag else None for flag in mask]
     if codec == _F64:
-        values = array("d")
-        values.frombytes(_unshuffle(data, 8))
+        values = _from_le(array("d"), _unshuffle(data, 8))
         return values.tolist()
     if codec == _STR:
         code, table = param
