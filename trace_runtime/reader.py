@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any, NamedTuple, Protocol
+from typing import Any, Protocol
 
 import orjson
 import zstandard
@@ -64,11 +64,9 @@ _MAX_RECORD = 1 << 34
 # --- values ------------------------------------------------------------------------------
 
 
-class RawMessage(NamedTuple):
-    """A message as stored: topic, per-channel sequence, log time, data.
-
-    A named tuple: readers make hundreds of thousands of these, and a tuple is the cheapest
-    immutable record Python builds."""
+@dataclass(frozen=True, slots=True)
+class RawMessage:
+    """A message as stored: topic, per-channel sequence, log time, data."""
 
     topic: str
     sequence: int
@@ -243,7 +241,11 @@ class Segment:
         if self._data[:8] != MAGIC:
             raise LogReadError(str(path), "not an MCAP file (bad magic)")
         self._schemas: dict[int, str] = {}
-        self._topics: dict[int, str] = {}
+        self._topic_map: dict[int, str] = {}
+        # Summary groups read only when needed (schemas and channels: when a chunk is
+        # decoded; metadata: when asked for), so opening a segment reads a few records.
+        self._deferred_summary: list[tuple[int, int]] = []
+        self._metadata_at: dict[str, int] = {}
         # The chunk table: start times, end times and file offsets, sorted by start time.
         # Loaded lazily from the segment's own compact index (or the MCAP chunk indexes),
         # so opening a long segment does not pay for parsing tens of thousands of records.
@@ -261,10 +263,15 @@ class Segment:
         if self._profile != PROFILE:
             label = repr(self._profile) if self._profile else "none"
             raise NotTraceLogError(str(path), f"MCAP profile is {label}, not a TRACE log")
-        if SESSION_METADATA not in self._metadata:
+        if SESSION_METADATA not in self._metadata and SESSION_METADATA not in self._metadata_at:
             raise NotTraceLogError(str(path), "no trace.session metadata record")
-        self._assemble = _assembler_for(self.session.tier)
-        self.info = self._make_info(finished)
+        self.finished = finished
+        self.start_ns: int
+        self.end_ns: int
+        if finished and self._statistics is not None:
+            self.start_ns, self.end_ns = self._statistics[0], self._statistics[1]
+        else:
+            self.start_ns, self.end_ns = self.info.start_ns, self.info.end_ns
         if not finished:
             log.warning(
                 "%s: no summary (unfinished segment); recovered %d complete messages by scan",
@@ -273,12 +280,33 @@ class Segment:
             )
 
     @cached_property
+    def info(self) -> SegmentInfo:
+        """What the segment is: session, time range, counts per channel, size, state."""
+        return self._make_info(self.finished)
+
+    @cached_property
     def session(self) -> SessionInfo:
+        if SESSION_METADATA not in self._metadata:
+            self._parse_metadata_at(self._metadata_at[SESSION_METADATA])
         return SessionInfo.from_metadata(self._metadata[SESSION_METADATA])
 
     @property
     def metadata(self) -> dict[str, dict[str, str]]:
+        """Every metadata record of the segment, by name."""
+        for name, offset in self._metadata_at.items():
+            if name not in self._metadata:
+                self._parse_metadata_at(offset)
         return self._metadata
+
+    @property
+    def _topics(self) -> dict[int, str]:
+        while self._deferred_summary:
+            self._parse_summary_records(*self._deferred_summary.pop())
+        return self._topic_map
+
+    @cached_property
+    def _assemble(self) -> Assembler:
+        return _assembler_for(self.session.tier)
 
     # --- summary and scan ------------------------------------------------------------
 
@@ -303,11 +331,14 @@ class Segment:
             if opcode == _OP_CHUNK_INDEX:
                 self._table_source = ("chunk_index", spans[0][0], spans[-1][1])
                 continue
+            if opcode in (_OP_SCHEMA, _OP_CHANNEL):
+                self._deferred_summary += spans
+                continue
             for begin, end in spans:
                 self._parse_summary_records(begin, end)
         if self._table_source[0] == "none" and 0 in ranges:
             self._table_source = ("chunk_index", summary_start, offsets_start or footer_at)
-        if not self._metadata:
+        if not self._metadata and not self._metadata_at:
             return False
         if (
             self._statistics is not None
@@ -343,7 +374,8 @@ class Segment:
                 self._parse_statistics(body)
             elif opcode == _OP_METADATA_INDEX:
                 offset, _len = struct.unpack_from("<QQ", data, body)
-                self._parse_metadata_at(offset)
+                name, _ = _read_str(data, body + 16)
+                self._metadata_at[name] = offset
             elif opcode == _OP_ATTACHMENT_INDEX:
                 offset, _len, _log, _create, size = struct.unpack_from("<QQQQQ", data, body)
                 name, _ = _read_str(data, body + 40)
@@ -487,7 +519,7 @@ class Segment:
     def _parse_channel(self, body: int) -> None:
         channel_id, _schema_id = struct.unpack_from("<HH", self._data, body)
         topic, _ = _read_str(self._data, body + 4)
-        self._topics[channel_id] = topic
+        self._topic_map[channel_id] = topic
 
     def _parse_metadata_at(self, offset: int) -> None:
         opcode, _length = _RECORD_HEADER.unpack_from(self._data, offset)
@@ -530,6 +562,7 @@ class Segment:
         if crc and zlib.crc32(raw) != crc:
             raise LogReadError(str(self.path), f"chunk at offset {offset} fails its CRC")
         messages: list[RawMessage] = []
+        topics = self._topics
         pos, end = 0, len(raw)
         while pos + 9 <= end:
             opcode, length = _RECORD_HEADER.unpack_from(raw, pos)
@@ -538,7 +571,7 @@ class Segment:
                 channel_id, sequence, log_time, _publish = _MESSAGE_FIXED.unpack_from(raw, body)
                 messages.append(
                     RawMessage(
-                        self._topics[channel_id], sequence, log_time, raw[body + 22 : body + length]
+                        topics[channel_id], sequence, log_time, raw[body + 22 : body + length]
                     )
                 )
             elif opcode == _OP_CHANNEL:
@@ -550,7 +583,7 @@ class Segment:
         if opcode == _OP_CHANNEL:
             channel_id, _schema = struct.unpack_from("<HH", raw, body)
             topic, _ = _read_str(raw, body + 4)
-            self._topics[channel_id] = topic
+            self._topic_map[channel_id] = topic
 
     def chunks(self) -> list[ChunkInfo]:
         """Every chunk's offset and time range, in time order."""
@@ -646,7 +679,7 @@ class Segment:
             chunk_count=chunk_count,
             channels=channels,
             bytes=len(self._data),
-            metadata=dict(self._metadata),
+            metadata=dict(self.metadata),
         )
 
 
@@ -686,20 +719,20 @@ class Log:
         if not segments:
             raise LogReadError(str(root), "no TRACE segments found")
         self.root = root
-        self.segments = sorted(segments, key=lambda s: (s.info.start_ns, s.session.segment))
-        self._starts = [s.info.start_ns for s in self.segments]
+        self.segments = sorted(segments, key=lambda s: (s.start_ns, s.path.name))
+        self._starts = [s.start_ns for s in self.segments]
 
     @property
     def start_ns(self) -> int:
-        return min(s.info.start_ns for s in self.segments)
+        return min(s.start_ns for s in self.segments)
 
     @property
     def end_ns(self) -> int:
-        return max(s.info.end_ns for s in self.segments)
+        return max(s.end_ns for s in self.segments)
 
     @property
     def recovered(self) -> bool:
-        return any(s.info.recovered for s in self.segments)
+        return any(not s.finished for s in self.segments)
 
     def iter_cycles(
         self, start_ns: int | None = None, end_ns: int | None = None, *, reverse: bool = False
@@ -708,8 +741,8 @@ class Log:
         segments = [
             s
             for s in self.segments
-            if (start_ns is None or s.info.end_ns >= start_ns)
-            and (end_ns is None or s.info.start_ns <= end_ns)
+            if (start_ns is None or s.end_ns >= start_ns)
+            and (end_ns is None or s.start_ns <= end_ns)
         ]
         for segment in reversed(segments) if reverse else segments:
             yield from segment.iter_cycles(start_ns, end_ns, reverse=reverse)
