@@ -41,14 +41,17 @@ MINUTE_CYCLES = 600
 BUDGET = 1.5
 
 
-def _ensure(path: Path, cycles: int, seed: int) -> None:
+def _ensure(path: Path, cycles: int, seed: int, batch: int) -> None:
     if path.exists():
         return
     from sim.runner import RunConfig, run
 
-    print(f"generating {path} ({cycles:,} cycles) with the simulator ...", file=sys.stderr)
+    print(
+        f"generating {path} ({cycles:,} cycles, {batch} per chunk) with the simulator ...",
+        file=sys.stderr,
+    )
     started = time.perf_counter()
-    result = run(RunConfig(out=path, total_cycles=cycles, seed=seed))
+    result = run(RunConfig(out=path, total_cycles=cycles, seed=seed, batch_cycles=batch))
     print(
         f"  {result.written:,} cycles written in {time.perf_counter() - started:.0f} s",
         file=sys.stderr,
@@ -116,11 +119,18 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--profile", action="store_true", help="profile the day's calls")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
+    parser.add_argument(
+        "--batch",
+        type=int,
+        default=1,
+        help="cycles per chunk when generating logs (1: as a 10 Hz robot writes; both logs "
+        "must be chunked alike for the ratio to mean anything)",
+    )
     args = parser.parse_args()
     if args.samples < 20:
         parser.error("--samples must be >= 20")
-    _ensure(args.minute, MINUTE_CYCLES, args.seed)
-    _ensure(args.day, DAY_CYCLES, args.seed)
+    _ensure(args.minute, MINUTE_CYCLES, args.seed, args.batch)
+    _ensure(args.day, DAY_CYCLES, args.seed, args.batch)
     rng = random.Random(args.seed)
     fractions = [rng.random() for _ in range(args.samples)]
     minute = _measure(args.minute, fractions)
@@ -152,6 +162,10 @@ def main() -> None:
             print(f"{label:14}{minute[key]:16.2f}{day[key]:16.2f}{ratios[key]:9.2f}x")
         for key, label in (("segments", "segments"), ("chunks", "chunks")):
             print(f"{label:14}{minute[key]:16,}{day[key]:16,}")
+        per_chunk = [
+            r["cycles_approx"] / r["chunks"] if r["chunks"] else 0.0 for r in (minute, day)
+        ]
+        print(f"{'cycles/chunk':14}{per_chunk[0]:16.1f}{per_chunk[1]:16.1f}")
         print(
             f"held-since walk, median cycles: {minute['held_cycles_median']:.0f} (minute), "
             f"{day['held_cycles_median']:.0f} (day)"

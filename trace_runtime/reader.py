@@ -21,6 +21,7 @@ import os
 import struct
 import sys
 import zlib
+from collections import OrderedDict
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -59,6 +60,7 @@ _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 
 _OP_CHUNK_INDEX, _OP_METADATA, _OP_DATA_END = 8, 12, 15
 _OP_ATTACHMENT_INDEX, _OP_STATISTICS, _OP_METADATA_INDEX, _OP_SUMMARY_OFFSET = 10, 11, 13, 14
 _MAX_RECORD = 1 << 34
+_RECENT_CHUNKS = 4
 
 
 # --- values ------------------------------------------------------------------------------
@@ -254,6 +256,7 @@ class Segment:
         self._ends_sorted = True
         self._statistics: tuple[int, int, int, dict[int, int]] | None = None
         self._loose: list[RawMessage] = []  # messages written outside chunks
+        self._recent_chunks: OrderedDict[int, list[RawMessage]] = OrderedDict()
         self._metadata: dict[str, dict[str, str]] = {}
         self._decompressor = zstandard.ZstdDecompressor()
         self._profile = ""
@@ -506,7 +509,7 @@ class Segment:
 
     def _chunk_valid(self, pos: int) -> bool:
         try:
-            self._decode_chunk_at(pos)
+            self._decode_chunk_uncached(pos)
         except (LogReadError, zstandard.ZstdError, struct.error):
             return False
         return True
@@ -546,6 +549,19 @@ class Segment:
     # --- chunks ----------------------------------------------------------------------------
 
     def _decode_chunk_at(self, offset: int) -> list[RawMessage]:
+        """The messages of the chunk at ``offset``; the last few decoded are remembered, since
+        an investigation asks about neighbouring moments (a seek, then a walk back)."""
+        cached = self._recent_chunks.get(offset)
+        if cached is not None:
+            self._recent_chunks.move_to_end(offset)
+            return cached
+        messages = self._decode_chunk_uncached(offset)
+        self._recent_chunks[offset] = messages
+        if len(self._recent_chunks) > _RECENT_CHUNKS:
+            self._recent_chunks.popitem(last=False)
+        return messages
+
+    def _decode_chunk_uncached(self, offset: int) -> list[RawMessage]:
         data = self._data
         body = offset + 9
         _start, _end, size, crc = _CHUNK_FIXED.unpack_from(data, body)
