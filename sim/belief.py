@@ -33,8 +33,8 @@ RULE_PED_RISK = (
 )
 RULE_TTC = "ttc = distance / closing speed (99 s when not closing)"
 RULE_VEH_RISK = (
-    "risk = lateral conflict x sigmoid((4.5 s - ttc) / 1.0 s); 0 when the vehicle moves "
-    "slower than 0.5 m/s"
+    "risk = lateral conflict x sigmoid((4.5 s - ttc) / 1.0 s); 0 unless the vehicle is seen "
+    "moving at 0.5 m/s or more"
 )
 RULE_CLEARANCE = "clearance = nearest non-person LiDAR return inside the corridor"
 RULE_BLOCKED = "P(blocked) = sigmoid((4.0 m - clearance) / 0.5 m)"
@@ -144,6 +144,8 @@ def build_belief(
             miss = max(0.0, min(abs(ry), abs(y_pred)) - 0.35)
             g = math.exp(-((miss / 0.5) ** 2))
             # A vehicle standing still is an obstacle (see aisle_blocked), not on a course.
+            # Perception reports zero velocity until a track's motion is confirmed, so a
+            # vehicle whose motion is unknown is never taken to be moving.
             moving = 1.0 if math.hypot(vx, vy) >= VEHICLE_MOVING_MPS else 0.0
             risk = round(moving * g * _sigmoid((4.5 - ttc) / 1.0), 3)
             p_r = round(conf * p_d, 3)

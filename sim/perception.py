@@ -45,9 +45,35 @@ CORRIDOR_HALF_WIDTH_M = 0.8
 CORRIDOR_MAX_M = 10.0
 MAX_COAST_CYCLES = 2
 DELETE_AFTER_MISSES = 4
+# Track velocity: the least-squares slope of the LiDAR centroids seen in the last second. A
+# younger (or just re-acquired) track has too few looks to tell motion from noise: its
+# velocity is unknown, and unknown is reported as standing still, never as moving.
+VELOCITY_WINDOW_CYCLES = 10
+VELOCITY_MIN_LOOKS = 5
+MOTION_FLOOR_MPS = 0.2
+VIEW_DRIFT_PER_RAD = 0.5
+"""How far the centroid of the visible surface slides, per radian of change in the angle it
+is seen from, as a fraction of the visible extent. Sweeping the view of a box by 90 degrees
+moves it from one face centre to the next (0.32 x the diagonal per radian); 0.5 x the
+extent leaves a margin for the coarse beam sampling of near objects."""
+MOVING_MPS = 0.4
+"""Confirmed motion at least this fast counts against the pallet class."""
 _PREFIX = {"person": "ped", "forklift": "forklift", "pallet": "obj"}
-# LiDAR width likelihood per class: mean, std of the visible extent (m).
-_WIDTH_MODEL = {"person": (0.45, 0.15), "forklift": (1.9, 0.6), "pallet": (1.1, 0.35)}
+# LiDAR extent per class: the visible extent (first to last return, m) lies anywhere in
+# [low, high], measured with Gaussian error sd. A person (0.5 m across) shows 0.15-0.5 m
+# (fewer beams far away); a pallet (1.2 x 1.0 m) one face or two, up to its 1.56 m diagonal;
+# a forklift (2.4 x 1.2 m) its 1.2 m front up to its 2.7 m diagonal. Between 0.9 and 1.6 m
+# the LiDAR cannot tell a pallet from a forklift, so it gives "forklift" no support there
+# (a pallet's narrower range makes it the likelier of the two); only the camera can.
+_EXTENT_MODEL = {
+    "person": (0.15, 0.5, 0.08),
+    "forklift": (0.9, 2.7, 0.1),
+    "pallet": (0.9, 1.6, 0.1),
+}
+_PRIOR = {"person": 0.3, "forklift": 0.1, "pallet": 0.6}
+"""What a new track is before its first look says otherwise: in a warehouse aisle most things
+are goods; it also settles looks that say nothing (a sliver of a half-hidden pallet)."""
+_LOG_PRIOR = [math.log(_PRIOR[c]) for c in CLASSES]
 _SENSOR_WEIGHT = {"lidar": 0.6, "camera": 0.3, "ultrasonic": 0.1}
 
 Ref = Any
@@ -81,6 +107,9 @@ class Cluster:
     y: float
     width: float
     bearing: float
+    truncated: bool = False
+    """An edge is hidden (a nearer return beside it, or the edge of the scan): only part of
+    the object is in view, so ``width`` is a lower bound and the centroid is not its own."""
 
 
 @dataclass(slots=True)
@@ -91,11 +120,16 @@ class Track:
     y: float
     vx: float = 0.0
     vy: float = 0.0
+    """Confirmed velocity (world frame); zero while unknown or explained by the view."""
     width: float = 0.5
     hits: int = 1
     missed: int = 0
     evidence: list[EvidenceItem] = field(default_factory=list)
     observed: bool = True
+    looks: list[tuple[int, float, float, float, float]] = field(default_factory=list)
+    """Recent LiDAR looks: (tick, centroid x, centroid y, visible extent, view-angle rate)."""
+    motion: str = "unknown"
+    """``unknown`` (too few looks), ``static`` or ``moving``."""
 
     def confidence(self) -> dict[str, float]:
         m = max(self.logp)
@@ -210,6 +244,13 @@ def _clusters(idx: list[int], rs: list[float]) -> list[Cluster]:
             ys = [ri * si for ri, si in zip(r, _SIN[first : last + 1], strict=True)]
             width = math.hypot(xs[-1] - xs[0], ys[-1] - ys[0])
             cx, cy = sum(xs) / len(xs), sum(ys) / len(ys)
+            # Hidden edge: a nearer return on the very next beam, or the end of the scan.
+            truncated = (
+                first == 0
+                or last == LIDAR_BEAMS - 1
+                or (start > 0 and idx[start - 1] == first - 1 and rs[start - 1] < rs[start])
+                or (k < n and idx[k] == last + 1 and rs[k] < rs[k - 1])
+            )
             clusters.append(
                 Cluster(
                     index=len(clusters),
@@ -220,6 +261,7 @@ def _clusters(idx: list[int], rs: list[float]) -> list[Cluster]:
                     y=cy,
                     width=width,
                     bearing=math.atan2(cy, cx),
+                    truncated=truncated,
                 )
             )
         start = k
@@ -239,11 +281,35 @@ def _argmax(values: list[float]) -> int:
     return best
 
 
-_WIDTH_TERMS = [(mu, sd, math.log(sd)) for mu, sd in _WIDTH_MODEL.values()]
+_EXTENT_TERMS = [_EXTENT_MODEL[c] for c in CLASSES]
+_SQRT2 = math.sqrt(2.0)
+_SQRT2PI = math.sqrt(2.0 * math.pi)
+
+
+def _phi_cdf(x: float) -> float:
+    return 0.5 * math.erfc(-x / _SQRT2)
 
 
 def _width_loglik(width: float) -> list[float]:
-    return [-0.5 * ((width - mu) / sd) ** 2 - log_sd for mu, sd, log_sd in _WIDTH_TERMS]
+    """log p(width | class): a uniform extent on [low, high] seen with Gaussian error."""
+    return [
+        math.log(
+            max(1e-12, (_phi_cdf((hi - width) / sd) - _phi_cdf((lo - width) / sd)) / (hi - lo))
+        )
+        for lo, hi, sd in _EXTENT_TERMS
+    ]
+
+
+def _width_at_least_loglik(width: float) -> list[float]:
+    """log P(extent >= width | class): all a partly hidden cluster's width can say."""
+    out = []
+    for lo, hi, sd in _EXTENT_TERMS:
+        # The mean over the uniform extent of P(error > width - extent), in closed form.
+        a, b = (hi - width) / sd, (lo - width) / sd
+        g_a = a * _phi_cdf(a) + math.exp(-0.5 * a * a) / _SQRT2PI
+        g_b = b * _phi_cdf(b) + math.exp(-0.5 * b * b) / _SQRT2PI
+        out.append(math.log(max(1e-12, sd * (g_a - g_b) / (hi - lo))))
+    return out
 
 
 def _score_loglik(scores: tuple[float, ...]) -> list[float]:
@@ -254,6 +320,41 @@ def _normalize(logp: list[float]) -> list[float]:
     m = max(logp)
     z = m + math.log(sum(math.exp(v - m) for v in logp))
     return [v - z for v in logp]
+
+
+def _view_rate(rx: float, ry: float, speed: float) -> float:
+    """|d bearing / dt| (rad/s) of a standing object at (rx, ry) as the robot drives past."""
+    r2 = max(rx * rx + ry * ry, 0.25)
+    return speed * abs(ry) / r2
+
+
+def _update_motion(t: Track, tick: int) -> None:
+    """Re-estimate ``t``'s velocity from its recent looks; see ``VELOCITY_WINDOW_CYCLES``.
+
+    The centroid of the returns is that of the surface in view, not of the object: driving
+    past a pallet, the robot sees its front, then its side, and the centroid slides along
+    with the robot. A slide no faster than the change of view can explain
+    (``VIEW_DRIFT_PER_RAD`` x extent x view-angle rate) is no evidence of motion. An object on
+    a collision course keeps a constant bearing, so its motion is never explained away.
+    """
+    looks = [k for k in t.looks if tick - k[0] < VELOCITY_WINDOW_CYCLES]
+    t.looks = looks
+    n = len(looks)
+    if n < VELOCITY_MIN_LOOKS:
+        t.motion, t.vx, t.vy = "unknown", 0.0, 0.0
+        return
+    tm = sum(k[0] for k in looks) / n
+    xm = sum(k[1] for k in looks) / n
+    ym = sum(k[2] for k in looks) / n
+    stt = sum((k[0] - tm) ** 2 for k in looks) * PERIOD_S
+    vx = sum((k[0] - tm) * (k[1] - xm) for k in looks) / stt
+    vy = sum((k[0] - tm) * (k[2] - ym) for k in looks) / stt
+    extent = max(k[3] for k in looks)
+    rate = max(k[4] for k in looks)
+    if math.hypot(vx, vy) <= MOTION_FLOOR_MPS + VIEW_DRIFT_PER_RAD * extent * rate:
+        t.motion, t.vx, t.vy = "static", 0.0, 0.0
+        return
+    t.motion, t.vx, t.vy = "moving", max(-3.0, min(3.0, vx)), max(-3.0, min(3.0, vy))
 
 
 def _weights(sensors: list[str], scale: float = 1.0) -> list[float]:
@@ -277,6 +378,7 @@ class Perceiver:
         self.tracks: list[Track] = []
         self._counters: dict[str, int] = {}
         self._corridor: CorridorView | None = None
+        self._tick = 0
 
     def forget_cycle(self, cycle: int) -> None:
         """The cycle's sensor messages never reached the log: stop pointing at them."""
@@ -307,6 +409,8 @@ class Perceiver:
         log_sensor: LogSensor,
     ) -> PerceptionOutput:
         """Run layer 1 for one cycle; readings it uses are logged through ``log_sensor``."""
+        self._tick += 1
+        tick = self._tick
         fg: list[int] = []
         fg_ranges: list[float] = []
         if scan is not None:
@@ -417,7 +521,7 @@ class Perceiver:
         # --- update tracks ------------------------------------------------------------
         for c in clusters:
             wx, wy = world_c[c.index]
-            ll = _width_loglik(c.width)
+            ll = _width_at_least_loglik(c.width) if c.truncated else _width_loglik(c.width)
             det_i = det_of_cluster.get(c.index)
             seen_by: CameraDetection | None = None  # the camera detection fused in, if any
             if det_i is not None and detections is not None:
@@ -425,23 +529,26 @@ class Perceiver:
             if seen_by is not None:
                 ll = [a + b for a, b in zip(ll, _score_loglik(seen_by.scores), strict=True)]
             known = track_of.get(c.index)
+            look = (tick, wx, wy, c.width, _view_rate(c.x, c.y, speed))
             if known is None:
-                logp = _normalize(ll)
+                logp = _normalize([a + b for a, b in zip(_LOG_PRIOR, ll, strict=True)])
                 top = _argmax(logp)
                 # Name by class only when the first look is fairly sure; ids never change.
                 cls = CLASSES[top] if math.exp(logp[top]) >= 0.6 else "pallet"
-                t = Track(self._new_id(cls), logp, wx, wy, width=c.width)
+                looks = [] if c.truncated else [look]
+                t = Track(self._new_id(cls), logp, wx, wy, width=c.width, looks=looks)
                 self.tracks.append(t)
             else:
                 t = known
-                ax, ay = wx - t.x, wy - t.y
-                t.x += 0.5 * ax
-                t.y += 0.5 * ay
-                t.vx = max(-3.0, min(3.0, t.vx + 0.25 * ax / PERIOD_S))
-                t.vy = max(-3.0, min(3.0, t.vy + 0.25 * ay / PERIOD_S))
+                t.x += 0.5 * (wx - t.x)
+                t.y += 0.5 * (wy - t.y)
+                if not c.truncated:  # a partial view's centroid slides as the view changes
+                    t.looks.append(look)
+                _update_motion(t, tick)
                 t.width = 0.7 * t.width + 0.3 * c.width
-                moving = math.hypot(t.vx, t.vy) > 0.4
-                if moving:  # pallets do not move
+                # Pallets do not move: only confirmed motion says so, never a young track's
+                # guess or a centroid sliding round the object as the robot passes it.
+                if math.hypot(t.vx, t.vy) > MOVING_MPS:
                     ll[2] += -2.0
                 t.logp = _normalize([0.8 * a + b for a, b in zip(t.logp, ll, strict=True)])
                 t.hits += 1
@@ -480,6 +587,8 @@ class Perceiver:
                 t.evidence = [EvidenceItem("camera", 1.0, "pixels", det.box, camera_ref, cycle)]
 
         for t in self.tracks:
+            if not t.looks or t.looks[-1][0] != tick:
+                _update_motion(t, tick)  # no LiDAR look this cycle: older looks age out
             if not t.observed:
                 t.missed += 1
                 # Coasting: the last observation still supports the track, at half weight.
