@@ -161,7 +161,7 @@ def _last_cycle_on_disk(kind: str, path: Path) -> int:
                     last = max(last, msg.sequence)
                 if type(record).__name__ == "Message":
                     last = max(last, record.sequence)  # type: ignore[attr-defined]
-    except Exception:  # noqa: BLE001 - a truncated file ends the scan; what was read counts
+    except Exception:  # a truncated file ends the scan; what was read before counts
         pass
     return last
 
@@ -171,8 +171,9 @@ def kill_runs(kind: str, runs: int, workdir: Path) -> list[int]:
     lost = []
     for run in range(runs):
         out = workdir / f"{kind}-{run}.mcap"
-        with subprocess.Popen([sys.executable, "-c", _CHILD, kind, str(out)],
-                              stdout=subprocess.PIPE, text=True) as proc:
+        with subprocess.Popen(
+            [sys.executable, "-c", _CHILD, kind, str(out)], stdout=subprocess.PIPE, text=True
+        ) as proc:
             assert proc.stdout is not None
             stop_after = random.uniform(0.3, 2.0)
             start = time.monotonic()
@@ -210,12 +211,15 @@ def main() -> None:
     pace = 0.002  # a 500 Hz loop: the writer keeps up, as it must on a real robot
     ours = control_cost_ours(records[:n_paced], work / "paced.mcap", pace)
     anchor = control_cost_anchor(records[:n_paced], work / "anchor-paced.mcap", pace)
-    print("\n1. control-thread cost per cycle (us), paced at 500 Hz, "
-          f"{n_paced} cycles")
-    print(f"   ours           p50 {_percentile(ours, 0.5):7.1f}  p99 {_percentile(ours, 0.99):7.1f}"
-          f"  mean {statistics.fmean(ours):7.1f}")
-    print(f"   mcap+orjson    p50 {_percentile(anchor, 0.5):7.1f}  "
-          f"p99 {_percentile(anchor, 0.99):7.1f}  mean {statistics.fmean(anchor):7.1f}")
+    print(f"\n1. control-thread cost per cycle (us), paced at 500 Hz, {n_paced} cycles")
+    print(
+        f"   ours           p50 {_percentile(ours, 0.5):7.1f}  p99 {_percentile(ours, 0.99):7.1f}"
+        f"  mean {statistics.fmean(ours):7.1f}"
+    )
+    print(
+        f"   mcap+orjson    p50 {_percentile(anchor, 0.5):7.1f}  "
+        f"p99 {_percentile(anchor, 0.99):7.1f}  mean {statistics.fmean(anchor):7.1f}"
+    )
     print("   paper          mean   120.0 (reported)")
     print(f"   ratio ours/anchor p50 {_percentile(ours, 0.5) / _percentile(anchor, 0.5):.2f}")
     hot = (work / "paced.mcap").stat().st_size / n_paced
@@ -235,8 +239,10 @@ def main() -> None:
     lost_ours = kill_runs("ours", kills, work)
     lost_anchor = kill_runs("anchor", kills, work)
     print(f"\n3. cycles lost on kill -9, {kills} runs at 100 Hz")
-    print(f"   ours        max {max(lost_ours)}  median {statistics.median(lost_ours)}  "
-          f"runs {lost_ours}")
+    print(
+        f"   ours        max {max(lost_ours)}  median {statistics.median(lost_ours)}  "
+        f"runs {lost_ours}"
+    )
     print(f"   mcap defaults max {max(lost_anchor)}  median {statistics.median(lost_anchor)}")
 
 
