@@ -30,7 +30,6 @@ import orjson
 from trace_runtime.chain import digest
 from trace_runtime.errors import RecordError, UsageError
 from trace_runtime.records import (
-    GENESIS,
     TOPIC_CHECKPOINT,
     TOPIC_PERCEPTION,
     TOPIC_SEAL,
@@ -47,7 +46,6 @@ if TYPE_CHECKING:
 
 __all__ = [
     "CHECKPOINT_FORMAT",
-    "GENESIS",
     "CheckpointState",
     "Ed25519Signer",
     "KeyPair",
