@@ -260,9 +260,16 @@ class Segment:
         self._metadata: dict[str, dict[str, str]] = {}
         self._decompressor = zstandard.ZstdDecompressor()
         self._profile = ""
-        finished = self._read_summary()
+        try:
+            finished = self._read_summary()
+        except _DAMAGE as err:
+            # A damaged summary does not make the data unreadable: scan the data instead.
+            log.warning("%s: damaged MCAP summary (%s); reading the data by scan", path, err)
+            self._reset_index()
+            finished = False
         if not finished:
-            self._scan()
+            with _damage_as_read_error(self.path):
+                self._scan()
         if self._profile != PROFILE:
             label = repr(self._profile) if self._profile else "none"
             raise NotTraceLogError(str(path), f"MCAP profile is {label}, not a TRACE log")
@@ -282,6 +289,14 @@ class Segment:
                 self.info.message_count,
             )
 
+    def _reset_index(self) -> None:
+        self._schemas.clear()
+        self._topic_map.clear()
+        self._deferred_summary.clear()
+        self._metadata_at.clear()
+        self._metadata.clear()
+        self._table, self._table_source, self._statistics = None, ("none", 0, 0), None
+
     @cached_property
     def info(self) -> SegmentInfo:
         """What the segment is: session, time range, counts per channel, size, state."""
@@ -290,7 +305,10 @@ class Segment:
     @cached_property
     def session(self) -> SessionInfo:
         if SESSION_METADATA not in self._metadata:
-            self._parse_metadata_at(self._metadata_at[SESSION_METADATA])
+            with _damage_as_read_error(self.path):
+                self._parse_metadata_at(self._metadata_at[SESSION_METADATA])
+        if SESSION_METADATA not in self._metadata:
+            raise LogReadError(str(self.path), "the trace.session metadata record is damaged")
         return SessionInfo.from_metadata(self._metadata[SESSION_METADATA])
 
     @property
@@ -304,7 +322,8 @@ class Segment:
     @property
     def _topics(self) -> dict[int, str]:
         while self._deferred_summary:
-            self._parse_summary_records(*self._deferred_summary.pop())
+            with _damage_as_read_error(self.path):
+                self._parse_summary_records(*self._deferred_summary.pop())
         return self._topic_map
 
     @cached_property
@@ -357,8 +376,10 @@ class Segment:
         pos = begin
         while pos + 9 <= end:
             opcode, length = _RECORD_HEADER.unpack_from(self._data, pos)
+            _check_fits(pos + 9, length, end)
             if opcode == _OP_SUMMARY_OFFSET:
                 group, start, size = struct.unpack_from("<BQQ", self._data, pos + 9)
+                _check_fits(start, size, len(self._data))
                 groups.setdefault(group, []).append((start, start + size))
             pos += 9 + length
         return groups
@@ -369,6 +390,7 @@ class Segment:
         while pos + 9 <= end:
             opcode, length = _RECORD_HEADER.unpack_from(data, pos)
             body = pos + 9
+            _check_fits(body, length, end)
             if opcode == _OP_SCHEMA:
                 self._parse_schema(body)
             elif opcode == _OP_CHANNEL:
@@ -404,12 +426,13 @@ class Segment:
     def _chunk_table(self) -> tuple[Sequence[int], Sequence[int], Sequence[int]]:
         if self._table is None:
             kind, first, second = self._table_source
-            if kind == "attachment":
-                self._load_table_attachment(first)
-            elif kind == "chunk_index":
-                self._set_table(self._load_chunk_indexes(first, second))
-            else:
-                self._set_table([])
+            with _damage_as_read_error(self.path):
+                if kind == "attachment":
+                    self._load_table_attachment(first)
+                elif kind == "chunk_index":
+                    self._set_table(self._load_chunk_indexes(first, second))
+                else:
+                    self._set_table([])
         assert self._table is not None
         return self._table
 
@@ -510,7 +533,7 @@ class Segment:
     def _chunk_valid(self, pos: int) -> bool:
         try:
             self._decode_chunk_uncached(pos)
-        except (LogReadError, zstandard.ZstdError, struct.error):
+        except (LogReadError, *_DAMAGE):
             return False
         return True
 
@@ -555,7 +578,8 @@ class Segment:
         if cached is not None:
             self._recent_chunks.move_to_end(offset)
             return cached
-        messages = self._decode_chunk_uncached(offset)
+        with _damage_as_read_error(self.path):
+            messages = self._decode_chunk_uncached(offset)
         self._recent_chunks[offset] = messages
         if len(self._recent_chunks) > _RECENT_CHUNKS:
             self._recent_chunks.popitem(last=False)
@@ -697,6 +721,26 @@ class Segment:
             bytes=len(self._data),
             metadata=dict(self.metadata),
         )
+
+
+_DAMAGE = (struct.error, ValueError, KeyError, IndexError, OverflowError, zstandard.ZstdError)
+"""What parsing a damaged record raises; never a bug of ours to show as a traceback."""
+
+
+def _check_fits(body: int, length: int, end: int) -> None:
+    """A record whose length runs past its section is damage, not a record."""
+    if body + length > end:
+        raise struct.error(
+            f"record at {body - 9} runs {body + length - end} bytes past its section"
+        )
+
+
+@contextlib.contextmanager
+def _damage_as_read_error(path: Path) -> Iterator[None]:
+    try:
+        yield
+    except _DAMAGE as err:
+        raise LogReadError(str(path), f"damaged MCAP record ({type(err).__name__}: {err})") from err
 
 
 def _map_file(path: Path) -> bytes:
