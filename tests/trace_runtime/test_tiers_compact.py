@@ -233,15 +233,17 @@ elif target == "write_batch":
     wrap(SegmentWriter, "write_batch")
 print("start", flush=True)
 compact(
-    {root!r}, {tier!r}, older_than_ns=0, cold=ColdOptions(block_cycles=16),
+    {root!r}, {tier!r}, older_than_ns=0, cold=ColdOptions(block_cycles=16, jobs={jobs}),
     progress=lambda event: print("progress", event.cycles_done, flush=True),
 )
 print("done", flush=True)
 """
 
 
-def _child(root: Path, tier: str, kill: tuple[str, str, int]) -> subprocess.Popen[str]:
-    code = _CHILD.format(repo=str(REPO), root=str(root), tier=tier, kill=kill)
+def _child(
+    root: Path, tier: str, kill: tuple[str, str, int], jobs: int = 1
+) -> subprocess.Popen[str]:
+    code = _CHILD.format(repo=str(REPO), root=str(root), tier=tier, kill=kill, jobs=jobs)
     return subprocess.Popen(
         [sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, cwd=str(REPO)
     )
@@ -315,6 +317,48 @@ def test_kill_9_at_random_moments(
         proc.send_signal(signal.SIGKILL)
         proc.communicate(timeout=60)
         _check_resumed(root, "cold", original, names)
+
+
+def _children_of(pid: int) -> list[int]:
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.append(int(stat.parent.name))
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
+def test_kill_9_with_worker_processes_leaves_no_orphans(
+    tmp_path: Path, template: tuple[Path, list[Any], list[str]]
+) -> None:
+    source, original, names = template
+    root = tmp_path / "root"
+    shutil.copytree(source, root)
+    proc = _child(root, "cold", ("none", "never", 0), jobs=2)
+    assert proc.stdout is not None
+    assert proc.stdout.readline().strip() == "start"
+    proc.stdout.readline()  # the workers have encoded a block
+    workers = _children_of(proc.pid)
+    assert len(workers) >= 2  # the two workers (and the resource tracker)
+    proc.send_signal(signal.SIGKILL)
+    proc.communicate(timeout=60)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(Path(f"/proc/{w}").exists() for w in workers):
+        time.sleep(0.1)
+    alive = []
+    for w in workers:
+        try:
+            state = Path(f"/proc/{w}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            continue
+        if state != "Z":  # a zombie has exited; only its parent's wait is missing
+            alive.append(w)
+    assert not alive
+    _check_resumed(root, "cold", original, names)
 
 
 # --- retention ----------------------------------------------------------------------------

@@ -583,6 +583,19 @@ def _encode_block(
     )
 
 
+def _exit_with_parent(parent: int) -> None:
+    """In a worker: exit when the compacting process is gone (killed with -9, it cannot
+    shut its pool down, and an idle worker would wait for work forever)."""
+    import threading
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="trace-compact-parent-watch", daemon=True).start()
+
+
 def _as_tuples(messages: list[RawMessage]) -> list[tuple[str, int, int, bytes]]:
     return [(m.topic, m.sequence, m.log_time_ns, m.data) for m in messages]
 
@@ -606,7 +619,12 @@ def _write_cold(
         from concurrent.futures import ProcessPoolExecutor
 
         # spawn: a worker never inherits the threads or locks of an embedding process
-        pool = ProcessPoolExecutor(options.jobs, mp_context=multiprocessing.get_context("spawn"))
+        pool = ProcessPoolExecutor(
+            options.jobs,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_exit_with_parent,
+            initargs=(os.getpid(),),
+        )
     pending: deque[tuple[int, list[RawMessage], Any]] = deque()
 
     def finish_one() -> None:
