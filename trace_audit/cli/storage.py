@@ -54,6 +54,7 @@ _COMPACT_HELP = "\n\n".join(
         "  trace-audit compact fleet/robot-7 --tier warm",
         "  trace-audit compact run/ --tier cold --older-than 0 --json",
         "  trace-audit compact /logs --tier cold --from hot --now --dry-run",
+        "  trace-audit compact /logs --tier cold --jobs 4 --retention off",
     ]
 )
 
@@ -140,6 +141,10 @@ def compact_command(
         int,
         typer.Option("--block-cycles", min=1, help="Cold: cycles per block (a seek decodes one)."),
     ] = ColdOptions().block_cycles,
+    jobs: Annotated[
+        int,
+        typer.Option("--jobs", "-j", min=1, help="Cold: processes encoding blocks in parallel."),
+    ] = 1,
     include_unfinished: Annotated[
         bool,
         typer.Option(
@@ -168,7 +173,7 @@ def compact_command(
                     keep_readings=keep_readings,
                     informational_prefixes=(*INFORMATIONAL_PREFIXES, *(informational or [])),
                 ),
-                cold=ColdOptions(block_cycles=block_cycles),
+                cold=ColdOptions(block_cycles=block_cycles, jobs=jobs),
                 progress=progress,
             ),
             quiet=json_out or plain,
