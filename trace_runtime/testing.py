@@ -199,7 +199,7 @@ def synthetic_cycle(
         distance = round(1.2 + k * 1.7 + 0.8 * ((index * (k + 1)) % 50) / 50, 3)
         nearest = min(nearest, distance)
         eid = f"ped_{k + 1}"
-        ref = EvidenceRef(topic=ref_topic, log_time_ns=t_ns, sequence=index, digest="0" * 64)
+        ref = EvidenceRef(topic=ref_topic, log_time_ns=t_ns, sequence=index)  # no reading logged
         entities.append(
             Entity(
                 id=eid,
