@@ -43,6 +43,15 @@ PlainOption = Annotated[
 ]
 
 
+def help_text(text: str) -> str:
+    """Help with each prose paragraph on one line, so typer re-wraps it to the terminal;
+    indented paragraphs (the examples) keep their lines."""
+    return "\n\n".join(
+        para if para.startswith("  ") else " ".join(line.strip() for line in para.splitlines())
+        for para in text.strip().split("\n\n")
+    )
+
+
 def fail(message: str, code: int) -> NoReturn:
     """Print one line on stderr and exit with ``code``."""
     sys.stderr.write(f"trace-audit: {message}\n")

@@ -22,6 +22,7 @@ from trace_audit.cli.app import (
     app,
     fail,
     guarded,
+    help_text,
     print_json,
 )
 from trace_audit.cli.render import Column, Doc, Seg, fmt_duration, fmt_t, setup_logging, show
@@ -76,15 +77,7 @@ from openssl genpkey -algorithm ed25519 work as well. Refuses to overwrite a key
 _MAX_LISTED = 200
 
 
-def _help(text: str) -> str:
-    """Help with each prose paragraph on one line, so typer re-wraps it; examples keep theirs."""
-    return "\n\n".join(
-        para if para.startswith("  ") else " ".join(line.strip() for line in para.splitlines())
-        for para in text.strip().split("\n\n")
-    )
-
-
-@app.command("verify", help=_help(_VERIFY_HELP))
+@app.command("verify", help=help_text(_VERIFY_HELP))
 def verify_command(
     log: Annotated[
         Path,
@@ -233,7 +226,7 @@ def _finding_table(doc: Doc, findings: list[Finding]) -> None:
         doc.line(f"… and {len(findings) - _MAX_LISTED} more (--json lists all)", 2)
 
 
-@app.command("keygen", help=_help(_KEYGEN_HELP))
+@app.command("keygen", help=help_text(_KEYGEN_HELP))
 def keygen_command(
     out: Annotated[
         Path,

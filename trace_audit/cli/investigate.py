@@ -26,6 +26,7 @@ from trace_audit.cli.app import (
     app,
     fail,
     guarded,
+    help_text,
     print_json,
 )
 from trace_audit.cli.render import Column, Doc, Item, Seg, fmt_duration, fmt_t, setup_logging, show
@@ -70,20 +71,6 @@ def format_value(value: Any, unit: str | None = None) -> str:
     return fmt(value, unit)
 
 
-def _help(text: str) -> str:
-    """Help text with each prose paragraph on one line, so typer re-wraps it to the terminal.
-
-    Indented paragraphs (the examples) keep their lines.
-    """
-    out = []
-    for para in text.strip().split("\n\n"):
-        if para.startswith("  "):
-            out.append(para)
-        else:
-            out.append(" ".join(line.strip() for line in para.splitlines()))
-    return "\n\n".join(out)
-
-
 def _run(call: Callable[[], T]) -> T:
     """``guarded`` plus the read errors a damaged file can raise below the reader."""
     setup_logging()
@@ -121,7 +108,7 @@ range is a usage error (exit 2) that names the range.
 """
 
 
-@app.command("explain", help=_help(_EXPLAIN_HELP))
+@app.command("explain", help=help_text(_EXPLAIN_HELP))
 def explain_command(  # noqa: PLR0917 - typer maps each parameter to an option
     log: LogArgument,
     t: TimeOption = None,
@@ -496,7 +483,7 @@ regard to case; one the log never shows is a usage error (exit 2) listing those 
 """
 
 
-@app.command("why", help=_help(_WHY_HELP))
+@app.command("why", help=help_text(_WHY_HELP))
 def why_command(  # noqa: PLR0917 - typer maps each parameter to an option
     log: LogArgument,
     action: Annotated[
@@ -596,7 +583,7 @@ leading factor (the first the rationale names) and the flags raised while it hel
 """
 
 
-@app.command("timeline", help=_help(_TIMELINE_HELP))
+@app.command("timeline", help=help_text(_TIMELINE_HELP))
 def timeline_command(  # noqa: PLR0917 - typer maps each parameter to an option
     log: LogArgument,
     start: Annotated[
@@ -707,7 +694,7 @@ segment summaries alone.
 """
 
 
-@app.command("info", help=_help(_INFO_HELP))
+@app.command("info", help=help_text(_INFO_HELP))
 def info_command(
     log: LogArgument,
     quick: Annotated[
@@ -843,7 +830,7 @@ labelled MISSING; the tree's taken path is bold.
 """
 
 
-@app.command("export", help=_help(_EXPORT_HELP))
+@app.command("export", help=help_text(_EXPORT_HELP))
 def export_command(
     log: LogArgument,
     t: TimeOption = None,
