@@ -253,6 +253,13 @@ def _size(n: int | None) -> str:
     return f"{n} B"
 
 
+def _span(ns: int) -> str:
+    for unit, size in (("d", 86_400), ("h", 3600), ("m", 60)):
+        if ns and ns % (size * 10**9) == 0:
+            return f"{ns // (size * 10**9)}{unit}"
+    return f"{ns / 1e9:g}s"
+
+
 def _when(t_ns: int | None) -> str:
     if t_ns is None:
         return "-"
@@ -266,9 +273,11 @@ def _render_report(report: CompactionReport, out: Any) -> None:
     boxes = box.ASCII if out.no_color else box.SIMPLE_HEAVY
     verb = "would move" if report.dry_run else "moved"
     out.print(
-        f"[bold]compact[/bold] {report.root} -> {report.tier} (from {', '.join(report.sources)}): "
-        f"segments older than {report.older_than_ns / 3.6e12:g} h before the {report.reference} "
-        f"{_when(report.reference_ns)} UTC"
+        f"[bold]compact[/bold] {report.root} -> {report.tier} (from {', '.join(report.sources)})"
+    )
+    out.print(
+        f"  segments older than {_span(report.older_than_ns)} before the {report.reference}"
+        f" ({_when(report.reference_ns)} UTC)"
     )
     for leftover in report.leftovers:
         out.print(f"  leftover {leftover.path}: {leftover.action}")
@@ -336,12 +345,13 @@ def _render_catalog(catalog: Catalog, out: Any) -> None:
     from rich.table import Table
 
     boxes = box.ASCII if out.no_color else box.SIMPLE_HEAVY
-    table = Table(box=boxes, show_edge=False, title=f"catalog of {catalog.root}")
-    for name in ("robot", "seg", "tier", "start (UTC)", "end (UTC)", "cycles", "size", "seals"):
-        table.add_column(name, justify="right" if name in ("seg", "cycles", "size") else "left")
+    table = Table(box=boxes, show_edge=False, title=f"catalog of {catalog.root} (times UTC)")
+    for name in ("robot", "seg", "tier", "start", "end", "cycles", "size"):
+        table.add_column(
+            name, justify="right" if name in ("seg", "cycles", "size") else "left", no_wrap=True
+        )
     for e in catalog.entries:
-        seals = f"{(e.first_seal or '-')[:8]}..{(e.last_seal or '-')[:8]}"
-        tier = e.tier + (" (lossy)" if e.lossy else "") + ("" if e.finished else " unfinished")
+        tier = e.tier + ("*" if e.lossy else "") + ("" if e.finished else " (unfinished)")
         table.add_row(
             e.robot,
             str(e.segment),
@@ -350,10 +360,14 @@ def _render_catalog(catalog: Catalog, out: Any) -> None:
             _when(e.end_ns),
             str(e.cycles),
             _size(e.bytes),
-            seals,
         )
     out.print(table)
     total = sum(e.bytes for e in catalog.entries)
-    out.print(f"  {len(catalog.entries)} segment(s), {_size(total)}")
+    lossy = any(e.lossy for e in catalog.entries)
+    out.print(
+        f"  {len(catalog.entries)} segment(s), {_size(total)}"
+        + ("; * lossy (warm summaries)" if lossy else "")
+        + "; seal digests and file SHA-256 in --json"
+    )
     for problem in catalog.problems:
         out.print(f"  unreadable: {problem}")
