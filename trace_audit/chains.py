@@ -219,7 +219,7 @@ def trace_layers(
         return DecisionChains(cycle, t_ns, (), 0.0, 0.0, "action not logged")
     rationale = action.get("rationale")
     raw_factors = rationale.get("factors") if isinstance(rationale, dict) else None
-    if not raw_factors:
+    if not raw_factors or not isinstance(raw_factors, list):
         return DecisionChains(cycle, t_ns, (), 0.0, 0.0, "action names no factors")
     walker = _Walker(belief, perception, window)
     chains = tuple(walker.factor(f) for f in raw_factors if isinstance(f, dict))

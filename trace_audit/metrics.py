@@ -642,7 +642,8 @@ def dr_problems(action: Any) -> list[str]:
         return problems
     if rationale.get("truncated"):
         problems.append("rationale truncated")
-    if not rationale.get("factors"):
+    factors = rationale.get("factors")
+    if not factors or not isinstance(factors, list):
         problems.append("rationale names no factors")
     if not action.get("counterfactuals") and not action.get("counterfactuals_none_applicable"):
         problems.append("no counterfactuals and not declared none-applicable")

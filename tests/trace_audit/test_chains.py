@@ -8,7 +8,7 @@ from typing import Any
 
 import orjson
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from trace_audit.chains import (
@@ -314,6 +314,7 @@ _JUNK = st.recursive(
 
 @settings(max_examples=300, deadline=None)
 @given(_JUNK, _JUNK, _JUNK)
+@example({"rationale": {"factors": True}}, None, None)  # once found: factors not a list
 def test_malformed_layers_never_raise(action: Any, belief: Any, perception: Any) -> None:
     window = _window(_msg())
     full = trace_layers(0, 0, action, belief, perception, window=window)
