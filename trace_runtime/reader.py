@@ -779,7 +779,8 @@ class Log:
         if not segments:
             raise LogReadError(str(root), "no TRACE segments found")
         self.root = root
-        self.segments = sorted(segments, key=lambda s: (s.start_ns, s.path.name))
+        kept, self.shadowed = _one_copy_per_segment(segments)
+        self.segments = sorted(kept, key=lambda s: (s.start_ns, s.path.name))
         self._starts = [s.start_ns for s in self.segments]
 
     @property
@@ -832,6 +833,35 @@ class Log:
                 if cycle.cycle > number:
                     break
         return None
+
+
+_TIER_ORDER = {"hot": 0, "warm": 1, "cold": 2}
+
+
+def _one_copy_per_segment(segments: Sequence[Segment]) -> tuple[list[Segment], list[Segment]]:
+    """While a compaction runs (or after one was interrupted) a segment can sit in two tiers
+    of a root. Keep the least compacted copy of each; return (kept, shadowed). Only roots
+    with a warm/ or cold/ directory in use are compared, so a hot-only log opens no metadata.
+    """
+    if not any(s.path.parent.name in ("warm", "cold") for s in segments):
+        return list(segments), []
+    chosen: dict[tuple[str, int, int, str], Segment] = {}
+    kept: list[Segment] = []
+    shadowed: list[Segment] = []
+    for segment in segments:
+        session = segment.session
+        key = (session.robot_id, session.segment, session.first_cycle, session.prev_seal)
+        other = chosen.get(key)
+        if other is None:
+            chosen[key] = segment
+        elif other.session.tier == session.tier:
+            kept.append(segment)  # two files of one tier: different content, keep both
+        elif _TIER_ORDER.get(session.tier, 9) < _TIER_ORDER.get(other.session.tier, 9):
+            shadowed.append(other)
+            chosen[key] = segment
+        else:
+            shadowed.append(segment)
+    return kept + list(chosen.values()), shadowed
 
 
 SegmentOpener = Callable[[Path], Segment]
