@@ -23,15 +23,13 @@ Run: ``.venv/bin/python bench/bench_sim.py [--cycles 20000] [--runs 3] [--batch 
 from __future__ import annotations
 
 import argparse
-import gc
 import io
 import logging
 import statistics
 import tempfile
 import time
 from collections import defaultdict
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,6 +37,7 @@ from typing import Any
 from sim import FaultRates, RunConfig, run, runner
 from sim.execution import Actuator
 from sim.perception import Perceiver
+from sim.runner import few_collections
 from trace_runtime import AuditLogger, CycleBuilder, LoggerConfig, SessionInfo
 from trace_runtime.chain import digest
 from trace_runtime.codec import encode_json, encode_layer, encode_seal_fields
@@ -115,17 +114,6 @@ def _capture(config: RunConfig) -> list[Captured]:
     return captured
 
 
-@contextmanager
-def _as_sim_run() -> Iterator[None]:
-    """The garbage-collector settings ``sim.run`` uses, so the logger is timed as it runs."""
-    threshold = gc.get_threshold()
-    gc.freeze()
-    gc.set_threshold(max(threshold[0], 50_000), threshold[1], threshold[2])
-    try:
-        yield
-    finally:
-        gc.set_threshold(*threshold)
-        gc.unfreeze()
 
 
 def _replay(cycles: list[Captured], out: Path, batch: int) -> float:
@@ -136,7 +124,7 @@ def _replay(cycles: list[Captured], out: Path, batch: int) -> float:
         clock="sim",
         config=LoggerConfig(threaded=False, fsync_interval_s=None, batch_cycles=batch),
     )
-    with _as_sim_run():
+    with few_collections():
         start = time.process_time()
         for cap in cycles:
             with logger.cycle(cap.t_ns) as c:
@@ -152,7 +140,7 @@ def _cpu(fn: Callable[[], object], runs: int) -> float:
     """Median CPU seconds of ``fn()``."""
     times = []
     for _ in range(runs):
-        with _as_sim_run():
+        with few_collections():
             start = time.process_time()
             fn()
             times.append(time.process_time() - start)

@@ -215,7 +215,7 @@ def run(config: RunConfig, progress: Callable[[int, int], None] | None = None) -
     started = time.perf_counter()
     done = 0
     try:
-        with _few_collections():
+        with few_collections():
             for k, (scenario, new_episode) in enumerate(plan(config)):
                 if new_episode:
                     sim.world.make_room(EPISODE_ROOM_M)
@@ -254,7 +254,7 @@ def run(config: RunConfig, progress: Callable[[int, int], None] | None = None) -
 
 
 @contextmanager
-def _few_collections() -> Iterator[None]:
+def few_collections() -> Iterator[None]:
     """Keep the cyclic garbage collector from re-scanning the same objects over and over.
 
     A batch of cycles keeps thousands of record objects alive until it is written; with the

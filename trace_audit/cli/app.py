@@ -89,5 +89,13 @@ def console(plain: bool = False) -> Any:
     from rich.console import Console
 
     if plain:
-        return Console(no_color=True, highlight=False, emoji=False, soft_wrap=False, width=100)
+        # No escape codes at all (colour or bold): logs, CI and files read it as text.
+        return Console(
+            color_system=None,
+            no_color=True,  # renderers read this to choose ASCII boxes
+            highlight=False,
+            emoji=False,
+            soft_wrap=False,
+            width=100,
+        )
     return Console(highlight=False)

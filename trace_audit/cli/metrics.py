@@ -17,6 +17,7 @@ from trace_audit.cli.app import (
     guarded,
     print_json,
 )
+from trace_audit.cli.render import progress_bar
 from trace_audit.metrics import (
     GROUP_BYS,
     MetricsConfig,
@@ -180,18 +181,8 @@ def metrics_command(
 def _with_progress(logs: list[Path], config: MetricsConfig, *, quiet: bool) -> MetricsReport:
     if quiet or not sys.stderr.isatty():
         return compute_metrics(logs, config)
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
-
-    with Progress(
-        "[progress.description]{task.description}",
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeRemainingColumn(),
-        console=Console(stderr=True),
-        transient=True,
-    ) as bar:
-        task = bar.add_task("scoring cycles", total=None, visible=False)
+    with progress_bar("scoring cycles", visible=False) as bar:
+        task = bar.task_ids[0]
 
         def progress(done: int, expected: int | None) -> None:
             visible = expected is None or expected >= _PROGRESS_MIN_CYCLES

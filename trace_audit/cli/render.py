@@ -15,7 +15,8 @@ import os
 import shutil
 import sys
 import textwrap
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -163,6 +164,25 @@ def setup_logging() -> None:
         logger.addHandler(_StderrLine(logging.WARNING))
     if logger.level == logging.NOTSET:
         logger.setLevel(logging.WARNING)
+
+
+@contextmanager
+def progress_bar(description: str, *, visible: bool = True) -> Iterator[Any]:
+    """A transient rich progress bar on stderr (counts, bar, time left), for long library
+    calls that report progress; the caller decides whether to show one at all."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    with Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    ) as bar:
+        bar.add_task(description, total=None, visible=visible)
+        yield bar
 
 
 # --- rendering -----------------------------------------------------------------------------------

@@ -18,6 +18,7 @@ from trace_audit.cli.app import (
     guarded,
     print_json,
 )
+from trace_audit.cli.render import progress_bar
 from trace_runtime.errors import UsageError
 from trace_runtime.tiers import (
     DEFAULT_RETENTION_NS,
@@ -194,19 +195,8 @@ def _with_progress(call: Any, *, quiet: bool) -> CompactionReport:
     if quiet or not sys.stderr.isatty():
         result: CompactionReport = call(None)
         return result
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, TimeRemainingColumn
-    from rich.progress import Progress as Bar
-
-    with Bar(
-        "[progress.description]{task.description}",
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeRemainingColumn(),
-        console=Console(stderr=True),
-        transient=True,
-    ) as bar:
-        task = bar.add_task("compacting", total=None)
+    with progress_bar("compacting") as bar:
+        task = bar.task_ids[0]
 
         def progress(event: Progress) -> None:
             bar.update(
