@@ -114,8 +114,6 @@ def _capture(config: RunConfig) -> list[Captured]:
     return captured
 
 
-
-
 def _replay(cycles: list[Captured], out: Path, batch: int) -> float:
     """CPU seconds for ``AuditLogger`` to take and write ``cycles``."""
     logger = AuditLogger(
