@@ -15,7 +15,13 @@ fi
 stamp=.venv/.trace-installed
 want=$(sha256sum pyproject.toml | cut -d' ' -f1)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-  .venv/bin/python -m pip install --quiet --upgrade pip >/dev/null
-  .venv/bin/python -m pip install --quiet -e ".[dev]"
+  echo "bootstrap: installing into .venv (first run or pyproject.toml changed) ..." >&2
+  log=.venv/install.log
+  # Quiet when it works; the whole pip output when it does not.
+  if ! { .venv/bin/python -m pip install --upgrade pip && .venv/bin/python -m pip install -e ".[dev]"; } >"$log" 2>&1; then
+    cat "$log" >&2
+    echo "bootstrap: installation failed (log above, also in $log)" >&2
+    exit 1
+  fi
   echo "$want" > "$stamp"
 fi
