@@ -11,6 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from trace_audit.timeline import GAP_FACTOR, Gap, LogSource, as_log, require_cycles, seal_dropped
+from trace_runtime.logger import CLOSE_METADATA
+from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
 
 __all__ = ["LogInfo", "SegmentRow", "log_info"]
@@ -90,6 +92,9 @@ def log_info(source: LogSource, *, scan: bool = True) -> LogInfo:
             if prev_t >= 0 and (lost or (limit and cycle.t_ns - prev_t > limit)):
                 gaps.append(Gap(prev_cycle, cycle.cycle, prev_t, cycle.t_ns, lost))
             prev_cycle, prev_t = cycle.cycle, cycle.t_ns
+    if dropped is not None:
+        # Drops after a segment's last seal are declared at close, not by a seal.
+        dropped += sum(_dropped_at_close(s) for s in log.segments)
     rows: list[SegmentRow] = []
     channels: dict[str, int] = {}
     tiers: dict[str, int] = {}
@@ -140,3 +145,11 @@ def log_info(source: LogSource, *, scan: bool = True) -> LogInfo:
         dropped=dropped,
         gaps=tuple(gaps),
     )
+
+
+def _dropped_at_close(segment: Segment) -> int:
+    closing = segment.metadata.get(CLOSE_METADATA, {})
+    try:
+        return int(closing.get("dropped_after_last_seal", 0))
+    except ValueError:
+        return 0

@@ -49,6 +49,9 @@ from trace_runtime.session import SessionInfo
 
 log = logging.getLogger("trace_runtime")
 
+CLOSE_METADATA = "trace.close"
+"""Metadata a segment ends with when cycles were dropped after its last seal."""
+
 Opener = Callable[[Path], BinaryIO]
 
 
@@ -397,6 +400,7 @@ class AuditLogger:
             if self._sync_batch:
                 batch, self._sync_batch = self._sync_batch, []
                 self._write_batch(batch)
+            self._declare_tail()
             self._close_segment()
 
     def __enter__(self) -> AuditLogger:
@@ -537,6 +541,22 @@ class AuditLogger:
         self._sealed_in_segment = 0
         self._checkpoint_tried_ns = None
         self.stats.segments.append(path)
+
+    def _declare_tail(self) -> None:
+        """Drops after the last seal have no next seal to declare them: say so at close in a
+        ``trace.close`` metadata record (schemas/PROFILE.md §7), so the gap is not silent."""
+        tail = self._undeclared_control + self._undeclared_writer
+        segment = self._segment
+        if tail == 0 or segment is None or segment.broken:
+            return
+        last = self._head[0] if self._head is not None else self._session.first_cycle - 1
+        try:
+            segment.add_metadata(
+                CLOSE_METADATA,
+                {"dropped_after_last_seal": str(tail), "last_sealed_cycle": str(last)},
+            )
+        except Exception as err:
+            self._report_once("close", f"could not record the dropped tail: {err}")
 
     def _close_segment(self) -> None:
         segment, self._segment = self._segment, None

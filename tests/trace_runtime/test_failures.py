@@ -119,8 +119,14 @@ def test_a_full_queue_drops_instead_of_blocking_the_control_loop(tmp_path: Path)
     cycles = list(open_log(path).iter_cycles())
     declared = sum(c.seal.dropped for c in cycles if c.seal is not None)
     assert len(cycles) + logger.stats.dropped_queue_full == 50
-    # Every gap before the last written cycle is declared by a seal.
+    # Every gap before the last written cycle is declared by a seal ...
     assert declared + len(cycles) == cycles[-1].cycle + 1
+    # ... and the drops after it, which no seal follows, by the segment's closing record.
+    closing = open_log(path).segments[0].metadata["trace.close"]
+    assert closing == {
+        "dropped_after_last_seal": str(49 - cycles[-1].cycle),
+        "last_sealed_cycle": str(cycles[-1].cycle),
+    }
 
 
 def test_a_lost_directory_never_raises_into_the_loop(tmp_path: Path) -> None:
