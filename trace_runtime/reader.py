@@ -677,8 +677,11 @@ class Segment:
         starts, _ends, offsets = self._chunk_table()
         index = bisect.bisect_right(starts, t_ns)
         # The chunk that starts last at or before t holds the answer unless t falls before
-        # its first cycle (e.g. sensors earlier than the cycle): then step back one chunk.
-        for offset in reversed(offsets[max(0, index - 2) : index]):
+        # its first cycle: a chunk starts at its earliest sensor reading, which may precede
+        # its cycle by several periods, and a closing checkpoint chunk holds no cycle. Step
+        # back until a chunk has a cycle at or before t (a few chunks at most in practice).
+        for i in range(index - 1, -1, -1):
+            offset = offsets[i]
             cycles = [
                 c
                 for c in self._assemble(self._decode_chunk_at(offset), self.path.name)
