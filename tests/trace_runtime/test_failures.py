@@ -97,9 +97,13 @@ def test_a_failure_the_file_cannot_roll_back_moves_to_a_new_segment(tmp_path: Pa
 
 def test_a_full_queue_drops_instead_of_blocking_the_control_loop(tmp_path: Path) -> None:
     gate = threading.Event()
+    gate.set()  # let the header and session metadata through
+    stuck = threading.Event()  # the writer is inside a write, waiting at the gate
 
     class SlowFile(io.FileIO):
         def write(self, data: Any) -> int:
+            if not gate.is_set():
+                stuck.set()
             gate.wait(5)
             return super().write(data)
 
@@ -107,12 +111,14 @@ def test_a_full_queue_drops_instead_of_blocking_the_control_loop(tmp_path: Path)
     logger = AuditLogger(
         path, robot_id="r", config=LoggerConfig(queue_cycles=4, opener=lambda p: SlowFile(p, "w"))
     )  # type: ignore[arg-type,return-value]
-    gate.set()  # let the header through
-    logger.flush()
     gate.clear()
     for i in range(50):
         p, b, a, e = synthetic_cycle(i)
         logger.log_cycle(i * 100_000_000, perception=p, belief=b, action=a, execution=e)
+        if i == 0:
+            # Wait until the writer holds cycle 0 at the gate, so the queue fills behind it
+            # however the threads are scheduled (and the last cycles are always dropped).
+            assert stuck.wait(5)
     gate.set()
     logger.close()
     assert logger.stats.dropped_queue_full > 0
