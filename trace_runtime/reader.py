@@ -309,7 +309,10 @@ class Segment:
                 self._parse_metadata_at(self._metadata_at[SESSION_METADATA])
         if SESSION_METADATA not in self._metadata:
             raise LogReadError(str(self.path), "the trace.session metadata record is damaged")
-        return SessionInfo.from_metadata(self._metadata[SESSION_METADATA])
+        try:
+            return SessionInfo.from_metadata(self._metadata[SESSION_METADATA])
+        except ValueError as err:  # a number field that is not a number
+            raise LogReadError(str(self.path), f"damaged trace.session metadata ({err})") from err
 
     @property
     def metadata(self) -> dict[str, dict[str, str]]:
@@ -454,6 +457,7 @@ class Segment:
         _name, pos = _read_str(data, pos)
         _media, pos = _read_str(data, pos)
         (size,) = struct.unpack_from("<Q", data, pos)
+        _check_fits(pos + 8, size, len(data))
         count = size // 24
         raw = memoryview(data)[pos + 8 : pos + 8 + 24 * count]
         if sys.byteorder == "big":

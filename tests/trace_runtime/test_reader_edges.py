@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 
-from trace_runtime import AuditLogger, LoggerConfig, open_log
+import pytest
+
+from trace_runtime import AuditLogger, LoggerConfig, LogReadError, open_log
 from trace_runtime.reader import open_segment
+from trace_runtime.segment import CHUNK_TABLE_ATTACHMENT
 from trace_runtime.testing import synthetic_cycle
 
 PERIOD_NS = 100_000_000
@@ -37,3 +41,40 @@ def test_cycle_at_finds_the_cycle_when_sensor_readings_precede_it_by_several_chu
             assert found is not None and found.cycle == i, (i, probe)
     assert segment.cycle_at(10 * PERIOD_NS - 1) is None
     assert open_log(path).cycle_at(15 * PERIOD_NS + 10).cycle == 5
+
+
+def _clean_log(tmp_path: Path) -> bytes:
+    from tests.trace_runtime.conftest import write_log
+
+    path = tmp_path / "clean.mcap"
+    write_log(path, 6)
+    return path.read_bytes()
+
+
+def _read_everything(path: Path) -> None:
+    segment = open_segment(path)
+    assert segment.info.session.robot_id
+    list(segment.iter_cycles())
+    segment.chunks()
+    segment.cycle_at(segment.start_ns)
+
+
+def test_a_session_record_with_a_non_numeric_field_is_a_read_error(tmp_path: Path) -> None:
+    data = bytearray(_clean_log(tmp_path))
+    at = data.find(b"period_ns") + len(b"period_ns") + 4  # the value's first character
+    data[at] = ord("x")
+    path = tmp_path / "session.mcap"
+    path.write_bytes(bytes(data))
+    with pytest.raises(LogReadError, match="session"):
+        _read_everything(path)
+
+
+def test_a_chunk_table_attachment_running_past_the_file_is_a_read_error(tmp_path: Path) -> None:
+    data = bytearray(_clean_log(tmp_path))
+    media = b"application/x-trace-chunk-columns"
+    at = data.find(media, data.find(CHUNK_TABLE_ATTACHMENT.encode())) + len(media)
+    struct.pack_into("<Q", data, at, 10**6 + 4)  # the attachment's data length
+    path = tmp_path / "table.mcap"
+    path.write_bytes(bytes(data))
+    with pytest.raises(LogReadError, match="damaged"):
+        _read_everything(path)
