@@ -365,12 +365,10 @@ class Segment:
             self._table_source = ("chunk_index", summary_start, offsets_start or footer_at)
         if not self._metadata and not self._metadata_at:
             return False
-        if (
-            self._statistics is not None
-            and self._statistics[2] == 0
-            and (self._table_source[0] == "none")
-        ):
-            self._scan_loose_messages()  # an unchunked file: its messages sit in the data section
+        if self._statistics is not None and self._statistics[2] == 0:
+            # An unchunked file: its messages sit in the data section. (Its summary may still
+            # hold an empty Chunk Index group, as the mcap library writes one.)
+            self._scan_loose_messages()
         return True
 
     def _summary_groups(self, begin: int, end: int) -> dict[int, list[tuple[int, int]]]:

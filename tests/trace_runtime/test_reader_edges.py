@@ -5,11 +5,16 @@ from __future__ import annotations
 import struct
 from pathlib import Path
 
+import orjson
 import pytest
+from mcap.writer import Writer
 
 from trace_runtime import AuditLogger, LoggerConfig, LogReadError, open_log
+from trace_runtime.chain import digest
 from trace_runtime.reader import open_segment
+from trace_runtime.records import GENESIS
 from trace_runtime.segment import CHUNK_TABLE_ATTACHMENT
+from trace_runtime.session import SessionInfo
 from trace_runtime.testing import synthetic_cycle
 
 PERIOD_NS = 100_000_000
@@ -78,3 +83,33 @@ def test_a_chunk_table_attachment_running_past_the_file_is_a_read_error(tmp_path
     path.write_bytes(bytes(data))
     with pytest.raises(LogReadError, match="damaged"):
         _read_everything(path)
+
+
+def test_a_finished_foreign_segment_without_chunks_is_read_from_its_loose_messages(
+    tmp_path: Path,
+) -> None:
+    # The mcap library, with chunking off, writes a summary whose Chunk Index group is empty.
+    path = tmp_path / "unchunked.mcap"
+    with path.open("wb") as f:
+        writer = Writer(f, use_chunking=False)
+        writer.start(profile="trace", library="other-robot")
+        writer.add_metadata(
+            "trace.session", SessionInfo(robot_id="c", period_ns=PERIOD_NS).to_metadata()
+        )
+        schema = writer.register_schema("trace.Seal", "jsonschema", b"{}")
+        seal_channel = writer.register_channel("/trace/seal", "json", schema)
+        prev = GENESIS
+        for cycle in range(3):
+            t_ns = cycle * PERIOD_NS
+            seal = orjson.dumps(
+                {"cycle": cycle, "t_ns": t_ns, "digests": {}, "prev": prev, "dropped": 0}
+            )
+            writer.add_message(seal_channel, t_ns, seal, t_ns, sequence=cycle)
+            prev = digest(seal)
+        writer.finish()
+    segment = open_segment(path)
+    assert segment.finished
+    assert [c.cycle for c in segment.iter_cycles()] == [0, 1, 2]
+    assert [c.cycle for c in segment.iter_cycles(reverse=True)] == [2, 1, 0]
+    found = segment.cycle_at(PERIOD_NS + 1)
+    assert found is not None and found.cycle == 1
