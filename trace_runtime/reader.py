@@ -205,11 +205,19 @@ def assemble_hot(messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
         else:
             sensors.append(msg)
     if payloads:
-        first = next(iter(payloads.values()))
-        number = int(orjson.loads(first).get("cycle", -1))
+        number = _cycle_field(next(iter(payloads.values())))
         t_ns = max(m.log_time_ns for m in messages if m.topic in payloads)
         cycles.append(Cycle(number, t_ns, payloads, sensors, segment))
     return cycles
+
+
+def _cycle_field(data: bytes) -> int:
+    """The ``cycle`` of an unsealed message, or -1 when its data does not say (damage)."""
+    try:
+        value = orjson.loads(data).get("cycle", -1)
+        return value if type(value) is int else -1
+    except (orjson.JSONDecodeError, AttributeError):
+        return -1
 
 
 _ASSEMBLERS: dict[str, Assembler] = {"hot": assemble_hot}

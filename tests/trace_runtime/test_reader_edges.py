@@ -113,3 +113,23 @@ def test_a_finished_foreign_segment_without_chunks_is_read_from_its_loose_messag
     assert [c.cycle for c in segment.iter_cycles(reverse=True)] == [2, 1, 0]
     found = segment.cycle_at(PERIOD_NS + 1)
     assert found is not None and found.cycle == 1
+
+
+@pytest.mark.parametrize("payload", [b"[1,2]", b"not json", b'{"cycle":"x"}', b'{"cycle":{}}'])
+def test_an_unsealed_tail_whose_payload_is_not_a_layer_object_is_still_read(
+    tmp_path: Path, payload: bytes
+) -> None:
+    path = tmp_path / "tail.mcap"
+    with path.open("wb") as f:
+        writer = Writer(f)
+        writer.start(profile="trace", library="other-robot")
+        writer.add_metadata(
+            "trace.session", SessionInfo(robot_id="c", period_ns=PERIOD_NS).to_metadata()
+        )
+        schema = writer.register_schema("trace.Action", "jsonschema", b"{}")
+        channel = writer.register_channel("/trace/action", "json", schema)
+        writer.add_message(channel, PERIOD_NS, payload, PERIOD_NS, sequence=1)
+        writer.finish()
+    (cycle,) = open_segment(path).iter_cycles()
+    assert not cycle.sealed and cycle.t_ns == PERIOD_NS
+    assert cycle.payloads == {"/trace/action": payload}
