@@ -534,7 +534,13 @@ class AuditLogger:
         path = self._segment_path(session)
         path.parent.mkdir(parents=True, exist_ok=True)
         stream = self._opener(path)
-        self._segment = SegmentWriter(stream, session, level=self.config.compression_level)
+        try:
+            segment = SegmentWriter(stream, session, level=self.config.compression_level)
+        except BaseException:
+            with contextlib.suppress(Exception):  # the header failed; the file is given up
+                stream.close()
+            raise
+        self._segment = segment
         self._session = session
         self._segment_start_ns = None
         self._head = None

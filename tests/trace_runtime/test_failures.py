@@ -157,3 +157,29 @@ def test_an_exception_in_the_robot_aborts_the_cycle_and_is_declared(tmp_path: Pa
     cycles = list(open_log(path).iter_cycles())
     assert [c.cycle for c in cycles] == [0, 2]
     assert cycles[1].seal is not None and cycles[1].seal.dropped == 1
+
+
+def test_a_segment_that_fails_while_opening_does_not_leak_its_file(tmp_path: Path) -> None:
+    state: dict[str, Any] = {"failing": False}
+    opened: list[io.FileIO] = []
+
+    class Unrecoverable(FlakyFile):
+        def truncate(self, size: Any = None) -> int:
+            if self.state["failing"]:
+                raise OSError(errno.EIO, "I/O error")
+            return super().truncate(size)
+
+    def opener(path: Path) -> BinaryIO:
+        stream = Unrecoverable(path, state)
+        opened.append(stream)
+        return stream  # type: ignore[return-value]
+
+    root = tmp_path / "root"
+    logger = AuditLogger(root, robot_id="r", config=LoggerConfig(threaded=False, opener=opener))
+    # Cycle 2 breaks the segment; cycles 3-5 each try a new one, whose header cannot be
+    # written either. Every file given up on must be closed, not left to the collector.
+    _log_cycles(logger, range(8), failing={2, 3, 4, 5}, state=state)
+    assert all(stream.closed for stream in opened[:-1])
+    logger.close()
+    assert all(stream.closed for stream in opened)
+    assert [c.cycle for c in open_log(root).iter_cycles()] == [0, 1, 6, 7]
