@@ -297,6 +297,15 @@ class Segment:
                 self.info.message_count,
             )
 
+    @property
+    def _holds_messages(self) -> bool:
+        """False for a segment with no chunk and no loose message (its times read 0)."""
+        if self._loose:
+            return True
+        if self.finished and self._statistics is not None:
+            return self._statistics[2] > 0
+        return len(self._chunk_table()[0]) > 0
+
     def _reset_index(self) -> None:
         self._schemas.clear()
         self._topic_map.clear()
@@ -795,14 +804,17 @@ class Log:
         kept, self.shadowed = _one_copy_per_segment(segments)
         self.segments = sorted(kept, key=lambda s: (s.start_ns, s.path.name))
         self._starts = [s.start_ns for s in self.segments]
+        # A segment that holds nothing (a logger opened and closed without a cycle) has no
+        # time range; its zeros must not stretch the log's range back to the epoch.
+        self._timed = [s for s in self.segments if s._holds_messages] or self.segments
 
     @property
     def start_ns(self) -> int:
-        return min(s.start_ns for s in self.segments)
+        return min(s.start_ns for s in self._timed)
 
     @property
     def end_ns(self) -> int:
-        return max(s.end_ns for s in self.segments)
+        return max(s.end_ns for s in self._timed)
 
     @property
     def recovered(self) -> bool:

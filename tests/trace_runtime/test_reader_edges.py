@@ -9,7 +9,7 @@ import orjson
 import pytest
 from mcap.writer import Writer
 
-from trace_runtime import AuditLogger, LoggerConfig, LogReadError, open_log
+from trace_runtime import AuditLogger, LoggerConfig, LogReadError, TimeOutOfRangeError, open_log
 from trace_runtime.chain import digest
 from trace_runtime.reader import open_segment
 from trace_runtime.records import GENESIS
@@ -133,3 +133,21 @@ def test_an_unsealed_tail_whose_payload_is_not_a_layer_object_is_still_read(
     (cycle,) = open_segment(path).iter_cycles()
     assert not cycle.sealed and cycle.t_ns == PERIOD_NS
     assert cycle.payloads == {"/trace/action": payload}
+
+
+def test_an_empty_segment_does_not_stretch_the_log_back_to_time_zero(tmp_path: Path) -> None:
+    root = tmp_path / "root"
+    t0 = 1_700_000_000_000_000_000
+    config = LoggerConfig(threaded=False)
+    logger = AuditLogger(root, robot_id="r", config=config)
+    for i in range(3):
+        logger.log_cycle(t0 + i * PERIOD_NS, action=synthetic_cycle(i)[2])
+    logger.close()
+    AuditLogger(root, robot_id="r", config=config).close()  # a restart that logged nothing
+    log = open_log(root)
+    assert len(log.segments) == 2
+    assert (log.start_ns, log.end_ns) == (t0, t0 + 2 * PERIOD_NS)
+    assert [c.cycle for c in log.iter_cycles()] == [0, 1, 2]
+    assert log.cycle_at(t0 + PERIOD_NS).cycle == 1
+    with pytest.raises(TimeOutOfRangeError):
+        log.cycle_at(t0 - 1)
