@@ -30,6 +30,7 @@ from typing import Any, Protocol
 
 import orjson
 import zstandard
+from pydantic import ValidationError
 
 from trace_runtime.chain import digest
 from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeError
@@ -916,13 +917,20 @@ def open_log(path: str | Path) -> Log:
 
 
 def last_seal(path: Path) -> tuple[Seal, str] | None:
-    """The last seal in a segment and its digest (used to continue a chain after restart)."""
+    """The last readable seal in a segment and its digest (to continue a chain after a
+    restart). Damage never stops a robot from logging: a damaged seal is passed over, and a
+    segment that cannot be read gives None (the caller then tries an older one; `verify`
+    reports the resulting break)."""
     try:
         segment = Segment(path)
+        for cycle in segment.iter_cycles(reverse=True):
+            data = cycle.payloads.get(TOPIC_SEAL)
+            if data is None:
+                continue
+            try:
+                return Seal.model_validate_json(data), digest(data)
+            except ValidationError:
+                continue
     except LogReadError:
         return None
-    for cycle in segment.iter_cycles(reverse=True):
-        data = cycle.payloads.get(TOPIC_SEAL)
-        if data is not None:
-            return Seal.model_validate_json(data), digest(data)
     return None

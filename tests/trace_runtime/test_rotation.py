@@ -10,6 +10,7 @@ from mcap.reader import make_reader
 from trace_runtime import AuditLogger, LoggerConfig, open_log
 from trace_runtime.chain import digest
 from trace_runtime.records import GENESIS, TOPIC_SEAL
+from trace_runtime.testing import synthetic_cycle
 
 
 def _chain_ok(root: Path) -> list[int]:
@@ -61,8 +62,6 @@ def test_a_restarted_robot_continues_its_chain_and_cycle_numbers(
     root = tmp_path / "root"
     log_writer(root, 10)
     second = AuditLogger(root, robot_id="amr-1", config=LoggerConfig(threaded=False))
-    from trace_runtime.testing import synthetic_cycle
-
     _, _, action, _ = synthetic_cycle(0)
     second.log_cycle(5_000_000_000, action=action)
     second.close()
@@ -86,3 +85,23 @@ def test_threaded_synchronous_and_batched_writers_seal_identically(
             assert log.segments[0].info.chunk_count <= 4  # 10 + 10 + 5 cycles (+ checkpoint)
     assert len(seals["sync"]) == 25
     assert seals["threaded"] == seals["sync"] == seals["sync-batched"]
+
+
+def test_a_damaged_newest_segment_does_not_stop_the_robot_from_logging(
+    tmp_path: Path, log_writer: Callable[..., AuditLogger]
+) -> None:
+    root = tmp_path / "root"
+    log_writer(root, 25, config=LoggerConfig(threaded=False, max_segment_s=1.0))
+    newest = sorted((root / "hot").glob("*.mcap"))[-1]
+    # The file still opens (its summary is intact) but its last chunks fail their CRC.
+    data = bytearray(newest.read_bytes())
+    for chunk in open_log(newest).segments[0].chunks()[-2:]:
+        data[chunk.offset + 80 : chunk.offset + 96] = b"\x00" * 16
+    newest.write_bytes(bytes(data))
+    logger = AuditLogger(root, robot_id="amr-1", config=LoggerConfig(threaded=False))
+    logger.log_cycle(9_000_000_000, action=synthetic_cycle(0)[2])
+    logger.close()
+    # The chain continues from the newest seal that can still be read (cycle 19).
+    resumed = open_log(logger.stats.segments[-1]).get_cycle(20)
+    assert logger.stats.written == 1
+    assert resumed is not None and resumed.seal is not None
