@@ -23,9 +23,8 @@ from trace_audit.cli.app import (
     fail,
     guarded,
     help_text,
-    print_json,
 )
-from trace_audit.cli.render import Column, Doc, Seg, fmt_duration, fmt_t, setup_logging, show
+from trace_audit.cli.render import Column, Doc, Seg, emit, fmt_duration, fmt_t, setup_logging
 
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
     from trace_audit.verify import Finding, RobotSummary, VerifyReport
@@ -111,10 +110,7 @@ def verify_command(
         report = guarded(run)
     except (zstandard.ZstdError, struct.error, OSError) as err:
         fail(f"cannot read the log: {type(err).__name__}: {err}".splitlines()[0], EXIT_UNREADABLE)
-    if json_out:
-        print_json(report)
-    else:
-        show(verify_doc(report), plain=plain)
+    emit(report, verify_doc, json_out=json_out, plain=plain)
     if not report.ok:
         raise typer.Exit(EXIT_FINDINGS)
 
@@ -243,10 +239,7 @@ def keygen_command(
     from trace_runtime.integrity import generate_keypair
 
     pair = guarded(lambda: generate_keypair(out, name=name, overwrite=force))
-    if json_out:
-        print_json(pair)
-        return
-    show(keygen_doc(pair), plain=plain)
+    emit(pair, keygen_doc, json_out=json_out, plain=plain)
 
 
 def keygen_doc(pair: KeyPair) -> Doc:

@@ -27,9 +27,17 @@ from trace_audit.cli.app import (
     fail,
     guarded,
     help_text,
-    print_json,
 )
-from trace_audit.cli.render import Column, Doc, Item, Seg, fmt_duration, fmt_t, setup_logging, show
+from trace_audit.cli.render import (
+    Column,
+    Doc,
+    Item,
+    Seg,
+    emit,
+    fmt_duration,
+    fmt_t,
+    setup_logging,
+)
 
 if TYPE_CHECKING:
     from trace_audit.causal import FactorValue
@@ -132,10 +140,7 @@ def explain_command(  # noqa: PLR0917 - typer maps each parameter to an option
     from trace_audit.explain import explain
 
     result = _run(lambda: explain(log, t=t, cycle=cycle, lookback_s=lookback))
-    if json_out:
-        print_json(result)
-        return
-    show(explain_doc(result, lookback), plain=plain)
+    emit(result, lambda r: explain_doc(r, lookback), json_out=json_out, plain=plain)
 
 
 def explain_doc(r: Explanation, lookback_s: float = 600.0) -> Doc:
@@ -501,10 +506,7 @@ def why_command(  # noqa: PLR0917 - typer maps each parameter to an option
     from trace_audit.timeline import why
 
     result = _run(lambda: why(log, action, t=t))
-    if json_out:
-        print_json(result)
-        return
-    show(why_doc(result), plain=plain)
+    emit(result, why_doc, json_out=json_out, plain=plain)
 
 
 def why_doc(r: WhyResult) -> Doc:
@@ -608,10 +610,7 @@ def timeline_command(  # noqa: PLR0917 - typer maps each parameter to an option
     from trace_audit.timeline import timeline
 
     result = _run(lambda: timeline(log, start=start, end=end, every=every))
-    if json_out:
-        print_json(result)
-        return
-    show(timeline_doc(result), plain=plain)
+    emit(result, timeline_doc, json_out=json_out, plain=plain)
 
 
 def timeline_doc(r: Timeline) -> Doc:
@@ -706,10 +705,7 @@ def info_command(
     from trace_audit.info import log_info
 
     result = _run(lambda: log_info(log, scan=not quick))
-    if json_out:
-        print_json(result)
-        return
-    show(info_doc(result), plain=plain)
+    emit(result, info_doc, json_out=json_out, plain=plain)
 
 
 def _size(n: int) -> str:

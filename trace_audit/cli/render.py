@@ -15,10 +15,12 @@ import os
 import shutil
 import sys
 import textwrap
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Literal
+
+from trace_audit.cli.app import print_json
 
 __all__ = [
     "Column",
@@ -194,6 +196,14 @@ def show(doc: Doc, *, plain: bool) -> None:
         sys.stdout.write(render_plain(doc, _width()))
     else:
         _render_rich(doc)
+
+
+def emit(result: Any, to_doc: Callable[[Any], Doc], *, json_out: bool, plain: bool) -> None:
+    """A command's output: ``result`` as JSON for scripts, or its document for people."""
+    if json_out:
+        print_json(result)
+    else:
+        show(to_doc(result), plain=plain)
 
 
 def render_plain(doc: Doc, width: int = 80) -> str:
