@@ -199,8 +199,14 @@ def explain(
     needs_window = sensor_window > 0 and any(
         c.missing is not None and c.missing.level == "sensor_reading" for c in chains.factors
     )
+    period = max((s.session.period_ns for s in log.segments), default=0)
     back = _look_back(
-        log, target, decision.command, int(lookback_s * 1e9), sensor_window if needs_window else 0
+        log,
+        target,
+        decision.command,
+        int(lookback_s * 1e9),
+        sensor_window if needs_window else 0,
+        period_ns=period,
     )
     if needs_window:
         window = SensorWindow(sensor_window)
@@ -209,7 +215,6 @@ def explain(
         window.push(target.sensors)
         chains = trace_cycle(target, window)
     seal = _check_seal(log, target, back.prev_sealed)
-    period = max((s.session.period_ns for s in log.segments), default=0)
     scores = _scores(target, chains, seal, prev_sealed=back.prev_sealed, period_ns=period)
     graph = causal_graph(target, chains, decision)
     tree = graph_data(tree_graph(decision.tree)) if decision.tree else None
@@ -251,6 +256,8 @@ def _look_back(
     command: str | None,
     lookback_ns: int,
     window_cycles: int,
+    *,
+    period_ns: int,
 ) -> _Back:
     """One reverse walk: previous seal, where the current command began, sensor window.
 
@@ -265,8 +272,7 @@ def _look_back(
     previous: Cycle | None = None
     holding = True
     floor = target.t_ns - lookback_ns
-    period = max((s.session.period_ns for s in log.segments), default=0)
-    start = max(0, min(floor, target.t_ns - 2 * (window_cycles + 1) * period))
+    start = max(0, min(floor, target.t_ns - 2 * (window_cycles + 1) * period_ns))
     for earlier in _reverse_from(log, target.t_ns, start):
         if earlier.cycle >= target.cycle:
             continue
