@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from trace_audit.explain import explain
-from trace_runtime.reader import open_log
+from trace_runtime.logset import open_log
 
 DAY_CYCLES = 864_000
 MINUTE_CYCLES = 600

@@ -18,7 +18,7 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 _EXPORTS = {
-    "open_log": "trace_runtime.reader",
+    "open_log": "trace_runtime.logset",
     "explain": "trace_audit.explain",
     "Explanation": "trace_audit.explain",
     "why": "trace_audit.timeline",
@@ -72,7 +72,7 @@ if TYPE_CHECKING:
     from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
     from trace_audit.timeline import Timeline, WhyResult, timeline, why
     from trace_audit.verify import VerifyReport, verify_log
-    from trace_runtime.reader import open_log
+    from trace_runtime.logset import open_log
 
 
 def __getattr__(name: str) -> Any:

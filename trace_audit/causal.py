@@ -23,7 +23,7 @@ from typing import Any
 import networkx as nx
 
 from trace_audit.chains import DecisionChains, FactorChain, Link
-from trace_runtime.reader import Cycle
+from trace_runtime.cycles import Cycle
 from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF, TOPIC_EXECUTION, TOPIC_PERCEPTION
 
 __all__ = [

@@ -39,7 +39,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-from trace_runtime.reader import Cycle, RawMessage
+from trace_runtime.cycles import Cycle, RawMessage
 from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF, TOPIC_PERCEPTION
 
 __all__ = [

@@ -34,7 +34,8 @@ from trace_audit.timeline import (
 from trace_runtime.chain import GENESIS, digest
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
 from trace_runtime.integrity import verify_cycle
-from trace_runtime.reader import Cycle, Log
+from trace_runtime.cycles import Cycle
+from trace_runtime.logset import Log
 from trace_runtime.records import TOPIC_ACTION, TOPIC_SEAL
 
 __all__ = [

@@ -55,7 +55,9 @@ from trace_audit.chains import (
     trace_layers,
 )
 from trace_runtime.errors import LogReadError, UsageError
-from trace_runtime.reader import Cycle, Segment, find_segments, open_segment
+from trace_runtime.cycles import Cycle
+from trace_runtime.logset import find_segment_files as find_segments
+from trace_runtime.reader import Segment, open_segment
 from trace_runtime.records import (
     TOPIC_ACTION,
     TOPIC_BELIEF,

@@ -35,7 +35,9 @@ from trace_runtime.integrity import (
     iter_checkpoints,
     verify_cycle,
 )
-from trace_runtime.reader import Cycle, Segment, find_segments, open_segment
+from trace_runtime.cycles import Cycle
+from trace_runtime.logset import find_segment_files as find_segments
+from trace_runtime.reader import Segment, open_segment
 from trace_runtime.records import GENESIS, Checkpoint
 
 __all__ = [

@@ -1,5 +1,6 @@
 """trace_runtime: the embeddable TRACE audit logger and the one reader of its format."""
 
+from trace_runtime.cycles import Cycle, RawMessage
 from trace_runtime.errors import (
     LogReadError,
     NotTraceLogError,
@@ -19,15 +20,8 @@ from trace_runtime.integrity import (
     verify_cycle,
 )
 from trace_runtime.logger import AuditLogger, CycleBuilder, LoggerConfig, LoggerStats
-from trace_runtime.reader import (
-    Cycle,
-    Log,
-    RawMessage,
-    Segment,
-    SegmentInfo,
-    open_log,
-    open_segment,
-)
+from trace_runtime.logset import Log, open_log
+from trace_runtime.reader import Segment, SegmentInfo, open_segment
 from trace_runtime.records import (
     Action,
     Alternative,

@@ -39,3 +39,8 @@ class TimeOutOfRangeError(TraceError):
         self.t_ns = t_ns
         self.start_ns = start_ns
         self.end_ns = end_ns
+
+
+class LogLimitError(LogReadError):
+    """A file asks the reader for more than its limits allow (a decompression bomb, a
+    flood of records): refused, in bounded time and memory."""

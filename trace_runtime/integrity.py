@@ -42,7 +42,8 @@ if TYPE_CHECKING:
         Ed25519PrivateKey,
     )
 
-    from trace_runtime.reader import Cycle, RawMessage, Segment
+    from trace_runtime.cycles import Cycle, RawMessage
+    from trace_runtime.reader import Segment
 
 __all__ = [
     "CHECKPOINT_FORMAT",

@@ -33,7 +33,7 @@ from trace_runtime.integrity import (
     make_checkpoint,
     signing_bytes,
 )
-from trace_runtime.reader import RawMessage
+from trace_runtime.cycles import RawMessage
 from trace_runtime.records import (
     LAYER_TOPICS,
     TOPIC_ACTION,

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from trace_runtime import LogReadError, open_log, open_segment
 from trace_runtime.chain import digest
-from trace_runtime.reader import RawMessage
+from trace_runtime.cycles import RawMessage
 from trace_runtime.records import TOPIC_CHECKPOINT, TOPIC_SEAL
 from trace_runtime.tiers import ColdOptions, WarmPolicy, chain_problems, compact, decode_block
 from trace_runtime.tiers import cold as cold_module

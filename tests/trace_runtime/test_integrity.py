@@ -33,7 +33,7 @@ from trace_runtime.integrity import (
     signing_bytes,
     verify_cycle,
 )
-from trace_runtime.reader import Cycle, RawMessage
+from trace_runtime.cycles import Cycle, RawMessage
 from trace_runtime.records import GENESIS, TOPIC_ACTION, TOPIC_PERCEPTION, TOPIC_SEAL, Checkpoint
 from trace_runtime.testing import synthetic_cycle
 

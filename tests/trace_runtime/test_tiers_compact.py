@@ -17,7 +17,7 @@ import orjson
 import pytest
 
 from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
-from trace_runtime.reader import RawMessage
+from trace_runtime.cycles import RawMessage
 from trace_runtime.testing import synthetic_cycle
 from trace_runtime.tiers import (
     CATALOG_NAME,

@@ -1,47 +1,43 @@
 """Storage tiers of a log root: warm summaries, the lossless cold codec, catalog, compaction.
 
-Importing this package teaches the reader the ``warm`` and ``cold`` tiers (the reader
-imports it by itself when it meets a segment of either tier).
+The reader imports the tier codecs (``tiers.warm``, ``tiers.cold``) directly; compaction
+imports the reader. Names here are imported on first use, so importing one codec does not
+pull compaction (and the reader) in behind it: the imports stay one way.
 """
 
 from __future__ import annotations
 
-from trace_runtime.reader import register_assembler
-from trace_runtime.tiers.catalog import (
-    CATALOG_NAME,
-    Catalog,
-    CatalogEntry,
-    load_catalog,
-    refresh_catalog,
-)
-from trace_runtime.tiers.cold import (
-    CODEC,
-    BlockEncoder,
-    assemble_cold,
-    decode_block,
-    iter_decoded,
-    register_inner,
-)
-from trace_runtime.tiers.compaction import (
-    DEFAULT_OLDER_THAN_NS,
-    DEFAULT_RETENTION_NS,
-    ColdOptions,
-    CompactionReport,
-    Leftover,
-    Progress,
-    RetentionResult,
-    SegmentResult,
-    chain_problems,
-    compact,
-    parse_duration,
-    recover,
-    verify_replacement,
-)
-from trace_runtime.tiers.warm import WarmPolicy, assemble_warm, summarize
+import importlib
+from typing import TYPE_CHECKING, Any
 
-register_assembler("warm", assemble_warm)
-register_assembler("cold", assemble_cold)
-register_inner("warm", assemble_warm)
+_EXPORTS = {
+    "CATALOG_NAME": "trace_runtime.tiers.catalog",
+    "Catalog": "trace_runtime.tiers.catalog",
+    "CatalogEntry": "trace_runtime.tiers.catalog",
+    "load_catalog": "trace_runtime.tiers.catalog",
+    "refresh_catalog": "trace_runtime.tiers.catalog",
+    "CODEC": "trace_runtime.tiers.cold",
+    "BlockEncoder": "trace_runtime.tiers.cold",
+    "assemble_cold": "trace_runtime.tiers.cold",
+    "decode_block": "trace_runtime.tiers.cold",
+    "iter_decoded": "trace_runtime.tiers.cold",
+    "DEFAULT_OLDER_THAN_NS": "trace_runtime.tiers.compaction",
+    "DEFAULT_RETENTION_NS": "trace_runtime.tiers.compaction",
+    "ColdOptions": "trace_runtime.tiers.compaction",
+    "CompactionReport": "trace_runtime.tiers.compaction",
+    "Leftover": "trace_runtime.tiers.compaction",
+    "Progress": "trace_runtime.tiers.compaction",
+    "RetentionResult": "trace_runtime.tiers.compaction",
+    "SegmentResult": "trace_runtime.tiers.compaction",
+    "chain_problems": "trace_runtime.tiers.compaction",
+    "compact": "trace_runtime.tiers.compaction",
+    "parse_duration": "trace_runtime.tiers.compaction",
+    "recover": "trace_runtime.tiers.compaction",
+    "verify_replacement": "trace_runtime.tiers.compaction",
+    "WarmPolicy": "trace_runtime.tiers.warm",
+    "assemble_warm": "trace_runtime.tiers.warm",
+    "summarize": "trace_runtime.tiers.warm",
+}
 
 __all__ = [
     "CATALOG_NAME",
@@ -58,6 +54,8 @@ __all__ = [
     "RetentionResult",
     "SegmentResult",
     "WarmPolicy",
+    "assemble_cold",
+    "assemble_warm",
     "chain_problems",
     "compact",
     "decode_block",
@@ -69,3 +67,48 @@ __all__ = [
     "summarize",
     "verify_replacement",
 ]
+
+if TYPE_CHECKING:
+    from trace_runtime.tiers.catalog import (
+        CATALOG_NAME,
+        Catalog,
+        CatalogEntry,
+        load_catalog,
+        refresh_catalog,
+    )
+    from trace_runtime.tiers.cold import (
+        CODEC,
+        BlockEncoder,
+        assemble_cold,
+        decode_block,
+        iter_decoded,
+    )
+    from trace_runtime.tiers.compaction import (
+        DEFAULT_OLDER_THAN_NS,
+        DEFAULT_RETENTION_NS,
+        ColdOptions,
+        CompactionReport,
+        Leftover,
+        Progress,
+        RetentionResult,
+        SegmentResult,
+        chain_problems,
+        compact,
+        parse_duration,
+        recover,
+        verify_replacement,
+    )
+    from trace_runtime.tiers.warm import WarmPolicy, assemble_warm, summarize
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'trace_runtime.tiers' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return __all__

@@ -38,10 +38,11 @@ from typing import Any
 import orjson
 import zstandard
 
+from trace_runtime.cycles import Cycle, RawMessage, assemble_hot
 from trace_runtime.errors import LogReadError
-from trace_runtime.reader import Cycle, RawMessage, assemble_hot
 from trace_runtime.records import TOPIC_CHECKPOINT, TOPIC_SEAL
 from trace_runtime.tiers._shapes import Shape, ShapeError, check_descriptor, compile_shape, describe
+from trace_runtime.tiers.warm import assemble_warm
 
 CODEC = "trace-cold-v1"
 BLOCK_TOPIC = "/trace/cold/block"
@@ -857,12 +858,8 @@ def index_entry(block: Sequence[RawMessage]) -> dict[str, Any]:
     }
 
 
-_INNER: dict[str, Assembler] = {"hot": assemble_hot}
-
-
-def register_inner(tier: str, assembler: Assembler) -> None:
-    """Let cold blocks hold messages of another tier (warm registers itself here)."""
-    _INNER[tier] = assembler
+_INNER: dict[str, Assembler] = {"hot": assemble_hot, "warm": assemble_warm}
+"""The tiers a cold block may hold the messages of (cold re-encodes a hot or a warm segment)."""
 
 
 _RECENT: OrderedDict[bytes, DecodedBlock] = OrderedDict()
@@ -903,6 +900,18 @@ def assemble_cold(messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
             raise LogReadError(segment, f"cold block holds messages of unknown tier {block.tier!r}")
         cycles += assembler(block.messages, segment)
     return cycles
+
+
+class ColdAssembler:
+    """The reader's assembler for the cold tier: a cycle run ends with its block."""
+
+    closer_topic = BLOCK_TOPIC
+
+    def __call__(self, messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
+        return assemble_cold(messages, segment)
+
+
+COLD_ASSEMBLER = ColdAssembler()
 
 
 def iter_decoded(messages: Iterable[RawMessage]) -> Iterator[RawMessage]:

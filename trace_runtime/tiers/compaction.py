@@ -37,8 +37,9 @@ from typing import Any, Literal
 import orjson
 
 from trace_runtime.chain import digest
+from trace_runtime.cycles import RawMessage
 from trace_runtime.errors import LogReadError, UsageError
-from trace_runtime.reader import RawMessage, Segment
+from trace_runtime.reader import Segment
 from trace_runtime.records import MESSAGE_MODELS, TOPIC_SEAL
 from trace_runtime.segment import OutMessage, SegmentWriteError, SegmentWriter
 from trace_runtime.session import SessionInfo

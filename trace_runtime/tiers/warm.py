@@ -23,7 +23,7 @@ from typing import Any
 
 import orjson
 
-from trace_runtime.reader import Cycle, RawMessage
+from trace_runtime.cycles import Cycle, RawMessage
 from trace_runtime.records import (
     LAYER_TOPICS,
     TOPIC_ACTION,
@@ -432,6 +432,18 @@ def assemble_warm(messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
         t_ns = max((m.log_time_ns for m in messages), default=0)
         cycles.append(Cycle(int(number), t_ns, payloads, sensors, segment, summary))
     return cycles
+
+
+class WarmAssembler:
+    """The reader's assembler for the warm tier: like hot, a cycle run ends with its seal."""
+
+    closer_topic = TOPIC_SEAL
+
+    def __call__(self, messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
+        return assemble_warm(messages, segment)
+
+
+WARM_ASSEMBLER = WarmAssembler()
 
 
 def _list(value: Any) -> list[Any]:

@@ -1,0 +1,649 @@
+"""The byte layer of the reader: one MCAP file as records, chunks and messages.
+
+It knows MCAP and nothing of TRACE: the header, the summary (or a linear scan when a crashed
+writer left none), metadata records, the chunk table, and decoding a chunk into messages.
+Every read is bounded, because an investigator opens files an attacker may have prepared:
+``ReadLimits`` caps a chunk's decompressed size (declared and real), the records a chunk may
+hold for its compressed size, record lengths and string lengths; a limit hit is a
+``LogLimitError`` (a ``LogReadError``), never a ``MemoryError`` or a hang.
+"""
+
+from __future__ import annotations
+
+import array
+import bisect
+import contextlib
+import logging
+import mmap
+import os
+import struct
+import sys
+import zlib
+from collections import OrderedDict
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import lz4.frame
+import zstandard
+
+from trace_runtime.cycles import RawMessage
+from trace_runtime.errors import LogLimitError, LogReadError
+from trace_runtime.segment import CHUNK_TABLE_ATTACHMENT, MAGIC
+
+log = logging.getLogger("trace_runtime")
+
+_RECORD_HEADER = struct.Struct("<BQ")
+_MESSAGE_FIXED = struct.Struct("<HIQQ")
+_CHUNK_FIXED = struct.Struct("<QQQI")
+_FOOTER_SIZE = 9 + 20
+_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
+_OP_CHUNK_INDEX, _OP_METADATA, _OP_DATA_END = 8, 12, 15
+_OP_ATTACHMENT_INDEX, _OP_STATISTICS, _OP_METADATA_INDEX, _OP_SUMMARY_OFFSET = 10, 11, 13, 14
+_RECENT_CHUNKS = 4
+
+
+@dataclass(frozen=True, slots=True)
+class ReadLimits:
+    """Bounds on what one file may make the reader do. The defaults are far above what an
+    honest log needs (a TRACE chunk is a few MB at most; a camera frame a few tens of MB)."""
+
+    max_chunk_bytes: int = 64 << 20
+    """A chunk's decompressed size, as declared and as really produced."""
+    records_per_compressed_byte: int = 8
+    """Records a chunk may hold per byte of its compressed data (plus ``min_chunk_records``).
+    Honest chunks hold well under one: every message carries a time and sequence that do not
+    compress to nothing. A flood of empty messages that inflates from a few KB is refused."""
+    min_chunk_records: int = 65_536
+    max_record_bytes: int = 1 << 32
+    """A record in the file (outside chunks)."""
+
+    def __post_init__(self) -> None:
+        for name in ("max_chunk_bytes", "records_per_compressed_byte", "min_chunk_records"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"ReadLimits.{name} must be positive")
+
+
+DEFAULT_LIMITS = ReadLimits()
+
+
+@dataclass(frozen=True, slots=True)
+class ChunkInfo:
+    """Where a chunk is and what time it covers."""
+
+    offset: int
+    length: int
+    start_ns: int
+    end_ns: int
+
+
+_DAMAGE = (struct.error, ValueError, KeyError, IndexError, OverflowError, zstandard.ZstdError)
+"""What parsing a damaged record raises; never a bug of ours to show as a traceback."""
+
+
+class McapFile:
+    """An MCAP file opened for reading: records, metadata, chunk table, messages."""
+
+    def __init__(self, path: str | Path, limits: ReadLimits = DEFAULT_LIMITS) -> None:
+        self.path = Path(path)
+        self.limits = limits
+        self._data = _map_file(self.path)
+        if self._data[:8] != MAGIC:
+            raise LogReadError(str(path), "not an MCAP file (bad magic)")
+        self.profile = ""
+        self._schemas: dict[int, str] = {}
+        self._topic_map: dict[int, str] = {}
+        # Summary groups read only when needed (schemas and channels: when a chunk is
+        # decoded; metadata: when asked for), so opening a file reads a few records.
+        self._deferred_summary: list[tuple[int, int]] = []
+        self._metadata_at: dict[str, list[int]] = {}
+        self._metadata: dict[str, list[dict[str, str]]] = {}
+        # The chunk table: start times, end times and file offsets, sorted by start time.
+        # Loaded lazily from the writer's compact index (or the MCAP chunk indexes), so
+        # opening a long file does not pay for parsing tens of thousands of records.
+        self._table: tuple[Sequence[int], Sequence[int], Sequence[int]] | None = None
+        self._table_source: tuple[str, int, int] = ("none", 0, 0)
+        self._ends_sorted = True
+        self._starts_in_file_order = True
+        self._sorted_offsets: list[int] | None = None
+        self.statistics: tuple[int, int, int, dict[int, int]] | None = None
+        """(message start ns, message end ns, chunk count, messages per channel id)."""
+        self.loose: list[RawMessage] = []
+        """Messages written outside chunks (some writers do; ours never)."""
+        self._recent_chunks: OrderedDict[int, list[RawMessage]] = OrderedDict()
+        self._zstd = zstandard.ZstdDecompressor()
+        try:
+            finished = self._read_summary()
+        except _DAMAGE as err:
+            # A damaged summary does not make the data unreadable: scan the data instead.
+            log.warning("%s: damaged MCAP summary (%s); reading the data by scan", path, err)
+            self._reset_index()
+            finished = False
+        if not finished:
+            with self.damage_as_read_error():
+                self._scan()
+        self.finished = finished
+
+    @property
+    def size(self) -> int:
+        return len(self._data)
+
+    @property
+    def holds_messages(self) -> bool:
+        """False for a file with no chunk and no loose message (its times read 0)."""
+        if self.loose:
+            return True
+        if self.finished and self.statistics is not None:
+            return self.statistics[2] > 0
+        return len(self.chunk_table()[0]) > 0
+
+    def _reset_index(self) -> None:
+        self._schemas.clear()
+        self._topic_map.clear()
+        self._deferred_summary.clear()
+        self._metadata_at.clear()
+        self._metadata.clear()
+        self._table, self._table_source, self.statistics = None, ("none", 0, 0), None
+
+    @contextlib.contextmanager
+    def damage_as_read_error(self) -> Iterator[None]:
+        """Turn what parsing damaged bytes raises into one ``LogReadError`` naming the file."""
+        try:
+            yield
+        except _DAMAGE as err:
+            raise LogReadError(
+                str(self.path), f"damaged MCAP record ({type(err).__name__}: {err})"
+            ) from err
+        except RecursionError as err:  # pragma: no cover - no parser here recurses
+            raise LogReadError(str(self.path), "structure nested too deeply") from err
+
+    # --- metadata --------------------------------------------------------------------------
+
+    def metadata_records(self, name: str) -> list[dict[str, str]]:
+        """Every metadata record called ``name``, in file order (usually one)."""
+        for offset in self._metadata_at.pop(name, []):
+            with self.damage_as_read_error():
+                self._parse_metadata_at(offset)
+        return self._metadata.get(name, [])
+
+    def has_metadata(self, name: str) -> bool:
+        return name in self._metadata or name in self._metadata_at
+
+    @property
+    def metadata(self) -> dict[str, dict[str, str]]:
+        """Every metadata record by name (the last one of a name, as MCAP tools show it)."""
+        for name in list(self._metadata_at):
+            self.metadata_records(name)
+        return {name: records[-1] for name, records in self._metadata.items() if records}
+
+    @property
+    def topics(self) -> dict[int, str]:
+        """Channel id to topic."""
+        while self._deferred_summary:
+            with self.damage_as_read_error():
+                self._parse_summary_records(*self._deferred_summary.pop())
+        return self._topic_map
+
+    # --- summary and scan ------------------------------------------------------------------
+
+    def _read_summary(self) -> bool:
+        data = self._data
+        header = self._parse_header(8)
+        if header is None:
+            raise LogReadError(str(self.path), "truncated before the MCAP header ended")
+        if len(data) < 8 + _FOOTER_SIZE + 8 or data[-8:] != MAGIC:
+            return False
+        footer_at = len(data) - 8 - _FOOTER_SIZE
+        opcode, length = _RECORD_HEADER.unpack_from(data, footer_at)
+        if opcode != _OP_FOOTER or length != 20:
+            return False
+        summary_start, offsets_start, _crc = struct.unpack_from("<QQI", data, footer_at + 9)
+        if summary_start == 0:
+            return False  # a finished file written without a summary: scan it
+        ranges = self._summary_groups(offsets_start or footer_at, footer_at)
+        if not ranges:  # no summary offsets: walk the whole summary section once
+            ranges = {0: [(summary_start, offsets_start or footer_at)]}
+        for opcode, spans in ranges.items():
+            if opcode == _OP_CHUNK_INDEX:
+                self._table_source = ("chunk_index", spans[0][0], spans[-1][1])
+                continue
+            if opcode in (_OP_SCHEMA, _OP_CHANNEL):
+                self._deferred_summary += spans
+                continue
+            for begin, end in spans:
+                self._parse_summary_records(begin, end)
+        if self._table_source[0] == "none" and 0 in ranges:
+            self._table_source = ("chunk_index", summary_start, offsets_start or footer_at)
+        if not self._metadata and not self._metadata_at:
+            return False
+        if self.statistics is not None and self.statistics[2] == 0:
+            # An unchunked file: its messages sit in the data section. (Its summary may still
+            # hold an empty Chunk Index group, as the mcap library writes one.)
+            self._scan_loose_messages()
+        return True
+
+    def _summary_groups(self, begin: int, end: int) -> dict[int, list[tuple[int, int]]]:
+        """Summary Offset records: where each group of summary records lives."""
+        groups: dict[int, list[tuple[int, int]]] = {}
+        pos = begin
+        while pos + 9 <= end:
+            opcode, length = _RECORD_HEADER.unpack_from(self._data, pos)
+            _check_fits(pos + 9, length, end)
+            if opcode == _OP_SUMMARY_OFFSET:
+                group, start, size = struct.unpack_from("<BQQ", self._data, pos + 9)
+                _check_fits(start, size, len(self._data))
+                groups.setdefault(group, []).append((start, start + size))
+            pos += 9 + length
+        return groups
+
+    def _parse_summary_records(self, begin: int, end: int) -> None:
+        data = self._data
+        pos = begin
+        while pos + 9 <= end:
+            opcode, length = _RECORD_HEADER.unpack_from(data, pos)
+            body = pos + 9
+            _check_fits(body, length, end)
+            if opcode == _OP_SCHEMA:
+                self._parse_schema(body)
+            elif opcode == _OP_CHANNEL:
+                self._parse_channel(body)
+            elif opcode == _OP_STATISTICS:
+                self._parse_statistics(body)
+            elif opcode == _OP_METADATA_INDEX:
+                offset, _len = struct.unpack_from("<QQ", data, body)
+                name, _ = _read_str(data, body + 16)
+                self._metadata_at.setdefault(name, []).append(offset)
+            elif opcode == _OP_ATTACHMENT_INDEX:
+                offset, _len, _log, _create, size = struct.unpack_from("<QQQQQ", data, body)
+                name, _ = _read_str(data, body + 40)
+                if name == CHUNK_TABLE_ATTACHMENT:
+                    self._table_source = ("attachment", offset, size)
+            pos = body + length
+
+    def _parse_statistics(self, body: int) -> None:
+        data = self._data
+        (chunk_count,) = struct.unpack_from("<I", data, body + 8 + 2 + 4 + 4 + 4)
+        start, end = struct.unpack_from("<QQ", data, body + 8 + 2 + 4 + 4 + 4 + 4)
+        (map_len,) = struct.unpack_from("<I", data, body + 42)
+        counts: dict[int, int] = {}
+        pos = body + 46
+        _check_fits(pos, map_len, len(data))
+        while pos < body + 46 + map_len:
+            channel_id, n = struct.unpack_from("<HQ", data, pos)
+            counts[channel_id] = n
+            pos += 10
+        self.statistics = (start, end, chunk_count, counts)
+
+    def _parse_header(self, pos: int) -> int | None:
+        data = self._data
+        if pos + 9 > len(data):
+            return None
+        opcode, length = _RECORD_HEADER.unpack_from(data, pos)
+        if opcode != _OP_HEADER or pos + 9 + length > len(data):
+            return None
+        profile, _ = _read_str(data, pos + 9)
+        self.profile = profile
+        return int(pos + 9 + length)
+
+    def _scan(self) -> None:
+        """Walk every record after the header; stop at the first incomplete one."""
+        rows: list[tuple[int, int, int]] = []
+        data = self._data
+        pos = self._parse_header(8) or len(data)
+        end = len(data)
+        while pos + 9 <= end:
+            opcode, length = _RECORD_HEADER.unpack_from(data, pos)
+            body = pos + 9
+            if length > self.limits.max_record_bytes or body + length > end:
+                break  # a record cut short by the crash: everything before it is kept
+            if opcode == _OP_SCHEMA:
+                self._parse_schema(body)
+            elif opcode == _OP_CHANNEL:
+                self._parse_channel(body)
+            elif opcode == _OP_METADATA:
+                self._parse_metadata(body)
+            elif opcode == _OP_CHUNK:
+                start, stop = struct.unpack_from("<QQ", data, body)
+                if self._chunk_valid(pos):
+                    rows.append((start, stop, pos))
+            elif opcode == _OP_MESSAGE:
+                self.loose.append(self._parse_message(body, length, data))
+            elif opcode in (_OP_DATA_END, _OP_FOOTER):
+                break
+            pos = body + length
+        self._set_table(rows)
+
+    def _scan_loose_messages(self) -> None:
+        """Messages written outside chunks are not indexed; find them between chunks."""
+        data = self._data
+        pos = self._parse_header(8) or len(data)
+        while pos + 9 <= len(data):
+            opcode, length = _RECORD_HEADER.unpack_from(data, pos)
+            if length > self.limits.max_record_bytes or pos + 9 + length > len(data):
+                break
+            if opcode == _OP_MESSAGE:
+                self.loose.append(self._parse_message(pos + 9, length, data))
+            elif opcode in (_OP_DATA_END, _OP_FOOTER):
+                break
+            pos += 9 + length
+
+    def _chunk_valid(self, pos: int) -> bool:
+        """Whether a chunk met in a scan decodes; a limit hit is not damage and is raised."""
+        try:
+            self._decode_chunk_uncached(pos)
+        except LogLimitError:
+            raise
+        except (LogReadError, *_DAMAGE):
+            return False
+        return True
+
+    def _parse_schema(self, body: int) -> None:
+        (schema_id,) = struct.unpack_from("<H", self._data, body)
+        name, _ = _read_str(self._data, body + 2)
+        self._schemas[schema_id] = name
+
+    def _parse_channel(self, body: int) -> None:
+        channel_id, _schema_id = struct.unpack_from("<HH", self._data, body)
+        topic, _ = _read_str(self._data, body + 4)
+        self._topic_map[channel_id] = topic
+
+    def _parse_metadata_at(self, offset: int) -> None:
+        opcode, length = _RECORD_HEADER.unpack_from(self._data, offset)
+        _check_fits(offset + 9, length, len(self._data))
+        if opcode == _OP_METADATA:
+            self._parse_metadata(offset + 9)
+
+    def _parse_metadata(self, body: int) -> None:
+        name, pos = _read_str(self._data, body)
+        (map_len,) = struct.unpack_from("<I", self._data, pos)
+        pos += 4
+        stop = pos + map_len
+        _check_fits(pos, map_len, len(self._data))
+        values: dict[str, str] = {}
+        while pos < stop:
+            key, pos = _read_str(self._data, pos)
+            value, pos = _read_str(self._data, pos)
+            values[key] = value
+        self._metadata.setdefault(name, []).append(values)
+
+    def _parse_message(self, body: int, length: int, data: bytes) -> RawMessage:
+        channel_id, sequence, log_time, _publish = _MESSAGE_FIXED.unpack_from(data, body)
+        topic = self.topics.get(channel_id, f"<channel {channel_id}>")
+        return RawMessage(topic, sequence, log_time, data[body + 22 : body + length])
+
+    # --- the chunk table -------------------------------------------------------------------
+
+    def chunk_table(self) -> tuple[Sequence[int], Sequence[int], Sequence[int]]:
+        """(start ns, end ns, file offset) columns of every chunk, sorted by start time."""
+        if self._table is None:
+            kind, first, second = self._table_source
+            with self.damage_as_read_error():
+                if kind == "attachment":
+                    self._load_table_attachment(first)
+                elif kind == "chunk_index":
+                    self._set_table(self._load_chunk_indexes(first, second))
+                else:
+                    self._set_table([])
+        assert self._table is not None
+        return self._table
+
+    def _set_table(self, rows: list[tuple[int, int, int]]) -> None:
+        # Sorted by start time for seeks; chunks that start together stay in file order.
+        # (Timsort on sorted input is one linear pass in C: cheap enough to check always.)
+        by_time = sorted(rows, key=lambda r: (r[0], r[2]))
+        starts, ends = [r[0] for r in by_time], [r[1] for r in by_time]
+        offsets = [r[2] for r in by_time]
+        self._ends_sorted = ends == sorted(ends)
+        self._starts_in_file_order = offsets == sorted(offsets)
+        self._table = (starts, ends, offsets)
+
+    def _load_table_attachment(self, offset: int) -> None:
+        """Map the writer's chunk columns in place: no copy, no parse, already in order."""
+        data = self._data
+        pos = offset + 9 + 16
+        _name, pos = _read_str(data, pos)
+        _media, pos = _read_str(data, pos)
+        (size,) = struct.unpack_from("<Q", data, pos)
+        _check_fits(pos + 8, size, len(data))
+        count = size // 24
+        raw = memoryview(data)[pos + 8 : pos + 8 + 24 * count]
+        if sys.byteorder == "big":
+            values = array.array("Q", raw.tobytes())
+            values.byteswap()
+            raw = memoryview(values.tobytes())
+        column = raw.cast("Q")
+        self._table = (column[:count], column[count : 2 * count], column[2 * count :])
+        # Our writer's own table: written in file order, one chunk per batch in time order.
+        self._ends_sorted = self._starts_in_file_order = True
+
+    def _load_chunk_indexes(self, begin: int, end: int) -> list[tuple[int, int, int]]:
+        data = self._data
+        rows = []
+        pos = begin
+        while pos + 9 <= end:
+            opcode, length = _RECORD_HEADER.unpack_from(data, pos)
+            if opcode == _OP_CHUNK_INDEX:
+                start, stop, offset = struct.unpack_from("<QQQ", data, pos + 9)
+                rows.append((start, stop, offset))
+            pos += 9 + length
+        return rows
+
+    def chunks(self) -> list[ChunkInfo]:
+        """Every chunk's offset and time range, in time order."""
+        starts, ends, offsets = self.chunk_table()
+        return [ChunkInfo(o, 0, s, e) for s, e, o in zip(starts, ends, offsets, strict=True)]
+
+    def offsets_in_range(self, start_ns: int | None, end_ns: int | None) -> list[int]:
+        """File offsets of the chunks that may hold messages in the range, in file order."""
+        starts, ends, offsets = self.chunk_table()
+        hi = len(starts) if end_ns is None else bisect.bisect_right(starts, end_ns)
+        lo = 0
+        if start_ns is not None and self._ends_sorted:
+            lo = bisect.bisect_left(ends, start_ns)
+        chosen = [offsets[i] for i in range(lo, hi) if start_ns is None or ends[i] >= start_ns]
+        return chosen if self._starts_in_file_order else sorted(chosen)
+
+    def offsets_starting_by(self, t_ns: int) -> list[int]:
+        """File offsets of the chunks that start at or before ``t_ns``, in file order."""
+        starts, _ends, offsets = self.chunk_table()
+        chosen = list(offsets[: bisect.bisect_right(starts, t_ns)])
+        return chosen if self._starts_in_file_order else sorted(chosen)
+
+    def previous_offset(self, offset: int) -> int | None:
+        """The chunk just before the one at ``offset`` in the file (None for the first)."""
+        order = self._file_order()
+        i = bisect.bisect_left(order, offset)
+        return order[i - 1] if i > 0 else None
+
+    def is_last_chunk(self, offset: int) -> bool:
+        order = self._file_order()
+        return bool(order) and order[-1] == offset
+
+    def _file_order(self) -> Sequence[int]:
+        offsets = self.chunk_table()[2]
+        if self._starts_in_file_order:
+            return offsets
+        if self._sorted_offsets is None:
+            self._sorted_offsets = sorted(offsets)
+        return self._sorted_offsets
+
+    # --- chunks ----------------------------------------------------------------------------
+
+    def chunk_messages(self, offset: int) -> list[RawMessage]:
+        """The messages of the chunk at file ``offset``; the last few decoded are remembered,
+        since an investigation asks about neighbouring moments (a seek, then a walk back)."""
+        cached = self._recent_chunks.get(offset)
+        if cached is not None:
+            self._recent_chunks.move_to_end(offset)
+            return cached
+        with self.damage_as_read_error():
+            messages = self._decode_chunk_uncached(offset)
+        self._recent_chunks[offset] = messages
+        if len(self._recent_chunks) > _RECENT_CHUNKS:
+            self._recent_chunks.popitem(last=False)
+        return messages
+
+    def _decode_chunk_uncached(self, offset: int) -> list[RawMessage]:
+        data = self._data
+        opcode, length = _RECORD_HEADER.unpack_from(data, offset)
+        if opcode != _OP_CHUNK:
+            raise LogReadError(str(self.path), f"no chunk record at offset {offset}")
+        _check_fits(offset + 9, length, len(data))
+        body = offset + 9
+        _start, _end, size, crc = _CHUNK_FIXED.unpack_from(data, body)
+        compression, pos = _read_str(data, body + 28)
+        (records_len,) = struct.unpack_from("<Q", data, pos)
+        pos += 8
+        _check_fits(pos, records_len, body + length)
+        raw = self._decompress(compression, data[pos : pos + records_len], size, offset)
+        if crc and zlib.crc32(raw) != crc:
+            raise LogReadError(str(self.path), f"chunk at offset {offset} fails its CRC")
+        most = max(
+            self.limits.min_chunk_records, self.limits.records_per_compressed_byte * records_len
+        )
+        return self._chunk_records(raw, offset, most)
+
+    def _decompress(self, compression: str, compressed: bytes, size: int, offset: int) -> bytes:
+        """A chunk's records, never more than its declared size nor the limit."""
+        cap = self.limits.max_chunk_bytes
+        if size > cap:
+            raise LogLimitError(
+                str(self.path),
+                f"chunk at offset {offset} declares {size} bytes decompressed, over the "
+                f"limit of {cap} bytes",
+            )
+        if compression == "":
+            raw = bytes(compressed)
+        elif compression == "zstd":
+            # The frame may claim a size of its own; never let it allocate past the declared.
+            content = zstandard.frame_content_size(compressed)
+            if content > size:
+                raise LogLimitError(
+                    str(self.path),
+                    f"chunk at offset {offset} inflates past its declared {size} bytes",
+                )
+            raw = self._zstd.decompress(compressed, max_output_size=size)
+        elif compression == "lz4":
+            try:
+                raw = lz4.frame.LZ4FrameDecompressor().decompress(compressed, max_length=size + 1)
+            except RuntimeError as err:
+                raise LogReadError(str(self.path), f"chunk at offset {offset}: {err}") from err
+        else:
+            raise LogReadError(
+                str(self.path), f"chunk at offset {offset}: unknown compression {compression!r}"
+            )
+        if len(raw) != size:
+            raise LogReadError(
+                str(self.path),
+                f"chunk at offset {offset} decompresses to {len(raw)} bytes, not the "
+                f"{size} it declares",
+            )
+        return raw
+
+    def _chunk_records(self, raw: bytes, offset: int, most: int) -> list[RawMessage]:
+        messages: list[RawMessage] = []
+        topics = self.topics
+        pos, end, count = 0, len(raw), 0
+        while pos + 9 <= end:
+            opcode, length = _RECORD_HEADER.unpack_from(raw, pos)
+            body = pos + 9
+            _check_fits(body, length, end)
+            count += 1
+            if count > most:
+                raise LogLimitError(
+                    str(self.path),
+                    f"chunk at offset {offset} holds more than {most} records for its "
+                    "compressed size (a flood, not a log)",
+                )
+            if opcode == _OP_MESSAGE:
+                channel_id, sequence, log_time, _publish = _MESSAGE_FIXED.unpack_from(raw, body)
+                topic = topics.get(channel_id)
+                if topic is None:
+                    raise LogReadError(
+                        str(self.path), f"chunk at offset {offset}: message on unknown channel"
+                    )
+                messages.append(
+                    RawMessage(topic, sequence, log_time, raw[body + 22 : body + length])
+                )
+            elif opcode == _OP_CHANNEL:
+                channel_id, _schema = struct.unpack_from("<HH", raw, body)
+                topic_name, _ = _read_str(raw, body + 4)
+                self._topic_map[channel_id] = topic_name
+            pos = body + length
+        return messages
+
+    def iter_chunk_messages(
+        self, start_ns: int | None, end_ns: int | None, *, reverse: bool
+    ) -> Iterator[list[RawMessage]]:
+        """The messages of every chunk that may hold the range (loose messages first)."""
+        chosen = self.offsets_in_range(start_ns, end_ns)
+        if self.loose and not reverse:
+            yield self.loose
+        for offset in reversed(chosen) if reverse else chosen:
+            yield self.chunk_messages(offset)
+        if self.loose and reverse:
+            yield self.loose
+
+    def iter_messages(
+        self, start_ns: int | None = None, end_ns: int | None = None, *, reverse: bool = False
+    ) -> Iterator[RawMessage]:
+        """Raw messages with ``start_ns <= log_time <= end_ns``, in file order per chunk."""
+        for messages in self.iter_chunk_messages(start_ns, end_ns, reverse=reverse):
+            for msg in reversed(messages) if reverse else messages:
+                if (start_ns is None or msg.log_time_ns >= start_ns) and (
+                    end_ns is None or msg.log_time_ns <= end_ns
+                ):
+                    yield msg
+
+    def channel_counts(self) -> tuple[int, int, int, dict[str, int]]:
+        """(start ns, end ns, chunk count, messages per topic), from the summary or a scan."""
+        channels: dict[str, int] = {}
+        if self.finished and self.statistics is not None:
+            start, end, chunk_count, counts = self.statistics
+            channels = {self.topics.get(cid, str(cid)): n for cid, n in counts.items()}
+        else:
+            starts, ends, _offsets = self.chunk_table()
+            start, end = min(starts, default=0), max(ends, default=0)
+            for messages in self.iter_chunk_messages(None, None, reverse=False):
+                for msg in messages:
+                    channels[msg.topic] = channels.get(msg.topic, 0) + 1
+            chunk_count = len(starts)
+        if self.loose:
+            times = [m.log_time_ns for m in self.loose]
+            start = min(times) if not channels else min(start, *times)
+            end = max(end, *times)
+        return start, end, chunk_count, channels
+
+
+def _check_fits(body: int, length: int, end: int) -> None:
+    """A record whose length runs past its section is damage, not a record."""
+    if body + length > end:
+        raise struct.error(
+            f"record at {body - 9} runs {body + length - end} bytes past its section"
+        )
+
+
+def _map_file(path: Path) -> bytes:
+    """Map a file read-only: seeks touch only the pages they read, however big the file."""
+    try:
+        with open(path, "rb") as f:
+            size = os.fstat(f.fileno()).st_size
+            if size == 0:
+                raise LogReadError(str(path), "empty file")
+            return mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)  # type: ignore[return-value]
+    except FileNotFoundError as err:
+        raise LogReadError(str(path), "no such file") from err
+    except IsADirectoryError as err:
+        raise LogReadError(str(path), "is a directory, not a segment") from err
+    except PermissionError as err:
+        raise LogReadError(str(path), "permission denied") from err
+    except OSError as err:
+        raise LogReadError(str(path), f"cannot read ({err.strerror or err})") from err
+
+
+def _read_str(data: bytes, pos: int) -> tuple[str, int]:
+    (length,) = struct.unpack_from("<I", data, pos)
+    start = pos + 4
+    if start + length > len(data):
+        raise struct.error("string runs past the end of the record")
+    return data[start : start + length].decode("utf-8", errors="replace"), start + length
