@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trace_runtime.cycles import Cycle
-from trace_runtime.errors import LogReadError, TimeOutOfRangeError
+from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeError
 from trace_runtime.mcap_file import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.reader import Segment
 
@@ -32,6 +32,8 @@ class FileProblem:
 
     path: Path
     reason: str
+    foreign: bool = False
+    """The file is MCAP (or something else) that is not a TRACE segment: not damage."""
 
 
 def copy_rank(segment: Segment) -> tuple[int, int]:
@@ -184,7 +186,7 @@ def open_segments(
         try:
             segments.append(Segment(file, limits))
         except LogReadError as err:
-            problems.append(FileProblem(file, err.reason))
+            problems.append(FileProblem(file, err.reason, isinstance(err, NotTraceLogError)))
     return segments, problems
 
 
