@@ -154,28 +154,32 @@ class Segment(McapFile):
     def _assemble(self, run: Sequence[RawMessage]) -> list[Cycle]:
         return self._assembler(run, self.path.name) if run else []
 
-    def _chunk_cycles(self, offset: int, lead: list[RawMessage] | None = None) -> list[Cycle]:
+    def _chunk_cycles(
+        self, offset: int, lead: list[RawMessage] | None = None
+    ) -> tuple[list[Cycle], list[RawMessage]]:
         """The cycles the chunk at ``offset`` closes (with their first messages from earlier
-        chunks); the file's last chunk also gives the unfinished cycle after its last seal."""
+        chunks), and the messages it leaves open for the next chunk. The file's last chunk
+        also gives the unfinished cycle after its last seal."""
         if lead is None:
             lead = self._lead_in(offset)
         closed, tail = self._closed_in(offset)
         if self.is_last_chunk(offset):
             closed, tail = closed + tail, []
-        return self._assemble(lead + closed if lead else closed)
+        if not closed:
+            return [], lead + tail
+        return self._assemble(lead + closed if lead else closed), tail
 
     def _iter_runs(self, offsets: Sequence[int]) -> Iterator[list[Cycle]]:
-        """Cycles chunk by chunk, oldest first; the tail of each chunk carries into the next
-        without a second decode when the chunks follow each other in the file."""
+        """Cycles chunk by chunk, oldest first; what a chunk leaves open carries into the
+        next without a second decode when the chunks follow each other in the file."""
         if self.loose:
             yield self._assemble(self.loose)
-        carried: list[RawMessage] | None = None
+        carried: list[RawMessage] = []
         previous: int | None = None
         for offset in offsets:
             follows = previous is not None and self.previous_offset(offset) == previous
-            lead = carried if follows else None
-            yield self._chunk_cycles(offset, lead)
-            carried = self._closed_in(offset)[1]
+            cycles, carried = self._chunk_cycles(offset, carried if follows else None)
+            yield cycles
             previous = offset
 
     def iter_cycles(
@@ -185,7 +189,7 @@ class Segment(McapFile):
         offsets = self.offsets_in_range(start_ns, end_ns)
         runs: Iterator[list[Cycle]]
         if reverse:
-            runs = (self._chunk_cycles(o) for o in reversed(offsets))
+            runs = (self._chunk_cycles(o)[0] for o in reversed(offsets))
             if self.loose:
                 runs = itertools.chain(runs, [self._assemble(self.loose)])
         else:
@@ -204,7 +208,7 @@ class Segment(McapFile):
         # its cycle by several periods, and a closing checkpoint chunk holds no cycle. Step
         # back until a chunk has a cycle at or before t (a few chunks at most in practice).
         for offset in reversed(self.offsets_starting_by(t_ns)):
-            cycles = [c for c in self._chunk_cycles(offset) if c.t_ns <= t_ns]
+            cycles = [c for c in self._chunk_cycles(offset)[0] if c.t_ns <= t_ns]
             if cycles:
                 return cycles[-1]
         if self.loose:
