@@ -32,9 +32,9 @@ from trace_audit.timeline import (
     resolve_time,
 )
 from trace_runtime.chain import GENESIS, digest
+from trace_runtime.cycles import Cycle
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
 from trace_runtime.integrity import verify_cycle
-from trace_runtime.cycles import Cycle
 from trace_runtime.logset import Log
 from trace_runtime.records import TOPIC_ACTION, TOPIC_SEAL
 

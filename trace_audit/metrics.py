@@ -54,8 +54,8 @@ from trace_audit.chains import (
     score_layers,
     trace_layers,
 )
-from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.cycles import Cycle
+from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.logset import find_segment_files as find_segments
 from trace_runtime.reader import Segment, open_segment
 from trace_runtime.records import (

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, NotTraceLogError, RecordError
 from trace_runtime.integrity import (
     CheckpointState,
@@ -35,7 +36,6 @@ from trace_runtime.integrity import (
     iter_checkpoints,
     verify_cycle,
 )
-from trace_runtime.cycles import Cycle
 from trace_runtime.logset import find_segment_files as find_segments
 from trace_runtime.reader import Segment, open_segment
 from trace_runtime.records import GENESIS, Checkpoint

@@ -20,6 +20,7 @@ from cryptography.hazmat.primitives.serialization import (
 
 from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
 from trace_runtime.chain import digest
+from trace_runtime.cycles import Cycle, RawMessage
 from trace_runtime.errors import UsageError
 from trace_runtime.integrity import (
     Ed25519Signer,
@@ -33,7 +34,6 @@ from trace_runtime.integrity import (
     signing_bytes,
     verify_cycle,
 )
-from trace_runtime.cycles import Cycle, RawMessage
 from trace_runtime.records import GENESIS, TOPIC_ACTION, TOPIC_PERCEPTION, TOPIC_SEAL, Checkpoint
 from trace_runtime.testing import synthetic_cycle
 
