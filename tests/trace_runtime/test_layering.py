@@ -61,3 +61,71 @@ def test_the_investigator_package_exports_import_lazily_and_resolve() -> None:
         "    getattr(trace_audit, name)\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
+
+
+def _module_imports(package: str) -> dict[str, set[str]]:
+    """Imports between modules of ``package``, deferred ones (inside functions, or by
+    ``importlib.import_module("...")``) included: a cycle through a deferred import is still
+    a cycle. ``if TYPE_CHECKING:`` blocks are left out: they never run."""
+    graph: dict[str, set[str]] = {}
+    for path in (ROOT / package).rglob("*.py"):
+        rel = path.relative_to(ROOT).with_suffix("")
+        name = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+        tree = ast.parse(path.read_text())
+        type_only = {
+            id(inner)
+            for node in ast.walk(tree)
+            if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
+            for inner in ast.walk(node)
+        }
+        targets: set[str] = set()
+        for node in ast.walk(tree):
+            if id(node) in type_only:
+                continue
+            if isinstance(node, ast.Import):
+                targets |= {alias.name for alias in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                targets.add(node.module)
+            elif (
+                isinstance(node, ast.Call)
+                and ast.unparse(node.func).endswith("import_module")
+                and node.args
+                and isinstance(node.args[0], ast.Constant)
+            ):
+                targets.add(str(node.args[0].value))
+        graph[name] = {t for t in targets if t.startswith(package + ".")}
+    return graph
+
+
+def test_no_import_cycles_inside_the_runtime() -> None:
+    """A cycle (the reader and the tiers importing each other, filled by side effects) makes
+    import order matter; the layers must only ever import downwards."""
+    graph = _module_imports("trace_runtime")
+    state: dict[str, int] = {}
+    cycles: list[list[str]] = []
+
+    def visit(node: str, path: list[str]) -> None:
+        state[node] = 1
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                cycles.append([*path[path.index(nxt) :], nxt])
+            elif nxt not in state:
+                visit(nxt, [*path, nxt])
+        state[node] = 2
+
+    for module in sorted(graph):
+        if module not in state:
+            visit(module, [module])
+    assert not cycles
+
+
+def test_the_reader_layers_import_downwards() -> None:
+    """Bytes, then cycles, then one segment, then many: never the other way."""
+    graph = _module_imports("trace_runtime")
+    assert "trace_runtime.reader" not in graph["trace_runtime.mcap_file"]
+    assert "trace_runtime.logset" not in graph["trace_runtime.reader"]
+    assert not graph["trace_runtime.cycles"] & {
+        "trace_runtime.mcap_file",
+        "trace_runtime.reader",
+        "trace_runtime.logset",
+    }
