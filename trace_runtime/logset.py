@@ -16,6 +16,7 @@ from pathlib import Path
 
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeError
+from trace_runtime.integrity import SealStatus, verify_cycle
 from trace_runtime.mcap_file import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.reader import Segment
 
@@ -123,6 +124,20 @@ class Log:
             (s for s in self.segments if s.session.robot_id == robot_id),
             key=lambda s: (s.session.segment, s.session.first_cycle, s.path.name),
         )
+
+    def iter_chain(self, robot_id: str) -> Iterator[tuple[Cycle, SealStatus]]:
+        """One robot's cycles in chain order, each with its seal check and the link to the
+        previous seal (across segments and tiers; the first seal of a segment is checked
+        against the previous segment's last, or its ``prev_seal`` when that is missing)."""
+        prev: str | None = None
+        for segment in self.segments_of(robot_id):
+            if prev is None:
+                prev = segment.session.prev_seal
+            for cycle in segment.iter_cycles():
+                status = verify_cycle(cycle, prev)
+                if status.seal_digest is not None:
+                    prev = status.seal_digest
+                yield cycle, status
 
     @property
     def start_ns(self) -> int:
