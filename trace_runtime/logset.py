@@ -10,6 +10,7 @@ report, not a reason to refuse the other segments.
 from __future__ import annotations
 
 import bisect
+import logging
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +20,8 @@ from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeE
 from trace_runtime.integrity import SealStatus, verify_cycle
 from trace_runtime.mcap_file import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.reader import Segment
+
+log = logging.getLogger("trace_runtime")
 
 TIER_DIRECTORIES = ("hot", "warm", "cold")
 """The subdirectories of a log root, one per storage tier."""
@@ -220,4 +223,8 @@ def open_log(path: str | Path, limits: ReadLimits = DEFAULT_LIMITS) -> Log:
     if not root.is_dir():
         return Log([Segment(root, limits)], root)
     segments, problems = open_segments(files, limits)
-    return Log(segments, root, problems)
+    opened = Log(segments, root, problems)
+    for problem in problems:
+        what = "not a TRACE segment" if problem.foreign else "unreadable"
+        log.warning("%s: %s, skipped (%s)", problem.path, what, problem.reason)
+    return opened
