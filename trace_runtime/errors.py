@@ -39,3 +39,16 @@ class TimeOutOfRangeError(TraceError):
         self.t_ns = t_ns
         self.start_ns = start_ns
         self.end_ns = end_ns
+
+
+class LogLockedError(TraceError):
+    """Another live logger already writes this robot's log here (one writer per robot and root).
+
+    ``pid`` is the holder's process id when it could be read from the lock file, else None.
+    """
+
+    def __init__(self, path: str, pid: int | None) -> None:
+        holder = f"pid {pid}" if pid is not None else "another process"
+        super().__init__(f"{path}: the log is being written by {holder} (lock held)")
+        self.path = path
+        self.pid = pid
