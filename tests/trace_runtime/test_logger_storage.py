@@ -60,6 +60,10 @@ def test_a_deleted_root_is_recreated_and_the_loss_declared(
         shutil.copy(logger.stats.segments[-1], copy)  # what was on disk, to find the last seal
         shutil.rmtree(root)  # the storage disappears under the running robot
         _log(logger, range(20, 40))
+        assert logger.flush()
+        # The lock went with the directory and was taken again: still one writer.
+        with pytest.raises(LogLockedError):
+            AuditLogger(root, robot_id="r", config=LoggerConfig(threaded=False))
         logger.close()
 
     cycles = {c.cycle: c for c in open_log(root).iter_cycles()}
@@ -185,12 +189,15 @@ def test_a_live_process_holds_the_lock_and_kill_9_releases_it(tmp_path: Path) ->
 class _HangingFile(io.FileIO):
     """A real file whose write() blocks on ``release`` while ``hang`` is set: a hung disk."""
 
+    stuck = threading.Event()  # set once a write is blocked
+
     def __init__(self, path: Path, hang: threading.Event, release: threading.Event) -> None:
         super().__init__(path, "w+")
         self.hang, self.release = hang, release
 
     def write(self, data: Any) -> int:
         if self.hang.is_set():
+            self.stuck.set()
             self.release.wait()
         return super().write(data)
 
@@ -206,8 +213,11 @@ def test_close_returns_within_its_timeout_when_the_disk_hangs(tmp_path: Path) ->
     _log(logger, range(3))
     assert logger.flush()
     hang.set()
+    _HangingFile.stuck.clear()
     try:
-        _log(logger, range(3, 13))
+        _log(logger, range(3, 4))
+        assert _HangingFile.stuck.wait(5)  # the writer is inside cycle 3's write, for good
+        _log(logger, range(4, 13))  # and these wait in the queue behind it
         start = time.monotonic()
         logger.close(timeout_s=1.0)
         elapsed = time.monotonic() - start
@@ -223,15 +233,35 @@ def test_close_returns_within_its_timeout_when_the_disk_hangs(tmp_path: Path) ->
         assert logger._thread is not None
         logger._thread.join(5)
     assert not logger._thread.is_alive()
-    stats = logger.stats
-    assert stats.written + stats.dropped == stats.committed == 13
-    cycles = [c.cycle for c in open_log(path).iter_cycles()]
-    assert cycles == list(range(3 + stats.written - 3))
+    stats = logger.stats  # cycle 3 was written after all; 4..12 never will be
+    assert (stats.written, stats.dropped_undelivered, stats.committed) == (4, 9, 13)
+    assert [c.cycle for c in open_log(path).iter_cycles()] == [0, 1, 2, 3]
     closing = open_log(path).segments[0].metadata["trace.close"]
-    assert closing == {
-        "dropped_after_last_seal": str(13 - len(cycles)),
-        "last_sealed_cycle": str(cycles[-1]),
-    }
+    assert closing == {"dropped_after_last_seal": "9", "last_sealed_cycle": "3"}
+
+
+def test_a_synchronous_close_is_bounded_too(tmp_path: Path) -> None:
+    hang, release = threading.Event(), threading.Event()
+
+    def opener(path: Path) -> BinaryIO:
+        return _HangingFile(path, hang, release)  # type: ignore[return-value]
+
+    config = LoggerConfig(threaded=False, batch_cycles=4, opener=opener)
+    logger = AuditLogger(tmp_path / "hung.mcap", robot_id="r", config=config)
+    _log(logger, range(3))  # held for a batch of 4: close() must write them
+    hang.set()
+    try:
+        start = time.monotonic()
+        logger.close(timeout_s=0.5)
+        assert time.monotonic() - start < 1.5
+        assert logger.stats.dropped_undelivered == 3 and logger.stats.written == 0
+    finally:
+        hang.clear()
+        release.set()
+    deadline = time.monotonic() + 5
+    while logger.stats.dropped_undelivered and time.monotonic() < deadline:
+        time.sleep(0.01)  # the disk is back: the closer thread writes them after all
+    assert logger.stats.written == 3 and logger.stats.dropped_undelivered == 0
 
 
 _HUNG_AT_EXIT = """
