@@ -2,6 +2,8 @@
 
 from trace_runtime.cycles import Cycle, RawMessage
 from trace_runtime.errors import (
+    LogLimitError,
+    LogLockedError,
     LogReadError,
     NotTraceLogError,
     RecordError,
@@ -68,6 +70,8 @@ __all__ = [
     "Execution",
     "Factor",
     "Log",
+    "LogLimitError",
+    "LogLockedError",
     "LogReadError",
     "LoggerConfig",
     "LoggerStats",

@@ -44,3 +44,16 @@ class TimeOutOfRangeError(TraceError):
 class LogLimitError(LogReadError):
     """A file asks the reader for more than its limits allow (a decompression bomb, a
     flood of records): refused, in bounded time and memory."""
+
+
+class LogLockedError(TraceError):
+    """Another live logger already writes this robot's log here (one writer per robot and root).
+
+    ``pid`` is the holder's process id when it could be read from the lock file, else None.
+    """
+
+    def __init__(self, path: str, pid: int | None) -> None:
+        holder = f"pid {pid}" if pid is not None else "another process"
+        super().__init__(f"{path}: the log is being written by {holder} (lock held)")
+        self.path = path
+        self.pid = pid

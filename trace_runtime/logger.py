@@ -8,7 +8,9 @@ and writes a chunk per batch, so every committed cycle reaches the OS within one
 Failure policy (see schemas/PROFILE.md, "Dropped cycles"): nothing about I/O ever raises
 into the control loop. A full queue, a failed write, a lost disk or permission: the cycle
 is dropped and counted, the first failure of each kind is logged once through ``logging``,
-and the next seal that is written carries the count in ``dropped``.
+and the next seal that is written carries the count in ``dropped``. A segment deleted under
+the writer is noticed at the next batch and replaced; ``close()`` is bounded in time even
+when the disk hangs. One live logger per robot and log root, enforced by an OS file lock.
 """
 
 from __future__ import annotations
@@ -16,7 +18,9 @@ from __future__ import annotations
 import contextlib
 import functools
 import logging
+import os
 import re
+import sys
 import threading
 import time
 from collections import deque
@@ -28,7 +32,7 @@ from typing import Any, BinaryIO, Literal, Protocol
 
 from trace_runtime.chain import digest
 from trace_runtime.codec import encode_json, encode_layer, encode_seal_fields
-from trace_runtime.errors import RecordError, UsageError
+from trace_runtime.errors import LogLockedError, RecordError, UsageError
 from trace_runtime.integrity import Signer, encode_checkpoint, load_signer, make_checkpoint
 from trace_runtime.records import (
     GENESIS,
@@ -46,6 +50,9 @@ from trace_runtime.records import (
 )
 from trace_runtime.segment import OutMessage, SegmentWriteError, SegmentWriter
 from trace_runtime.session import SessionInfo
+
+if sys.platform != "win32":  # Linux is the target; elsewhere the writer lock is skipped
+    import fcntl
 
 log = logging.getLogger("trace_runtime")
 
@@ -97,9 +104,14 @@ class LoggerStats:
 
     committed: int = 0
     written: int = 0
+    """Cycles on disk (cycles of a segment later lost with its storage are taken back out)."""
     dropped_queue_full: int = 0
     dropped_io: int = 0
     dropped_aborted: int = 0
+    dropped_storage_lost: int = 0
+    """Cycles written into a segment that was then deleted under the writer."""
+    dropped_undelivered: int = 0
+    """Cycles still queued or being written when ``close()`` gave up waiting (a hung disk)."""
     segments: list[Path] = field(default_factory=list)
     bytes_written: int = 0
     checkpoints: int = 0
@@ -107,7 +119,13 @@ class LoggerStats:
 
     @property
     def dropped(self) -> int:
-        return self.dropped_queue_full + self.dropped_io + self.dropped_aborted
+        return (
+            self.dropped_queue_full
+            + self.dropped_io
+            + self.dropped_aborted
+            + self.dropped_storage_lost
+            + self.dropped_undelivered
+        )
 
 
 @dataclass(slots=True)
@@ -135,6 +153,7 @@ class _Handover:
         self._closed = False
         self._put = 0  # producer only
         self._done = 0  # consumer only
+        self.discarded: list[_PendingCycle] = []  # what abandon() took out, never written
 
     def put(self, item: _PendingCycle, *, block: bool) -> bool:
         """Hand ``item`` over; False when full and not blocking."""
@@ -153,8 +172,10 @@ class _Handover:
         """Up to ``most`` items, waiting for at least one; [] once closed and drained."""
         while True:
             batch: list[_PendingCycle] = []
-            while self._items and len(batch) < most:
-                batch.append(self._items.popleft())
+            # abandon() may empty the deque under us: an empty popleft ends the batch.
+            with contextlib.suppress(IndexError):
+                while self._items and len(batch) < most:
+                    batch.append(self._items.popleft())
             if batch:
                 self._space.set()
                 return batch
@@ -173,8 +194,21 @@ class _Handover:
             time.sleep(0.0005)
         return self._done == self._put
 
+    @property
+    def undone(self) -> int:
+        """Cycles handed over and not yet written (or failed)."""
+        return self._put - self._done
+
     def close(self) -> None:
         self._closed = True
+        self._wake.set()
+
+    def abandon(self) -> None:
+        """Close and take every waiting item out, so the consumer writes nothing more."""
+        self._closed = True
+        with contextlib.suppress(IndexError):  # the consumer may take the last one first
+            while self._items:
+                self.discarded.append(self._items.popleft())
         self._wake.set()
 
 
@@ -311,7 +345,30 @@ class AuditLogger:
         self._undeclared_writer = 0  # writer side only (under _lock)
         self._reported: set[str] = set()
         self._last_sync = time.monotonic()
+        # close() giving up on a hung writer, and the writer finishing a batch after that,
+        # settle ``stats.dropped_undelivered`` under this lock (see close()).
+        self._accounting = threading.Lock()
+        self._gave_up = False
+        self._closing_cycles = 0  # threaded=False: cycles close() handed to the closer
 
+        # One live writer per robot and log root: taken before reading the resume point, so
+        # two processes cannot both continue the same chain. Raises LogLockedError.
+        self._writer_lock = _WriterLock.take(_lock_path(self.path, self.is_root, robot_id))
+        try:
+            self._start(robot_id, period_s, software_version, policy_version, clock)
+        except BaseException:
+            if self._writer_lock is not None:
+                self._writer_lock.release()
+            raise
+
+    def _start(
+        self,
+        robot_id: str,
+        period_s: float,
+        software_version: str,
+        policy_version: str,
+        clock: str,
+    ) -> None:
         first_cycle, prev_seal, segment_no = 0, GENESIS, 0
         if self.is_root:
             first_cycle, prev_seal, segment_no = _resume_point(self.path, robot_id)
@@ -388,20 +445,51 @@ class AuditLogger:
             return True
         return self._queue.wait_idle(timeout_s)
 
-    def close(self) -> None:
-        """Write what is queued, then the segment's summary and indexes. Idempotent."""
+    def close(self, timeout_s: float | None = 5.0) -> None:
+        """Write what is queued, then the segment's summary and indexes. Idempotent.
+
+        Waits at most ``timeout_s`` for the writer (a hung disk must not stall the robot's
+        shutdown; None waits as long as it takes, for log generators with a deep queue).
+        What it could not write by then is counted in
+        ``stats.dropped_undelivered`` and logged once; should the disk come back, the writer
+        thread (a daemon) ends the segment and declares them in ``trace.close``, and it keeps
+        the robot's writer lock until then.
+        """
         if self._closed:
             return
         self._closed = True
         if self._queue is not None and self._thread is not None:
             self._queue.close()
-            self._thread.join()
-        with self._lock:
-            if self._sync_batch:
-                batch, self._sync_batch = self._sync_batch, []
-                self._write_batch(batch)
-            self._declare_tail()
-            self._close_segment()
+            finisher = self._thread
+        else:
+            batch, self._sync_batch = self._sync_batch, []
+            self._closing_cycles = len(batch)
+            finisher = threading.Thread(
+                target=self._finish,
+                args=(batch,),
+                name=f"trace-close-{self._session.robot_id}",
+                daemon=True,
+            )
+            finisher.start()
+        finisher.join(timeout_s)
+        if timeout_s is not None and finisher.is_alive():
+            self._give_up(timeout_s)
+
+    def _give_up(self, timeout_s: float) -> None:
+        """close() timed out: count what the writer still holds as undelivered."""
+        with self._accounting:
+            self._gave_up = True
+            if self._queue is not None:
+                self._queue.abandon()
+                undelivered = self._queue.undone
+            else:
+                undelivered = self._closing_cycles
+            self.stats.dropped_undelivered += undelivered
+        self._report_once(
+            "close-timeout",
+            f"audit log close timed out after {timeout_s:g} s (storage hung?): "
+            f"{undelivered} cycle(s) not written",
+        )
 
     def __enter__(self) -> AuditLogger:
         return self
@@ -452,14 +540,40 @@ class AuditLogger:
         while True:
             batch = handover.take(self.config.max_batch_cycles)
             if not batch:
-                return  # closed and drained
+                break  # closed and drained, or abandoned by a close() that timed out
             with self._lock:
                 self._write_batch(batch)
-            handover.done(len(batch))
+            with self._accounting:
+                handover.done(len(batch))
+                if self._gave_up:  # close() counted this batch as undelivered; it is not
+                    self.stats.dropped_undelivered -= len(batch)
+        # What close() took out of the queue is declared in trace.close like any drop.
+        skipped = handover.discarded
+        self._finish([], skipped=len(skipped) + sum(p.dropped_before for p in skipped))
+
+    def _finish(self, batch: list[_PendingCycle], *, skipped: int = 0) -> None:
+        """End the log: write ``batch``, declare the undeclared tail, close the segment, let
+        go of the writer lock. On the writer thread, or a closer thread (threaded=False)."""
+        try:
+            with self._lock:
+                if batch:
+                    self._write_batch(batch)
+                    with self._accounting:
+                        if self._gave_up:
+                            self.stats.dropped_undelivered -= len(batch)
+                        self._closing_cycles = 0
+                self._undeclared_writer += skipped
+                self._check_storage()
+                self._declare_tail()
+                self._close_segment()
+        finally:
+            if self._writer_lock is not None:
+                self._writer_lock.release()
 
     def _write_batch(self, batch: list[_PendingCycle]) -> None:
         """Seal and write cycles; called with ``_lock`` held. Swallows every failure."""
         try:
+            self._check_storage()
             self._maybe_rotate(batch[0].t_ns)
             if self._segment is None:
                 self._open_segment(self._session.next_segment(self._prev_seal, batch[0].cycle))
@@ -521,6 +635,30 @@ class AuditLogger:
             with contextlib.suppress(Exception):  # already failing; nothing more to do
                 self._segment._stream.close()
             self._segment = None
+
+    def _check_storage(self) -> None:
+        """A segment deleted under the writer (its directory removed) is lost with every
+        cycle sealed into it: give it up so the next batch opens a new segment (recreating
+        the directory) that continues the chain from the last seal, and whose first seal
+        declares the lost cycles as dropped (schemas/PROFILE.md §7). One fstat per batch."""
+        segment = self._segment
+        if segment is None or not segment.storage_lost():
+            return
+        lost = self._sealed_in_segment
+        self.stats.written -= lost
+        self.stats.dropped_storage_lost += lost
+        self._undeclared_writer += lost
+        path = self.stats.segments[-1] if self.stats.segments else self.path
+        self._report_once(
+            "storage",
+            f"audit storage lost: {path} was deleted under the writer with {lost} cycle(s); "
+            "going on in a new segment",
+        )
+        with contextlib.suppress(OSError, ValueError):  # nothing to save in an unlinked file
+            segment._stream.close()
+        self._segment = None
+        if self._writer_lock is not None:
+            self._writer_lock.renew(self._report_once)
 
     def _maybe_rotate(self, t_ns: int) -> None:
         segment = self._segment
@@ -702,3 +840,84 @@ def _resume_point(root: Path, robot_id: str) -> tuple[int, str, int]:
             seal, seal_digest = found
             return seal.cycle + 1, seal_digest, number + 1
     return 0, GENESIS, number + 1
+
+
+def _lock_path(path: Path, is_root: bool, robot_id: str) -> Path:
+    """Where the writer lock of a log lives: per robot in a root, per file otherwise."""
+    if is_root:
+        return path / ".locks" / f"{robot_id}.lock"
+    return path.with_name(f".{path.name}.lock")
+
+
+class _WriterLock:
+    """One live writer per robot and log root: an exclusive ``flock`` on a lock file.
+
+    The kernel drops the lock when the process dies, so ``kill -9`` never leaves a stale
+    one. The holder's pid is written into the file for the refusal message. ``flock``
+    locks belong to the open file, so a second logger in the same process is refused too.
+    """
+
+    def __init__(self, path: Path, fd: int) -> None:
+        self.path = path
+        self._fd = fd
+
+    @classmethod
+    def take(cls, path: Path) -> _WriterLock | None:
+        """Lock ``path``; raise ``LogLockedError`` when another writer holds it. None where
+        the platform or the filesystem has no ``flock`` (logged; the log is then unguarded)."""
+        if sys.platform == "win32":
+            return None
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _read_pid(fd)
+            os.close(fd)
+            raise LogLockedError(str(path), holder) from None
+        except OSError as err:  # e.g. ENOLCK on a filesystem without locks
+            os.close(fd)
+            log.warning("cannot lock %s (%s): a second writer would not be refused", path, err)
+            return None
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        except OSError:
+            pass  # the pid is only for the message; the lock itself holds
+        return cls(path, fd)
+
+    def renew(self, report: Callable[[str, str], None]) -> None:
+        """The lock file was deleted with its directory: lock a new one at the same place,
+        so a logger started on the recreated root is still refused."""
+        if self._fd < 0:
+            return
+        try:
+            if os.fstat(self._fd).st_nlink > 0:
+                return
+            fresh = _WriterLock.take(self.path)
+        except LogLockedError as err:
+            report("lock", f"audit log lock lost with its directory and taken by another: {err}")
+            return
+        except OSError as err:
+            report("lock", f"could not renew the audit log lock {self.path}: {err}")
+            return
+        if fresh is not None:
+            os.close(self._fd)
+            self._fd, fresh._fd = fresh._fd, -1
+
+    def release(self) -> None:
+        """Let go of the lock (closing the descriptor drops it). Idempotent."""
+        fd, self._fd = self._fd, -1
+        if fd < 0:
+            return
+        with contextlib.suppress(OSError):
+            os.ftruncate(fd, 0)  # no stale pid for the next reader
+        os.close(fd)
+
+
+def _read_pid(fd: int) -> int | None:
+    try:
+        text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+    except OSError:
+        return None
+    return int(text) if text.isdigit() else None

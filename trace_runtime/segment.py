@@ -279,11 +279,30 @@ class SegmentWriter:
 
     def sync(self) -> None:
         """fsync the file, when the stream has a file descriptor."""
+        fileno = self._fileno()
+        if fileno is not None:
+            os.fsync(fileno)
+
+    def storage_lost(self) -> bool:
+        """True when the file was unlinked under the writer (its directory deleted, or the
+        file itself): everything written to it is gone once it is closed.
+
+        One ``fstat`` (about a microsecond); False for streams without a file descriptor,
+        which cannot be checked.
+        """
+        fileno = self._fileno()
+        if fileno is None:
+            return False
         try:
-            fileno = self._stream.fileno()
+            return os.fstat(fileno).st_nlink == 0
+        except OSError:
+            return False  # the next write reports what is wrong with the descriptor
+
+    def _fileno(self) -> int | None:
+        try:
+            return self._stream.fileno()
         except (AttributeError, OSError, ValueError):
-            return
-        os.fsync(fileno)
+            return None
 
     def finish(self) -> None:
         """Write the data end, the summary (schemas, channels, statistics, indexes), the footer."""

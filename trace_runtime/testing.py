@@ -15,6 +15,7 @@ encoding and sealing, so what a test sees is exactly what would have been writte
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
@@ -22,7 +23,7 @@ from typing import Any, TypeVar
 from trace_runtime.chain import digest
 from trace_runtime.codec import encode_layer, encode_seal
 from trace_runtime.errors import UsageError
-from trace_runtime.logger import CycleBuilder, LoggerStats
+from trace_runtime.logger import AuditLogger, CycleBuilder, LoggerStats
 from trace_runtime.records import (
     GENESIS,
     TOPIC_ACTION,
@@ -307,3 +308,18 @@ def synthetic_cycle(
     )
     belief = Belief(nodes=nodes, edges=edges)
     return perception, belief, action, execution
+
+
+def simulate_crash(logger: AuditLogger) -> None:
+    """Leave a (synchronous) logger as a killed process would: every written batch stays on
+    disk, the open segment never gets its summary or closing checkpoint, and the writer lock
+    is gone (the kernel drops it with the process). For tests of crash recovery."""
+    segment = logger._segment
+    if segment is not None:
+        segment._stream.flush()
+        os.fsync(segment._stream.fileno())
+        segment._stream.close()
+    logger._segment = None
+    logger._closed = True
+    if logger._writer_lock is not None:
+        logger._writer_lock.release()

@@ -9,7 +9,6 @@ and which links to break, so tests can check that a broken link is reported, not
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +26,7 @@ from trace_runtime import (
     open_segment,
 )
 from trace_runtime.session import SESSION_METADATA
+from trace_runtime.testing import simulate_crash
 
 T0_NS = 100_000_000_000  # the fixture logs start at t = 100 s (not 0: relative times matter)
 PERIOD_NS = 100_000_000
@@ -362,15 +362,8 @@ def write_log(
     if finish:
         logger.close()
     else:
-        # A crash: the file keeps every written batch but never gets its summary. Closing
-        # the raw stream without SegmentWriter.close() is what a killed process leaves.
-        segment = logger._segment
-        assert segment is not None
-        segment._stream.flush()
-        os.fsync(segment._stream.fileno())
-        segment._stream.close()
-        logger._segment = None
-        logger._closed = True
+        # A crash: the file keeps every written batch but never gets its summary.
+        simulate_crash(logger)
     return path
 
 

@@ -26,6 +26,7 @@ from trace_audit.verify import verify_log
 from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
 from trace_runtime.errors import LogReadError
 from trace_runtime.integrity import Ed25519Signer, generate_keypair, load_public_key, load_signer
+from trace_runtime.testing import simulate_crash
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -211,8 +212,7 @@ def test_a_crashed_segment_compacted_later_is_not_called_truncated(tmp_path: Pat
         with crashed.cycle(T0_NS + i * PERIOD_NS) as c:
             fill_cycle(c, "ped_far")
     assert crashed._segment is not None
-    crashed._segment._stream.close()  # killed: no closing checkpoint, no summary
-    crashed._segment, crashed._closed = None, True
+    simulate_crash(crashed)  # killed: no closing checkpoint, no summary
     restarted = AuditLogger(root, robot_id="amr-7", config=config)
     for i in range(45, 80):
         with restarted.cycle(T0_NS + i * PERIOD_NS) as c:

@@ -35,7 +35,7 @@ from trace_runtime.integrity import (
     verify_cycle,
 )
 from trace_runtime.records import GENESIS, TOPIC_ACTION, TOPIC_PERCEPTION, TOPIC_SEAL, Checkpoint
-from trace_runtime.testing import synthetic_cycle
+from trace_runtime.testing import simulate_crash, synthetic_cycle
 
 PERIOD_NS = 100_000_000
 
@@ -313,8 +313,7 @@ def test_a_restart_after_a_crash_before_the_first_write_continues_the_chain(
     _write(root, 10, _sync())
     crashed = AuditLogger(root, robot_id="amr-1", config=_sync())
     assert crashed._segment is not None
-    crashed._segment._stream.close()  # killed: header and metadata only
-    crashed._segment, crashed._closed = None, True
+    simulate_crash(crashed)  # killed: no closing checkpoint, no summary
     _write(root, 5, _sync(), start=10)
     segments = sorted((root / "hot").glob("*.mcap"))
     assert len(segments) == 3
