@@ -20,8 +20,8 @@ from pathlib import Path
 import orjson
 
 from trace_audit.causal import CounterfactualView, FactorValue, read_decision, split_flags
-from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.cycles import Cycle
+from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.logset import Log, open_log
 from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION, TOPIC_SEAL
 
