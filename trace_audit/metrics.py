@@ -11,17 +11,17 @@ Definitions (docs/metrics.md is the long form; every number here comes from the 
 - **TC** = 1 - sum(gaps) / window over the sealed cycles of each robot, in time order. The
   interval between two consecutive sealed cycles is a gap when it exceeds the nominal period
   (``trace.session`` ``period_ns``) by more than ``gap_tolerance`` periods; the gap is the
-  time beyond one period. The window is last - first sealed time + one period. A gap is
+  time beyond one period (the rule is ``trace_runtime.gaps``). The window is last - first sealed time + one period. A gap is
   counted in the group of the sealed cycle that ends it. Seals' ``dropped`` counts are
   summed separately as declared drops.
 - **DR(d)** = 1 when the action is logged (a command), its alternatives are logged (at
   least one), and its rationale is complete: not truncated, factors present, and
   counterfactuals present or ``counterfactuals_none_applicable``. A sealed cycle without an
   action is not reconstructable.
-- **Integrity(d)** = 1 when the cycle is sealed, every layer payload it holds has the digest
-  its seal names, every layer the seal names is present (in full, or in the warm summary),
-  and the seal's ``prev`` is the digest of the robot's previous seal (the segment's
-  ``prev_seal`` for the first one read).
+- **Integrity(d)** = 1 when the one seal check (``trace_runtime.integrity.verify_cycle``)
+  passes: sealed, every layer payload it holds has the digest its seal names, every layer
+  the seal names is present, evidenced readings match their refs, and the seal's ``prev``
+  is the digest of the robot's previous seal (the segment's ``prev_seal`` for the first).
 - **TCS(d)** = weighted mean of ET, ET_partial, DR, continuity and integrity (``TCSWeights``),
   forced to 0 when integrity fails and ``integrity_gate`` is on. Continuity(d) is 1, or
   period / interval when the interval that ends at d holds a gap.
