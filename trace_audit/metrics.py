@@ -11,9 +11,9 @@ Definitions (docs/metrics.md is the long form; every number here comes from the 
 - **TC** = 1 - sum(gaps) / window over the sealed cycles of each robot, in time order. The
   interval between two consecutive sealed cycles is a gap when it exceeds the nominal period
   (``trace.session`` ``period_ns``) by more than ``gap_tolerance`` periods; the gap is the
-  time beyond one period (the rule is ``trace_runtime.gaps``). The window is last - first sealed time + one period. A gap is
-  counted in the group of the sealed cycle that ends it. Seals' ``dropped`` counts are
-  summed separately as declared drops.
+  time beyond one period (the rule is ``trace_runtime.gaps``). The window is last - first
+  sealed time + one period. A gap is counted in the group of the sealed cycle that ends it.
+  Seals' ``dropped`` counts are summed separately as declared drops.
 - **DR(d)** = 1 when the action is logged (a command), its alternatives are logged (at
   least one), and its rationale is complete: not truncated, factors present, and
   counterfactuals present or ``counterfactuals_none_applicable``. A sealed cycle without an
