@@ -15,16 +15,25 @@ skipped. ``tree_graph`` rebuilds the counterfactual decision tree with the taken
 
 from __future__ import annotations
 
+import types
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from functools import cache
 from itertools import pairwise
-from typing import Any
+from typing import Any, Union, get_args, get_origin
 
 import networkx as nx
+from pydantic import BaseModel
 
 from trace_audit.chains import DecisionChains, FactorChain, Link
 from trace_runtime.cycles import Cycle
-from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF, TOPIC_EXECUTION, TOPIC_PERCEPTION
+from trace_runtime.records import (
+    MESSAGE_MODELS,
+    TOPIC_ACTION,
+    TOPIC_BELIEF,
+    TOPIC_EXECUTION,
+    TOPIC_PERCEPTION,
+)
 
 __all__ = [
     "ACTION_NODE",
@@ -40,6 +49,7 @@ __all__ = [
     "causal_graph",
     "format_value",
     "graph_data",
+    "layer_with_defaults",
     "read_decision",
     "split_flags",
     "tree_graph",
@@ -211,10 +221,89 @@ class Decision:
         return self.factors[0] if self.factors else None
 
 
+# --- schema defaults ----------------------------------------------------------------------
+
+
+def layer_with_defaults(cycle: Cycle, topic: str) -> Any:
+    """``cycle.layer(topic)`` with every optional field the writer left out set to its
+    schema default (``trace_runtime.records``), as JSON: a robot in another language may
+    omit ``angular`` and mean ``0.0``. A warm summary is returned as kept: a field missing
+    there was pruned, not defaulted."""
+    layer = cycle.layer(topic)
+    model = MESSAGE_MODELS.get(topic)
+    if topic not in cycle.payloads or model is None:
+        return layer
+    return with_defaults(model, layer)
+
+
+def with_defaults(model: type[BaseModel], value: Any) -> Any:
+    """``value`` (plain JSON) with the defaults of ``model``'s omitted optional fields,
+    recursively through nested records and lists of them; anything else is left as it is
+    (this reads, it does not validate)."""
+    if not isinstance(value, Mapping):
+        return value
+    out = dict(value)
+    for key, default, nested in _fields(model):
+        if key not in out:
+            if default is _REQUIRED:
+                continue
+            out[key] = default() if callable(default) else default
+        if nested is not None:
+            item_model, many = nested
+            current = out[key]
+            if many and isinstance(current, list):
+                out[key] = [with_defaults(item_model, item) for item in current]
+            elif not many:
+                out[key] = with_defaults(item_model, current)
+    return out
+
+
+_REQUIRED = object()
+
+
+@cache
+def _fields(
+    model: type[BaseModel],
+) -> tuple[tuple[str, Any, tuple[type[BaseModel], bool] | None], ...]:
+    """(JSON key, default or a factory or ``_REQUIRED``, nested record type) per field."""
+    out = []
+    for name, info in model.model_fields.items():
+        key = info.alias or name
+        if info.is_required():
+            default: Any = _REQUIRED
+        elif info.default_factory is not None:
+            default = info.default_factory
+        else:
+            default = _jsonable(info.default)
+        out.append((key, default, _nested(info.annotation)))
+    return tuple(out)
+
+
+def _jsonable(value: Any) -> Any:
+    return list(value) if isinstance(value, tuple) else value
+
+
+def _nested(annotation: Any) -> tuple[type[BaseModel], bool] | None:
+    """The record type a field holds (and whether it is a list of them), if any."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation, False
+    origin = get_origin(annotation)
+    if origin is list:
+        inner = _nested(get_args(annotation)[0])
+        return (inner[0], True) if inner is not None else None
+    if origin in (Union, types.UnionType):
+        for arg in get_args(annotation):
+            found = _nested(arg)
+            if found is not None:
+                return found
+    return None
+
+
 def read_decision(cycle: Cycle) -> Decision:
-    """The decision logged in ``cycle`` (full or warm summary), read leniently."""
-    action = _mapping(cycle.layer(TOPIC_ACTION))
-    execution = _mapping(cycle.layer(TOPIC_EXECUTION))
+    """The decision logged in ``cycle`` (full or warm summary), read leniently, with
+    omitted optional fields at their schema defaults."""
+    action = _mapping(layer_with_defaults(cycle, TOPIC_ACTION))
+    execution = _mapping(layer_with_defaults(cycle, TOPIC_EXECUTION))
     layers = tuple(
         topic
         for topic in (TOPIC_PERCEPTION, TOPIC_BELIEF, TOPIC_ACTION, TOPIC_EXECUTION)
@@ -389,8 +478,8 @@ def causal_graph(
     factor chains use it) and, for belief edges, ``rule`` and ``p``.
     """
     decision = decision or read_decision(cycle)
-    belief = _mapping(cycle.layer(TOPIC_BELIEF)) or {}
-    perception = _mapping(cycle.layer(TOPIC_PERCEPTION)) or {}
+    belief = _mapping(layer_with_defaults(cycle, TOPIC_BELIEF)) or {}
+    perception = _mapping(layer_with_defaults(cycle, TOPIC_PERCEPTION)) or {}
     nodes = {str(n.get("id")): n for n in _dicts(belief.get("nodes"))}
     edges = {(str(e.get("parent")), str(e.get("child"))): e for e in _dicts(belief.get("edges"))}
     entities = {str(e.get("id")): e for e in _dicts(perception.get("entities"))}

@@ -22,7 +22,7 @@ from typing import Any, Literal
 
 from trace_audit.causal import Decision, causal_graph, graph_data, read_decision, tree_graph
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, DecisionChains, SensorWindow, trace_cycle
-from trace_audit.metrics import MetricsConfig, continuity_of, dr_problems, trust_score
+from trace_audit.metrics import MetricsConfig, dr_problems, trust_score
 from trace_audit.timeline import (
     LogSource,
     TimeArg,
@@ -34,6 +34,7 @@ from trace_audit.timeline import (
 from trace_runtime.chain import GENESIS, digest
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
+from trace_runtime.gaps import continuity, gap_limit_ns
 from trace_runtime.integrity import verify_cycle
 from trace_runtime.logset import Log
 from trace_runtime.records import TOPIC_ACTION, TOPIC_SEAL
@@ -141,8 +142,9 @@ class Explanation:
 
     @property
     def stale(self) -> bool:
-        """True when no decision was logged for more than 1.5 periods before the query."""
-        return self.period_ns > 0 and self.offset_ns > self.period_ns * 3 // 2
+        """True when the time from the decision to the query would be a gap (the one gap
+        rule, ``trace_runtime.gaps``): no decision was logged when one was due."""
+        return self.period_ns > 0 and self.offset_ns > gap_limit_ns(self.period_ns)
 
 
 def find_cycle(log: Log, number: int) -> Cycle:
@@ -398,15 +400,15 @@ def _scores(
     missing_dr = dr_problems(target.layer(TOPIC_ACTION))
     problems += [f"DR: {p}" for p in missing_dr]
     problems += [f"integrity: {p}" for p in seal.problems]
-    continuity = 1.0
+    continuity_d = 1.0
     if prev_sealed is not None and target.t_ns > prev_sealed.t_ns:
-        continuity = continuity_of(target.t_ns - prev_sealed.t_ns, period_ns, config.gap_tolerance)
+        continuity_d = continuity(target.t_ns - prev_sealed.t_ns, period_ns, config.gap_tolerance)
     tcs = trust_score(
         config.weights,
         et=chains.et,
         et_partial=chains.et_partial,
         dr_ok=not missing_dr,
-        continuity=continuity,
+        continuity=continuity_d,
         intact=seal.verified,
     )
     return DecisionScores(

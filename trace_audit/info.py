@@ -10,7 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from trace_audit.timeline import GAP_FACTOR, Gap, LogSource, as_log, require_cycles, seal_dropped
+from trace_audit.timeline import LogSource, as_log, gap_stepper, require_cycles, seal_dropped
+from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, CycleRange, Gap
 from trace_runtime.logger import CLOSE_METADATA
 from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
@@ -57,6 +58,7 @@ class LogInfo:
     scanned: bool
     dropped: int | None
     gaps: tuple[Gap, ...]
+    """Gaps between each robot's sealed cycles, by the rule metrics uses for TC."""
 
     @property
     def duration_ns(self) -> int:
@@ -65,33 +67,31 @@ class LogInfo:
     @property
     def gap_ns(self) -> int:
         """Time in gaps beyond the nominal period (what temporal continuity counts as lost)."""
-        return sum(max(0, g.duration_ns - self.period_ns) for g in self.gaps)
+        return sum(g.gap_ns for g in self.gaps)
 
 
-def log_info(source: LogSource, *, scan: bool = True) -> LogInfo:
+def log_info(
+    source: LogSource, *, scan: bool = True, gap_tolerance: float = DEFAULT_GAP_TOLERANCE
+) -> LogInfo:
     """Describe a log; ``scan`` reads every seal to count dropped cycles and gaps."""
     log = as_log(source)
     require_cycles(log)
     period = max((s.session.period_ns for s in log.segments), default=0)
     counts: dict[str, int] = {}
-    first: dict[str, int] = {}
-    last: dict[str, int] = {}
+    ranges: dict[str, CycleRange] = {}
     dropped: int | None = None
     gaps: list[Gap] = []
     if scan:
         dropped = 0
-        limit = period * GAP_FACTOR
-        prev_cycle, prev_t = -1, -1
+        gap_of = gap_stepper(log, gap_tolerance)
         for cycle in log.iter_cycles():
             name = cycle.segment
             counts[name] = counts.get(name, 0) + 1
-            first.setdefault(name, cycle.cycle)
-            last[name] = cycle.cycle
-            lost = seal_dropped(cycle)
-            dropped += lost
-            if prev_t >= 0 and (lost or (limit and cycle.t_ns - prev_t > limit)):
-                gaps.append(Gap(prev_cycle, cycle.cycle, prev_t, cycle.t_ns, lost))
-            prev_cycle, prev_t = cycle.cycle, cycle.t_ns
+            ranges[name] = CycleRange.of(cycle.cycle, cycle.t_ns).merge(ranges.get(name))
+            dropped += seal_dropped(cycle)
+            gap = gap_of(cycle)
+            if gap is not None:
+                gaps.append(gap)
     if dropped is not None:
         # Drops after a segment's last seal are declared at close, not by a seal.
         dropped += sum(_dropped_at_close(s) for s in log.segments)
@@ -105,8 +105,10 @@ def log_info(source: LogSource, *, scan: bool = True) -> LogInfo:
             counts[name] = info.channels.get(TOPIC_SEAL, 0)
             newest = next(segment.iter_cycles(reverse=True), None)
             if newest is not None:
-                last[name] = newest.cycle
-                first[name] = segment.session.first_cycle
+                ranges[name] = CycleRange(
+                    segment.session.first_cycle, newest.cycle, info.start_ns, newest.t_ns
+                )
+        cycles = ranges.get(name)
         for topic, n in info.channels.items():
             channels[topic] = channels.get(topic, 0) + n
         tiers[info.tier] = tiers.get(info.tier, 0) + 1
@@ -118,8 +120,8 @@ def log_info(source: LogSource, *, scan: bool = True) -> LogInfo:
                 segment=segment.session.segment,
                 start_ns=info.start_ns,
                 end_ns=info.end_ns,
-                first_cycle=first.get(name),
-                last_cycle=last.get(name),
+                first_cycle=None if cycles is None else cycles.first_cycle,
+                last_cycle=None if cycles is None else cycles.last_cycle,
                 cycles=counts.get(name, 0),
                 bytes=info.bytes,
                 chunks=info.chunk_count,

@@ -11,17 +11,17 @@ Definitions (docs/metrics.md is the long form; every number here comes from the 
 - **TC** = 1 - sum(gaps) / window over the sealed cycles of each robot, in time order. The
   interval between two consecutive sealed cycles is a gap when it exceeds the nominal period
   (``trace.session`` ``period_ns``) by more than ``gap_tolerance`` periods; the gap is the
-  time beyond one period. The window is last - first sealed time + one period. A gap is
-  counted in the group of the sealed cycle that ends it. Seals' ``dropped`` counts are
-  summed separately as declared drops.
+  time beyond one period (the rule is ``trace_runtime.gaps``). The window is last - first
+  sealed time + one period. A gap is counted in the group of the sealed cycle that ends it.
+  Seals' ``dropped`` counts are summed separately as declared drops.
 - **DR(d)** = 1 when the action is logged (a command), its alternatives are logged (at
   least one), and its rationale is complete: not truncated, factors present, and
   counterfactuals present or ``counterfactuals_none_applicable``. A sealed cycle without an
   action is not reconstructable.
-- **Integrity(d)** = 1 when the cycle is sealed, every layer payload it holds has the digest
-  its seal names, every layer the seal names is present (in full, or in the warm summary),
-  and the seal's ``prev`` is the digest of the robot's previous seal (the segment's
-  ``prev_seal`` for the first one read).
+- **Integrity(d)** = 1 when the one seal check (``trace_runtime.integrity.verify_cycle``)
+  passes: sealed, every layer payload it holds has the digest its seal names, every layer
+  the seal names is present, evidenced readings match their refs, and the seal's ``prev``
+  is the digest of the robot's previous seal (the segment's ``prev_seal`` for the first).
 - **TCS(d)** = weighted mean of ET, ET_partial, DR, continuity and integrity (``TCSWeights``),
   forced to 0 when integrity fails and ``integrity_gate`` is on. Continuity(d) is 1, or
   period / interval when the interval that ends at d holds a gap.
@@ -33,7 +33,6 @@ Nothing here reads an injected-fault flag or a simulator's ground truth.
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import math
 import os
 import time
@@ -42,8 +41,6 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, get_args
-
-import orjson
 
 from trace_audit.chains import (
     DEFAULT_SENSOR_WINDOW,
@@ -54,9 +51,12 @@ from trace_audit.chains import (
     score_layers,
     trace_layers,
 )
+from trace_runtime.chain import digest
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, UsageError
-from trace_runtime.logset import find_segment_files as find_segments
+from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap, continuity, find_gap
+from trace_runtime.integrity import SealStatus, verify_cycle
+from trace_runtime.logset import Log, find_segment_files, open_segments
 from trace_runtime.reader import Segment, open_segment
 from trace_runtime.records import (
     TOPIC_ACTION,
@@ -93,7 +93,6 @@ ProgressCallback = Callable[[int, int | None], None]
 """Called with (cycles done, cycles expected or None) as the scan advances."""
 
 _PROGRESS_EVERY = 2048
-_TIER_PREFERENCE = {"hot": 0, "cold": 1, "warm": 2}
 
 
 # --- configuration ---------------------------------------------------------------------------
@@ -169,8 +168,9 @@ class MetricsConfig:
     """How ``compute_metrics`` reads and scores a log."""
 
     by: GroupBy | None = None
-    gap_tolerance: float = 0.5
-    """An interval between sealed cycles is a gap when > (1 + tolerance) x nominal period."""
+    gap_tolerance: float = DEFAULT_GAP_TOLERANCE
+    """An interval between sealed cycles is a gap when > (1 + tolerance) x nominal period
+    (the rule is ``trace_runtime.gaps``; this only overrides its tolerance)."""
     sensor_window: int = DEFAULT_SENSOR_WINDOW
     """Evidence refs resolve against this many cycles before the decision (and its own)."""
     weights: TCSWeights = field(default_factory=TCSWeights)
@@ -276,20 +276,6 @@ class DecisionFailure:
 
 
 @dataclass(frozen=True, slots=True)
-class Gap:
-    """An interval between two sealed cycles of one robot longer than the period allows."""
-
-    robot: str
-    after_cycle: int
-    after_t_ns: int
-    before_cycle: int
-    before_t_ns: int
-    gap_ns: int
-    missing_cycles: int
-    declared_dropped: int
-
-
-@dataclass(frozen=True, slots=True)
 class ThresholdCheck:
     metric: str
     threshold: float
@@ -304,6 +290,9 @@ class MetricsReport:
     logs: tuple[str, ...]
     segments: tuple[str, ...]
     skipped_segments: tuple[str, ...]
+    """Copies of a segment not read because another tier's copy is (``preferred_copies``)."""
+    unreadable: tuple[str, ...]
+    """Files of the log that could not be read, each ``path: reason``; the rest is scored."""
     by: str | None
     definitions: dict[str, str]
     overall: GroupMetrics
@@ -401,166 +390,160 @@ class _Scanner:
         self.partial = partial
         self.window = SensorWindow(config.sensor_window)
         self.stream = _Stream()
+        self.session_prev: str | None = None
 
     def scan(self, segment: Segment, progress: Callable[[int], None] | None = None) -> None:
         cfg = self.config
         session = segment.session
-        period = session.period_ns
-        limit_ns = period + int(period * cfg.gap_tolerance)
-        by = cfg.by
-        seg_name = segment.path.name
-        fixed_group = (
-            seg_name
-            if by == "segment"
-            else session.robot_id
-            if by == "robot"
-            else "all"
-            if by is None
-            else ""
-        )
         # The first seal read links to the session's prev_seal, unless a start time cut the
         # segment: then the seal before it was not read and the link cannot be checked here.
         cut = cfg.start_ns is not None and segment.info.start_ns < cfg.start_ns
-        session_prev: str | None = None if cut else session.prev_seal
-        groups = self.partial.groups
-        window = self.window
-        stream = self.stream
-        weights = cfg.weights
-        partial = self.partial
-        limit = cfg.max_listed
+        self.session_prev = None if cut else session.prev_seal
+        group_of = self._grouper(segment)
         done = 0
         for cycle in segment.iter_cycles(cfg.start_ns, cfg.end_ns):
             done += 1
             if progress is not None and done % _PROGRESS_EVERY == 0:
                 progress(_PROGRESS_EVERY)
-            window.push(cycle.sensors)
-            action = cycle.layer(TOPIC_ACTION)
-            belief = cycle.layer(TOPIC_BELIEF)
-            perception = cycle.layer(TOPIC_PERCEPTION)
-            score = score_layers(action, belief, perception, window=window)
-            dr_problems_ = dr_problems(action)
-            if fixed_group:
-                group = fixed_group
-            elif by == "scenario":
-                group = _scenario(cycle.layer(TOPIC_EXECUTION))
-            else:
-                group = time.strftime("%Y-%m-%d %H:00", time.gmtime(cycle.t_ns // 1_000_000_000))
-            acc = groups.get(group)
-            if acc is None:
-                acc = groups[group] = _Acc()
-
-            # integrity and continuity: only a sealed cycle closes an interval
-            integrity: list[str] = []
-            continuity = 0.0
-            seal_data = cycle.payloads.get(TOPIC_SEAL)
-            if seal_data is None:
-                integrity.append("not sealed")
-            else:
-                acc.sealed += 1
-                seal = orjson.loads(seal_data)
-                _check_digests(cycle, seal, integrity)
-                expected = stream.prev_seal if stream.prev_seal is not None else session_prev
-                if expected is not None and seal.get("prev") != expected:
-                    integrity.append("hash chain broken: prev is not the previous seal's digest")
-                stream.prev_seal = hashlib.sha256(seal_data).hexdigest()
-                dropped = int(seal.get("dropped") or 0)
-                acc.dropped += dropped
-                continuity = 1.0
-                prev_t = stream.prev_t_ns
-                if prev_t is None:
-                    acc.window_ns += period
-                else:
-                    interval = cycle.t_ns - prev_t
-                    if interval <= 0:
-                        acc.anomalies += 1
-                    else:
-                        acc.window_ns += interval
-                        if period > 0 and interval > limit_ns:
-                            gap = interval - period
-                            missing = round(gap / period)
-                            acc.gap_ns += gap
-                            acc.gaps += 1
-                            acc.missing_cycles += missing
-                            continuity = continuity_of(interval, period, cfg.gap_tolerance)
-                            partial.gaps_total += 1
-                            if len(partial.gaps) < limit:
-                                partial.gaps.append(
-                                    Gap(
-                                        session.robot_id,
-                                        stream.prev_cycle,
-                                        prev_t,
-                                        cycle.cycle,
-                                        cycle.t_ns,
-                                        gap,
-                                        missing,
-                                        dropped,
-                                    )
-                                )
-                stream.prev_t_ns = cycle.t_ns
-                stream.prev_cycle = cycle.cycle
-
-            et, etp = score.et, score.et_partial
-            full = score.fully_traceable
-            dr_ok = not dr_problems_
-            intact = not integrity
-            acc.decisions += 1
-            if cycle.summary is not None:
-                acc.summarized += 1
-            acc.et_sum += et
-            acc.et_sq += et * et
-            acc.etp_sum += etp
-            acc.etp_sq += etp * etp
-            acc.full += full
-            acc.factors += score.factors
-            acc.factors_traceable += score.traceable
-            acc.no_factors += score.factors == 0
-            acc.dr_ok += dr_ok
-            acc.integrity_ok += intact
-            tcs = trust_score(
-                weights, et=et, et_partial=etp, dr_ok=dr_ok, continuity=continuity, intact=intact
-            )
-            acc.tcs_sum += tcs
-            acc.tcs_sq += tcs * tcs
-            if not (full and dr_ok and intact):
-                partial.failures_total += 1
-                if len(partial.failures) < limit:
-                    partial.failures.append(
-                        DecisionFailure(
-                            cycle.cycle,
-                            cycle.t_ns,
-                            seg_name,
-                            group,
-                            et,
-                            etp,
-                            (
-                                *(
-                                    ()
-                                    if full
-                                    else _et_problems(
-                                        trace_layers(
-                                            cycle.cycle,
-                                            cycle.t_ns,
-                                            action,
-                                            belief,
-                                            perception,
-                                            window=window,
-                                        )
-                                    )
-                                ),
-                                *(f"DR: {p}" for p in dr_problems_),
-                                *(f"integrity: {p}" for p in integrity),
-                            ),
-                        )
-                    )
-        partial.cycles += done
+            self._score(cycle, segment, group_of)
+        self.partial.cycles += done
         if progress is not None:
             progress(done % _PROGRESS_EVERY)
         timing = segment.metadata.get(TIMING_METADATA)
         if timing:
             with contextlib.suppress(KeyError, ValueError):
-                partial.timing.append(
+                self.partial.timing.append(
                     (float(timing["commit_mean_ns"]), int(timing.get("cycles", done)))
                 )
+
+    def _grouper(self, segment: Segment) -> Callable[[Cycle], str]:
+        """How this segment's cycles are grouped (``--by``)."""
+        by = self.config.by
+        if by is None:
+            return lambda _cycle: "all"
+        if by == "segment":
+            name = segment.path.name
+            return lambda _cycle: name
+        if by == "robot":
+            robot = segment.session.robot_id
+            return lambda _cycle: robot
+        if by == "scenario":
+            return lambda cycle: _scenario(cycle.layer(TOPIC_EXECUTION))
+        return lambda cycle: time.strftime(
+            "%Y-%m-%d %H:00", time.gmtime(cycle.t_ns // 1_000_000_000)
+        )
+
+    def _score(self, cycle: Cycle, segment: Segment, group_of: Callable[[Cycle], str]) -> None:
+        """Score one decision into its group's sums; list it when it fails."""
+        self.window.push(cycle.sensors)
+        action = cycle.layer(TOPIC_ACTION)
+        belief = cycle.layer(TOPIC_BELIEF)
+        perception = cycle.layer(TOPIC_PERCEPTION)
+        score = score_layers(action, belief, perception, window=self.window)
+        missing_dr = dr_problems(action)
+        group = group_of(cycle)
+        acc = self.partial.groups.get(group)
+        if acc is None:
+            acc = self.partial.groups[group] = _Acc()
+        integrity, continuity_d = self._seal_and_gap(cycle, segment, acc)
+        et, etp = score.et, score.et_partial
+        full, dr_ok, intact = score.fully_traceable, not missing_dr, not integrity
+        acc.decisions += 1
+        acc.summarized += cycle.summary is not None
+        acc.et_sum += et
+        acc.et_sq += et * et
+        acc.etp_sum += etp
+        acc.etp_sq += etp * etp
+        acc.full += full
+        acc.factors += score.factors
+        acc.factors_traceable += score.traceable
+        acc.no_factors += score.factors == 0
+        acc.dr_ok += dr_ok
+        acc.integrity_ok += intact
+        tcs = trust_score(
+            self.config.weights,
+            et=et,
+            et_partial=etp,
+            dr_ok=dr_ok,
+            continuity=continuity_d,
+            intact=intact,
+        )
+        acc.tcs_sum += tcs
+        acc.tcs_sq += tcs * tcs
+        if full and dr_ok and intact:
+            return
+        partial = self.partial
+        partial.failures_total += 1
+        if len(partial.failures) >= self.config.max_listed:
+            return
+        et_problems = (
+            ()
+            if full
+            else _et_problems(
+                trace_layers(
+                    cycle.cycle, cycle.t_ns, action, belief, perception, window=self.window
+                )
+            )
+        )
+        partial.failures.append(
+            DecisionFailure(
+                cycle.cycle,
+                cycle.t_ns,
+                segment.path.name,
+                group,
+                et,
+                etp,
+                (
+                    *et_problems,
+                    *(f"DR: {p}" for p in missing_dr),
+                    *(f"integrity: {p}" for p in integrity),
+                ),
+            )
+        )
+
+    def _seal_and_gap(self, cycle: Cycle, segment: Segment, acc: _Acc) -> tuple[list[str], float]:
+        """Integrity problems of the cycle (the one seal check, ``verify_cycle``) and its
+        continuity; a sealed cycle closes an interval, which the one gap rule judges."""
+        stream = self.stream
+        expected = stream.prev_seal if stream.prev_seal is not None else self.session_prev
+        status = verify_cycle(cycle, expected)
+        integrity = integrity_problems(status)
+        if status.state == "unsealed":
+            return integrity, 0.0
+        acc.sealed += 1
+        stream.prev_seal = status.seal_digest
+        acc.dropped += status.dropped
+        period = segment.session.period_ns
+        prev_t = stream.prev_t_ns
+        continuity_d = 1.0
+        if prev_t is None:
+            acc.window_ns += period
+        elif cycle.t_ns <= prev_t:
+            acc.anomalies += 1
+        else:
+            interval = cycle.t_ns - prev_t
+            acc.window_ns += interval
+            gap = find_gap(
+                stream.prev_cycle,
+                prev_t,
+                cycle.cycle,
+                cycle.t_ns,
+                period,
+                tolerance=self.config.gap_tolerance,
+                declared_dropped=status.dropped,
+                robot=segment.session.robot_id,
+            )
+            if gap is not None:
+                acc.gap_ns += gap.gap_ns
+                acc.gaps += 1
+                acc.missing_cycles += gap.missing_cycles
+                continuity_d = continuity(interval, period, self.config.gap_tolerance)
+                self.partial.gaps_total += 1
+                if len(self.partial.gaps) < self.config.max_listed:
+                    self.partial.gaps.append(gap)
+        stream.prev_t_ns = cycle.t_ns
+        stream.prev_cycle = cycle.cycle
+        return integrity, continuity_d
 
     def prefill(self, segment: Segment) -> None:
         """Load the chain and window state at the end of ``segment`` (the one before ours)."""
@@ -579,14 +562,25 @@ class _Scanner:
         if last_sealed is not None:
             self.stream.prev_t_ns = last_sealed.t_ns
             self.stream.prev_cycle = last_sealed.cycle
-            self.stream.prev_seal = hashlib.sha256(last_sealed.payloads[TOPIC_SEAL]).hexdigest()
+            self.stream.prev_seal = digest(last_sealed.payloads[TOPIC_SEAL])
 
 
-def continuity_of(interval_ns: int, period_ns: int, gap_tolerance: float) -> float:
-    """A decision's continuity: 1 unless the interval since the previous sealed cycle is a gap
-    (longer than (1 + tolerance) periods), then period / interval."""
-    limit = period_ns + int(period_ns * gap_tolerance)
-    return period_ns / interval_ns if period_ns > 0 and interval_ns > limit else 1.0
+def integrity_problems(status: SealStatus) -> list[str]:
+    """Why a decision fails integrity, from the one seal check; [] when it holds."""
+    if status.state == "unsealed":
+        return ["not sealed"]
+    problems = [f"{topic} does not match its seal digest" for topic in status.modified]
+    problems += [f"{topic} is not named by the seal" for topic in status.extra]
+    problems += [f"{topic} is named by the seal but missing" for topic in status.missing]
+    problems += [
+        f"sensor reading {reading} does not match the digest its evidence ref names"
+        for reading in status.evidence_mismatch
+    ]
+    if status.state == "modified" and not problems:
+        problems.append(status.detail)  # a malformed seal, or one naming another cycle
+    if status.link == "broken":
+        problems.append("hash chain broken: prev is not the previous seal's digest")
+    return problems
 
 
 def trust_score(
@@ -610,25 +604,6 @@ def trust_score(
         + weights.continuity * continuity
         + weights.integrity * intact
     ) / total
-
-
-def _check_digests(cycle: Cycle, seal: dict[str, Any], problems: list[str]) -> None:
-    named = seal.get("digests")
-    if not isinstance(named, dict):
-        problems.append("seal names no digests")
-        return
-    for topic, data in cycle.payloads.items():
-        if topic == TOPIC_SEAL:
-            continue
-        want = named.get(topic)
-        if want is None:
-            problems.append(f"{topic} is not named by the seal")
-        elif hashlib.sha256(data).hexdigest() != want:
-            problems.append(f"{topic} does not match its seal digest")
-    summary = cycle.summary
-    for topic in named:
-        if topic not in cycle.payloads and not (summary is not None and topic in summary):
-            problems.append(f"{topic} is named by the seal but missing")
 
 
 def dr_problems(action: Any) -> list[str]:
@@ -685,43 +660,46 @@ class _Task:
     config: MetricsConfig
 
 
-def _plan(paths: Sequence[str | Path]) -> tuple[list[tuple[str, list[Segment]]], list[str]]:
-    """Open every segment; order each robot's segments; drop tier duplicates of a segment."""
+def _open(paths: Sequence[str | Path]) -> Log:
+    """The given files, directories and roots as one log (``trace_runtime.logset``): its
+    choice of copies, its per-file problems. A path given twice is read once."""
     if not paths:
         raise UsageError("no log given")
-    segments: list[Segment] = []
-    for path in paths:
-        files = find_segments(Path(path))
-        if not files:
+    files: dict[Path, Path] = {}
+    for path in map(Path, paths):
+        if not path.exists():
+            raise LogReadError(str(path), "no such file or directory")
+        found = find_segment_files(path)
+        if not found:
             raise LogReadError(str(path), "directory holds no .mcap segments")
-        segments.extend(open_segment(file) for file in files)
-    chosen: dict[tuple[str, int], Segment] = {}
-    skipped: list[str] = []
-    for segment in segments:
-        key = (segment.session.robot_id, segment.session.segment)
-        other = chosen.get(key)
-        if other is None:
-            chosen[key] = segment
-            continue
-        if other.path.resolve() == segment.path.resolve():
-            continue
-        keep, drop = sorted((other, segment), key=_tier_rank)
-        chosen[key] = keep
-        skipped.append(f"{drop.path} (same robot and segment number as {keep.path})")
-    robots: dict[str, list[Segment]] = {}
-    for segment in chosen.values():
-        robots.setdefault(segment.session.robot_id, []).append(segment)
-    plan = [
-        (robot, sorted(segs, key=lambda s: (s.session.segment, s.info.start_ns)))
-        for robot, segs in robots.items()
-    ]
+        for file in found:
+            files.setdefault(file.resolve(), file)
+    segments, problems = open_segments(list(files.values()))
+    return Log(segments, Path(paths[0]), problems)
+
+
+def _plan(log: Log) -> list[tuple[str, list[Segment]]]:
+    """Each robot's segments in chain order, robots in order of their first record."""
+    plan = [(robot, log.segments_of(robot)) for robot in log.robots]
     plan.sort(key=lambda item: min(s.info.start_ns for s in item[1]))
-    return plan, skipped
+    return plan
 
 
-def _tier_rank(segment: Segment) -> tuple[int, str]:
-    # hot and cold hold the same cycles losslessly; warm is lossy, so it loses ties.
-    return (_TIER_PREFERENCE.get(segment.session.tier, 3), str(segment.path))
+def _shadowed(log: Log) -> list[str]:
+    out: list[str] = []
+    for copy in log.shadowed:
+        key = (copy.session.robot_id, copy.session.segment, copy.session.first_cycle)
+        read = next(
+            (
+                s
+                for s in log.segments
+                if (s.session.robot_id, s.session.segment, s.session.first_cycle) == key
+            ),
+            None,
+        )
+        where = ", which is read" if read is None else f" {read.path}, which is read"
+        out.append(f"{copy.path} (a copy of the same segment as{where})")
+    return out
 
 
 def _run_task(task: _Task) -> _Partial:
@@ -753,7 +731,8 @@ def compute_metrics(
     """
     cfg = config or MetricsConfig()
     started = time.perf_counter()
-    plan, skipped = _plan(paths)
+    log = _open(paths)
+    plan = _plan(log)
     expected = sum(_expected_cycles(s) for _, segs in plan for s in segs) or None
     total = _Partial()
     done = 0
@@ -787,18 +766,16 @@ def compute_metrics(
                 advance(partial.cycles)
     elapsed = time.perf_counter() - started
     segments_read = tuple(str(s.path) for _, segs in plan for s in segs)
-    return _report(
-        paths, cfg, total=total, segments=segments_read, skipped=skipped, elapsed=elapsed
-    )
+    return _report(paths, cfg, log=log, total=total, segments=segments_read, elapsed=elapsed)
 
 
 def _report(
     paths: Sequence[str | Path],
     cfg: MetricsConfig,
     *,
+    log: Log,
     total: _Partial,
     segments: tuple[str, ...],
-    skipped: list[str],
     elapsed: float,
 ) -> MetricsReport:
     overall_acc = _Acc()
@@ -816,7 +793,8 @@ def _report(
     return MetricsReport(
         logs=tuple(str(p) for p in paths),
         segments=segments,
-        skipped_segments=tuple(skipped),
+        skipped_segments=tuple(_shadowed(log)),
+        unreadable=tuple(f"{p.path}: {p.reason}" for p in log.problems),
         by=cfg.by,
         definitions=_definitions(cfg),
         overall=overall,

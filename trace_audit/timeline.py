@@ -13,6 +13,7 @@ time) are reported as gaps between rows, not papered over.
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
@@ -22,6 +23,7 @@ import orjson
 from trace_audit.causal import CounterfactualView, FactorValue, read_decision, split_flags
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, UsageError
+from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap, GapFinder, SealedStamp
 from trace_runtime.logset import Log, open_log
 from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION, TOPIC_SEAL
 
@@ -35,15 +37,13 @@ __all__ = [
     "WhyResult",
     "as_log",
     "command_of",
+    "gap_stepper",
     "require_cycles",
     "timeline",
     "why",
 ]
 
 LogSource = Log | str | Path
-
-# A cycle further than this many nominal periods after the previous one leaves a gap.
-GAP_FACTOR = 1.5
 
 
 @dataclass(frozen=True, slots=True)
@@ -151,6 +151,24 @@ def seal_dropped(cycle: Cycle) -> int:
     return int(digits) if digits else 0
 
 
+def gap_stepper(
+    log: Log, tolerance: float = DEFAULT_GAP_TOLERANCE
+) -> Callable[[Cycle], Gap | None]:
+    """Feed a log's cycles in reading order; get the gap each sealed one ends, by the one
+    rule (``trace_runtime.gaps``): per robot, with the period of the cycle's own segment."""
+    sessions = {s.path.name: s.session for s in log.segments}
+    finder = GapFinder(tolerance)
+
+    def step(cycle: Cycle) -> Gap | None:
+        session = sessions.get(cycle.segment)
+        if session is None or not cycle.sealed:
+            return None
+        stamp = SealedStamp(cycle.cycle, cycle.t_ns, session.period_ns, seal_dropped(cycle))
+        return finder.step(session.robot_id, stamp)
+
+    return step
+
+
 def _period_ns(log: Log) -> int:
     return max((s.session.period_ns for s in log.segments), default=0)
 
@@ -184,23 +202,9 @@ class Span:
 
 
 @dataclass(frozen=True, slots=True)
-class Gap:
-    """Time between two logged cycles beyond the nominal period, and what the seal says."""
-
-    after_cycle: int
-    before_cycle: int
-    start_ns: int
-    end_ns: int
-    dropped: int
-
-    @property
-    def duration_ns(self) -> int:
-        return self.end_ns - self.start_ns
-
-
-@dataclass(frozen=True, slots=True)
 class Timeline:
-    """Rows of decision changes (or of every cycle) in a window, with gaps."""
+    """Rows of decision changes (or of every cycle) in a window, with the gaps between the
+    sealed cycles of each robot (``trace_runtime.gaps``, the rule metrics uses for TC)."""
 
     path: str
     robot: str
@@ -235,25 +239,25 @@ def timeline(
     start: TimeArg = None,
     end: TimeArg = None,
     every: bool = False,
+    gap_tolerance: float = DEFAULT_GAP_TOLERANCE,
 ) -> Timeline:
     """A row per decision change (per cycle with ``every``) between ``start`` and ``end``."""
     log = as_log(source)
     require_cycles(log)
     lo, hi = _window(log, start, end)
     period = _period_ns(log)
-    limit = period * GAP_FACTOR
+    gap_of = gap_stepper(log, gap_tolerance)
     rows: list[Span] = []
     gaps: list[Gap] = []
     current: Span | None = None
-    prev: Cycle | None = None
     count = changes = 0
     for cycle in log.iter_cycles(lo, hi):
         count += 1
         command = command_of(cycle)
         flags, scenario = split_flags(_flags_of(cycle))
-        dropped = seal_dropped(cycle)
-        if prev is not None and (dropped or (limit and cycle.t_ns - prev.t_ns > limit)):
-            gaps.append(Gap(prev.cycle, cycle.cycle, prev.t_ns, cycle.t_ns, dropped))
+        gap = gap_of(cycle)
+        if gap is not None:
+            gaps.append(gap)
         changed = current is not None and command != current.command
         changes += changed
         if current is None or every or changed:
@@ -279,7 +283,6 @@ def timeline(
             current.flagged_cycles += 1
             for flag in flags:
                 current.flag_counts[flag] = current.flag_counts.get(flag, 0) + 1
-        prev = cycle
     if current is not None:
         current.held_ns = current.end_t_ns + period - current.t_ns
     robot = log.segments[0].session.robot_id

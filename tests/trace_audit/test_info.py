@@ -45,7 +45,10 @@ def test_a_log_root_of_rotated_segments_with_drops(tmp_path: Path) -> None:
     r = log_info(root)
     assert len(r.segments) >= 3 and r.tiers == {"hot": len(r.segments)}
     assert r.cycles == 57 and r.dropped == 3
-    assert [(g.after_cycle, g.before_cycle, g.dropped) for g in r.gaps] == [(9, 12, 2), (32, 34, 1)]
+    assert [(g.after_cycle, g.before_cycle, g.declared_dropped) for g in r.gaps] == [
+        (9, 12, 2),
+        (32, 34, 1),
+    ]
     assert r.gap_ns == 3 * PERIOD_NS
     assert sum(s.cycles for s in r.segments) == 57
     firsts = [s.first_cycle or 0 for s in r.segments]

@@ -24,6 +24,7 @@ from trace_audit.metrics import (
     parse_thresholds,
 )
 from trace_runtime.errors import UsageError
+from trace_runtime.tiers import compact
 
 SCHEMAS = Path(__file__).resolve().parents[2] / "schemas"
 GENESIS = "0" * 64
@@ -283,7 +284,9 @@ ET_PARTIAL = {
     11: 1,
 }
 DR = {0: 1, 1: 1, 2: 1, 3: 0, 4: 0, 5: 1, 8: 1, 9: 0, 10: 1, 11: 1}
-INTACT = {c: int(c != 10) for c in ET}
+# 10: a layer altered after sealing; 8: its sealed evidence ref names other content than
+# the reading logged (the one seal check, ``verify_cycle``, which explain and verify use too)
+INTACT = {c: int(c not in (8, 10)) for c in ET}
 CONTINUITY = {c: (1 / 3 if c == 8 else 1.0) for c in ET}
 
 
@@ -316,7 +319,7 @@ def test_overall_values_match_the_hand_computation(known_log: Path) -> None:
     assert o.window_s == pytest.approx(1.2)
     assert (o.gaps, o.gap_s, o.missing_cycles, o.declared_dropped) == (1, pytest.approx(0.2), 2, 2)
     assert o.tc == pytest.approx(1 - 0.2 / 1.2)
-    assert (o.integrity_ok, o.integrity_failed) == (9, 1)
+    assert (o.integrity_ok, o.integrity_failed) == (8, 2)
     w = TCSWeights()
     assert o.tcs.mean == pytest.approx(statistics.fmean(_tcs(c, w) for c in ET))
     assert o.tcs.std == pytest.approx(statistics.pstdev(_tcs(c, w) for c in ET))
@@ -332,6 +335,10 @@ def test_failures_name_each_decision_and_what_is_missing(known_log: Path) -> Non
     assert by_cycle[3] == ("DR: rationale truncated",)
     assert by_cycle[4] == ("DR: no counterfactuals and not declared none-applicable",)
     assert any("sensor_reading missing (digest" in p for p in by_cycle[8])
+    assert (
+        "integrity: sensor reading /sensors/lidar#6 does not match the digest its evidence "
+        "ref names"
+    ) in by_cycle[8]
     assert "DR: action not logged" in by_cycle[9] and "ET: action not logged" in by_cycle[9]
     assert by_cycle[10] == ("integrity: /trace/belief does not match its seal digest",)
     (gap,) = report.gaps
@@ -534,15 +541,18 @@ def test_group_by_segment_and_hour(tmp_path: Path) -> None:
 
 def test_the_same_segment_in_two_tiers_is_read_once(tmp_path: Path) -> None:
     root = _two_segments(tmp_path)
-    (root / "cold").mkdir()
-    copy = root / "cold" / "amr-7_000000.mcap"
-    copy.write_bytes((root / "amr-7_000000.mcap").read_bytes())
+    (root / "hot").mkdir()
+    for path in sorted(root.glob("*.mcap")):
+        path.rename(root / "hot" / path.name)
+    original = (root / "hot" / "amr-7_000000.mcap").read_bytes()
+    compact(root, "cold", older_than_ns=0, retention_ns=None, sources=["hot"])
+    # as if the compaction was interrupted before it removed the hot source
+    (root / "hot" / "amr-7_000000.mcap").write_bytes(original)
     report = compute_metrics([root])
     assert report.overall.decisions == 8
-    assert (
-        len(report.skipped_segments) == 1
-        and "same robot and segment" in (report.skipped_segments[0])
-    )
+    (skipped,) = report.skipped_segments
+    assert skipped.startswith(str(root / "cold" / "amr-7_000000.mcap") + " (a copy of the same")
+    assert report.segments[0] == str(root / "hot" / "amr-7_000000.mcap")
 
 
 def test_logging_time_is_shown_only_where_logged(tmp_path: Path, known_log: Path) -> None:

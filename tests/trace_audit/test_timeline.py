@@ -59,8 +59,9 @@ def test_dropped_cycles_show_as_gaps(tmp_path: Path) -> None:
     log = write_log(tmp_path / "r.mcap", [stretch("clear", 20)], skip=lambda i: i in (5, 6, 7))
     r = timeline(log)
     (gap,) = r.gaps
-    assert (gap.after_cycle, gap.before_cycle, gap.dropped) == (4, 8, 3)
-    assert gap.duration_ns == 4 * PERIOD_NS
+    assert (gap.after_cycle, gap.before_cycle, gap.declared_dropped) == (4, 8, 3)
+    assert gap.interval_ns == 4 * PERIOD_NS and gap.gap_ns == 3 * PERIOD_NS
+    assert gap.missing_cycles == 3
     assert r.cycles == 17 and len(r.rows) == 1
 
 

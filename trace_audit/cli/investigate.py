@@ -45,6 +45,7 @@ if TYPE_CHECKING:
     from trace_audit.explain import Explanation
     from trace_audit.info import LogInfo
     from trace_audit.timeline import Timeline, WhyResult
+    from trace_runtime.gaps import Gap
 
 # The library (networkx, pydantic models) is imported inside each command, so that
 # ``--help`` and the other command groups start without it.
@@ -647,22 +648,7 @@ def timeline_doc(r: Timeline) -> Doc:
             )
         )
     for gap in r.gaps:
-        dropped = f", {gap.dropped} dropped" if gap.dropped else ""
-        events.append(
-            (
-                gap.start_ns,
-                1,
-                [
-                    f"{gap.start_ns / 1e9:.3f}",
-                    "",
-                    Seg("GAP", "bold red"),
-                    fmt_duration(gap.duration_ns),
-                    Seg(
-                        f"no cycle between {gap.after_cycle} and {gap.before_cycle}{dropped}", "red"
-                    ),
-                ],
-            )
-        )
+        events.append((gap.after_t_ns, 1, _gap_row(gap)))
     events.sort(key=lambda e: (e[0], e[1]))
     doc.table(
         [
@@ -675,6 +661,24 @@ def timeline_doc(r: Timeline) -> Doc:
         [e[2] for e in events],
     )
     return doc
+
+
+def _gap_row(gap: Gap) -> list[Any]:
+    """A timeline row for a gap: how long beyond the period, the cycles it would have held,
+    and what the seal after it declares."""
+    declared = gap.declared_dropped
+    said = "" if declared is None else f", {declared} declared dropped by the seal after it"
+    return [
+        f"{gap.after_t_ns / 1e9:.3f}",
+        "",
+        Seg("GAP", "bold red"),
+        fmt_duration(gap.gap_ns),
+        Seg(
+            f"no cycle between {gap.after_cycle} and {gap.before_cycle} "
+            f"(~{gap.missing_cycles} missing{said})",
+            "red",
+        ),
+    ]
 
 
 # --- info --------------------------------------------------------------------------------------
@@ -791,15 +795,17 @@ def info_doc(r: LogInfo) -> Doc:
             [
                 Column("after cycle", "right"),
                 Column("from (s)", "right"),
-                Column("length", "right"),
-                Column("dropped", "right"),
+                Column("beyond period", "right"),
+                Column("missing", "right"),
+                Column("declared", "right"),
             ],
             [
                 [
                     str(g.after_cycle),
-                    f"{g.start_ns / 1e9:.3f}",
-                    fmt_duration(g.duration_ns),
-                    str(g.dropped),
+                    f"{g.after_t_ns / 1e9:.3f}",
+                    fmt_duration(g.gap_ns),
+                    f"~{g.missing_cycles}",
+                    "?" if g.declared_dropped is None else str(g.declared_dropped),
                 ]
                 for g in shown
             ],

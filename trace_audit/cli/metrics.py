@@ -328,9 +328,10 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
             + ("." if wide else "; TCS per group in --json (the terminal is too narrow).")
         )
 
-    if report.skipped_segments:
-        for skipped in report.skipped_segments:
-            out.print(f"  skipped duplicate segment {skipped}")
+    for skipped in report.skipped_segments:
+        out.print(f"  not read: {skipped}", markup=False, soft_wrap=True)
+    for problem in report.unreadable:
+        out.print(f"  unreadable file, not scored: {problem}", markup=False, soft_wrap=True)
 
     if failures:
         listed = len(report.failures)

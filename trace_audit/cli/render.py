@@ -153,7 +153,7 @@ class _StderrLine(logging.Handler):
     def emit(self, record: logging.LogRecord) -> None:
         try:
             sys.stderr.write(f"trace-audit: {record.levelname.lower()}: {record.getMessage()}\n")
-        except Exception:
+        except (OSError, ValueError):  # stderr closed or unable to encode the message
             self.handleError(record)
 
 
