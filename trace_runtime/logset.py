@@ -10,6 +10,7 @@ report, not a reason to refuse the other segments.
 from __future__ import annotations
 
 import bisect
+import hashlib
 import logging
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -60,8 +61,9 @@ def preferred_copies(segments: Sequence[Segment]) -> tuple[list[Segment], list[S
     While a compaction runs (or after one was interrupted) a segment sits in two tiers of a
     root. The copy read is the one holding the most (``copy_rank``); the others are listed
     as shadowed. Only copies that opened are compared, so a damaged copy never shadows a
-    readable one. Two files of one tier with one chain position hold different content and
-    are both read (``verify`` reports the fork).
+    readable one. A byte-identical copy (a segment copied by hand into another directory)
+    is read once. Two different files of one tier with one chain position are both read
+    (``verify`` reports the fork).
     """
     if not any(s.path.parent.name in ("warm", "cold") for s in segments):
         return list(segments), []
@@ -75,13 +77,30 @@ def preferred_copies(segments: Sequence[Segment]) -> tuple[list[Segment], list[S
         if other is None:
             chosen[key] = segment
         elif other.session.tier == session.tier:
-            same_tier.append(segment)
+            if _same_bytes(segment.path, other.path):
+                shadowed.append(segment)
+            else:
+                same_tier.append(segment)
         elif copy_rank(segment) < copy_rank(other):
             shadowed.append(other)
             chosen[key] = segment
         else:
             shadowed.append(segment)
     return same_tier + list(chosen.values()), shadowed
+
+
+def _same_bytes(a: Path, b: Path) -> bool:
+    """Whether two files hold the same bytes (sizes first, then their SHA-256)."""
+    try:
+        if a.stat().st_size != b.stat().st_size:
+            return False
+        with open(a, "rb") as fa, open(b, "rb") as fb:
+            return (
+                hashlib.file_digest(fa, "sha256").digest()
+                == hashlib.file_digest(fb, "sha256").digest()
+            )
+    except OSError:
+        return False
 
 
 def find_segment_files(path: Path) -> list[Path]:

@@ -77,3 +77,16 @@ def test_the_chain_is_checked_across_segments(
     assert [c.payloads[TOPIC_SEAL] for c, _ in links] == [
         c.payloads[TOPIC_SEAL] for c in log.iter_cycles()
     ]
+
+
+def test_a_byte_identical_copy_in_another_directory_is_read_once(
+    tmp_path: Path, log_writer: Callable[..., AuditLogger]
+) -> None:
+    root = _root(tmp_path, log_writer)
+    cycles = [c.cycle for c in open_log(root).iter_cycles()]
+    (root / "cold").mkdir()
+    first = sorted((root / "hot").glob("*.mcap"))[0]
+    shutil.copy2(first, root / "cold" / first.name)
+    log = open_log(root)
+    assert [c.cycle for c in log.iter_cycles()] == cycles
+    assert [s.path.name for s in log.shadowed] == [first.name]
