@@ -25,6 +25,7 @@ from trace_audit.verify import VerifyReport, verify_log
 from trace_runtime import AuditLogger, LoggerConfig, open_segment
 from trace_runtime.chain import digest
 from trace_runtime.codec import encode_seal
+from trace_runtime.cycles import RawMessage
 from trace_runtime.integrity import (
     Ed25519Signer,
     Signer,
@@ -33,7 +34,6 @@ from trace_runtime.integrity import (
     make_checkpoint,
     signing_bytes,
 )
-from trace_runtime.cycles import RawMessage
 from trace_runtime.records import (
     LAYER_TOPICS,
     TOPIC_ACTION,
