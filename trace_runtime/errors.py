@@ -44,3 +44,8 @@ class TimeOutOfRangeError(TraceError):
 class LogLimitError(LogReadError):
     """A file asks the reader for more than its limits allow (a decompression bomb, a
     flood of records): refused, in bounded time and memory."""
+
+
+class VerificationError(TraceError):
+    """A copy of a segment is not what its source becomes (compaction checks every copy it
+    makes, and every copy a killed run left, before anything is removed)."""

@@ -133,6 +133,8 @@ class SegmentSummary:
     end_ns: int | None = None
     findings: int = 0
     ok: bool = True
+    last_seal: str | None = None
+    """Digest of the segment's last seal in reading order: where the next segment enters."""
     copy: bool = False
     """A second copy of a segment (mid-compaction): verified, but not counted twice."""
 
@@ -288,6 +290,7 @@ class _SegmentCheck:
             s.start_ns, s.end_ns = min(scan.t), max(scan.t)
         if scan.last_digest is not None and scan.num:
             self.tail = _Tail(scan.last_digest, scan.num[-1], scan.t[-1])
+        s.last_seal = scan.last_digest
         s.findings = len(self.sink.findings) - self.findings_before
         s.ok = s.findings == 0
         if scan.summarised:
