@@ -406,8 +406,19 @@ def _run(root: Path, settings: _Settings, progress: ProgressCallback | None) -> 
         del segments[path]
     if retention_ns is not None and reference is not None:
         report.retention = _retention(root, reference - retention_ns, robot, dry_run, settings.key)
-    refresh_catalog(root, write=not dry_run)
+    if not dry_run:
+        _refresh(root)
     return report
+
+
+def _refresh(root: Path) -> str:
+    """Update the catalog; a failure (a full disk) is said, never fatal: the files are the
+    truth and the next run rebuilds it."""
+    try:
+        refresh_catalog(root)
+    except OSError as err:
+        return f"catalog not updated ({err.strerror or err})"
+    return ""
 
 
 def _order(segment: Segment) -> tuple[str, int]:
@@ -522,13 +533,13 @@ def compact_segment(
             else:
                 written = _write_warm(segment, stream, source_sha, warm_policy, advance)
         _check_written(segment, partial, written)
+        os.replace(partial, target)
     except (VerificationError, LogReadError, ColdFormatError, SegmentWriteError, OSError) as err:
         with contextlib.suppress(OSError):
             partial.unlink()
         return failed(str(err))
-    os.replace(partial, target)
     fsync_dir(target_dir)
-    refresh_catalog(root)
+    result.detail = _refresh(root)
     path.unlink()
     fsync_dir(path.parent)
     result.bytes_after = target.stat().st_size
