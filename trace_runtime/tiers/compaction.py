@@ -1085,7 +1085,8 @@ def _retention(
     segments, problems = open_segments(_tier_files(root))
     for problem in problems:
         if problem.path.parent.name == "cold":
-            out.append(RetentionResult(_rel(root, problem.path), 0, "kept", problem.reason))
+            rel = _rel(root, problem.path)
+            out.append(RetentionResult(rel, 0, "kept", f"held: unreadable ({problem.reason})"))
     candidates = [
         s
         for s in segments
