@@ -44,7 +44,7 @@ import orjson
 from trace_runtime.cycles import RawMessage
 from trace_runtime.errors import LogReadError, UsageError, VerificationError
 from trace_runtime.integrity import PublicKey
-from trace_runtime.logset import FileProblem, Log, find_segment_files, open_segments
+from trace_runtime.logset import FileProblem, Log, open_segments
 from trace_runtime.reader import Segment
 from trace_runtime.records import MESSAGE_MODELS, TOPIC_SEAL
 from trace_runtime.segment import OutMessage, SegmentWriteError, SegmentWriter
@@ -61,7 +61,13 @@ from trace_runtime.tiers._files import (
     partial_path,
     root_lock,
 )
-from trace_runtime.tiers.catalog import TIER_METADATA, TIERS, file_digest, refresh_catalog
+from trace_runtime.tiers.catalog import (
+    TIER_METADATA,
+    TIERS,
+    file_digest,
+    refresh_catalog,
+    segment_files,
+)
 from trace_runtime.tiers.cold import (
     BLOCK_SCHEMA,
     BLOCK_TOPIC,
@@ -425,25 +431,15 @@ def _order(segment: Segment) -> tuple[str, int]:
     return segment.session.robot_id, segment.session.segment
 
 
-def _tier_files(root: Path) -> list[Path]:
-    """The segment files directly in the root's tier directories (logset's discovery)."""
-    files: list[Path] = []
-    for tier in TIERS:
-        directory = root / tier
-        if directory.is_dir():
-            files += [p for p in find_segment_files(directory) if p.parent == directory]
-    return files
-
-
 def _scan(root: Path) -> tuple[dict[Path, Segment], list[FileProblem]]:
-    segments, problems = open_segments(_tier_files(root))
+    segments, problems = open_segments(segment_files(root))
     return {s.path: s for s in segments}, problems
 
 
 def _in_two_tiers(root: Path) -> set[str]:
     """Names of segment files present in more than one tier (held by ``recover``)."""
     seen: dict[str, int] = {}
-    for path in _tier_files(root):
+    for path in segment_files(root):
         seen[path.name] = seen.get(path.name, 0) + 1
     return {name for name, count in seen.items() if count > 1}
 
@@ -940,7 +936,7 @@ def recover(root: Path, *, dry_run: bool = False, key: PublicKey | None = None) 
                 fsync_dir(directory)
             done.append(Leftover(_rel(root, partial), "unfinished write discarded"))
     by_name: dict[str, list[Path]] = {}
-    for path in _tier_files(root):
+    for path in segment_files(root):
         by_name.setdefault(path.name, []).append(path)
     for copies in by_name.values():
         if len(copies) >= 2:
@@ -1082,7 +1078,7 @@ def _retention(
 ) -> list[RetentionResult]:
     """Delete old cold segments that ``verify`` finds clean; hold every other one."""
     out: list[RetentionResult] = []
-    segments, problems = open_segments(_tier_files(root))
+    segments, problems = open_segments(segment_files(root))
     for problem in problems:
         if problem.path.parent.name == "cold":
             rel = _rel(root, problem.path)
