@@ -57,3 +57,8 @@ class LogLockedError(TraceError):
         super().__init__(f"{path}: the log is being written by {holder} (lock held)")
         self.path = path
         self.pid = pid
+
+
+class VerificationError(TraceError):
+    """A copy of a segment is not what its source becomes (compaction checks every copy it
+    makes, and every copy a killed run left, before anything is removed)."""

@@ -8,10 +8,10 @@ a CloudTrail digest file. A signed head vouches for every cycle the chain reache
 
 This module holds the primitives a logger, a storage gateway or the investigator needs:
 key files, building and signing checkpoints, checking a signature, and ``verify_cycle``,
-the check of one cycle against its seal. The whole-log report lives in
-``trace_audit.verify``. ``cryptography`` is imported only when a key is used, so a robot
-logging unsigned checkpoints does not pay for it. The byte formats are specified in
-docs/integrity.md.
+the check of one cycle against its seal. The whole-log verification built on it lives in
+``trace_runtime.verification`` (``trace-audit verify`` and retention both use it).
+``cryptography`` is imported only when a key is used, so a robot logging unsigned
+checkpoints does not pay for it. The byte formats are specified in docs/integrity.md.
 """
 
 from __future__ import annotations

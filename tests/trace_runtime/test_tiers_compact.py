@@ -189,13 +189,37 @@ def test_leftovers_of_a_killed_run_are_completed_or_discarded(tmp_path: Path) ->
     assert _segment_names(root) == [f"cold/{name0}", f"hot/{name1}"]
     assert [cycle_key(c) for c in open_log(root).iter_cycles()] == original
 
-    # a replacement that is not what its source becomes is discarded, then redone
-    shutil.copy(done / "cold" / name0, root / "cold" / name1)
+    # a decayed replacement is discarded (its source verifies), then redone
+    shutil.copy(done / "cold" / name1, root / "cold" / name1)
+    decayed = bytearray((root / "cold" / name1).read_bytes())
+    decayed[open_segment(root / "cold" / name1).chunks()[0].offset + 80] ^= 0x10
+    (root / "cold" / name1).write_bytes(bytes(decayed))
     report = compact(root, "cold", older_than_ns=0, cold=SMALL_BLOCKS)
     assert "did not verify" in report.leftovers[0].action
     assert [s.status for s in report.segments] == ["compacted"]
     assert _segment_names(root) == [f"cold/{name0}", f"cold/{name1}"]
     assert [cycle_key(c) for c in open_log(root).iter_cycles()] == original
+
+
+def test_a_replacement_of_another_segment_that_verifies_is_held_not_deleted(
+    tmp_path: Path,
+) -> None:
+    """Compaction never writes one segment's copy under another's name; when it finds one,
+    both files verify on their own and neither is provably redundant: both are kept."""
+    template = make_root(tmp_path / "template", cycles=40, segments=2)
+    done = tmp_path / "done"
+    shutil.copytree(template, done)
+    compact(done, "cold", older_than_ns=0, cold=SMALL_BLOCKS)
+    name0, name1 = (p.name for p in sorted((template / "hot").glob("*.mcap")))
+    root = tmp_path / "root"
+    shutil.copytree(template, root)
+    (root / "cold").mkdir()
+    shutil.copy(done / "cold" / name0, root / "cold" / name1)
+    report = compact(root, "cold", older_than_ns=0, cold=SMALL_BLOCKS)
+    (held,) = report.held
+    assert held.path == f"hot/{name1}" and "both verify but differ" in held.action
+    assert f"hot/{name1}" not in [s.source for s in report.segments]
+    assert (root / "hot" / name1).exists() and (root / "cold" / name1).exists()
 
 
 # --- kill -9 ------------------------------------------------------------------------------
@@ -381,7 +405,7 @@ def test_retention_deletes_only_old_cold_segments_that_verify(tmp_path: Path) ->
     by_path = {r.path: r for r in report.retention}
     assert by_path[f"cold/{segments[0].name}"].status == "deleted"
     assert by_path[f"cold/{segments[1].name}"].status == "kept"
-    assert "does not verify" in by_path[f"cold/{segments[1].name}"].detail
+    assert "held: findings (damaged" in by_path[f"cold/{segments[1].name}"].detail
     assert len(by_path) == 2
     assert sorted(p.name for p in (root / "cold").glob("*.mcap")) == [s.name for s in segments[1:]]
     tombstones = [orjson.loads(line) for line in (root / RETENTION_LOG).read_bytes().splitlines()]

@@ -49,13 +49,16 @@ _COMPACT_HELP = "\n\n".join(
             "24h for warm (the hot window), 7d for cold. Each segment is written aside, "
             "fsynced, verified by decoding, renamed in, and only then is its source removed; "
             "a killed run is completed by the next one. Retention deletes cold segments older "
-            "than --retention (default 183d) that verify; nothing else is ever deleted."
+            "than --retention (default 183d) that verify clean (seals, checkpoints, and "
+            "signatures with --key); a copy is removed only when a verified one stays, and "
+            "only files compaction can prove its own; nothing else is ever deleted."
         ),
         "[bold]Examples[/bold]:",
         "  trace-audit compact fleet/robot-7 --tier warm",
         "  trace-audit compact run/ --tier cold --older-than 0 --json",
         "  trace-audit compact /logs --tier cold --from hot --now --dry-run",
         "  trace-audit compact /logs --tier cold --jobs 4 --retention off",
+        "  trace-audit compact /logs --tier cold --key keys/trace-ed25519.pub",
     ]
 )
 
@@ -153,10 +156,22 @@ def compact_command(
             help="Also compact a robot's newest unfinished hot segment (a crashed robot's).",
         ),
     ] = False,
+    key: Annotated[
+        Path | None,
+        typer.Option(
+            "--key",
+            help="The robots' Ed25519 public key: retention then also checks checkpoint "
+            "signatures, and keeps what does not verify.",
+            show_default=False,
+        ),
+    ] = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
     def run() -> CompactionReport:
+        from trace_runtime.integrity import load_public_key
+
+        public = load_public_key(key) if key is not None else None
         context_ns = parse_duration(context)
         return _with_progress(
             lambda progress: compact(
@@ -176,6 +191,7 @@ def compact_command(
                 ),
                 cold=ColdOptions(block_cycles=block_cycles, jobs=jobs),
                 progress=progress,
+                key=public,
             ),
             quiet=json_out or plain,
         )
@@ -188,6 +204,10 @@ def compact_command(
     if report.failed:
         names = ", ".join(s.source for s in report.failed)
         sys.stderr.write(f"trace-audit: compaction failed for {names}; sources kept\n")
+    if report.held:
+        names = ", ".join(leftover.path for leftover in report.held)
+        sys.stderr.write(f"trace-audit: copies held for a human (both kept): {names}\n")
+    if report.failed or report.held:
         raise typer.Exit(EXIT_FINDINGS)
 
 

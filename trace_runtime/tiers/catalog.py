@@ -21,6 +21,7 @@ import orjson
 
 from trace_runtime.chain import digest
 from trace_runtime.errors import LogReadError
+from trace_runtime.logset import find_segment_files
 from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.tiers._files import write_atomic
@@ -145,12 +146,13 @@ def refresh_catalog(root: str | Path, *, write: bool = True) -> Catalog:
 
 
 def segment_files(root: Path) -> list[Path]:
-    """Every finished-named segment file in the tier directories of ``root``."""
+    """Every segment file directly in the tier directories of ``root``, as
+    ``logset.find_segment_files`` finds them (writes in progress excluded)."""
     files: list[Path] = []
     for tier in TIERS:
         directory = root / tier
         if directory.is_dir():
-            files += sorted(p for p in directory.glob("*.mcap") if p.is_file())
+            files += [p for p in find_segment_files(directory) if p.parent == directory]
     return files
 
 

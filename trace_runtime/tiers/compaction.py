@@ -3,10 +3,12 @@
 Each segment moves in one crash-safe sequence: write the new tier's file aside as
 ``<name>.mcap.partial``, fsync it, verify it against the source by decoding it, rename it
 into ``warm/`` or ``cold/``, fsync the directory, update the catalog, and only then remove
-the source. A run killed at any point is completed by the next one: a ``.partial`` is
-discarded; a finished replacement whose source still exists is verified against it and
-the source removed (or, if it does not verify, the replacement is discarded and redone).
-So a segment is never lost, and once the next run has finished it is never in two tiers.
+the source. A run killed at any point is completed by the next one from whichever copy
+verifies (``recover``): a ``.partial`` that is provably compaction's own is discarded (any
+other file is left alone); of a segment found in two tiers, the copy that stays is one that
+verifies, and the other is removed only when the one staying holds all it holds. Copies
+that disagree while both verify, or that both fail, are held for a human. So a segment is
+never lost, the last good copy is never removed, and a settled segment is in one tier.
 
 Which segments move: those whose newest log time is ``older_than`` before the reference
 time, which is the newest log time anywhere in the root (so a simulator's log, in sim
@@ -15,9 +17,12 @@ segment of a robot that is not finished is the one its logger may still be writi
 is left alone unless ``include_unfinished``.
 
 Retention deletes only cold segments (already compacted) whose newest log time is more
-than ``retention_ns`` before the reference, and only if they verify (every seal links to the
-one before, every full layer message matches its seal digest); each deletion is recorded
-in ``retention.jsonl`` in the root first.
+than ``retention_ns`` before the reference, and only if the verification ``trace-audit
+verify`` runs (``trace_runtime.verification``: seals, links, checkpoints, and signatures when
+``key`` is given) finds nothing in them; anything else is held as evidence. Each deletion is
+recorded in ``retention.jsonl`` in the root first.
+
+Segment files are found and opened through ``trace_runtime.logset``, like every reader.
 """
 
 from __future__ import annotations
@@ -32,24 +37,37 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from itertools import islice, zip_longest
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, BinaryIO, Literal, cast
 
 import orjson
 
-from trace_runtime.chain import digest
 from trace_runtime.cycles import RawMessage
-from trace_runtime.errors import LogReadError, UsageError
+from trace_runtime.errors import LogReadError, UsageError, VerificationError
+from trace_runtime.integrity import PublicKey
+from trace_runtime.logset import FileProblem, Log, open_segments
 from trace_runtime.reader import Segment
 from trace_runtime.records import MESSAGE_MODELS, TOPIC_SEAL
 from trace_runtime.segment import OutMessage, SegmentWriteError, SegmentWriter
 from trace_runtime.session import SessionInfo
 from trace_runtime.tiers._files import (
+    PARTIAL_METADATA,
     PARTIAL_SUFFIX,
+    PartialOpener,
+    PartialStream,
+    compaction_marker,
     fsync_dir,
+    open_partial,
+    partial_owner,
     partial_path,
     root_lock,
 )
-from trace_runtime.tiers.catalog import TIER_METADATA, TIERS, file_digest, refresh_catalog
+from trace_runtime.tiers.catalog import (
+    TIER_METADATA,
+    TIERS,
+    file_digest,
+    refresh_catalog,
+    segment_files,
+)
 from trace_runtime.tiers.cold import (
     BLOCK_SCHEMA,
     BLOCK_TOPIC,
@@ -68,6 +86,23 @@ from trace_runtime.tiers.cold import (
     split_plain,
 )
 from trace_runtime.tiers.warm import SUMMARY_SCHEMA, SUMMARY_TOPIC, WarmPolicy, warm_cycles
+from trace_runtime.verification import SegmentSummary, VerifyReport, verify
+
+__all__ = [  # noqa: RUF022 - grouped by role
+    "compact",
+    "compact_segment",
+    "recover",
+    "verify_replacement",
+    "chain_problems",
+    "parse_duration",
+    "ColdOptions",
+    "CompactionReport",
+    "Leftover",
+    "Progress",
+    "RetentionResult",
+    "SegmentResult",
+    "VerificationError",
+]
 
 SECOND_NS = 1_000_000_000
 DAY_NS = 86_400 * SECOND_NS
@@ -149,6 +184,7 @@ class RetentionResult:
     path: str
     end_ns: int
     status: Literal["deleted", "would delete", "kept"]
+    """``kept``: held as evidence (``detail`` says why: findings, unreadable, two copies)."""
     detail: str = ""
 
 
@@ -191,9 +227,10 @@ class CompactionReport:
     def cycles(self) -> int:
         return sum(s.cycles for s in self.segments if s.status != "failed")
 
-
-class VerificationError(Exception):
-    """A replacement does not match its source (internal; reported per segment)."""
+    @property
+    def held(self) -> list[Leftover]:
+        """Leftovers that could not be settled safely: two copies kept for a human."""
+        return [leftover for leftover in self.leftovers if leftover.action.startswith("held")]
 
 
 # --- the entry point -----------------------------------------------------------------------
@@ -214,12 +251,16 @@ def compact(
     warm: WarmPolicy | None = None,
     cold: ColdOptions | None = None,
     progress: ProgressCallback | None = None,
+    key: PublicKey | None = None,
+    opener: PartialOpener = open_partial,
 ) -> CompactionReport:
     """Move every eligible segment of ``root`` into ``tier`` ("warm" or "cold"); see module doc.
 
     ``older_than_ns`` defaults to 24 h for warm and 7 days for cold; ``sources`` to hot for
     warm and hot + warm for cold. ``now_ns`` fixes the reference time (tests, replays).
-    ``retention_ns=None`` turns retention off. A dry run changes nothing on disk.
+    ``retention_ns=None`` turns retention off. ``key``: the robots' public key; retention and
+    the settling of leftovers then check checkpoint signatures too. ``opener`` creates each
+    partial file (a plug point for fault injection). A dry run changes nothing on disk.
     """
     root = Path(root)
     if not root.is_dir():
@@ -254,6 +295,8 @@ def compact(
             include_unfinished=include_unfinished,
             warm=warm_policy,
             cold=cold_options,
+            key=key,
+            opener=opener,
         )
         report = _run(root, settings, progress)
     report.seconds = time.perf_counter() - started
@@ -273,14 +316,17 @@ class _Settings:
     include_unfinished: bool
     warm: WarmPolicy
     cold: ColdOptions
+    key: PublicKey | None
+    opener: PartialOpener
 
 
 def _run(root: Path, settings: _Settings, progress: ProgressCallback | None) -> CompactionReport:
     tier, sources, robot = settings.tier, settings.sources, settings.robot
     dry_run, now_ns, retention_ns = settings.dry_run, settings.now_ns, settings.retention_ns
     older_than_ns = settings.older_than_ns
-    leftovers = recover(root, dry_run=dry_run)
+    leftovers = recover(root, dry_run=dry_run, key=settings.key)
     segments, unreadable = _scan(root)
+    held = _in_two_tiers(root)
     if now_ns is not None:
         reference: int | None = now_ns
         label: Literal["newest log time", "wall clock", "given"] = "given"
@@ -302,7 +348,8 @@ def _run(root: Path, settings: _Settings, progress: ProgressCallback | None) -> 
         retention_ns=retention_ns,
         leftovers=leftovers,
     )
-    for path, reason in unreadable:
+    for problem in unreadable:
+        path, reason = problem.path, problem.reason
         report.skipped.append(
             SegmentResult(
                 _rel(root, path),
@@ -324,7 +371,9 @@ def _run(root: Path, settings: _Settings, progress: ProgressCallback | None) -> 
         if session.tier not in sources or (robot is not None and session.robot_id != robot):
             continue
         why = ""
-        if cutoff is None or segment.info.end_ns > cutoff:
+        if path.name in held:
+            why = "held: the segment is in two tiers (see the leftovers)"
+        elif cutoff is None or segment.info.end_ns > cutoff:
             why = "newer than the cutoff"
         elif path in live and not settings.include_unfinished:
             why = "unfinished newest hot segment: its logger may still be writing it"
@@ -357,32 +406,42 @@ def _run(root: Path, settings: _Settings, progress: ProgressCallback | None) -> 
             warm_policy=settings.warm,
             cold_options=settings.cold,
             advance=advance,
+            opener=settings.opener,
         )
         report.segments.append(result)
         del segments[path]
     if retention_ns is not None and reference is not None:
-        report.retention = _retention(root, reference - retention_ns, robot, dry_run)
-    refresh_catalog(root, write=not dry_run)
+        report.retention = _retention(root, reference - retention_ns, robot, dry_run, settings.key)
+    if not dry_run:
+        _refresh(root)
     return report
+
+
+def _refresh(root: Path) -> str:
+    """Update the catalog; a failure (a full disk) is said, never fatal: the files are the
+    truth and the next run rebuilds it."""
+    try:
+        refresh_catalog(root)
+    except OSError as err:
+        return f"catalog not updated ({err.strerror or err})"
+    return ""
 
 
 def _order(segment: Segment) -> tuple[str, int]:
     return segment.session.robot_id, segment.session.segment
 
 
-def _scan(root: Path) -> tuple[dict[Path, Segment], list[tuple[Path, str]]]:
-    segments: dict[Path, Segment] = {}
-    unreadable: list[tuple[Path, str]] = []
-    for tier in TIERS:
-        directory = root / tier
-        if not directory.is_dir():
-            continue
-        for path in sorted(directory.glob("*.mcap")):
-            try:
-                segments[path] = Segment(path)
-            except LogReadError as err:
-                unreadable.append((path, err.reason))
-    return segments, unreadable
+def _scan(root: Path) -> tuple[dict[Path, Segment], list[FileProblem]]:
+    segments, problems = open_segments(segment_files(root))
+    return {s.path: s for s in segments}, problems
+
+
+def _in_two_tiers(root: Path) -> set[str]:
+    """Names of segment files present in more than one tier (held by ``recover``)."""
+    seen: dict[str, int] = {}
+    for path in segment_files(root):
+        seen[path.name] = seen.get(path.name, 0) + 1
+    return {name for name, count in seen.items() if count > 1}
 
 
 def _live_segments(segments: dict[Path, Segment]) -> set[Path]:
@@ -438,6 +497,7 @@ def compact_segment(
     warm_policy: WarmPolicy,
     cold_options: ColdOptions,
     advance: Callable[[int], None] = lambda _n: None,
+    opener: PartialOpener = open_partial,
 ) -> SegmentResult:
     """Write, verify and swap in the ``tier`` copy of one segment; remove the source last."""
     started = time.perf_counter()
@@ -446,24 +506,36 @@ def compact_segment(
     target = target_dir / path.name
     partial = partial_path(target)
     result = _result(root, path, segment, target, status="compacted", detail="")
+
+    def failed(detail: str) -> SegmentResult:
+        result.status, result.detail = "failed", detail
+        result.seconds = time.perf_counter() - started
+        return result
+
+    if target.exists():
+        return failed(f"{_rel(root, target)} exists already and is not this segment's copy")
+    try:
+        file = opener(partial)
+    except FileExistsError:
+        return failed(f"a file not made by compaction is in the way: {_rel(root, partial)}")
+    except OSError as err:
+        return failed(f"cannot create {_rel(root, partial)}: {err}")
+    # From here on the partial is the file this run created: ours to remove on failure.
     try:
         source_sha = file_digest(path)
-        with open(partial, "wb") as stream:
+        with PartialStream(file) as stream:
             if tier == "cold":
                 written = _write_cold(segment, stream, source_sha, cold_options, advance)
             else:
                 written = _write_warm(segment, stream, source_sha, warm_policy, advance)
         _check_written(segment, partial, written)
+        os.replace(partial, target)
     except (VerificationError, LogReadError, ColdFormatError, SegmentWriteError, OSError) as err:
         with contextlib.suppress(OSError):
             partial.unlink()
-        result.status = "failed"
-        result.detail = str(err)
-        result.seconds = time.perf_counter() - started
-        return result
-    os.replace(partial, target)
+        return failed(str(err))
     fsync_dir(target_dir)
-    refresh_catalog(root)
+    result.detail = _refresh(root)
     path.unlink()
     fsync_dir(path.parent)
     result.bytes_after = target.stat().st_size
@@ -491,6 +563,13 @@ def _tier_metadata(segment: Segment, tier: str, source_sha: str, **extra: str) -
     )
     if tier == "cold" and lossy == "true":
         note += " (the source was a lossy warm segment)"
+    # Whether the robot's logger closed the original (verify then requires its closing
+    # checkpoint): a hot source says so itself, a compacted one passes it on.
+    finished = (
+        str(segment.info.finished).lower()
+        if segment.session.tier == "hot"
+        else segment.metadata.get(TIER_METADATA, {}).get("source_finished")
+    )
     return {
         "tier": tier,
         "source_tier": segment.session.tier,
@@ -498,6 +577,7 @@ def _tier_metadata(segment: Segment, tier: str, source_sha: str, **extra: str) -
         "source_bytes": str(segment.info.bytes),
         "lossy": lossy,
         "note": note,
+        **({} if finished is None else {"source_finished": finished}),
         **extra,
     }
 
@@ -601,15 +681,30 @@ def _as_tuples(messages: list[RawMessage]) -> list[tuple[str, int, int, bytes]]:
     return [(m.topic, m.sequence, m.log_time_ns, m.data) for m in messages]
 
 
+def _open_writer(
+    segment: Segment, stream: PartialStream, tier: str, **options: Any
+) -> _TallyWriter:
+    """A SegmentWriter on a partial file whose first write carries compaction's marker."""
+    marker = {"partial": segment.path.name, "tier": tier}
+    writer = SegmentWriter(
+        cast(BinaryIO, stream),  # PartialStream has every method SegmentWriter uses
+        _tier_session(segment, tier),
+        extra_metadata=[(PARTIAL_METADATA, marker)],
+        **options,
+    )
+    stream.release()
+    return _TallyWriter(writer)
+
+
 def _write_cold(
     segment: Segment,
-    stream: Any,
+    stream: PartialStream,
     source_sha: str,
     options: ColdOptions,
     advance: Callable[[int], None],
 ) -> _Written:
     # Blocks are zstd-compressed already; a second compression of the chunk would only cost time.
-    out = _TallyWriter(SegmentWriter(stream, _tier_session(segment, "cold"), compression=""))
+    out = _open_writer(segment, stream, "cold", compression="")
     block_channel = out.channel(BLOCK_TOPIC, encoding=CODEC, schema=BLOCK_SCHEMA)
     index_channel = out.channel(INDEX_TOPIC, encoding="json", schema=INDEX_SCHEMA)
     source_tier = segment.session.tier
@@ -689,12 +784,12 @@ def _write_cold(
 
 def _write_warm(
     segment: Segment,
-    stream: Any,
+    stream: PartialStream,
     source_sha: str,
     policy: WarmPolicy,
     advance: Callable[[int], None],
 ) -> _Written:
-    out = _TallyWriter(SegmentWriter(stream, _tier_session(segment, "warm"), level=WARM_LEVEL))
+    out = _open_writer(segment, stream, "warm", level=WARM_LEVEL)
     out.channel(SUMMARY_TOPIC, schema=SUMMARY_SCHEMA)
     seals = _Tally()
 
@@ -808,123 +903,260 @@ def _same(expected: Iterator[RawMessage], actual: Iterator[RawMessage], path: Pa
             )
 
 
-def chain_problems(segment: Segment, limit: int = 10) -> list[str]:
-    """Breaks in a segment's hash chain: seals that do not link, payloads that do not match."""
-    problems: list[str] = []
-    prev = segment.session.prev_seal
-    for cycle in segment.iter_cycles():
-        data = cycle.payloads.get(TOPIC_SEAL)
-        if data is None:
-            problems.append(f"cycle {cycle.cycle}: not sealed")
-        else:
-            seal = orjson.loads(data)
-            if seal.get("prev") != prev:
-                problems.append(f"cycle {cycle.cycle}: seal does not link to the previous seal")
-            named = seal.get("digests", {})
-            for topic, payload in cycle.payloads.items():
-                if topic != TOPIC_SEAL and named.get(topic) != digest(payload):
-                    problems.append(f"cycle {cycle.cycle}: {topic} does not match its seal digest")
-            prev = digest(data)
-        if len(problems) >= limit:
-            break
-    return problems
+def chain_problems(segment: Segment, limit: int = 10, key: PublicKey | None = None) -> list[str]:
+    """What ``verify`` finds in one segment on its own (its chain entering where its
+    ``trace.session`` says), one line each; empty when it verifies."""
+    report = verify(Log([segment], segment.path.parent), key=key)
+    return [f"{f.kind}: {f.message}" for f in report.findings[:limit]]
 
 
 # --- leftovers of a killed run ---------------------------------------------------------------
 
 
-def recover(root: Path, *, dry_run: bool = False) -> list[Leftover]:
-    """Finish or undo what a killed compaction left in ``root`` (report only, if dry run)."""
+def recover(root: Path, *, dry_run: bool = False, key: PublicKey | None = None) -> list[Leftover]:
+    """Finish or undo what a killed compaction left in ``root`` (report only, if dry run).
+
+    Unfinished writes are discarded only when provably compaction's own (``partial_owner``);
+    a segment in two tiers is settled by ``_settle``, never at the cost of its last good copy.
+    """
     done: list[Leftover] = []
     for tier in TIERS:
         directory = root / tier
         if not directory.is_dir():
             continue
         for partial in sorted(directory.glob(f"*{PARTIAL_SUFFIX}")):
+            if not partial.is_file():
+                continue
+            why = partial_owner(partial)
+            if why is not None:
+                done.append(Leftover(_rel(root, partial), f"left alone: {why}"))
+                continue
             if not dry_run:
                 partial.unlink()
                 fsync_dir(directory)
             done.append(Leftover(_rel(root, partial), "unfinished write discarded"))
     by_name: dict[str, list[Path]] = {}
-    for tier in TIERS:
-        directory = root / tier
-        if directory.is_dir():
-            for path in sorted(directory.glob("*.mcap")):
-                by_name.setdefault(path.name, []).append(path)
+    for path in segment_files(root):
+        by_name.setdefault(path.name, []).append(path)
     for copies in by_name.values():
-        if len(copies) < 2:
-            continue
-        # TIERS order: the least compacted copy is the source, the next one its replacement;
-        # a third copy (never made by compact) is left for the next run to settle.
-        done.append(_settle(root, copies[0], copies[1], dry_run))
+        if len(copies) >= 2:
+            # TIERS order: the least compacted copy is the source, the next one its
+            # replacement; a third copy (never made by compact) waits for the next run.
+            done.append(_settle(root, copies[0], copies[1], dry_run, key))
     return done
 
 
-def _settle(root: Path, source_path: Path, replacement: Path, dry_run: bool) -> Leftover:
+@dataclass(slots=True)
+class _Copy:
+    """One copy of a segment as ``_settle`` sees it."""
+
+    path: Path
+    segment: Segment | None
+    report: VerifyReport | None
+    problem: str = ""
+
+    @property
+    def clean(self) -> bool:
+        """Opened, read to the end, and ``verify`` finds nothing in it."""
+        return self.report is not None and self.report.ok
+
+    def why_not(self) -> str:
+        if self.report is None:
+            return self.problem
+        first = self.report.findings[0]
+        return f"{first.kind}: {first.message}"
+
+
+def _examine(path: Path, key: PublicKey | None) -> _Copy:
     try:
-        source = Segment(source_path)
-        verify_replacement(source, replacement)
-    except (VerificationError, LogReadError, ColdFormatError) as err:
-        if not dry_run:
-            replacement.unlink()
-            fsync_dir(replacement.parent)
-        return Leftover(_rel(root, replacement), f"replacement did not verify ({err}); discarded")
+        segment = Segment(path)
+    except LogReadError as err:
+        return _Copy(path, None, None, f"cannot be opened ({err.reason})")
+    return _Copy(path, segment, verify(Log([segment], path.parent), key=key))
+
+
+def _settle(
+    root: Path, source_path: Path, replacement: Path, dry_run: bool, key: PublicKey | None
+) -> Leftover:
+    """Settle a segment found in two tiers, keeping a copy that verifies.
+
+    - the replacement is exactly what the source becomes: the source is removed;
+    - the source is damaged (it opens, but parts cannot be read) and the replacement is a
+      lossless copy of it that verifies and holds every message still readable in the
+      source: the source is removed (the compaction is completed from the good copy);
+    - the source verifies and the replacement does not (damaged, or findings): the
+      replacement, compaction's own file, is discarded and the segment compacted again;
+    - anything else (both verify but differ, neither verifies, a lossy replacement of a
+      damaged source, a source that cannot be opened): both are held for a human.
+    """
+    src_rel, rep_rel = _rel(root, source_path), _rel(root, replacement)
+    source = _examine(source_path, key)
+    copy = _examine(replacement, key)
+    mismatch = ""
+    if source.segment is not None and copy.segment is not None:
+        try:
+            verify_replacement(source.segment, replacement)
+        except (VerificationError, LogReadError, ColdFormatError) as err:
+            mismatch = str(err)
+        else:
+            _remove(source_path, dry_run)
+            return Leftover(src_rel, f"replacement {rep_rel} verified; source removed")
+    if copy.clean and _completes(source, copy):
+        _remove(source_path, dry_run)
+        return Leftover(
+            src_rel,
+            f"source damaged ({source.why_not()}); verified replacement {rep_rel} kept and "
+            "holds everything still readable in it; source removed",
+        )
+    if source.clean and not copy.clean and _own_copy(copy):
+        _remove(replacement, dry_run)
+        why = copy.why_not() if copy.report is None or not copy.report.ok else mismatch
+        return Leftover(rep_rel, f"replacement did not verify ({why}); discarded")
+    if source.clean and copy.clean:
+        why = f"both verify but differ ({mismatch})"
+    else:
+        parts = [f"{c.path.parent.name}: {c.why_not()}" for c in (source, copy) if not c.clean]
+        why = "; ".join(parts) or mismatch
+    return Leftover(src_rel, f"held: copies in {src_rel} and {rep_rel} kept ({why})")
+
+
+def _completes(source: _Copy, copy: _Copy) -> bool:
+    """Whether ``copy`` (verified) can stand in for a damaged ``source``: a lossless copy of
+    the same segment that holds every message the source still yields, in order."""
+    if source.segment is None or copy.segment is None or source.report is None:
+        return False
+    if not any(f.kind == "damaged" for f in source.report.findings):
+        return False  # readable, but different: not decay
+    meta = copy.segment.metadata.get(TIER_METADATA, {})
+    if copy.segment.session.tier != "cold" or meta.get("lossy") != "false":
+        return False
+    if replace(copy.segment.session, tier=source.segment.session.tier) != source.segment.session:
+        return False
+    try:
+        decoded = iter_decoded(copy.segment.iter_messages())
+        for want in _readable_messages(source.segment):
+            if not any(got == want for got in decoded):
+                return False
+    except (LogReadError, ColdFormatError):
+        return False
+    return True
+
+
+def _readable_messages(segment: Segment) -> Iterator[RawMessage]:
+    """Every message of a damaged segment that can still be read, chunk by chunk."""
+    if segment.loose:
+        yield from segment.loose
+    for chunk in segment.chunks():
+        try:
+            messages = segment.chunk_messages(chunk.offset)
+        except LogReadError:
+            continue
+        yield from messages
+
+
+def _own_copy(copy: _Copy) -> bool:
+    """A finished replacement is compaction's own when it says so: its trace.session names a
+    compacted tier and it carries the trace.tier record (or the partial-file marker)."""
+    if copy.segment is not None:
+        return copy.segment.session.tier in ("warm", "cold") and bool(
+            copy.segment.metadata.get(TIER_METADATA)
+        )
+    return compaction_marker(copy.path) == copy.path.name
+
+
+def _remove(path: Path, dry_run: bool) -> None:
     if not dry_run:
-        source_path.unlink()
-        fsync_dir(source_path.parent)
-    return Leftover(
-        _rel(root, source_path), f"replacement {_rel(root, replacement)} verified; source removed"
-    )
+        path.unlink()
+        fsync_dir(path.parent)
 
 
 # --- retention -------------------------------------------------------------------------------
 
 
 def _retention(
-    root: Path, cutoff_ns: int, robot: str | None, dry_run: bool
+    root: Path, cutoff_ns: int, robot: str | None, dry_run: bool, key: PublicKey | None
 ) -> list[RetentionResult]:
+    """Delete old cold segments that ``verify`` finds clean; hold every other one."""
     out: list[RetentionResult] = []
-    directory = root / "cold"
-    if not directory.is_dir():
-        return out
-    for path in sorted(directory.glob("*.mcap")):
-        try:
-            segment = Segment(path)
-        except LogReadError as err:
-            out.append(RetentionResult(_rel(root, path), 0, "kept", f"unreadable: {err.reason}"))
-            continue
-        if robot is not None and segment.session.robot_id != robot:
-            continue
-        end = segment.info.end_ns
-        if end >= cutoff_ns:
-            continue
-        try:
-            problems = chain_problems(segment)
-        except (LogReadError, ColdFormatError) as err:
-            problems = [str(err)]
-        if problems:
-            out.append(
-                RetentionResult(_rel(root, path), end, "kept", "does not verify: " + problems[0])
-            )
-            continue
-        if dry_run:
-            out.append(RetentionResult(_rel(root, path), end, "would delete"))
-            continue
-        _record_retired(root, path, segment)
-        del segment
-        path.unlink()
-        fsync_dir(directory)
-        out.append(RetentionResult(_rel(root, path), end, "deleted"))
+    segments, problems = open_segments(segment_files(root))
+    for problem in problems:
+        if problem.path.parent.name == "cold":
+            rel = _rel(root, problem.path)
+            out.append(RetentionResult(rel, 0, "kept", f"held: unreadable ({problem.reason})"))
+    candidates = [
+        s
+        for s in segments
+        if s.session.tier == "cold"
+        and s.path.parent.name == "cold"
+        and (robot is None or s.session.robot_id == robot)
+        and s.info.end_ns < cutoff_ns
+    ]
+    for robot_id in sorted({s.session.robot_id for s in candidates}):
+        mine = [s for s in candidates if s.session.robot_id == robot_id]
+        chain = [s for s in segments if s.session.robot_id == robot_id]
+        out += _retire(root, mine, chain, dry_run, key)
     return out
 
 
-def _record_retired(root: Path, path: Path, segment: Segment) -> None:
-    last = None
-    for cycle in segment.iter_cycles(reverse=True):
-        data = cycle.payloads.get(TOPIC_SEAL)
-        if data is not None:
-            last = digest(data)
-            break
+def _retire(
+    root: Path,
+    candidates: list[Segment],
+    chain: list[Segment],
+    dry_run: bool,
+    key: PublicKey | None,
+) -> list[RetentionResult]:
+    """One robot's old cold segments: verify its chain up to the newest of them, delete each
+    one that verify finds nothing in, whose successor continues from its last seal."""
+    last = max(s.session.segment for s in candidates)
+    report = verify(Log([s for s in chain if s.session.segment <= last], root), key=key)
+    summaries = {Path(s.path): s for s in report.segments}
+    named = {f.segment for f in report.findings}
+    out: list[RetentionResult] = []
+    for segment in sorted(candidates, key=lambda s: s.session.segment):
+        rel, end = _rel(root, segment.path), segment.info.end_ns
+        summary = summaries[segment.path]
+        why = _retention_hold(segment, summary, named, chain, report)
+        if why:
+            out.append(RetentionResult(rel, end, "kept", why))
+            continue
+        if dry_run:
+            out.append(RetentionResult(rel, end, "would delete"))
+            continue
+        try:
+            _record_retired(root, segment.path, segment, summary.last_seal)
+        except OSError as err:
+            out.append(RetentionResult(rel, end, "kept", f"cannot record the deletion: {err}"))
+            continue
+        segment.path.unlink()
+        fsync_dir(segment.path.parent)
+        out.append(RetentionResult(rel, end, "deleted"))
+    return out
+
+
+def _retention_hold(
+    segment: Segment,
+    summary: SegmentSummary,
+    named: set[str],
+    chain: list[Segment],
+    report: VerifyReport,
+) -> str:
+    """Why retention must keep ``segment`` ("" when nothing stops it)."""
+    name = f"cold/{segment.path.name}"
+    if not summary.ok or name in named:
+        first = next((f for f in report.findings if f.segment == name), None)
+        return "held: findings" + (f" ({first.kind}: {first.message})" if first else "")
+    if summary.copy or any(
+        s.path != segment.path and s.path.name == segment.path.name for s in chain
+    ):
+        return "held: the segment is in two tiers"
+    after = [s for s in chain if s.session.segment == segment.session.segment + 1]
+    tail = summary.last_seal or segment.session.prev_seal  # an empty segment passes it on
+    if any(s.session.prev_seal != tail for s in after):
+        return "held: the next segment does not continue its chain"
+    return ""
+
+
+def _record_retired(root: Path, path: Path, segment: Segment, last_seal: str | None) -> None:
     line = {
         "path": _rel(root, path),
         "robot": segment.session.robot_id,
@@ -932,7 +1164,7 @@ def _record_retired(root: Path, path: Path, segment: Segment) -> None:
         "start_ns": segment.info.start_ns,
         "end_ns": segment.info.end_ns,
         "prev_seal": segment.session.prev_seal,
-        "last_seal": last,
+        "last_seal": last_seal,
         "sha256": file_digest(path),
         "deleted_at_ns": time.time_ns(),
     }

@@ -1,0 +1,109 @@
+"""``verify`` reads a log through the one owner of multi-file logs (``trace_runtime.logset``):
+the same copy of every segment as every other reader, the same unreadable-file problems; and
+it agrees with PROFILE §6 that checkpoints are a SHOULD.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+from tests.trace_audit.test_verify_tamper import _write_plain, decode, write_signed_log
+from tests.trace_runtime.test_tiers import make_root
+from trace_audit.verify import verify_log
+from trace_runtime import open_log
+from trace_runtime.integrity import Ed25519Signer
+from trace_runtime.tiers import compact
+
+
+def _kinds(items: list) -> list[str]:  # type: ignore[type-arg]
+    return [f.kind for f in items]
+
+
+def _root_with_warm_and_cold_copies(tmp_path: Path) -> Path:
+    """Segment 0 in warm (lossy) and in cold (lossless, of the hot original), as a root holds
+    it when a hot -> cold compaction ran while an older warm copy was still there."""
+    template = make_root(tmp_path / "template", cycles=60, flag_every=0, drop_at=None)
+    warm = tmp_path / "warm-run"
+    shutil.copytree(template, warm)
+    compact(warm, "warm", older_than_ns=0, include_unfinished=True)
+    cold = tmp_path / "cold-run"
+    shutil.copytree(template, cold)
+    compact(cold, "cold", older_than_ns=0, sources=["hot"], include_unfinished=True)
+    root = tmp_path / "root"
+    (root / "warm").mkdir(parents=True)
+    (root / "cold").mkdir()
+    (name,) = [p.name for p in (warm / "warm").glob("*.mcap")]
+    shutil.copy(warm / "warm" / name, root / "warm" / name)
+    shutil.copy(cold / "cold" / name, root / "cold" / name)
+    return root
+
+
+def test_verify_reads_the_copy_every_other_reader_reads(tmp_path: Path) -> None:
+    """A lossless cold copy outranks a lossy warm one (logset's one tier policy): verify
+    checks every payload of the cold copy and counts the warm one as the spare."""
+    root = _root_with_warm_and_cold_copies(tmp_path)
+    (read,) = open_log(root).segments
+    assert read.session.tier == "cold"
+    report = verify_log(root)
+    assert report.ok, report.findings
+    main = [s for s in report.segments if not s.copy]
+    assert [s.tier for s in main] == ["cold"]
+    assert report.cycles_summarised == 0 and report.cycles_valid == 60
+    assert "duplicate_segment" in _kinds(report.notes)
+
+
+def test_unreadable_and_foreign_files_come_from_the_log_problems(tmp_path: Path) -> None:
+    root = make_root(tmp_path / "log", cycles=20)
+    (root / "hot" / "zz_garbage.mcap").write_bytes(b"not an mcap file at all")
+    foreign = root / "hot" / "zz_foreign.mcap"
+    from mcap.writer import Writer
+
+    with open(foreign, "wb") as f:
+        writer = Writer(f)
+        writer.start(profile="ros2", library="someone else")
+        writer.finish()  # type: ignore[no-untyped-call]
+    problems = {p.path.name: p.foreign for p in open_log(root).problems}
+    assert problems == {"zz_garbage.mcap": False, "zz_foreign.mcap": True}
+    report = verify_log(root)
+    assert [(f.kind, f.segment) for f in report.findings] == [("damaged", "hot/zz_garbage.mcap")]
+    assert ("skipped_file", "hot/zz_foreign.mcap") in [(n.kind, n.segment) for n in report.notes]
+
+
+# --- PROFILE §6: checkpoints are a SHOULD ------------------------------------------------------
+
+
+def _without_checkpoints(source: Path, out: Path) -> Path:
+    """The same log as another writer (plain ``mcap`` library) that skips checkpoints writes it."""
+    decoded = decode(source)
+    decoded.units = [u for u in decoded.units if u.kind != "checkpoint"]
+    _write_plain(decoded, out)
+    return out
+
+
+def test_a_finished_log_without_any_checkpoint_is_a_note_not_a_finding(tmp_path: Path) -> None:
+    signer = Ed25519Signer.generate()
+    source = write_signed_log(tmp_path / "signed.mcap", signer, 30)
+    path = _without_checkpoints(source, tmp_path / "other-writer.mcap")
+    report = verify_log(path)
+    assert report.ok, report.findings
+    (note,) = [n for n in report.notes if n.kind == "no_checkpoints"]
+    assert "end not anchored: no final checkpoint" in note.message
+    assert "unanchored" in _kinds(report.notes)
+    # With the robot's key the investigator expects signatures: nothing vouches for the log.
+    keyed = verify_log(path, key=signer.public_key)
+    assert _kinds(keyed.findings) == ["unsigned_checkpoint"]
+
+
+def test_a_missing_final_checkpoint_is_still_truncation_when_others_exist(tmp_path: Path) -> None:
+    signer = Ed25519Signer.generate()
+    source = write_signed_log(tmp_path / "signed.mcap", signer, 30)
+    decoded = decode(source)
+    finals = [i for i, u in enumerate(decoded.units) if u.kind == "checkpoint"]
+    assert len(finals) == 3
+    del decoded.units[finals[-1]]  # the closing checkpoint only
+    path = tmp_path / "cut.mcap"
+    _write_plain(decoded, path)
+    report = verify_log(path, key=signer.public_key)
+    assert _kinds(report.findings) == ["truncated"]
+    assert report.findings[0].first_cycle == 30
