@@ -445,7 +445,7 @@ class _Scanner:
         acc = self.partial.groups.get(group)
         if acc is None:
             acc = self.partial.groups[group] = _Acc()
-        integrity, continuity_d = self._seal_and_gap(cycle, segment, acc)
+        integrity, continuity_d = self._seal_and_gap(cycle, segment, acc, perception)
         et, etp = score.et, score.et_partial
         full, dr_ok, intact = score.fully_traceable, not missing_dr, not integrity
         acc.decisions += 1
@@ -501,12 +501,15 @@ class _Scanner:
             )
         )
 
-    def _seal_and_gap(self, cycle: Cycle, segment: Segment, acc: _Acc) -> tuple[list[str], float]:
+    def _seal_and_gap(
+        self, cycle: Cycle, segment: Segment, acc: _Acc, perception: Any
+    ) -> tuple[list[str], float]:
         """Integrity problems of the cycle (the one seal check, ``verify_cycle``) and its
         continuity; a sealed cycle closes an interval, which the one gap rule judges."""
         stream = self.stream
         expected = stream.prev_seal if stream.prev_seal is not None else self.session_prev
-        status = verify_cycle(cycle, expected)
+        parsed = perception if TOPIC_PERCEPTION in cycle.payloads else None
+        status = verify_cycle(cycle, expected, perception_json=parsed)
         integrity = integrity_problems(status)
         if status.state == "unsealed":
             return integrity, 0.0

@@ -23,7 +23,7 @@ import stat
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
 
 import orjson
 
@@ -440,12 +440,17 @@ def _parse_seal(data: bytes) -> tuple[int, int, dict[str, str], str, int] | None
     return cycle, t_ns, digests, prev, dropped
 
 
-def verify_cycle(cycle: Cycle, prev_seal_digest: str | None = None) -> SealStatus:
+def verify_cycle(
+    cycle: Cycle, prev_seal_digest: str | None = None, *, perception_json: Any = None
+) -> SealStatus:
     """Check one cycle: its layer messages (and evidenced sensor readings) against its seal,
     and, when ``prev_seal_digest`` is given, the seal's link to the previous seal.
 
     Works on every tier through the reader's ``Cycle``: for a warm summary cycle the layer
     digests cannot be recomputed, so it is ``summarised`` when its seal and link hold.
+    ``perception_json``: the cycle's perception message already parsed by the caller (the
+    evidence check then does not parse it a second time); it must be the parse of the stored
+    bytes, which the seal check covers.
     """
     seal_data = cycle.payloads.get(TOPIC_SEAL)
     if seal_data is None:
@@ -485,7 +490,7 @@ def verify_cycle(cycle: Cycle, prev_seal_digest: str | None = None) -> SealStatu
     if perception is not None and TOPIC_PERCEPTION not in modified:
         # Sensor readings are not sealed themselves: the evidence refs that name them carry
         # their digests, and the refs are sealed with the perception message.
-        checked, unresolved, bad, uncited = _check_evidence(cycle, perception)
+        checked, unresolved, bad, uncited = _check_evidence(cycle, perception, perception_json)
     if modified:
         verb = "differs" if len(modified) == 1 else "differ"
         problems.append(f"{', '.join(modified)} {verb} from the seal's digest")
@@ -529,13 +534,16 @@ def verify_cycle(cycle: Cycle, prev_seal_digest: str | None = None) -> SealStatu
     )
 
 
-def _check_evidence(cycle: Cycle, perception: bytes) -> tuple[int, int, list[str], int]:
+def _check_evidence(
+    cycle: Cycle, perception: bytes, parsed: Any = None
+) -> tuple[int, int, list[str], int]:
     """Check the evidence refs that carry a digest against the cycle's sensor messages.
 
     Returns (refs checked, refs unresolved, readings that differ, readings no ref cites).
     """
     try:
-        entities = orjson.loads(perception).get("entities") or ()
+        value = parsed if parsed is not None else orjson.loads(perception)
+        entities = value.get("entities") or ()
     except (orjson.JSONDecodeError, AttributeError):
         return 0, 0, [], len(cycle.sensors)
     by_sequence = {(m.topic, m.sequence): i for i, m in enumerate(cycle.sensors)}
