@@ -430,22 +430,31 @@ class _SegmentCheck:
         for i in positions:
             before = self.entry_cycle if i == 0 else scan.num[i - 1]
             if before is None:
+                # The first cycle the log holds (earlier segments retired or lost): nothing
+                # to number against, but the drops its seal declares are still drops.
+                self._declared(i, None)
                 continue
             self._gap(before, scan.t[i - 1] if i > 0 else None, i)
 
-    def _gap(self, before: int, before_t: int | None, i: int) -> None:
+    def _declared(self, i: int, before_t: int | None) -> int:
+        """Note the drops the seal at position ``i`` declares; return their count."""
         scan = self.scan
-        gap = scan.num[i] - before - 1
-        declared = scan.dropped[i]
-        number, t = scan.num[i], scan.t[i]
+        declared, number = scan.dropped[i], scan.num[i]
         if declared:
             self.sink.declared += declared
             self.note(
                 "declared_gap",
                 f"{declared} cycle(s) dropped by the logger before cycle {number} "
                 "(declared by its seal)",
-                (number - declared, number - 1, before_t, t),
+                (number - declared, number - 1, before_t, scan.t[i]),
             )
+        return declared
+
+    def _gap(self, before: int, before_t: int | None, i: int) -> None:
+        scan = self.scan
+        gap = scan.num[i] - before - 1
+        declared = self._declared(i, before_t)
+        number, t = scan.num[i], scan.t[i]
         if gap > declared:
             scan.bad_positions.add(i)
             self.finding(
@@ -755,6 +764,8 @@ class _Structure:
                 check._gap(scan.num[i - 1], scan.t[i - 1], i)
             elif check.entry_cycle is not None:
                 check._gap(check.entry_cycle, None, i)
+            else:
+                check._declared(i, None)
 
     def _report_moved(self, rest: list[int], moved: set[int]) -> None:
         """One finding per run of moved cycles, located between the cycles around it."""

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import os
 import random
+import shutil
 import signal
 import struct
 import subprocess
@@ -368,3 +369,20 @@ def test_every_integrity_command_has_help_with_an_example() -> None:
     for command in ("verify", "keygen"):
         code, out, _err = _run(command, "--help")
         assert code == 0 and "Examples" in out and f"trace-audit {command}" in out
+
+
+def test_drops_declared_by_the_first_seal_a_log_holds_are_reported(tmp_path: Path) -> None:
+    """The log directory deleted under the robot: the next segment's first seal declares the
+    cycles that went with it, and verify counts them although nothing precedes that seal."""
+    root = tmp_path / "root"
+    logger = AuditLogger(root, robot_id="amr-1", period_s=0.1, config=LoggerConfig(threaded=False))
+    for i in range(30):
+        if i == 20:
+            shutil.rmtree(root)
+        with logger.cycle(T0_NS + i * PERIOD_NS) as c:
+            fill_cycle(c, "ped_far")
+    logger.close()
+    report = verify_log(root)
+    assert report.ok
+    assert report.declared_dropped == 20
+    assert [n.kind for n in report.notes if n.kind == "declared_gap"] == ["declared_gap"]
