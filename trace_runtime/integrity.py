@@ -30,6 +30,7 @@ import orjson
 from trace_runtime.chain import digest
 from trace_runtime.errors import RecordError, UsageError
 from trace_runtime.records import (
+    LAYER_TOPICS,
     TOPIC_CHECKPOINT,
     TOPIC_PERCEPTION,
     TOPIC_SEAL,
@@ -483,7 +484,9 @@ def verify_cycle(
             (summarised if cycle.summary is not None else missing).append(topic)
         elif digest(data) != expected:
             modified.append(topic)
-    extra = [t for t in cycle.payloads if t != TOPIC_SEAL and t not in digests]
+    # A layer the seal does not name was added. A /trace channel this reader does not know
+    # and the seal does not name is ignored, as PROFILE section 10 asks of every reader.
+    extra = [t for t in cycle.payloads if t in LAYER_TOPICS and t not in digests]
     checked, unresolved, uncited = 0, 0, len(cycle.sensors)
     bad: list[str] = []
     perception = cycle.payloads.get(TOPIC_PERCEPTION)

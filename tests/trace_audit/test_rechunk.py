@@ -234,3 +234,38 @@ def test_two_robots_merged_into_one_file_are_refused_in_one_line(tmp_path: Path)
         LogReadError, match=r"2 different trace.session records \(robots cpp-7, cpp-8\)"
     ):
         open_log(b_path)
+
+
+def test_an_unknown_trace_channel_the_seal_does_not_name_is_ignored(tmp_path: Path) -> None:
+    """PROFILE section 10: readers ignore channels they do not know, /trace/ ones included;
+    an added layer the reader knows is still caught."""
+    src = _profile_only_log(tmp_path / "src.mcap", chunk_size=1 << 20, cycles=10)
+
+    def add(topic: str) -> Path:
+        out = tmp_path / f"{topic.strip('/').replace('/', '_')}.mcap"
+        segment = open_segment(src)
+        with open(out, "wb") as f:
+            writer = Writer(f)
+            writer.start(profile="trace", library="vendor")
+            writer.add_metadata("trace.session", segment.metadata["trace.session"])
+            channels: dict[str, int] = {}
+            for msg in segment.iter_messages():
+                for name in ([topic] if msg.topic == TOPIC_SEAL else []) + [msg.topic]:
+                    if name not in channels:
+                        schema = writer.register_schema(
+                            name=name, encoding="jsonschema", data=b"{}"
+                        )
+                        channels[name] = writer.register_channel(
+                            topic=name, message_encoding="json", schema_id=schema
+                        )
+                    data = msg.data if name == msg.topic else b'{"vendor":1}'
+                    writer.add_message(
+                        channels[name], msg.log_time_ns, data, msg.log_time_ns, msg.sequence
+                    )
+            writer.finish()  # type: ignore[no-untyped-call]
+        return out
+
+    assert verify_log(add("/trace/vendor_extension")).ok
+    report = verify_log(add("/trace/belief"))
+    assert not report.ok
+    assert all("not named by the seal" in f.message for f in report.findings)
