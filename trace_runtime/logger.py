@@ -843,9 +843,13 @@ def _resume_point(root: Path, robot_id: str) -> tuple[int, str, int]:
 
 
 def _lock_path(path: Path, is_root: bool, robot_id: str) -> Path:
-    """Where the writer lock of a log lives: per robot in a root, per file otherwise."""
+    """Where the writer lock of a log lives: per robot in a root, per file otherwise. A file
+    written straight into a root's tier directory takes the robot's root lock: it would
+    otherwise fork the chain of a logger writing that root."""
     if is_root:
         return path / ".locks" / f"{robot_id}.lock"
+    if path.parent.name in ("hot", "warm", "cold"):
+        return path.parent.parent / ".locks" / f"{robot_id}.lock"
     return path.with_name(f".{path.name}.lock")
 
 

@@ -147,6 +147,16 @@ def test_a_second_logger_on_the_same_file_is_refused(tmp_path: Path) -> None:
     first.close()
 
 
+def test_a_file_inside_a_root_takes_the_robots_root_lock(tmp_path: Path) -> None:
+    """A second logger given a segment path inside the root (not the root) would fork the
+    chain of the logger writing the root; it is refused like one given the root."""
+    root = tmp_path / "root"
+    first = AuditLogger(root, robot_id="r", config=LoggerConfig(threaded=False))
+    with pytest.raises(LogLockedError):
+        AuditLogger(root / "hot" / "r_000007.mcap", robot_id="r")
+    first.close()
+
+
 def test_two_robots_on_one_root_are_independent(tmp_path: Path) -> None:
     root = tmp_path / "root"
     a = AuditLogger(root, robot_id="a", config=LoggerConfig(threaded=False))
