@@ -44,3 +44,12 @@ class TimeOutOfRangeError(TraceError):
 class LogLimitError(LogReadError):
     """A file asks the reader for more than its limits allow (a decompression bomb, a
     flood of records): refused, in bounded time and memory."""
+
+
+class PayloadError(LogReadError):
+    """A stored message's data is not what its channel promises: not JSON, nested deeper
+    than the parser allows, or not of its record's schema. ``path`` names the segment."""
+
+    def __init__(self, path: str, topic: str, reason: str) -> None:
+        super().__init__(path, f"{topic} message: {reason}")
+        self.topic = topic
