@@ -291,6 +291,8 @@ def record_soup(seed: bytes) -> bytes:
     out = RecordBuilder()
     out.write(MAGIC)
     Header("trace", "soup").write(out)
+    _schemas(out)
+    _channels(out)
     Metadata("trace.session", session()).write(out)
     return bytes(out.end()) + seed
 
