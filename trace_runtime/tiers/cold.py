@@ -971,6 +971,7 @@ def merge_plain(
         at += 1
     yield from pending
 
+
 _RECENT = COLD_ASSEMBLER.cache
 """Transitional alias of the shared assembler's cache for ``tests/trace_runtime/test_cold.py``
 and ``bench/bench_tiers.py`` (``_RECENT.clear()``); they should call
