@@ -19,6 +19,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 from sim.policy import PolicyInput, choose
+from trace_runtime.errors import TraceError
 
 STRICT_EPS = 1e-6
 DEFAULT_BUDGET = 400
@@ -32,8 +33,9 @@ _DOMAINS = {
 }
 
 
-class BudgetExhaustedError(Exception):
-    """The probing ran out of policy evaluations."""
+class BudgetExhaustedError(TraceError):
+    """The probing ran out of policy evaluations (caught inside ``sim``; a ``TraceError`` like
+    every error the project raises on purpose)."""
 
 
 @dataclass(slots=True)  # not frozen: ~4x cheaper to create

@@ -60,8 +60,8 @@ EPISODE_ROOM_M = 28.0
 """Straight aisle an episode needs ahead: the farthest spawn (~15 m) plus 10 s of driving."""
 
 
-class SimError(Exception):
-    """Base of the simulator's own errors."""
+class SimError(TraceError):
+    """Base of the simulator's own errors (a ``TraceError``, the project's one error root)."""
 
 
 class SimUsageError(SimError, ValueError):

@@ -11,11 +11,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 import orjson
+from pydantic import BaseModel, ValidationError
 
 from trace_runtime.chain import digest
+from trace_runtime.errors import PayloadError
 from trace_runtime.records import (
     TOPIC_ACTION,
     TOPIC_BELIEF,
@@ -29,6 +31,8 @@ from trace_runtime.records import (
     PerceptionMessage,
     Seal,
 )
+
+M = TypeVar("M", bound=BaseModel)
 
 # --- values ------------------------------------------------------------------------------
 
@@ -69,43 +73,53 @@ class Cycle:
         return self.summary is not None
 
     def json(self, topic: str) -> Any:
-        """The full message on ``topic`` parsed as plain JSON, or None if absent."""
+        """The full message on ``topic`` parsed as plain JSON, or None if absent.
+
+        Raises ``PayloadError`` when the stored bytes are not JSON (or nest deeper than the
+        parser's 1024 levels): a file's content, never a bug to show as a traceback."""
         data = self.payloads.get(topic)
-        return None if data is None else orjson.loads(data)
+        return None if data is None else parse_json(data, topic, self.segment)
 
     def layer(self, topic: str) -> Any:
         """The message on ``topic`` as JSON: the full one, else the warm summary's, else None."""
         data = self.payloads.get(topic)
         if data is not None:
-            return orjson.loads(data)
+            return parse_json(data, topic, self.segment)
         if self.summary is not None:
             return self.summary.get(topic)
         return None
 
+    def _model(self, topic: str, model: type[M]) -> M | None:
+        data = self.payloads.get(topic)
+        if data is None:
+            return None
+        try:
+            return model.model_validate_json(data)
+        except ValidationError as err:
+            first = err.errors()[0] if err.error_count() else {"msg": str(err)}
+            raise PayloadError(
+                self.segment, topic, f"not a valid {model.__name__}: {first['msg']}"
+            ) from err
+
     @property
     def seal(self) -> Seal | None:
-        data = self.payloads.get(TOPIC_SEAL)
-        return None if data is None else Seal.model_validate_json(data)
+        return self._model(TOPIC_SEAL, Seal)
 
     @property
     def perception(self) -> PerceptionMessage | None:
-        data = self.payloads.get(TOPIC_PERCEPTION)
-        return None if data is None else PerceptionMessage.model_validate_json(data)
+        return self._model(TOPIC_PERCEPTION, PerceptionMessage)
 
     @property
     def belief(self) -> BeliefMessage | None:
-        data = self.payloads.get(TOPIC_BELIEF)
-        return None if data is None else BeliefMessage.model_validate_json(data)
+        return self._model(TOPIC_BELIEF, BeliefMessage)
 
     @property
     def action(self) -> ActionMessage | None:
-        data = self.payloads.get(TOPIC_ACTION)
-        return None if data is None else ActionMessage.model_validate_json(data)
+        return self._model(TOPIC_ACTION, ActionMessage)
 
     @property
     def execution(self) -> ExecutionMessage | None:
-        data = self.payloads.get(TOPIC_EXECUTION)
-        return None if data is None else ExecutionMessage.model_validate_json(data)
+        return self._model(TOPIC_EXECUTION, ExecutionMessage)
 
     def digests(self) -> dict[str, str]:
         """SHA-256 of each layer payload present, keyed by topic (what a seal names)."""
@@ -152,6 +166,17 @@ def assemble_hot(messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
         t_ns = max(m.log_time_ns for m in messages if m.topic in payloads)
         cycles.append(Cycle(number, t_ns, payloads, sensors, segment))
     return cycles
+
+
+def parse_json(data: bytes, topic: str, segment: str) -> Any:
+    """A stored message's data as JSON; ``PayloadError`` (a ``LogReadError``) if it is not.
+
+    orjson refuses nesting past 1024 levels itself, so a hostile payload costs one bounded
+    parse; the error names the segment and topic instead of surfacing as a traceback."""
+    try:
+        return orjson.loads(data)
+    except orjson.JSONDecodeError as err:
+        raise PayloadError(segment, topic, f"not JSON ({err})") from err
 
 
 def cycle_field(data: bytes) -> int:

@@ -62,3 +62,12 @@ class LogLockedError(TraceError):
 class VerificationError(TraceError):
     """A copy of a segment is not what its source becomes (compaction checks every copy it
     makes, and every copy a killed run left, before anything is removed)."""
+
+
+class PayloadError(LogReadError):
+    """A stored message's data is not what its channel promises: not JSON, nested deeper
+    than the parser allows, or not of its record's schema. ``path`` names the segment."""
+
+    def __init__(self, path: str, topic: str, reason: str) -> None:
+        super().__init__(path, f"{topic} message: {reason}")
+        self.topic = topic

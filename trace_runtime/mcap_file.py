@@ -45,23 +45,49 @@ _RECENT_CHUNKS = 4
 
 @dataclass(frozen=True, slots=True)
 class ReadLimits:
-    """Bounds on what one file may make the reader do. The defaults are far above what an
-    honest log needs (a TRACE chunk is a few MB at most; a camera frame a few tens of MB)."""
+    """Bounds on what one file may make the reader do, so that reading costs about what an
+    honest file of the same size would (within a constant factor), never a bomb's worth.
+
+    The defaults are far above what an honest log needs: a TRACE chunk is a few MB at most
+    (a camera frame a few tens of MB); zstd shrinks TRACE chunks about 4-16x and an honest
+    chunk holds about 0.03 records per compressed byte (measured on simulator logs)."""
 
     max_chunk_bytes: int = 64 << 20
     """A chunk's decompressed size, as declared and as really produced."""
-    records_per_compressed_byte: int = 8
+    max_inflation: int = 1024
+    """A chunk may declare at most this many times its compressed size (plus
+    ``small_chunk_bytes``). Zeros compress ~30,000:1; without this bound an 80 KB file of
+    40 chunks would make the reader inflate 2.5 GB."""
+    small_chunk_bytes: int = 64 << 10
+    """What any chunk may inflate to, whatever its compressed size."""
+    records_per_compressed_byte: int = 1
     """Records a chunk may hold per byte of its compressed data (plus ``min_chunk_records``).
     Honest chunks hold well under one: every message carries a time and sequence that do not
     compress to nothing. A flood of empty messages that inflates from a few KB is refused."""
-    min_chunk_records: int = 65_536
+    min_chunk_records: int = 16
+    """What any chunk may hold; small, so that a flood spread over many tiny chunks is
+    bounded by the file's size too (about 1.3 records per file byte at worst)."""
     max_record_bytes: int = 1 << 32
     """A record in the file (outside chunks)."""
 
     def __post_init__(self) -> None:
-        for name in ("max_chunk_bytes", "records_per_compressed_byte", "min_chunk_records"):
+        for name in (
+            "max_chunk_bytes",
+            "max_inflation",
+            "small_chunk_bytes",
+            "records_per_compressed_byte",
+            "min_chunk_records",
+        ):
             if getattr(self, name) <= 0:
                 raise ValueError(f"ReadLimits.{name} must be positive")
+
+    def chunk_bytes(self, compressed: int) -> int:
+        """The most a chunk of ``compressed`` bytes may inflate to."""
+        return min(self.max_chunk_bytes, self.small_chunk_bytes + self.max_inflation * compressed)
+
+    def chunk_records(self, compressed: int) -> int:
+        """The most records a chunk of ``compressed`` bytes may hold."""
+        return self.min_chunk_records + self.records_per_compressed_byte * compressed
 
 
 DEFAULT_LIMITS = ReadLimits()
@@ -110,6 +136,8 @@ class McapFile:
         """(message start ns, message end ns, chunk count, messages per channel id)."""
         self.loose: list[RawMessage] = []
         """Messages written outside chunks (some writers do; ours never)."""
+        self.skipped_chunks: list[tuple[int, str]] = []
+        """Chunks a scan found damaged and stepped over: (file offset, why)."""
         self._recent_chunks: OrderedDict[int, list[RawMessage]] = OrderedDict()
         self._zstd = zstandard.ZstdDecompressor()
         try:
@@ -304,8 +332,12 @@ class McapFile:
                 self._parse_metadata(body)
             elif opcode == _OP_CHUNK:
                 start, stop = struct.unpack_from("<QQ", data, body)
-                if self._chunk_valid(pos):
+                damage = self._chunk_damage(pos)
+                if damage is None:
                     rows.append((start, stop, pos))
+                else:
+                    self.skipped_chunks.append((pos, damage))
+                    log.warning("%s: %s; skipped", self.path, damage)
             elif opcode == _OP_MESSAGE:
                 self.loose.append(self._parse_message(body, length, data))
             elif opcode in (_OP_DATA_END, _OP_FOOTER):
@@ -327,15 +359,18 @@ class McapFile:
                 break
             pos += 9 + length
 
-    def _chunk_valid(self, pos: int) -> bool:
-        """Whether a chunk met in a scan decodes; a limit hit is not damage and is raised."""
+    def _chunk_damage(self, pos: int) -> str | None:
+        """Why a chunk met in a scan does not decode (None if it does); a limit hit is not
+        damage to step over: it is raised, and the file is refused."""
         try:
             self._decode_chunk_uncached(pos)
         except LogLimitError:
             raise
-        except (LogReadError, *_DAMAGE):
-            return False
-        return True
+        except LogReadError as err:
+            return err.reason
+        except _DAMAGE as err:
+            return f"chunk at offset {pos} is damaged ({type(err).__name__}: {err})"
+        return None
 
     def _parse_schema(self, body: int) -> None:
         (schema_id,) = struct.unpack_from("<H", self._data, body)
@@ -390,7 +425,8 @@ class McapFile:
     def _set_table(self, rows: list[tuple[int, int, int]]) -> None:
         # Sorted by start time for seeks; chunks that start together stay in file order.
         # (Timsort on sorted input is one linear pass in C: cheap enough to check always.)
-        by_time = sorted(rows, key=lambda r: (r[0], r[2]))
+        # One row per chunk: an index naming a chunk twice would make every read repeat it.
+        by_time = sorted({r[2]: r for r in rows}.values(), key=lambda r: (r[0], r[2]))
         starts, ends = [r[0] for r in by_time], [r[1] for r in by_time]
         offsets = [r[2] for r in by_time]
         self._ends_sorted = ends == sorted(ends)
@@ -412,6 +448,10 @@ class McapFile:
             values.byteswap()
             raw = memoryview(values.tobytes())
         column = raw.cast("Q")
+        offsets = column[2 * count :].tolist()
+        if len(set(offsets)) != count or offsets != sorted(offsets):
+            # Ours is written in file order; a table naming a chunk twice is not ours.
+            raise LogReadError(str(self.path), "the chunk table is not in file order")
         self._table = (column[:count], column[count : 2 * count], column[2 * count :])
         # Our writer's own table: written in file order, one chunk per batch in time order.
         self._ends_sorted = self._starts_in_file_order = True
@@ -498,31 +538,21 @@ class McapFile:
         raw = self._decompress(compression, data[pos : pos + records_len], size, offset)
         if crc and zlib.crc32(raw) != crc:
             raise LogReadError(str(self.path), f"chunk at offset {offset} fails its CRC")
-        most = max(
-            self.limits.min_chunk_records, self.limits.records_per_compressed_byte * records_len
-        )
-        return self._chunk_records(raw, offset, most)
+        return self._chunk_records(raw, offset, self.limits.chunk_records(records_len))
 
     def _decompress(self, compression: str, compressed: bytes, size: int, offset: int) -> bytes:
-        """A chunk's records, never more than its declared size nor the limit."""
-        cap = self.limits.max_chunk_bytes
+        """A chunk's records, never more than its declared size nor the limits."""
+        cap = self.limits.chunk_bytes(len(compressed))
         if size > cap:
             raise LogLimitError(
                 str(self.path),
-                f"chunk at offset {offset} declares {size} bytes decompressed, over the "
-                f"limit of {cap} bytes",
+                f"chunk at offset {offset} declares {size} bytes decompressed from "
+                f"{len(compressed)}, over the limit of {cap} bytes",
             )
         if compression == "":
             raw = bytes(compressed)
         elif compression == "zstd":
-            # The frame may claim a size of its own; never let it allocate past the declared.
-            content = zstandard.frame_content_size(compressed)
-            if content > size:
-                raise LogLimitError(
-                    str(self.path),
-                    f"chunk at offset {offset} inflates past its declared {size} bytes",
-                )
-            raw = self._zstd.decompress(compressed, max_output_size=size)
+            raw = self._unzstd(compressed, size, offset)
         elif compression == "lz4":
             try:
                 raw = lz4.frame.LZ4FrameDecompressor().decompress(compressed, max_length=size + 1)
@@ -532,6 +562,8 @@ class McapFile:
             raise LogReadError(
                 str(self.path), f"chunk at offset {offset}: unknown compression {compression!r}"
             )
+        if len(raw) > size:
+            raise self._inflates_past(offset, size)
         if len(raw) != size:
             raise LogReadError(
                 str(self.path),
@@ -539,6 +571,29 @@ class McapFile:
                 f"{size} it declares",
             )
         return raw
+
+    def _unzstd(self, compressed: bytes, size: int, offset: int) -> bytes:
+        """Decompress a zstd chunk, producing at most one byte more than it declares."""
+        content = zstandard.frame_content_size(compressed)
+        if content > size:  # the frame's own claim; -1 when it makes none
+            raise self._inflates_past(offset, size)
+        if content == size:
+            return self._zstd.decompress(compressed, max_output_size=size)
+        # No size in the frame: stream, so that "more than declared" is told from damage.
+        reader = self._zstd.stream_reader(compressed)
+        parts, got = [], 0
+        while got <= size:
+            part = reader.read(size + 1 - got)
+            if not part:
+                break
+            parts.append(part)
+            got += len(part)
+        return b"".join(parts)
+
+    def _inflates_past(self, offset: int, size: int) -> LogLimitError:
+        return LogLimitError(
+            str(self.path), f"chunk at offset {offset} inflates past its declared {size} bytes"
+        )
 
     def _chunk_records(self, raw: bytes, offset: int, most: int) -> list[RawMessage]:
         messages: list[RawMessage] = []

@@ -2,11 +2,22 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass, replace
 
 from trace_runtime.records import GENESIS, PROFILE_VERSION
 
 SESSION_METADATA = "trace.session"
+
+MIN_PERIOD_NS = 1_000
+"""The shortest nominal period a reader accepts (1 us, a 1 MHz decision loop): a shorter one
+is a corrupt or hostile record, and would make every nanosecond of jitter a gap."""
+INT64_MAX = (1 << 63) - 1
+"""Cycle numbers, segment numbers and periods are int64 in every writer (PROFILE section 2)."""
+
+_ROBOT_ID = re.compile(r"[A-Za-z0-9_.-]+")
+_DIGEST = re.compile(r"[0-9a-f]{64}")
+_DECIMAL = re.compile(r"-?[0-9]{1,19}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -30,16 +41,29 @@ class SessionInfo:
 
     @classmethod
     def from_metadata(cls, data: dict[str, str]) -> SessionInfo:
-        """Parse a metadata map; unknown keys are ignored so newer writers stay readable."""
+        """Parse a metadata map; unknown keys are ignored so newer writers stay readable.
+
+        Raises ``ValueError`` naming the key when a value is out of the profile's range (the
+        reader wraps it as a ``LogReadError``): a robot id with other characters, a period
+        under ``MIN_PERIOD_NS``, a negative or non-int64 segment or cycle number, a
+        ``prev_seal`` that is not a digest."""
+        robot_id = data.get("robot_id", "")
+        if not _ROBOT_ID.fullmatch(robot_id):
+            raise ValueError(
+                f"robot_id {robot_id[:40]!r} is not a simple name (letters, digits, _.-)"
+            )
+        prev_seal = data.get("prev_seal", GENESIS)
+        if not _DIGEST.fullmatch(prev_seal):
+            raise ValueError(f"prev_seal {prev_seal[:40]!r} is not 64 lowercase hex digits")
         return cls(
-            robot_id=data.get("robot_id", ""),
-            period_ns=int(data.get("period_ns", "0") or 0),
+            robot_id=robot_id,
+            period_ns=_integer(data, "period_ns", None, MIN_PERIOD_NS),
             software_version=data.get("software_version", ""),
             policy_version=data.get("policy_version", ""),
             clock=data.get("clock", "system"),
-            segment=int(data.get("segment", "0") or 0),
-            prev_seal=data.get("prev_seal", GENESIS),
-            first_cycle=int(data.get("first_cycle", "0") or 0),
+            segment=_integer(data, "segment", 0, 0),
+            prev_seal=prev_seal,
+            first_cycle=_integer(data, "first_cycle", 0, 0),
             tier=data.get("tier", "hot"),
             profile_version=data.get("profile_version", PROFILE_VERSION),
         )
@@ -47,3 +71,18 @@ class SessionInfo:
     def next_segment(self, prev_seal: str, first_cycle: int) -> SessionInfo:
         """The session record of the segment that follows this one."""
         return replace(self, segment=self.segment + 1, prev_seal=prev_seal, first_cycle=first_cycle)
+
+
+def _integer(data: dict[str, str], key: str, default: int | None, low: int) -> int:
+    """A decimal int64 value in ``[low, INT64_MAX]``; ``default`` when absent (None: required)."""
+    text = data.get(key, "")
+    if not text:
+        if default is None:
+            raise ValueError(f"{key} is missing")
+        return default
+    if not _DECIMAL.fullmatch(text):
+        raise ValueError(f"{key} {text[:40]!r} is not a decimal integer")
+    value = int(text)
+    if not low <= value <= INT64_MAX:
+        raise ValueError(f"{key} {value} is outside [{low}, {INT64_MAX}]")
+    return value

@@ -15,7 +15,7 @@ from typing import Annotated, Any, NoReturn, TypeVar
 
 import typer
 
-from trace_runtime.errors import LogReadError, TimeOutOfRangeError, TraceError, UsageError
+from trace_runtime.errors import TimeOutOfRangeError, TraceError, UsageError
 
 T = TypeVar("T")
 
@@ -59,16 +59,24 @@ def fail(message: str, code: int) -> NoReturn:
 
 
 def exit_code_for(err: TraceError) -> int:
-    """The documented exit code of an error raised by the library."""
-    if isinstance(err, LogReadError):
-        return EXIT_UNREADABLE
+    """The documented exit code of an error raised by the library: the one place they are
+    mapped. Every error the library raises on purpose is a ``TraceError`` (third-party
+    errors are wrapped where they arise), so nothing here knows zstd, struct or orjson."""
     if isinstance(err, TimeOutOfRangeError | UsageError):
         return EXIT_USAGE
+    # LogReadError (and its LogLimitError, PayloadError, NotTraceLogError) and every other
+    # TraceError describe the input: unreadable, not a TRACE log, over a read limit.
     return EXIT_UNREADABLE
 
 
 def guarded(call: Callable[[], T]) -> T:
-    """Run a library call; turn its ``TraceError`` into one stderr line and an exit code."""
+    """Run a library call; turn its ``TraceError`` into one stderr line and an exit code.
+
+    Library warnings (a recovered segment, a skipped damaged chunk) go to stderr as one
+    ``trace-audit: warning:`` line each, whichever command runs."""
+    from trace_audit.cli.render import setup_logging
+
+    setup_logging()
     try:
         return call()
     except TraceError as err:

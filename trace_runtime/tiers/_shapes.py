@@ -21,6 +21,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from trace_runtime.errors import TraceError
+
 MAX_DEPTH = 32
 MAX_LEAVES = 1 << 16
 _SMALL_LIST = 8
@@ -31,7 +33,7 @@ Descriptor = Any  # dict[str, Descriptor] | list[Descriptor] | SCALAR | VECTOR
 Path = tuple[str | int, ...]
 
 
-class ShapeError(ValueError):
+class ShapeError(TraceError, ValueError):
     """A value cannot be given a shape (a bare scalar, too deep, too big) or a shape is bad."""
 
 

@@ -39,7 +39,7 @@ import orjson
 import zstandard
 
 from trace_runtime.cycles import Cycle, RawMessage, assemble_hot
-from trace_runtime.errors import LogReadError
+from trace_runtime.errors import LogReadError, TraceError
 from trace_runtime.records import TOPIC_CHECKPOINT, TOPIC_SEAL
 from trace_runtime.tiers._shapes import Shape, ShapeError, check_descriptor, compile_shape, describe
 from trace_runtime.tiers.warm import assemble_warm
@@ -77,8 +77,9 @@ _NULLABLE = "n"
 Assembler = Callable[[Sequence[RawMessage], str], list[Cycle]]
 
 
-class ColdFormatError(ValueError):
-    """A cold block is malformed (wrapped into ``LogReadError`` by callers)."""
+class ColdFormatError(TraceError, ValueError):
+    """A cold block is malformed (wrapped into ``LogReadError`` by callers). A ``TraceError``
+    so that one that escapes still maps to an exit code; a ``ValueError`` for older callers."""
 
 
 @contextlib.contextmanager
@@ -862,37 +863,54 @@ _INNER: dict[str, Assembler] = {"hot": assemble_hot, "warm": assemble_warm}
 """The tiers a cold block may hold the messages of (cold re-encodes a hot or a warm segment)."""
 
 
-_RECENT: OrderedDict[bytes, DecodedBlock] = OrderedDict()
-_RECENT_BLOCKS = 4
-_RECENT_LOCK = threading.Lock()
+class BlockCache:
+    """The last few decoded blocks: an investigation asks about nearby times (a decision, the
+    cycles before it, their sensor readings) and each ask reads the block again. Keyed by
+    the block's digest, so the same bytes share an entry. Thread-safe; owned by an assembler,
+    so it lives as long as whoever holds that assembler (a reader, a compaction)."""
+
+    def __init__(self, size: int = 4) -> None:
+        if size < 0:
+            raise ValueError("BlockCache size must not be negative")
+        self.size = size
+        self._blocks: OrderedDict[bytes, DecodedBlock] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def __len__(self) -> int:
+        return len(self._blocks)
+
+    def decode(self, data: bytes) -> DecodedBlock:
+        """``decode_block(data)``, from the cache when it was decoded lately."""
+        if self.size == 0:
+            return decode_block(data)
+        key = hashlib.sha256(data).digest()
+        with self._lock:
+            found = self._blocks.get(key)
+            if found is not None:
+                self._blocks.move_to_end(key)
+                return found
+        block = decode_block(data)
+        with self._lock:
+            self._blocks[key] = block
+            while len(self._blocks) > self.size:
+                self._blocks.popitem(last=False)
+        return block
+
+    def clear(self) -> None:
+        with self._lock:
+            self._blocks.clear()
 
 
-def _recently_decoded(data: bytes) -> DecodedBlock:
-    """decode_block, remembering the last few blocks: an investigation asks about nearby times
-    (a decision, the cycles before it, their sensor readings) and each ask reads the block
-    again. Keyed by the block's digest, so the same bytes in any file share an entry."""
-    key = hashlib.sha256(data).digest()
-    with _RECENT_LOCK:
-        found = _RECENT.get(key)
-        if found is not None:
-            _RECENT.move_to_end(key)
-            return found
-    block = decode_block(data)
-    with _RECENT_LOCK:
-        _RECENT[key] = block
-        while len(_RECENT) > _RECENT_BLOCKS:
-            _RECENT.popitem(last=False)
-    return block
-
-
-def assemble_cold(messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
+def assemble_cold(
+    messages: Sequence[RawMessage], segment: str, cache: BlockCache | None = None
+) -> list[Cycle]:
     """The reader's assembler for cold chunks: decode each block, assemble its cycles."""
     cycles: list[Cycle] = []
     for msg in messages:
         if msg.topic != BLOCK_TOPIC:
             continue
         try:
-            block = _recently_decoded(msg.data)
+            block = cache.decode(msg.data) if cache is not None else decode_block(msg.data)
         except ColdFormatError as err:
             raise LogReadError(segment, f"cold block {msg.sequence}: {err}") from err
         assembler = _INNER.get(block.tier)
@@ -903,12 +921,16 @@ def assemble_cold(messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
 
 
 class ColdAssembler:
-    """The reader's assembler for the cold tier: a cycle run ends with its block."""
+    """The reader's assembler for the cold tier: a cycle run ends with its block. It owns the
+    cache of recently decoded blocks; make one per reader to bound the cache's lifetime."""
 
     closer_topic = BLOCK_TOPIC
 
+    def __init__(self, cache_blocks: int = 4) -> None:
+        self.cache = BlockCache(cache_blocks)
+
     def __call__(self, messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
-        return assemble_cold(messages, segment)
+        return assemble_cold(messages, segment, self.cache)
 
 
 COLD_ASSEMBLER = ColdAssembler()
@@ -948,3 +970,9 @@ def merge_plain(
         yield msg
         at += 1
     yield from pending
+
+
+_RECENT = COLD_ASSEMBLER.cache
+"""Transitional alias of the shared assembler's cache for ``tests/trace_runtime/test_cold.py``
+and ``bench/bench_tiers.py`` (``_RECENT.clear()``); they should call
+``COLD_ASSEMBLER.cache.clear()``, and readers should own a ``ColdAssembler`` each."""
