@@ -717,15 +717,38 @@ class _Structure:
                 (scan.num[extra], scan.num[extra], scan.t[extra], scan.t[extra]),
             )
         # A link that skips cycles: those no later cycle continues from were inserted.
+        # ``next_open`` jumps over positions already found inserted, so many links that skip
+        # back to one place (a flood of seals naming the start) cost linear time, not n^2.
+        jump = list(range(n + 1))
+        for k in inserted:
+            jump[k] = k + 1
+
+        def next_open(k: int) -> int:
+            root = k
+            while jump[root] != root:
+                root = jump[root]
+            while jump[k] != root:
+                jump[k], k = root, jump[k]
+            return root
+
         for i in range(n):
             p = pred[i]
             if scan.link_ok[i] or not (0 <= p < i - 1 or (p == self.ENTRY and i > 0)):
                 continue
-            skipped = [k for k in range(max(p, -1) + 1, i) if k not in inserted]
+            skipped: list[int] = []
+            k = next_open(max(p, -1) + 1)
+            while k < i:
+                if k not in inserted:
+                    skipped.append(k)
+                k = next_open(k + 1)
+            if not skipped:
+                continue
             # Skipped cycles that continue the chain, before or after ``i``, were moved.
             chain = self._descendants(i) | self._ancestors(i)
             dead = [k for k in skipped if k not in chain]
             inserted.update(dead)
+            for k in dead:
+                jump[k] = k + 1
             after = f"after cycle {scan.num[p]}" if p >= 0 else "at the start of the segment"
             for run in _runs(dead):
                 numbers = sorted({scan.num[k] for k in run})
