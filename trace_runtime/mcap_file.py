@@ -137,7 +137,8 @@ class McapFile:
         self.loose: list[RawMessage] = []
         """Messages written outside chunks (some writers do; ours never)."""
         self.skipped_chunks: list[tuple[int, str]] = []
-        """Chunks a scan found damaged and stepped over: (file offset, why)."""
+        """Damaged chunks stepped over, by a scan or when read: (file offset, why)."""
+        self._damaged: set[int] = set()
         self._recent_chunks: OrderedDict[int, list[RawMessage]] = OrderedDict()
         self._zstd = zstandard.ZstdDecompressor()
         try:
@@ -336,8 +337,10 @@ class McapFile:
                 if damage is None:
                     rows.append((start, stop, pos))
                 else:
-                    self.skipped_chunks.append((pos, damage))
-                    log.warning("%s: %s; skipped", self.path, damage)
+                    # Kept in the table (its time range says where the damage is), but
+                    # read as empty; the scan goes on to the next complete record.
+                    rows.append((start, stop, pos))
+                    self._skip_chunk(pos, damage)
             elif opcode == _OP_MESSAGE:
                 self.loose.append(self._parse_message(body, length, data))
             elif opcode in (_OP_DATA_END, _OP_FOOTER):
@@ -511,17 +514,49 @@ class McapFile:
 
     def chunk_messages(self, offset: int) -> list[RawMessage]:
         """The messages of the chunk at file ``offset``; the last few decoded are remembered,
-        since an investigation asks about neighbouring moments (a seek, then a walk back)."""
+        since an investigation asks about neighbouring moments (a seek, then a walk back).
+
+        A chunk that is damaged (fails its CRC, does not decompress, holds broken records)
+        gives no messages: it is recorded in ``skipped_chunks``, a warning is logged once,
+        and every other chunk is still read. A limit hit is not damage: it is raised.
+        """
         cached = self._recent_chunks.get(offset)
         if cached is not None:
             self._recent_chunks.move_to_end(offset)
             return cached
-        with self.damage_as_read_error():
-            messages = self._decode_chunk_uncached(offset)
+        if offset in self._damaged:
+            return []
+        try:
+            with self.damage_as_read_error():
+                messages = self._decode_chunk_uncached(offset)
+        except LogLimitError:
+            raise
+        except LogReadError as err:
+            self._skip_chunk(offset, err.reason)
+            return []
         self._recent_chunks[offset] = messages
         if len(self._recent_chunks) > _RECENT_CHUNKS:
             self._recent_chunks.popitem(last=False)
         return messages
+
+    def is_damaged(self, offset: int) -> bool:
+        """Whether the chunk at ``offset`` was found damaged (once it has been read)."""
+        return offset in self._damaged
+
+    def _skip_chunk(self, offset: int, reason: str) -> None:
+        if f"offset {offset}" not in reason:
+            reason = f"chunk at offset {offset}: {reason}"
+        self._damaged.add(offset)
+        self.skipped_chunks.append((offset, reason))
+        log.warning("%s: %s; its messages are skipped", self.path, reason)
+
+    def chunk_span(self, offset: int) -> tuple[int, int] | None:
+        """The time range the chunk index gives the chunk at ``offset`` (None if unknown)."""
+        starts, ends, offsets = self.chunk_table()
+        for i, o in enumerate(offsets):
+            if o == offset:
+                return starts[i], ends[i]
+        return None
 
     def _decode_chunk_uncached(self, offset: int) -> list[RawMessage]:
         data = self._data

@@ -131,6 +131,8 @@ class Segment(McapFile):
     def _closed_in(self, offset: int) -> tuple[list[RawMessage], list[RawMessage]]:
         """A chunk's messages split at its last closing message: (up to it, after it)."""
         messages = self.chunk_messages(offset)
+        if not messages:
+            return [], []
         closer = self._assembler.closer_topic
         for i in range(len(messages) - 1, -1, -1):
             if messages[i].topic == closer:
@@ -145,6 +147,8 @@ class Segment(McapFile):
             if previous is None:
                 break
             closed, tail = self._closed_in(previous)
+            if self.is_damaged(previous):
+                break  # what came before the damage cannot be joined to what follows it
             parts.append(tail)
             if closed:
                 break
@@ -163,6 +167,8 @@ class Segment(McapFile):
         if lead is None:
             lead = self._lead_in(offset)
         closed, tail = self._closed_in(offset)
+        if self.is_damaged(offset):
+            return [], []  # the cycle it cut is lost with it; verify reports the damage
         if self.is_last_chunk(offset):
             closed, tail = closed + tail, []
         if not closed:

@@ -220,6 +220,8 @@ class _Scan:
     summarised: list[int] = field(default_factory=list)  # positions
     bad_positions: set[int] = field(default_factory=set)
     uncited: int = 0  # sensor readings no evidence ref with a digest names
+    damaged: list[tuple[int, int, int]] = field(default_factory=list)
+    """Cycle ranges lost in damaged chunks: (first, last, sealed cycles lost)."""
 
 
 def _prefix(hex_digest: str) -> int:
@@ -277,6 +279,7 @@ class _SegmentCheck:
     def run(self) -> None:
         self._read_checkpoints()
         self._scan_cycles()
+        self._report_damaged_chunks()
         self._check_structure()
         self._check_unsealed()
         self._check_checkpoints()
@@ -326,6 +329,34 @@ class _SegmentCheck:
                 self.checkpoints.append((message.log_time_ns, message.sequence, checkpoint))
         except LogReadError as err:  # a damaged file is a finding, not a crash
             self.finding("damaged", f"cannot read the segment's checkpoints: {err}")
+
+    def _report_damaged_chunks(self) -> None:
+        """A chunk the reader stepped over (fails its CRC, does not decompress) is damage to
+        the file, located by the chunk's time range and the cycles read around it."""
+        scan = self.scan
+        for offset, reason in self.segment.skipped_chunks:
+            span = self.segment.chunk_span(offset)
+            if span is None:
+                self.finding("damaged", f"part of the segment cannot be read: {reason}")
+                continue
+            start_ns, end_ns = span
+            before = [n for n, t in zip(scan.num, scan.t, strict=True) if t < start_ns]
+            after = [i for i, t in enumerate(scan.t) if t > end_ns]
+            first = max(before) + 1 if before else None
+            last = min(scan.num[i] for i in after) - 1 if after else None
+            lost = "the cycles in it cannot be counted"
+            if first is not None and last is not None and first <= last:
+                lost = f"cycles {first}..{last} are in it"
+                # The cycle after the damage declares the drops among those numbers.
+                next_position = min(after, key=lambda i: scan.num[i])
+                sealed = last - first + 1 - scan.dropped[next_position]
+                scan.damaged.append((first, last, max(sealed, 0)))
+            self.finding(
+                "damaged",
+                f"part of the segment cannot be read: {reason} (t = {start_ns / 1e9:.3f} s .. "
+                f"{end_ns / 1e9:.3f} s; {lost}, unverifiable)",
+                (first, last, start_ns, end_ns),
+            )
 
     def _iter_cycles_resuming(self) -> Iterator[Cycle]:
         """Every readable cycle; a damaged chunk becomes a finding and reading goes on after it."""
@@ -632,6 +663,10 @@ class _SegmentCheck:
                 count = bisect.bisect_right(num, c.cycle) - bisect.bisect_left(num, c.first_cycle)
             else:
                 count = sum(1 for n in num if c.first_cycle <= n <= c.cycle)
+            # Cycles lost in damaged chunks were sealed; the damage finding accounts for them.
+            count += sum(
+                lost for a, b, lost in self.scan.damaged if c.first_cycle <= a and b <= c.cycle
+            )
             if count != c.sealed:
                 problems.append(
                     (
@@ -860,6 +895,8 @@ class _Structure:
         scan.bad_positions.add(i)
         if number - before - 1 > declared:
             first, last = before + 1, number - 1
+            if any(a <= first and last <= b for a, b, _ in scan.damaged):
+                return  # lost in a damaged chunk: reported as damage, not as a removal
             check.finding(
                 "missing",
                 f"cycles {first}..{last} are missing ({last - first + 1} cycle(s) removed: "

@@ -9,7 +9,6 @@ the figures. Each file is built from the outside with the plain ``mcap`` library
 from __future__ import annotations
 
 import json
-
 from collections.abc import Callable
 from pathlib import Path
 

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from trace_runtime import LogReadError, open_log
+from trace_runtime import LogReadError, TimeOutOfRangeError, open_log
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +30,10 @@ def _read_everything(path: Path) -> int:
         cycle.digests()
         count += 1
     if count:
-        log.cycle_at(log.start_ns)
+        # The summary's start may lie in a chunk that no longer reads: then no cycle is in
+        # force there, which is a clear answer, not a crash.
+        with contextlib.suppress(TimeOutOfRangeError):
+            log.cycle_at(log.start_ns)
     return count
 
 

@@ -98,10 +98,14 @@ def test_a_damaged_newest_segment_does_not_stop_the_robot_from_logging(
     for chunk in open_log(newest).segments[0].chunks()[-2:]:
         data[chunk.offset + 80 : chunk.offset + 96] = b"\x00" * 16
     newest.write_bytes(bytes(data))
+    readable = [c for c in open_log(newest).iter_cycles() if c.sealed]
     logger = AuditLogger(root, robot_id="amr-1", config=LoggerConfig(threaded=False))
     logger.log_cycle(9_000_000_000, action=synthetic_cycle(0)[2])
     logger.close()
-    # The chain continues from the newest seal that can still be read (cycle 19).
-    resumed = open_log(logger.stats.segments[-1]).get_cycle(20)
+    # The damaged chunks are stepped over: the chain continues from the newest seal that
+    # can still be read.
+    assert readable[-1].cycle < 24
+    resumed = open_log(logger.stats.segments[-1]).get_cycle(readable[-1].cycle + 1)
     assert logger.stats.written == 1
     assert resumed is not None and resumed.seal is not None
+    assert resumed.seal.prev == digest(readable[-1].payloads[TOPIC_SEAL])
