@@ -126,10 +126,12 @@ class SensorWindow:
     """The sensor messages of the current cycle and of a bounded number of cycles before it.
 
     ``push`` once per cycle, oldest cycle first, before resolving that cycle's refs.
-    Memory is bounded by ``cycles`` cycles of sensor messages.
+    Memory is bounded by ``cycles`` cycles of sensor messages (and their digests, each
+    computed at most once while the message is in the window: a reading is cited by several
+    entities and, for tracked entities, by the cycles after its own).
     """
 
-    __slots__ = ("_batches", "_index", "cycles")
+    __slots__ = ("_batches", "_digests", "_index", "cycles")
 
     def __init__(self, cycles: int = DEFAULT_SENSOR_WINDOW) -> None:
         if cycles < 0:
@@ -138,6 +140,8 @@ class SensorWindow:
         # (topic, log_time_ns) -> the messages logged under it, oldest first
         self._index: dict[tuple[str, int], list[RawMessage]] = {}
         self._batches: deque[Sequence[RawMessage]] = deque()
+        # id() of a message in the window -> SHA-256 hex of its data; dropped with the message
+        self._digests: dict[int, str] = {}
 
     def push(self, sensors: Sequence[RawMessage]) -> None:
         """Add one cycle's sensor messages; forget the cycle that falls out of the window."""
@@ -152,7 +156,10 @@ class SensorWindow:
         batches = self._batches
         batches.append(sensors)
         if len(batches) > self.cycles + 1:
+            digests = self._digests
             for msg in batches.popleft():
+                if digests:
+                    digests.pop(id(msg), None)
                 key = (msg.topic, msg.log_time_ns)
                 entries = index.get(key)
                 if entries is not None:
@@ -163,6 +170,7 @@ class SensorWindow:
     def clear(self) -> None:
         self._index.clear()
         self._batches.clear()
+        self._digests.clear()
 
     def resolve(self, ref: dict[str, Any]) -> str:
         """'' when the ref resolves to a message in the window, else why it does not."""
@@ -180,11 +188,17 @@ class SensorWindow:
             if sequence is not None and msg.sequence != sequence:
                 why = why or f"sequence {sequence} does not match the logged {msg.sequence}"
                 continue
-            if want is not None and hashlib.sha256(msg.data).hexdigest() != want:
+            if want is not None and self._digest(msg) != want:
                 why = "digest does not match the logged message data"
                 continue
             return ""
         return why
+
+    def _digest(self, msg: RawMessage) -> str:
+        found = self._digests.get(id(msg))
+        if found is None:
+            found = self._digests[id(msg)] = hashlib.sha256(msg.data).hexdigest()
+        return found
 
 
 def trace_cycle(cycle: Cycle, window: SensorWindow | None = None) -> DecisionChains:
@@ -529,18 +543,24 @@ def _index_belief(belief: dict[str, Any]) -> tuple[dict[str, Any], dict[str, lis
     """Node by id, and the parents of each child, from a belief message's JSON."""
     nodes: dict[str, dict[str, Any]] = {}
     parents: dict[str, list[str]] = {}
-    for node in _dicts(belief.get("nodes")):
-        node_id = node.get("id")
-        if type(node_id) is str:
-            nodes[node_id] = node
-    for edge in _dicts(belief.get("edges")):
-        parent, child = edge.get("parent"), edge.get("child")
-        if type(parent) is str and type(child) is str:
-            found = parents.get(child)
-            if found is None:
-                parents[child] = [parent]
-            else:
-                found.append(parent)
+    raw = belief.get("nodes")
+    if type(raw) is list:
+        for node in raw:
+            if type(node) is dict:
+                node_id = node.get("id")
+                if type(node_id) is str:
+                    nodes[node_id] = node
+    raw = belief.get("edges")
+    if type(raw) is list:
+        for edge in raw:
+            if type(edge) is dict:
+                parent, child = edge.get("parent"), edge.get("child")
+                if type(parent) is str and type(child) is str:
+                    found = parents.get(child)
+                    if found is None:
+                        parents[child] = [parent]
+                    else:
+                        found.append(parent)
     return nodes, parents
 
 

@@ -37,7 +37,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, get_args
@@ -435,29 +435,35 @@ class _Scanner:
 
     def _score(self, cycle: Cycle, segment: Segment, group_of: Callable[[Cycle], str]) -> None:
         """Score one decision into its group's sums; list it when it fails."""
-        self.window.push(cycle.sensors)
+        window = self.window
+        window.push(cycle.sensors)
+        # Each layer is parsed once: ET, DR and the seal check's evidence step share it.
         action = cycle.layer(TOPIC_ACTION)
         belief = cycle.layer(TOPIC_BELIEF)
         perception = cycle.layer(TOPIC_PERCEPTION)
-        score = score_layers(action, belief, perception, window=self.window)
+        score = score_layers(action, belief, perception, window=window)
         missing_dr = dr_problems(action)
         group = group_of(cycle)
-        acc = self.partial.groups.get(group)
+        partial = self.partial
+        acc = partial.groups.get(group)
         if acc is None:
-            acc = self.partial.groups[group] = _Acc()
+            acc = partial.groups[group] = _Acc()
         integrity, continuity_d = self._seal_and_gap(cycle, segment, acc, perception)
         et, etp = score.et, score.et_partial
-        full, dr_ok, intact = score.fully_traceable, not missing_dr, not integrity
+        factors, traceable = score.factors, score.traceable
+        full = factors > 0 and traceable == factors
+        dr_ok, intact = not missing_dr, not integrity
         acc.decisions += 1
-        acc.summarized += cycle.summary is not None
+        if cycle.summary is not None:
+            acc.summarized += 1
         acc.et_sum += et
         acc.et_sq += et * et
         acc.etp_sum += etp
         acc.etp_sq += etp * etp
         acc.full += full
-        acc.factors += score.factors
-        acc.factors_traceable += score.traceable
-        acc.no_factors += score.factors == 0
+        acc.factors += factors
+        acc.factors_traceable += traceable
+        acc.no_factors += factors == 0
         acc.dr_ok += dr_ok
         acc.integrity_ok += intact
         tcs = trust_score(
@@ -472,7 +478,6 @@ class _Scanner:
         acc.tcs_sq += tcs * tcs
         if full and dr_ok and intact:
             return
-        partial = self.partial
         partial.failures_total += 1
         if len(partial.failures) >= self.config.max_listed:
             return
@@ -480,9 +485,7 @@ class _Scanner:
             ()
             if full
             else _et_problems(
-                trace_layers(
-                    cycle.cycle, cycle.t_ns, action, belief, perception, window=self.window
-                )
+                trace_layers(cycle.cycle, cycle.t_ns, action, belief, perception, window=window)
             )
         )
         partial.failures.append(
@@ -510,7 +513,7 @@ class _Scanner:
         expected = stream.prev_seal if stream.prev_seal is not None else self.session_prev
         parsed = perception if TOPIC_PERCEPTION in cycle.payloads else None
         status = verify_cycle(cycle, expected, perception_json=parsed)
-        integrity = integrity_problems(status)
+        integrity = [] if status.ok else integrity_problems(status)
         if status.state == "unsealed":
             return integrity, 0.0
         acc.sealed += 1
@@ -518,19 +521,20 @@ class _Scanner:
         acc.dropped += status.dropped
         period = segment.session.period_ns
         prev_t = stream.prev_t_ns
+        t_ns = cycle.t_ns
         continuity_d = 1.0
         if prev_t is None:
             acc.window_ns += period
-        elif cycle.t_ns <= prev_t:
+        elif t_ns <= prev_t:
             acc.anomalies += 1
         else:
-            interval = cycle.t_ns - prev_t
+            interval = t_ns - prev_t
             acc.window_ns += interval
             gap = find_gap(
                 stream.prev_cycle,
                 prev_t,
                 cycle.cycle,
-                cycle.t_ns,
+                t_ns,
                 period,
                 tolerance=self.config.gap_tolerance,
                 declared_dropped=status.dropped,
@@ -544,7 +548,7 @@ class _Scanner:
                 self.partial.gaps_total += 1
                 if len(self.partial.gaps) < self.config.max_listed:
                     self.partial.gaps.append(gap)
-        stream.prev_t_ns = cycle.t_ns
+        stream.prev_t_ns = t_ns
         stream.prev_cycle = cycle.cycle
         return integrity, continuity_d
 
@@ -714,6 +718,13 @@ def _run_task(task: _Task) -> _Partial:
     return partial
 
 
+def _usable_cpus() -> int:
+    """CPUs this process may run on (its affinity mask, e.g. a container's share)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0)) or 1
+    return os.cpu_count() or 1
+
+
 def _expected_cycles(segment: Segment) -> int:
     return segment.info.channels.get(TOPIC_SEAL, 0)
 
@@ -746,8 +757,12 @@ def compute_metrics(
         if progress is not None:
             progress(done, expected)
 
-    n_segments = sum(len(segs) for _, segs in plan)
-    workers = min(cfg.workers, n_segments, os.cpu_count() or 1)
+    tasks = [
+        _Task(str(seg.path), str(segs[i - 1].path) if i else None, cfg)
+        for _robot, segs in plan
+        for i, seg in enumerate(segs)
+    ]
+    workers = min(cfg.workers, len(tasks), _usable_cpus())
     if workers <= 1:
         for _robot, segments in plan:
             partial = _Partial()
@@ -758,15 +773,17 @@ def compute_metrics(
     else:
         # Each task scores one segment; it first reads the tail of the robot's previous
         # segment, so chain links, gaps and refs across the boundary come out as in one pass.
-        tasks = [
-            _Task(str(seg.path), str(segs[i - 1].path) if i else None, cfg)
-            for _robot, segs in plan
-            for i, seg in enumerate(segs)
-        ]
+        # The longest segments start first (a short one left for last keeps both workers
+        # busy to the end); the partials are merged in plan order whatever order they finish
+        # in, so the sums and the listed failures are the same in every run.
+        sizes = [s.info.bytes for _robot, segs in plan for s in segs]
+        order = sorted(range(len(tasks)), key=lambda i: -sizes[i])
         with ProcessPoolExecutor(max_workers=workers) as pool:
-            for partial in pool.map(_run_task, tasks):
-                total.merge(partial, cfg.max_listed)
-                advance(partial.cycles)
+            futures = {i: pool.submit(_run_task, tasks[i]) for i in order}
+            for future in as_completed(futures.values()):
+                advance(future.result().cycles)
+            for i in range(len(tasks)):
+                total.merge(futures[i].result(), cfg.max_listed)
     elapsed = time.perf_counter() - started
     segments_read = tuple(str(s.path) for _, segs in plan for s in segs)
     return _report(paths, cfg, log=log, total=total, segments=segments_read, elapsed=elapsed)
