@@ -52,8 +52,10 @@ class ReadLimits:
     (a camera frame a few tens of MB); zstd shrinks TRACE chunks about 4-16x and an honest
     chunk holds about 0.03 records per compressed byte (measured on simulator logs)."""
 
-    max_chunk_bytes: int = 64 << 20
-    """A chunk's decompressed size, as declared and as really produced."""
+    max_chunk_bytes: int = 512 << 20
+    """A chunk's decompressed size, as declared and as really produced, whatever its
+    compressed size. (A stock MCAP writer cutting chunks by size writes chunks of its chunk
+    size or of its largest message; tools re-chunk at up to a few hundred MB.)"""
     max_inflation: int = 1024
     """A chunk may declare at most this many times its compressed size (plus
     ``small_chunk_bytes``). Zeros compress ~30,000:1; without this bound an 80 KB file of
