@@ -786,7 +786,11 @@ def compute_metrics(
                 total.merge(futures[i].result(), cfg.max_listed)
     elapsed = time.perf_counter() - started
     segments_read = tuple(str(s.path) for _, segs in plan for s in segs)
-    return _report(paths, cfg, log=log, total=total, segments=segments_read, elapsed=elapsed)
+    report = _report(paths, cfg, log=log, total=total, segments=segments_read, elapsed=elapsed)
+    if report.overall.decisions == 0 and cfg.start_ns is None and cfg.end_ns is None:
+        # As info, explain and verify say it: nothing to score is an empty log, not 0 %.
+        raise LogReadError(str(paths[0]), "the log holds no decision cycles")
+    return report
 
 
 def _report(

@@ -1085,6 +1085,9 @@ def verify(log: Log, *, key: PublicKey | None = None) -> VerifyReport:
         report.last_cycle = max(r.last_cycle for r in robots if r.last_cycle is not None)
         report.start_ns = min(r.start_ns for r in robots if r.start_ns is not None)
         report.end_ns = max(r.end_ns for r in robots if r.end_ns is not None)
+    if report.cycles == 0 and report.ok:
+        # Nothing to vouch for: an empty log (exit 3, as info and explain say), not CLEAN.
+        raise LogReadError(str(log.root), "the log holds no decision cycles")
     return report
 
 

@@ -235,3 +235,16 @@ def test_exit_codes_come_from_the_error_type_alone() -> None:
         ColdFormatError("bad block"),
     ):
         assert exit_code_for(err) == 3
+
+
+@pytest.mark.parametrize("command", ["info", "verify", "metrics", "timeline"])
+def test_a_log_without_a_single_cycle_is_empty_for_every_command(
+    tmp_path: Path, command: str
+) -> None:
+    """A robot that started and stopped before its first cycle: exit 3 everywhere, with the
+    same line (verify used to say CLEAN and metrics 0 decisions, while info said empty)."""
+    path = tmp_path / "empty.mcap"
+    AuditLogger(path, robot_id="amr-1", config=LoggerConfig(threaded=False)).close()
+    result = CliRunner().invoke(app, [command, str(path), "--plain"])
+    assert result.exit_code == 3, result.output
+    assert "the log holds no decision cycles" in result.output
