@@ -6,6 +6,8 @@ Also: every command has help with an example, plain output fits 80 columns, --js
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -17,6 +19,7 @@ from trace_audit.cli import app
 from trace_runtime import AuditLogger, LoggerConfig
 
 COMMANDS = ("explain", "why", "timeline", "info", "export")
+ALL_COMMANDS = tuple(c.name or "" for c in app.registered_commands)
 
 
 def _run(*args: str, width: int = 80) -> Result:
@@ -122,7 +125,13 @@ def test_why_t_and_all(sample_log: Path) -> None:
     _one_error_line(_run("why", str(sample_log), "--action", "STOP", "--t", "104", "--all"), 2)
 
 
-@pytest.mark.parametrize("command", COMMANDS)
+@pytest.mark.parametrize("command", ALL_COMMANDS)
+def test_every_command_takes_json_and_plain(command: str) -> None:
+    result = _run(command, "--help", width=200)
+    assert "--json" in result.stdout and "--plain" in result.stdout
+
+
+@pytest.mark.parametrize("command", ALL_COMMANDS)
 def test_every_command_has_help_with_an_example(command: str) -> None:
     result = _run(command, "--help", width=100)
     assert result.exit_code == 0
@@ -248,3 +257,28 @@ def test_a_log_without_a_single_cycle_is_empty_for_every_command(
     result = CliRunner().invoke(app, [command, str(path), "--plain"])
     assert result.exit_code == 3, result.output
     assert "the log holds no decision cycles" in result.output
+
+
+@pytest.mark.parametrize(
+    ("args", "said"),
+    [
+        (["verify", "{log}", "--bogus"], "No such option: --bogus"),
+        (["nosuch"], "No such command"),
+        (["explain", "{log}", "--t", "abc"], "invalid time 'abc'"),
+    ],
+)
+def test_usage_errors_are_one_line_with_exit_2_from_the_real_command(
+    tmp_path: Path, args: list[str], said: str
+) -> None:
+    """As a process, the way users meet it: no framed block, one line, exit code 2."""
+    log = write_log(tmp_path / "run.mcap")
+    run = subprocess.run(
+        [sys.executable, "-m", "trace_audit.cli", *(a.format(log=log) for a in args)],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert run.returncode == 2, run
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("trace-audit: ") and said in lines[0], run

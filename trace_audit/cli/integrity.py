@@ -7,20 +7,16 @@ terminal, plain text with ``--plain`` or in a pipe, JSON with ``--json``.
 
 from __future__ import annotations
 
-import struct
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
-import zstandard
 
 from trace_audit.cli.app import (
     EXIT_FINDINGS,
-    EXIT_UNREADABLE,
     JsonOption,
     PlainOption,
     app,
-    fail,
     guarded,
     help_text,
 )
@@ -106,10 +102,7 @@ def verify_command(
         public = load_public_key(key) if key is not None else None
         return verify_log(log, key=public)
 
-    try:
-        report = guarded(run)
-    except (zstandard.ZstdError, struct.error, OSError) as err:
-        fail(f"cannot read the log: {type(err).__name__}: {err}".splitlines()[0], EXIT_UNREADABLE)
+    report = guarded(run)
     emit(report, verify_doc, json_out=json_out, plain=plain)
     if not report.ok:
         raise typer.Exit(EXIT_FINDINGS)

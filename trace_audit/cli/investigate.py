@@ -8,18 +8,15 @@ Times are seconds in the log's own clock (``--t 12.3``) or after the log's start
 
 from __future__ import annotations
 
-import struct
 import sys
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from itertools import pairwise
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 import typer
-import zstandard
 
 from trace_audit.cli.app import (
-    EXIT_UNREADABLE,
     EXIT_USAGE,
     JsonOption,
     PlainOption,
@@ -27,6 +24,7 @@ from trace_audit.cli.app import (
     fail,
     guarded,
     help_text,
+    print_json,
 )
 from trace_audit.cli.render import (
     Column,
@@ -36,7 +34,6 @@ from trace_audit.cli.render import (
     emit,
     fmt_duration,
     fmt_t,
-    setup_logging,
 )
 
 if TYPE_CHECKING:
@@ -78,20 +75,6 @@ def format_value(value: Any, unit: str | None = None) -> str:
     from trace_audit.causal import format_value as fmt
 
     return fmt(value, unit)
-
-
-def _run(call: Callable[[], T]) -> T:
-    """``guarded`` plus the read errors a damaged file can raise below the reader."""
-    setup_logging()
-    try:
-        return guarded(call)
-    except zstandard.ZstdError as err:
-        fail(f"cannot read the log: corrupt compressed data ({err})", EXIT_UNREADABLE)
-    except (struct.error, ValueError, OSError) as err:
-        # Damage below what the reader checks (a corrupt record inside a valid chunk):
-        # still one line and the unreadable-input code, never a traceback.
-        message = f"cannot read the log: {type(err).__name__}: {err}".splitlines()[0]
-        fail(message, EXIT_UNREADABLE)
 
 
 # --- explain -----------------------------------------------------------------------------------
@@ -140,7 +123,7 @@ def explain_command(  # noqa: PLR0917 - typer maps each parameter to an option
 ) -> None:
     from trace_audit.explain import explain
 
-    result = _run(lambda: explain(log, t=t, cycle=cycle, lookback_s=lookback))
+    result = guarded(lambda: explain(log, t=t, cycle=cycle, lookback_s=lookback))
     emit(result, lambda r: explain_doc(r, lookback), json_out=json_out, plain=plain)
 
 
@@ -506,7 +489,7 @@ def why_command(  # noqa: PLR0917 - typer maps each parameter to an option
         fail("give either --t or --all, not both", EXIT_USAGE)
     from trace_audit.timeline import why
 
-    result = _run(lambda: why(log, action, t=t))
+    result = guarded(lambda: why(log, action, t=t))
     emit(result, why_doc, json_out=json_out, plain=plain)
 
 
@@ -610,7 +593,7 @@ def timeline_command(  # noqa: PLR0917 - typer maps each parameter to an option
 ) -> None:
     from trace_audit.timeline import timeline
 
-    result = _run(lambda: timeline(log, start=start, end=end, every=every))
+    result = guarded(lambda: timeline(log, start=start, end=end, every=every))
     emit(result, timeline_doc, json_out=json_out, plain=plain)
 
 
@@ -708,7 +691,7 @@ def info_command(
 ) -> None:
     from trace_audit.info import log_info
 
-    result = _run(lambda: log_info(log, scan=not quick))
+    result = guarded(lambda: log_info(log, scan=not quick))
     emit(result, info_doc, json_out=json_out, plain=plain)
 
 
@@ -835,6 +818,7 @@ labelled MISSING; the tree's taken path is bold.
 @app.command("export", help=help_text(_EXPORT_HELP))
 def export_command(
     log: LogArgument,
+    *,
     t: TimeOption = None,
     cycle: Annotated[
         int | None,
@@ -849,10 +833,22 @@ def export_command(
         Path | None,
         typer.Option("--out", help="Write to this file instead of stdout.", show_default=False),
     ] = None,
+    json_out: Annotated[
+        bool,
+        typer.Option(
+            "--json",
+            help="Print the export and its counts (cycle, nodes, edges, undocumented links) "
+            "as one JSON object.",
+        ),
+    ] = False,
+    plain: PlainOption = False,  # the export is plain text already; accepted like elsewhere
 ) -> None:
     from trace_audit.export import export_decision
 
-    result = _run(lambda: export_decision(log, t=t, cycle=cycle, fmt=fmt))
+    result = guarded(lambda: export_decision(log, t=t, cycle=cycle, fmt=fmt))
+    if json_out and out is None:
+        print_json(result)
+        return
     if out is None:
         sys.stdout.write(result.text)
         return
