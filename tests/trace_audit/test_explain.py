@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 from itertools import pairwise
 from pathlib import Path
@@ -9,6 +10,7 @@ from pathlib import Path
 import networkx as nx
 import orjson
 import pytest
+from typer.testing import CliRunner
 
 from tests.trace_audit.conftest import (
     PERIOD_NS,
@@ -20,10 +22,12 @@ from tests.trace_audit.conftest import (
 )
 from trace_audit.causal import causal_graph, read_decision, tree_graph
 from trace_audit.chains import trace_cycle
+from trace_audit.cli import app
 from trace_audit.explain import explain, find_cycle
-from trace_runtime import RawMessage, open_log
+from trace_runtime import AuditLogger, LoggerConfig, RawMessage, open_log
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
-from trace_runtime.records import TOPIC_ACTION, TOPIC_SEAL
+from trace_runtime.records import TOPIC_ACTION, TOPIC_SEAL, DecisionTree, TreeEdge, TreeNode
+from trace_runtime.testing import synthetic_cycle
 
 
 def _graph(result: object) -> nx.DiGraph:
@@ -363,3 +367,29 @@ def test_explain_scores_each_decision_as_the_metrics_do(sim_log: Path) -> None:
             assert (scores.tcs < 1.0) == (cycle in after_gap), cycle
         checked += 1
     assert checked > 400 and failing  # the run has injected faults to disagree about
+
+
+def test_a_counterfactual_tree_thousands_of_levels_deep_is_drawn_bounded(tmp_path: Path) -> None:
+    """A log may hold any tree: one 5,000 levels deep must not exhaust the renderer's stack
+    (it was a RecursionError traceback); the terminal shows the top, --json all of it."""
+    depth = 5_000
+    nodes = [TreeNode(id=f"n{i}", label=f"test {i}") for i in range(depth)]
+    nodes.append(TreeNode(id="leaf", label="STOP", command="STOP"))
+    edges = [TreeEdge(parent=f"n{i}", child=f"n{i + 1}", label="yes") for i in range(depth - 1)]
+    edges.append(TreeEdge(parent=f"n{depth - 1}", child="leaf", label="yes"))
+    path = tmp_path / "deep.mcap"
+    logger = AuditLogger(path, robot_id="amr-1", config=LoggerConfig(threaded=False))
+    p, b, a, e = synthetic_cycle(0)
+    deep = a.model_copy(
+        update={"tree": DecisionTree(nodes=nodes, edges=edges, taken_path=["n0", "leaf"])}
+    )
+    logger.log_cycle(1_000_000_000, perception=p, belief=b, action=deep, execution=e)
+    logger.close()
+    runner = CliRunner()
+    for extra in (["--plain"], []):
+        result = runner.invoke(app, ["explain", str(path), "--t", "1.0", *extra])
+        assert result.exit_code == 0, result.output
+        assert "deeper levels" in result.output
+    result = runner.invoke(app, ["explain", str(path), "--t", "1.0", "--json"])
+    assert result.exit_code == 0
+    assert len(json.loads(result.stdout)["tree"]["nodes"]) == depth + 1

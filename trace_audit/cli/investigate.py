@@ -359,17 +359,25 @@ def _tree_item(r: Explanation) -> Item:
 
     seen: set[str] = set()
 
-    def build(node_id: str, label: str) -> Item:
+    def build(node_id: str, label: str, depth: int) -> Item:
         item = Item(line(node_id, label))
         if node_id in seen:
             return item  # a malformed tree with a cycle: show the node once
         seen.add(node_id)
-        for edge in children.get(node_id, ()):
-            item.children.append(build(edge["target"], str(edge.get("label") or "")))
+        edges = children.get(node_id, ())
+        if edges and depth >= _MAX_TREE_DEPTH:
+            # A policy's tree is a few levels deep; a log may hold anything. Shown bounded.
+            item.children.append(Item(["   ", Seg("... deeper levels: see --json", "dim")]))
+            return item
+        for edge in edges:
+            item.children.append(build(edge["target"], str(edge.get("label") or ""), depth + 1))
         return item
 
-    return build(root_id if root_id is not None else next(iter(nodes), "?"), "")
+    return build(root_id if root_id is not None else next(iter(nodes), "?"), "", 0)
 
+
+_MAX_TREE_DEPTH = 12
+"""Levels of a counterfactual tree drawn in a terminal; deeper ones are in ``--json``."""
 
 _LEVEL_NAMES = {
     "sensor_reading": "sensor reading",
