@@ -48,7 +48,6 @@ from trace_runtime import AuditLogger, LoggerConfig, open_log
 from trace_runtime.schemas import SENSOR_SCHEMA_NAME, schema_bytes, schema_name
 from trace_runtime.testing import synthetic_cycle
 from trace_runtime.tiers import ColdOptions, compact
-from trace_runtime.tiers import cold as cold_codec
 
 FLEET_ROBOTS = 100_000
 FLEET_HZ = 10
@@ -239,7 +238,7 @@ def bench_log(name: str, root: Path, work: Path, repeats: int, jobs: int) -> dic
 
     def read_all(opened: Any) -> Callable[[], int]:
         def go() -> int:
-            cold_codec._RECENT.clear()  # no help from blocks decoded before
+            opened.clear_caches()  # no help from blocks decoded before
             return sum(1 for _ in opened.iter_cycles())
 
         return go
@@ -257,7 +256,7 @@ def bench_log(name: str, root: Path, work: Path, repeats: int, jobs: int) -> dic
         samples = []
         for t_ns in times:
             if forget:
-                cold_codec._RECENT.clear()
+                opened.clear_caches()
             else:
                 opened.cycle_at(t_ns)
             started = time.perf_counter()

@@ -161,6 +161,11 @@ class Log:
                     prev = status.seal_digest
                 yield cycle, status
 
+    def clear_caches(self) -> None:
+        """Forget what every segment decoded lately (to measure a first read)."""
+        for segment in self.segments:
+            segment.clear_caches()
+
     @property
     def start_ns(self) -> int:
         return min(s.start_ns for s in self._timed)

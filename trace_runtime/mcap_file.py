@@ -541,6 +541,10 @@ class McapFile:
             self._recent_chunks.popitem(last=False)
         return messages
 
+    def clear_caches(self) -> None:
+        """Forget the recently decoded chunks (to measure a first read)."""
+        self._recent_chunks.clear()
+
     def is_damaged(self, offset: int) -> bool:
         """Whether the chunk at ``offset`` was found damaged (once it has been read)."""
         return offset in self._damaged

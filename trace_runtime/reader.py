@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import itertools
 import logging
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -24,17 +24,18 @@ from trace_runtime.errors import LogReadError, NotTraceLogError
 from trace_runtime.mcap_file import DEFAULT_LIMITS, McapFile, ReadLimits
 from trace_runtime.records import PROFILE, TOPIC_SEAL, Seal
 from trace_runtime.session import SESSION_METADATA, SessionInfo
-from trace_runtime.tiers.cold import COLD_ASSEMBLER
-from trace_runtime.tiers.warm import WARM_ASSEMBLER
+from trace_runtime.tiers.cold import ColdAssembler
+from trace_runtime.tiers.warm import WarmAssembler
 
 log = logging.getLogger("trace_runtime")
 
-ASSEMBLERS: Mapping[str, Assembler] = {
-    "hot": HotAssembler(),
-    "warm": WARM_ASSEMBLER,
-    "cold": COLD_ASSEMBLER,
+ASSEMBLERS: Mapping[str, Callable[[], Assembler]] = {
+    "hot": HotAssembler,
+    "warm": WarmAssembler,
+    "cold": ColdAssembler,
 }
-"""How each tier's messages become cycles (``trace.session`` ``tier``)."""
+"""How each tier's messages become cycles (``trace.session`` ``tier``): one assembler per
+segment, so a cache an assembler keeps (cold: decoded blocks) lives as long as the reader."""
 
 _MAX_LEAD_IN_CHUNKS = 4096
 """How far back a cycle's first messages are looked for (chunks of one message each hold a
@@ -124,7 +125,14 @@ class Segment(McapFile):
 
     @cached_property
     def _assembler(self) -> Assembler:
-        return ASSEMBLERS.get(self.session.tier, ASSEMBLERS["hot"])
+        return ASSEMBLERS.get(self.session.tier, HotAssembler)()
+
+    def clear_caches(self) -> None:
+        """Forget recently decoded chunks and blocks (to measure a first read)."""
+        super().clear_caches()
+        cache = getattr(self._assembler, "cache", None)
+        if cache is not None:
+            cache.clear()
 
     # --- cycles across chunk boundaries ------------------------------------------------------
 

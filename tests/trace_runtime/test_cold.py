@@ -181,12 +181,12 @@ def test_seek_into_a_cold_segment_decodes_one_block(
         *(rng.randrange(hot.start_ns, hot.end_ns) for _ in range(30)),
     ]:
         calls.clear()
-        cold_module._RECENT.clear()
+        cold.clear_caches()
         assert cold.cycle_at(t_ns) == hot.cycle_at(t_ns)
         assert len(calls) <= 2  # the block that starts at or before t (and, rarely, the one before)
     middle = hot.start_ns + (hot.end_ns - hot.start_ns) // 2
     calls.clear()
-    cold_module._RECENT.clear()
+    cold.clear_caches()
     found = cold.cycle_at(middle)
     assert found.t_ns <= middle < found.t_ns + 100_000_000
     assert len(calls) == 1

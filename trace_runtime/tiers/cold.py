@@ -933,9 +933,6 @@ class ColdAssembler:
         return assemble_cold(messages, segment, self.cache)
 
 
-COLD_ASSEMBLER = ColdAssembler()
-
-
 def iter_decoded(messages: Iterable[RawMessage]) -> Iterator[RawMessage]:
     """The original message stream behind a cold segment's messages, in the original order.
 
@@ -970,9 +967,3 @@ def merge_plain(
         yield msg
         at += 1
     yield from pending
-
-
-_RECENT = COLD_ASSEMBLER.cache
-"""Transitional alias of the shared assembler's cache for ``tests/trace_runtime/test_cold.py``
-and ``bench/bench_tiers.py`` (``_RECENT.clear()``); they should call
-``COLD_ASSEMBLER.cache.clear()``, and readers should own a ``ColdAssembler`` each."""

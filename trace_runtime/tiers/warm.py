@@ -443,9 +443,6 @@ class WarmAssembler:
         return assemble_warm(messages, segment)
 
 
-WARM_ASSEMBLER = WarmAssembler()
-
-
 def _list(value: Any) -> list[Any]:
     return value if isinstance(value, list) else []
 
