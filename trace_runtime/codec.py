@@ -1,29 +1,174 @@
 """Canonical encoding of TRACE messages: the exact bytes that digests are taken over.
 
 The canonical bytes of a layer message are compact JSON (UTF-8, no whitespace) of the form
-``{"cycle":C,"t_ns":T,<the record's fields in schema order>}``. A seal is the JSON of the
-``Seal`` model in the same style. Whatever re-encodes a message later (the warm and cold tiers)
-must give back these bytes exactly; a reader never re-serialises to verify.
+``{"cycle":C,"t_ns":T,<the record's fields in schema order>}``, every field present, spelled
+as ``orjson`` spells it (``1e+21``, ``-0.0``, raw UTF-8). A seal is the JSON of the ``Seal``
+model in the same style. Whatever re-encodes a message later (the warm and cold tiers) must
+give back these bytes exactly; a reader never re-serialises to verify.
+
+The logger's way in is two steps: ``check_layer`` on the control thread validates what the
+robot handed over, ``encode_checked`` on the writer thread gives the message bytes. A built
+record is kept as it is and serialised by its pydantic serializer (one call into Rust). A
+plain dict is validated by a ``msgspec`` mirror of the record model (derived from the
+pydantic model, so the model stays the one definition of the format) and encoded by
+``orjson``; only input the mirror refuses goes through pydantic, which then either accepts
+it (pydantic's lax coercions, e.g. ``cls`` given for ``class``) or raises ``RecordError``
+with pydantic's message. Both ways give the same bytes for the same record. See
+docs/performance.md, "Logger: validation and encoding".
 """
 
 from __future__ import annotations
 
-from typing import Any
+import functools
+import sys
+import types
+import typing
+from typing import Annotated, Any, Literal, Union, get_args, get_origin
 
+import annotated_types
+import msgspec
 import orjson
+from pydantic_core import PydanticUndefined
 
-from trace_runtime.records import Seal, _Record
+from trace_runtime.records import Seal, _Record, validate_record
+
+_FLOAT_MAX = sys.float_info.max
 
 
-def encode_layer(cycle: int, t_ns: int, record: _Record) -> bytes:
-    """Canonical bytes of one layer record stamped with its cycle and time."""
+def encode_layer(
+    cycle: int, t_ns: int, record: _Record, model: type[_Record] | None = None
+) -> bytes:
+    """Canonical bytes of one layer record stamped with its cycle and time.
+
+    ``model``: the layer model the record stands for (default: its own class). A subclass
+    instance, e.g. a ``PerceptionMessage`` handed over as a ``Perception``, is written with
+    the layer's fields only, so ``cycle`` and ``t_ns`` are never written twice.
+    """
     # The serializer itself: the bytes of ``model_dump_json(by_alias=True)`` without the
-    # str round trip (a writer's hot path: four records per cycle).
-    body = record.__pydantic_serializer__.to_json(record, by_alias=True)
+    # str round trip (one call into Rust for the whole record).
+    body = (model or type(record)).__pydantic_serializer__.to_json(record, by_alias=True)
+    return _stamped(cycle, t_ns, body)
+
+
+LayerValue = _Record | msgspec.Struct
+"""A layer record checked on the control thread: the robot's model, or the msgspec mirror a
+plain dict was converted into. Either way the writer only encodes it."""
+
+
+def check_layer(model: type[_Record], record: Any) -> LayerValue:
+    """Validate ``record`` (a ``model`` or a dict of its fields) without encoding it; raise
+    ``RecordError`` when it is not a valid ``model``."""
+    if isinstance(record, model):
+        return record
+    if type(record) is dict:
+        # Plain dicts (all the way down) take the mirror. Models nested in a dict do not:
+        # msgspec would read any object's attributes, pydantic accepts only the model.
+        try:
+            return msgspec.convert(record, _mirror(model), strict=True)
+        except msgspec.ValidationError:
+            pass  # pydantic may still coerce it (e.g. ``cls`` for ``class``), or say why not
+    return validate_record(model, record)
+
+
+def encode_checked(cycle: int, t_ns: int, model: type[_Record], value: LayerValue) -> bytes:
+    """Canonical bytes of a value ``check_layer`` gave for ``model``. Holds the GIL throughout
+    (no I/O, no release): the writer thread calls it and must not convoy with the robot."""
+    if isinstance(value, _Record):
+        return encode_layer(cycle, t_ns, value, model)
+    plain = msgspec.to_builtins(value)
+    try:
+        return _stamped(cycle, t_ns, orjson.dumps(plain))
+    except orjson.JSONEncodeError:  # integers beyond 64 bits: pydantic spells them
+        return encode_layer(cycle, t_ns, model.model_validate(plain), model)
+
+
+def layer_message(model: type[_Record], cycle: int, t_ns: int, record: Any) -> bytes:
+    """Validate ``record`` and return the canonical bytes of its message (both steps)."""
+    return encode_checked(cycle, t_ns, model, check_layer(model, record))
+
+
+def _stamped(cycle: int, t_ns: int, body: bytes) -> bytes:
     stamp = b'{"cycle":%d,"t_ns":%d' % (cycle, t_ns)
     if body == b"{}":
         return stamp + b"}"
     return b"".join((stamp, b",", memoryview(body)[1:]))
+
+
+# --- the msgspec mirror of the record models ----------------------------------------------
+
+
+@functools.cache
+def _mirror(model: type[_Record]) -> type[msgspec.Struct]:
+    """A ``msgspec.Struct`` with ``model``'s fields, order, aliases, defaults and constraints.
+
+    Built on first use, once per model (the cache is bounded by the number of record
+    classes). A field type it cannot mirror faithfully raises ``TypeError``: a new kind of
+    field must be taught here, not validated loosely.
+    """
+    fields: list[tuple[str, Any, Any]] = []
+    for name, info in model.model_fields.items():
+        kind = _mirror_type(info.annotation, info.metadata)
+        if info.default_factory is not None:
+            default = msgspec.field(name=info.alias, default_factory=info.default_factory)  # type: ignore[arg-type]
+        elif info.default is PydanticUndefined:
+            default = msgspec.field(name=info.alias)
+        else:
+            default = msgspec.field(name=info.alias, default=info.default)
+        fields.append((name, kind, default))
+    return msgspec.defstruct(
+        f"_Fast{model.__name__}",
+        fields,
+        kw_only=True,
+        forbid_unknown_fields=True,
+        omit_defaults=False,
+        gc=False,
+    )
+
+
+def _mirror_type(annotation: Any, metadata: list[Any] | tuple[Any, ...] = ()) -> Any:
+    """The msgspec type that accepts exactly what pydantic's lax validation of
+    ``annotation`` accepts without coercion (a refusal falls back to pydantic)."""
+    bounds: dict[str, Any] = {}
+    for item in metadata:
+        if isinstance(item, annotated_types.Ge):
+            bounds["ge"] = item.ge
+        elif isinstance(item, annotated_types.Le):
+            bounds["le"] = item.le
+        elif isinstance(item, annotated_types.MinLen):
+            bounds["min_length"] = item.min_length
+        else:
+            raise TypeError(f"no msgspec mirror for the constraint {item!r}")
+    if annotation is float:
+        # NaN and infinity fail these bounds, as allow_inf_nan=False rejects them.
+        bounds["ge"] = max(bounds.get("ge", -_FLOAT_MAX), -_FLOAT_MAX)
+        bounds["le"] = min(bounds.get("le", _FLOAT_MAX), _FLOAT_MAX)
+        return Annotated[float, msgspec.Meta(**bounds)]
+    if annotation in (int, str, bool):
+        return Annotated[annotation, msgspec.Meta(**bounds)] if bounds else annotation
+    origin, args = get_origin(annotation), get_args(annotation)
+    if origin in (Union, types.UnionType):
+        # pydantic puts a field's constraints on the non-None member of an optional
+        none = type(None)
+        if bounds and not (len(args) == 2 and none in args):
+            raise TypeError(f"no msgspec mirror for constraints on {annotation!r}")
+        members = [a if a is none else _mirror_type(a, metadata) for a in args]
+        return typing.Union[tuple(members)]  # noqa: UP007 - built from a tuple
+    if bounds:
+        raise TypeError(f"no msgspec mirror for constraints on {annotation!r}")
+    if isinstance(annotation, type) and issubclass(annotation, _Record):
+        return _mirror(annotation)
+    if origin is Literal:
+        return annotation
+    if origin is list:
+        return list[_mirror_type(args[0])]  # type: ignore[misc]
+    if origin is tuple and Ellipsis not in args:
+        return tuple[tuple(_mirror_type(a) for a in args)]  # type: ignore[misc]
+    if origin is dict:
+        return dict[_mirror_type(args[0]), _mirror_type(args[1])]  # type: ignore[misc]
+    raise TypeError(f"no msgspec mirror for the field type {annotation!r}")
+
+
+# --- seals and free-form payloads ---------------------------------------------------------
 
 
 def encode_seal(seal: Seal) -> bytes:

@@ -1,9 +1,15 @@
 """``AuditLogger``: the per-cycle audit trail API a robot's control loop calls.
 
-The control thread does little: it checks and keeps references to the records, encodes the
-small sensor payloads it needs digests for, and hands the cycle to a bounded queue. A
+The control thread does little: it validates the records (a built record is kept as it
+is; a plain dict is converted into its msgspec mirror, see ``trace_runtime.codec``), encodes
+the small sensor payloads it needs digests for, and hands the cycle to a bounded queue. A
 writer thread encodes the layer records canonically, seals the cycle into the hash chain
 and writes a chunk per batch, so every committed cycle reaches the OS within one period.
+
+The writer holds the GIL while it encodes, digests and seals, and lets go of it only for
+the batch's compression and write: a thread that lets go of the GIL waits up to the switch
+interval (5 ms) to get it back from a busy control thread, so letting go once per message
+(``hashlib`` does, for data of 2 KiB and more) starved the writer (docs/performance.md).
 
 Failure policy (see schemas/PROFILE.md, "Dropped cycles"): nothing about I/O ever raises
 into the control loop. A full queue, a failed write, a lost disk or permission: the cycle
@@ -17,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import hashlib
 import logging
 import os
 import re
@@ -31,7 +38,13 @@ from types import TracebackType
 from typing import Any, BinaryIO, Literal, Protocol
 
 from trace_runtime.chain import digest
-from trace_runtime.codec import encode_json, encode_layer, encode_seal_fields
+from trace_runtime.codec import (
+    LayerValue,
+    check_layer,
+    encode_checked,
+    encode_json,
+    encode_seal_fields,
+)
 from trace_runtime.errors import LogLockedError, RecordError, UsageError
 from trace_runtime.integrity import Signer, encode_checkpoint, load_signer, make_checkpoint
 from trace_runtime.records import (
@@ -45,8 +58,6 @@ from trace_runtime.records import (
     TOPIC_PERCEPTION,
     TOPIC_SEAL,
     EvidenceRef,
-    _Record,
-    validate_record,
 )
 from trace_runtime.segment import OutMessage, SegmentWriteError, SegmentWriter
 from trace_runtime.session import SessionInfo
@@ -132,7 +143,7 @@ class LoggerStats:
 class _PendingCycle:
     cycle: int
     t_ns: int
-    layers: dict[str, _Record]
+    layers: dict[str, LayerValue]
     sensors: list[tuple[str, int, int, bytes]]
     dropped_before: int
 
@@ -229,7 +240,7 @@ class CycleBuilder:
         self._logger = logger
         self.cycle = cycle
         self.t_ns = t_ns
-        self._layers: dict[str, _Record] = {}
+        self._layers: dict[str, LayerValue] = {}
         self._sensors: list[tuple[str, int, int, bytes]] = []
         self._committed = False
 
@@ -270,7 +281,7 @@ class CycleBuilder:
             raise UsageError(f"cycle {self.cycle} is already committed")
         if topic in self._layers:
             raise UsageError(f"cycle {self.cycle} already has a {topic} record")
-        self._layers[topic] = validate_record(LAYER_MODELS[topic], record)
+        self._layers[topic] = check_layer(LAYER_MODELS[topic], record)
 
     def commit(self) -> None:
         """Hand the cycle to the writer. Never raises because of I/O."""
@@ -614,8 +625,8 @@ class AuditLogger:
                 messages.append(OutMessage(segment.channel(topic), sequence, log_time, data))
             digests: dict[str, str] = {}
             for topic, record in pending.layers.items():
-                data = encode_layer(pending.cycle, pending.t_ns, record)
-                digests[topic] = digest(data)
+                data = encode_checked(pending.cycle, pending.t_ns, LAYER_MODELS[topic], record)
+                digests[topic] = _digest_keeping_gil(data)
                 messages.append(
                     OutMessage(segment.channel(topic), pending.cycle, pending.t_ns, data)
                 )
@@ -808,6 +819,23 @@ class AuditLogger:
         if kind not in self._reported:
             self._reported.add(kind)
             log.warning("%s (reported once; see AuditLogger.stats)", message)
+
+
+_GIL_KEPT_BELOW = 2048
+"""``hashlib`` lets go of the GIL for updates of this many bytes and more (CPython's
+``HASHLIB_GIL_MINSIZE``); smaller updates keep it."""
+
+
+def _digest_keeping_gil(data: bytes) -> str:
+    """``chain.digest(data)`` without letting go of the GIL (see the module docstring): the
+    same SHA-256, fed in pieces below hashlib's threshold. Costs ~0.1 us per 2 KiB piece."""
+    if len(data) < _GIL_KEPT_BELOW:
+        return hashlib.sha256(data).hexdigest()
+    hasher = hashlib.sha256()
+    view = memoryview(data)
+    for start in range(0, len(data), _GIL_KEPT_BELOW - 1):
+        hasher.update(view[start : start + _GIL_KEPT_BELOW - 1])
+    return hasher.hexdigest()
 
 
 def _resume_point(root: Path, robot_id: str) -> tuple[int, str, int]:

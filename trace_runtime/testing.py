@@ -20,12 +20,15 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
+import msgspec
+
 from trace_runtime.chain import digest
-from trace_runtime.codec import encode_layer, encode_seal
+from trace_runtime.codec import LayerValue, encode_checked, encode_seal
 from trace_runtime.errors import UsageError
 from trace_runtime.logger import AuditLogger, CycleBuilder, LoggerStats
 from trace_runtime.records import (
     GENESIS,
+    LAYER_MODELS,
     TOPIC_ACTION,
     TOPIC_BELIEF,
     TOPIC_EXECUTION,
@@ -122,7 +125,7 @@ class CaptureLogger:
     def _commit(self, builder: CycleBuilder) -> None:
         layers = builder._layers
         payloads = {
-            topic: encode_layer(builder.cycle, builder.t_ns, record)
+            topic: encode_checked(builder.cycle, builder.t_ns, LAYER_MODELS[topic], record)
             for topic, record in layers.items()
         }
         seal = Seal(
@@ -158,11 +161,15 @@ class CaptureLogger:
         self._dropped_since_seal += 1
 
 
-T = TypeVar("T")
+T = TypeVar("T", Perception, Belief, Action, Execution)
 
 
-def _typed(record: object, kind: type[T]) -> T | None:
-    return record if isinstance(record, kind) else None
+def _typed(record: LayerValue | None, kind: type[T]) -> T | None:
+    """The record as its model, also when the robot handed over a dict (validated then into
+    its msgspec mirror, which a test should not have to know about)."""
+    if record is None or isinstance(record, kind):
+        return record
+    return kind.model_validate(msgspec.to_builtins(record))
 
 
 def synthetic_cycle(
