@@ -7,23 +7,24 @@ model in the same style. Whatever re-encodes a message later (the warm and cold 
 give back these bytes exactly; a reader never re-serialises to verify.
 
 The logger's way in is two steps: ``check_layer`` on the control thread validates what the
-robot handed over, ``encode_checked`` on the writer thread gives the message bytes. A built
-record is kept as it is and serialised by its pydantic serializer (one call into Rust). A
-plain dict is validated by a ``msgspec`` mirror of the record model (derived from the
-pydantic model, so the model stays the one definition of the format) and encoded by
-``orjson``; only input the mirror refuses goes through pydantic, which then either accepts
-it (pydantic's lax coercions, e.g. ``cls`` given for ``class``) or raises ``RecordError``
-with pydantic's message. Both ways give the same bytes for the same record. See
-docs/performance.md, "Logger: validation and encoding".
+robot handed over, ``encode_checked`` (writer thread) gives the message bytes. A built
+record is kept as it is and serialised later by its pydantic serializer (one call into
+Rust). A plain dict is validated by a ``msgspec`` mirror of the record model (derived from
+the pydantic model, so the model stays the one definition of the format) and encoded by
+``orjson`` at once, on the control thread; only input the mirror refuses goes through
+pydantic, which then either accepts it (pydantic's lax coercions, e.g. ``cls`` given for
+``class``) or raises ``RecordError`` with pydantic's message. Both ways give the same bytes
+for the same record. See docs/performance.md, "Logger: validation and encoding".
 """
 
 from __future__ import annotations
 
 import functools
+import hashlib
 import sys
 import types
 import typing
-from typing import Annotated, Any, Literal, Union, get_args, get_origin
+from typing import Annotated, Any, Literal, NamedTuple, Union, get_args, get_origin
 
 import annotated_types
 import msgspec
@@ -50,31 +51,57 @@ def encode_layer(
     return _stamped(cycle, t_ns, body)
 
 
-LayerValue = _Record | msgspec.Struct
-"""A layer record checked on the control thread: the robot's model, or the msgspec mirror a
-plain dict was converted into. Either way the writer only encodes it."""
+class EncodedLayer(NamedTuple):
+    """A layer message already encoded on the control thread, with its digest."""
+
+    data: bytes
+    digest: str
 
 
-def check_layer(model: type[_Record], record: Any) -> LayerValue:
-    """Validate ``record`` (a ``model`` or a dict of its fields) without encoding it; raise
-    ``RecordError`` when it is not a valid ``model``."""
+LayerValue = _Record | EncodedLayer
+"""A layer record checked on the control thread: the robot's built model (encoded later by
+the writer), or the message a plain dict was validated and encoded into."""
+
+
+def check_layer(model: type[_Record], cycle: int, t_ns: int, record: Any) -> LayerValue:
+    """Validate ``record`` (a ``model`` or a dict of its fields) for cycle ``cycle`` at
+    ``t_ns``; raise ``RecordError`` when it is not a valid ``model``.
+
+    A built record is returned as it is: it costs the control thread an ``isinstance``. A
+    plain dict is encoded right away, with its digest: validating it is most of the work,
+    and a control thread that keeps busy while the writer thread encodes convoys with it on
+    the GIL (docs/performance.md).
+    """
     if isinstance(record, model):
         return record
     if type(record) is dict:
         # Plain dicts (all the way down) take the mirror. Models nested in a dict do not:
         # msgspec would read any object's attributes, pydantic accepts only the model.
         try:
-            return msgspec.convert(record, _mirror(model), strict=True)
+            value = msgspec.convert(record, _mirror(model), strict=True)
         except msgspec.ValidationError:
             pass  # pydantic may still coerce it (e.g. ``cls`` for ``class``), or say why not
-    return validate_record(model, record)
+        else:
+            data = _encode_mirror(cycle, t_ns, model, value)
+            return EncodedLayer(data, digest_keeping_gil(data))
+    data = encode_layer(cycle, t_ns, validate_record(model, record), model)
+    return EncodedLayer(data, digest_keeping_gil(data))
 
 
 def encode_checked(cycle: int, t_ns: int, model: type[_Record], value: LayerValue) -> bytes:
     """Canonical bytes of a value ``check_layer`` gave for ``model``. Holds the GIL throughout
     (no I/O, no release): the writer thread calls it and must not convoy with the robot."""
-    if isinstance(value, _Record):
-        return encode_layer(cycle, t_ns, value, model)
+    if isinstance(value, EncodedLayer):
+        return value.data
+    return encode_layer(cycle, t_ns, value, model)
+
+
+def layer_message(model: type[_Record], cycle: int, t_ns: int, record: Any) -> bytes:
+    """Validate ``record`` and return the canonical bytes of its message (both steps)."""
+    return encode_checked(cycle, t_ns, model, check_layer(model, cycle, t_ns, record))
+
+
+def _encode_mirror(cycle: int, t_ns: int, model: type[_Record], value: msgspec.Struct) -> bytes:
     plain = msgspec.to_builtins(value)
     try:
         return _stamped(cycle, t_ns, orjson.dumps(plain))
@@ -82,9 +109,23 @@ def encode_checked(cycle: int, t_ns: int, model: type[_Record], value: LayerValu
         return encode_layer(cycle, t_ns, model.model_validate(plain), model)
 
 
-def layer_message(model: type[_Record], cycle: int, t_ns: int, record: Any) -> bytes:
-    """Validate ``record`` and return the canonical bytes of its message (both steps)."""
-    return encode_checked(cycle, t_ns, model, check_layer(model, record))
+_GIL_KEPT_BELOW = 2048
+"""``hashlib`` lets go of the GIL for updates of this many bytes and more (CPython's
+``HASHLIB_GIL_MINSIZE``); smaller updates keep it."""
+
+
+def digest_keeping_gil(data: bytes) -> str:
+    """``chain.digest(data)`` without letting go of the GIL: the same SHA-256, fed in pieces
+    below hashlib's threshold (~0.1 us a piece). A thread that lets go of the GIL waits up
+    to the switch interval (5 ms) to get it back from a busy thread: the logger's threads
+    let go of it only for compression and file I/O (docs/performance.md)."""
+    if len(data) < _GIL_KEPT_BELOW:
+        return hashlib.sha256(data).hexdigest()
+    hasher = hashlib.sha256()
+    view = memoryview(data)
+    for start in range(0, len(data), _GIL_KEPT_BELOW - 1):
+        hasher.update(view[start : start + _GIL_KEPT_BELOW - 1])
+    return hasher.hexdigest()
 
 
 def _stamped(cycle: int, t_ns: int, body: bytes) -> bytes:

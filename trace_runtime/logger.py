@@ -1,15 +1,16 @@
 """``AuditLogger``: the per-cycle audit trail API a robot's control loop calls.
 
-The control thread does little: it validates the records (a built record is kept as it
-is; a plain dict is converted into its msgspec mirror, see ``trace_runtime.codec``), encodes
-the small sensor payloads it needs digests for, and hands the cycle to a bounded queue. A
-writer thread encodes the layer records canonically, seals the cycle into the hash chain
-and writes a chunk per batch, so every committed cycle reaches the OS within one period.
+The control thread does little: it keeps a reference to a built record (an ``isinstance``),
+validates and encodes a plain dict at once (see ``trace_runtime.codec.check_layer``),
+encodes the small sensor payloads it needs digests for, and hands the cycle to a bounded
+queue. A writer thread encodes the built records canonically, seals the cycle into the hash
+chain and writes a chunk per batch, so every committed cycle reaches the OS within one
+period.
 
-The writer holds the GIL while it encodes, digests and seals, and lets go of it only for
-the batch's compression and write: a thread that lets go of the GIL waits up to the switch
-interval (5 ms) to get it back from a busy control thread, so letting go once per message
-(``hashlib`` does, for data of 2 KiB and more) starved the writer (docs/performance.md).
+Neither thread lets go of the GIL per message: the writer only for the batch's compression
+and write. A thread that lets go of the GIL waits up to the switch interval (5 ms) to get it
+back from a busy one; the v1 writer let go once per message (``hashlib`` does, for data of
+2 KiB and more) and starved behind a control thread validating dicts (docs/performance.md).
 
 Failure policy (see schemas/PROFILE.md, "Dropped cycles"): nothing about I/O ever raises
 into the control loop. A full queue, a failed write, a lost disk or permission: the cycle
@@ -23,7 +24,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import hashlib
 import logging
 import os
 import re
@@ -39,8 +39,10 @@ from typing import Any, BinaryIO, Literal, Protocol
 
 from trace_runtime.chain import digest
 from trace_runtime.codec import (
+    EncodedLayer,
     LayerValue,
     check_layer,
+    digest_keeping_gil,
     encode_checked,
     encode_json,
     encode_seal_fields,
@@ -257,7 +259,7 @@ class CycleBuilder:
         sequence = self._logger._next_sensor_sequence(topic)
         self._sensors.append((topic, sequence, log_time, data))
         return EvidenceRef(
-            topic=topic, log_time_ns=log_time, sequence=sequence, digest=digest(data)
+            topic=topic, log_time_ns=log_time, sequence=sequence, digest=digest_keeping_gil(data)
         )
 
     def perception(self, record: Any) -> None:
@@ -281,7 +283,7 @@ class CycleBuilder:
             raise UsageError(f"cycle {self.cycle} is already committed")
         if topic in self._layers:
             raise UsageError(f"cycle {self.cycle} already has a {topic} record")
-        self._layers[topic] = check_layer(LAYER_MODELS[topic], record)
+        self._layers[topic] = check_layer(LAYER_MODELS[topic], self.cycle, self.t_ns, record)
 
     def commit(self) -> None:
         """Hand the cycle to the writer. Never raises because of I/O."""
@@ -625,8 +627,11 @@ class AuditLogger:
                 messages.append(OutMessage(segment.channel(topic), sequence, log_time, data))
             digests: dict[str, str] = {}
             for topic, record in pending.layers.items():
-                data = encode_checked(pending.cycle, pending.t_ns, LAYER_MODELS[topic], record)
-                digests[topic] = _digest_keeping_gil(data)
+                if isinstance(record, EncodedLayer):  # a dict, encoded on the control thread
+                    data, digests[topic] = record
+                else:
+                    data = encode_checked(pending.cycle, pending.t_ns, LAYER_MODELS[topic], record)
+                    digests[topic] = digest_keeping_gil(data)
                 messages.append(
                     OutMessage(segment.channel(topic), pending.cycle, pending.t_ns, data)
                 )
@@ -819,23 +824,6 @@ class AuditLogger:
         if kind not in self._reported:
             self._reported.add(kind)
             log.warning("%s (reported once; see AuditLogger.stats)", message)
-
-
-_GIL_KEPT_BELOW = 2048
-"""``hashlib`` lets go of the GIL for updates of this many bytes and more (CPython's
-``HASHLIB_GIL_MINSIZE``); smaller updates keep it."""
-
-
-def _digest_keeping_gil(data: bytes) -> str:
-    """``chain.digest(data)`` without letting go of the GIL (see the module docstring): the
-    same SHA-256, fed in pieces below hashlib's threshold. Costs ~0.1 us per 2 KiB piece."""
-    if len(data) < _GIL_KEPT_BELOW:
-        return hashlib.sha256(data).hexdigest()
-    hasher = hashlib.sha256()
-    view = memoryview(data)
-    for start in range(0, len(data), _GIL_KEPT_BELOW - 1):
-        hasher.update(view[start : start + _GIL_KEPT_BELOW - 1])
-    return hasher.hexdigest()
 
 
 def _resume_point(root: Path, robot_id: str) -> tuple[int, str, int]:

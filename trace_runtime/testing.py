@@ -20,10 +20,10 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
-import msgspec
+import orjson
 
 from trace_runtime.chain import digest
-from trace_runtime.codec import LayerValue, encode_checked, encode_seal
+from trace_runtime.codec import EncodedLayer, LayerValue, encode_checked, encode_seal
 from trace_runtime.errors import UsageError
 from trace_runtime.logger import AuditLogger, CycleBuilder, LoggerStats
 from trace_runtime.records import (
@@ -165,11 +165,14 @@ T = TypeVar("T", Perception, Belief, Action, Execution)
 
 
 def _typed(record: LayerValue | None, kind: type[T]) -> T | None:
-    """The record as its model, also when the robot handed over a dict (validated then into
-    its msgspec mirror, which a test should not have to know about)."""
+    """The record as its model, also when the robot handed over a dict (then validated and
+    encoded at the call site: the model is read back from the bytes that were written)."""
     if record is None or isinstance(record, kind):
         return record
-    return kind.model_validate(msgspec.to_builtins(record))
+    assert isinstance(record, EncodedLayer)
+    fields = orjson.loads(record.data)
+    del fields["cycle"], fields["t_ns"]
+    return kind.model_validate(fields)
 
 
 def synthetic_cycle(

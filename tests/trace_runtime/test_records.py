@@ -307,7 +307,7 @@ def test_a_spoiled_dict_is_refused_exactly_when_pydantic_refuses_it(
         expected = None
     if expected is None:
         with pytest.raises(RecordError):
-            check_layer(model, spoiled)
+            check_layer(model, 1, 2, spoiled)
     else:
         assert layer_message(model, 1, 2, spoiled) == expected
 
