@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import re
 import sys
 import types
 import typing
@@ -34,6 +35,7 @@ from pydantic_core import PydanticUndefined
 from trace_runtime.records import Seal, _Record, validate_record
 
 _FLOAT_MAX = sys.float_info.max
+_MIRROR_ENCODER = msgspec.json.Encoder()
 
 
 def encode_layer(
@@ -45,10 +47,50 @@ def encode_layer(
     instance, e.g. a ``PerceptionMessage`` handed over as a ``Perception``, is written with
     the layer's fields only, so ``cycle`` and ``t_ns`` are never written twice.
     """
+    model = model or type(record)
+    if type(record) is model:
+        try:
+            # orjson reading the validated models' fields: ~30% cheaper than pydantic's
+            # serializer, the same bytes (a property test holds the two together)
+            return _stamped(cycle, t_ns, orjson.dumps(record, default=_record_fields))
+        except orjson.JSONEncodeError:
+            pass  # something the fast path does not know; the serializer does
     # The serializer itself: the bytes of ``model_dump_json(by_alias=True)`` without the
     # str round trip (one call into Rust for the whole record).
-    body = (model or type(record)).__pydantic_serializer__.to_json(record, by_alias=True)
-    return _stamped(cycle, t_ns, body)
+    return _stamped(cycle, t_ns, model.__pydantic_serializer__.to_json(record, by_alias=True))
+
+
+def _record_fields(value: Any) -> dict[str, Any]:
+    """orjson's ``default``: the fields of a record of ``trace_runtime.records`` in schema
+    order under their JSON names. Anything else (a subclass of a record, a model with
+    unvalidated extras from ``model_copy(update=...)``, a numpy scalar) raises, and the
+    whole record goes to pydantic's serializer instead."""
+    spec = _field_specs().get(type(value))
+    if spec is None:
+        raise TypeError(type(value).__name__)
+    count, renamed = spec
+    fields: dict[str, Any] = value.__dict__
+    if len(fields) != count:
+        raise TypeError(f"{type(value).__name__} holds fields it does not declare")
+    if renamed is None:
+        return fields
+    return {key: fields[name] for name, key in renamed}
+
+
+@functools.cache
+def _field_specs() -> dict[type, tuple[int, tuple[tuple[str, str], ...] | None]]:
+    """Per record class of ``trace_runtime.records``: its field count and, when a field has
+    an alias (``Entity.cls`` is ``class``), (name, JSON name) in order. Built once."""
+    from trace_runtime import records
+
+    specs: dict[type, tuple[int, tuple[tuple[str, str], ...] | None]] = {}
+    for cls in vars(records).values():
+        if isinstance(cls, type) and issubclass(cls, _Record) and cls is not _Record:
+            fields = cls.model_fields
+            renamed = tuple((name, info.alias or name) for name, info in fields.items())
+            aliased = any(name != key for name, key in renamed)
+            specs[cls] = (len(fields), renamed if aliased else None)
+    return specs
 
 
 class EncodedLayer(NamedTuple):
@@ -101,7 +143,14 @@ def layer_message(model: type[_Record], cycle: int, t_ns: int, record: Any) -> b
     return encode_checked(cycle, t_ns, model, check_layer(model, cycle, t_ns, record))
 
 
+_POSITIVE_EXPONENT = re.compile(rb"[0-9]e[0-9]")
+"""msgspec spells 1e21 where orjson (and pydantic) spell 1e+21; nothing else differs."""
+
+
 def _encode_mirror(cycle: int, t_ns: int, model: type[_Record], value: msgspec.Struct) -> bytes:
+    body = _MIRROR_ENCODER.encode(value)
+    if _POSITIVE_EXPONENT.search(body) is None:  # (a string like "1e5" only costs the detour)
+        return _stamped(cycle, t_ns, body)
     plain = msgspec.to_builtins(value)
     try:
         return _stamped(cycle, t_ns, orjson.dumps(plain))

@@ -45,7 +45,9 @@ from trace_runtime.records import (
 from trace_runtime.testing import CaptureLogger
 
 names = st.text(st.characters(codec="utf-8", exclude_categories=("Cs",)), min_size=1, max_size=12)
-finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+finite = st.floats(allow_nan=False, allow_infinity=False, width=64) | st.sampled_from(
+    [1e21, -1.5e300, 1e16, 9.999e15, 1e-7, -0.0, 0.30000000000000004]  # exponent spellings
+)
 unit = st.floats(min_value=0.0, max_value=1.0)
 scalars = st.one_of(finite, st.integers(-(2**53), 2**53), st.booleans(), names)
 
@@ -257,7 +259,9 @@ _layer_records = st.one_of(*_LAYER_STRATEGIES.values())
 @given(record=_layer_records)
 def test_a_dict_gives_the_same_canonical_bytes_as_the_built_record(record: Any) -> None:
     model = type(record)
-    want = encode_layer(7, 123, record)
+    body = model.__pydantic_serializer__.to_json(record, by_alias=True)
+    want = b'{"cycle":7,"t_ns":123,' + body[1:]  # pydantic's own bytes, as v1 wrote them
+    assert encode_layer(7, 123, record) == want  # orjson reading the fields
     assert layer_message(model, 7, 123, record) == want
     assert layer_message(model, 7, 123, record.model_dump(by_alias=True)) == want  # mirror
     assert layer_message(model, 7, 123, record.model_dump()) == want  # "cls": pydantic decides
@@ -341,3 +345,21 @@ def test_every_layer_model_has_a_msgspec_mirror_with_its_fields_in_order(model: 
     mirror = _mirror(model)
     names = [f.encode_name for f in msgspec.structs.fields(mirror)]
     assert names == [f.alias or name for name, f in model.model_fields.items()]
+
+
+def test_records_the_fast_encoder_does_not_know_are_written_by_pydantic() -> None:
+    """A subclass of a record nested in a model, or extras put in by ``model_copy``: the
+    bytes are pydantic's (declared fields only), never the object's own ``__dict__``."""
+
+    class TaggedPose(Pose):
+        tag: str = "mine"
+
+    entity = Entity(id="e", cls="person", pose=TaggedPose(position=(1.0, 2.0, 3.0)), confidence={})
+    perception = Perception(entities=[entity])
+    with_extra = Motion(linear=1.0).model_copy(update={"sneaky": 1})
+    execution = Execution(intended=with_extra, actual=Motion(linear=1.0), deviation=0.0)
+    for record in (perception, execution):
+        body = type(record).__pydantic_serializer__.to_json(record, by_alias=True)
+        data = encode_layer(1, 2, record)
+        assert data == b'{"cycle":1,"t_ns":2,' + body[1:]
+        assert b"mine" not in data and b"sneaky" not in data
