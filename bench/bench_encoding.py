@@ -15,7 +15,9 @@ run timing every candidate once in turn so machine noise hits them alike; read t
   msgspec's own JSON encoder (spells ``1e21`` where orjson and pydantic spell ``1e+21``).
 - msgspec Structs built by the robot: encode only (what it would cost if the public records
   were Structs; they are not, so this is a floor, not a candidate).
-- chosen (``codec.layer_message``): serializer for models, mirror for dicts, pydantic for
+- chosen (``trace_runtime.codec``): built records by orjson reading the validated fields
+  (pydantic's bytes); dicts by the mirror and msgspec's encoder, detouring through
+  ``to_builtins`` + orjson when a positive exponent needs orjson's spelling; pydantic for
   anything the mirror refuses (e.g. a dict with models nested inside).
 
 Also per cycle, for scale: SHA-256 of the four messages, zstd-3 of them, and one
@@ -35,11 +37,17 @@ import msgspec
 import orjson
 import zstandard
 
-from trace_runtime.codec import _mirror, encode_layer, layer_message
+from trace_runtime.codec import _encode_mirror, _mirror, encode_layer, layer_message
 from trace_runtime.records import LAYER_MODELS, _Record
 from trace_runtime.testing import CaptureLogger, synthetic_cycle
 
 MODELS = list(LAYER_MODELS.values())
+
+
+def _v1_encode(cycle: int, record: _Record) -> bytes:
+    """What the v1 logger's writer did per record: pydantic's serializer, then the stamp."""
+    body = type(record).__pydantic_serializer__.to_json(record, by_alias=True)
+    return b'{"cycle":%d,"t_ns":%d,' % (cycle, cycle * 100) + body[1:]
 
 
 def _stamp(cycle: int, body: dict[str, Any]) -> dict[str, Any]:
@@ -61,12 +69,12 @@ def candidates(
     def pydantic_built() -> None:
         for i, c in enumerate(built):
             for r in c:
-                encode_layer(i, i * 100, r)
+                _v1_encode(i, r)
 
     def pydantic_dicts() -> None:
         for i, c in enumerate(dicts):
             for m, d in zip(MODELS, c, strict=True):
-                encode_layer(i, i * 100, m.model_validate(d))
+                _v1_encode(i, m.model_validate(d))
 
     def orjson_built() -> None:
         for i, c in enumerate(built):
@@ -104,18 +112,21 @@ def candidates(
 
     def chosen_built() -> None:
         for i, c in enumerate(built):
-            for m, r in zip(MODELS, c, strict=True):
-                layer_message(m, i, i * 100, r)
+            for r in c:
+                encode_layer(i, i * 100, r)
 
     def chosen_dicts() -> None:
         for i, c in enumerate(dicts):
             for m, d in zip(MODELS, c, strict=True):
-                layer_message(m, i, i * 100, d)
+                _encode_mirror(i, i * 100, m, msgspec.convert(d, _mirror(m), strict=True))
 
-    def chosen_mixed() -> None:
+    def chosen_mixed() -> None:  # the mirror refuses, pydantic validates
         for i, c in enumerate(mixed):
             for m, d in zip(MODELS, c, strict=True):
-                layer_message(m, i, i * 100, d)
+                try:
+                    msgspec.convert(d, _mirror(m), strict=True)
+                except msgspec.ValidationError:
+                    encode_layer(i, i * 100, m.model_validate(d), m)
 
     return {
         "pydantic, built (v1)": pydantic_built,
@@ -126,9 +137,9 @@ def candidates(
         "msgspec mirror, dicts, msgspec JSON": msgspec_dicts_own_json,
         "msgspec mirror, built (from_attributes) + orjson": msgspec_built_from_attributes,
         "msgspec Structs built, encode only (floor)": msgspec_structs_encode_only,
-        "chosen layer_message, built": chosen_built,
-        "chosen layer_message, dicts": chosen_dicts,
-        "chosen layer_message, dicts holding models": chosen_mixed,
+        "chosen, built: orjson reading the fields": chosen_built,
+        "chosen, dicts: mirror + msgspec JSON (+ exp. check)": chosen_dicts,
+        "chosen, dicts holding models (pydantic decides)": chosen_mixed,
     }
 
 
@@ -148,14 +159,15 @@ def scale(built: list[tuple[_Record, ...]]) -> dict[str, Callable[[], object]]:
             compressor.compress(b"".join(c))
 
     def sensor() -> None:
-        builder = capture.cycle(0)
         for i in range(len(built)):
-            builder.sensor("/sensors/lidar", {"ranges": [1.5, 1.6, 1.7], "cluster": i})
+            with capture.cycle(i) as builder:
+                builder.sensor("/sensors/lidar", {"ranges": [1.5, 1.6, 1.7], "cluster": i})
+        capture.cycles.clear()
 
     return {
         "sha256 of the 4 messages": sha256,
         "zstd-3 of the 4 messages (one per chunk)": zstd3,
-        "one CycleBuilder.sensor() call": sensor,
+        "a cycle with one sensor() call (CaptureLogger)": sensor,
     }
 
 

@@ -11,7 +11,8 @@ robot handed over, ``encode_checked`` (writer thread) gives the message bytes. A
 record is kept as it is and serialised later by its pydantic serializer (one call into
 Rust). A plain dict is validated by a ``msgspec`` mirror of the record model (derived from
 the pydantic model, so the model stays the one definition of the format) and encoded by
-``orjson`` at once, on the control thread; only input the mirror refuses goes through
+msgspec at once, on the control thread (its JSON is orjson's for floats below 1e16, to which
+the mirror is bounded); only input the mirror refuses goes through
 pydantic, which then either accepts it (pydantic's lax coercions, e.g. ``cls`` given for
 ``class``) or raises ``RecordError`` with pydantic's message. Both ways give the same bytes
 for the same record. See docs/performance.md, "Logger: validation and encoding".
@@ -21,8 +22,6 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import re
-import sys
 import types
 import typing
 from typing import Annotated, Any, Literal, NamedTuple, Union, get_args, get_origin
@@ -34,7 +33,7 @@ from pydantic_core import PydanticUndefined
 
 from trace_runtime.records import Seal, _Record, validate_record
 
-_FLOAT_MAX = sys.float_info.max
+_SPELLED_ALIKE = 1e16
 _MIRROR_ENCODER = msgspec.json.Encoder()
 
 
@@ -124,7 +123,7 @@ def check_layer(model: type[_Record], cycle: int, t_ns: int, record: Any) -> Lay
         except msgspec.ValidationError:
             pass  # pydantic may still coerce it (e.g. ``cls`` for ``class``), or say why not
         else:
-            data = _encode_mirror(cycle, t_ns, model, value)
+            data = _encode_mirror(cycle, t_ns, value)
             return EncodedLayer(data, digest_keeping_gil(data))
     data = encode_layer(cycle, t_ns, validate_record(model, record), model)
     return EncodedLayer(data, digest_keeping_gil(data))
@@ -143,19 +142,10 @@ def layer_message(model: type[_Record], cycle: int, t_ns: int, record: Any) -> b
     return encode_checked(cycle, t_ns, model, check_layer(model, cycle, t_ns, record))
 
 
-_POSITIVE_EXPONENT = re.compile(rb"[0-9]e[0-9]")
-"""msgspec spells 1e21 where orjson (and pydantic) spell 1e+21; nothing else differs."""
-
-
-def _encode_mirror(cycle: int, t_ns: int, model: type[_Record], value: msgspec.Struct) -> bytes:
-    body = _MIRROR_ENCODER.encode(value)
-    if _POSITIVE_EXPONENT.search(body) is None:  # (a string like "1e5" only costs the detour)
-        return _stamped(cycle, t_ns, body)
-    plain = msgspec.to_builtins(value)
-    try:
-        return _stamped(cycle, t_ns, orjson.dumps(plain))
-    except orjson.JSONEncodeError:  # integers beyond 64 bits: pydantic spells them
-        return encode_layer(cycle, t_ns, model.model_validate(plain), model)
+def _encode_mirror(cycle: int, t_ns: int, value: msgspec.Struct) -> bytes:
+    # msgspec's JSON is orjson's (and pydantic's) byte for byte: the mirror's floats stay
+    # below 1e16, where msgspec would spell 1e16 where the others spell 1e+16.
+    return _stamped(cycle, t_ns, _MIRROR_ENCODER.encode(value))
 
 
 _GIL_KEPT_BELOW = 2048
@@ -229,9 +219,15 @@ def _mirror_type(annotation: Any, metadata: list[Any] | tuple[Any, ...] = ()) ->
         else:
             raise TypeError(f"no msgspec mirror for the constraint {item!r}")
     if annotation is float:
-        # NaN and infinity fail these bounds, as allow_inf_nan=False rejects them.
-        bounds["ge"] = max(bounds.get("ge", -_FLOAT_MAX), -_FLOAT_MAX)
-        bounds["le"] = min(bounds.get("le", _FLOAT_MAX), _FLOAT_MAX)
+        # Bounded on both sides, so NaN and infinity fail, as allow_inf_nan=False rejects
+        # them; and below 1e16 in magnitude, where msgspec's JSON spells floats as orjson's
+        # does (1e16 and up it writes 1e16, not 1e+16): bigger values take pydantic's path.
+        if bounds.get("ge", -_SPELLED_ALIKE) <= -_SPELLED_ALIKE:
+            bounds.pop("ge", None)
+            bounds["gt"] = -_SPELLED_ALIKE
+        if bounds.get("le", _SPELLED_ALIKE) >= _SPELLED_ALIKE:
+            bounds.pop("le", None)
+            bounds["lt"] = _SPELLED_ALIKE
         return Annotated[float, msgspec.Meta(**bounds)]
     if annotation in (int, str, bool):
         return Annotated[annotation, msgspec.Meta(**bounds)] if bounds else annotation
