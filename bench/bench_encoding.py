@@ -16,9 +16,9 @@ run timing every candidate once in turn so machine noise hits them alike; read t
 - msgspec Structs built by the robot: encode only (what it would cost if the public records
   were Structs; they are not, so this is a floor, not a candidate).
 - chosen (``trace_runtime.codec``): built records by orjson reading the validated fields
-  (pydantic's bytes); dicts by the mirror and msgspec's encoder, detouring through
-  ``to_builtins`` + orjson when a positive exponent needs orjson's spelling; pydantic for
-  anything the mirror refuses (e.g. a dict with models nested inside).
+  (pydantic's bytes); dicts by the mirror and msgspec's encoder (the mirror bounds floats
+  below 1e16, where msgspec spells as orjson does); pydantic for anything the mirror refuses
+  (e.g. a dict with models nested inside).
 
 Also per cycle, for scale: SHA-256 of the four messages, zstd-3 of them, and one
 ``CycleBuilder.sensor`` call (encode + digest + EvidenceRef).
@@ -118,7 +118,7 @@ def candidates(
     def chosen_dicts() -> None:
         for i, c in enumerate(dicts):
             for m, d in zip(MODELS, c, strict=True):
-                _encode_mirror(i, i * 100, m, msgspec.convert(d, _mirror(m), strict=True))
+                _encode_mirror(i, i * 100, msgspec.convert(d, _mirror(m), strict=True))
 
     def chosen_mixed() -> None:  # the mirror refuses, pydantic validates
         for i, c in enumerate(mixed):
@@ -138,7 +138,7 @@ def candidates(
         "msgspec mirror, built (from_attributes) + orjson": msgspec_built_from_attributes,
         "msgspec Structs built, encode only (floor)": msgspec_structs_encode_only,
         "chosen, built: orjson reading the fields": chosen_built,
-        "chosen, dicts: mirror + msgspec JSON (+ exp. check)": chosen_dicts,
+        "chosen, dicts: mirror + msgspec JSON": chosen_dicts,
         "chosen, dicts holding models (pydantic decides)": chosen_mixed,
     }
 
