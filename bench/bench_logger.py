@@ -4,7 +4,9 @@
 
 1. control-thread cost per cycle (p50, p99) for a typical 3-5 KB cycle, paced like a control
    loop; anchor: writing the same cycle synchronously with the plain `mcap` Writer + orjson.
-2. sustained throughput of one writer (cycles/s); anchor: plain `mcap` Writer + orjson.
+2. sustained throughput of one writer (cycles/s), with built records and with the plain
+   dicts a robot may hand over instead (validation included); anchor: plain `mcap` Writer +
+   orjson of the same records (``model_dump`` + orjson for built ones, orjson of the dict).
 3. cycles lost on kill -9 at a random moment, over N runs; anchor: `mcap` Writer defaults.
 4. bytes per cycle in the hot tier (paced: a chunk per cycle; and batched when catching up).
 
@@ -89,8 +91,10 @@ def control_cost_anchor(records: list[tuple], path: Path, pace_s: float) -> list
 # --- 2. throughput ---------------------------------------------------------------------------
 
 
-def throughput_ours(records: list[tuple], path: Path) -> float:
-    config = LoggerConfig(when_full="block", queue_cycles=4096, fsync_interval_s=None)
+def throughput_ours(records: list[tuple], path: Path, *, threaded: bool = True) -> float:
+    config = LoggerConfig(
+        threaded=threaded, when_full="block", queue_cycles=4096, fsync_interval_s=None
+    )
     start = time.perf_counter()
     with AuditLogger(path, robot_id="bench", config=config) as log:
         for i, (p, b, a, e) in enumerate(records):
@@ -108,9 +112,22 @@ def throughput_anchor(records: list[tuple], path: Path) -> float:
         for i, layers in enumerate(records):
             t = i * PERIOD_NS
             for channel, record in zip(channels, layers, strict=True):
-                writer.add_message(channel, t, orjson.dumps(record.model_dump()), t)
+                data = record if isinstance(record, dict) else record.model_dump()
+                writer.add_message(channel, t, orjson.dumps(data), t)
         writer.finish()
     return len(records) / (time.perf_counter() - start)
+
+
+def throughput(records: list[tuple], work: Path, tag: str, runs: int = 3) -> dict[str, float]:
+    """Median cycles/s of ours (threaded, and synchronous) and of the anchor, interleaved."""
+    got: dict[str, list[float]] = {"ours": [], "ours sync": [], "anchor": []}
+    for k in range(runs):
+        got["ours"].append(throughput_ours(records, work / f"tp-{tag}-{k}.mcap"))
+        got["ours sync"].append(
+            throughput_ours(records, work / f"tps-{tag}-{k}.mcap", threaded=False)
+        )
+        got["anchor"].append(throughput_anchor(records, work / f"tpa-{tag}-{k}.mcap"))
+    return {name: statistics.median(values) for name, values in got.items()}
 
 
 # --- 3. kill -9 ------------------------------------------------------------------------------
@@ -227,14 +244,18 @@ def main() -> None:
 
     fast = records * (n_fast // len(records) + 1)
     fast = fast[:n_fast]
-    ours_tp = [throughput_ours(fast, work / f"tp-{k}.mcap") for k in range(3)]
-    anchor_tp = [throughput_anchor(fast, work / f"tpa-{k}.mcap") for k in range(3)]
-    batched = (work / "tp-0.mcap").stat().st_size / n_fast
+    dicts = [tuple(r.model_dump(by_alias=True) for r in layers) for layers in fast]
+    built_tp = throughput(fast, work, "built")
+    batched = (work / "tp-built-0.mcap").stat().st_size / n_fast
     print(f"   hot tier: {batched:.0f} B/cycle when the writer batches (catching up)")
-    print(f"\n2. throughput, {n_fast} cycles, median of 3 (cycles/s)")
-    print(f"   ours        {statistics.median(ours_tp):9.0f}")
-    print(f"   mcap+orjson {statistics.median(anchor_tp):9.0f}")
-    print(f"   ratio ours/anchor {statistics.median(ours_tp) / statistics.median(anchor_tp):.2f}")
+    dict_tp = throughput(dicts, work, "dicts")
+    print(f"\n2. throughput, {n_fast} cycles, median of 3 interleaved runs (cycles/s)")
+    for label, tp in (("built records", built_tp), ("plain dicts, validated", dict_tp)):
+        print(
+            f"   {label:23s} ours {tp['ours']:7.0f}  (sync {tp['ours sync']:7.0f})  "
+            f"mcap+orjson {tp['anchor']:7.0f}  ratio {tp['ours'] / tp['anchor']:.2f} "
+            f"(sync {tp['ours sync'] / tp['anchor']:.2f})"
+        )
 
     lost_ours = kill_runs("ours", kills, work)
     lost_anchor = kill_runs("anchor", kills, work)

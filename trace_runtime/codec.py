@@ -1,29 +1,260 @@
 """Canonical encoding of TRACE messages: the exact bytes that digests are taken over.
 
 The canonical bytes of a layer message are compact JSON (UTF-8, no whitespace) of the form
-``{"cycle":C,"t_ns":T,<the record's fields in schema order>}``. A seal is the JSON of the
-``Seal`` model in the same style. Whatever re-encodes a message later (the warm and cold tiers)
-must give back these bytes exactly; a reader never re-serialises to verify.
+``{"cycle":C,"t_ns":T,<the record's fields in schema order>}``, every field present, spelled
+as ``orjson`` spells it (``1e+21``, ``-0.0``, raw UTF-8). A seal is the JSON of the ``Seal``
+model in the same style. Whatever re-encodes a message later (the warm and cold tiers) must
+give back these bytes exactly; a reader never re-serialises to verify.
+
+The logger's way in is two steps: ``check_layer`` on the control thread validates what the
+robot handed over, ``encode_checked`` (writer thread) gives the message bytes. A built
+record is kept as it is and serialised later by its pydantic serializer (one call into
+Rust). A plain dict is validated by a ``msgspec`` mirror of the record model (derived from
+the pydantic model, so the model stays the one definition of the format) and encoded by
+msgspec at once, on the control thread (its JSON is orjson's for floats below 1e16, to which
+the mirror is bounded); only input the mirror refuses goes through
+pydantic, which then either accepts it (pydantic's lax coercions, e.g. ``cls`` given for
+``class``) or raises ``RecordError`` with pydantic's message. Both ways give the same bytes
+for the same record. See docs/performance.md, "Logger: validation and encoding".
 """
 
 from __future__ import annotations
 
-from typing import Any
+import functools
+import hashlib
+import types
+import typing
+from collections.abc import Callable
+from typing import Annotated, Any, Literal, NamedTuple, Union, get_args, get_origin
 
+import annotated_types
+import msgspec
 import orjson
+from pydantic_core import PydanticUndefined
 
-from trace_runtime.records import Seal, _Record
+from trace_runtime.records import Seal, _Record, validate_record
+
+_SPELLED_ALIKE = 1e16
+_MIRROR_ENCODER = msgspec.json.Encoder()
 
 
-def encode_layer(cycle: int, t_ns: int, record: _Record) -> bytes:
-    """Canonical bytes of one layer record stamped with its cycle and time."""
+def encode_layer(
+    cycle: int, t_ns: int, record: _Record, model: type[_Record] | None = None
+) -> bytes:
+    """Canonical bytes of one layer record stamped with its cycle and time.
+
+    ``model``: the layer model the record stands for (default: its own class). A subclass
+    instance, e.g. a ``PerceptionMessage`` handed over as a ``Perception``, is written with
+    the layer's fields only, so ``cycle`` and ``t_ns`` are never written twice.
+    """
+    model = model or type(record)
+    if type(record) is model:
+        try:
+            # orjson reading the validated models' fields: ~17% cheaper than pydantic's
+            # serializer, the same bytes (a property test holds the two together)
+            return _stamped(cycle, t_ns, orjson.dumps(record, default=_record_fields()))
+        except orjson.JSONEncodeError:
+            pass  # something the fast path does not know; the serializer does
     # The serializer itself: the bytes of ``model_dump_json(by_alias=True)`` without the
-    # str round trip (a writer's hot path: four records per cycle).
-    body = record.__pydantic_serializer__.to_json(record, by_alias=True)
+    # str round trip (one call into Rust for the whole record).
+    return _stamped(cycle, t_ns, model.__pydantic_serializer__.to_json(record, by_alias=True))
+
+
+@functools.cache
+def _record_fields() -> Callable[[Any], dict[str, Any]]:
+    """orjson's ``default`` for the records of ``trace_runtime.records`` (built once: it is
+    called for every nested record, ~55 a cycle, so it looks nothing up but one dict)."""
+    from trace_runtime import records
+
+    specs: dict[type, tuple[int, tuple[tuple[str, str], ...] | None]] = {}
+    for cls in vars(records).values():
+        if isinstance(cls, type) and issubclass(cls, _Record) and cls is not _Record:
+            renamed = tuple((name, info.alias or name) for name, info in cls.model_fields.items())
+            aliased = any(name != key for name, key in renamed)
+            specs[cls] = (len(renamed), renamed if aliased else None)
+
+    def fields_of(value: Any) -> dict[str, Any]:
+        """The fields of a record in schema order under their JSON names (``Entity.cls`` is
+        ``class``). Anything else (a subclass of a record, a model with unvalidated extras
+        from ``model_copy(update=...)``, a numpy scalar) raises, and the whole record goes
+        to pydantic's serializer instead."""
+        spec = specs.get(type(value))
+        if spec is None:
+            raise TypeError(type(value).__name__)
+        count, renamed = spec
+        fields: dict[str, Any] = value.__dict__
+        if len(fields) != count:
+            raise TypeError(f"{type(value).__name__} holds fields it does not declare")
+        if renamed is None:
+            return fields
+        return {key: fields[name] for name, key in renamed}
+
+    return fields_of
+
+
+class EncodedLayer(NamedTuple):
+    """A layer message already encoded on the control thread, with its digest."""
+
+    data: bytes
+    digest: str
+
+
+LayerValue = _Record | EncodedLayer
+"""A layer record checked on the control thread: the robot's built model (encoded later by
+the writer), or the message a plain dict was validated and encoded into."""
+
+
+def check_layer(model: type[_Record], cycle: int, t_ns: int, record: Any) -> LayerValue:
+    """Validate ``record`` (a ``model`` or a dict of its fields) for cycle ``cycle`` at
+    ``t_ns``; raise ``RecordError`` when it is not a valid ``model``.
+
+    A built record is returned as it is: it costs the control thread an ``isinstance``. A
+    plain dict is encoded right away, with its digest: validating it is most of the work,
+    and a control thread that keeps busy while the writer thread encodes convoys with it on
+    the GIL (docs/performance.md).
+    """
+    if isinstance(record, model):
+        return record
+    if type(record) is dict:
+        # Plain dicts (all the way down) take the mirror. Models nested in a dict do not:
+        # msgspec would read any object's attributes, pydantic accepts only the model.
+        try:
+            value = msgspec.convert(record, _mirror(model), strict=True)
+        except msgspec.ValidationError:
+            pass  # pydantic may still coerce it (e.g. ``cls`` for ``class``), or say why not
+        else:
+            data = _encode_mirror(cycle, t_ns, value)
+            return EncodedLayer(data, digest_keeping_gil(data))
+    data = encode_layer(cycle, t_ns, validate_record(model, record), model)
+    return EncodedLayer(data, digest_keeping_gil(data))
+
+
+def encode_checked(cycle: int, t_ns: int, model: type[_Record], value: LayerValue) -> bytes:
+    """Canonical bytes of a value ``check_layer`` gave for ``model``. Holds the GIL throughout
+    (no I/O, no release): the writer thread calls it and must not convoy with the robot."""
+    if isinstance(value, EncodedLayer):
+        return value.data
+    return encode_layer(cycle, t_ns, value, model)
+
+
+def layer_message(model: type[_Record], cycle: int, t_ns: int, record: Any) -> bytes:
+    """Validate ``record`` and return the canonical bytes of its message (both steps)."""
+    return encode_checked(cycle, t_ns, model, check_layer(model, cycle, t_ns, record))
+
+
+def _encode_mirror(cycle: int, t_ns: int, value: msgspec.Struct) -> bytes:
+    # msgspec's JSON is orjson's (and pydantic's) byte for byte: the mirror's floats stay
+    # below 1e16, where msgspec would spell 1e16 where the others spell 1e+16.
+    return _stamped(cycle, t_ns, _MIRROR_ENCODER.encode(value))
+
+
+_GIL_KEPT_BELOW = 2048
+"""``hashlib`` lets go of the GIL for updates of this many bytes and more (CPython's
+``HASHLIB_GIL_MINSIZE``); smaller updates keep it."""
+
+
+def digest_keeping_gil(data: bytes) -> str:
+    """``chain.digest(data)`` without letting go of the GIL: the same SHA-256, fed in pieces
+    below hashlib's threshold (~0.1 us a piece). A thread that lets go of the GIL waits up
+    to the switch interval (5 ms) to get it back from a busy thread: the logger's threads
+    let go of it only for compression and file I/O (docs/performance.md)."""
+    if len(data) < _GIL_KEPT_BELOW:
+        return hashlib.sha256(data).hexdigest()
+    hasher = hashlib.sha256()
+    view = memoryview(data)
+    for start in range(0, len(data), _GIL_KEPT_BELOW - 1):
+        hasher.update(view[start : start + _GIL_KEPT_BELOW - 1])
+    return hasher.hexdigest()
+
+
+def _stamped(cycle: int, t_ns: int, body: bytes) -> bytes:
     stamp = b'{"cycle":%d,"t_ns":%d' % (cycle, t_ns)
     if body == b"{}":
         return stamp + b"}"
     return b"".join((stamp, b",", memoryview(body)[1:]))
+
+
+# --- the msgspec mirror of the record models ----------------------------------------------
+
+
+@functools.cache
+def _mirror(model: type[_Record]) -> type[msgspec.Struct]:
+    """A ``msgspec.Struct`` with ``model``'s fields, order, aliases, defaults and constraints.
+
+    Built on first use, once per model (the cache is bounded by the number of record
+    classes). A field type it cannot mirror faithfully raises ``TypeError``: a new kind of
+    field must be taught here, not validated loosely.
+    """
+    fields: list[tuple[str, Any, Any]] = []
+    for name, info in model.model_fields.items():
+        kind = _mirror_type(info.annotation, info.metadata)
+        if info.default_factory is not None:
+            default = msgspec.field(name=info.alias, default_factory=info.default_factory)  # type: ignore[arg-type]
+        elif info.default is PydanticUndefined:
+            default = msgspec.field(name=info.alias)
+        else:
+            default = msgspec.field(name=info.alias, default=info.default)
+        fields.append((name, kind, default))
+    return msgspec.defstruct(
+        f"_Fast{model.__name__}",
+        fields,
+        kw_only=True,
+        forbid_unknown_fields=True,
+        omit_defaults=False,
+        gc=False,
+    )
+
+
+def _mirror_type(annotation: Any, metadata: list[Any] | tuple[Any, ...] = ()) -> Any:
+    """The msgspec type that accepts exactly what pydantic's lax validation of
+    ``annotation`` accepts without coercion (a refusal falls back to pydantic)."""
+    bounds: dict[str, Any] = {}
+    for item in metadata:
+        if isinstance(item, annotated_types.Ge):
+            bounds["ge"] = item.ge
+        elif isinstance(item, annotated_types.Le):
+            bounds["le"] = item.le
+        elif isinstance(item, annotated_types.MinLen):
+            bounds["min_length"] = item.min_length
+        else:
+            raise TypeError(f"no msgspec mirror for the constraint {item!r}")
+    if annotation is float:
+        # Bounded on both sides, so NaN and infinity fail, as allow_inf_nan=False rejects
+        # them; and below 1e16 in magnitude, where msgspec's JSON spells floats as orjson's
+        # does (1e16 and up it writes 1e16, not 1e+16): bigger values take pydantic's path.
+        if bounds.get("ge", -_SPELLED_ALIKE) <= -_SPELLED_ALIKE:
+            bounds.pop("ge", None)
+            bounds["gt"] = -_SPELLED_ALIKE
+        if bounds.get("le", _SPELLED_ALIKE) >= _SPELLED_ALIKE:
+            bounds.pop("le", None)
+            bounds["lt"] = _SPELLED_ALIKE
+        return Annotated[float, msgspec.Meta(**bounds)]
+    if annotation in (int, str, bool):
+        return Annotated[annotation, msgspec.Meta(**bounds)] if bounds else annotation
+    origin, args = get_origin(annotation), get_args(annotation)
+    if origin in (Union, types.UnionType):
+        # pydantic puts a field's constraints on the non-None member of an optional
+        none = type(None)
+        if bounds and not (len(args) == 2 and none in args):
+            raise TypeError(f"no msgspec mirror for constraints on {annotation!r}")
+        members = [a if a is none else _mirror_type(a, metadata) for a in args]
+        return typing.Union[tuple(members)]  # noqa: UP007 - built from a tuple
+    if bounds:
+        raise TypeError(f"no msgspec mirror for constraints on {annotation!r}")
+    if isinstance(annotation, type) and issubclass(annotation, _Record):
+        return _mirror(annotation)
+    if origin is Literal:
+        return annotation
+    if origin is list:
+        return list[_mirror_type(args[0])]  # type: ignore[misc]
+    if origin is tuple and Ellipsis not in args:
+        return tuple[tuple(_mirror_type(a) for a in args)]  # type: ignore[misc]
+    if origin is dict:
+        return dict[_mirror_type(args[0]), _mirror_type(args[1])]  # type: ignore[misc]
+    raise TypeError(f"no msgspec mirror for the field type {annotation!r}")
+
+
+# --- seals and free-form payloads ---------------------------------------------------------
 
 
 def encode_seal(seal: Seal) -> bytes:

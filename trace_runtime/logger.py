@@ -1,9 +1,16 @@
 """``AuditLogger``: the per-cycle audit trail API a robot's control loop calls.
 
-The control thread does little: it checks and keeps references to the records, encodes the
-small sensor payloads it needs digests for, and hands the cycle to a bounded queue. A
-writer thread encodes the layer records canonically, seals the cycle into the hash chain
-and writes a chunk per batch, so every committed cycle reaches the OS within one period.
+The control thread does little: it keeps a reference to a built record (an ``isinstance``),
+validates and encodes a plain dict at once (see ``trace_runtime.codec.check_layer``),
+encodes the small sensor payloads it needs digests for, and hands the cycle to a bounded
+queue. A writer thread encodes the built records canonically, seals the cycle into the hash
+chain and writes a chunk per batch, so every committed cycle reaches the OS within one
+period.
+
+Neither thread lets go of the GIL per message: the writer only for the batch's compression
+and write. A thread that lets go of the GIL waits up to the switch interval (5 ms) to get it
+back from a busy one; the v1 writer let go once per message (``hashlib`` does, for data of
+2 KiB and more) and starved behind a control thread validating dicts (docs/performance.md).
 
 Failure policy (see schemas/PROFILE.md, "Dropped cycles"): nothing about I/O ever raises
 into the control loop. A full queue, a failed write, a lost disk or permission: the cycle
@@ -31,7 +38,15 @@ from types import TracebackType
 from typing import Any, BinaryIO, Literal, Protocol
 
 from trace_runtime.chain import digest
-from trace_runtime.codec import encode_json, encode_layer, encode_seal_fields
+from trace_runtime.codec import (
+    EncodedLayer,
+    LayerValue,
+    check_layer,
+    digest_keeping_gil,
+    encode_checked,
+    encode_json,
+    encode_seal_fields,
+)
 from trace_runtime.errors import LogLockedError, RecordError, UsageError
 from trace_runtime.integrity import Signer, encode_checkpoint, load_signer, make_checkpoint
 from trace_runtime.records import (
@@ -45,8 +60,6 @@ from trace_runtime.records import (
     TOPIC_PERCEPTION,
     TOPIC_SEAL,
     EvidenceRef,
-    _Record,
-    validate_record,
 )
 from trace_runtime.segment import OutMessage, SegmentWriteError, SegmentWriter
 from trace_runtime.session import SessionInfo
@@ -132,7 +145,7 @@ class LoggerStats:
 class _PendingCycle:
     cycle: int
     t_ns: int
-    layers: dict[str, _Record]
+    layers: dict[str, LayerValue]
     sensors: list[tuple[str, int, int, bytes]]
     dropped_before: int
 
@@ -229,7 +242,7 @@ class CycleBuilder:
         self._logger = logger
         self.cycle = cycle
         self.t_ns = t_ns
-        self._layers: dict[str, _Record] = {}
+        self._layers: dict[str, LayerValue] = {}
         self._sensors: list[tuple[str, int, int, bytes]] = []
         self._committed = False
 
@@ -246,7 +259,7 @@ class CycleBuilder:
         sequence = self._logger._next_sensor_sequence(topic)
         self._sensors.append((topic, sequence, log_time, data))
         return EvidenceRef(
-            topic=topic, log_time_ns=log_time, sequence=sequence, digest=digest(data)
+            topic=topic, log_time_ns=log_time, sequence=sequence, digest=digest_keeping_gil(data)
         )
 
     def perception(self, record: Any) -> None:
@@ -270,7 +283,7 @@ class CycleBuilder:
             raise UsageError(f"cycle {self.cycle} is already committed")
         if topic in self._layers:
             raise UsageError(f"cycle {self.cycle} already has a {topic} record")
-        self._layers[topic] = validate_record(LAYER_MODELS[topic], record)
+        self._layers[topic] = check_layer(LAYER_MODELS[topic], self.cycle, self.t_ns, record)
 
     def commit(self) -> None:
         """Hand the cycle to the writer. Never raises because of I/O."""
@@ -614,8 +627,11 @@ class AuditLogger:
                 messages.append(OutMessage(segment.channel(topic), sequence, log_time, data))
             digests: dict[str, str] = {}
             for topic, record in pending.layers.items():
-                data = encode_layer(pending.cycle, pending.t_ns, record)
-                digests[topic] = digest(data)
+                if isinstance(record, EncodedLayer):  # a dict, encoded on the control thread
+                    data, digests[topic] = record
+                else:
+                    data = encode_checked(pending.cycle, pending.t_ns, LAYER_MODELS[topic], record)
+                    digests[topic] = digest_keeping_gil(data)
                 messages.append(
                     OutMessage(segment.channel(topic), pending.cycle, pending.t_ns, data)
                 )

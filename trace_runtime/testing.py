@@ -20,12 +20,15 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
+import orjson
+
 from trace_runtime.chain import digest
-from trace_runtime.codec import encode_layer, encode_seal
+from trace_runtime.codec import EncodedLayer, LayerValue, encode_checked, encode_seal
 from trace_runtime.errors import UsageError
 from trace_runtime.logger import AuditLogger, CycleBuilder, LoggerStats
 from trace_runtime.records import (
     GENESIS,
+    LAYER_MODELS,
     TOPIC_ACTION,
     TOPIC_BELIEF,
     TOPIC_EXECUTION,
@@ -122,7 +125,7 @@ class CaptureLogger:
     def _commit(self, builder: CycleBuilder) -> None:
         layers = builder._layers
         payloads = {
-            topic: encode_layer(builder.cycle, builder.t_ns, record)
+            topic: encode_checked(builder.cycle, builder.t_ns, LAYER_MODELS[topic], record)
             for topic, record in layers.items()
         }
         seal = Seal(
@@ -158,11 +161,18 @@ class CaptureLogger:
         self._dropped_since_seal += 1
 
 
-T = TypeVar("T")
+T = TypeVar("T", Perception, Belief, Action, Execution)
 
 
-def _typed(record: object, kind: type[T]) -> T | None:
-    return record if isinstance(record, kind) else None
+def _typed(record: LayerValue | None, kind: type[T]) -> T | None:
+    """The record as its model, also when the robot handed over a dict (then validated and
+    encoded at the call site: the model is read back from the bytes that were written)."""
+    if record is None or isinstance(record, kind):
+        return record
+    assert isinstance(record, EncodedLayer)
+    fields = orjson.loads(record.data)
+    del fields["cycle"], fields["t_ns"]
+    return kind.model_validate(fields)
 
 
 def synthetic_cycle(
