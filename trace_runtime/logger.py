@@ -62,7 +62,7 @@ from trace_runtime.records import (
     EvidenceRef,
 )
 from trace_runtime.segment import OutMessage, SegmentWriteError, SegmentWriter
-from trace_runtime.session import SessionInfo
+from trace_runtime.session import MIN_PERIOD_NS, SessionInfo
 
 if sys.platform != "win32":  # Linux is the target; elsewhere the writer lock is skipped
     import fcntl
@@ -335,8 +335,11 @@ class AuditLogger:
     ) -> None:
         if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", robot_id):
             raise UsageError(f"robot_id must be a simple name (letters, digits, _.-): {robot_id!r}")
-        if period_s <= 0:
-            raise UsageError(f"period_s must be positive, got {period_s}")
+        if not period_s * 1e9 >= MIN_PERIOD_NS:  # also refuses NaN
+            raise UsageError(
+                f"period_s must be at least {MIN_PERIOD_NS / 1e9:g} s (PROFILE section 2), "
+                f"got {period_s}"
+            )
         self.config = config or LoggerConfig()
         interval = self.config.checkpoint_interval_s
         if interval is not None and interval <= 0:

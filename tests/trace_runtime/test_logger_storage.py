@@ -20,7 +20,7 @@ import pytest
 
 from trace_runtime import AuditLogger, LoggerConfig, open_log
 from trace_runtime.chain import digest
-from trace_runtime.errors import LogLockedError
+from trace_runtime.errors import LogLockedError, UsageError
 from trace_runtime.testing import synthetic_cycle
 
 PERIOD_NS = 100_000_000
@@ -307,3 +307,12 @@ def test_a_robot_with_a_hung_disk_still_exits(tmp_path: Path) -> None:
     elapsed, undelivered = out.split()
     assert float(elapsed) < 1.5 and int(undelivered) == 5
     assert "5 cycle(s)" in err  # logged once: the count that close could not write
+
+
+@pytest.mark.parametrize("period_s", [0.0, -1.0, 1e-10, float("nan")])
+def test_a_period_no_reader_accepts_is_refused_at_construction(
+    tmp_path: Path, period_s: float
+) -> None:
+    """Readers refuse a period under 1 us (PROFILE section 2): the logger must not write one."""
+    with pytest.raises(UsageError, match="period_s must be at least"):
+        AuditLogger(tmp_path / "run.mcap", robot_id="r", period_s=period_s)
