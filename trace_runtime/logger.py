@@ -62,7 +62,7 @@ from trace_runtime.records import (
     EvidenceRef,
 )
 from trace_runtime.segment import OutMessage, SegmentWriteError, SegmentWriter
-from trace_runtime.session import MIN_PERIOD_NS, SessionInfo
+from trace_runtime.session import MIN_PERIOD_NS, TIERS, SessionInfo
 
 if sys.platform != "win32":  # Linux is the target; elsewhere the writer lock is skipped
     import fcntl
@@ -837,7 +837,7 @@ def _resume_point(root: Path, robot_id: str) -> tuple[int, str, int]:
     """
     name = re.compile(re.escape(robot_id) + r"_(\d+)\.mcap")
     numbered: list[tuple[int, int, Path]] = []
-    for rank, tier in enumerate(("hot", "warm", "cold")):
+    for rank, tier in enumerate(TIERS):
         directory = root / tier
         if directory.is_dir():
             for path in directory.glob(f"{robot_id}_*.mcap"):
@@ -867,7 +867,7 @@ def _lock_path(path: Path, is_root: bool, robot_id: str) -> Path:
     otherwise fork the chain of a logger writing that root."""
     if is_root:
         return path / ".locks" / f"{robot_id}.lock"
-    if path.parent.name in ("hot", "warm", "cold"):
+    if path.parent.name in TIERS:
         return path.parent.parent / ".locks" / f"{robot_id}.lock"
     return path.with_name(f".{path.name}.lock")
 

@@ -21,11 +21,10 @@ from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeE
 from trace_runtime.integrity import SealStatus, verify_cycle
 from trace_runtime.mcap_file import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.reader import Segment
+from trace_runtime.session import TIERS
 
 log = logging.getLogger("trace_runtime")
 
-TIER_DIRECTORIES = ("hot", "warm", "cold")
-"""The subdirectories of a log root, one per storage tier."""
 
 PARTIAL_MARK = ".partial"
 """File names holding this are writes in progress (compaction), never read as segments."""
@@ -52,7 +51,7 @@ def copy_rank(segment: Segment) -> tuple[int, int]:
     lossy = tier == "warm" or (
         tier == "cold" and segment.metadata.get("trace.tier", {}).get("lossy") == "true"
     )
-    return (1 if lossy else 0, TIER_DIRECTORIES.index(tier) if tier in TIER_DIRECTORIES else 9)
+    return (1 if lossy else 0, TIERS.index(tier) if tier in TIERS else 9)
 
 
 def preferred_copies(segments: Sequence[Segment]) -> tuple[list[Segment], list[Segment]]:

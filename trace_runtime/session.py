@@ -9,6 +9,10 @@ from trace_runtime.records import GENESIS, PROFILE_VERSION
 
 SESSION_METADATA = "trace.session"
 
+TIERS = ("hot", "warm", "cold")
+"""The storage tiers, from the robot's own segments to the most compacted: the values of
+``trace.session`` ``tier`` and the subdirectories of a log root (PROFILE section 9)."""
+
 MIN_PERIOD_NS = 1_000
 """The shortest nominal period a reader accepts (1 us, a 1 MHz decision loop): a shorter one
 is a corrupt or hostile record, and would make every nanosecond of jitter a gap."""

@@ -38,9 +38,10 @@ from trace_runtime.integrity import (
     iter_checkpoints,
     verify_cycle,
 )
-from trace_runtime.logset import TIER_DIRECTORIES, FileProblem, Log, copy_rank
+from trace_runtime.logset import FileProblem, Log, copy_rank
 from trace_runtime.reader import Segment
 from trace_runtime.records import GENESIS, Checkpoint
+from trace_runtime.session import TIERS
 
 __all__ = [
     "Finding",
@@ -997,7 +998,7 @@ def _describe_numbers(numbers: list[int]) -> str:
 
 def _display_name(path: Path) -> str:
     parts = path.parts
-    return "/".join(parts[-2:]) if len(parts) >= 2 and parts[-2] in TIER_DIRECTORIES else path.name
+    return "/".join(parts[-2:]) if len(parts) >= 2 and parts[-2] in TIERS else path.name
 
 
 # --- the whole log -------------------------------------------------------------------------------
