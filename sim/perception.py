@@ -230,13 +230,19 @@ def cluster_scan(scan: LidarScan) -> list[Cluster]:
 
 def _clusters(idx: list[int], rs: list[float]) -> list[Cluster]:
     """Clusters of the foreground beams ``idx`` (ascending) with ranges ``rs``."""
-    clusters: list[Cluster] = []
     n = len(idx)
+    if n < MIN_CLUSTER_BEAMS:
+        return []
+    # A cluster is a run of adjacent beams without a range jump: find where runs end.
+    ends = [
+        k
+        for k, (i0, i1, r0, r1) in enumerate(zip(idx, idx[1:], rs, rs[1:], strict=False), start=1)
+        if i1 - i0 > 1 or not abs(r1 - r0) < CLUSTER_JUMP_M
+    ]
+    ends.append(n)
+    clusters: list[Cluster] = []
     start = 0
-    for k in range(1, n + 1):
-        # A cluster is a run of adjacent beams without a range jump.
-        if k < n and idx[k] - idx[k - 1] <= 1 and abs(rs[k] - rs[k - 1]) < CLUSTER_JUMP_M:
-            continue
+    for k in ends:
         if k - start >= MIN_CLUSTER_BEAMS:
             first, last = idx[start], idx[k - 1]
             r = rs[start:k]
@@ -253,15 +259,15 @@ def _clusters(idx: list[int], rs: list[float]) -> list[Cluster]:
             )
             clusters.append(
                 Cluster(
-                    index=len(clusters),
-                    first=first,
-                    last=last,
-                    ranges=[round(v, 3) for v in r],
-                    x=cx,
-                    y=cy,
-                    width=width,
-                    bearing=math.atan2(cy, cx),
-                    truncated=truncated,
+                    len(clusters),
+                    first,
+                    last,
+                    [round(v, 3) for v in r],
+                    cx,
+                    cy,
+                    width,
+                    math.atan2(cy, cx),
+                    truncated,
                 )
             )
         start = k
@@ -343,14 +349,30 @@ def _update_motion(t: Track, tick: int) -> None:
     if n < VELOCITY_MIN_LOOKS:
         t.motion, t.vx, t.vy = "unknown", 0.0, 0.0
         return
-    tm = sum(k[0] for k in looks) / n
-    xm = sum(k[1] for k in looks) / n
-    ym = sum(k[2] for k in looks) / n
-    stt = sum((k[0] - tm) ** 2 for k in looks) * PERIOD_S
-    vx = sum((k[0] - tm) * (k[1] - xm) for k in looks) / stt
-    vy = sum((k[0] - tm) * (k[2] - ym) for k in looks) / stt
-    extent = max(k[3] for k in looks)
-    rate = max(k[4] for k in looks)
+    # Two passes instead of seven: each sum adds the same terms in the same order from the
+    # same int 0 that sum() starts from, and max() keeps the first of equals as this does.
+    st: float = 0  # an int 0, as sum() starts from
+    sx: float = 0
+    sy: float = 0
+    for k in looks:
+        st += k[0]
+        sx += k[1]
+        sy += k[2]
+    tm, xm, ym = st / n, sx / n, sy / n
+    stt: float = 0
+    sxt: float = 0
+    syt: float = 0
+    first = looks[0]
+    extent, rate = first[3], first[4]
+    for k in looks:
+        dt = k[0] - tm
+        stt += dt**2
+        sxt += dt * (k[1] - xm)
+        syt += dt * (k[2] - ym)
+        extent = max(extent, k[3])
+        rate = max(rate, k[4])
+    stt *= PERIOD_S
+    vx, vy = sxt / stt, syt / stt
     if math.hypot(vx, vy) <= MOTION_FLOOR_MPS + VIEW_DRIFT_PER_RAD * extent * rate:
         t.motion, t.vx, t.vy = "static", 0.0, 0.0
         return
@@ -414,7 +436,7 @@ class Perceiver:
         fg: list[int] = []
         fg_ranges: list[float] = []
         if scan is not None:
-            fg_idx = np.flatnonzero(scan.ranges < scan.expected - FOREGROUND_MARGIN_M)
+            fg_idx = (scan.ranges < scan.expected - FOREGROUND_MARGIN_M).nonzero()[0]
             fg, fg_ranges = fg_idx.tolist(), scan.ranges[fg_idx].tolist()
         clusters = _clusters(fg, fg_ranges)
 

@@ -87,6 +87,55 @@ class _Pairs:
         )
 
 
+@dataclass(frozen=True, slots=True)
+class _Table:
+    """``_Pairs`` laid out one column per beam, for a scan that is a handful of whole-array steps.
+
+    Column ``i`` holds beam ``i``'s slab tests: row 0 the wall it leaves through in x, row 1
+    the wall it meets in y, then its (beam, shelf) pairs, padded with tests that never hit.
+    Each wall is written as a slab test whose other bounds are infinite, so it yields exactly
+    the wall's range: ``(x - ox) * inv_x`` for the x wall, ``wall_y`` for the y wall. The
+    minimum of a set of floats does not depend on the order it is taken in, so a column's
+    minimum is bit for bit the minimum the pair list gives. (Rows, not columns, per test:
+    numpy takes a minimum across rows in a few vector steps, along a short row slowly.)
+    """
+
+    x: np.ndarray  # (2, tests, beams): the x bound entered through, the x bound left through
+    inv_x: np.ndarray  # (beams,)
+    y_in: np.ndarray  # (tests, beams)
+    y_out: np.ndarray
+    ahead: bool  # as ``_Pairs.ahead`` (the walls are always ahead)
+
+
+def _table(pairs: _Pairs, inv_x: np.ndarray, wall_y: np.ndarray) -> _Table:
+    beams = len(inv_x)
+    counts = np.bincount(pairs.beam, minlength=beams)
+    rows = 2 + int(counts.max(initial=0))
+    inf = np.inf
+    forward = np.where(inv_x > 0.0, inf, -inf)  # the x at infinity ahead of each beam
+    # Padding: entering at x = infinity ahead gives t_in = inf, i.e. never the nearest.
+    x = np.empty((2, rows, beams))
+    x[:] = forward
+    y_in = np.zeros((rows, beams))
+    y_out = np.zeros((rows, beams))
+    # Row 0, the x wall: t_in = (x_wall - ox) * inv_x; the other bounds never bind.
+    x[0, 0] = np.where(inv_x > 0.0, WIDTH_M, 0.0)
+    y_in[0], y_out[0] = -inf, inf
+    # Row 1, the y wall: (x at infinity behind - ox) * inv_x = -inf, so t_in = wall_y.
+    x[0, 1] = -forward
+    y_in[1], y_out[1] = wall_y, inf
+    # The pairs, in their order within each beam.
+    order = np.argsort(pairs.beam, kind="stable")
+    beam = pairs.beam[order]
+    starts = np.cumsum(counts) - counts
+    row = 2 + np.arange(len(beam)) - starts[beam]
+    x[0, row, beam] = pairs.x_in[order]
+    x[1, row, beam] = pairs.x_out[order]
+    y_in[row, beam] = pairs.y_in[order]
+    y_out[row, beam] = pairs.y_out[order]
+    return _Table(x=x, inv_x=inv_x, y_in=y_in, y_out=y_out, ahead=pairs.ahead)
+
+
 _Local = tuple[np.ndarray, np.ndarray, list[float], list[float]]
 
 
@@ -111,7 +160,8 @@ class _Rays:
     boxes: tuple[tuple[float, float, float, float], ...]
     cy2: tuple[float, ...]  # squared y-distance to each shelf
     pairs: _Pairs
-    by_near: dict[tuple[bool, ...], _Pairs]  # ``pairs`` restricted to the shelves in range
+    by_near: dict[tuple[bool, ...], _Table]  # ``pairs`` restricted to the shelves in range
+    last: tuple[float, np.ndarray] | None  # the last scan's x and its ranges (a robot stands)
     local: dict[float, _Local]  # see _local_dirs
 
 
@@ -160,6 +210,7 @@ def _rays(heading: float, oy: float, shelves: np.ndarray) -> _Rays:
         cy2=tuple((min(max(oy, b[1]), b[3]) - oy) ** 2 for b in boxes),
         pairs=pairs,
         by_near={},
+        last=None,
         local={},
     )
     if len(_RAYS) < 64:
@@ -168,27 +219,31 @@ def _rays(heading: float, oy: float, shelves: np.ndarray) -> _Rays:
 
 
 def _static_ranges(rays: _Rays, ox: float, oy: float) -> np.ndarray:
-    """Ranges to the map (shelves and outer walls) along each beam: the slab method."""
-    # Walls: where the ray leaves the warehouse rectangle.
-    best: np.ndarray = np.minimum(np.where(rays.pos_x, WIDTH_M - ox, -ox) * rays.inv_x, rays.wall_y)
+    """Ranges to the map (shelves and outer walls) along each beam: the slab method.
+
+    The array returned is shared with the next call from the same ``ox``: do not modify it.
+    """
+    last = rays.last
+    if last is not None and last[0] == ox:
+        return last[1]
     # Only shelves within range can be hit.
     near = tuple(
         (min(max(ox, box[0]), box[2]) - ox) ** 2 + cy2 < LIDAR_RANGE_MAX**2
         for box, cy2 in zip(rays.boxes, rays.cy2, strict=True)
     )
-    pairs = rays.by_near.get(near)
-    if pairs is None:
-        pairs = rays.pairs.subset(np.array(near)[rays.pairs.box])
-        rays.by_near[near] = pairs
-    if not len(pairs.beam):
-        return best
+    table = rays.by_near.get(near)
+    if table is None:
+        table = _table(rays.pairs.subset(np.array(near)[rays.pairs.box]), rays.inv_x, rays.wall_y)
+        rays.by_near[near] = table
     # Entering the x-slab through x_in is min(x0, x1) of the textbook slab test, exactly.
-    t_in = np.maximum((pairs.x_in - ox) * pairs.inv_x, pairs.y_in)
-    t_out = np.minimum((pairs.x_out - ox) * pairs.inv_x, pairs.y_out)
-    hit = t_out >= t_in
-    if not pairs.ahead:
+    t = table.x - ox
+    t *= table.inv_x
+    t_in = np.maximum(t[0], table.y_in)
+    hit = np.minimum(t[1], table.y_out) >= t_in
+    if not table.ahead:
         hit &= t_in > 0.0
-    np.minimum.at(best, pairs.beam[hit], t_in[hit])
+    best: np.ndarray = np.where(hit, t_in, np.inf).min(axis=0)
+    rays.last = (ox, best)
     return best
 
 
