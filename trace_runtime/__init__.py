@@ -1,54 +1,67 @@
-"""trace_runtime: the embeddable TRACE audit logger and the one reader of its format."""
+"""trace_runtime: the embeddable TRACE audit logger and the one reader of its format.
 
-from trace_runtime.cycles import Cycle, RawMessage
-from trace_runtime.errors import (
-    LogLimitError,
-    LogLockedError,
-    LogReadError,
-    NotTraceLogError,
-    RecordError,
-    TimeOutOfRangeError,
-    TraceError,
-    UsageError,
-)
-from trace_runtime.integrity import (
-    Ed25519Signer,
-    PublicKey,
-    SealStatus,
-    Signer,
-    generate_keypair,
-    load_public_key,
-    load_signer,
-    verify_cycle,
-)
-from trace_runtime.logger import AuditLogger, CycleBuilder, LoggerConfig, LoggerStats
-from trace_runtime.logset import Log, open_log
-from trace_runtime.reader import Segment, SegmentInfo, open_segment
-from trace_runtime.records import (
-    Action,
-    Alternative,
-    Belief,
-    BeliefEdge,
-    BeliefNode,
-    Checkpoint,
-    ComplianceCheck,
-    Counterfactual,
-    DecisionTree,
-    Entity,
-    Evidence,
-    EvidenceRef,
-    Execution,
-    Factor,
-    Motion,
-    Perception,
-    Pose,
-    Rationale,
-    Region,
-    Seal,
-    TreeEdge,
-    TreeNode,
-)
-from trace_runtime.session import SessionInfo
+Names are imported on first use (PEP 562), so ``import trace_runtime.errors`` (what the
+investigator's CLI needs to start) does not build the pydantic record models, and a robot
+pays only for what it touches.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+_EXPORTS = {
+    "Cycle": "trace_runtime.cycles",
+    "RawMessage": "trace_runtime.cycles",
+    "LogLimitError": "trace_runtime.errors",
+    "LogLockedError": "trace_runtime.errors",
+    "LogReadError": "trace_runtime.errors",
+    "NotTraceLogError": "trace_runtime.errors",
+    "RecordError": "trace_runtime.errors",
+    "TimeOutOfRangeError": "trace_runtime.errors",
+    "TraceError": "trace_runtime.errors",
+    "UsageError": "trace_runtime.errors",
+    "Ed25519Signer": "trace_runtime.integrity",
+    "PublicKey": "trace_runtime.integrity",
+    "SealStatus": "trace_runtime.integrity",
+    "Signer": "trace_runtime.integrity",
+    "generate_keypair": "trace_runtime.integrity",
+    "load_public_key": "trace_runtime.integrity",
+    "load_signer": "trace_runtime.integrity",
+    "verify_cycle": "trace_runtime.integrity",
+    "AuditLogger": "trace_runtime.logger",
+    "CycleBuilder": "trace_runtime.logger",
+    "LoggerConfig": "trace_runtime.logger",
+    "LoggerStats": "trace_runtime.logger",
+    "Log": "trace_runtime.logset",
+    "open_log": "trace_runtime.logset",
+    "Segment": "trace_runtime.reader",
+    "SegmentInfo": "trace_runtime.reader",
+    "open_segment": "trace_runtime.reader",
+    "Action": "trace_runtime.records",
+    "Alternative": "trace_runtime.records",
+    "Belief": "trace_runtime.records",
+    "BeliefEdge": "trace_runtime.records",
+    "BeliefNode": "trace_runtime.records",
+    "Checkpoint": "trace_runtime.records",
+    "ComplianceCheck": "trace_runtime.records",
+    "Counterfactual": "trace_runtime.records",
+    "DecisionTree": "trace_runtime.records",
+    "Entity": "trace_runtime.records",
+    "Evidence": "trace_runtime.records",
+    "EvidenceRef": "trace_runtime.records",
+    "Execution": "trace_runtime.records",
+    "Factor": "trace_runtime.records",
+    "Motion": "trace_runtime.records",
+    "Perception": "trace_runtime.records",
+    "Pose": "trace_runtime.records",
+    "Rationale": "trace_runtime.records",
+    "Region": "trace_runtime.records",
+    "Seal": "trace_runtime.records",
+    "TreeEdge": "trace_runtime.records",
+    "TreeNode": "trace_runtime.records",
+    "SessionInfo": "trace_runtime.session",
+}
 
 __all__ = [
     "Action",
@@ -102,3 +115,67 @@ __all__ = [
     "open_segment",
     "verify_cycle",
 ]
+
+if TYPE_CHECKING:
+    from trace_runtime.cycles import Cycle, RawMessage
+    from trace_runtime.errors import (
+        LogLimitError,
+        LogLockedError,
+        LogReadError,
+        NotTraceLogError,
+        RecordError,
+        TimeOutOfRangeError,
+        TraceError,
+        UsageError,
+    )
+    from trace_runtime.integrity import (
+        Ed25519Signer,
+        PublicKey,
+        SealStatus,
+        Signer,
+        generate_keypair,
+        load_public_key,
+        load_signer,
+        verify_cycle,
+    )
+    from trace_runtime.logger import AuditLogger, CycleBuilder, LoggerConfig, LoggerStats
+    from trace_runtime.logset import Log, open_log
+    from trace_runtime.reader import Segment, SegmentInfo, open_segment
+    from trace_runtime.records import (
+        Action,
+        Alternative,
+        Belief,
+        BeliefEdge,
+        BeliefNode,
+        Checkpoint,
+        ComplianceCheck,
+        Counterfactual,
+        DecisionTree,
+        Entity,
+        Evidence,
+        EvidenceRef,
+        Execution,
+        Factor,
+        Motion,
+        Perception,
+        Pose,
+        Rationale,
+        Region,
+        Seal,
+        TreeEdge,
+        TreeNode,
+    )
+    from trace_runtime.session import SessionInfo
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'trace_runtime' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return __all__

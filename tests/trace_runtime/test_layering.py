@@ -63,6 +63,28 @@ def test_the_investigator_package_exports_import_lazily_and_resolve() -> None:
     subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
 
 
+def test_the_runtime_package_exports_import_lazily_and_resolve() -> None:
+    """``import trace_runtime.errors`` (all the CLI needs to start) builds no pydantic
+    models; every name in ``__all__`` still resolves on first use."""
+    code = (
+        "import sys, trace_runtime.errors\n"
+        "assert 'pydantic' not in sys.modules, 'import trace_runtime.errors must stay light'\n"
+        "assert 'trace_runtime.records' not in sys.modules\n"
+        "import trace_runtime\n"
+        "assert sorted(trace_runtime.__all__) == sorted(trace_runtime._EXPORTS)\n"
+        "assert sorted(dir(trace_runtime)) == sorted(trace_runtime.__all__)\n"
+        "for name in trace_runtime.__all__:\n"
+        "    getattr(trace_runtime, name)\n"
+        "try:\n"
+        "    trace_runtime.nope\n"
+        "except AttributeError:\n"
+        "    pass\n"
+        "else:\n"
+        "    raise AssertionError('unknown names must raise AttributeError')\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
+
+
 def _module_imports(package: str) -> dict[str, set[str]]:
     """Imports between modules of ``package``, deferred ones (inside functions, or by
     ``importlib.import_module("...")``) included: a cycle through a deferred import is still

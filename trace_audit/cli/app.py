@@ -14,6 +14,7 @@ from collections.abc import Callable
 from typing import Annotated, Any, NoReturn, TypeVar
 
 import typer
+from typer.core import TyperGroup
 
 from trace_runtime.errors import TimeOutOfRangeError, TraceError, UsageError
 
@@ -24,8 +25,24 @@ EXIT_FINDINGS = 1
 EXIT_USAGE = 2
 EXIT_UNREADABLE = 3
 
+
+class _Group(TyperGroup):
+    """typer's group, with a ``--help`` flag that starts as ``False`` rather than unset.
+
+    typer (0.29) builds a pydantic ``TypeAdapter`` to coerce every parameter that has no
+    value yet, the group's own ``--help`` among them, so ``trace-audit COMMAND --help``
+    imported pydantic (~60 ms) before it printed a word; a ``bool`` is left alone."""
+
+    def get_help_option(self, ctx: Any) -> Any:
+        option = super().get_help_option(ctx)
+        if option is not None and option.default is None:
+            option.default = False
+        return option
+
+
 app = typer.Typer(
     name="trace-audit",
+    cls=_Group,
     help=(
         "Investigate TRACE robot decision logs: explain a decision, find why the robot "
         "stopped, measure auditability, verify integrity, compact storage tiers.\n\n"

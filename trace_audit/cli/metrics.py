@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -18,16 +18,10 @@ from trace_audit.cli.app import (
     print_json,
 )
 from trace_audit.cli.render import progress_bar
-from trace_audit.metrics import (
-    GROUP_BYS,
-    MetricsConfig,
-    MetricsReport,
-    Stat,
-    TCSWeights,
-    compute_metrics,
-    parse_thresholds,
-)
 from trace_runtime.errors import UsageError
+
+if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
+    from trace_audit.metrics import MetricsConfig, MetricsReport, Stat
 
 _PROGRESS_MIN_CYCLES = 20_000
 
@@ -81,6 +75,8 @@ _HELP = "\n\n".join(
 
 
 def _parse_by(value: str | None) -> Any:
+    from trace_audit.metrics import GROUP_BYS
+
     if value is not None and value not in GROUP_BYS:
         raise UsageError(f"--by must be one of {', '.join(GROUP_BYS)}, got {value!r}")
     return value
@@ -150,6 +146,8 @@ def metrics_command(
     plain: PlainOption = False,
 ) -> None:
     def run() -> MetricsReport:
+        from trace_audit.metrics import MetricsConfig, TCSWeights, parse_thresholds
+
         config = MetricsConfig(
             by=_parse_by(by),
             gap_tolerance=gap_tolerance,
@@ -179,6 +177,8 @@ def metrics_command(
 
 
 def _with_progress(logs: list[Path], config: MetricsConfig, *, quiet: bool) -> MetricsReport:
+    from trace_audit.metrics import compute_metrics
+
     if quiet or not sys.stderr.isatty():
         return compute_metrics(logs, config)
     with progress_bar("scoring cycles", visible=False) as bar:

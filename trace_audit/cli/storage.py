@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -20,18 +20,15 @@ from trace_audit.cli.app import (
 )
 from trace_audit.cli.render import progress_bar
 from trace_runtime.errors import UsageError
-from trace_runtime.tiers import (
-    DEFAULT_RETENTION_NS,
-    Catalog,
-    ColdOptions,
-    CompactionReport,
-    Progress,
-    WarmPolicy,
-    compact,
-    parse_duration,
-    refresh_catalog,
-)
-from trace_runtime.tiers.warm import INFORMATIONAL_PREFIXES
+
+if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
+    from trace_runtime.tiers import Catalog, CompactionReport, Progress
+
+# The defaults shown in ``--help``, written out so that showing it does not import the
+# compaction machinery (the reader, pydantic models, codecs). A test pins them to
+# trace_runtime.tiers' DEFAULT_RETENTION_NS and ColdOptions().block_cycles.
+_DEFAULT_RETENTION = "183d"
+_DEFAULT_BLOCK_CYCLES = 512
 
 _COMPACT_HELP = "\n\n".join(
     [
@@ -84,6 +81,8 @@ def _duration(text: str | None, name: str) -> int | None:
         if name != "--retention":
             raise UsageError(f"{name} needs a duration, e.g. 24h")
         return None
+    from trace_runtime.tiers import parse_duration
+
     return parse_duration(text)
 
 
@@ -121,7 +120,7 @@ def compact_command(
         typer.Option(
             "--retention", help="Delete verified cold segments older than this (or 'off')."
         ),
-    ] = f"{DEFAULT_RETENTION_NS // 86_400_000_000_000}d",
+    ] = _DEFAULT_RETENTION,
     context: Annotated[
         str,
         typer.Option("--context", help="Warm: time kept in full around each flagged cycle."),
@@ -144,7 +143,7 @@ def compact_command(
     block_cycles: Annotated[
         int,
         typer.Option("--block-cycles", min=1, help="Cold: cycles per block (a seek decodes one)."),
-    ] = ColdOptions().block_cycles,
+    ] = _DEFAULT_BLOCK_CYCLES,
     jobs: Annotated[
         int,
         typer.Option("--jobs", "-j", min=1, help="Cold: processes encoding blocks in parallel."),
@@ -170,6 +169,8 @@ def compact_command(
 ) -> None:
     def run() -> CompactionReport:
         from trace_runtime.integrity import load_public_key
+        from trace_runtime.tiers import ColdOptions, WarmPolicy, compact, parse_duration
+        from trace_runtime.tiers.warm import INFORMATIONAL_PREFIXES
 
         public = load_public_key(key) if key is not None else None
         context_ns = parse_duration(context)
@@ -343,6 +344,8 @@ def catalog_command(
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
+    from trace_runtime.tiers import refresh_catalog
+
     catalog = guarded(lambda: refresh_catalog(root, write=refresh))
     if json_out:
         print_json({"root": str(root), "segments": catalog.entries, "problems": catalog.problems})

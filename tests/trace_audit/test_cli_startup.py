@@ -1,0 +1,68 @@
+"""The CLI starts light: what ``trace-audit`` imports before a command needs the library.
+
+Start-up time is a budget (DESIGN.md: ``--help`` within 4x a bare ``python -c pass``;
+bench/bench_cli.py measures it). Timing is not asserted here, on a shared machine it would
+flake; what these tests pin is the cause of a slow start: a heavy module imported by a
+process that does not use it.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from trace_audit.cli import app
+
+ALL_COMMANDS = tuple(c.name or "" for c in app.registered_commands)
+
+# The library behind the commands: pydantic record models, the MCAP reader, graphs, arrays.
+HEAVY = ("pydantic", "networkx", "numpy", "mcap", "trace_runtime.records", "trace_audit.metrics")
+
+
+def _loaded_after(code: str) -> set[str]:
+    script = f"import sys\n{code}\nprint(' '.join(sorted(sys.modules)))\n"
+    out = subprocess.run(
+        [sys.executable, "-c", script], check=True, capture_output=True, text=True, timeout=60
+    )
+    return set(out.stdout.split())
+
+
+def test_importing_the_cli_imports_no_library_and_no_rich() -> None:
+    loaded = _loaded_after("import trace_audit.cli")
+    assert not loaded & {*HEAVY, "rich"}
+
+
+@pytest.mark.parametrize("command", ["", *ALL_COMMANDS])
+def test_help_imports_no_library(command: str) -> None:
+    """Every command's ``--help`` too, not only the top-level one (typer coerces the
+    group's unset ``--help`` flag with pydantic unless it starts as ``False``)."""
+    argv = [c for c in ("trace-audit", command, "--help") if c]
+    code = (
+        "from trace_audit.cli import main\n"
+        f"sys.argv = {argv!r}\n"
+        "try:\n"
+        "    main()\n"
+        "except SystemExit as exit:\n"
+        "    assert exit.code == 0, exit.code\n"
+        "sys.stdout.flush()\n"
+        "sys.stdout = sys.__stderr__\n"
+    )
+    script = f"import sys\n{code}\nprint(' '.join(sorted(sys.modules)))\n"
+    out = subprocess.run(
+        [sys.executable, "-c", script], check=True, capture_output=True, text=True, timeout=60
+    )
+    loaded = set(out.stderr.split())
+    assert "Usage" in out.stdout
+    assert not loaded & set(HEAVY)
+
+
+def test_compact_help_defaults_are_the_librarys() -> None:
+    """``compact --help`` shows its defaults without importing the compaction machinery;
+    they must stay the library's."""
+    from trace_audit.cli import storage
+    from trace_runtime.tiers import DEFAULT_RETENTION_NS, ColdOptions
+
+    shown = (storage._DEFAULT_RETENTION, storage._DEFAULT_BLOCK_CYCLES)
+    assert shown == (f"{DEFAULT_RETENTION_NS // 86_400_000_000_000}d", ColdOptions().block_cycles)
