@@ -488,11 +488,12 @@ class McapFile:
         chosen = [offsets[i] for i in range(lo, hi) if start_ns is None or ends[i] >= start_ns]
         return chosen if self._starts_in_file_order else sorted(chosen)
 
-    def offsets_starting_by(self, t_ns: int) -> list[int]:
-        """File offsets of the chunks that start at or before ``t_ns``, in file order."""
+    def offsets_back_from(self, t_ns: int) -> Iterator[int]:
+        """File offsets of the chunks that start at or before ``t_ns``, the latest start
+        first: a seek looks at one or two of them, so they are produced one at a time."""
         starts, _ends, offsets = self.chunk_table()
-        chosen = list(offsets[: bisect.bisect_right(starts, t_ns)])
-        return chosen if self._starts_in_file_order else sorted(chosen)
+        for i in range(bisect.bisect_right(starts, t_ns) - 1, -1, -1):
+            yield offsets[i]
 
     def previous_offset(self, offset: int) -> int | None:
         """The chunk just before the one at ``offset`` in the file (None for the first)."""

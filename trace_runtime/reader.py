@@ -221,7 +221,7 @@ class Segment(McapFile):
         # its first cycle: a chunk starts at its earliest sensor reading, which may precede
         # its cycle by several periods, and a closing checkpoint chunk holds no cycle. Step
         # back until a chunk has a cycle at or before t (a few chunks at most in practice).
-        for offset in reversed(self.offsets_starting_by(t_ns)):
+        for offset in self.offsets_back_from(t_ns):
             cycles = [c for c in self._chunk_cycles(offset)[0] if c.t_ns <= t_ns]
             if cycles:
                 return cycles[-1]
