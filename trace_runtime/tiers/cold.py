@@ -59,8 +59,8 @@ INDEX_SCHEMA = (
 PLAIN_TOPICS = frozenset({TOPIC_CHECKPOINT})
 """Topics kept out of blocks, as ordinary MCAP messages in the block's chunk: signed chain
 heads stay readable by any MCAP tool without decoding. The block records where they were."""
-DEFAULT_BLOCK_CYCLES = 512
-DEFAULT_LEVEL = 9
+DEFAULT_BLOCK_CYCLES = 256
+DEFAULT_LEVEL = 11
 _MAGIC = b"TCB\x01"
 _MAX_BLOCK_BYTES = 1 << 31
 _MAX_NEW_SHAPES_PER_TOPIC = 64
@@ -83,7 +83,7 @@ class ColdFormatError(TraceError, ValueError):
 
 
 @contextlib.contextmanager
-def _gc_paused() -> Iterator[None]:
+def gc_paused() -> Iterator[None]:
     """Pause the cyclic GC while a block is taken apart or put together.
 
     A block makes and keeps hundreds of thousands of small acyclic objects (parsed messages,
@@ -286,7 +286,7 @@ class BlockEncoder:
         with every message verbatim.
         """
         expected = list(messages)
-        with _gc_paused():
+        with gc_paused():
             for strict, verbatim in ((False, False), (True, False), (True, True)):
                 self._strict = strict
                 data = self._encode(expected, tier, plain, verbatim=verbatim)
@@ -568,7 +568,7 @@ def decode_block(block: bytes) -> DecodedBlock:
         raise ColdFormatError("not a trace-cold-v1 block (bad magic)")
     try:
         body = _DECOMPRESSOR.decompress(block[4:], max_output_size=_MAX_BLOCK_BYTES)
-        with _gc_paused():
+        with gc_paused():
             return _decode_body(body)
     except ColdFormatError:
         raise

@@ -79,6 +79,7 @@ from trace_runtime.tiers.cold import (
     INDEX_TOPIC,
     BlockEncoder,
     ColdFormatError,
+    gc_paused,
     index_entry,
     iter_blocks,
     iter_decoded,
@@ -823,10 +824,41 @@ def _write_cold(
 ) -> _Written:
     # Blocks are zstd-compressed already; a second compression of the chunk would only cost time.
     out = _open_writer(segment, stream, "cold", compression="")
+    counts = {"blocks": 0, "cycles": 0, "messages": 0, "verbatim": 0}
+    # Nothing a compaction makes is cyclic: the cyclic GC would only walk the blocks in
+    # flight again and again (reference counting still frees everything).
+    with gc_paused():
+        _encode_blocks(segment, out, options, counts, advance)
+    blocks, cycles = counts["blocks"], counts["cycles"]
+    out.writer.add_metadata(
+        TIER_METADATA,
+        _tier_metadata(
+            segment,
+            "cold",
+            source_sha,
+            codec=CODEC,
+            block_cycles=str(options.block_cycles),
+            blocks=str(blocks),
+            cycles=str(cycles),
+            messages=str(counts["messages"]),
+            verbatim_messages=str(counts["verbatim"]),
+        ),
+    )
+    out.writer.finish()
+    return _Written(out.batches, _Tally())
+
+
+def _encode_blocks(
+    segment: Segment,
+    out: _TallyWriter,
+    options: ColdOptions,
+    counts: dict[str, int],
+    advance: Callable[[int], None],
+) -> None:
+    """Encode the segment's blocks, check each against the source, write each as a chunk."""
     block_channel = out.channel(BLOCK_TOPIC, encoding=CODEC, schema=BLOCK_SCHEMA)
     index_channel = out.channel(INDEX_TOPIC, encoding="json", schema=INDEX_SCHEMA)
     source_tier = segment.session.tier
-    counts = {"blocks": 0, "cycles": 0, "messages": 0, "verbatim": 0}
     encoder = BlockEncoder(options.level)
     source = iter_blocks(segment.iter_messages(), options.block_cycles)
     for number, block in enumerate(source):
@@ -856,23 +888,6 @@ def _write_cold(
         counts["messages"] += len(block) - len(plain)
         counts["verbatim"] += encoder.raw_messages - raw_before
         advance(entry["cycles"])
-    blocks, cycles = counts["blocks"], counts["cycles"]
-    out.writer.add_metadata(
-        TIER_METADATA,
-        _tier_metadata(
-            segment,
-            "cold",
-            source_sha,
-            codec=CODEC,
-            block_cycles=str(options.block_cycles),
-            blocks=str(blocks),
-            cycles=str(cycles),
-            messages=str(counts["messages"]),
-            verbatim_messages=str(counts["verbatim"]),
-        ),
-    )
-    out.writer.finish()
-    return _Written(out.batches, _Tally())
 
 
 def _write_warm(
