@@ -789,12 +789,15 @@ def _as_tuples(messages: list[RawMessage]) -> list[tuple[str, int, int, bytes]]:
 
 def _exit_with_parent(parent: int) -> None:
     """In a worker: exit when the compacting process is gone (killed with -9, it cannot
-    shut its pool down, and an idle worker would wait for work forever)."""
+    shut its pool down, and an idle worker would wait for work forever). A worker writes a
+    partial file, so it stops soon: the next run may start (the lock died with the parent),
+    and a worker still busy then could at worst remove the partial of the same name and make
+    that run fail the segment (a worker never renames a file and never touches a source)."""
     import threading
 
     def watch() -> None:
         while os.getppid() == parent:
-            time.sleep(0.5)
+            time.sleep(0.1)
         os._exit(1)
 
     threading.Thread(target=watch, name="trace-compact-parent-watch", daemon=True).start()
