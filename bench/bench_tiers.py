@@ -4,7 +4,9 @@
                                           [--json results.json]
 
 Budgets (DESIGN.md): cold <= 0.5x MCAP default zstd chunks and <= 0.8x whole-stream
-zstd -19, lossless; compaction >= 10,000 cycles/s.
+zstd -19, lossless. Compaction speed against its budget (>= 0.5x a bare read + parse + dump
++ zstd-3 rewrite, 2 workers >= 1.7x one) and the cold first seek are measured, as whole
+processes on a multi-segment root, by ``bench/bench_compaction.py``.
 
 Three logs, built once and kept under ``--log``: (a) a long routine-operation sim run
 (``trace-sim run --duration``, faults at the paper's rates, ~8 KB of JSON per cycle), (b) the
@@ -222,7 +224,7 @@ def bench_log(name: str, root: Path, work: Path, repeats: int, jobs: int) -> dic
     speed["compact cold, 1 process"] = timed(repeats, compaction("cold"))
     cold_root = work / f"{name}-cold"
     sizes["cold (lossless)"] = files_bytes(cold_root, "cold")
-    if jobs > 1:
+    if jobs > 1 and len(log.segments) > 1:  # workers take whole segments
         speed[f"compact cold, {jobs} workers"] = timed(
             repeats, compaction("cold", cold=ColdOptions(jobs=jobs))
         )
@@ -330,11 +332,7 @@ def main() -> int:
     )
     for form, pb in projection.items():
         print(f"  {form:<24}{pb:>9.2f} PB")
-    cold_rate = routine["speed"]["compact cold, 1 process"]["cpu"]
-    print(
-        f"\ncompaction budget >= 10,000 cycles/s: cold, 1 process {cold_rate:,.0f}/s (cpu)"
-        f" -> {'meets' if cold_rate >= 10_000 else 'MISSES'}"
-    )
+    print("\ncompaction speed against its budget: bench/bench_compaction.py")
     if args.json:
         args.json.write_text(
             orjson.dumps(

@@ -82,6 +82,38 @@ def test_parallel_workers_give_a_segment_with_the_same_cycles(tmp_path: Path) ->
     assert list(open_log(root).iter_cycles()) == hot
 
 
+def test_workers_compact_segments_into_the_same_files_as_one_process(tmp_path: Path) -> None:
+    """Segments spread over worker processes (each reading its own file) come out byte for
+    byte as one process writes them, swapped in in order, with the catalog and progress."""
+    template = make_root(tmp_path / "template", cycles=90, segments=3)
+    serial, parallel = tmp_path / "serial", tmp_path / "parallel"
+    shutil.copytree(template, serial)
+    shutil.copytree(template, parallel)
+    one = compact(serial, "cold", older_than_ns=0, cold=SMALL_BLOCKS)
+    seen: list[int] = []
+    two = compact(
+        parallel,
+        "cold",
+        older_than_ns=0,
+        cold=ColdOptions(block_cycles=16, jobs=2),
+        progress=lambda event: seen.append(event.cycles_done),
+    )
+    assert [s.status for s in two.segments] == ["compacted"] * 3
+    assert [(s.source, s.target, s.cycles) for s in two.segments] == [
+        (s.source, s.target, s.cycles) for s in one.segments
+    ]
+    assert seen == sorted(seen) and seen[-1] == two.cycles
+    names = sorted(p.name for p in (serial / "cold").glob("*.mcap"))
+    assert names == sorted(p.name for p in (parallel / "cold").glob("*.mcap"))
+    for name in names:
+        assert (serial / "cold" / name).read_bytes() == (parallel / "cold" / name).read_bytes()
+    assert not list((parallel / "hot").glob("*.mcap"))
+    assert not list(parallel.rglob("*.partial"))
+    catalog = load_catalog(parallel)
+    assert catalog is not None
+    assert sorted(e.path for e in catalog.entries) == [f"cold/{n}" for n in names]
+
+
 def test_dry_run_changes_nothing(tmp_path: Path) -> None:
     root = make_root(tmp_path / "log", cycles=40, segments=2)
     (root / "cold").mkdir()

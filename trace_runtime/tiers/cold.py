@@ -59,8 +59,8 @@ INDEX_SCHEMA = (
 PLAIN_TOPICS = frozenset({TOPIC_CHECKPOINT})
 """Topics kept out of blocks, as ordinary MCAP messages in the block's chunk: signed chain
 heads stay readable by any MCAP tool without decoding. The block records where they were."""
-DEFAULT_BLOCK_CYCLES = 512
-DEFAULT_LEVEL = 9
+DEFAULT_BLOCK_CYCLES = 256
+DEFAULT_LEVEL = 11
 _MAGIC = b"TCB\x01"
 _MAX_BLOCK_BYTES = 1 << 31
 _MAX_NEW_SHAPES_PER_TOPIC = 64
@@ -83,7 +83,7 @@ class ColdFormatError(TraceError, ValueError):
 
 
 @contextlib.contextmanager
-def _gc_paused() -> Iterator[None]:
+def gc_paused() -> Iterator[None]:
     """Pause the cyclic GC while a block is taken apart or put together.
 
     A block makes and keeps hundreds of thousands of small acyclic objects (parsed messages,
@@ -286,7 +286,7 @@ class BlockEncoder:
         with every message verbatim.
         """
         expected = list(messages)
-        with _gc_paused():
+        with gc_paused():
             for strict, verbatim in ((False, False), (True, False), (True, True)):
                 self._strict = strict
                 data = self._encode(expected, tier, plain, verbatim=verbatim)
@@ -568,7 +568,7 @@ def decode_block(block: bytes) -> DecodedBlock:
         raise ColdFormatError("not a trace-cold-v1 block (bad magic)")
     try:
         body = _DECOMPRESSOR.decompress(block[4:], max_output_size=_MAX_BLOCK_BYTES)
-        with _gc_paused():
+        with gc_paused():
             return _decode_body(body)
     except ColdFormatError:
         raise
@@ -642,10 +642,7 @@ def _decode_body(body: bytes) -> DecodedBlock:
     for group, (topic_id, shape) in enumerate(shapes, start=1):
         count = len(positions[group])
         keys, vectors = _plan(shape, topic_id)
-        slices = [
-            reader.take_vectors(key, count) if vector else reader.take(key, count)
-            for key, vector in zip(keys, vectors, strict=True)
-        ]
+        slices = reader.take_all(keys, vectors, count)
         rows: Iterable[Sequence[Any]] = zip(*slices, strict=True) if slices else repeat((), count)
         slots = [i for i, key in enumerate(keys) if key in reader.digests] if reader.digests else []
         if slots:
@@ -706,6 +703,28 @@ class _ColumnReader:
             raise ColdFormatError("a column is shorter than its shapes need")
         self._taken[key] = start + count
         return values[start : start + count]
+
+    def take_all(
+        self, keys: list[tuple[int, tuple[Any, ...]]], vectors: list[bool], count: int
+    ) -> list[list[Any]]:
+        """``take`` (or ``take_vectors``) of every key of a shape group, in one call: a
+        block has hundreds of groups times dozens of keys, and this is the decoder's loop."""
+        columns, constants, taken = self.columns, self.constants, self._taken
+        out: list[list[Any]] = []
+        for key, vector in zip(keys, vectors, strict=True):
+            if vector:
+                out.append(self.take_vectors(key, count))
+            elif key in constants:
+                out.append([constants[key]] * count)
+            else:
+                values = columns[key]
+                start = taken.get(key, 0)
+                end = start + count
+                if end > len(values):
+                    raise ColdFormatError("a column is shorter than its shapes need")
+                taken[key] = end
+                out.append(values[start:end])
+        return out
 
     def take_vectors(self, key: tuple[int, tuple[Any, ...]], count: int) -> list[Any]:
         topic_id, path = key

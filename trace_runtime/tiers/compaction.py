@@ -28,11 +28,12 @@ Segment files are found and opened through ``trace_runtime.logset``, like every 
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import os
+import pickle
 import re
 import time
-from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from itertools import islice, zip_longest
@@ -75,9 +76,9 @@ from trace_runtime.tiers.cold import (
     DEFAULT_LEVEL,
     INDEX_SCHEMA,
     INDEX_TOPIC,
-    PLAIN_TOPICS,
     BlockEncoder,
     ColdFormatError,
+    gc_paused,
     index_entry,
     iter_blocks,
     iter_decoded,
@@ -136,7 +137,8 @@ class ColdOptions:
     level: int = DEFAULT_LEVEL
     """zstd level of each block."""
     jobs: int = 1
-    """Processes encoding blocks in parallel; 1 encodes in the calling process."""
+    """Worker processes, each compacting whole segments (read from disk by the worker);
+    1, or a root with one segment to move, compacts in the calling process."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -383,37 +385,47 @@ def _run(root: Path, settings: _Settings, progress: ProgressCallback | None) -> 
 
     total = sum(_cycle_estimate(s) for _, s in plan)
     done = 0
-    for path, segment in plan:
-        target = root / tier / path.name
-        if dry_run:
+
+    def advance(cycles: int, name: str) -> None:
+        nonlocal done
+        done += cycles
+        if progress is not None:
+            progress(Progress(name, min(done, total), total))
+
+    if dry_run:
+        for path, segment in plan:
+            target = root / tier / path.name
             report.segments.append(
                 _result(root, path, segment, target, status="planned", detail="")
             )
-            continue
-
-        def advance(cycles: int, name: str = path.name) -> None:
-            nonlocal done
-            done += cycles
-            if progress is not None:
-                progress(Progress(name, min(done, total), total))
-
-        result = compact_segment(
-            root,
-            path,
-            segment,
-            tier,
-            warm_policy=settings.warm,
-            cold_options=settings.cold,
-            advance=advance,
-            opener=settings.opener,
-        )
-        report.segments.append(result)
-        del segments[path]
+    elif settings.cold.jobs > 1 and len(plan) > 1 and _picklable(settings.opener):
+        # Segments in parallel: each worker reads, encodes and checks a whole segment.
+        for path, result in _compact_in_workers(root, plan, settings, advance):
+            report.segments.append(result)
+            del segments[path]
+    else:
+        for path, segment in plan:
+            result = compact_segment(
+                root,
+                path,
+                segment,
+                tier,
+                warm_policy=settings.warm,
+                cold_options=settings.cold,
+                advance=functools.partial(_named, advance, path.name),
+                opener=settings.opener,
+            )
+            report.segments.append(result)
+            del segments[path]
     if retention_ns is not None and reference is not None:
         report.retention = _retention(root, reference - retention_ns, robot, dry_run, settings.key)
     if not dry_run:
         _refresh(root)
     return report
+
+
+def _named(advance: Callable[[int, str], None], name: str, cycles: int) -> None:
+    advance(cycles, name)
 
 
 def _refresh(root: Path) -> str:
@@ -500,25 +512,53 @@ def compact_segment(
 ) -> SegmentResult:
     """Write, verify and swap in the ``tier`` copy of one segment; remove the source last."""
     started = time.perf_counter()
+    result = _result(root, path, segment, root / tier / path.name, status="compacted", detail="")
+    written = _write_replacement(
+        root,
+        path,
+        segment,
+        tier,
+        warm_policy=warm_policy,
+        cold_options=cold_options,
+        advance=advance,
+        opener=opener,
+    )
+    if isinstance(written, str):
+        return _failed(result, written, started)
+    return _swap_in(root, path, tier, result, full_cycles=written.full_cycles, started=started)
+
+
+def _failed(result: SegmentResult, detail: str, started: float) -> SegmentResult:
+    result.status, result.detail = "failed", detail
+    result.seconds = time.perf_counter() - started
+    return result
+
+
+def _write_replacement(
+    root: Path,
+    path: Path,
+    segment: Segment,
+    tier: str,
+    *,
+    warm_policy: WarmPolicy,
+    cold_options: ColdOptions,
+    advance: Callable[[int], None],
+    opener: PartialOpener,
+) -> _Written | str:
+    """Write the ``tier`` copy of a segment aside as its partial file, fsync it and check that
+    it holds exactly what was written; the failure detail (a str) if not, the partial gone."""
     target_dir = root / tier
     target_dir.mkdir(parents=True, exist_ok=True)
     target = target_dir / path.name
     partial = partial_path(target)
-    result = _result(root, path, segment, target, status="compacted", detail="")
-
-    def failed(detail: str) -> SegmentResult:
-        result.status, result.detail = "failed", detail
-        result.seconds = time.perf_counter() - started
-        return result
-
     if target.exists():
-        return failed(f"{_rel(root, target)} exists already and is not this segment's copy")
+        return f"{_rel(root, target)} exists already and is not this segment's copy"
     try:
         file = opener(partial)
     except FileExistsError:
-        return failed(f"a file not made by compaction is in the way: {_rel(root, partial)}")
+        return f"a file not made by compaction is in the way: {_rel(root, partial)}"
     except OSError as err:
-        return failed(f"cannot create {_rel(root, partial)}: {err}")
+        return f"cannot create {_rel(root, partial)}: {err}"
     # From here on the partial is the file this run created: ours to remove on failure.
     try:
         source_sha = file_digest(path)
@@ -528,19 +568,125 @@ def compact_segment(
             else:
                 written = _write_warm(segment, stream, source_sha, warm_policy, advance)
         _check_written(segment, partial, written)
-        os.replace(partial, target)
     except (VerificationError, LogReadError, ColdFormatError, SegmentWriteError, OSError) as err:
         with contextlib.suppress(OSError):
             partial.unlink()
-        return failed(str(err))
+        return str(err)
+    return written
+
+
+def _swap_in(
+    root: Path,
+    path: Path,
+    tier: str,
+    result: SegmentResult,
+    *,
+    full_cycles: int | None,
+    started: float,
+) -> SegmentResult:
+    """Rename a verified partial into place, update the catalog, and only then remove the
+    source (each step fsynced)."""
+    target_dir = root / tier
+    target = target_dir / path.name
+    partial = partial_path(target)
+    try:
+        os.replace(partial, target)
+    except OSError as err:
+        with contextlib.suppress(OSError):
+            partial.unlink()
+        return _failed(result, str(err), started)
     fsync_dir(target_dir)
     result.detail = _refresh(root)
     path.unlink()
     fsync_dir(path.parent)
     result.bytes_after = target.stat().st_size
-    result.full_cycles = written.full_cycles
+    result.full_cycles = full_cycles
     result.seconds = time.perf_counter() - started
     return result
+
+
+def _write_in_worker(
+    root: Path, path: Path, tier: str, settings: tuple[WarmPolicy, ColdOptions, PartialOpener]
+) -> int | str | None:
+    """In a worker process: ``_write_replacement`` of one segment, which the worker opens and
+    reads from disk itself (nothing but paths and options crosses the process boundary).
+    Returns the warm tier's full cycle count (None for cold), or the failure detail (str)."""
+    warm_policy, cold_options, opener = settings
+    try:
+        segment = Segment(path)
+    except LogReadError as err:
+        return str(err)
+    written = _write_replacement(
+        root,
+        path,
+        segment,
+        tier,
+        warm_policy=warm_policy,
+        cold_options=cold_options,
+        advance=lambda _n: None,
+        opener=opener,
+    )
+    return written if isinstance(written, str) else written.full_cycles
+
+
+def _compact_in_workers(
+    root: Path,
+    plan: list[tuple[Path, Segment]],
+    settings: _Settings,
+    advance: Callable[[int, str], None],
+) -> Iterator[tuple[Path, SegmentResult]]:
+    """Compact the planned segments in ``settings.cold.jobs`` worker processes, one segment
+    per task. Each worker writes and checks its segment's partial file; this process then
+    swaps the replacements in, one at a time and in plan order, exactly as ``compact_segment``
+    does (rename, fsync, catalog, remove the source)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    # spawn: a worker never inherits the threads or locks of an embedding process
+    pool = ProcessPoolExecutor(
+        min(settings.cold.jobs, len(plan)),
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_exit_with_parent,
+        initargs=(os.getpid(),),
+    )
+    try:
+        jobs = [
+            (
+                path,
+                segment,
+                time.perf_counter(),
+                pool.submit(
+                    _write_in_worker,
+                    root,
+                    path,
+                    settings.tier,
+                    (settings.warm, settings.cold, settings.opener),
+                ),
+            )
+            for path, segment in plan
+        ]
+        for path, segment, started, job in jobs:
+            target = root / settings.tier / path.name
+            result = _result(root, path, segment, target, status="compacted", detail="")
+            outcome = job.result()
+            if isinstance(outcome, str):
+                yield path, _failed(result, outcome, started)
+                continue
+            yield (
+                path,
+                _swap_in(root, path, settings.tier, result, full_cycles=outcome, started=started),
+            )
+            advance(result.cycles, path.name)
+    finally:
+        pool.shutdown(cancel_futures=True)
+
+
+def _picklable(value: Any) -> bool:
+    try:
+        pickle.dumps(value)
+    except (pickle.PicklingError, TypeError, AttributeError):
+        return False
+    return True
 
 
 def _tier_session(segment: Segment, tier: str) -> SessionInfo:
@@ -636,48 +782,24 @@ class _TallyWriter:
         self.batches.append((len(batch), _batch_digest(rows)))
 
 
-_WORKER_ENCODERS: dict[int, BlockEncoder] = {}
-
-
-def _encode_block(
-    level: int,
-    tier: str,
-    kept: list[tuple[str, int, int, bytes]],
-    plain_at: list[int],
-    plain: list[tuple[str, int, int, bytes]],
-) -> tuple[bytes, str, int, int, int]:
-    """Encode one block (in this process or a worker): the data, and the digest of the
-    stream it decodes to with the plain messages put back, for the caller to check."""
-    encoder = _WORKER_ENCODERS.get(level)
-    if encoder is None:
-        encoder = _WORKER_ENCODERS[level] = BlockEncoder(level)
-    raw_before, retries_before = encoder.raw_messages, encoder.retries
-    data, check = encoder.encode_checked([RawMessage(*m) for m in kept], tier, plain_at)
-    stream = list(merge_plain(check.messages, [RawMessage(*m) for m in plain], check.plain))
-    return (
-        data,
-        _batch_digest(_as_tuples(stream)),
-        len(stream),
-        encoder.raw_messages - raw_before,
-        encoder.retries - retries_before,
-    )
+def _as_tuples(messages: list[RawMessage]) -> list[tuple[str, int, int, bytes]]:
+    return [(m.topic, m.sequence, m.log_time_ns, m.data) for m in messages]
 
 
 def _exit_with_parent(parent: int) -> None:
     """In a worker: exit when the compacting process is gone (killed with -9, it cannot
-    shut its pool down, and an idle worker would wait for work forever)."""
+    shut its pool down, and an idle worker would wait for work forever). A worker writes a
+    partial file, so it stops soon: the next run may start (the lock died with the parent),
+    and a worker still busy then could at worst remove the partial of the same name and make
+    that run fail the segment (a worker never renames a file and never touches a source)."""
     import threading
 
     def watch() -> None:
         while os.getppid() == parent:
-            time.sleep(0.5)
+            time.sleep(0.1)
         os._exit(1)
 
     threading.Thread(target=watch, name="trace-compact-parent-watch", daemon=True).start()
-
-
-def _as_tuples(messages: list[RawMessage]) -> list[tuple[str, int, int, bytes]]:
-    return [(m.topic, m.sequence, m.log_time_ns, m.data) for m in messages]
 
 
 def _open_writer(
@@ -704,64 +826,11 @@ def _write_cold(
 ) -> _Written:
     # Blocks are zstd-compressed already; a second compression of the chunk would only cost time.
     out = _open_writer(segment, stream, "cold", compression="")
-    block_channel = out.channel(BLOCK_TOPIC, encoding=CODEC, schema=BLOCK_SCHEMA)
-    index_channel = out.channel(INDEX_TOPIC, encoding="json", schema=INDEX_SCHEMA)
-    source_tier = segment.session.tier
     counts = {"blocks": 0, "cycles": 0, "messages": 0, "verbatim": 0}
-    pool = None
-    if options.jobs > 1:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
-        # spawn: a worker never inherits the threads or locks of an embedding process
-        pool = ProcessPoolExecutor(
-            options.jobs,
-            mp_context=multiprocessing.get_context("spawn"),
-            initializer=_exit_with_parent,
-            initargs=(os.getpid(),),
-        )
-    pending: deque[tuple[int, list[RawMessage], Any]] = deque()
-
-    def finish_one() -> None:
-        number, block, job = pending.popleft()
-        data, digest_, count, verbatim, _retries = job.result() if pool else job
-        # The block, decoded again with its plain messages put back, must be the source
-        # block as it was read (a digest over every message, in order).
-        if (len(block), _batch_digest(_as_tuples(block))) != (count, digest_):
-            raise VerificationError(f"block {number} does not decode to the source messages")
-        entry = index_entry(block)
-        first = min(m.log_time_ns for m in block)
-        last = max(m.log_time_ns for m in block)
-        plain = [m for m in block if m.topic in PLAIN_TOPICS]
-        out.write_batch(
-            [
-                *(
-                    OutMessage(out.channel(m.topic), m.sequence, m.log_time_ns, m.data)
-                    for m in plain
-                ),
-                OutMessage(block_channel, number, first, data),
-                OutMessage(index_channel, number, last, orjson.dumps(entry)),
-            ]
-        )
-        counts["blocks"] += 1
-        counts["cycles"] += entry["cycles"]
-        counts["messages"] += len(block) - len(plain)
-        counts["verbatim"] += verbatim
-        advance(entry["cycles"])
-
-    try:
-        for number, block in enumerate(iter_blocks(segment.iter_messages(), options.block_cycles)):
-            kept, plain, positions = split_plain(block)
-            args = (options.level, source_tier, _as_tuples(kept), positions, _as_tuples(plain))
-            job = pool.submit(_encode_block, *args) if pool else _encode_block(*args)
-            pending.append((number, block, job))
-            while len(pending) > (2 * options.jobs if pool else 0):
-                finish_one()
-        while pending:
-            finish_one()
-    finally:
-        if pool is not None:
-            pool.shutdown(cancel_futures=True)
+    # Nothing a compaction makes is cyclic: the cyclic GC would only walk the blocks in
+    # flight again and again (reference counting still frees everything).
+    with gc_paused():
+        _encode_blocks(segment, out, options, counts, advance)
     blocks, cycles = counts["blocks"], counts["cycles"]
     out.writer.add_metadata(
         TIER_METADATA,
@@ -779,6 +848,48 @@ def _write_cold(
     )
     out.writer.finish()
     return _Written(out.batches, _Tally())
+
+
+def _encode_blocks(
+    segment: Segment,
+    out: _TallyWriter,
+    options: ColdOptions,
+    counts: dict[str, int],
+    advance: Callable[[int], None],
+) -> None:
+    """Encode the segment's blocks, check each against the source, write each as a chunk."""
+    block_channel = out.channel(BLOCK_TOPIC, encoding=CODEC, schema=BLOCK_SCHEMA)
+    index_channel = out.channel(INDEX_TOPIC, encoding="json", schema=INDEX_SCHEMA)
+    source_tier = segment.session.tier
+    encoder = BlockEncoder(options.level)
+    source = iter_blocks(segment.iter_messages(), options.block_cycles)
+    for number, block in enumerate(source):
+        kept, plain, positions = split_plain(block)
+        raw_before = encoder.raw_messages
+        data, check = encoder.encode_checked(kept, source_tier, positions)
+        # The block, decoded again with its plain messages put back, must be the source
+        # block as it was read, message for message (encode_checked compared it with what
+        # it was given; this catches a pipeline that gave it something else).
+        if list(merge_plain(check.messages, plain, check.plain)) != block:
+            raise VerificationError(f"block {number} does not decode to the source messages")
+        entry = index_entry(block)
+        first = min(m.log_time_ns for m in block)
+        last = max(m.log_time_ns for m in block)
+        out.write_batch(
+            [
+                *(
+                    OutMessage(out.channel(m.topic), m.sequence, m.log_time_ns, m.data)
+                    for m in plain
+                ),
+                OutMessage(block_channel, number, first, data),
+                OutMessage(index_channel, number, last, orjson.dumps(entry)),
+            ]
+        )
+        counts["blocks"] += 1
+        counts["cycles"] += entry["cycles"]
+        counts["messages"] += len(block) - len(plain)
+        counts["verbatim"] += encoder.raw_messages - raw_before
+        advance(entry["cycles"])
 
 
 def _write_warm(

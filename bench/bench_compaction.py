@@ -1,0 +1,272 @@
+"""Cold compaction benchmark: whole processes against a bare rewrite of the same log.
+
+    .venv/bin/python bench/bench_compaction.py [--hours 2] [--repeats 3] [--log DIR]
+                                               [--json results.json]
+
+Budgets (DESIGN.md and the [perf] issue): cold compaction >= 0.5x a bare read + parse +
+dump + zstd-3 rewrite of the same log (whole process); 2 workers >= 1.7x one on a
+multi-segment root; cold first seek <= 10 ms; cold bytes per cycle no worse than before
+(~175-185 B on a routine sim hour), lossless.
+
+The log is a routine sim run (``--hours`` of 10 Hz cycles, seed 2024) in a log root, which
+the logger rotates into one segment per simulated hour; it is built once under ``--log``
+and kept, so repeated runs measure the same bytes. Every timed variant runs as a whole
+process (interpreter start, imports, output), in rounds whose order rotates, so a load
+change on the shared machine hits all alike:
+
+1. anchor: the ``mcap`` library's reader over every segment file, ``orjson.loads`` and
+   ``orjson.dumps`` of every message, the bytes written through one zstd level-3 stream
+   per segment to a file beside it (read + parse + dump + zstd-3 rewrite);
+2. ``compact(root, "cold")`` in one process (the library call ``trace-audit compact``
+   makes), on a fresh copy of the root (the copy is not timed);
+3. the same with ``ColdOptions(jobs=2)``: segments spread over two worker processes.
+
+Reported: medians of wall and CPU seconds (the process and its children), cycles/s, the
+ratios compaction / anchor (CPU, and wall) and 2 workers / 1 (wall), with the load average.
+Then, on the compacted root: bytes per sealed cycle beside the hot files and MCAP default
+zstd chunks; reading every cycle; and ``cycle_at`` at 40 random times, hot and cold, each
+a first ask (caches cleared) and cold asked again (median ms).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import random
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import orjson
+from bench_tiers import mcap_default_bytes
+
+from sim import RunConfig, run
+from trace_runtime import open_log
+
+REPO = Path(__file__).resolve().parent.parent
+
+ANCHOR = """
+import sys
+from pathlib import Path
+
+import orjson
+import zstandard
+from mcap.reader import make_reader
+
+root, out = Path(sys.argv[1]), Path(sys.argv[2])
+out.mkdir(parents=True, exist_ok=True)
+cycles = 0
+for path in sorted(root.rglob("*.mcap")):
+    with open(path, "rb") as f, open(out / (path.name + ".zst"), "wb") as o:
+        writer = zstandard.ZstdCompressor(level=3).stream_writer(o)
+        for _schema, channel, message in make_reader(f).iter_messages():
+            writer.write(orjson.dumps(orjson.loads(message.data)))
+            cycles += channel.topic == "/trace/seal"
+        writer.flush(zstandard.FLUSH_FRAME)
+print(cycles)
+"""
+
+COMPACT = """
+import sys
+from trace_runtime.tiers import ColdOptions, compact
+
+def main():
+    report = compact(sys.argv[1], "cold", older_than_ns=0, retention_ns=None,
+                     cold=ColdOptions(jobs=int(sys.argv[2])))
+    assert not report.failed, report.failed
+    print(report.cycles)
+
+if __name__ == "__main__":
+    main()
+"""
+
+
+def build_log(root: Path, hours: float) -> int:
+    """A routine sim log root of ``hours`` (one segment per simulated hour); reused."""
+    marker = root / "cycles.txt"
+    if marker.exists():
+        return int(marker.read_text())
+    shutil.rmtree(root, ignore_errors=True)
+    cycles = round(hours * 36_000)
+    print(f"building a {hours:g} h sim log ({cycles} cycles) in {root} ...", flush=True)
+    result = run(RunConfig(out=root, total_cycles=cycles, seed=2024))
+    shutil.rmtree(root / "truth", ignore_errors=True)  # ground truth is not part of the log
+    marker.write_text(str(result.written))
+    return result.written
+
+
+@dataclass
+class Variant:
+    label: str
+    code: str
+    walls: list[float] = field(default_factory=list)
+    cpus: list[float] = field(default_factory=list)
+
+    def wall(self) -> float:
+        return statistics.median(self.walls)
+
+    def cpu(self) -> float:
+        return statistics.median(self.cpus)
+
+
+def _children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def fresh_copy(source: Path, target: Path) -> Path:
+    shutil.rmtree(target, ignore_errors=True)
+    shutil.copytree(source, target, ignore=shutil.ignore_patterns("cycles.txt", "truth"))
+    return target
+
+
+def measure(variant: Variant, argv: list[str]) -> None:
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    cpu, wall = _children_cpu(), time.perf_counter()
+    subprocess.run(argv, check=True, stdout=subprocess.DEVNULL, env=env, cwd=REPO)
+    variant.walls.append(time.perf_counter() - wall)
+    variant.cpus.append(_children_cpu() - cpu)
+
+
+def seeks_ms(hot: Any, cold: Any, rng: random.Random) -> dict[str, float]:
+    """Median ms of ``cycle_at`` at random times: a first ask (caches cleared), and asked again."""
+    times = [rng.randrange(hot.start_ns, hot.end_ns) for _ in range(40)]
+    out = {}
+    for label, opened, forget in (
+        ("hot, first ask", hot, True),
+        ("cold, first ask", cold, True),
+        ("cold, asked again", cold, False),
+    ):
+        samples = []
+        for t_ns in times:
+            if forget:
+                opened.clear_caches()
+            else:
+                opened.cycle_at(t_ns)
+            started = time.perf_counter()
+            opened.cycle_at(t_ns)
+            samples.append(time.perf_counter() - started)
+        out[label] = statistics.median(samples) * 1e3
+    assert all(hot.cycle_at(t) == cold.cycle_at(t) for t in times[:10])
+    return out
+
+
+def read_all(opened: Any) -> float:
+    """Cycles per second reading every cycle (caches cleared first)."""
+    opened.clear_caches()
+    started = time.perf_counter()
+    n = sum(1 for _ in opened.iter_cycles())
+    return n / (time.perf_counter() - started)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--hours", type=float, default=2.0, help="simulated hours (default 2)")
+    parser.add_argument("--repeats", type=int, default=3, help="rounds (medians are taken)")
+    parser.add_argument("--log", type=Path, default=Path("/tmp/trace-bench-compaction"))
+    parser.add_argument("--json", type=Path, default=None, help="also write results here")
+    args = parser.parse_args()
+
+    source = args.log / f"{args.hours:g}h"
+    cycles = build_log(source, args.hours)
+    work = args.log / "work"
+    segments = sorted(source.rglob("*.mcap"))
+    py = sys.executable
+    anchor = Variant("anchor: mcap read+parse+dump+zstd-3", ANCHOR)
+    one = Variant("compact cold, 1 process", COMPACT)
+    two = Variant("compact cold, 2 workers", COMPACT)
+    variants = [anchor, one, two]
+    print(
+        f"log: {source} ({cycles} cycles, {len(segments)} segments, "
+        f"{sum(p.stat().st_size for p in segments) / 1e6:.1f} MB); "
+        f"{len(os.sched_getaffinity(0))} CPUs; {args.repeats} rounds, whole processes",
+        flush=True,
+    )
+    loads = []
+    for round_no in range(args.repeats):
+        for variant in variants[round_no % 3 :] + variants[: round_no % 3]:
+            if variant is anchor:
+                argv = [py, "-c", ANCHOR, str(source), str(work / "anchor-out")]
+            else:
+                target = fresh_copy(source, work / "cold")
+                argv = [py, "-c", COMPACT, str(target), "2" if variant is two else "1"]
+            measure(variant, argv)
+        loads.append(os.getloadavg()[0])
+        print(
+            f"  round {round_no + 1}: "
+            + ", ".join(f"{v.label.split(':')[0]} {v.walls[-1]:.1f}s" for v in variants)
+            + f" (load {loads[-1]:.2f})",
+            flush=True,
+        )
+
+    print(f"\n{'':<40} {'wall s':>7} {'cpu s':>7} {'cycles/s wall':>14} {'cycles/s cpu':>13}")
+    for v in variants:
+        print(
+            f"{v.label:<40} {v.wall():>7.2f} {v.cpu():>7.2f}"
+            f" {cycles / v.wall():>14,.0f} {cycles / v.cpu():>13,.0f}"
+        )
+    ratio_cpu, ratio_wall = anchor.cpu() / one.cpu(), anchor.wall() / one.wall()
+    scaling = one.wall() / two.wall()
+    load = statistics.median(loads)
+    print(
+        f"\ncompaction / anchor, 1 process: cpu {ratio_cpu:.2f}x, wall {ratio_wall:.2f}x"
+        "   (budget >= 0.5x)"
+    )
+    print(
+        f"2 workers / 1, wall:            {scaling:.2f}x over {len(segments)} segments"
+        f"   (budget >= 1.7x; load average {load:.2f} on {len(os.sched_getaffinity(0))} CPUs)"
+    )
+    print(f"2 workers, cpu:                 {two.cpu() / one.cpu():.2f}x the CPU of one process")
+
+    # sizes, reads and seeks on the compacted root (a last 1-process run, untimed)
+    cold_root = fresh_copy(source, work / "cold")
+    subprocess.run(
+        [py, "-c", COMPACT, str(cold_root), "1"],
+        check=True,
+        stdout=subprocess.DEVNULL,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )
+    hot, cold = open_log(source), open_log(cold_root)
+    sizes = {
+        "hot (as logged)": sum(p.stat().st_size for p in segments),
+        "MCAP default zstd": mcap_default_bytes(source),
+        "cold": sum(p.stat().st_size for p in (cold_root / "cold").glob("*.mcap")),
+    }
+    per_cycle = {k: v / cycles for k, v in sizes.items()}
+    print(f"\n{'form':<24}{'B/cycle':>10}")
+    for form, value in per_cycle.items():
+        print(f"{form:<24}{value:>10,.1f}")
+    print(f"cold / MCAP default = {per_cycle['cold'] / per_cycle['MCAP default zstd']:.3f}")
+    reads = {"hot": read_all(hot), "cold": read_all(cold)}
+    print(f"read every cycle: hot {reads['hot']:,.0f}/s, cold {reads['cold']:,.0f}/s")
+    seeks = seeks_ms(hot, cold, random.Random(5))
+    print(
+        "cycle_at, median ms: "
+        + ", ".join(f"{k} {v:.2f}" for k, v in seeks.items())
+        + "   (budget: cold first ask <= 10 ms)"
+    )
+    if args.json:
+        results = {
+            "cycles": cycles,
+            "segments": len(segments),
+            "variants": {v.label: {"walls": v.walls, "cpus": v.cpus} for v in variants},
+            "ratio_cpu": ratio_cpu,
+            "ratio_wall": ratio_wall,
+            "workers_scaling": scaling,
+            "load": loads,
+            "bytes_per_cycle": per_cycle,
+            "read_cycles_per_s": reads,
+            "seek_ms": seeks,
+        }
+        args.json.write_text(orjson.dumps(results, option=orjson.OPT_INDENT_2).decode())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
