@@ -28,7 +28,7 @@ if TYPE_CHECKING:  # the library is imported inside each command: start-up stays
 # compaction machinery (the reader, pydantic models, codecs). A test pins them to
 # trace_runtime.tiers' DEFAULT_RETENTION_NS and ColdOptions().block_cycles.
 _DEFAULT_RETENTION = "183d"
-_DEFAULT_BLOCK_CYCLES = 512
+_DEFAULT_BLOCK_CYCLES = 256
 
 _COMPACT_HELP = "\n\n".join(
     [
