@@ -21,7 +21,7 @@ from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeE
 from trace_runtime.integrity import SealStatus, verify_cycle
 from trace_runtime.mcap_file import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.reader import Segment
-from trace_runtime.session import TIERS
+from trace_runtime.session import TIER_METADATA, TIERS
 
 log = logging.getLogger("trace_runtime")
 
@@ -49,7 +49,7 @@ def copy_rank(segment: Segment) -> tuple[int, int]:
     """
     tier = segment.session.tier
     lossy = tier == "warm" or (
-        tier == "cold" and segment.metadata.get("trace.tier", {}).get("lossy") == "true"
+        tier == "cold" and segment.metadata.get(TIER_METADATA, {}).get("lossy") == "true"
     )
     return (1 if lossy else 0, TIERS.index(tier) if tier in TIERS else 9)
 

@@ -172,11 +172,11 @@ class Segment(McapFile):
         """The cycles the chunk at ``offset`` closes (with their first messages from earlier
         chunks), and the messages it leaves open for the next chunk. The file's last chunk
         also gives the unfinished cycle after its last seal."""
-        if lead is None:
-            lead = self._lead_in(offset)
         closed, tail = self._closed_in(offset)
         if self.is_damaged(offset):
             return [], []  # the cycle it cut is lost with it; verify reports the damage
+        if lead is None:
+            lead = self._lead_in(offset)
         if self.is_last_chunk(offset):
             closed, tail = closed + tail, []
         if not closed:

@@ -9,6 +9,9 @@ from trace_runtime.records import GENESIS, PROFILE_VERSION
 
 SESSION_METADATA = "trace.session"
 
+TIER_METADATA = "trace.tier"
+"""The metadata record a compacted segment carries: its source, whether it is lossy."""
+
 TIERS = ("hot", "warm", "cold")
 """The storage tiers, from the robot's own segments to the most compacted: the values of
 ``trace.session`` ``tier`` and the subdirectories of a log root (PROFILE section 9)."""

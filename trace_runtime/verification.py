@@ -41,7 +41,7 @@ from trace_runtime.integrity import (
 from trace_runtime.logset import FileProblem, Log, copy_rank
 from trace_runtime.reader import Segment
 from trace_runtime.records import GENESIS, Checkpoint
-from trace_runtime.session import TIERS
+from trace_runtime.session import TIER_METADATA, TIERS
 
 __all__ = [
     "Finding",
@@ -972,7 +972,6 @@ def _closed_by_logger(segment: Segment) -> bool | None:
     """
     if segment.session.tier == "hot":
         return segment.info.finished
-    from trace_runtime.tiers.catalog import TIER_METADATA  # the tiers, only when met
 
     value = segment.metadata.get(TIER_METADATA, {}).get("source_finished")
     return None if value is None else value == "true"

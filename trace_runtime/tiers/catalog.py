@@ -24,12 +24,11 @@ from trace_runtime.errors import LogReadError
 from trace_runtime.logset import find_segment_files
 from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
-from trace_runtime.session import TIERS
+from trace_runtime.session import TIER_METADATA, TIERS
 from trace_runtime.tiers._files import write_atomic
 
 CATALOG_NAME = "catalog.json"
 CATALOG_FORMAT = "trace-catalog-v1"
-TIER_METADATA = "trace.tier"
 
 
 @dataclass(frozen=True, slots=True)
