@@ -56,7 +56,7 @@ from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap, continuity, find_gap
 from trace_runtime.integrity import SealStatus, verify_cycle
-from trace_runtime.logset import Log, find_segment_files, open_segments
+from trace_runtime.logset import Log, open_logs
 from trace_runtime.reader import Segment, open_segment
 from trace_runtime.records import (
     TOPIC_ACTION,
@@ -667,24 +667,6 @@ class _Task:
     config: MetricsConfig
 
 
-def _open(paths: Sequence[str | Path]) -> Log:
-    """The given files, directories and roots as one log (``trace_runtime.logset``): its
-    choice of copies, its per-file problems. A path given twice is read once."""
-    if not paths:
-        raise UsageError("no log given")
-    files: dict[Path, Path] = {}
-    for path in map(Path, paths):
-        if not path.exists():
-            raise LogReadError(str(path), "no such file or directory")
-        found = find_segment_files(path)
-        if not found:
-            raise LogReadError(str(path), "directory holds no .mcap segments")
-        for file in found:
-            files.setdefault(file.resolve(), file)
-    segments, problems = open_segments(list(files.values()))
-    return Log(segments, Path(paths[0]), problems)
-
-
 def _plan(log: Log) -> list[tuple[str, list[Segment]]]:
     """Each robot's segments in chain order, robots in order of their first record."""
     plan = [(robot, log.segments_of(robot)) for robot in log.robots]
@@ -745,7 +727,7 @@ def compute_metrics(
     """
     cfg = config or MetricsConfig()
     started = time.perf_counter()
-    log = _open(paths)
+    log = open_logs(paths)
     plan = _plan(log)
     expected = sum(_expected_cycles(s) for _, segs in plan for s in segs) or None
     total = _Partial()

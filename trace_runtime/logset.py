@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trace_runtime.cycles import Cycle
-from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeError
+from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeError, UsageError
 from trace_runtime.integrity import SealStatus, verify_cycle
 from trace_runtime.mcap_file import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.reader import Segment
@@ -231,23 +231,42 @@ def open_segments(
     return segments, problems
 
 
+def _files_of(path: Path) -> list[Path]:
+    """The segment files a path names; a missing path or an empty directory is an error."""
+    if not path.exists():
+        raise LogReadError(str(path), "no such file or directory")
+    files = find_segment_files(path)
+    if not files:
+        raise LogReadError(str(path), "directory holds no .mcap segments")
+    return files
+
+
+def open_logs(paths: Sequence[str | Path], limits: ReadLimits = DEFAULT_LIMITS) -> Log:
+    """Several files, directories or roots read as one log (a fleet's metrics); a file
+    named twice is read once. Unreadable files are listed in ``Log.problems``."""
+    if not paths:
+        raise UsageError("no log given")
+    files: dict[Path, Path] = {}
+    for path in map(Path, paths):
+        for file in _files_of(path):
+            files.setdefault(file.resolve(), file)
+    segments, problems = open_segments(list(files.values()), limits)
+    return Log(segments, Path(paths[0]), problems)
+
+
 def open_log(path: str | Path, limits: ReadLimits = DEFAULT_LIMITS) -> Log:
     """Open a segment file, a directory of segments, or a log root (hot/ warm/ cold/).
 
     A single file that cannot be read raises ``LogReadError``; in a directory, unreadable
-    files are listed in ``Log.problems`` and the others are read.
+    files are listed in ``Log.problems`` (one warning each) and the others are read.
     """
     root = Path(path)
-    if not root.exists():
-        raise LogReadError(str(root), "no such file or directory")
-    files = find_segment_files(root)
-    if not files:
-        raise LogReadError(str(root), "directory holds no .mcap segments")
+    files = _files_of(root)
     if not root.is_dir():
         return Log([Segment(root, limits)], root)
     segments, problems = open_segments(files, limits)
     opened = Log(segments, root, problems)
-    for problem in problems:
+    for problem in opened.problems:
         what = "not a TRACE segment" if problem.foreign else "unreadable"
         log.warning("%s: %s, skipped (%s)", problem.path, what, problem.reason)
     return opened
