@@ -186,8 +186,6 @@ class McapFile:
             raise LogReadError(
                 str(self.path), f"damaged MCAP record ({type(err).__name__}: {err})"
             ) from err
-        except RecursionError as err:  # pragma: no cover - no parser here recurses
-            raise LogReadError(str(self.path), "structure nested too deeply") from err
 
     # --- metadata --------------------------------------------------------------------------
 
