@@ -18,7 +18,7 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "bootstrap: installing into .venv (first run or pyproject.toml changed) ..." >&2
   log=.venv/install.log
   # Quiet when it works; the whole pip output when it does not.
-  if ! { .venv/bin/python -m pip install --upgrade pip && .venv/bin/python -m pip install -e ".[dev]"; } >"$log" 2>&1; then
+  if ! { .venv/bin/python -m pip install --upgrade pip && .venv/bin/python -m pip install -e ".[dev,all]"; } >"$log" 2>&1; then
     cat "$log" >&2
     echo "bootstrap: installation failed (log above, also in $log)" >&2
     exit 1
