@@ -27,6 +27,7 @@ from sim.faults import (
     TruthLog,
     truth_path_for,
 )
+from sim.nulllog import NullLogger
 from sim.perception import CORRIDOR_MAX_M, Perceiver, PerceptionOutput
 from sim.policy import REROUTE
 from sim.records import (
@@ -90,6 +91,9 @@ class RunConfig:
     """Cycles per write (``LoggerConfig.batch_cycles``). 1 for the paper's runs: an injected
     audit-write timeout then loses exactly one cycle. Above 1 (long generated runs) every
     write carries that many cycles, and a timed-out write loses all of them (see ``faults``)."""
+    audit: bool = True
+    """False: the same loop with a ``NullLogger`` (nothing written), to measure what logging
+    costs per cycle. The ground-truth sidecar is still written."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -190,19 +194,23 @@ def run(config: RunConfig, progress: Callable[[int, int], None] | None = None) -
         else:
             out.mkdir(parents=True, exist_ok=True)
         truth = TruthLog(truth_path)
-        logger = AuditLogger(
-            out,
-            robot_id=config.robot_id,
-            period_s=PERIOD_S,
-            software_version=SOFTWARE_VERSION,
-            policy_version=POLICY_VERSION,
-            clock="sim",
-            config=LoggerConfig(
-                threaded=False,
-                fsync_interval_s=None,
-                opener=opener,
-                batch_cycles=config.batch_cycles,
-            ),
+        logger: AuditLogger | NullLogger = (
+            NullLogger()
+            if not config.audit
+            else AuditLogger(
+                out,
+                robot_id=config.robot_id,
+                period_s=PERIOD_S,
+                software_version=SOFTWARE_VERSION,
+                policy_version=POLICY_VERSION,
+                clock="sim",
+                config=LoggerConfig(
+                    threaded=False,
+                    fsync_interval_s=None,
+                    opener=opener,
+                    batch_cycles=config.batch_cycles,
+                ),
+            )
         )
     except OSError as err:
         raise SimOutputError(f"cannot write {out}: {err.strerror or err}") from err
@@ -290,7 +298,11 @@ class _Pipeline:
     """The robot: world, sensors, the four layers and the logger, one cycle at a time."""
 
     def __init__(
-        self, config: RunConfig, logger: AuditLogger, opener: FailingOpener, truth: TruthLog
+        self,
+        config: RunConfig,
+        logger: AuditLogger | NullLogger,
+        opener: FailingOpener,
+        truth: TruthLog,
     ) -> None:
         seeds = np.random.SeedSequence(config.seed).spawn(4)
         self.world = World(np.random.default_rng(seeds[0]))
