@@ -24,6 +24,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from sim import SCENARIOS, FaultRates, RunConfig, read_truth, run
+from sim.baselines import BaselinesReport, MethodResult
+from sim.baselines.cost import WARM_UP_CYCLES
+from sim.baselines.evaluate import Spread
 from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
 
 # The paper's reported figures (Tables II and III), quoted for comparison only.
@@ -310,20 +313,280 @@ def _et_named(report: MetricsReport) -> float:
     return o.et.mean * o.decisions / named if named else math.nan
 
 
+# The paper's Table II rows for the baselines: "estimates based on architectural capability
+# analysis" (its footnote), quoted for comparison only.
+PAPER_BASELINES = {
+    "attention": {"ET": "20–25", "TC": "70–80", "DR": "N/A", "Time": "<0.01 ms"},
+    "SHAP": {"ET": "30–35", "TC": "0", "DR": "N/A", "Time": "0.02 ms"},
+    "LIME": {"ET": "25–30", "TC": "0", "DR": "N/A", "Time": "1.29 ms"},
+}
+BASELINES_TITLE = "## Table II measured: TRACE against LIME, SHAP and attention"
+
+
+def measure_baselines(seed: int, seeds: int) -> BaselinesReport:
+    """``trace-sim baselines`` with more repeats for the timings than its defaults."""
+    from sim.baselines import BaselinesConfig, run_baselines
+
+    config = BaselinesConfig(
+        seed=seed,
+        seeds=seeds,
+        overhead_repeats=3,
+        scaling_cycles=100,
+        scaling_repeats=5,
+    )
+    return run_baselines(config, progress=lambda step: print(step, file=sys.stderr))
+
+
+def _pm(spread: Spread, scale: float = 100.0, digits: int = 1) -> str:
+    return f"{spread.mean * scale:.{digits}f} ± {spread.std * scale:.{digits}f}"
+
+
+def render_baselines(report: BaselinesReport) -> str:
+    """The measured Table II section (methods, cost, scaling, differences)."""
+    data = report.as_dict()
+    m = report.methods
+    cfg = report.config
+    seeds = [s.seed for s in report.seeds]
+    lines: list[str] = []
+    add = lines.append
+    add(BASELINES_TITLE)
+    add("")
+    add(
+        f"Measured by `trace-sim baselines` (`sim/baselines/`, commit `{git_revision()}`) over "
+        f"{len(seeds)} seeds "
+        f"({seeds[0]}..{seeds[-1]}), each one run of the paper's evaluation (5 scenarios x "
+        f"{cfg.cycles} cycles, faults at the paper's rates). The learned policy (random forest) "
+        f"and the attention model were trained on {report.train_decisions} decisions from "
+        f"{cfg.train_runs} run(s) with other seeds; on the evaluation runs they agree with the "
+        "rule "
+        f"policy on {_pm(report.policy_accuracy)}% and {_pm(report.attention_accuracy)}% of "
+        f"decisions. Each method explained {cfg.explain_per_seed} randomly drawn decisions per "
+        "run; TRACE is scored on every logged decision by `trace_audit.metrics`. Definitions: "
+        '[metrics.md](metrics.md), "Explanation baselines" (written before these numbers). '
+        "Figures are mean ± std across seeds (population std), in %."
+    )
+    add("")
+    add(
+        "| method | ET paper | ET here | ET_partial here | DR paper | DR here | "
+        "time paper | time here (ms) | bytes / decision here |"
+    )
+    add("|---|---|---|---|---|---|---|---|---|")
+    paper_trace = {
+        "ET": PAPER_TABLE_II["ET"],
+        "DR": PAPER_TABLE_II["DR"],
+        "Time": PAPER_TABLE_II["Time"],
+    }
+    for name in ("TRACE", "LIME", "SHAP", "attention"):
+        paper = paper_trace if name == "TRACE" else PAPER_BASELINES[name]
+        r = m[name]
+        add(
+            f"| {name} | {paper['ET']} | {_pm(r.et)} | {_pm(r.et_partial)} | {paper['DR']} | "
+            f"{_pm(r.dr)} | {paper['Time']} | {_pm(r.ms_per_decision, 1.0, 3)} | "
+            f"{r.bytes_per_decision.mean:,.0f} |"
+        )
+    add("")
+    add(
+        "TC is not measured for the baselines: it is a property of how records are kept, not of "
+        "an explanation method (metrics.md). The paper's baseline TC (0%, 70–80%) is likewise "
+        "an estimate."
+    )
+    add("")
+    o = report.overhead
+    add("### TRACE's cost per cycle, logging on and off")
+    add("")
+    add(
+        f"The simulator's whole decision loop over the same {len(seeds)} seeds' scenario runs "
+        f"({o.cycles} cycles each, faults off so both sides run identical cycles: same commands "
+        f"{'in every cycle' if o.same_commands else 'NOT in every cycle'}), "
+        f"{o.runs // len(seeds)} back-to-back repeat(s) per seed, medians; a run's time "
+        "includes opening and closing its log, spread over its cycles:"
+    )
+    add("")
+    add("| | us per cycle |")
+    add("|---|---|")
+    add(f"| audit logger on (`AuditLogger`, synchronous, one write per cycle) | {o.on_us:.0f} |")
+    add(f"| audit logger off (`NullLogger`) | {o.off_us:.0f} |")
+    add(f"| **overhead** (paper: 120 us) | **{o.overhead_us:.0f}** |")
+    add("")
+    add("### How the overhead grows with entities n and candidate actions k")
+    add("")
+    add(
+        f"A synthetic decision loop (`sim/baselines/cost.py`: n pedestrians with one evidence "
+        f"item each, 2 belief nodes per entity, n factors, k-1 alternatives, n x (k-1) "
+        f"counterfactuals), {cfg.scaling_cycles} cycles per run, median of "
+        f"{cfg.scaling_repeats} back-to-back on/off runs, after {WARM_UP_CYCLES} untimed "
+        "cycles; logging overhead in us per cycle "
+        "(compressed bytes per cycle in brackets):"
+    )
+    add("")
+    ks = sorted({p.actions for p in report.scaling})
+    ns = sorted({p.entities for p in report.scaling})
+    grid = {(p.entities, p.actions): p for p in report.scaling}
+    add("| n | " + " | ".join(f"k={k}" for k in ks) + " |")
+    add("|---|" + "---|" * len(ks))
+    for n in ns:
+        cells = [f"{grid[n, k].overhead_us:.0f} ({grid[n, k].bytes_per_cycle:,} B)" for k in ks]
+        add(f"| {n} | " + " | ".join(cells) + " |")
+    add("")
+    slope_n, slope_k, r2 = _fit(report)
+    load = data["machine"]
+    add(
+        f"A least-squares fit overhead = a + b n + c k over the grid gives b = {slope_n:.1f} "
+        f"us per entity and c = {slope_k:.1f} us per action (R² = {r2:.2f})."
+    )
+    add("")
+    add(
+        f"Machine: {load['cpus']} cores shared with other work; 1-minute load average "
+        f"{load['load_1min_start']} at the start and {load['load_1min_end']} at the end "
+        f"of this {load['elapsed_s']:.0f} s measurement. Timings are medians of back-to-back "
+        "on/off runs so that load hits both sides alike, but they are not quiet-machine figures."
+    )
+    add("")
+    add("### Where the paper's estimates hold, and where not")
+    add("")
+    for para in _baseline_differences(report, slope_n, slope_k, r2):
+        add(para)
+        add("")
+    return "\n".join(lines)
+
+
+def _fit(report: BaselinesReport) -> tuple[float, float, float]:
+    import numpy as np
+
+    pts = report.scaling
+    a = np.array([[1.0, p.entities, p.actions] for p in pts])
+    y = np.array([p.overhead_us for p in pts])
+    coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+    resid = y - a @ coef
+    total = float(((y - y.mean()) ** 2).sum())
+    r2 = 1.0 - float((resid**2).sum()) / total if total else math.nan
+    return float(coef[1]), float(coef[2]), r2
+
+
+def _versus(value: float, low: float, high: float) -> str:
+    """Where a measured share stands against the paper's estimated range (both in %)."""
+    if value < low:
+        return "below the paper's range"
+    if value > high:
+        return "above the paper's range"
+    return "within the paper's range"
+
+
+def _baseline_differences(
+    report: BaselinesReport, slope_n: float, slope_k: float, r2: float
+) -> list[str]:
+    m = report.methods
+    o = report.overhead
+    lime, shap, attn, trace = m["LIME"], m["SHAP"], m["attention"], m["TRACE"]
+
+    def share(r: MethodResult) -> str:
+        return f"{r.unlinked / r.citations * 100:.0f}%" if r.citations else "n/a"
+
+    shap_vs_lime = (
+        "SHAP above LIME, as the paper has it"
+        if shap.et.mean > lime.et.mean
+        else "SHAP not above LIME, unlike the paper"
+    )
+    order = sorted(("LIME", "SHAP", "attention"), key=lambda k: m[k].ms_per_decision.mean)
+    paper_order = ["attention", "SHAP", "LIME"]
+    ranking = (
+        "The paper's ranking (attention fastest, LIME slowest) holds"
+        if order == paper_order
+        else f"The measured ranking ({' < '.join(order)}) differs from the paper's"
+    )
+    linear = (
+        f"a plane in n and k fits the grid with R² = {r2:.2f}"
+        if r2 >= 0.8
+        else f"a plane in n and k fits the grid only loosely (R² = {r2:.2f}: timing noise)"
+    )
+    return [
+        f"**ET of LIME and SHAP.** Measured {_pm(lime.et)}% "
+        f"({_versus(lime.et.mean * 100, 25, 30)}, 25–30%) and {_pm(shap.et)}% "
+        f"({_versus(shap.et.mean * 100, 30, 35)}, 30–35%), with {shap_vs_lime}. Both "
+        "numbers rest on a choice the paper does not make: this harness stores, with every "
+        "explanation, which belief node each input feature was read from. Without that link a "
+        'feature attribution names a column ("ped2_risk") that no log message carries, and '
+        f"ET is 0 by construction. With it, {share(lime)} of LIME's and {share(shap)} of "
+        "SHAP's cited factors still have nothing to follow: they are padding slots (a second "
+        "or third pedestrian, or a vehicle, that was not there), which the attributions rank "
+        'among the strongest factors because "nobody there" is what let the robot continue. '
+        "An absence has no sensor reading; TRACE's rationale only names nodes that exist.",
+        f"**ET of attention.** Measured {_pm(attn.et)}%, "
+        f"{_versus(attn.et.mean * 100, 20, 25)} (20–25%). Attention weights are over perceived "
+        f"entities, so each cited token is an entity node (or the aisle state): {share(attn)} "
+        "of its citations lack a node, and its shortfall comes from the same injected evidence "
+        "and edge faults that TRACE's chains meet. That is traceability of what was attended "
+        "to, not a reason for the decision; and TRACE's ET "
+        f"({_pm(trace.et)}%) counts the decisions whose rationale was truncated to nothing as "
+        "0, which never happens to an attention record.",
+        "**DR.** The paper writes N/A for the baselines. Under the same rule as TRACE's, "
+        f"LIME, SHAP and attention score {_pm(lime.dr)}%, {_pm(shap.dr)}% and {_pm(attn.dr)}%: "
+        "none produces counterfactuals. Their class probabilities pass as alternatives (they "
+        "say nothing of why an alternative lost) and their cited factors as a rationale. "
+        f"TRACE: {_pm(trace.dr)}%.",
+        f"**Time.** LIME with its default 5000 samples took {_pm(lime.ms_per_decision, 1, 1)} "
+        "ms per explanation against the paper's 1.29 ms (the paper gives neither its sample "
+        f"count nor its model); SHAP's exact TreeExplainer {_pm(shap.ms_per_decision, 1, 2)} ms "
+        "against 0.02 ms; the attention weights cost one numpy forward pass for a single "
+        f"decision, {_pm(attn.ms_per_decision, 1, 3)} ms, against <0.01 ms. {ranking}; the "
+        "magnitudes depend on a model and settings the paper does not give.",
+        f"**TRACE's 0.12 ms.** Measured here: {o.overhead_us:.0f} us per cycle "
+        f"({o.on_us:.0f} on, {o.off_us:.0f} off), {o.overhead_us / 120:.1f} x the paper's "
+        "120 us. This is the simulator's synchronous configuration: record validation, "
+        "canonical encoding, SHA-256 digests of the sensor data and records, the seal and one "
+        "MCAP write per cycle, all on the loop thread. The logger's default threaded mode "
+        "moves the write off the control thread; `bench/bench_logger.py` measures that cost, "
+        "not this section. Against the 100 ms period at 10 Hz the measured overhead is "
+        f"{o.overhead_us / 1000:.2f}% of the cycle.",
+        f"**Scaling.** The paper says the overhead grows linearly with entities and candidate "
+        f"actions. Over n = 1..50 the fit gives {slope_n:.1f} us per entity, over k = 2..8 "
+        f"{slope_k:.1f} us per action; {linear}. The paper's O(k²) action-synthesis term "
+        "would need larger k to separate from the fixed per-cycle cost.",
+        f"**Bytes.** TRACE keeps {trace.bytes_per_decision.mean:,.0f} bytes of canonical JSON "
+        "per cycle (before compression) for the whole decision; the baselines keep "
+        f"{lime.bytes_per_decision.mean:,.0f} (LIME), {shap.bytes_per_decision.mean:,.0f} "
+        f"(SHAP) and {attn.bytes_per_decision.mean:,.0f} (attention) bytes per explanation, "
+        "feature-to-node links included. The paper does not compare storage.",
+    ]
+
+
+def replace_section(document: str, section: str) -> str:
+    """``document`` with its measured-baselines section (to the next "## " or the end)
+    replaced by ``section``, or ``section`` appended when it has none."""
+    start = document.find(BASELINES_TITLE)
+    if start < 0:
+        return document.rstrip("\n") + "\n\n" + section
+    end = document.find("\n## ", start + len(BASELINES_TITLE))
+    rest = document[end + 1 :] if end >= 0 else ""
+    return document[:start] + section.rstrip("\n") + "\n" + ("\n" + rest if rest else "")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seed", type=int, default=42)
     parser.add_argument("--seeds", type=int, default=20, help="runs for the variance table")
     parser.add_argument(
+        "--baseline-seeds", type=int, default=10, help="runs for the measured Table II (>= 5)"
+    )
+    parser.add_argument(
+        "--baselines-only",
+        action="store_true",
+        help="measure only the baselines and replace that section of --out, keeping the rest",
+    )
+    parser.add_argument(
         "--out", type=Path, default=Path(__file__).resolve().parents[1] / "docs" / "reproduction.md"
     )
     args = parser.parse_args()
-    seeds = list(range(1, args.seeds + 1))
-    with tempfile.TemporaryDirectory() as tmp:
-        work = Path(tmp)
-        main_run = simulate(args.seed, work)
-        sweep = [simulate(seed, work) for seed in seeds]
-    text = render(main_run, sweep, seeds)
+    baselines = render_baselines(measure_baselines(1, args.baseline_seeds))
+    if args.baselines_only:
+        text = replace_section(args.out.read_text(), baselines)
+    else:
+        seeds = list(range(1, args.seeds + 1))
+        with tempfile.TemporaryDirectory() as tmp:
+            work = Path(tmp)
+            main_run = simulate(args.seed, work)
+            sweep = [simulate(seed, work) for seed in seeds]
+        text = render(main_run, sweep, seeds).rstrip("\n") + "\n\n" + baselines
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text)
     print(text)

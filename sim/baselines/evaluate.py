@@ -11,8 +11,10 @@ std across seeds.
 
 from __future__ import annotations
 
+import os
 import statistics
 import tempfile
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -94,6 +96,10 @@ class MethodSeed:
     ms_per_decision: float
     bytes_per_decision: float
     decisions: int
+    citations: int
+    """Factors cited (TRACE: named) over those decisions."""
+    unlinked: int
+    """Cited factors with no node of the cycle's belief graph to follow."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -133,6 +139,8 @@ class MethodResult:
     ms_per_decision: Spread
     bytes_per_decision: Spread
     decisions: int
+    citations: int
+    unlinked: int
 
 
 @dataclass(frozen=True, slots=True)
@@ -145,6 +153,10 @@ class BaselinesReport:
     attention_accuracy: Spread
     seeds: list[SeedResult] = field(default_factory=list)
     train_decisions: int = 0
+    load: tuple[float, float] = (0.0, 0.0)
+    """1-minute load average of the machine when the run started and when it ended: other
+    processes share the cores, and the timings move with them."""
+    elapsed_s: float = 0.0
 
     def as_dict(self) -> dict[str, Any]:
         """The JSON of ``trace-sim baselines --json``."""
@@ -161,6 +173,8 @@ class BaselinesReport:
                 "ms_per_decision": round(m.ms_per_decision.mean, 4),
                 "bytes_per_decision": round(m.bytes_per_decision.mean, 1),
                 "decisions": m.decisions,
+                "cited_factors": m.citations,
+                "cited_without_link": m.unlinked,
                 "spread_over_seeds": {
                     "ET": spread(m.et),
                     "ET_partial": spread(m.et_partial),
@@ -194,6 +208,12 @@ class BaselinesReport:
             "attention_accuracy": round(self.attention_accuracy.mean, 4),
             "seeds": [s.seed for s in self.seeds],
             "train_decisions": self.train_decisions,
+            "machine": {
+                "cpus": os.cpu_count(),
+                "load_1min_start": round(self.load[0], 2),
+                "load_1min_end": round(self.load[1], 2),
+                "elapsed_s": round(self.elapsed_s, 1),
+            },
             "problems": {
                 name: _sum_counts(s.problems.get(name, {}) for s in self.seeds)
                 for name in ("TRACE", *METHODS)
@@ -285,6 +305,8 @@ def _score_seed(
             ms_per_decision=trace_ms,
             bytes_per_decision=statistics.fmean(trace_bytes),
             decisions=o.decisions,
+            citations=o.factors,
+            unlinked=trace_problems.get("ET: factor_node missing", 0),
         )
     }
     for m in METHODS:
@@ -296,6 +318,8 @@ def _score_seed(
             ms_per_decision=statistics.median(seconds[m]) * 1e3,
             bytes_per_decision=statistics.fmean(s.bytes for s in got),
             decisions=len(got),
+            citations=sum(s.citations for s in got),
+            unlinked=problems[m].get("ET: factor_node missing", 0),
         )
     return SeedResult(
         seed=seed,
@@ -312,6 +336,8 @@ def run_baselines(
 ) -> BaselinesReport:
     """Measure TRACE, LIME, SHAP and attention on the same runs; TRACE's cost on and off."""
     cfg = config or BaselinesConfig()
+    started = time.perf_counter()
+    load_start = os.getloadavg()[0]
 
     def say(step: str) -> None:
         if progress is not None:
@@ -350,6 +376,8 @@ def run_baselines(
             ms_per_decision=Spread.of([p.ms_per_decision for p in per]),
             bytes_per_decision=Spread.of([p.bytes_per_decision for p in per]),
             decisions=sum(p.decisions for p in per),
+            citations=sum(p.citations for p in per),
+            unlinked=sum(p.unlinked for p in per),
         )
     return BaselinesReport(
         config=cfg,
@@ -360,4 +388,6 @@ def run_baselines(
         attention_accuracy=Spread.of([s.attention_accuracy for s in seeds]),
         seeds=seeds,
         train_decisions=len(train),
+        load=(load_start, os.getloadavg()[0]),
+        elapsed_s=time.perf_counter() - started,
     )

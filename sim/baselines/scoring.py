@@ -70,6 +70,7 @@ class ExplanationScore:
     dr: bool
     problems: tuple[str, ...]
     bytes: int
+    citations: int
 
 
 def as_action(record: ExplanationRecord) -> dict[str, Any]:
@@ -113,4 +114,5 @@ def score_explanation(
         dr=not dr,
         problems=tuple(problems + [f"DR: {p}" for p in dr]),
         bytes=len(orjson.dumps(record.stored)),
+        citations=len(record.citations),
     )
