@@ -42,8 +42,16 @@ PERIOD_NS = 100_000_000
 
 @dataclass(frozen=True, slots=True)
 class Overhead:
+    """Wall-clock and CPU time per cycle (us), medians over runs.
+
+    CPU time (``time.process_time``: this process, user + system) is what the loop itself
+    spent; wall time also holds whatever other processes took from it on a shared machine.
+    """
+
     on_us: float
     off_us: float
+    on_cpu_us: float
+    off_cpu_us: float
     cycles: int
     """Cycles per run."""
     runs: int
@@ -51,24 +59,36 @@ class Overhead:
     same_commands: bool
     """Both sides made the same command every cycle (so they did the same work)."""
     per_seed: dict[int, tuple[float, float]]
-    """Seed -> (median on, median off) in us per cycle over that seed's repeats."""
+    """Seed -> (median on, median off) CPU us per cycle over that seed's repeats."""
 
     @property
     def overhead_us(self) -> float:
         return self.on_us - self.off_us
 
+    @property
+    def overhead_cpu_us(self) -> float:
+        return self.on_cpu_us - self.off_cpu_us
+
 
 @dataclass(frozen=True, slots=True)
 class ScalingPoint:
+    """Per-cycle wall-clock and CPU time (us) with logging on and off at one (n, k)."""
+
     entities: int
     actions: int
     on_us: float
     off_us: float
+    on_cpu_us: float
+    off_cpu_us: float
     bytes_per_cycle: int
 
     @property
     def overhead_us(self) -> float:
         return self.on_us - self.off_us
+
+    @property
+    def overhead_cpu_us(self) -> float:
+        return self.on_cpu_us - self.off_cpu_us
 
 
 def measure_overhead(
@@ -77,10 +97,11 @@ def measure_overhead(
     """Median time per cycle of the scenario runs with logging on and off (same seeds)."""
     on: list[float] = []
     off: list[float] = []
+    cpu: dict[bool, list[float]] = {True: [], False: []}
     per_seed: dict[int, tuple[float, float]] = {}
     same = True
     for seed in seeds:
-        first = len(on)
+        first = len(cpu[True])
         for r in range(repeats):
             results = {}
             for audit in (True, False):
@@ -91,14 +112,21 @@ def measure_overhead(
                     faults=FaultRates.off(),
                     audit=audit,
                 )
+                cpu_started = time.process_time()
                 result = run(config)
+                cpu[audit].append((time.process_time() - cpu_started) / result.cycles * 1e6)
                 (on if audit else off).append(result.elapsed_s / result.cycles * 1e6)
                 results[audit] = result.commands
             same = same and results[True] == results[False]
-        per_seed[seed] = (statistics.median(on[first:]), statistics.median(off[first:]))
+        per_seed[seed] = (
+            statistics.median(cpu[True][first:]),
+            statistics.median(cpu[False][first:]),
+        )
     return Overhead(
         on_us=statistics.median(on),
         off_us=statistics.median(off),
+        on_cpu_us=statistics.median(cpu[True]),
+        off_cpu_us=statistics.median(cpu[False]),
         cycles=cycles * 5,
         runs=len(on),
         same_commands=same,
@@ -192,13 +220,13 @@ WARM_UP_CYCLES = 5
 """Cycles logged before timing starts: the first write opens the segment (a one-off)."""
 
 
-def _loop(logger: AuditLogger | NullLogger, n: int, k: int, cycles: int) -> float:
-    """Seconds per cycle of: build the records, hand them to ``logger`` (open and close of
-    the log not counted: they happen once per session, not per cycle)."""
-    started = 0.0
+def _loop(logger: AuditLogger | NullLogger, n: int, k: int, cycles: int) -> tuple[float, float]:
+    """(wall, CPU) seconds per cycle of: build the records, hand them to ``logger`` (open and
+    close of the log not counted: they happen once per session, not per cycle)."""
+    started = cpu_started = 0.0
     for i in range(WARM_UP_CYCLES + cycles):
         if i == WARM_UP_CYCLES:
-            started = time.perf_counter()
+            started, cpu_started = time.perf_counter(), time.process_time()
         records = synthetic_cycle(n, k, i)
         with logger.cycle(i * PERIOD_NS) as c:
             ref = c.sensor("/sensors/lidar", records["scan"])
@@ -208,9 +236,9 @@ def _loop(logger: AuditLogger | NullLogger, n: int, k: int, cycles: int) -> floa
             c.belief(records["belief"])
             c.action(records["action"])
             c.execution(records["execution"])
-    elapsed = time.perf_counter() - started
+    elapsed, cpu = time.perf_counter() - started, time.process_time() - cpu_started
     logger.close()
-    return elapsed / cycles
+    return elapsed / cycles, cpu / cycles
 
 
 def measure_scaling(
@@ -225,8 +253,8 @@ def measure_scaling(
     with tempfile.TemporaryDirectory(prefix="trace-scaling-") as tmp:
         for n in entities:
             for k in actions:
-                on: list[float] = []
-                off: list[float] = []
+                on: list[tuple[float, float]] = []
+                off: list[tuple[float, float]] = []
                 size = 0
                 for r in range(repeats):
                     path = Path(tmp) / f"n{n}-k{k}-{r}.mcap"
@@ -243,7 +271,13 @@ def measure_scaling(
                     path.unlink()
                 points.append(
                     ScalingPoint(
-                        n, k, statistics.median(on) * 1e6, statistics.median(off) * 1e6, size
+                        n,
+                        k,
+                        on_us=statistics.median(w for w, _ in on) * 1e6,
+                        off_us=statistics.median(w for w, _ in off) * 1e6,
+                        on_cpu_us=statistics.median(c for _, c in on) * 1e6,
+                        off_cpu_us=statistics.median(c for _, c in off) * 1e6,
+                        bytes_per_cycle=size,
                     )
                 )
                 if progress is not None:

@@ -189,6 +189,9 @@ class BaselinesReport:
                 "on_us": round(self.overhead.on_us, 1),
                 "off_us": round(self.overhead.off_us, 1),
                 "overhead_us": round(self.overhead.overhead_us, 1),
+                "on_cpu_us": round(self.overhead.on_cpu_us, 1),
+                "off_cpu_us": round(self.overhead.off_cpu_us, 1),
+                "overhead_cpu_us": round(self.overhead.overhead_cpu_us, 1),
                 "cycles_per_run": self.overhead.cycles,
                 "runs_per_side": self.overhead.runs,
                 "same_commands": self.overhead.same_commands,
@@ -200,6 +203,9 @@ class BaselinesReport:
                     "on_us": round(p.on_us, 1),
                     "off_us": round(p.off_us, 1),
                     "overhead_us": round(p.overhead_us, 1),
+                    "on_cpu_us": round(p.on_cpu_us, 1),
+                    "off_cpu_us": round(p.off_cpu_us, 1),
+                    "overhead_cpu_us": round(p.overhead_cpu_us, 1),
                     "bytes_per_cycle": p.bytes_per_cycle,
                 }
                 for p in self.scaling
@@ -354,7 +360,7 @@ def run_baselines(
         overhead = measure_overhead(cfg.eval_seeds, cfg.cycles, work, cfg.overhead_repeats)
         seeds = []
         for seed in cfg.eval_seeds:
-            on, off = overhead.per_seed[seed]
+            on, off = overhead.per_seed[seed]  # CPU us, like the explainers' times
             say(f"seed {seed}: simulating, explaining, scoring")
             seeds.append(
                 _score_seed(

@@ -60,7 +60,7 @@ class ExplanationRecord:
     stored: dict[str, Any] = field(default_factory=dict)
     """The per-decision payload the method must keep to be audited later."""
     seconds: float = 0.0
-    """Time the method took to produce this explanation."""
+    """CPU time the method took to produce this explanation."""
 
 
 @dataclass(frozen=True, slots=True)
