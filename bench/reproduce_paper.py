@@ -362,7 +362,8 @@ def render_baselines(report: BaselinesReport) -> str:
         f"policy on {_pm(report.policy_accuracy)}% and {_pm(report.attention_accuracy)}% of "
         f"decisions. Each method explained {cfg.explain_per_seed} randomly drawn decisions per "
         "run; TRACE is scored on every logged decision by `trace_audit.metrics`. Definitions: "
-        '[metrics.md](metrics.md), "Explanation baselines" (the metrics written before the first run; times switched to CPU after it, as it says). '
+        '[metrics.md](metrics.md), "Explanation baselines" (the metrics written before the '
+        "first run; times switched to CPU after it, as it says). "
         "Figures are mean ± std across seeds (population std), in %; times are CPU time."
     )
     add("")
