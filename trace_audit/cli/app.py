@@ -8,7 +8,6 @@ Exit codes (documented in the README and in ``--help``):
 
 from __future__ import annotations
 
-import json
 import re
 import sys
 from collections.abc import Callable
@@ -155,6 +154,8 @@ def guarded(call: Callable[[], T]) -> T:
 
 def print_json(value: Any) -> None:
     """Write ``value`` (pydantic model, dataclass tree or plain data) as JSON on stdout."""
+    import json  # here, not at the top: start-up (``--help``) does not need it
+
     from trace_audit.jsonout import to_jsonable
 
     sys.stdout.write(json.dumps(to_jsonable(value), indent=2, ensure_ascii=False) + "\n")
