@@ -12,6 +12,10 @@ times (the same fractions of each log's range):
   what explain itself costs (seek, look-back, chains, graphs, seal check).
 - ``seek``:  ``Log.cycle_at(t)`` on that hot ``Log``.
 
+Every measure runs ``--rounds`` times, the two logs alternating, and is timed by the wall
+clock or, with ``--clock cpu``, by this process's CPU time (steadier when other work shares
+the machine: a wait for a core is not counted, a cache miss is).
+
 Logs are made with the simulator when missing (a log root; the day takes a while: ~10-15
 min at ~1,200 cycles/s). ``--profile`` prints where a day's ``call`` spends its time.
 
@@ -58,28 +62,44 @@ def _ensure(path: Path, cycles: int, seed: int, batch: int) -> None:
     )
 
 
-def _each(call: Callable[[int], object], times: list[int]) -> list[float]:
+CLOCKS: dict[str, Callable[[], float]] = {"wall": time.perf_counter, "cpu": time.process_time}
+
+
+def _each(
+    call: Callable[[int], object], times: list[int], clock: Callable[[], float]
+) -> list[float]:
     """Seconds each ``call(t)`` took."""
     out = []
     for t in times:
-        started = time.perf_counter()
+        started = clock()
         call(t)
-        out.append(time.perf_counter() - started)
+        out.append(clock() - started)
     return out
 
 
-def _measure(path: Path, fractions: list[float]) -> dict[str, Any]:
+def _samples(path: Path, fractions: list[float], clock: Callable[[], float]) -> dict[str, Any]:
+    """One round of every measure on one log: a list of seconds per measure."""
     log = open_log(path)
     start, end = log.start_ns, log.end_ns
     times = [start + int(f * (end - start)) for f in fractions]
     explain(path, t=times[0])  # warm the page cache and imports; not counted
-    calls = _each(lambda t: explain(path, t=t), times)
-    opens = _each(lambda _t: open_log(path), times)
-    firsts = _each(lambda t: open_log(path).cycle_at(t), times)
+    calls = _each(lambda t: explain(path, t=t), times, clock)
+    opens = _each(lambda _t: open_log(path), times, clock)
+    firsts = _each(lambda t: open_log(path).cycle_at(t), times, clock)
     for segment in log.segments:  # load every chunk table: what remains is explain's own
         segment.cycle_at(segment.info.start_ns)
-    hot = _each(lambda t: explain(log, t=t), times)
-    seeks = _each(log.cycle_at, times)
+    hot = _each(lambda t: explain(log, t=t), times, clock)
+    seeks = _each(log.cycle_at, times, clock)
+    return {"calls": calls, "opens": opens, "firsts": firsts, "hot": hot, "seeks": seeks}
+
+
+def _measure(path: Path, fractions: list[float], rounds: list[dict[str, Any]]) -> dict[str, Any]:
+    log = open_log(path)
+    start, end = log.start_ns, log.end_ns
+    times = [start + int(f * (end - start)) for f in fractions]
+    calls, opens, firsts, hot, seeks = (
+        [x for r in rounds for x in r[key]] for key in ("calls", "opens", "firsts", "hot", "seeks")
+    )
     held = [explain(log, t=t).held.cycles for t in times]
     chunks = sum(s.info.chunk_count for s in log.segments)
     return {
@@ -120,6 +140,19 @@ def main() -> None:
     parser.add_argument("--profile", action="store_true", help="profile the day's calls")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     parser.add_argument(
+        "--rounds",
+        type=int,
+        default=3,
+        help="rounds of every measure, alternating the two logs, so that a busy spell on a "
+        "shared machine falls on both (medians over all rounds)",
+    )
+    parser.add_argument(
+        "--clock",
+        choices=sorted(CLOCKS),
+        default="wall",
+        help="wall: elapsed time; cpu: this process's CPU time (steadier on a shared machine)",
+    )
+    parser.add_argument(
         "--batch",
         type=int,
         default=1,
@@ -133,14 +166,21 @@ def main() -> None:
     _ensure(args.day, DAY_CYCLES, args.seed, args.batch)
     rng = random.Random(args.seed)
     fractions = [rng.random() for _ in range(args.samples)]
-    minute = _measure(args.minute, fractions)
-    day = _measure(args.day, fractions)
+    clock = CLOCKS[args.clock]
+    rounds: dict[str, list[dict[str, Any]]] = {"minute": [], "day": []}
+    for _ in range(args.rounds):
+        rounds["minute"].append(_samples(args.minute, fractions, clock))
+        rounds["day"].append(_samples(args.day, fractions, clock))
+    minute = _measure(args.minute, fractions, rounds["minute"])
+    day = _measure(args.day, fractions, rounds["day"])
     ratios = {
         key: day[key] / minute[key] if minute[key] > 0 else float("inf")
         for key in ("call_ms", "open_ms", "first_seek_ms", "hot_ms", "seek_ms")
     }
     result = {
         "samples": args.samples,
+        "rounds": args.rounds,
+        "clock": args.clock,
         "minute": minute,
         "day": day,
         "ratio": ratios,
@@ -150,7 +190,10 @@ def main() -> None:
     if args.json:
         print(json.dumps(result, indent=2))
     else:
-        print(f"explain at {args.samples} random t (medians; same fractions of each range)")
+        print(
+            f"explain at {args.samples} random t x {args.rounds} alternating rounds, "
+            f"{args.clock} clock (medians; same fractions of each range)"
+        )
         print(f"{'':14}{'1-minute log':>16}{'24 h log':>16}{'ratio':>10}")
         for key, label in (
             ("call_ms", "call (ms)"),

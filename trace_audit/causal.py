@@ -20,9 +20,8 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import cache
 from itertools import pairwise
-from typing import Any, Union, get_args, get_origin
+from typing import TYPE_CHECKING, Any, Union, get_args, get_origin
 
-import networkx as nx
 from pydantic import BaseModel
 
 from trace_audit.chains import DecisionChains, FactorChain, Link
@@ -34,6 +33,9 @@ from trace_runtime.records import (
     TOPIC_EXECUTION,
     TOPIC_PERCEPTION,
 )
+
+if TYPE_CHECKING:  # networkx is imported by the two functions that return its graphs
+    import networkx as nx
 
 __all__ = [
     "ACTION_NODE",
@@ -47,12 +49,14 @@ __all__ = [
     "TreeNodeView",
     "TreeView",
     "causal_graph",
+    "causal_graph_data",
     "format_value",
     "graph_data",
     "layer_with_defaults",
     "read_decision",
     "split_flags",
     "tree_graph",
+    "tree_graph_data",
 ]
 
 Scalar = float | int | bool | str
@@ -467,6 +471,56 @@ def _tree_view(raw: Mapping[str, Any], command: str | None) -> TreeView:
 # --- graphs ------------------------------------------------------------------------------
 
 
+class _Graph:
+    """A directed graph with attributes, as small as the builders below need.
+
+    ``explain`` builds its graphs here and hands out plain data (``graph_data``), so it
+    does not import networkx (~50-120 ms of a ~0.3 s command: its ``__init__`` imports every
+    algorithm). Nodes and edges iterate in networkx's order (nodes as added; edges by source
+    node in that order, then by target as added), so the data is the same as from a
+    ``networkx.DiGraph`` built by the same calls."""
+
+    def __init__(self, **graph: Any) -> None:
+        self.graph: dict[str, Any] = graph
+        self.nodes: dict[str, dict[str, Any]] = {}
+        self._succ: dict[str, dict[str, dict[str, Any]]] = {}
+
+    def __contains__(self, node: str) -> bool:
+        return node in self.nodes
+
+    def add_node(self, node: str, **attrs: Any) -> None:
+        self.nodes.setdefault(node, {}).update(attrs)
+
+    def add_edge(self, u: str, v: str, **attrs: Any) -> None:
+        for end in (u, v):
+            self.nodes.setdefault(end, {})
+        self._succ.setdefault(u, {}).setdefault(v, {}).update(attrs)
+
+    def edge(self, u: str, v: str) -> dict[str, Any] | None:
+        """The attributes of edge ``u -> v`` (None when there is no such edge)."""
+        return self._succ.get(u, {}).get(v)
+
+    def edges(self) -> Iterable[tuple[str, str, dict[str, Any]]]:
+        for u in self.nodes:
+            for v, data in self._succ.get(u, {}).items():
+                yield u, v, data
+
+    def data(self) -> dict[str, Any]:
+        return {
+            "graph": dict(self.graph),
+            "nodes": [{"id": n, **attrs} for n, attrs in self.nodes.items()],
+            "edges": [{"source": u, "target": v, **attrs} for u, v, attrs in self.edges()],
+        }
+
+    def to_networkx(self) -> nx.DiGraph:
+        import networkx as nx  # only callers that want a DiGraph pay for its import
+
+        g = nx.DiGraph(**self.graph)
+        g.add_nodes_from(self.nodes.items())
+        g.add_edges_from(self.edges())
+        return g
+
+
 def causal_graph(
     cycle: Cycle, chains: DecisionChains, decision: Decision | None = None
 ) -> nx.DiGraph:
@@ -477,6 +531,17 @@ def causal_graph(
     ``level`` (the chain level it documents), ``documented``, ``detail``, ``factors`` (which
     factor chains use it) and, for belief edges, ``rule`` and ``p``.
     """
+    return _causal(cycle, chains, decision).to_networkx()
+
+
+def causal_graph_data(
+    cycle: Cycle, chains: DecisionChains, decision: Decision | None = None
+) -> dict[str, Any]:
+    """``graph_data(causal_graph(...))``, built without networkx."""
+    return _causal(cycle, chains, decision).data()
+
+
+def _causal(cycle: Cycle, chains: DecisionChains, decision: Decision | None) -> _Graph:
     decision = decision or read_decision(cycle)
     belief = _mapping(layer_with_defaults(cycle, TOPIC_BELIEF)) or {}
     perception = _mapping(layer_with_defaults(cycle, TOPIC_PERCEPTION)) or {}
@@ -485,7 +550,7 @@ def causal_graph(
     entities = {str(e.get("id")): e for e in _dicts(perception.get("entities"))}
     sensors = {(m.topic, m.log_time_ns) for m in cycle.sensors}
 
-    g = nx.DiGraph(cycle=cycle.cycle, t_ns=cycle.t_ns, command=decision.command)
+    g = _Graph(cycle=cycle.cycle, t_ns=cycle.t_ns, command=decision.command)
     g.add_node(
         ACTION_NODE,
         kind="action",
@@ -501,7 +566,7 @@ def causal_graph(
 class _GraphBuilder:
     def __init__(
         self,
-        g: nx.DiGraph,
+        g: _Graph,
         nodes: Mapping[str, Mapping[str, Any]],
         edges: Mapping[tuple[str, str], Mapping[str, Any]],
         entities: Mapping[str, Mapping[str, Any]],
@@ -538,8 +603,8 @@ class _GraphBuilder:
         )
 
     def _edge(self, u: str, v: str, chain: FactorChain, link: Link, **attrs: Any) -> None:
-        if self.g.has_edge(u, v):
-            data = self.g.edges[u, v]
+        data = self.g.edge(u, v)
+        if data is not None:
             data["documented"] = data["documented"] or link.documented
             if chain.node not in data["factors"]:
                 data["factors"].append(chain.node)
@@ -696,7 +761,16 @@ def _evidence_label(item: Mapping[str, Any]) -> str:
 
 def tree_graph(tree: TreeView) -> nx.DiGraph:
     """The counterfactual decision tree as a DiGraph; ``taken`` marks the chosen path."""
-    g = nx.DiGraph(root=tree.root, taken_path=list(tree.taken_path))
+    return _tree(tree).to_networkx()
+
+
+def tree_graph_data(tree: TreeView) -> dict[str, Any]:
+    """``graph_data(tree_graph(tree))``, built without networkx."""
+    return _tree(tree).data()
+
+
+def _tree(tree: TreeView) -> _Graph:
+    g = _Graph(root=tree.root, taken_path=list(tree.taken_path))
     for node in tree.nodes:
         g.add_node(
             node.id, label=node.label, test=node.test, command=node.command, taken=node.taken

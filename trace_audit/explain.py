@@ -20,7 +20,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from trace_audit.causal import Decision, causal_graph, graph_data, read_decision, tree_graph
+from trace_audit.causal import Decision, causal_graph_data, read_decision, tree_graph_data
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, DecisionChains, SensorWindow, trace_cycle
 from trace_audit.metrics import MetricsConfig, dr_problems, trust_score
 from trace_audit.timeline import (
@@ -219,8 +219,8 @@ def explain(
         chains = trace_cycle(target, window)
     seal = _check_seal(log, target, back.prev_sealed)
     scores = _scores(target, chains, seal, prev_sealed=back.prev_sealed, period_ns=period)
-    graph = causal_graph(target, chains, decision)
-    tree = graph_data(tree_graph(decision.tree)) if decision.tree else None
+    graph = causal_graph_data(target, chains, decision)
+    tree = tree_graph_data(decision.tree) if decision.tree else None
     return Explanation(
         path=str(log.root),
         robot=log.segments[0].session.robot_id,
@@ -238,7 +238,7 @@ def explain(
         scores=scores,
         seal=seal,
         held=back.held,
-        graph=graph_data(graph),
+        graph=graph,
         tree=tree,
     )
 

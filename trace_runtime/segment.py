@@ -37,17 +37,11 @@ from mcap.records import (
 )
 
 from trace_runtime.errors import TraceError
+from trace_runtime.mcap_file import CHUNK_TABLE_ATTACHMENT, MAGIC
 from trace_runtime.records import LAYER_TOPICS, PROFILE, TOPIC_SEAL
 from trace_runtime.schemas import SENSOR_SCHEMA_NAME, schema_bytes, schema_name
 from trace_runtime.session import SESSION_METADATA, SessionInfo
 
-MAGIC = b"\x89MCAP0\r\n"
-CHUNK_TABLE_ATTACHMENT = "trace.chunk_columns"
-"""An attachment holding every chunk's start times, then end times, then file offsets, each
-a column of little-endian uint64, in time order (written only when the chunks are in time
-order, which the logger guarantees unless the robot's clock runs backwards). Readers map it
-and bisect it in place instead of parsing one Chunk Index record per chunk (36,000 an hour
-at 10 Hz). The Chunk Indexes stay, for every other MCAP tool."""
 LIBRARY = "trace_runtime 0.1"
 _MESSAGE_HEADER = struct.Struct("<BQHIQQ")
 _CHUNK_HEADER = struct.Struct("<BQQQQII")  # opcode, length, start, end, size, crc, compression len

@@ -55,7 +55,35 @@ def test_help_imports_no_library(command: str) -> None:
     )
     loaded = set(out.stderr.split())
     assert "Usage" in out.stdout
-    assert not loaded & set(HEAVY)
+    # rich too: typer's rich help imports rich, markdown-it and pygments (~90 ms)
+    assert not loaded & {*HEAVY, "rich"}
+    # the help is drawn plain, so rich markup in a help text must not show up as tags
+    assert "[bold]" not in out.stdout
+    assert "[/" not in out.stdout
+
+
+def test_a_command_registered_the_usual_way_gets_the_plain_help() -> None:
+    """A new command module needs nothing beyond ``@app.command(...)``: its help loses
+    its rich markup and the command list shows its whole first paragraph."""
+    from typer.testing import CliRunner
+
+    from trace_audit.cli.app import _App, _Group
+
+    demo = _App(cls=_Group, rich_markup_mode=None, add_completion=False)
+    long = "Write a [bold]long[/bold] first paragraph that click would otherwise cut short."
+
+    @demo.command("report", help=f"{long}\n\n[bold]Examples[/bold]:\n\n  demo report x")
+    def report() -> None: ...
+
+    @demo.command("other", help="Another command.")
+    def other() -> None: ...
+
+    runner = CliRunner()
+    top = runner.invoke(demo, ["--help"], terminal_width=200)
+    assert long.replace("[bold]", "").replace("[/bold]", "") in top.output
+    sub = runner.invoke(demo, ["report", "--help"])
+    assert "Examples:" in sub.output
+    assert "[bold]" not in sub.output
 
 
 def test_compact_help_defaults_are_the_librarys() -> None:

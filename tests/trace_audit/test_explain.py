@@ -20,7 +20,14 @@ from tests.trace_audit.conftest import (
     t_ns,
     write_log,
 )
-from trace_audit.causal import causal_graph, read_decision, tree_graph
+from trace_audit.causal import (
+    causal_graph,
+    causal_graph_data,
+    graph_data,
+    read_decision,
+    tree_graph,
+    tree_graph_data,
+)
 from trace_audit.chains import trace_cycle
 from trace_audit.cli import app
 from trace_audit.explain import explain, find_cycle
@@ -237,6 +244,42 @@ def test_graph_and_tree_from_a_cycle(sample_log: Path) -> None:
     assert decision.tree is not None
     t = tree_graph(decision.tree)
     assert [n for n, taken in t.nodes(data="taken") if taken] == ["root", "ped", "stop"]
+
+
+@pytest.mark.parametrize("second", [45, 82, 1])
+def test_graph_data_without_networkx_is_the_networkx_graphs_data(
+    sample_log: Path, tmp_path: Path, second: int
+) -> None:
+    """explain builds its graphs without networkx; the data (order included) is what a
+    networkx DiGraph built by the same calls gives: a documented chain, null evidence refs
+    (placeholders), and a missing belief edge."""
+    path = sample_log
+    if second == 1:
+        path = write_log(tmp_path / "r.mcap", [stretch("ped_close", 3, "no_edge")])
+    cycle = open_log(path).cycle_at(t_ns(second))
+    chains = trace_cycle(cycle)
+    decision = read_decision(cycle)
+    data = causal_graph_data(cycle, chains, decision)
+    assert data == graph_data(causal_graph(cycle, chains, decision))
+    assert orjson.dumps(data) == orjson.dumps(graph_data(causal_graph(cycle, chains, decision)))
+    assert any(not e["documented"] for e in data["edges"]) == (second != 45)
+    if decision.tree is not None:
+        tree = tree_graph_data(decision.tree)
+        assert orjson.dumps(tree) == orjson.dumps(graph_data(tree_graph(decision.tree)))
+
+
+def test_explain_does_not_import_networkx(sample_log: Path) -> None:
+    """networkx is ~50-120 ms of start-up; explain's graphs are plain data."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from trace_audit.explain import explain\n"
+        f"explain({str(sample_log)!r}, t={t_ns(45)})\n"
+        "assert 'networkx' not in sys.modules, 'explain imported networkx'\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
 
 
 def test_warm_summary_cycles_are_read_leniently(sample_log: Path) -> None:

@@ -8,13 +8,14 @@ Exit codes (documented in the README and in ``--help``):
 
 from __future__ import annotations
 
-import json
+import re
 import sys
 from collections.abc import Callable
 from typing import Annotated, Any, NoReturn, TypeVar
 
 import typer
-from typer.core import TyperGroup
+from typer.core import TyperCommand, TyperGroup
+from typer.models import CommandFunctionType
 
 from trace_runtime.errors import TimeOutOfRangeError, TraceError, UsageError
 
@@ -26,12 +27,25 @@ EXIT_USAGE = 2
 EXIT_UNREADABLE = 3
 
 
+# Rich markup written in help texts ("[bold]Examples[/bold]:"): the help is drawn by click's
+# plain formatter (below), so the tags are taken out rather than printed. Only style tags:
+# "[0, 1]" or "[default: 600]" are text.
+_MARKUP_TAG = re.compile(r"\[/?(?:bold|italic|dim|underline|b|i|u)\]|\[/\]")
+
+
+def _plain(text: str | None) -> str | None:
+    return None if text is None else _MARKUP_TAG.sub("", text)
+
+
 class _Group(TyperGroup):
     """typer's group, with a ``--help`` flag that starts as ``False`` rather than unset.
 
     typer (0.29) builds a pydantic ``TypeAdapter`` to coerce every parameter that has no
     value yet, the group's own ``--help`` among them, so ``trace-audit COMMAND --help``
     imported pydantic (~60 ms) before it printed a word; a ``bool`` is left alone."""
+
+    def __init__(self, *args: Any, help: str | None = None, **kwargs: Any) -> None:
+        super().__init__(*args, help=_plain(help), **kwargs)
 
     def get_help_option(self, ctx: Any) -> Any:
         option = super().get_help_option(ctx)
@@ -40,7 +54,41 @@ class _Group(TyperGroup):
         return option
 
 
-app = typer.Typer(
+class _Command(TyperCommand):
+    """A command whose help text may carry rich markup; click's formatter prints it plain.
+
+    The command list shows a command's whole first paragraph (click would cut it at ~45
+    characters with "..."), as typer's rich help did."""
+
+    def __init__(
+        self,
+        *args: Any,
+        help: str | None = None,
+        short_help: str | None = None,
+        **kwargs: Any,
+    ) -> None:
+        help = _plain(help)
+        if short_help is None and help:
+            short_help = " ".join(help.strip().split("\n\n")[0].split())
+        super().__init__(*args, help=help, short_help=short_help, **kwargs)
+
+
+class _App(typer.Typer):
+    """The typer app, whose commands are ``_Command`` unless one asks for another class.
+
+    A command module registers as before (``@app.command("name", help=...)`` in a module
+    imported by ``trace_audit/cli/__init__.py``); nothing in it has to change."""
+
+    def command(
+        self, name: str | None = None, *, cls: type[TyperCommand] | None = None, **kwargs: Any
+    ) -> Callable[[CommandFunctionType], CommandFunctionType]:
+        return super().command(name, cls=cls or _Command, **kwargs)
+
+
+# The help is drawn by click's plain formatter (``rich_markup_mode=None``), not typer's rich
+# panels: typer's rich help imports rich, markdown-it and pygments (~90 ms), which put every
+# ``--help`` at 7x a bare interpreter against a budget of 4x (docs/performance.md, CLI start-up).
+app = _App(
     name="trace-audit",
     cls=_Group,
     help=(
@@ -51,7 +99,9 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
-    rich_markup_mode="rich",
+    rich_markup_mode=None,
+    # As wide as the terminal up to 100 columns (click's default stops at 80); commands inherit it.
+    context_settings={"max_content_width": 100},
 )
 
 JsonOption = Annotated[bool, typer.Option("--json", help="Print machine-readable JSON on stdout.")]
@@ -104,6 +154,8 @@ def guarded(call: Callable[[], T]) -> T:
 
 def print_json(value: Any) -> None:
     """Write ``value`` (pydantic model, dataclass tree or plain data) as JSON on stdout."""
+    import json  # here, not at the top: start-up (``--help``) does not need it
+
     from trace_audit.jsonout import to_jsonable
 
     sys.stdout.write(json.dumps(to_jsonable(value), indent=2, ensure_ascii=False) + "\n")

@@ -10,7 +10,6 @@ Both fit the terminal width (80 columns when it is unknown).
 
 from __future__ import annotations
 
-import logging
 import os
 import shutil
 import sys
@@ -147,23 +146,31 @@ def _width() -> int:
     return max(40, shutil.get_terminal_size((80, 24)).columns)
 
 
-class _StderrLine(logging.Handler):
-    """One ``trace-audit: warning: ...`` line on whatever ``sys.stderr`` is at the time."""
-
-    def emit(self, record: logging.LogRecord) -> None:
-        try:
-            sys.stderr.write(f"trace-audit: {record.levelname.lower()}: {record.getMessage()}\n")
-        except (OSError, ValueError):  # stderr closed or unable to encode the message
-            self.handleError(record)
+_HANDLER_NAME = "trace-audit stderr line"
 
 
 def setup_logging() -> None:
     """Library warnings (e.g. a recovered segment) as one ``trace-audit: warning:`` line."""
+    import logging  # here, not at the top: ``--help`` never logs (start-up budget)
+
+    class StderrLine(logging.Handler):
+        """One ``trace-audit: warning: ...`` line on whatever ``sys.stderr`` is at the time."""
+
+        def emit(self, record: logging.LogRecord) -> None:
+            try:
+                sys.stderr.write(
+                    f"trace-audit: {record.levelname.lower()}: {record.getMessage()}\n"
+                )
+            except (OSError, ValueError):  # stderr closed or unable to encode the message
+                self.handleError(record)
+
     logger = logging.getLogger("trace_runtime")
     # With a handler here Python's last-resort printer stays quiet; propagation is left on
     # so an application (or pytest) that configured the root logger still sees the record.
-    if not any(isinstance(h, _StderrLine) for h in logger.handlers):
-        logger.addHandler(_StderrLine(logging.WARNING))
+    if not any(h.get_name() == _HANDLER_NAME for h in logger.handlers):
+        handler = StderrLine(logging.WARNING)
+        handler.set_name(_HANDLER_NAME)
+        logger.addHandler(handler)
     if logger.level == logging.NOTSET:
         logger.setLevel(logging.WARNING)
 
