@@ -197,21 +197,27 @@ def _factor_axis(ax: Axes, data: ReportData, name: str) -> None:
             cf.text,
             (1.0, threshold),
             xycoords=("axes fraction", "data"),
+            xytext=(-4, 3),
+            textcoords="offset points",
             ha="right",
             va="bottom",
             fontsize=8,
             color=command_colour(cf.would_select),
+            bbox={"fc": "white", "ec": "none", "alpha": 0.85, "pad": 1},
         )
     now = next((f for f in data.decision.factors if f.label == name), None)
     value = _number(now.value) if now is not None else None
     if now is not None and value is not None:
         ax.plot([_seconds(data.explanation.t_ns)], [value], "o", color=_MARKED, ms=5)
         ax.annotate(
-            f" {now.shown}",
+            now.shown,
             (_seconds(data.explanation.t_ns), value),
+            xytext=(6, 6),
+            textcoords="offset points",
             fontsize=8,
             fontweight="bold",
-            va="center",
+            va="bottom",
+            bbox={"fc": "white", "ec": "none", "alpha": 0.85, "pad": 1},
         )
     ax.set_ylabel(f"{name} ({unit})" if unit else name)
     ax.set_xlim(_seconds(data.start_ns), _seconds(data.end_ns))

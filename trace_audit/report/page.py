@@ -54,7 +54,9 @@ h1 { font-size: 1.6rem; margin: 0 0 .2rem; }
 h2 { font-size: 1.2rem; margin: 2rem 0 .6rem; padding-bottom: .25rem;
      border-bottom: 2px solid var(--line); }
 h3 { font-size: 1rem; margin: 1.2rem 0 .4rem; }
-p.lead { font-size: 1.15rem; margin: .6rem 0 1rem; }
+p.lead { font-size: 1.15rem; margin: .6rem 0 .4rem; }
+#in-short { background: #f6f8fa; border-left: 4px solid #8aa4c8; padding: .5rem .8rem;
+            margin: .4rem 0 1rem; }
 .muted, .note { color: var(--muted); }
 .note { font-size: .9rem; }
 .verdict { display: inline-block; padding: .15rem .6rem; border-radius: .3rem;
@@ -172,8 +174,35 @@ def _header(data: ReportData) -> str:
     return (
         f'<header><p class="muted">TRACE incident report · {escape(data.path)}</p>'
         f"<h1>{escape(e.robot)}: {_command(d.command)} at {escape(_t(e.t_ns))}</h1>"
-        f'<p class="lead" id="reason">{escape(reason)}</p></header>'
+        f'<p class="lead" id="reason">{escape(reason)}</p>'
+        f'<p id="in-short">{_in_short(data)}</p></header>'
     )
+
+
+def _in_short(data: ReportData) -> str:
+    """The page in three sentences, for a reader who has never seen the tool."""
+    e, d = data.explanation, data.decision
+    leading = d.leading
+    first = f"The robot {escape(e.robot)} chose {escape(d.command or 'no logged action')}"
+    first += f" at {escape(_t(e.t_ns))}"
+    first += (
+        f", mainly because {escape(leading.label)} was {escape(leading.shown)}."
+        if leading
+        else "; it logged no factor for it."
+    )
+    what_ifs = [cf.text for cf in d.counterfactuals]
+    second = f" It {escape(' and '.join(what_ifs))}." if what_ifs else ""
+    factors = e.chains.factors
+    traced = sum(1 for c in factors if c.traceable)
+    third = (
+        f" {traced} of {len(factors)} factors trace back to a logged sensor reading, and the "
+        + (
+            "record of this decision verifies (not altered)."
+            if e.seal.verified
+            else '<span class="bad">record of this decision does NOT verify</span>.'
+        )
+    )
+    return first + second + third
 
 
 def _clock_line(data: ReportData) -> str:
