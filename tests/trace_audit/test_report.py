@@ -171,6 +171,11 @@ def test_a_hostile_log_cannot_inject_markup_or_fetch_anything(tmp_path: Path) ->
     assert "does NOT verify" in page.section_text["integrity"]  # the edit broke the seal
 
 
+def test_a_system_clock_is_also_shown_in_utc(sample_log: Path) -> None:
+    text = parse_report(build_report(sample_log, t=t_s(45)).html).section_text["summary"]
+    assert "(system) = 1970-01-01T00:01:44.500+00:00" in text  # t = 104.5 s after the epoch
+
+
 def test_a_crashed_log_is_reported_and_said_so(crashed_log: Path) -> None:
     page = parse_report(build_report(crashed_log, t=t_s(45)).html)
     assert "recovered from a segment the robot did not close" in page.section_text["summary"]

@@ -82,6 +82,8 @@ def execution_channels(view: ExecutionView) -> dict[str, tuple[float | None, flo
     The one place that knows the shape of the execution record's motion: when the record
     gains channels (joints, a gripper), they are added here and every figure and table of
     the report shows them."""
+    if view.intended == (None, None) and view.actual == (None, None):
+        return {}  # no planar motion logged
     return {
         "linear speed (m/s)": (view.intended[0], view.actual[0]),
         "angular speed (rad/s)": (view.intended[1], view.actual[1]),

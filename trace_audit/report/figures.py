@@ -239,7 +239,7 @@ def scene_figure(data: ReportData) -> str:
     with _style():
         fig = _figure(7.5, 4.4)
         ax = fig.add_subplot()
-        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_aspect("equal", adjustable="box")
         robot = data.robot
         if robot is not None:
             _draw_robot(ax, robot.x, robot.y, robot.heading_rad)
@@ -281,11 +281,28 @@ def scene_figure(data: ReportData) -> str:
         ax.grid(True, lw=0.4, alpha=0.5)
         if not placed and robot is None:
             ax.text(0.5, 0.5, "no pose logged", ha="center", transform=ax.transAxes)
-        ax.margins(0.25)
+        else:
+            points = [(float(e.x or 0.0), float(e.y or 0.0)) for e in placed]
+            if robot is not None:
+                points.append((robot.x, robot.y))
+            _frame(ax, points)
         return _svg(fig, "scene", "The robot and the entities it perceived at the decision")
 
 
 _ENTITY = "#1f4e79"
+_MIN_SPAN_M = 4.0
+"""The scene shows at least this many metres each way, so a lone entity is not a dot in a
+blown-up grid of centimetres."""
+
+
+def _frame(ax: Axes, points: list[tuple[float, float]]) -> None:
+    xs, ys = [p[0] for p in points], [p[1] for p in points]
+    cx, cy = (min(xs) + max(xs)) / 2, (min(ys) + max(ys)) / 2
+    half = max(max(xs) - min(xs), max(ys) - min(ys), _MIN_SPAN_M) * 0.65
+    ax.set_xlim(cx - half * 1.6, cx + half * 1.6)  # the plot is wider than tall
+    ax.set_ylim(cy - half, cy + half)
+
+
 _LABEL_OFFSETS = ((28, 26), (28, -30), (-28, 26), (-28, -30))
 
 
@@ -360,7 +377,8 @@ def causal_figure(data: ReportData) -> str:
         pos = nx.multipartite_layout(g, subset_key="layer", align="vertical", scale=1.0)
         layers = 1 + max(g.nodes[n]["layer"] for n in g)
         tallest = max(sum(1 for n in g if g.nodes[n]["layer"] == i) for i in range(layers))
-        fig = _figure(7.5, max(1.3, 0.8 * tallest + 0.4))
+        broken = any(not d["documented"] for _, _, d in g.edges(data=True))
+        fig = _figure(7.5, max(1.6, 0.8 * tallest + 0.7) + (0.9 if broken else 0.0))
         ax = fig.add_subplot()
         ax.axis("off")
         _draw_causal(ax, g, pos)
@@ -374,46 +392,60 @@ def _edge_attrs(edge: Mapping[str, Any]) -> dict[str, Any]:
     }
 
 
+def _half_width_pt(label: str) -> float:
+    """About half the width of a node's box in points (7 pt text, wrapped as drawn)."""
+    longest = max((len(line) for line in _node_text(label).splitlines()), default=1)
+    return 1.9 * longest + 5.0
+
+
+def _node_text(label: str) -> str:
+    lines = textwrap.wrap(label, 13, break_long_words=False) or [""]
+    return "\n".join(lines[:4] + (["…"] if len(lines) > 4 else []))
+
+
+_ARC = 0.3
+"""Bend of an edge that skips a layer, so it arcs over the nodes in between."""
+_BELOW = 0.1
+"""How far under the row of nodes the reason of a broken link is written (layout units)."""
+
+
 def _draw_causal(ax: Axes, g: Any, pos: Mapping[str, Any]) -> None:
     import networkx as nx
 
-    documented = [(u, v) for u, v, d in g.edges(data=True) if d["documented"]]
-    broken = [(u, v) for u, v, d in g.edges(data=True) if not d["documented"]]
-    nx.draw_networkx_edges(
-        g,
-        pos,
-        edgelist=documented,
-        ax=ax,
-        edge_color="#555555",
-        arrows=True,
-        arrowsize=10,
-        node_size=2600,
-        width=1.0,
-    )
-    nx.draw_networkx_edges(
-        g,
-        pos,
-        edgelist=broken,
-        ax=ax,
-        edge_color=_BROKEN,
-        style="dashed",
-        arrows=True,
-        arrowsize=10,
-        node_size=2600,
-        width=1.4,
-    )
-    for u, v in broken:
+    layer = {n: g.nodes[n]["layer"] for n in g}
+    for u, v, d in g.edges(data=True):
+        long = layer[v] - layer[u] > 1
+        nx.draw_networkx_edges(
+            g,
+            pos,
+            edgelist=[(u, v)],
+            ax=ax,
+            arrows=True,
+            arrowsize=10,
+            edge_color="#555555" if d["documented"] else _BROKEN,
+            style="solid" if d["documented"] else "dashed",
+            width=1.0 if d["documented"] else 1.4,
+            connectionstyle=f"arc3,rad={-_ARC if long else 0.0}",
+            min_source_margin=_half_width_pt(str(g.nodes[u].get("label", u))),
+            min_target_margin=_half_width_pt(str(g.nodes[v].get("label", v))),
+        )
+        if d["documented"]:
+            continue
+        # The reason goes under the broken link (the nodes leave no room beside it), joined
+        # to it by a thin red leader.
         (x1, y1), (x2, y2) = pos[u], pos[v]
-        detail = g.edges[u, v]["detail"]
-        ax.text(
-            (x1 + x2) / 2,
-            (y1 + y2) / 2,
-            _wrap("BROKEN: " + detail, 26, 3),
+        lift = _ARC * abs(x2 - x1) / 2 if long else 0.0
+        mid = ((x1 + x2) / 2, (y1 + y2) / 2 + lift)
+        ax.annotate(
+            _wrap("BROKEN: " + d["detail"], 20, 4),
+            mid,
+            xytext=(mid[0], min(y1, y2) - _BELOW),
             fontsize=6.5,
             color=_BROKEN,
             ha="center",
-            va="center",
-            bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": _BROKEN, "lw": 0.6},
+            va="top",
+            bbox={"boxstyle": "round,pad=0.25", "fc": "white", "ec": _BROKEN, "lw": 0.6},
+            arrowprops={"arrowstyle": "-", "color": _BROKEN, "lw": 0.6},
         )
     for node, (x, y) in pos.items():
         attrs = g.nodes[node]
@@ -421,7 +453,7 @@ def _draw_causal(ax: Axes, g: Any, pos: Mapping[str, Any]) -> None:
         ax.text(
             x,
             y,
-            _wrap(str(attrs.get("label", node)), 22, 4),
+            _node_text(str(attrs.get("label", node))),
             fontsize=7,
             ha="center",
             va="center",
@@ -435,8 +467,13 @@ def _draw_causal(ax: Axes, g: Any, pos: Mapping[str, Any]) -> None:
         )
     xs = [p[0] for p in pos.values()]
     ys = [p[1] for p in pos.values()]
+    arcs = [_ARC * abs(pos[v][0] - pos[u][0]) / 2 for u, v in g.edges() if layer[v] - layer[u] > 1]
+    broken = any(not d["documented"] for _, _, d in g.edges(data=True))
     ax.set_xlim(min(xs) - 0.12, max(xs) + 0.12)
-    ax.set_ylim(min(ys) - 0.12, max(ys) + 0.12)
+    ax.set_ylim(
+        min(ys) - (0.12 + 3 * _BELOW if broken else 0.12),
+        max(ys) + 0.12 + max(arcs, default=0.0),
+    )
 
 
 # --- the counterfactual tree -------------------------------------------------------------
