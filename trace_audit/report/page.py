@@ -79,7 +79,9 @@ ul.problems li { color: var(--bad); }
 footer { margin-top: 2rem; color: var(--muted); font-size: .85rem; }
 @page { size: A4; margin: 14mm 12mm; }
 @media print {
-  body { background: white; font-size: 10.5pt; }
+  /* the command and verdict badges are white text on colour: keep the colour on paper */
+  body { background: white; font-size: 10.5pt; -webkit-print-color-adjust: exact;
+         print-color-adjust: exact; }
   main { max-width: none; padding: 0; }
   h2 { break-after: avoid; }
   figure, table, pre { break-inside: avoid; }
