@@ -176,6 +176,28 @@ def test_a_system_clock_is_also_shown_in_utc(sample_log: Path) -> None:
     assert "(system) = 1970-01-01T00:01:44.500+00:00" in text  # t = 104.5 s after the epoch
 
 
+def test_a_log_with_hundreds_of_entities_gives_a_bounded_page(
+    sample_log: Path, tmp_path: Path
+) -> None:
+    from tests.trace_audit.conftest import rewrite_segment
+    from trace_runtime.records import TOPIC_PERCEPTION
+
+    def crowd(msg: Any) -> bytes:
+        if msg.topic != TOPIC_PERCEPTION:
+            return bytes(msg.data)
+        perception = json.loads(msg.data)
+        template = perception["entities"][0] if perception["entities"] else None
+        if template is not None:
+            perception["entities"] += [{**template, "id": f"e{i}"} for i in range(2000)]
+        return json.dumps(perception).encode()
+
+    crowded = rewrite_segment(sample_log, tmp_path / "crowd.mcap", crowd)
+    report = build_report(crowded, t=t_s(45))
+    assert len(report.data.entities) == 2001
+    assert report.size_bytes < 2_000_000
+    assert "the first 60 of 2001 entities" in parse_report(report.html).section_text["scene"]
+
+
 def test_a_crashed_log_is_reported_and_said_so(crashed_log: Path) -> None:
     page = parse_report(build_report(crashed_log, t=t_s(45)).html)
     assert "recovered from a segment the robot did not close" in page.section_text["summary"]
@@ -260,3 +282,16 @@ def test_cli_errors_are_one_line_with_the_documented_code(sample_log: Path, tmp_
 def test_cli_help_shows_an_example() -> None:
     done = runner.invoke(app, ["report", "--help"])
     assert done.exit_code == 0 and "trace-audit report run.mcap --t 20.0" in done.output
+
+
+def test_cli_reports_a_cycle_number_and_says_where_it_wrote(
+    sample_log: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "by-cycle.html"
+    done = _cli("report", sample_log, "--cycle", "45", "--out", out, "--json")
+    assert done.exit_code == 0, done.output
+    summary = json.loads(done.stdout)
+    assert (summary["cycle"], summary["t_ns"]) == (45, t_ns(45))
+    assert summary["out"] == str(out.resolve()) and out.stat().st_size == summary["size_bytes"]
+    plain = _cli("report", sample_log, "--cycle", "45", "--out", out, "--plain")
+    assert plain.exit_code == 0 and str(out.resolve()) in plain.stdout

@@ -24,6 +24,9 @@ if TYPE_CHECKING:
 
 __all__ = [
     "COMMAND_COLOURS",
+    "MAX_ENTITIES",
+    "MAX_FACTORS",
+    "MAX_GRAPH_NODES",
     "causal_figure",
     "command_colour",
     "execution_figure",
@@ -38,6 +41,12 @@ COMMAND_COLOURS = {
     "CONTINUE": "#2ca02c",
     "REROUTE": "#1f77b4",
 }
+# A log may hold anything (docs/integrity.md, hostile files): the figures draw at most this
+# much, and the page says what was left out; explain --json has all of it.
+MAX_FACTORS = 8
+MAX_ENTITIES = 60
+MAX_GRAPH_NODES = 150
+
 _OTHER_COLOURS = ("#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
 _MARKED = "#222222"
 _BROKEN = "#c0392b"
@@ -162,7 +171,7 @@ def _command_legend(fig: Figure, data: ReportData, extra: Sequence[Any] = ()) ->
 def factors_figure(data: ReportData) -> str:
     """Each factor of the decision over the window, its thresholds, the commands as bands."""
     names = list(data.factor_units)
-    numeric = [n for n in names if any(n in s.factors for s in data.samples)]
+    numeric = [n for n in names if any(n in s.factors for s in data.samples)][:MAX_FACTORS]
     with _style():
         rows = max(1, len(numeric))
         fig = _figure(7.5, 1.2 + 1.7 * rows)
@@ -235,7 +244,7 @@ _CLASS_MARKERS = {"person": "o", "forklift": "s", "vehicle": "s", "pallet": "D",
 def scene_figure(data: ReportData) -> str:
     """Top-down plot of the robot and the entities it perceived at t; entities whose
     evidence failed are drawn hollow and red, each entity's logged distance as a line."""
-    placed = [e for e in data.entities if e.x is not None and e.y is not None]
+    placed = [e for e in data.entities[:MAX_ENTITIES] if e.x is not None and e.y is not None]
     with _style():
         fig = _figure(7.5, 4.4)
         ax = fig.add_subplot()
@@ -365,7 +374,7 @@ def causal_figure(data: ReportData) -> str:
     for edge in graph["edges"]:
         g.add_edge(edge["source"], edge["target"], **_edge_attrs(edge))
     with _style():
-        if g.number_of_nodes() == 0 or not nx.is_directed_acyclic_graph(g):
+        if not 0 < g.number_of_nodes() <= MAX_GRAPH_NODES or not nx.is_directed_acyclic_graph(g):
             fig = _figure(7.5, 1.5)
             ax = fig.add_subplot()
             ax.axis("off")
@@ -496,7 +505,7 @@ def tree_figure(data: ReportData) -> str | None:
             **{k: v for k, v in edge.items() if k not in ("source", "target")},
         )
     root = tree["graph"].get("root")
-    if root not in source or not nx.is_tree(source):
+    if root not in source or len(source) > MAX_GRAPH_NODES or not nx.is_tree(source):
         return None
     pos = _tidy_layout(source, root)
     depth = 1 + round(-min(y for _, y in pos.values()))

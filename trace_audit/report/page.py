@@ -19,6 +19,9 @@ from trace_audit.causal import format_value
 from trace_audit.jsonout import to_jsonable
 from trace_audit.report.data import ReportData, execution_channels
 from trace_audit.report.figures import (
+    MAX_ENTITIES,
+    MAX_FACTORS,
+    MAX_GRAPH_NODES,
     causal_figure,
     command_colour,
     execution_figure,
@@ -350,6 +353,8 @@ def _factors(data: ReportData) -> str:
         "are the thresholds its counterfactuals name; the background colour is the command "
         "in force; the black line marks the decision explained."
     )
+    if len(d.factors) > MAX_FACTORS:
+        caption += f" The first {MAX_FACTORS} of {len(d.factors)} factors are plotted."
     return table + _figure(factors_figure(data), caption)
 
 
@@ -358,7 +363,7 @@ def _scene(data: ReportData) -> str:
         kept = "" if data.entities_retained else " (perception not retained in this tier)"
         return f'<p class="note">No perceived entities logged{escape(kept)}.</p>'
     rows = []
-    for entity in data.entities:
+    for entity in data.entities[:MAX_ENTITIES]:
         evidence = (
             "<br>".join(
                 escape(f"{ev.sensor} (w={format_value(ev.weight)}) {ev.region}; ref {ev.ref}")
@@ -391,6 +396,11 @@ def _scene(data: ReportData) -> str:
     )
     if data.robot is None:
         caption += " The robot did not log its own pose (robot_pose), so it is not drawn."
+    if len(data.entities) > MAX_ENTITIES:
+        caption += (
+            f" Shown: the first {MAX_ENTITIES} of {len(data.entities)} entities "
+            "(explain --json lists all)."
+        )
     return _figure(scene_figure(data), caption) + _table(
         [
             "entity",
@@ -427,6 +437,12 @@ def _causal(data: ReportData) -> str:
         "belief graph to the factor and the action (right). A dashed red link is one the log "
         "does not document, with the reason."
     )
+    if len(data.explanation.graph["nodes"]) > MAX_GRAPH_NODES:
+        caption = (
+            f"The graph has {len(data.explanation.graph['nodes'])} nodes, more than the "
+            f"{MAX_GRAPH_NODES} drawn here: the table below and "
+            "trace-audit export --format dot show it."
+        )
     return _figure(causal_figure(data), caption) + table
 
 
@@ -468,7 +484,8 @@ def _counterfactuals(data: ReportData) -> str:
     tree_html = (
         _figure(tree, "The policy's decision tree; the path taken is bold green.")
         if tree is not None
-        else '<p class="note">No counterfactual tree logged (or it is not a tree).</p>'
+        else '<p class="note">No tree drawn: none logged, not a tree, or over '
+        f"{MAX_GRAPH_NODES} nodes (explain shows it).</p>"
     )
     if d.tree is not None:
         tree_html += _problems(d.tree.problems)
