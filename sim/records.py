@@ -119,6 +119,8 @@ def perception_record(
         "entities": entities,
         "sensors_used": list(out.sensors_used),
         "sensors_unavailable": list(out.sensors_unavailable),
+        # where the robot itself was: the incident report's scene places it by this
+        "robot_pose": {"position": (round(ox, 3), round(oy, 3), 0.0), "orientation": _quat(h)},
     }
 
 

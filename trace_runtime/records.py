@@ -140,6 +140,10 @@ class Perception(_Record):
     entities: list[Entity] = Field(default_factory=list)
     sensors_used: list[str] = Field(default_factory=list)
     sensors_unavailable: list[str] = Field(default_factory=list)
+    robot_pose: Pose | None = Field(
+        default=None,
+        description="the robot's own pose at this cycle, in the frame of the entities' poses",
+    )
 
 
 # --- layer 2: belief -------------------------------------------------------------------

@@ -55,9 +55,9 @@ CASES: dict[str, RunConfig] = {
 }
 
 GOLDEN = {
-    "paper": "2f208603cd25640ead60b55d8d3dc1561730087250daf79a672e24db5db9d78f",
-    "heavy": "d3ba00c43d0c5211b819ce1aca8b34a07bea4eedac8d020b2f56b5aeb7f1f3a8",
-    "duration": "748807d54619e4aeed8b6e975d7c1697fdba7f45b6d9fc94e8fef9b4fd197d21",
+    "paper": "dcf8b64a313b684a5b83377bd780fbdf8359003bb3f9afe9f479ba00a13b459c",
+    "heavy": "e4f8da915f396397775c5a6b25cc742c99bb414c8331787822d57a5991d77773",
+    "duration": "5b9d8e79bcaa6b4cc7bedeba6d66e8c7de9a124726f6135e01d3677c6ae084d0",
 }
 
 

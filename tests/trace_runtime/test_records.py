@@ -321,7 +321,8 @@ def test_a_message_model_handed_over_as_its_layer_is_written_without_duplicate_k
     data = layer_message(Perception, 1, 2, message)
     assert (
         data
-        == b'{"cycle":1,"t_ns":2,"entities":[],"sensors_used":["lidar"],"sensors_unavailable":[]}'
+        == b'{"cycle":1,"t_ns":2,"entities":[],"sensors_used":["lidar"],"sensors_unavailable":[],'
+        b'"robot_pose":null}'
     )
 
 

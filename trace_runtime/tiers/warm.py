@@ -304,7 +304,7 @@ def summarize(layers: dict[str, Any]) -> dict[str, Any]:
         out[TOPIC_PERCEPTION] = {
             **_stamp(perception),
             "entities": entities,
-            **_pick(perception, ("sensors_used", "sensors_unavailable")),
+            **_pick(perception, ("sensors_used", "sensors_unavailable", "robot_pose")),
         }
     execution = layers.get(TOPIC_EXECUTION)
     if isinstance(execution, dict):

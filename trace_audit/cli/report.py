@@ -1,0 +1,143 @@
+"""``trace-audit report``: the incident report of one decision as a self-contained HTML page."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
+
+import typer
+
+from trace_audit.cli.app import JsonOption, PlainOption, app, guarded, help_text
+from trace_audit.cli.investigate import LogArgument, TimeOption
+from trace_audit.cli.render import Doc, Seg, emit
+
+if TYPE_CHECKING:
+    from trace_audit.report import IncidentReport
+
+_REPORT_HELP = """Write the incident report of the decision in force at a time: one HTML
+file to read, print, archive and hand over.
+
+The page shows the decision and its one-sentence reason, the integrity of the record
+(seal, hash chain, checkpoints, signatures with --key), the leading factors over a window
+around t with the decision thresholds and the commands as coloured bands, the scene the
+robot perceived with the evidence behind each entity, the causal chain as a graph (broken
+links marked with their reason), the alternatives, counterfactuals and decision tree, the
+execution (intended vs actual), the auditability scores of the decision and of the window,
+and the commands that regenerate each section. Numbers are those of explain, timeline,
+metrics and verify; the page loads nothing from the network (figures are inline SVG).
+
+The window runs from 2/3 of --window before t to 1/3 after it, within the log. Integrity
+findings are shown in the report and do not change the exit code (use verify for that).
+
+[bold]Examples[/bold]:
+
+  trace-audit report run.mcap --t 20.0
+
+  trace-audit report logs/ --t +600 --window 60s --out incident.html --key keys/robot.pub
+
+  trace-audit report run.mcap --cycle 200 --json
+"""
+
+
+@app.command("report", help=help_text(_REPORT_HELP))
+def report_command(  # noqa: PLR0917 - typer maps each parameter to an option
+    log: LogArgument,
+    t: TimeOption = None,
+    cycle: Annotated[
+        int | None,
+        typer.Option(
+            "--cycle", help="Report on this cycle number instead of a time.", show_default=False
+        ),
+    ] = None,
+    window: Annotated[
+        str,
+        typer.Option(
+            "--window", help="Length of the window shown: seconds (30, 30s) or minutes (2m)."
+        ),
+    ] = "30s",
+    out: Annotated[Path, typer.Option("--out", help="The HTML file to write.")] = Path(
+        "incident.html"
+    ),
+    key: Annotated[
+        Path | None,
+        typer.Option(
+            "--key",
+            help="The robot's Ed25519 public key, to check checkpoint signatures.",
+            show_default=False,
+        ),
+    ] = None,
+    json_out: JsonOption = False,
+    plain: PlainOption = False,
+) -> None:
+    from trace_audit.report import build_report, parse_window, write_report
+    from trace_runtime.integrity import load_public_key
+
+    def run() -> tuple[IncidentReport, Path]:
+        public = load_public_key(key) if key is not None else None
+        report = build_report(log, t=t, cycle=cycle, window_s=parse_window(window), key=public)
+        return report, write_report(report, out)
+
+    if json_out or plain or not sys.stderr.isatty():
+        report, written = guarded(run)
+    else:
+        with _status():
+            report, written = guarded(run)
+    emit(_summary(report, written), _summary_doc, json_out=json_out, plain=plain)
+
+
+def _status() -> Any:
+    from rich.console import Console
+
+    return Console(stderr=True).status("gathering and drawing the incident report ...")
+
+
+def _summary(report: IncidentReport, written: Path) -> dict[str, Any]:
+    from trace_audit.report.page import SECTIONS
+
+    data = report.data
+    e = data.explanation
+    return {
+        "out": str(written.resolve()),
+        "size_bytes": report.size_bytes,
+        "robot": e.robot,
+        "cycle": e.cycle,
+        "t_ns": e.t_ns,
+        "command": e.decision.command,
+        "window_start_ns": data.start_ns,
+        "window_end_ns": data.end_ns,
+        "cycles_in_window": len(data.samples),
+        "integrity_ok": data.integrity.ok and e.seal.verified,
+        "integrity_findings": len(data.integrity.findings),
+        "sections": [section for section, _ in SECTIONS],
+    }
+
+
+def _summary_doc(summary: dict[str, Any]) -> Doc:
+    doc = Doc()
+    doc.title(["Incident report: ", Seg(summary["out"], "bold")])
+    integrity = (
+        Seg("clean", "green")
+        if summary["integrity_ok"]
+        else Seg(
+            f"NOT clean ({summary['integrity_findings']} findings; see the report)", "bold red"
+        )
+    )
+    doc.fields(
+        [
+            (
+                "Decision",
+                f"{summary['robot']} {summary['command']} at "
+                f"{summary['t_ns'] / 1e9:.3f} s (cycle {summary['cycle']})",
+            ),
+            (
+                "Window",
+                f"{summary['window_start_ns'] / 1e9:.3f} s to "
+                f"{summary['window_end_ns'] / 1e9:.3f} s, "
+                f"{summary['cycles_in_window']} cycles",
+            ),
+            ("Integrity", integrity),
+            ("Size", f"{summary['size_bytes'] / 1024:.0f} KiB"),
+        ]
+    )
+    return doc

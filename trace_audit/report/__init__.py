@@ -1,0 +1,87 @@
+"""The incident report: one self-contained HTML page about one decision, to hand over.
+
+``build_report(log, t=...)`` gathers the decision (``explain``), the commands and factors
+over a window around it (``timeline``), the window's auditability (``compute_metrics``) and
+integrity (``verify``), and renders them with inline SVG figures (matplotlib, networkx) into
+a page that loads nothing from anywhere::
+
+    from trace_audit.report import build_report
+
+    report = build_report("run.mcap", t="20.0", window_s=30)
+    Path("incident.html").write_text(report.html, encoding="utf-8")
+
+matplotlib is the ``report`` extra; it is imported only when a figure is drawn.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from trace_audit.report.data import (
+    DEFAULT_WINDOW_S,
+    ReportData,
+    execution_channels,
+    gather_report,
+    parse_window,
+)
+from trace_audit.timeline import TimeArg
+from trace_runtime.errors import UsageError
+from trace_runtime.integrity import PublicKey
+
+__all__ = [
+    "DEFAULT_WINDOW_S",
+    "IncidentReport",
+    "ReportData",
+    "build_report",
+    "execution_channels",
+    "gather_report",
+    "parse_window",
+    "write_report",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class IncidentReport:
+    """The rendered page and the data it shows."""
+
+    data: ReportData
+    html: str
+
+    @property
+    def size_bytes(self) -> int:
+        return len(self.html.encode("utf-8"))
+
+
+def build_report(
+    path: str | Path,
+    *,
+    t: TimeArg = None,
+    cycle: int | None = None,
+    window_s: float = DEFAULT_WINDOW_S,
+    key: PublicKey | None = None,
+    command_name: str = "trace-audit",
+) -> IncidentReport:
+    """The incident report of the decision in force at ``t`` (or cycle ``cycle``)."""
+    try:
+        import matplotlib  # noqa: F401 - the report extra
+    except ImportError as err:
+        raise UsageError("the report needs matplotlib: pip install 'trace-audit[report]'") from err
+    from trace_audit.report.page import render_page
+
+    data = gather_report(path, t=t, cycle=cycle, window_s=window_s, key=key)
+    return IncidentReport(data, render_page(data, command_name=command_name))
+
+
+def write_report(report: IncidentReport, out: str | Path) -> Path:
+    """Write the page to ``out`` (through a temporary file, so a reader never sees half a
+    report); ``UsageError`` when the path cannot be written."""
+    target = Path(out)
+    partial = target.with_name(f".{target.name}.partial")
+    try:
+        partial.write_text(report.html, encoding="utf-8")
+        partial.replace(target)
+    except OSError as err:
+        partial.unlink(missing_ok=True)
+        raise UsageError(f"cannot write the report to {target}: {err.strerror or err}") from err
+    return target

@@ -1,0 +1,377 @@
+"""What the incident report shows, gathered from the investigator's own library calls.
+
+``gather_report`` asks the same questions the terminal commands ask, and nothing else:
+``explain`` for the decision at t, ``timeline`` for the commands over the window,
+``compute_metrics`` (with the window as its analysis window) for TC, gaps and drops, and
+``verify`` over the segments that hold the window for integrity. What the figures need
+beyond that (a factor's value in each cycle of the window, the scene at t) is read from the
+same cycles with ``read_decision`` and the chain walker's ``SensorWindow``, so a number in
+the report is the number ``explain --json`` prints.
+
+The window runs from two thirds of ``window_s`` before t to one third after it (clipped to
+the log): how the situation built up, and what the robot did next.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from trace_audit.causal import (
+    Decision,
+    ExecutionView,
+    format_value,
+    layer_with_defaults,
+    read_decision,
+)
+from trace_audit.chains import DEFAULT_SENSOR_WINDOW, SensorWindow
+from trace_audit.explain import Explanation, explain
+from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
+from trace_audit.timeline import TimeArg, Timeline, as_log, timeline
+from trace_runtime.cycles import Cycle
+from trace_runtime.errors import UsageError
+from trace_runtime.integrity import PublicKey
+from trace_runtime.logset import Log
+from trace_runtime.records import TOPIC_BELIEF, TOPIC_PERCEPTION
+from trace_runtime.session import SessionInfo
+from trace_runtime.verification import VerifyReport, verify
+
+__all__ = [
+    "DEFAULT_WINDOW_S",
+    "EntityView",
+    "EvidenceView",
+    "ReportData",
+    "RobotPose",
+    "Sample",
+    "execution_channels",
+    "gather_report",
+    "parse_window",
+]
+
+DEFAULT_WINDOW_S = 30.0
+MAX_WINDOW_S = 3600.0
+"""A report is about one incident; an hour of cycles is already ~36,000 points per line."""
+
+
+def parse_window(text: str) -> float:
+    """``30``, ``30s``, ``2m`` or ``1.5min`` as seconds; ``UsageError`` on anything else."""
+    raw = text.strip().lower()
+    scale = 1.0
+    for suffix, factor in (("min", 60.0), ("m", 60.0), ("s", 1.0)):
+        if raw.endswith(suffix):
+            raw, scale = raw[: -len(suffix)], factor
+            break
+    try:
+        seconds = float(raw) * scale
+    except ValueError:
+        seconds = float("nan")
+    if not 0 < seconds <= MAX_WINDOW_S:
+        raise UsageError(
+            f"invalid window {text!r}: give seconds (30, 30s) or minutes (2m), "
+            f"more than 0 and at most {MAX_WINDOW_S:.0f} s"
+        )
+    return seconds
+
+
+def execution_channels(view: ExecutionView) -> dict[str, tuple[float | None, float | None]]:
+    """Each execution channel the record offers: name (with unit) -> (intended, actual).
+
+    The one place that knows the shape of the execution record's motion: when the record
+    gains channels (joints, a gripper), they are added here and every figure and table of
+    the report shows them."""
+    if view.intended == (None, None) and view.actual == (None, None):
+        return {}  # no planar motion logged
+    return {
+        "linear speed (m/s)": (view.intended[0], view.actual[0]),
+        "angular speed (rad/s)": (view.intended[1], view.actual[1]),
+    }
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """One cycle of the window, as the factor and execution figures plot it."""
+
+    cycle: int
+    t_ns: int
+    command: str | None
+    factors: dict[str, float]
+    """Factor name -> numeric value, for the factors this cycle's action names."""
+    channels: dict[str, tuple[float | None, float | None]]
+    deviation: float | None
+    failed_checks: tuple[str, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class EvidenceView:
+    """One item of an entity's evidence, and whether its ref resolves to a logged reading."""
+
+    sensor: str
+    weight: float | None
+    region: str
+    ref: str
+    resolved: bool
+    problem: str
+
+
+@dataclass(frozen=True, slots=True)
+class EntityView:
+    """A perceived entity at t: where, what, how sure, on which evidence."""
+
+    id: str
+    cls: str
+    confidence: float | None
+    x: float | None
+    y: float | None
+    frame: str
+    evidence: tuple[EvidenceView, ...]
+    distance: str | None
+    """The belief graph's distance to it, as logged (``<id>.distance``), when there is one."""
+
+    @property
+    def evidence_failed(self) -> bool:
+        """No evidence at all, or none of it resolves to a logged sensor reading."""
+        return not any(e.resolved for e in self.evidence)
+
+
+@dataclass(frozen=True, slots=True)
+class RobotPose:
+    """Where the robot was at t, as its perception record says (``robot_pose``)."""
+
+    x: float
+    y: float
+    heading_rad: float
+    frame: str
+
+
+@dataclass(frozen=True, slots=True)
+class ReportData:
+    """Everything the incident report shows, each part from its library owner."""
+
+    path: str
+    explanation: Explanation
+    session: SessionInfo
+    window_s: float
+    start_ns: int
+    end_ns: int
+    timeline: Timeline
+    samples: tuple[Sample, ...]
+    factor_units: dict[str, str | None]
+    entities: tuple[EntityView, ...]
+    entities_retained: bool
+    robot: RobotPose | None
+    metrics: MetricsReport
+    integrity: VerifyReport
+    integrity_scope: tuple[str, ...]
+    key_id: str | None
+    not_retained: tuple[str, ...] = field(default=())
+
+    @property
+    def decision(self) -> Decision:
+        return self.explanation.decision
+
+
+def gather_report(
+    path: str | Path,
+    *,
+    t: TimeArg = None,
+    cycle: int | None = None,
+    window_s: float = DEFAULT_WINDOW_S,
+    key: PublicKey | None = None,
+) -> ReportData:
+    """Gather the report of the decision in force at ``t`` (or cycle ``cycle``) in a log."""
+    if not 0 < window_s <= MAX_WINDOW_S:
+        raise UsageError(f"window must be in (0, {MAX_WINDOW_S:.0f}] s, got {window_s}")
+    log = as_log(path)
+    result = explain(log, t=t, cycle=cycle)
+    before = int(window_s * 2 / 3 * 1e9)
+    start = max(log.start_ns, result.t_ns - before)
+    end = min(log.end_ns, start + int(window_s * 1e9))
+    spans = timeline(log, start=start, end=end)
+    samples, target, sensors = _samples(log, start, end, result)
+    entities = _entities(target, sensors) if target is not None else ()
+    metrics = compute_metrics([path], MetricsConfig(start_ns=start, end_ns=end))
+    scope = [s for s in log.segments if s.end_ns >= start and s.start_ns <= end]
+    integrity = verify(Log(scope, log.root), key=key)
+    session = next(
+        (s.session for s in log.segments if s.path.name == result.decision.segment),
+        log.segments[0].session,
+    )
+    return ReportData(
+        path=str(path),
+        explanation=result,
+        session=session,
+        window_s=window_s,
+        start_ns=start,
+        end_ns=end,
+        timeline=spans,
+        samples=samples,
+        factor_units={f.label: f.unit for f in result.decision.factors},
+        entities=entities,
+        entities_retained=target is not None and TOPIC_PERCEPTION in target.payloads,
+        robot=_robot_pose(target) if target is not None else None,
+        metrics=metrics,
+        integrity=integrity,
+        integrity_scope=tuple(s.path.name for s in scope),
+        key_id=key.key_id if key is not None else None,
+        not_retained=_not_retained(result),
+    )
+
+
+def _samples(
+    log: Log, start_ns: int, end_ns: int, result: Explanation
+) -> tuple[tuple[Sample, ...], Cycle | None, SensorWindow]:
+    """The window's cycles as samples, the decision's own cycle (for the scene) and the
+    sensor readings in reach of its evidence refs.
+
+    Sensor readings are pushed through a ``SensorWindow`` of the explain default so the
+    scene's evidence resolves exactly as the chain walker resolves it."""
+    names = {f.label for f in result.decision.factors}
+    period = max(result.period_ns, 1)
+    lead_ns = (DEFAULT_SENSOR_WINDOW + 1) * period
+    window = SensorWindow(DEFAULT_SENSOR_WINDOW)
+    samples: list[Sample] = []
+    target: Cycle | None = None
+    for c in log.iter_cycles(min(start_ns, result.t_ns - lead_ns), max(end_ns, result.t_ns)):
+        if c.t_ns <= result.t_ns:
+            window.push(c.sensors)
+        if c.cycle == result.cycle and c.t_ns == result.t_ns:
+            target = c
+        if c.t_ns < start_ns or c.t_ns > end_ns:
+            continue
+        d = read_decision(c)
+        ex = d.execution
+        samples.append(
+            Sample(
+                cycle=c.cycle,
+                t_ns=c.t_ns,
+                command=d.command,
+                factors={
+                    f.label: float(f.value)
+                    for f in d.factors
+                    if f.label in names
+                    and isinstance(f.value, int | float)
+                    and not isinstance(f.value, bool)
+                },
+                channels=execution_channels(ex) if ex is not None else {},
+                deviation=ex.deviation if ex is not None else None,
+                failed_checks=tuple(ch.rule for ch in ex.checks if not ch.passed)
+                if ex is not None
+                else (),
+            )
+        )
+    return tuple(samples), target, window
+
+
+def _entities(target: Cycle, sensors: SensorWindow) -> tuple[EntityView, ...]:
+    """The perceived entities of the decision's cycle, each evidence ref resolved."""
+    perception = layer_with_defaults(target, TOPIC_PERCEPTION)
+    belief = target.layer(TOPIC_BELIEF)
+    distances: dict[str, str] = {}
+    if isinstance(belief, Mapping):
+        for node in _dicts(belief.get("nodes")):
+            node_id = node.get("id")
+            if isinstance(node_id, str) and node_id.endswith(".distance"):
+                unit = node.get("unit")
+                distances[node_id[: -len(".distance")]] = format_value(
+                    node.get("value"), unit if isinstance(unit, str) else None
+                )
+    if not isinstance(perception, Mapping):
+        return ()
+    out = []
+    for raw in _dicts(perception.get("entities")):
+        entity_id = str(raw.get("id", "?"))
+        cls = str(raw.get("class", "?"))
+        pose = raw.get("pose") if isinstance(raw.get("pose"), Mapping) else {}
+        position = pose.get("position") if isinstance(pose, Mapping) else None
+        xy = _xy(position)
+        confidence = raw.get("confidence")
+        p = confidence.get(cls) if isinstance(confidence, Mapping) else None
+        out.append(
+            EntityView(
+                id=entity_id,
+                cls=cls,
+                confidence=_number(p),
+                x=xy[0],
+                y=xy[1],
+                frame=str(pose.get("frame", "map")) if isinstance(pose, Mapping) else "map",
+                evidence=tuple(_evidence(e, sensors) for e in _dicts(raw.get("evidence"))),
+                distance=distances.get(entity_id),
+            )
+        )
+    return tuple(out)
+
+
+def _robot_pose(target: Cycle) -> RobotPose | None:
+    """The robot's own pose from the perception record, when the robot logged one."""
+    perception = target.layer(TOPIC_PERCEPTION)
+    pose = perception.get("robot_pose") if isinstance(perception, Mapping) else None
+    if not isinstance(pose, Mapping):
+        return None
+    x, y = _xy(pose.get("position"))
+    if x is None or y is None:
+        return None
+    q = pose.get("orientation")
+    heading = 0.0
+    if isinstance(q, list | tuple) and len(q) == 4 and all(_is_number(v) for v in q):
+        qx, qy, qz, qw = (float(v) for v in q)
+        # yaw of a unit quaternion (x, y, z, w)
+        heading = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+    return RobotPose(x, y, heading, str(pose.get("frame", "map")))
+
+
+def _evidence(raw: Mapping[str, Any], sensors: SensorWindow) -> EvidenceView:
+    ref = raw.get("ref")
+    region = raw.get("region")
+    where = ""
+    if isinstance(region, Mapping):
+        values = ", ".join(
+            f"{v:g}" if _is_number(v) else str(v) for v in region.get("values") or ()
+        )
+        where = f"{region.get('kind')} [{values}] in {region.get('frame', '?')}"
+    weight = raw.get("weight")
+    if isinstance(ref, dict):
+        problem = sensors.resolve(ref)
+        label = f"{ref.get('topic')} @ {ref.get('log_time_ns')}"
+    else:
+        problem, label = "no evidence ref recorded", "-"
+    return EvidenceView(
+        sensor=str(raw.get("sensor", "?")),
+        weight=_number(weight),
+        region=where,
+        ref=label,
+        resolved=not problem,
+        problem=problem,
+    )
+
+
+def _not_retained(result: Explanation) -> tuple[str, ...]:
+    """What a warm-tier summary cycle did not keep, in words (empty for a full cycle)."""
+    d = result.decision
+    if not d.summary:
+        return ()
+    out = ["the sensor readings (warm summaries keep the digests, not the data)"]
+    out += [f"the full {topic} message" for topic in result.seal.summarised]
+    return tuple(out)
+
+
+def _xy(position: Any) -> tuple[float | None, float | None]:
+    if isinstance(position, list | tuple) and len(position) >= 2:
+        x, y = position[0], position[1]
+        if _is_number(x) and _is_number(y):
+            return float(x), float(y)
+    return None, None
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _number(value: Any) -> float | None:
+    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
+
+
+def _dicts(value: Any) -> list[Mapping[str, Any]]:
+    return [v for v in value if isinstance(v, Mapping)] if isinstance(value, list) else []
