@@ -41,34 +41,30 @@ _WHITESPACE = re.compile(rb"[ \t\r\n]")
 _MAX_DEPTH_TEXT = "JSON nested too deep"
 
 
-class _DuplicateKeyError(ValueError):
-    pass
-
-
-def _unique_pairs(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    keys = [k for k, _ in pairs]
-    if len(set(keys)) != len(keys):
-        dupe = next(k for k in keys if keys.count(k) > 1)
-        raise _DuplicateKeyError(dupe)
-    return dict(pairs)
-
-
 def parse_canonical(data: bytes) -> tuple[Any, str]:
-    """Parse /trace message data; (value, '') or (None, why it is not canonical JSON)."""
+    """Parse /trace message data; (value, '') or (value or None, why it is not canonical)."""
     if data.startswith(b"\xef\xbb\xbf"):
         return None, "starts with a byte-order mark"
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError:
         return None, "is not UTF-8"
+    repeated: list[str] = []
+
+    def unique(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+        if len({k for k, _ in pairs}) != len(pairs) and not repeated:
+            keys = [k for k, _ in pairs]
+            repeated.append(next(k for k in keys if keys.count(k) > 1))
+        return dict(pairs)
+
     try:
-        value = json.loads(text, object_pairs_hook=_unique_pairs)
-    except _DuplicateKeyError as err:
-        return None, f"repeats the key {err.args[0]!r}"
+        value = json.loads(text, object_pairs_hook=unique)
     except RecursionError:
         return None, _MAX_DEPTH_TEXT
     except ValueError as err:
         return None, f"is not JSON ({err})"
+    if repeated:
+        return value, f"repeats the key {repeated[0]!r}"
     if _WHITESPACE.search(_STRING.sub(b'""', data)):
         return value, "has whitespace between tokens (not compact)"
     return value, ""
