@@ -15,6 +15,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any
 
+import orjson
 from mcap.records import Message
 
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, SensorWindow
@@ -43,6 +44,15 @@ _MAX_DEPTH_TEXT = "JSON nested too deep"
 
 def parse_canonical(data: bytes) -> tuple[Any, str]:
     """Parse /trace message data; (value, '') or (value or None, why it is not canonical)."""
+    try:
+        value = orjson.loads(data)
+    except orjson.JSONDecodeError:
+        pass
+    else:
+        # Bytes that orjson spells back exactly are compact, unique-keyed UTF-8 JSON (what the
+        # Python writer and most writers emit): the common case, without the slow checks.
+        if orjson.dumps(value) == data:
+            return value, ""
     if data.startswith(b"\xef\xbb\xbf"):
         return None, "starts with a byte-order mark"
     try:
