@@ -153,3 +153,12 @@ def test_canonical_bytes_check(data: bytes, why: str) -> None:
 
     _value, got = parse_canonical(data)
     assert (why in got) if why else got == ""
+
+
+def test_progress_counts_bytes_up_to_the_whole_log(tmp_path: Path) -> None:
+    root = write_log(tmp_path / "root", max_segment_s=3.0)
+    calls: list[tuple[int, int]] = []
+    doctor_log(root, progress=lambda done, total: calls.append((done, total)))
+    total = sum(p.stat().st_size for p in root.rglob("*.mcap"))
+    assert calls[-1] == (total, total)
+    assert [d for d, _ in calls] == sorted(d for d, _ in calls)

@@ -6,13 +6,14 @@ rich on a terminal, plain text with ``--plain`` or in a pipe, JSON with ``--json
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from trace_audit.cli.app import EXIT_FINDINGS, JsonOption, PlainOption, app, guarded, help_text
-from trace_audit.cli.render import Column, Doc, Seg, emit, setup_logging
+from trace_audit.cli.render import Column, Doc, Seg, emit, progress_bar, setup_logging
 
 if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
     from trace_audit.doctor import DoctorReport, Problem
@@ -69,7 +70,16 @@ def doctor_command(
     from trace_audit.doctor import doctor_log
 
     setup_logging()
-    report = guarded(lambda: doctor_log(log, evidence=evidence or ()))
+    if json_out or plain or not sys.stderr.isatty():
+        report = guarded(lambda: doctor_log(log, evidence=evidence or ()))
+    else:
+        with progress_bar("checking records (MB)") as bar:
+            task = bar.task_ids[0]
+
+            def progress(done: int, total: int) -> None:
+                bar.update(task, completed=done >> 20, total=total >> 20)
+
+            report = guarded(lambda: doctor_log(log, evidence=evidence or (), progress=progress))
     emit(report, doctor_doc, json_out=json_out, plain=plain)
     if not report.conforms:
         raise typer.Exit(EXIT_FINDINGS)

@@ -10,7 +10,8 @@ offset). A log conforms when no MUST is broken; SHOULD deviations are notes.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import functools
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from trace_audit.doctor.rules import RULES, DoctorReport, Problem, Rule, SegmentDoctor
@@ -42,11 +43,17 @@ _FINDING_RULES = {
 _NOTE_RULES = {"external_unresolved": "external-given", "no_checkpoints": "checkpoint-cadence"}
 
 
-def doctor_log(path: str | Path, *, evidence: Sequence[str | Path] = ()) -> DoctorReport:
+def doctor_log(
+    path: str | Path,
+    *,
+    evidence: Sequence[str | Path] = (),
+    progress: Callable[[int, int], None] | None = None,
+) -> DoctorReport:
     """Check a segment file, or every segment under a directory, against the profile.
 
     ``evidence``: external recordings (MCAP files or rosbag2 directories) that evidence refs
     name; without them such refs are a note (not checked), never a broken rule.
+    ``progress(bytes_done, bytes_total)`` is called as the files are walked.
     Raises ``LogReadError`` (exit 3) when the path is missing, holds no MCAP file, or a file
     is not MCAP at all.
     """
@@ -59,15 +66,24 @@ def doctor_log(path: str | Path, *, evidence: Sequence[str | Path] = ()) -> Doct
     recordings = Recordings.open(evidence) if evidence else None
     report = DoctorReport(str(root))
     by_name: dict[str, SegmentDoctor] = {}
+    total, done = sum(f.stat().st_size for f in files), 0
     for file in files:
         segment = SegmentDoctor(str(file))
-        check_structure(file, segment)
+        step = None if progress is None else functools.partial(_step, progress, done, total)
+        check_structure(file, segment, progress=step)
         report.segments.append(segment)
         by_name[file.name] = segment
+        done += file.stat().st_size
+        if progress is not None:
+            progress(done, total)
     _verify_into(root, report, by_name, recordings)
     report.evidence = recordings.names if recordings else []
     report.conforms = all(s.conforms for s in report.segments)
     return report
+
+
+def _step(progress: Callable[[int, int], None], before: int, total: int, offset: int) -> None:
+    progress(before + offset, total)
 
 
 def _verify_into(

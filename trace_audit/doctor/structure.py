@@ -10,7 +10,7 @@ inflate past ``ReadLimits``. Each message it meets goes to the content checker
 from __future__ import annotations
 
 import struct
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -67,6 +67,7 @@ class _Seen:
     report: SegmentDoctor
     content: CycleCheck
     limits: ReadLimits
+    progress: Callable[[int], None] | None = None
     schemas: dict[int, Schema] = field(default_factory=dict)
     channels: dict[int, Channel] = field(default_factory=dict)
     chunks: dict[int, Chunk] = field(default_factory=dict)  # by file offset
@@ -83,9 +84,13 @@ class _Seen:
 
 
 def check_structure(
-    path: Path, report: SegmentDoctor, limits: ReadLimits = DEFAULT_LIMITS
+    path: Path,
+    report: SegmentDoctor,
+    limits: ReadLimits = DEFAULT_LIMITS,
+    progress: Callable[[int], None] | None = None,
 ) -> SessionInfo | None:
     """Check one segment file's MCAP records and every message in it; return its session.
+    ``progress(offset)`` is called after each chunk with the bytes of the file read so far.
 
     Raises ``LogReadError`` when the file is not MCAP at all (exit 3); everything after the
     magic and the header is a problem in ``report``, not an exception.
@@ -99,7 +104,7 @@ def check_structure(
             raise LogReadError(str(path), "not an MCAP file (bad magic)")
         stream.seek(0)
         size = path.stat().st_size
-        seen = _Seen(report, CycleCheck(report), limits)
+        seen = _Seen(report, CycleCheck(report), limits, progress)
         _walk(stream, size, seen)
         seen.content.finish(closed=seen.footer is not None)
     report.closed = seen.footer is not None and seen.footer.summary_start != 0
@@ -215,6 +220,8 @@ def _check_channel(channel: Channel, seen: _Seen, report: SegmentDoctor, offset:
 
 def _chunk(offset: int, chunk: Chunk, seen: _Seen) -> None:
     report, limits = seen.report, seen.limits
+    if seen.progress is not None:
+        seen.progress(offset)
     seen.chunks[offset] = chunk
     report.chunks += 1
     if chunk.compression != "zstd":
