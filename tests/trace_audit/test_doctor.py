@@ -162,3 +162,22 @@ def test_progress_counts_bytes_up_to_the_whole_log(tmp_path: Path) -> None:
     total = sum(p.stat().st_size for p in root.rglob("*.mcap"))
     assert calls[-1] == (total, total)
     assert [d for d, _ in calls] == sorted(d for d, _ in calls)
+
+
+def test_a_summary_that_hides_a_chunk_breaks_the_summary_rule(tmp_path: Path) -> None:
+    """A Chunk Index record dropped from the summary: readers that seek by the index would
+    never see that chunk's cycles."""
+    path = write_profile_log(tmp_path / "p.mcap")
+    data = bytearray(path.read_bytes())
+    # Walk the summary section (the footer says where it starts) to the second Chunk Index
+    # and turn it into an unknown record type (opcode 0x80, which MCAP readers skip): the
+    # file stays well-formed, the summary just no longer lists that chunk.
+    summary_start = int.from_bytes(data[-8 - 20 : -8 - 12], "little")
+    pos, seen = summary_start, 0
+    while data[pos] != 0x08 or (seen := seen + 1) < 2:
+        pos += 9 + int.from_bytes(data[pos + 1 : pos + 9], "little")
+    data[pos] = 0x80
+    path.write_bytes(bytes(data))
+    report = doctor_log(path)
+    summary = [p for p in report.errors if p.rule == "summary-agrees"]
+    assert summary and "1 chunk(s) have no Chunk Index" in summary[0].message

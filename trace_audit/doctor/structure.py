@@ -293,6 +293,15 @@ def _check_summary(seen: _Seen, report: SegmentDoctor) -> None:
         report.add("summary", f"the summary lacks {', '.join(lacking)} records")
     for offset, record in seen.summary:
         _summary_record(offset, record, seen, report)
+    indexed = {r.chunk_start_offset for _, r in seen.summary if isinstance(r, ChunkIndex)}
+    unindexed = [offset for offset in seen.chunks if offset not in indexed]
+    if "ChunkIndex" in kinds and unindexed:
+        report.add(
+            "summary-agrees",
+            f"{len(unindexed)} chunk(s) have no Chunk Index record (a reader that seeks by the "
+            "index never reads them)",
+            offset=unindexed[0],
+        )
     grouped = {r.group_opcode for _, r in seen.summary if isinstance(r, SummaryOffset)}
     present = {
         _OP_SCHEMA: "Schema",
