@@ -57,6 +57,21 @@ def test_a_log_root_with_several_segments_conforms(tmp_path: Path) -> None:
     assert report.conforms, report.errors
 
 
+@pytest.mark.parametrize("tier", ["warm", "cold"])
+def test_compacted_tiers_conform(tmp_path: Path, tier: str) -> None:
+    """Warm and cold segments carry their own channels (and cold its own encoding): they are
+    the profile's section 9, not deviations from section 3."""
+    root = write_log(tmp_path / "root", max_segment_s=3.0)
+    moved = CliRunner().invoke(
+        app, ["compact", str(root), "--tier", tier, "--older-than", "1s", "--plain"]
+    )
+    assert moved.exit_code == 0, moved.output
+    assert list((root / tier).glob("*.mcap"))
+    report = doctor_log(root)
+    assert report.conforms, report.errors
+    assert not [p for p in report.notes if p.rule in ("known-channel", "chunk-compression")]
+
+
 def test_log_time_differing_from_t_ns_names_the_rule_section_and_place(tmp_path: Path) -> None:
     report = doctor_log(write_profile_log(tmp_path / "p.mcap", faults=Faults(log_time_off_by=7)))
     assert not report.conforms

@@ -39,6 +39,8 @@ from trace_runtime.mcap_file import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import MESSAGE_MODELS, PROFILE
 from trace_runtime.schemas import schema_name
 from trace_runtime.session import SESSION_METADATA, SessionInfo
+from trace_runtime.tiers.cold import BLOCK_TOPIC, INDEX_TOPIC
+from trace_runtime.tiers.warm import SUMMARY_TOPIC
 
 __all__ = ["check_structure"]
 
@@ -55,6 +57,8 @@ _SESSION_KEYS = (
     "tier",
     "profile_version",
 )
+_TIER_TOPICS = {"warm": (SUMMARY_TOPIC,), "cold": (BLOCK_TOPIC, INDEX_TOPIC)}
+"""Channels of the compacted tiers (PROFILE section 9), which section 3 does not list."""
 _OP_SCHEMA, _OP_CHANNEL, _OP_CHUNK_INDEX, _OP_STATISTICS, _OP_METADATA_INDEX = 3, 4, 8, 11, 13
 _DAMAGE = (McapError, struct.error, EOFError, ValueError, KeyError, UnicodeDecodeError)
 """What the mcap library raises on a damaged or cut record."""
@@ -70,6 +74,7 @@ class _Seen:
     progress: Callable[[int], None] | None = None
     schemas: dict[int, Schema] = field(default_factory=dict)
     channels: dict[int, Channel] = field(default_factory=dict)
+    channel_at: dict[int, int] = field(default_factory=dict)  # where each was first seen
     chunks: dict[int, Chunk] = field(default_factory=dict)  # by file offset
     metadata_at: dict[int, str] = field(default_factory=dict)
     sessions: int = 0
@@ -108,6 +113,8 @@ def check_structure(
         _walk(stream, size, seen)
         seen.content.finish(closed=seen.footer is not None)
     report.closed = seen.footer is not None and seen.footer.summary_start != 0
+    for channel_id, channel in seen.channels.items():
+        _check_channel(channel, seen, report, seen.channel_at[channel_id])
     _check_session(seen, report)
     _check_summary(seen, report)
     return seen.session
@@ -157,7 +164,7 @@ def _data_record(offset: int, record: Any, seen: _Seen) -> None:
         seen.schemas[record.id] = record
     elif isinstance(record, Channel):
         seen.channels[record.id] = record
-        _check_channel(record, seen, report, offset)
+        seen.channel_at.setdefault(record.id, offset)
     elif isinstance(record, Metadata):
         seen.metadata_at[offset] = record.name
         if record.name == SESSION_METADATA:
@@ -187,8 +194,19 @@ def _session_record(record: Metadata, seen: _Seen, report: SegmentDoctor, offset
         )
 
 
+def _tier(seen: _Seen) -> str:
+    return seen.session.tier if seen.session is not None else "hot"
+
+
 def _check_channel(channel: Channel, seen: _Seen, report: SegmentDoctor, offset: int) -> None:
+    """Section 3 for one channel, in its segment's tier (section 9: a compacted tier has
+    its own channels and, in cold, its own message encoding; docs/storage.md)."""
     topic = channel.topic
+    tier = _tier(seen)
+    if topic in _TIER_TOPICS.get(tier, ()):
+        return
+    if tier == "cold":
+        return  # every message of a cold segment lives in its blocks
     if topic.startswith("/trace/"):
         if topic not in MESSAGE_MODELS:
             report.add("known-channel", f"unknown channel {topic}", offset=offset)
@@ -224,7 +242,8 @@ def _chunk(offset: int, chunk: Chunk, seen: _Seen) -> None:
         seen.progress(offset)
     seen.chunks[offset] = chunk
     report.chunks += 1
-    if chunk.compression != "zstd":
+    # (a cold segment's blocks are zstd-compressed inside; its chunks need not be)
+    if chunk.compression != "zstd" and _tier(seen) != "cold":
         report.add("chunk-compression", f"a chunk is {chunk.compression or 'uncompressed'}")
     if seen.last_chunk_start is not None and chunk.message_start_time < seen.last_chunk_start:
         report.add(
@@ -250,7 +269,7 @@ def _chunk(offset: int, chunk: Chunk, seen: _Seen) -> None:
             seen.schemas[record.id] = record
         elif isinstance(record, Channel):
             seen.channels[record.id] = record
-            _check_channel(record, seen, report, offset)
+            seen.channel_at.setdefault(record.id, offset)
         elif isinstance(record, Message):
             _message(record, offset, seen)
 
@@ -263,6 +282,11 @@ def _message(message: Message, offset: int, seen: _Seen) -> None:
     t = message.log_time
     seen.start_ns = t if seen.start_ns is None else min(seen.start_ns, t)
     seen.end_ns = t if seen.end_ns is None else max(seen.end_ns, t)
+    if _tier(seen) == "cold":
+        # Cold blocks are a columnar re-encoding (docs/storage.md): the verifier reads them
+        # back to the canonical bytes and checks those; here they are only counted.
+        seen.report.messages += 1
+        return
     seen.content.message(topic, message, offset)
 
 
