@@ -8,6 +8,7 @@ Open a log (a segment, a directory or a log root, in any tier), then ask it ques
     stops = why("run.mcap", "STOP")               # every transition into STOP, with its reason
     report = compute_metrics(["run.mcap"])        # ET, ET_partial, TC, DR, TCS
     integrity = verify_log("logs/")               # chain, checkpoints, signatures
+    conformance = doctor_log("run.mcap")          # every rule of schemas/PROFILE.md
 
 Names are imported on first use, so ``import trace_audit`` (and the CLI's start-up) stays fast.
 """
@@ -38,11 +39,17 @@ _EXPORTS = {
     "MetricsReport": "trace_audit.metrics",
     "verify_log": "trace_audit.verify",
     "VerifyReport": "trace_audit.verify",
+    "doctor_log": "trace_audit.doctor",
+    "DoctorReport": "trace_audit.doctor",
+    "describe_refs": "trace_audit.evidence",
+    "ExternalEvidence": "trace_audit.evidence",
 }
 
 __all__ = [
     "DecisionChains",
+    "DoctorReport",
     "Explanation",
+    "ExternalEvidence",
     "LogInfo",
     "MetricsConfig",
     "MetricsReport",
@@ -51,6 +58,8 @@ __all__ = [
     "WhyResult",
     "causal_graph",
     "compute_metrics",
+    "describe_refs",
+    "doctor_log",
     "explain",
     "export_decision",
     "log_info",
@@ -66,6 +75,8 @@ __all__ = [
 if TYPE_CHECKING:
     from trace_audit.causal import causal_graph, read_decision, tree_graph
     from trace_audit.chains import DecisionChains, trace_cycle
+    from trace_audit.doctor import DoctorReport, doctor_log
+    from trace_audit.evidence import ExternalEvidence, describe_refs
     from trace_audit.explain import Explanation, explain
     from trace_audit.export import export_decision
     from trace_audit.info import LogInfo, log_info

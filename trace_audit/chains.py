@@ -28,18 +28,22 @@ in breadth-first order (nearest entity first) wins ties.
 
 Evidence refs resolve against the sensor messages of the decision's own cycle and of the
 ``SensorWindow.cycles`` cycles before it (default 50, i.e. 5 s at 10 Hz); a ref to a
-reading older than that, to a later cycle, or to an external recording does not resolve.
+reading older than that or to a later cycle does not resolve. A ref into an external
+recording (PROFILE.md section 11, e.g. a rosbag2 MCAP) resolves when the window was given
+that recording and the message there matches the ref; without the recording it stays
+undocumented, with a reason that says it was not checked rather than broken.
 """
 
 from __future__ import annotations
 
 import hashlib
-from collections import deque
+from collections import OrderedDict, deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 from trace_runtime.cycles import Cycle, RawMessage
+from trace_runtime.recordings import ExternalCheck, ExternalState, Recordings
 from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF, TOPIC_PERCEPTION
 
 __all__ = [
@@ -63,6 +67,7 @@ EXPECTED_DEPTH_ENTITY = 4
 DEFAULT_SENSOR_WINDOW = 50
 
 _NOT_REACHED = "not reached: the chain is broken above"
+_EXTERNAL_REMEMBERED = 4096
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,12 +136,19 @@ class SensorWindow:
     entities and, for tracked entities, by the cycles after its own).
     """
 
-    __slots__ = ("_batches", "_digests", "_index", "cycles")
+    __slots__ = ("_batches", "_digests", "_external", "_index", "cycles", "recordings")
 
-    def __init__(self, cycles: int = DEFAULT_SENSOR_WINDOW) -> None:
+    def __init__(
+        self, cycles: int = DEFAULT_SENSOR_WINDOW, recordings: Recordings | None = None
+    ) -> None:
         if cycles < 0:
             raise ValueError(f"sensor window must be >= 0 cycles, got {cycles}")
         self.cycles = cycles
+        self.recordings = recordings
+        """External recordings refs may name (None: such refs are unresolved, unchecked)."""
+        # (recording, topic, log time, sequence, digest) -> its check, most recent last:
+        # tracked entities cite the same reading cycle after cycle
+        self._external: OrderedDict[tuple[Any, ...], ExternalCheck] = OrderedDict()
         # (topic, log_time_ns) -> the messages logged under it, oldest first
         self._index: dict[tuple[str, int], list[RawMessage]] = {}
         self._batches: deque[Sequence[RawMessage]] = deque()
@@ -174,6 +186,8 @@ class SensorWindow:
 
     def resolve(self, ref: dict[str, Any]) -> str:
         """'' when the ref resolves to a message in the window, else why it does not."""
+        if type(ref.get("recording")) is str:
+            return self.check_external(ref).detail
         topic = ref.get("topic")
         t_ns = ref.get("log_time_ns")
         if type(topic) is not str or type(t_ns) is not int:
@@ -194,6 +208,34 @@ class SensorWindow:
             return ""
         return why
 
+    def check_external(self, ref: dict[str, Any]) -> ExternalCheck:
+        """The check of a ref into an external recording (remembered for the last few
+        thousand refs); ``detail`` is '' when it resolved."""
+        key = tuple(ref.get(k) for k in ("recording", "topic", "log_time_ns", "sequence", "digest"))
+        found = self._external.get(key)
+        if found is not None:
+            self._external.move_to_end(key)
+            return found
+        name = str(ref.get("recording"))
+        if self.recordings is None:
+            found = ExternalCheck(
+                "unresolved", name, f"in external recording {name}, not given (--evidence)"
+            )
+        else:
+            found = self.recordings.check(ref)
+            if found.state == "unresolved":
+                found = ExternalCheck(
+                    "unresolved", name, f"in external recording {name}, not among those given"
+                )
+        self._external[key] = found
+        if len(self._external) > _EXTERNAL_REMEMBERED:
+            self._external.popitem(last=False)
+        return found
+
+    def external_state(self, ref: dict[str, Any]) -> ExternalState:
+        """resolved, broken or unresolved: what became of a ref into an external recording."""
+        return self.check_external(ref).state
+
     def _digest(self, msg: RawMessage) -> str:
         found = self._digests.get(id(msg))
         if found is None:
@@ -201,13 +243,16 @@ class SensorWindow:
         return found
 
 
-def trace_cycle(cycle: Cycle, window: SensorWindow | None = None) -> DecisionChains:
+def trace_cycle(
+    cycle: Cycle, window: SensorWindow | None = None, *, recordings: Recordings | None = None
+) -> DecisionChains:
     """The factor chains of one cycle; ``window`` must already hold this cycle's sensors.
 
-    Without a window, refs resolve against this cycle's own sensor messages only.
+    Without a window, refs resolve against this cycle's own sensor messages only (and refs
+    into external recordings against ``recordings``).
     """
     if window is None:
-        window = SensorWindow(0)
+        window = SensorWindow(0, recordings)
         window.push(cycle.sensors)
     return trace_layers(
         cycle.cycle,
@@ -571,4 +616,6 @@ def _dicts(value: Any) -> list[dict[str, Any]]:
 
 
 def _ref_label(ref: dict[str, Any]) -> str:
-    return f"{ref.get('topic')}@{ref.get('log_time_ns')}"
+    recording = ref.get("recording")
+    where = f"{recording}:" if type(recording) is str else ""
+    return f"{where}{ref.get('topic')}@{ref.get('log_time_ns')}"

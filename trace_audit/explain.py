@@ -16,12 +16,14 @@ walk reaches the bound first, the action has held "at least since" the oldest cy
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Literal
 
 from trace_audit.causal import Decision, causal_graph_data, read_decision, tree_graph_data
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, DecisionChains, SensorWindow, trace_cycle
+from trace_audit.evidence import ExternalEvidence, describe_refs, open_recordings
 from trace_audit.metrics import MetricsConfig, dr_problems, trust_score
 from trace_audit.timeline import (
     LogSource,
@@ -37,7 +39,7 @@ from trace_runtime.errors import TimeOutOfRangeError, UsageError
 from trace_runtime.gaps import continuity, gap_limit_ns
 from trace_runtime.integrity import verify_cycle
 from trace_runtime.logset import Log
-from trace_runtime.records import TOPIC_ACTION, TOPIC_SEAL
+from trace_runtime.records import TOPIC_ACTION, TOPIC_PERCEPTION, TOPIC_SEAL
 
 __all__ = [
     "DEFAULT_LOOKBACK_S",
@@ -139,6 +141,9 @@ class Explanation:
     held: HeldSince
     graph: dict[str, Any]
     tree: dict[str, Any] | None
+    external_evidence: tuple[ExternalEvidence, ...] = ()
+    """The decision's evidence refs into external recordings: resolved (and decoded),
+    broken, or unresolved (recording not given)."""
 
     @property
     def stale(self) -> bool:
@@ -178,8 +183,12 @@ def explain(
     cycle: int | None = None,
     lookback_s: float = DEFAULT_LOOKBACK_S,
     sensor_window: int = DEFAULT_SENSOR_WINDOW,
+    evidence: Sequence[str | Path] = (),
 ) -> Explanation:
-    """Explain the decision in force at ``t`` (or cycle number ``cycle``) in a log."""
+    """Explain the decision in force at ``t`` (or cycle number ``cycle``) in a log.
+
+    ``evidence``: external recordings (MCAP files, rosbag2 directories) whose messages the
+    decision's evidence refs may name; they are resolved, digest-checked and decoded."""
     if (t is None) == (cycle is None):
         raise UsageError("give exactly one of a time (--t) or a cycle number (--cycle)")
     if lookback_s < 0:
@@ -195,10 +204,11 @@ def explain(
         target = find_cycle(log, cycle)
         offset = 0
     decision = read_decision(target)
+    recordings = open_recordings(evidence)
     # Refs usually point into the decision's own cycle; the earlier cycles of the sensor
     # window are read only when a chain stops at an unresolved reading (same result as
     # resolving against the whole window, as the metrics do).
-    chains = trace_cycle(target)
+    chains = trace_cycle(target, recordings=recordings)
     needs_window = sensor_window > 0 and any(
         c.missing is not None and c.missing.level == "sensor_reading" for c in chains.factors
     )
@@ -212,7 +222,7 @@ def explain(
         period_ns=period,
     )
     if needs_window:
-        window = SensorWindow(sensor_window)
+        window = SensorWindow(sensor_window, recordings)
         for earlier in reversed(back.window):
             window.push(earlier.sensors)
         window.push(target.sensors)
@@ -240,6 +250,7 @@ def explain(
         held=back.held,
         graph=graph,
         tree=tree,
+        external_evidence=tuple(describe_refs(target.layer(TOPIC_PERCEPTION), recordings)),
     )
 
 

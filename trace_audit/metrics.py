@@ -58,6 +58,7 @@ from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap, continuity, find_gap
 from trace_runtime.integrity import SealStatus, verify_cycle
 from trace_runtime.logset import Log, open_logs
 from trace_runtime.reader import Segment, open_segment
+from trace_runtime.recordings import Recordings
 from trace_runtime.records import (
     TOPIC_ACTION,
     TOPIC_BELIEF,
@@ -181,6 +182,9 @@ class MetricsConfig:
     """Processes to spread segments over (1: in this process)."""
     start_ns: int | None = None
     end_ns: int | None = None
+    evidence: tuple[str, ...] = ()
+    """External recordings (MCAP files, rosbag2 directories) that evidence refs may name; a
+    ref into one resolves there (digest checked), a ref into one not given does not."""
 
     def __post_init__(self) -> None:
         if self.by is not None and self.by not in GROUP_BYS:
@@ -306,6 +310,10 @@ class MetricsReport:
     thresholds: tuple[ThresholdCheck, ...]
     elapsed_s: float
     cycles_per_s: float
+    external_refs: dict[str, int] = field(default_factory=dict)
+    """Evidence refs into external recordings, by what became of them: ``resolved``,
+    ``broken`` (recording given, message missing or changed) and ``unresolved`` (recording
+    not given: not checked). Counted per citation in the perception records."""
 
     @property
     def passed(self) -> bool:
@@ -366,8 +374,11 @@ class _Partial:
     gaps_total: int = 0
     cycles: int = 0
     timing: list[tuple[float, int]] = field(default_factory=list)
+    external: dict[str, int] = field(default_factory=dict)
 
     def merge(self, other: _Partial, limit: int) -> None:
+        for state, n in other.external.items():
+            self.external[state] = self.external.get(state, 0) + n
         for name, acc in other.groups.items():
             mine = self.groups.get(name)
             if mine is None:
@@ -388,7 +399,8 @@ class _Scanner:
     def __init__(self, config: MetricsConfig, partial: _Partial) -> None:
         self.config = config
         self.partial = partial
-        self.window = SensorWindow(config.sensor_window)
+        recordings = Recordings.open(config.evidence) if config.evidence else None
+        self.window = SensorWindow(config.sensor_window, recordings)
         self.stream = _Stream()
         self.session_prev: str | None = None
 
@@ -433,6 +445,20 @@ class _Scanner:
             "%Y-%m-%d %H:00", time.gmtime(cycle.t_ns // 1_000_000_000)
         )
 
+    def _count_external(self, perception: Any) -> None:
+        """Tally the perception's refs into external recordings by resolved / broken /
+        unresolved (a ref's check is remembered by the window, so a reading cited cycle
+        after cycle is read once)."""
+        if not isinstance(perception, dict):
+            return
+        tally = self.partial.external
+        for entity in perception.get("entities") or ():
+            for evidence in (entity.get("evidence") or ()) if isinstance(entity, dict) else ():
+                ref = evidence.get("ref") if isinstance(evidence, dict) else None
+                if isinstance(ref, dict) and type(ref.get("recording")) is str:
+                    state = self.window.external_state(ref)
+                    tally[state] = tally.get(state, 0) + 1
+
     def _score(self, cycle: Cycle, segment: Segment, group_of: Callable[[Cycle], str]) -> None:
         """Score one decision into its group's sums; list it when it fails."""
         window = self.window
@@ -442,6 +468,8 @@ class _Scanner:
         belief = cycle.layer(TOPIC_BELIEF)
         perception = cycle.layer(TOPIC_PERCEPTION)
         score = score_layers(action, belief, perception, window=window)
+        if perception is not None:
+            self._count_external(perception)
         missing_dr = dr_problems(action)
         group = group_of(cycle)
         partial = self.partial
@@ -814,6 +842,7 @@ def _report(
         thresholds=checks,
         elapsed_s=elapsed,
         cycles_per_s=total.cycles / elapsed if elapsed > 0 else 0.0,
+        external_refs=dict(sorted(total.external.items())),
     )
 
 

@@ -9,10 +9,12 @@ what that same verification finds clean. For one decision (``explain``) the chec
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 from trace_runtime.integrity import PublicKey
 from trace_runtime.logset import open_log
+from trace_runtime.recordings import Recordings
 from trace_runtime.verification import (
     Finding,
     FindingKind,
@@ -34,10 +36,16 @@ __all__ = [
 ]
 
 
-def verify_log(path: str | Path, *, key: PublicKey | None = None) -> VerifyReport:
+def verify_log(
+    path: str | Path, *, key: PublicKey | None = None, evidence: Sequence[str | Path] = ()
+) -> VerifyReport:
     """Verify a segment file, a directory of segments or a log root; never raises on tampering.
 
+    ``evidence``: external recordings (MCAP files, rosbag2 directories) that evidence refs
+    name: each such ref is resolved and its digest checked there (a mismatch is a finding);
+    refs into recordings not given are counted as unresolved (a note), not as broken.
     Raises ``LogReadError`` only when nothing readable is there (exit 3 at the CLI); a damaged
     segment inside a root is a finding.
     """
-    return verify(open_log(path), key=key)
+    recordings = Recordings.open(evidence) if evidence else None
+    return verify(open_log(path), key=key, recordings=recordings)

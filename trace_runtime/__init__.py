@@ -38,6 +38,8 @@ _EXPORTS = {
     "Segment": "trace_runtime.reader",
     "SegmentInfo": "trace_runtime.reader",
     "open_segment": "trace_runtime.reader",
+    "Recordings": "trace_runtime.recordings",
+    "external_ref": "trace_runtime.recordings",
     "Action": "trace_runtime.records",
     "Alternative": "trace_runtime.records",
     "Belief": "trace_runtime.records",
@@ -96,6 +98,7 @@ __all__ = [
     "Rationale",
     "RawMessage",
     "RecordError",
+    "Recordings",
     "Region",
     "Seal",
     "SealStatus",
@@ -108,6 +111,7 @@ __all__ = [
     "TreeEdge",
     "TreeNode",
     "UsageError",
+    "external_ref",
     "generate_keypair",
     "load_public_key",
     "load_signer",
@@ -141,6 +145,7 @@ if TYPE_CHECKING:
     from trace_runtime.logger import AuditLogger, CycleBuilder, LoggerConfig, LoggerStats
     from trace_runtime.logset import Log, open_log
     from trace_runtime.reader import Segment, SegmentInfo, open_segment
+    from trace_runtime.recordings import Recordings, external_ref
     from trace_runtime.records import (
         Action,
         Alternative,

@@ -398,6 +398,10 @@ class SealStatus:
     sensors_uncited: int = 0
     """Sensor readings in the cycle that no digest-carrying evidence ref names: the chain
     does not cover them."""
+    external: tuple[dict[str, Any], ...] = ()
+    """Evidence refs naming a message in an external recording (PROFILE section 11), as
+    JSON: sealed with the perception message, checked only against the recording itself
+    (``trace_runtime.recordings``)."""
     detail: str = ""
 
     @property
@@ -489,11 +493,14 @@ def verify_cycle(
     extra = [t for t in cycle.payloads if t in LAYER_TOPICS and t not in digests]
     checked, unresolved, uncited = 0, 0, len(cycle.sensors)
     bad: list[str] = []
+    external: list[dict[str, Any]] = []
     perception = cycle.payloads.get(TOPIC_PERCEPTION)
     if perception is not None and TOPIC_PERCEPTION not in modified:
         # Sensor readings are not sealed themselves: the evidence refs that name them carry
         # their digests, and the refs are sealed with the perception message.
-        checked, unresolved, bad, uncited = _check_evidence(cycle, perception, perception_json)
+        checked, unresolved, bad, uncited = _check_evidence(
+            cycle, perception, perception_json, external
+        )
     if modified:
         verb = "differs" if len(modified) == 1 else "differ"
         problems.append(f"{', '.join(modified)} {verb} from the seal's digest")
@@ -533,16 +540,19 @@ def verify_cycle(
         evidence_unresolved=unresolved,
         evidence_mismatch=tuple(bad),
         sensors_uncited=uncited,
+        external=tuple(external),
         detail=detail,
     )
 
 
 def _check_evidence(
-    cycle: Cycle, perception: bytes, parsed: Any = None
+    cycle: Cycle, perception: bytes, parsed: Any = None, external: list[Any] | None = None
 ) -> tuple[int, int, list[str], int]:
     """Check the evidence refs that carry a digest against the cycle's sensor messages.
 
     Returns (refs checked, refs unresolved, readings that differ, readings no ref cites).
+    Refs into an external recording are not looked for in the cycle: they are appended to
+    ``external`` (when given) for the caller to check against the recording.
     """
     try:
         value = parsed if parsed is not None else orjson.loads(perception)
@@ -557,7 +567,13 @@ def _check_evidence(
     for entity in entities:
         for evidence in entity.get("evidence") or ():
             ref = evidence.get("ref")
-            if not ref or not ref.get("digest"):
+            if not ref:
+                continue
+            if isinstance(ref.get("recording"), str):
+                if external is not None:
+                    external.append(ref)
+                continue
+            if not ref.get("digest"):
                 continue
             topic, seq = ref.get("topic"), ref.get("sequence")
             index = by_sequence.get((topic, seq)) if seq is not None else None

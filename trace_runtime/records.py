@@ -19,7 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from trace_runtime.errors import RecordError
 
 PROFILE = "trace"
-PROFILE_VERSION = "1"
+PROFILE_VERSION = "1.1"
 
 TOPIC_PERCEPTION = "/trace/perception"
 TOPIC_BELIEF = "/trace/belief"
@@ -86,12 +86,24 @@ class Pose(_Record):
 
 
 class EvidenceRef(_Record):
-    """Names one sensor message in the log: topic + log time (+ sequence, + content digest)."""
+    """Names one sensor message: topic + log time (+ sequence, + content digest).
 
-    topic: str = Field(min_length=1)
-    log_time_ns: int = Field(ge=0)
-    sequence: int | None = Field(default=None, ge=0)
+    Without ``recording`` the message is in the TRACE log itself (a ``/sensors/...``
+    channel). With ``recording`` it is in another MCAP file, e.g. a rosbag2 recording made
+    beside the log: ``recording`` is that file's name, ``topic`` the topic there (a ROS 2
+    topic such as ``/front_camera/image_raw``), and ``digest`` the SHA-256 of the message's
+    stored data (its CDR bytes for ROS 2). PROFILE.md section 11.
+    """
+
+    topic: str = Field(min_length=1, description="the topic the message was logged on")
+    log_time_ns: int = Field(ge=0, description="the message's MCAP log time, ns")
+    sequence: int | None = Field(default=None, ge=0, description="the message's MCAP sequence")
     digest: str | None = Field(default=None, description="sha256 hex of the message data")
+    recording: str | None = Field(
+        default=None,
+        description="file name of the external MCAP recording holding the message; "
+        "null when it is in this log",
+    )
 
 
 class Region(_Record):

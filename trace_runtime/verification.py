@@ -40,6 +40,7 @@ from trace_runtime.integrity import (
 )
 from trace_runtime.logset import FileProblem, Log, copy_rank
 from trace_runtime.reader import Segment
+from trace_runtime.recordings import Recordings
 from trace_runtime.records import GENESIS, Checkpoint
 from trace_runtime.session import TIER_METADATA, TIERS
 
@@ -87,6 +88,7 @@ NoteKind = Literal[
     "skipped_file",
     "uncovered_sensors",
     "no_checkpoints",
+    "external_unresolved",
 ]
 """Things an investigator should know that are not tampering."""
 
@@ -138,6 +140,10 @@ class SegmentSummary:
     """Digest of the segment's last seal in reading order: where the next segment enters."""
     copy: bool = False
     """A second copy of a segment (mid-compaction): verified, but not counted twice."""
+    external_resolved: int = 0
+    """Evidence refs into external recordings that resolved with a matching digest."""
+    external_unresolved: int = 0
+    """Evidence refs into external recordings that were not given (not checked)."""
 
 
 @dataclass(slots=True)
@@ -179,6 +185,10 @@ class VerifyReport:
     checkpoints_valid: int = 0
     segments_valid: int = 0
     declared_dropped: int = 0
+    external_resolved: int = 0
+    """Evidence refs into external recordings (--evidence) that resolved, digests equal."""
+    external_unresolved: int = 0
+    """Evidence refs into external recordings that were not given: unchecked, not broken."""
     first_cycle: int | None = None
     last_cycle: int | None = None
     start_ns: int | None = None
@@ -221,6 +231,8 @@ class _Scan:
     summarised: list[int] = field(default_factory=list)  # positions
     bad_positions: set[int] = field(default_factory=set)
     uncited: int = 0  # sensor readings no evidence ref with a digest names
+    external_ok: int = 0  # evidence refs into external recordings that resolved and match
+    external_unresolved: dict[str, int] = field(default_factory=dict)  # recording -> refs
     damaged: list[tuple[int, int, int]] = field(default_factory=list)
     """Cycle ranges lost in damaged chunks: (first, last, sealed cycles lost)."""
 
@@ -242,8 +254,11 @@ class _SegmentCheck:
         entry_cycle: int | None,
         key: PublicKey | None,
         add: _Sink,
+        *,
+        recordings: Recordings | None = None,
     ) -> None:
         self.segment = segment
+        self.recordings = recordings
         self.session = segment.session
         self.name = _display_name(segment.path)
         self.entry = entry
@@ -295,6 +310,8 @@ class _SegmentCheck:
         if scan.last_digest is not None and scan.num:
             self.tail = _Tail(scan.last_digest, scan.num[-1], scan.t[-1])
         s.last_seal = scan.last_digest
+        s.external_resolved = scan.external_ok
+        s.external_unresolved = sum(scan.external_unresolved.values())
         s.findings = len(self.sink.findings) - self.findings_before
         s.ok = s.findings == 0
         if scan.summarised:
@@ -312,6 +329,8 @@ class _SegmentCheck:
                 "the chain does not cover them",
                 (s.first_cycle, s.last_cycle, s.start_ns, s.end_ns),
             )
+        if scan.external_unresolved:
+            self._note_external_unresolved()
         if s.recovered:
             self.note(
                 "recovered",
@@ -319,6 +338,16 @@ class _SegmentCheck:
                 "filled); read by a linear scan",
                 (s.first_cycle, s.last_cycle, s.start_ns, s.end_ns),
             )
+
+    def _note_external_unresolved(self) -> None:
+        s, missing = self.summary, self.scan.external_unresolved
+        names = ", ".join(sorted(missing)[:5]) + (" …" if len(missing) > 5 else "")
+        self.note(
+            "external_unresolved",
+            f"{sum(missing.values())} evidence ref(s) name external recordings that were not "
+            f"given ({names}): not checked, not broken; pass them with --evidence",
+            (s.first_cycle, s.last_cycle, s.start_ns, s.end_ns),
+        )
 
     def _read_checkpoints(self) -> None:
         try:
@@ -441,6 +470,35 @@ class _SegmentCheck:
                 "evidence_mismatch",
                 f"cycle {status.cycle}: sensor reading {', '.join(status.evidence_mismatch)} "
                 "differs from the digest its evidence ref names",
+                (status.cycle, status.cycle, status.t_ns, status.t_ns),
+            )
+        if status.external:
+            self._check_external(status, position)
+
+    def _check_external(self, status: SealStatus, position: int) -> None:
+        """Evidence refs into external recordings: a changed or missing message in a
+        recording that was given is a finding; a recording not given is only counted."""
+        broken: list[str] = []
+        for ref in status.external:
+            name = str(ref.get("recording"))
+            if self.recordings is None:
+                unresolved = self.scan.external_unresolved
+                unresolved[name] = unresolved.get(name, 0) + 1
+                continue
+            check = self.recordings.check(ref)
+            if check.state == "resolved":
+                self.scan.external_ok += 1
+            elif check.state == "unresolved":
+                unresolved = self.scan.external_unresolved
+                unresolved[name] = unresolved.get(name, 0) + 1
+            elif check.detail not in broken:
+                broken.append(check.detail)
+        if broken:
+            self.scan.bad_positions.add(position)
+            self.finding(
+                "evidence_mismatch",
+                f"cycle {status.cycle}: evidence ref into an external recording does not "
+                f"resolve: {'; '.join(broken)}",
                 (status.cycle, status.cycle, status.t_ns, status.t_ns),
             )
 
@@ -1036,9 +1094,16 @@ def problem_finding(problem: FileProblem) -> Finding:
     return Finding(kind, f"{problem.path.name}: {problem.reason}", segment=name)
 
 
-def verify(log: Log, *, key: PublicKey | None = None) -> VerifyReport:
+def verify(
+    log: Log, *, key: PublicKey | None = None, recordings: Recordings | None = None
+) -> VerifyReport:
     """Verify every segment of ``log`` (each robot's chain across its segments and tiers);
     never raises on tampering or damage: those are findings.
+
+    ``recordings``: external MCAP recordings (e.g. rosbag2) that evidence refs may name;
+    a ref into a recording given that does not resolve or whose digest differs is an
+    ``evidence_mismatch`` finding; refs into recordings not given are an
+    ``external_unresolved`` note (PROFILE.md section 11).
 
     Each segment is verified in every copy the log holds (``log.segments`` and the copies
     they shadow); the copy ``logset.preferred_copies`` reads is the one counted. The files
@@ -1055,7 +1120,9 @@ def verify(log: Log, *, key: PublicKey | None = None) -> VerifyReport:
     for segment in segments:
         by_robot.setdefault(segment.session.robot_id, []).append(segment)
     for robot_id in sorted(by_robot):
-        robot = _verify_robot(robot_id, by_robot[robot_id], key, sink, report)
+        robot = _verify_robot(
+            robot_id, by_robot[robot_id], key, sink, report, recordings=recordings
+        )
         report.robots.append(robot)
     if key is None and any(s.checkpoints for s in report.segments):
         sink.note(
@@ -1079,6 +1146,8 @@ def verify(log: Log, *, key: PublicKey | None = None) -> VerifyReport:
         report.checkpoints += s.checkpoints
         report.checkpoints_valid += s.checkpoints_valid
         report.segments_valid += 1 if s.ok else 0
+        report.external_resolved += s.external_resolved
+        report.external_unresolved += s.external_unresolved
     robots = [r for r in report.robots if r.first_cycle is not None]
     if robots:
         report.first_cycle = min(r.first_cycle for r in robots if r.first_cycle is not None)
@@ -1097,6 +1166,8 @@ def _verify_robot(
     key: PublicKey | None,
     sink: _Sink,
     report: VerifyReport,
+    *,
+    recordings: Recordings | None = None,
 ) -> RobotSummary:
     robot = RobotSummary(robot_id)
     by_number: dict[int, list[Segment]] = {}
@@ -1150,7 +1221,14 @@ def _verify_robot(
         results: list[_SegmentCheck] = []
         for n, copy in enumerate(copies):
             # Further copies report their findings; their notes would repeat the first's.
-            check = _SegmentCheck(copy, entry, entry_cycle, key, sink if n == 0 else sink.quiet())
+            check = _SegmentCheck(
+                copy,
+                entry,
+                entry_cycle,
+                key,
+                sink if n == 0 else sink.quiet(),
+                recordings=recordings,
+            )
             check.run()
             check.summary.copy = n > 0
             results.append(check)

@@ -7,7 +7,14 @@ import sys
 import typer
 from typer.exceptions import TyperException
 
-from trace_audit.cli import integrity, investigate, metrics, report, storage  # noqa: F401
+from trace_audit.cli import (  # noqa: F401 - each module registers its commands
+    doctor,
+    integrity,
+    investigate,
+    metrics,
+    report,
+    storage,
+)
 from trace_audit.cli.app import EXIT_USAGE, app
 
 __all__ = ["app", "main"]

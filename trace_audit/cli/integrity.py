@@ -90,6 +90,15 @@ def verify_command(
             show_default=False,
         ),
     ] = None,
+    evidence: Annotated[
+        list[Path] | None,
+        typer.Option(
+            "--evidence",
+            help="An external recording (MCAP file or rosbag2 directory) the log's evidence "
+            "refs name: their digests are checked there. Repeat for several.",
+            show_default=False,
+        ),
+    ] = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
@@ -100,7 +109,7 @@ def verify_command(
 
     def run() -> VerifyReport:
         public = load_public_key(key) if key is not None else None
-        return verify_log(log, key=public)
+        return verify_log(log, key=public, evidence=evidence or ())
 
     report = guarded(run)
     emit(report, verify_doc, json_out=json_out, plain=plain)
@@ -135,6 +144,14 @@ def verify_doc(r: VerifyReport) -> Doc:
         ("segments", f"{r.segments_valid} valid of {len(r.segments)}"),
         ("declared gaps", f"{r.declared_dropped} cycle(s) dropped by the logger"),
     ]
+    if r.external_resolved or r.external_unresolved:
+        rows.append(
+            (
+                "external evidence",
+                f"{r.external_resolved} ref(s) resolved in the recordings given, "
+                f"{r.external_unresolved} not checked (recording not given)",
+            )
+        )
     doc.fields(rows)
     if r.findings:
         doc.heading("Findings")

@@ -57,6 +57,15 @@ LogArgument = Annotated[
         show_default=False,
     ),
 ]
+EvidenceOption = Annotated[
+    list[Path] | None,
+    typer.Option(
+        "--evidence",
+        help="An external recording (MCAP file or rosbag2 directory) the log's evidence refs "
+        "name; repeat for several.",
+        show_default=False,
+    ),
+]
 TimeOption = Annotated[
     str | None,
     typer.Option(
@@ -118,13 +127,32 @@ def explain_command(  # noqa: PLR0917 - typer maps each parameter to an option
             "where the current action began.",
         ),
     ] = 600.0,
+    evidence: EvidenceOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
     from trace_audit.explain import explain
 
-    result = guarded(lambda: explain(log, t=t, cycle=cycle, lookback_s=lookback))
+    result = guarded(
+        lambda: explain(log, t=t, cycle=cycle, lookback_s=lookback, evidence=evidence or ())
+    )
     emit(result, lambda r: explain_doc(r, lookback), json_out=json_out, plain=plain)
+
+
+def _external_evidence(doc: Doc, r: Explanation) -> None:
+    """Evidence refs into external recordings: resolved (decoded), broken, or not checked."""
+    doc.heading("External evidence (recordings the refs name)")
+    style = {"resolved": "green", "broken": "bold red", "unresolved": "yellow"}
+    for e in r.external_evidence:
+        state = {"resolved": "resolved, digest verified", "broken": "BROKEN"}.get(
+            e.state, "not checked (recording not given: --evidence)"
+        )
+        t = fmt_t(e.log_time_ns) if e.log_time_ns is not None else "?"
+        doc.line([f"{e.entity}: {e.recording} {e.topic} @ {t}  ", Seg(state, style[e.state])], 2)
+        if e.detail and e.state == "broken":
+            doc.line(e.detail, 4)
+        if e.schema:
+            doc.line(e.schema + ": " + ", ".join(f"{k}={v}" for k, v in e.fields), 4)
 
 
 def explain_doc(r: Explanation, lookback_s: float = 600.0) -> Doc:
@@ -215,6 +243,8 @@ def explain_doc(r: Explanation, lookback_s: float = 600.0) -> Doc:
         doc.line(Seg(f"no chain: {r.chains.reason}", "red"), 2)
     for chain in r.chains.factors:
         doc.tree(_chain_item(r, chain))
+    if r.external_evidence:
+        _external_evidence(doc, r)
 
     doc.heading("Execution")
     ex = d.execution

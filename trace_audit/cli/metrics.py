@@ -142,6 +142,15 @@ def metrics_command(
             "dr, continuity, integrity, gate).",
         ),
     ] = None,
+    evidence: Annotated[
+        list[Path] | None,
+        typer.Option(
+            "--evidence",
+            help="An external recording (MCAP file or rosbag2 directory) the logs' evidence "
+            "refs name; repeat for several.",
+            show_default=False,
+        ),
+    ] = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
@@ -158,6 +167,7 @@ def metrics_command(
             start_ns=None if start is None else round(start * 1e9),
             end_ns=None if end is None else round(end * 1e9),
             max_listed=10_000 if failures else 0,
+            evidence=tuple(str(p) for p in evidence or ()),
         )
         return _with_progress(logs, config, quiet=json_out or plain)
 
@@ -332,6 +342,15 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
         out.print(f"  not read: {skipped}", markup=False, soft_wrap=True)
     for problem in report.unreadable:
         out.print(f"  unreadable file, not scored: {problem}", markup=False, soft_wrap=True)
+    if report.external_refs:
+        ext = report.external_refs
+        out.print(
+            f"  evidence refs into external recordings: {ext.get('resolved', 0)} resolved, "
+            f"{ext.get('broken', 0)} broken, {ext.get('unresolved', 0)} unresolved "
+            "(recording not given: --evidence)",
+            markup=False,
+            soft_wrap=True,
+        )
 
     if failures:
         listed = len(report.failures)

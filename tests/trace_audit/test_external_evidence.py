@@ -1,0 +1,202 @@
+"""Evidence refs into an external rosbag2-style MCAP recording (PROFILE.md section 11).
+
+The recording is a real ROS 2 MCAP written by ``mcap-ros2-support`` (examples/ros2_robot.py):
+``sensor_msgs/msg/LaserScan`` with its ``ros2msg`` schema, CDR messages. The TRACE log cites
+its messages; explain, verify, metrics and doctor resolve them when given the recording,
+check their digests, and keep "recording not given" apart from "broken"."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import Writer
+from typer.testing import CliRunner
+
+from trace_audit.cli import app
+from trace_audit.doctor import doctor_log
+from trace_audit.explain import explain
+from trace_audit.metrics import MetricsConfig, compute_metrics
+from trace_audit.verify import verify_log
+from trace_runtime.errors import LogReadError
+from trace_runtime.recordings import Recordings
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLE = ROOT / "examples" / "ros2_robot.py"
+CYCLES = 40
+
+
+@pytest.fixture(scope="module")
+def robot(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """(TRACE log, rosbag2 directory) written by the example, as a user would run it."""
+    out = tmp_path_factory.mktemp("ros2") / "robot.mcap"
+    subprocess.run(
+        [sys.executable, str(EXAMPLE), "--out", str(out), "--cycles", str(CYCLES)],
+        check=True,
+        cwd=ROOT,
+        env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
+        capture_output=True,
+        timeout=60,
+    )
+    return out, out.with_name("robot_bag")
+
+
+def _copy_bag(src: Path, dst: Path, change: int | None = None, drop: int | None = None) -> Path:
+    """Copy a recording message by message; flip a byte of message ``change``, leave out
+    message ``drop`` (by sequence): what a damaged or edited recording looks like."""
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    with src.open("rb") as f_in, dst.open("wb") as f_out:
+        reader = make_reader(f_in)
+        writer = Writer(f_out)
+        writer.start(profile="ros2", library="test copy")
+        ids: dict[int, int] = {}
+        for schema, channel, message in reader.iter_messages():
+            if channel.id not in ids:
+                assert schema is not None
+                sid = writer.register_schema(schema.name, schema.encoding, schema.data)
+                ids[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, sid
+                )
+            if message.sequence == drop:
+                continue
+            data = message.data
+            if message.sequence == change:
+                data = data[:-8] + bytes(b ^ 0xFF for b in data[-8:])
+            writer.add_message(
+                ids[channel.id], message.log_time, data, message.publish_time, message.sequence
+            )
+        writer.finish()
+    return dst
+
+
+def test_the_recording_is_a_real_ros2_mcap_that_mcap_ros2_decodes(robot: tuple[Path, Path]) -> None:
+    from mcap_ros2.decoder import DecoderFactory
+
+    _log, bag = robot
+    [recording] = list(bag.glob("*.mcap"))
+    with recording.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        assert reader.get_header().profile == "ros2"
+        decoded = list(reader.iter_decoded_messages())
+    assert len(decoded) == CYCLES
+    schema, channel, _message, scan = decoded[0]
+    assert (schema.name, schema.encoding, channel.message_encoding) == (
+        "sensor_msgs/msg/LaserScan",
+        "ros2msg",
+        "cdr",
+    )
+    assert len(scan.ranges) == 32 and scan.header.frame_id == "base_laser"
+
+
+def test_verify_checks_the_digests_only_when_given_the_recording(robot: tuple[Path, Path]) -> None:
+    log, bag = robot
+    alone = verify_log(log)
+    assert alone.ok
+    assert (alone.external_resolved, alone.external_unresolved) == (0, CYCLES)
+    assert [n.kind for n in alone.notes].count("external_unresolved") == 1
+    given = verify_log(log, evidence=[bag])
+    assert given.ok
+    assert (given.external_resolved, given.external_unresolved) == (CYCLES, 0)
+    assert "external_unresolved" not in [n.kind for n in given.notes]
+
+
+def test_a_changed_or_missing_message_in_the_recording_is_a_finding(
+    robot: tuple[Path, Path], tmp_path: Path
+) -> None:
+    log, bag = robot
+    [recording] = list(bag.glob("*.mcap"))
+    changed = _copy_bag(recording, tmp_path / "changed" / recording.name, change=10)
+    report = verify_log(log, evidence=[changed])
+    assert not report.ok
+    [finding] = report.findings
+    assert finding.kind == "evidence_mismatch" and finding.first_cycle == 10
+    assert "does not match the ref's digest" in finding.message
+    assert report.external_resolved == CYCLES - 1
+
+    dropped = _copy_bag(recording, tmp_path / "dropped" / recording.name, drop=7)
+    [finding] = verify_log(log, evidence=[dropped]).findings
+    assert finding.first_cycle == 7 and "no /scan message" in finding.message
+
+
+def test_a_recording_not_given_is_unresolved_not_broken(
+    robot: tuple[Path, Path], tmp_path: Path
+) -> None:
+    log, bag = robot
+    [recording] = list(bag.glob("*.mcap"))
+    other = _copy_bag(recording, tmp_path / "other_bag" / "other_bag_0.mcap")
+    report = verify_log(log, evidence=[other])
+    assert report.ok and (report.external_resolved, report.external_unresolved) == (0, CYCLES)
+    metrics = compute_metrics([log], MetricsConfig(evidence=(str(other),)))
+    assert metrics.external_refs == {"unresolved": CYCLES}
+
+
+def test_metrics_count_resolved_broken_and_unresolved_apart(
+    robot: tuple[Path, Path], tmp_path: Path
+) -> None:
+    log, bag = robot
+    [recording] = list(bag.glob("*.mcap"))
+    without = compute_metrics([log])
+    given = compute_metrics([log], MetricsConfig(evidence=(str(bag),)))
+    assert without.external_refs == {"unresolved": CYCLES}
+    assert given.external_refs == {"resolved": CYCLES}
+    # ET needs a resolving reading: not checked is not traced
+    assert without.overall.et.mean == 0.0 and given.overall.et.mean == 1.0
+    changed = _copy_bag(recording, tmp_path / "c" / recording.name, change=3)
+    broken = compute_metrics([log], MetricsConfig(evidence=(str(changed),)))
+    assert broken.external_refs == {"broken": 1, "resolved": CYCLES - 1}
+
+
+def test_explain_resolves_and_decodes_the_cited_scan(robot: tuple[Path, Path]) -> None:
+    log, bag = robot
+    result = explain(log, cycle=5, evidence=[bag])
+    [external] = result.external_evidence
+    assert external.state == "resolved" and external.schema == "sensor_msgs/msg/LaserScan"
+    fields = dict(external.fields)
+    assert fields["ranges"].startswith("[32]")
+    assert all(c.traceable for c in result.chains.factors)
+    unchecked = explain(log, cycle=5)
+    assert [e.state for e in unchecked.external_evidence] == ["unresolved"]
+    [chain] = unchecked.chains.factors
+    assert chain.missing is not None and "not given" in chain.missing.detail
+
+
+def test_cli_evidence_option_and_exit_codes(robot: tuple[Path, Path], tmp_path: Path) -> None:
+    log, bag = robot
+    runner = CliRunner()
+    shown = runner.invoke(app, ["explain", str(log), "--cycle", "5", "--evidence", str(bag)])
+    assert shown.exit_code == 0, shown.output
+    assert "resolved, digest verified" in shown.stdout
+    assert "sensor_msgs/msg/LaserScan" in shown.stdout
+    [recording] = list(bag.glob("*.mcap"))
+    changed = _copy_bag(recording, tmp_path / "c" / recording.name, change=2)
+    failed = runner.invoke(app, ["verify", str(log), "--evidence", str(changed), "--json"])
+    assert failed.exit_code == 1
+    assert json.loads(failed.stdout)["findings"][0]["kind"] == "evidence_mismatch"
+    missing = runner.invoke(app, ["verify", str(log), "--evidence", str(tmp_path / "nope")])
+    assert missing.exit_code == 3 and "no such recording" in missing.stderr
+    doctor = runner.invoke(app, ["doctor", str(log), "--evidence", str(changed), "--json"])
+    assert doctor.exit_code == 1
+    [problem] = [
+        p for p in json.loads(doctor.stdout)["segments"][0]["problems"] if p["level"] == "MUST"
+    ]
+    assert (problem["rule"], problem["section"]) == ("external-digest", "§11")
+
+
+def test_doctor_passes_the_ros2_robot_and_notes_unchecked_refs(robot: tuple[Path, Path]) -> None:
+    log, bag = robot
+    alone = doctor_log(log)
+    assert alone.conforms
+    assert [p.rule for p in alone.notes] == ["external-given"]
+    assert doctor_log(log, evidence=[bag]).notes == []
+
+
+def test_recordings_refuse_a_file_that_is_not_mcap(tmp_path: Path) -> None:
+    bad = tmp_path / "x_0.mcap"
+    bad.write_bytes(b"not mcap")
+    recordings = Recordings.open([bad])
+    with pytest.raises(LogReadError):
+        recordings.check({"recording": "x_0.mcap", "topic": "/scan", "log_time_ns": 1})

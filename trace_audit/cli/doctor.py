@@ -1,0 +1,128 @@
+"""trace-audit ``doctor``: does a log follow the TRACE profile (schemas/PROFILE.md)?
+
+Parses its arguments, calls ``trace_audit.doctor.doctor_log`` and renders the typed report:
+rich on a terminal, plain text with ``--plain`` or in a pipe, JSON with ``--json``.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+
+from trace_audit.cli.app import EXIT_FINDINGS, JsonOption, PlainOption, app, guarded, help_text
+from trace_audit.cli.render import Column, Doc, Seg, emit, progress_bar, setup_logging
+
+if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
+    from trace_audit.doctor import DoctorReport, Problem
+
+_HELP = """Check a log against every rule of the TRACE profile: the tool to run first when
+you write TRACE logs from C++, Rust or anything else.
+
+Checks the MCAP header, trace.session keys and ranges, channels and schemas, message
+encodings, that log_time = t_ns and sequence = cycle, the order of messages within a cycle,
+compact JSON and each record's JSON Schema, seals and the hash chain, checkpoints, declared
+drops, evidence refs, and the summary and indexes. Each problem names the rule, the
+PROFILE.md section, MUST or SHOULD, and where it is (cycle, file offset).
+
+Evidence refs into external recordings (rosbag2 MCAP) are checked when the recordings are
+given with --evidence; otherwise they are a note, never a broken rule.
+
+Exit codes: 0 conforming (SHOULD deviations are listed as notes), 1 a MUST is broken,
+2 usage, 3 unreadable (missing, not MCAP).
+
+[bold]Examples[/bold]:
+
+  trace-audit doctor robot.mcap
+
+  trace-audit doctor robot.mcap --evidence rosbag2_2026_11_29/ --plain
+
+  trace-audit doctor /data/logs/amr-7/ --json | jq '.segments[].problems'
+"""
+
+_MAX_LISTED = 100
+
+
+@app.command("doctor", help=help_text(_HELP))
+def doctor_command(
+    log: Annotated[
+        Path,
+        typer.Argument(
+            help="A TRACE segment (.mcap), a directory of segments, or a log root.",
+            show_default=False,
+        ),
+    ],
+    *,
+    evidence: Annotated[
+        list[Path] | None,
+        typer.Option(
+            "--evidence",
+            help="An external recording (MCAP file or rosbag2 directory) that evidence refs "
+            "name; repeat for several.",
+            show_default=False,
+        ),
+    ] = None,
+    json_out: JsonOption = False,
+    plain: PlainOption = False,
+) -> None:
+    from trace_audit.doctor import doctor_log
+
+    setup_logging()
+    if json_out or plain or not sys.stderr.isatty():
+        report = guarded(lambda: doctor_log(log, evidence=evidence or ()))
+    else:
+        with progress_bar("checking records (MB)") as bar:
+            task = bar.task_ids[0]
+
+            def progress(done: int, total: int) -> None:
+                bar.update(task, completed=done >> 20, total=total >> 20)
+
+            report = guarded(lambda: doctor_log(log, evidence=evidence or (), progress=progress))
+    emit(report, doctor_doc, json_out=json_out, plain=plain)
+    if not report.conforms:
+        raise typer.Exit(EXIT_FINDINGS)
+
+
+def doctor_doc(r: DoctorReport) -> Doc:
+    """The doctor report as a document."""
+    doc = Doc()
+    errors, notes = r.errors, r.notes
+    verdict = (
+        Seg("CONFORMS", "bold green")
+        if r.conforms
+        else Seg(f"{len(errors)} RULE(S) BROKEN", "bold red", f"{len(errors)} RULE(S) BROKEN")
+    )
+    doc.title([f"Doctor {r.path}: ", verdict])
+    doc.fields(
+        [
+            ("segments", str(len(r.segments))),
+            ("read", f"{sum(s.messages for s in r.segments)} messages, "
+             f"{sum(s.cycles for s in r.segments)} sealed cycles"),
+            ("rules", f"{r.rules_checked} rules of PROFILE.md"),
+            ("evidence", ", ".join(r.evidence) if r.evidence else "no external recording given"),
+        ]
+    )  # fmt: skip
+    if errors:
+        doc.heading("MUST broken (the log does not conform)")
+        _problem_table(doc, errors)
+    if notes:
+        doc.heading("SHOULD not followed (notes)")
+        _problem_table(doc, notes)
+    return doc
+
+
+def _problem_table(doc: Doc, problems: list[Problem]) -> None:
+    rows = []
+    for p in problems[:_MAX_LISTED]:
+        where = []
+        if p.cycle is not None:
+            where.append(f"cycle {p.cycle}")
+        if p.offset is not None:
+            where.append(f"@{p.offset}")
+        times = f" (x{p.count})" if p.count > 1 else ""
+        rows.append([f"{p.section} {p.rule}", " ".join(where), p.message + times])
+    doc.table([Column("rule"), Column("where"), Column("what", wrap=True)], rows)
+    if len(problems) > _MAX_LISTED:
+        doc.line(f"… and {len(problems) - _MAX_LISTED} more (--json lists all)", 2)
