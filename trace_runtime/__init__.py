@@ -42,6 +42,7 @@ _EXPORTS = {
     "Alternative": "trace_runtime.records",
     "Belief": "trace_runtime.records",
     "BeliefEdge": "trace_runtime.records",
+    "ActuatorChannel": "trace_runtime.records",
     "BeliefNode": "trace_runtime.records",
     "Checkpoint": "trace_runtime.records",
     "ComplianceCheck": "trace_runtime.records",
@@ -65,6 +66,7 @@ _EXPORTS = {
 
 __all__ = [
     "Action",
+    "ActuatorChannel",
     "Alternative",
     "AuditLogger",
     "Belief",
@@ -143,6 +145,7 @@ if TYPE_CHECKING:
     from trace_runtime.reader import Segment, SegmentInfo, open_segment
     from trace_runtime.records import (
         Action,
+        ActuatorChannel,
         Alternative,
         Belief,
         BeliefEdge,
