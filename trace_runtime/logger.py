@@ -34,6 +34,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from time import perf_counter_ns
 from types import TracebackType
 from typing import Any, BinaryIO, Literal, Protocol
 
@@ -47,6 +48,7 @@ from trace_runtime.codec import (
     encode_json,
     encode_seal_fields,
 )
+from trace_runtime.costs import TIMING_METADATA, CostHistogram
 from trace_runtime.errors import LogLockedError, RecordError, UsageError
 from trace_runtime.integrity import Signer, encode_checkpoint, load_signer, make_checkpoint
 from trace_runtime.records import (
@@ -104,8 +106,9 @@ class LoggerConfig:
     opener: Opener | None = None
     """How segment files are opened; a plug point for custom storage and fault injection."""
     checkpoint_interval_s: float | None = 10.0
-    """Write a /trace/checkpoint (the chain head) after the seal once this much log time has
-    passed since the last one; one is always written when a segment closes. None: only then."""
+    """Write a /trace/checkpoint (the chain head) after the first seal at or past each
+    multiple of this much log time from the segment's first cycle, however cycles are
+    batched into chunks; one is always written when a segment closes. None: only then."""
     checkpoint_key: str | Path | Signer | None = None
     """Sign checkpoints: an Ed25519 private key file (``trace-audit keygen``) or a ``Signer``.
     None writes unsigned checkpoints (chain-head anchors only)."""
@@ -148,6 +151,7 @@ class _PendingCycle:
     layers: dict[str, LayerValue]
     sensors: list[tuple[str, int, int, bytes]]
     dropped_before: int
+    cost_ns: int
 
 
 class _Handover:
@@ -225,18 +229,32 @@ class _Handover:
         self._wake.set()
 
 
+def next_cycle_time(t_ns: int | None, previous_ns: int) -> int:
+    """The time of the cycle being begun: ``t_ns``, or now when None. ``RecordError`` when
+    it is earlier than ``previous_ns``, the time of the cycle begun before it (0 before the
+    first): time never goes backwards within a session (schemas/PROFILE.md §4)."""
+    if t_ns is None:
+        return time.time_ns()
+    if t_ns < previous_ns:
+        raise RecordError(
+            f"cycle time {t_ns} ns is earlier than {previous_ns} ns, the previous cycle's "
+            "(or 0 before the first): time must not go backwards (PROFILE section 4)"
+        )
+    return t_ns
+
+
 class CycleSink(Protocol):
     """What a ``CycleBuilder`` hands its cycle to: the logger, or a test capture."""
 
     def _next_sensor_sequence(self, topic: str) -> int: ...
-    def _commit(self, builder: CycleBuilder) -> None: ...
+    def _commit(self, builder: CycleBuilder, started_ns: int) -> None: ...
     def _abort(self, builder: CycleBuilder) -> None: ...
 
 
 class CycleBuilder:
     """One decision cycle being assembled; commit it once, or let ``with`` do it."""
 
-    __slots__ = ("_committed", "_layers", "_logger", "_sensors", "cycle", "t_ns")
+    __slots__ = ("_committed", "_cost_ns", "_layers", "_logger", "_sensors", "cycle", "t_ns")
 
     def __init__(self, logger: CycleSink, cycle: int, t_ns: int) -> None:
         self._logger = logger
@@ -245,6 +263,7 @@ class CycleBuilder:
         self._layers: dict[str, LayerValue] = {}
         self._sensors: list[tuple[str, int, int, bytes]] = []
         self._committed = False
+        self._cost_ns = 0  # control-thread time spent in the logger for this cycle
 
     def sensor(self, topic: str, payload: Any, t_ns: int | None = None) -> EvidenceRef:
         """Log a sensor reading that evidence will point to; return its evidence ref.
@@ -252,15 +271,18 @@ class CycleBuilder:
         ``payload`` is a JSON-able object or bytes of JSON. The ref carries the topic, log
         time, per-topic sequence and the SHA-256 of the data, so it resolves and verifies.
         """
+        start = perf_counter_ns()
         if not topic.startswith(SENSOR_PREFIX):
             raise RecordError(f"sensor topic must start with {SENSOR_PREFIX!r}: {topic!r}")
         data = payload if isinstance(payload, bytes) else encode_json(payload)
         log_time = self.t_ns if t_ns is None else t_ns
         sequence = self._logger._next_sensor_sequence(topic)
         self._sensors.append((topic, sequence, log_time, data))
-        return EvidenceRef(
+        ref = EvidenceRef(
             topic=topic, log_time_ns=log_time, sequence=sequence, digest=digest_keeping_gil(data)
         )
+        self._cost_ns += perf_counter_ns() - start
+        return ref
 
     def perception(self, record: Any) -> None:
         """Add layer 1 (a ``Perception`` or a dict of its fields)."""
@@ -279,18 +301,20 @@ class CycleBuilder:
         self._add(TOPIC_EXECUTION, record)
 
     def _add(self, topic: str, record: Any) -> None:
+        start = perf_counter_ns()
         if self._committed:
             raise UsageError(f"cycle {self.cycle} is already committed")
         if topic in self._layers:
             raise UsageError(f"cycle {self.cycle} already has a {topic} record")
         self._layers[topic] = check_layer(LAYER_MODELS[topic], self.cycle, self.t_ns, record)
+        self._cost_ns += perf_counter_ns() - start
 
     def commit(self) -> None:
         """Hand the cycle to the writer. Never raises because of I/O."""
         if self._committed:
             raise UsageError(f"cycle {self.cycle} is already committed")
         self._committed = True
-        self._logger._commit(self)
+        self._logger._commit(self, perf_counter_ns())
 
     def abort(self) -> None:
         """Give the cycle up; it is counted as dropped and the next seal says so."""
@@ -354,6 +378,7 @@ class AuditLogger:
         self._lock = threading.Lock()
         self._closed = False
         self._open_cycle: CycleBuilder | None = None
+        self._last_t_ns = 0  # time of the last cycle begun (control thread only)
         self._sensor_seq: dict[str, int] = {}
         # Drops are declared by the seal of the next cycle written after them. The control
         # thread counts what it drops before the hand-over; the writer counts failed writes.
@@ -404,7 +429,8 @@ class AuditLogger:
         self._segment_start_ns: int | None = None
         self._head: tuple[int, int] | None = None  # (cycle, t_ns) of the segment's last seal
         self._sealed_in_segment = 0
-        self._checkpoint_tried_ns: int | None = None  # log time of the last periodic attempt
+        self._checkpoint_due_ns: int | None = None  # log time the next periodic one is due
+        self._costs = CostHistogram()  # this segment's per-cycle control-thread costs
         # Opening the first segment may fail (bad path, no permission): that is a set-up
         # error the integrator must see, so it raises here, unlike every later I/O failure.
         self._open_segment(self._session)
@@ -422,12 +448,18 @@ class AuditLogger:
     # --- control-thread API -------------------------------------------------------------
 
     def cycle(self, t_ns: int | None = None) -> CycleBuilder:
-        """Begin the next decision cycle at ``t_ns`` (default: now, wall clock)."""
+        """Begin the next decision cycle at ``t_ns`` (default: now, wall clock).
+
+        Raises ``RecordError`` when ``t_ns`` is earlier than the previous cycle's time
+        (PROFILE §4: time does not go backwards within a session); the cycle number is then
+        not used.
+        """
         if self._closed:
             raise UsageError("the logger is closed")
         if self._open_cycle is not None and not self._open_cycle._committed:
             raise UsageError(f"cycle {self._open_cycle.cycle} was begun but not committed")
-        builder = CycleBuilder(self, self._next_cycle, time.time_ns() if t_ns is None else t_ns)
+        t_ns = self._last_t_ns = next_cycle_time(t_ns, self._last_t_ns)
+        builder = CycleBuilder(self, self._next_cycle, t_ns)
         self._next_cycle += 1
         self._open_cycle = builder
         return builder
@@ -520,7 +552,7 @@ class AuditLogger:
         self._sensor_seq[topic] = seq + 1
         return seq
 
-    def _commit(self, builder: CycleBuilder) -> None:
+    def _commit(self, builder: CycleBuilder, started_ns: int) -> None:
         self.stats.committed += 1
         pending = _PendingCycle(
             builder.cycle,
@@ -528,7 +560,9 @@ class AuditLogger:
             builder._layers,
             builder._sensors,
             self._undeclared_control,
+            builder._cost_ns,
         )
+        pending.cost_ns += perf_counter_ns() - started_ns
         if self._queue is None:
             self._undeclared_control = 0
             self._sync_batch.append(pending)
@@ -596,10 +630,7 @@ class AuditLogger:
             segment = self._segment
             if segment is None:
                 raise SegmentWriteError("no segment could be opened", rolled_back=False)
-            messages, last_seal = self._seal(segment, batch)
-            checkpoint = self._checkpoint_if_due(segment, batch, last_seal)
-            if checkpoint is not None:
-                messages.append(checkpoint)
+            messages, last_seal, checkpoints = self._seal(segment, batch)
             self.stats.bytes_written += segment.write_batch(messages)
         except SegmentWriteError as err:
             self._lose(batch, err, abandon=not err.rolled_back)
@@ -612,20 +643,24 @@ class AuditLogger:
         self.stats.written += len(batch)
         self._head = (batch[-1].cycle, batch[-1].t_ns)
         self._sealed_in_segment += len(batch)
-        if checkpoint is not None:
-            self.stats.checkpoints += 1
+        self.stats.checkpoints += checkpoints
         if self._segment_start_ns is None:
             self._segment_start_ns = batch[0].t_ns
+        for pending in batch:
+            self._costs.add(pending.cost_ns)
         self._maybe_sync()
 
     def _seal(
         self, segment: SegmentWriter, batch: list[_PendingCycle]
-    ) -> tuple[list[OutMessage], str]:
+    ) -> tuple[list[OutMessage], str, int]:
+        """The batch's messages in file order, the last seal's digest, and how many periodic
+        checkpoints are among the messages (each right after the seal it names)."""
         messages: list[OutMessage] = []
+        checkpoints = 0
         prev = self._prev_seal
         carried = self._undeclared_writer
         seal_channel = segment.channel(TOPIC_SEAL)
-        for pending in batch:
+        for index, pending in enumerate(batch):
             for topic, sequence, log_time, data in pending.sensors:
                 messages.append(OutMessage(segment.channel(topic), sequence, log_time, data))
             digests: dict[str, str] = {}
@@ -643,7 +678,15 @@ class AuditLogger:
             messages.append(OutMessage(seal_channel, pending.cycle, pending.t_ns, data))
             prev = digest(data)
             carried = 0
-        return messages, prev
+            if self._checkpoint_due(pending.t_ns):
+                sealed = self._sealed_in_segment + index + 1
+                checkpoint = self._checkpoint_message(
+                    segment, pending.cycle, pending.t_ns, prev, sealed, final=False
+                )
+                if checkpoint is not None:
+                    messages.append(checkpoint)
+                    checkpoints += 1
+        return messages, prev, checkpoints
 
     def _lose(self, batch: list[_PendingCycle], err: Exception, *, abandon: bool) -> None:
         self.stats.dropped_io += len(batch)
@@ -702,7 +745,8 @@ class AuditLogger:
         self._segment_start_ns = None
         self._head = None
         self._sealed_in_segment = 0
-        self._checkpoint_tried_ns = None
+        self._checkpoint_due_ns = None
+        self._costs = CostHistogram()
         self.stats.segments.append(path)
 
     def _declare_tail(self) -> None:
@@ -738,6 +782,12 @@ class AuditLogger:
                 except Exception as err:
                     self.stats.checkpoint_failures += 1
                     self._report_once("checkpoint", f"could not write a checkpoint: {err}")
+        if self._costs.cycles and not segment.broken:
+            # The logger's own cost per cycle, for Table II of `trace-audit metrics`.
+            try:
+                segment.add_metadata(TIMING_METADATA, self._costs.to_metadata())
+            except Exception as err:
+                self._report_once("timing", f"could not record the logger's cost: {err}")
         try:
             segment.close()
         except Exception as err:
@@ -750,24 +800,28 @@ class AuditLogger:
             return self.path.with_name(f"{self.path.stem}.{session.segment:06d}.mcap")
         return self.path / "hot" / f"{session.robot_id}_{session.segment:06d}.mcap"
 
-    def _checkpoint_if_due(
-        self, segment: SegmentWriter, batch: list[_PendingCycle], head: str
-    ) -> OutMessage | None:
-        """The periodic checkpoint to append after this batch's last seal, when one is due."""
+    def _checkpoint_due(self, t_ns: int) -> bool:
+        """Whether a periodic checkpoint goes after the seal of the cycle at ``t_ns``.
+
+        They fall on a grid in log time: the first seal at or past each multiple of the
+        interval from the segment's first cycle, so their spacing does not depend on how
+        cycles were batched into chunks. After a pause longer than the interval there is one
+        checkpoint, not one per missed multiple. A checkpoint that could not be built or
+        signed still counts as done: a signer that is down (an HSM that times out) is asked
+        again an interval later, not on every cycle.
+        """
         interval = self.config.checkpoint_interval_s
         if interval is None:
-            return None
-        since = self._checkpoint_tried_ns
-        if since is None:
-            since = batch[0].t_ns if self._segment_start_ns is None else self._segment_start_ns
-        last = batch[-1]
-        if last.t_ns - since < interval * 1e9:
-            return None
-        # Counted as tried even if signing fails: a signer that is down (an HSM that times
-        # out) is asked again an interval later, not on every cycle.
-        self._checkpoint_tried_ns = last.t_ns
-        sealed = self._sealed_in_segment + len(batch)
-        return self._checkpoint_message(segment, last.cycle, last.t_ns, head, sealed, final=False)
+            return False
+        step = max(1, round(interval * 1e9))
+        due = self._checkpoint_due_ns
+        if due is None:
+            start = t_ns if self._segment_start_ns is None else self._segment_start_ns
+            due = self._checkpoint_due_ns = start + step
+        if t_ns < due:
+            return False
+        self._checkpoint_due_ns = due + ((t_ns - due) // step + 1) * step
+        return True
 
     def _checkpoint_message(
         self,
