@@ -51,7 +51,9 @@ from trace_audit.chains import (
     score_layers,
     trace_layers,
 )
+from trace_audit.jsonout import OMIT_EMPTY
 from trace_runtime.chain import digest
+from trace_runtime.costs import TIMING_METADATA, CostHistogram
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap, continuity, find_gap
@@ -74,6 +76,7 @@ __all__ = [
     "Gap",
     "GroupBy",
     "GroupMetrics",
+    "LoggingCost",
     "MetricsConfig",
     "MetricsReport",
     "Stat",
@@ -87,7 +90,6 @@ GroupBy = Literal["scenario", "segment", "robot", "hour"]
 GROUP_BYS: tuple[str, ...] = get_args(GroupBy)
 NO_SCENARIO = "(none)"
 SCENARIO_FLAG = "scenario:"
-TIMING_METADATA = "trace.timing"
 
 ProgressCallback = Callable[[int, int | None], None]
 """Called with (cycles done, cycles expected or None) as the scan advances."""
@@ -284,6 +286,20 @@ class ThresholdCheck:
 
 
 @dataclass(frozen=True, slots=True)
+class LoggingCost:
+    """The logger's control-thread cost per cycle as the log's writers measured it
+    (``trace.timing`` metadata). Percentiles are None unless every timed segment carries a
+    histogram (a writer may record only the mean); they are within 6.25 % (bucket width)."""
+
+    cycles: int
+    segments: int
+    mean_ns: float
+    p50_ns: int | None
+    p99_ns: int | None
+    max_ns: int | None
+
+
+@dataclass(frozen=True, slots=True)
 class MetricsReport:
     """Everything ``trace-audit metrics`` shows: definitions, tables, failures, thresholds."""
 
@@ -306,6 +322,8 @@ class MetricsReport:
     thresholds: tuple[ThresholdCheck, ...]
     elapsed_s: float
     cycles_per_s: float
+    logging_cost: LoggingCost | None = field(default=None, metadata={OMIT_EMPTY: True})
+    """The logger's own control-thread cost per cycle, from the segments' ``trace.timing``."""
 
     @property
     def passed(self) -> bool:
@@ -365,7 +383,8 @@ class _Partial:
     gaps: list[Gap] = field(default_factory=list)
     gaps_total: int = 0
     cycles: int = 0
-    timing: list[tuple[float, int]] = field(default_factory=list)
+    timing: list[tuple[float, int, CostHistogram | None]] = field(default_factory=list)
+    """(mean ns, cycles, histogram if recorded) per segment with ``trace.timing``."""
 
     def merge(self, other: _Partial, limit: int) -> None:
         for name, acc in other.groups.items():
@@ -411,9 +430,13 @@ class _Scanner:
             progress(done % _PROGRESS_EVERY)
         timing = segment.metadata.get(TIMING_METADATA)
         if timing:
-            with contextlib.suppress(KeyError, ValueError):
+            with contextlib.suppress(KeyError, ValueError):  # a malformed record: not timed
                 self.partial.timing.append(
-                    (float(timing["commit_mean_ns"]), int(timing.get("cycles", done)))
+                    (
+                        float(timing["commit_mean_ns"]),
+                        int(timing.get("cycles", done)),
+                        CostHistogram.from_metadata(timing),
+                    )
                 )
 
     def _grouper(self, segment: Segment) -> Callable[[Cycle], str]:
@@ -796,6 +819,7 @@ def _report(
     checks = tuple(_check(name, threshold, overall) for name, threshold in cfg.thresholds.items())
     failures = tuple(sorted(total.failures, key=lambda f: (f.t_ns, f.cycle)))
     gaps = tuple(sorted(total.gaps, key=lambda g: (g.after_t_ns, g.robot)))
+    cost = _logging_cost(total.timing)
     return MetricsReport(
         logs=tuple(str(p) for p in paths),
         segments=segments,
@@ -806,13 +830,14 @@ def _report(
         overall=overall,
         groups=groups,
         across_groups=across,
-        logging_time=_timing(total.timing),
+        logging_time=_timing(cost),
         failures=failures,
         failures_total=total.failures_total,
         gaps=gaps,
         gaps_total=total.gaps_total,
         thresholds=checks,
         elapsed_s=elapsed,
+        logging_cost=cost,
         cycles_per_s=total.cycles / elapsed if elapsed > 0 else 0.0,
     )
 
@@ -900,12 +925,34 @@ def _check(name: str, threshold: float, overall: GroupMetrics) -> ThresholdCheck
     return ThresholdCheck(name, threshold, value, value is not None and value >= threshold)
 
 
-def _timing(entries: list[tuple[float, int]]) -> str:
-    weight = sum(n for _, n in entries)
+def _logging_cost(entries: list[tuple[float, int, CostHistogram | None]]) -> LoggingCost | None:
+    weight = sum(n for _, n, _ in entries)
     if not entries or weight <= 0:
+        return None
+    mean_ns = sum(m * n for m, n, _ in entries) / weight
+    merged: CostHistogram | None = CostHistogram()
+    for _, _, histogram in entries:
+        if histogram is None or merged is None:
+            merged = None  # percentiles of some segments would not describe the others
+        else:
+            merged.merge(histogram)
+    return LoggingCost(
+        cycles=weight,
+        segments=len(entries),
+        mean_ns=mean_ns,
+        p50_ns=merged.percentile_ns(0.5) if merged else None,
+        p99_ns=merged.percentile_ns(0.99) if merged else None,
+        max_ns=merged.max_ns if merged else None,
+    )
+
+
+def _timing(cost: LoggingCost | None) -> str:
+    if cost is None:
         return "not logged"
-    mean_ns = sum(m * n for m, n in entries) / weight
-    return f"{mean_ns / 1e6:.3f} ms mean per cycle ({TIMING_METADATA} metadata, {weight} cycles)"
+    text = f"{cost.mean_ns / 1e6:.3f} ms mean"
+    if cost.p50_ns is not None and cost.p99_ns is not None:
+        text += f", p50 {cost.p50_ns / 1e6:.3f} ms, p99 {cost.p99_ns / 1e6:.3f} ms"
+    return f"{text} per cycle ({TIMING_METADATA} metadata, {cost.cycles} cycles)"
 
 
 def _definitions(cfg: MetricsConfig) -> dict[str, str]:
