@@ -88,12 +88,8 @@ def _with_field_docs(model: type[BaseModel]) -> str:
         key = info.alias or name
         shown = key if key == name else f"{key} (Python: {name})"
         kind = _type_text(info.annotation)
-        if info.is_required():
-            default = ""
-        elif info.default_factory is not None:
-            default = " = " + repr(info.default_factory())
-        else:
-            default = " = " + repr(info.default)
+        required = info.is_required()
+        default = "" if required else " = " + repr(info.get_default(call_default_factory=True))
         lines.append(f"    {shown}: {kind}{default}")
         lines.append(f"        {info.description or '(undocumented)'}")
     return "\n".join(lines) + "\n"
