@@ -72,6 +72,7 @@ __all__ = [
     "GROUP_BYS",
     "METRIC_NAMES",
     "AcrossGroups",
+    "ChannelDeviation",
     "DecisionFailure",
     "Gap",
     "GroupBy",
@@ -286,6 +287,20 @@ class ThresholdCheck:
 
 
 @dataclass(frozen=True, slots=True)
+class ChannelDeviation:
+    """Execution deviation of one actuator channel (profile 1.1) over the scored decisions,
+    in the channel's own unit; ``cycles`` counts records naming the channel, ``logged``
+    those that give its deviation (the mean and max are over those)."""
+
+    name: str
+    unit: str
+    cycles: int
+    logged: int
+    mean: float | None
+    max: float | None
+
+
+@dataclass(frozen=True, slots=True)
 class LoggingCost:
     """The logger's control-thread cost per cycle as the log's writers measured it
     (``trace.timing`` metadata). Percentiles are None unless every timed segment carries a
@@ -324,6 +339,8 @@ class MetricsReport:
     cycles_per_s: float
     logging_cost: LoggingCost | None = field(default=None, metadata={OMIT_EMPTY: True})
     """The logger's own control-thread cost per cycle, from the segments' ``trace.timing``."""
+    channel_deviation: tuple[ChannelDeviation, ...] = field(default=(), metadata={OMIT_EMPTY: True})
+    """Per actuator channel of the execution records (profile 1.1), by name and unit."""
 
     @property
     def passed(self) -> bool:
@@ -385,6 +402,8 @@ class _Partial:
     cycles: int = 0
     timing: list[tuple[float, int, CostHistogram | None]] = field(default_factory=list)
     """(mean ns, cycles, histogram if recorded) per segment with ``trace.timing``."""
+    channels: dict[tuple[str, str], list[float]] = field(default_factory=dict)
+    """(name, unit) -> [cycles, deviations logged, sum, max] of the execution channels."""
 
     def merge(self, other: _Partial, limit: int) -> None:
         for name, acc in other.groups.items():
@@ -399,6 +418,12 @@ class _Partial:
         self.gaps_total += other.gaps_total
         self.cycles += other.cycles
         self.timing.extend(other.timing)
+        for key, (n, logged, total, top) in other.channels.items():
+            sums = self.channels.setdefault(key, [0, 0, 0.0, -math.inf])
+            sums[0] += n
+            sums[1] += logged
+            sums[2] += total
+            sums[3] = max(sums[3], top)
 
 
 class _Scanner:
@@ -466,6 +491,9 @@ class _Scanner:
         perception = cycle.layer(TOPIC_PERCEPTION)
         score = score_layers(action, belief, perception, window=window)
         missing_dr = dr_problems(action)
+        execution = cycle.payloads.get(TOPIC_EXECUTION)
+        if execution is not None and _HAS_CHANNELS in execution:  # parsed only when it has
+            _add_channels(self.partial.channels, cycle.layer(TOPIC_EXECUTION))
         group = group_of(cycle)
         partial = self.partial
         acc = partial.groups.get(group)
@@ -838,6 +866,7 @@ def _report(
         thresholds=checks,
         elapsed_s=elapsed,
         logging_cost=cost,
+        channel_deviation=_channel_deviation(total.channels),
         cycles_per_s=total.cycles / elapsed if elapsed > 0 else 0.0,
     )
 
@@ -925,6 +954,44 @@ def _check(name: str, threshold: float, overall: GroupMetrics) -> ThresholdCheck
     return ThresholdCheck(name, threshold, value, value is not None and value >= threshold)
 
 
+_HAS_CHANNELS = b'"channels":[{'
+"""Execution records with channels contain this (compact JSON, PROFILE §6); the others,
+every profile 1.0 record among them, are not parsed again for it."""
+
+
+def _add_channels(into: dict[tuple[str, str], list[float]], execution: Any) -> None:
+    channels = execution.get("channels") if isinstance(execution, dict) else None
+    for channel in channels if isinstance(channels, list) else ():
+        if not isinstance(channel, dict):
+            continue
+        name, unit = channel.get("name"), channel.get("unit")
+        if not isinstance(name, str) or not isinstance(unit, str):
+            continue
+        sums = into.setdefault((name, unit), [0, 0, 0.0, -math.inf])
+        sums[0] += 1
+        deviation = channel.get("deviation")
+        if isinstance(deviation, int | float) and math.isfinite(deviation):
+            sums[1] += 1
+            sums[2] += deviation
+            sums[3] = max(sums[3], deviation)
+
+
+def _channel_deviation(
+    channels: dict[tuple[str, str], list[float]],
+) -> tuple[ChannelDeviation, ...]:
+    return tuple(
+        ChannelDeviation(
+            name=name,
+            unit=unit,
+            cycles=int(n),
+            logged=int(logged),
+            mean=total / logged if logged else None,
+            max=top if logged else None,
+        )
+        for (name, unit), (n, logged, total, top) in sorted(channels.items())
+    )
+
+
 def _logging_cost(entries: list[tuple[float, int, CostHistogram | None]]) -> LoggingCost | None:
     weight = sum(n for _, n, _ in entries)
     if not entries or weight <= 0:
@@ -949,10 +1016,10 @@ def _logging_cost(entries: list[tuple[float, int, CostHistogram | None]]) -> Log
 def _timing(cost: LoggingCost | None) -> str:
     if cost is None:
         return "not logged"
-    text = f"{cost.mean_ns / 1e6:.3f} ms mean"
+    text = f"{cost.mean_ns / 1e6:.3f} ms mean per cycle"
     if cost.p50_ns is not None and cost.p99_ns is not None:
         text += f", p50 {cost.p50_ns / 1e6:.3f} ms, p99 {cost.p99_ns / 1e6:.3f} ms"
-    return f"{text} per cycle ({TIMING_METADATA} metadata, {cost.cycles} cycles)"
+    return f"{text} ({TIMING_METADATA} metadata, {cost.cycles} cycles)"
 
 
 def _definitions(cfg: MetricsConfig) -> dict[str, str]:

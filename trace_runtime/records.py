@@ -408,8 +408,7 @@ class Execution(_Record):
     )
     deviation_unit: str | None = Field(
         default=None,
-        description="unit of the overall deviation; null: m/s for planar motion, else the "
-        "writer's own norm over channels (profile 1.1)",
+        description="unit of the overall deviation, e.g. m/s; null: not stated (profile 1.1)",
     )
 
 

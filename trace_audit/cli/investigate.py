@@ -646,6 +646,8 @@ def timeline_doc(r: Timeline) -> Doc:
         lead = f"{row.leading.label} = {row.leading.shown}" if row.leading else "-"
         flags = ", ".join(f"{k} x{v}" if v > 1 else k for k, v in row.flag_counts.items())
         what: list[Any] = [lead]
+        if row.max_deviation is not None:
+            what.append(f"; max deviation {format_value(row.max_deviation)} {row.deviation_unit}")
         if flags:
             what.append(Seg(f"; flags: {flags}", "bold red"))
         if row.scenario:
