@@ -4,7 +4,9 @@
 What is measured is the control thread's time inside the logger for one cycle: the
 ``sensor()`` calls, the four layer calls (validating and encoding plain dicts) and
 ``commit()`` up to the hand-over to the writer. The writer thread's work (sealing,
-compression, the write) is not on the control thread and is not counted.
+compression, the write) is not on the control thread and is not counted. The Python logger
+times one cycle in eight (``logger.COST_SAMPLE_EVERY``), so timing costs the other seven
+nothing; ``cycles`` in the record counts the cycles timed, ``sample_every`` says which.
 
 The histogram is log-linear: exact below 16 ns, then eight buckets per power of two, so a
 percentile read from it is within 1/16 (6.25 %) of the true value, whatever the range.
@@ -95,9 +97,14 @@ class CostHistogram:
                 return min(max(middle, self.min_ns), self.max_ns)
         return self.max_ns
 
-    def to_metadata(self) -> dict[str, str]:
-        """The ``trace.timing`` record (MCAP metadata: strings only)."""
-        out = {"cycles": str(self.cycles), "what": "control-thread ns per cycle in the logger"}
+    def to_metadata(self, sample_every: int = 1) -> dict[str, str]:
+        """The ``trace.timing`` record (MCAP metadata: strings only); ``sample_every``: one
+        cycle in that many was timed."""
+        out = {
+            "cycles": str(self.cycles),
+            "sample_every": str(sample_every),
+            "what": "control-thread ns per cycle in the logger",
+        }
         if self.cycles:
             out.update(
                 commit_mean_ns=f"{self.total_ns / self.cycles:.1f}",

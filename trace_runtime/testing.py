@@ -123,7 +123,7 @@ class CaptureLogger:
         self._sensor_seq[topic] = seq + 1
         return seq
 
-    def _commit(self, builder: CycleBuilder, started_ns: int) -> None:
+    def _commit(self, builder: CycleBuilder, started_ns: int | None) -> None:
         layers = builder._layers
         payloads = {
             topic: encode_checked(builder.cycle, builder.t_ns, LAYER_MODELS[topic], record)

@@ -85,7 +85,7 @@ def test_metrics_reports_deviation_per_channel_and_the_loggers_cost(arm_log: Pat
     # the gripper's slip: commanded 20 N, held 6 N for a cycle
     assert got["gripper_force"].max == pytest.approx(14.0)
     cost = report.logging_cost
-    assert cost is not None and cost.cycles == 240 and cost.p50_ns is not None
+    assert cost is not None and cost.cycles == 30 and cost.p50_ns is not None  # 1 in 8 timed
     assert cost.p99_ns is not None and 0 < cost.p50_ns <= cost.p99_ns <= (cost.max_ns or 0)
     assert ", p50 " in report.logging_time and report.logging_time != "not logged"
     plain = CliRunner().invoke(app, ["metrics", str(arm_log), "--plain"]).stdout

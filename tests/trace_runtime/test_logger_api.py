@@ -27,6 +27,7 @@ from trace_runtime.codec import layer_message
 from trace_runtime.costs import TIMING_METADATA, CostHistogram, bucket_bounds, bucket_of
 from trace_runtime.errors import RecordError
 from trace_runtime.integrity import decode_checkpoint, iter_checkpoints
+from trace_runtime.logger import COST_SAMPLE_EVERY
 from trace_runtime.records import LAYER_MODELS, MESSAGE_MODELS, TOPIC_EXECUTION, _Record
 from trace_runtime.testing import CaptureLogger, synthetic_cycle
 
@@ -139,9 +140,11 @@ def test_the_logger_writes_its_per_cycle_cost_at_close(tmp_path: Path) -> None:
             p, b, a, e = synthetic_cycle(i)
             log.log_cycle(i * PERIOD_NS, perception=p, belief=b, action=a, execution=e)
     timing = open_segment(path).metadata[TIMING_METADATA]
-    assert timing["cycles"] == "200"
+    # one cycle in COST_SAMPLE_EVERY is timed: cycles 0, 8, ..., 192
+    timed = len(range(0, 200, COST_SAMPLE_EVERY))
+    assert (timing["cycles"], timing["sample_every"]) == (str(timed), str(COST_SAMPLE_EVERY))
     histogram = CostHistogram.from_metadata(timing)
-    assert histogram is not None and histogram.cycles == 200
+    assert histogram is not None and histogram.cycles == timed
     p50, p99 = int(timing["commit_p50_ns"]), int(timing["commit_p99_ns"])
     assert 0 < int(timing["commit_min_ns"]) <= p50 <= p99 <= int(timing["commit_max_ns"])
     assert histogram.percentile_ns(0.5) == p50 and histogram.percentile_ns(0.99) == p99
