@@ -26,6 +26,9 @@ TIMING_METADATA = "trace.timing"
 _SUB_BITS = 3  # 2**3 = 8 buckets per power of two
 _EXACT_BELOW = 1 << (_SUB_BITS + 1)
 _MAX_TEXT = 64 * 1024  # a hostile histogram text is refused, not parsed into a huge dict
+_MAX_BUCKET = ((64 - _SUB_BITS - 1) << _SUB_BITS) + (1 << (_SUB_BITS + 1)) - 1
+"""The bucket of the largest 64-bit duration; a bigger index in a file is refused (its bounds
+would be a shift by that many bits)."""
 
 
 def bucket_of(value_ns: int) -> int:
@@ -130,7 +133,7 @@ class CostHistogram:
         for item in text.split():
             key, _, count = item.partition(":")
             b, n = int(key), int(count)
-            if b < 0 or n <= 0 or b in out.counts:
+            if not 0 <= b <= _MAX_BUCKET or n <= 0 or b in out.counts:
                 raise ValueError(f"bad commit_histogram entry {item!r}")
             out.counts[b] = n
         out.cycles = sum(out.counts.values())

@@ -166,10 +166,11 @@ def test_histogram_percentiles_are_within_a_sixteenth_of_the_exact_ones(values: 
     assert (again.min_ns, again.max_ns) == (min(values), max(values))
 
 
-@given(st.integers(min_value=0, max_value=2**62))
+@given(st.integers(min_value=0, max_value=2**64 - 1))
 def test_a_value_lies_within_the_bounds_of_its_bucket(value: int) -> None:
     low, high = bucket_bounds(bucket_of(value))
     assert low <= value < high
+    assert CostHistogram.from_metadata({"commit_histogram": f"{bucket_of(value)}:1"})
 
 
 def test_histograms_merge_like_the_union_of_their_samples() -> None:
@@ -195,6 +196,7 @@ def test_histograms_merge_like_the_union_of_their_samples() -> None:
         {"commit_histogram": "20:0", "cycles": "0"},
         {"commit_histogram": "20:1 20:1", "cycles": "2"},
         {"commit_histogram": "1:1 " * 20_000, "cycles": "20000"},
+        {"commit_histogram": "1000000000000:1", "cycles": "1"},
     ],
 )
 def test_a_malformed_timing_record_is_refused(bad: dict[str, str]) -> None:
