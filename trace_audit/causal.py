@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, Union, get_args, get_origin
 from pydantic import BaseModel
 
 from trace_audit.chains import DecisionChains, FactorChain, Link
+from trace_audit.jsonout import OMIT_EMPTY
 from trace_runtime.cycles import Cycle
 from trace_runtime.records import (
     MESSAGE_MODELS,
@@ -40,6 +41,7 @@ if TYPE_CHECKING:  # networkx is imported by the two functions that return its g
 __all__ = [
     "ACTION_NODE",
     "AlternativeView",
+    "ChannelView",
     "CheckView",
     "CounterfactualView",
     "Decision",
@@ -151,10 +153,28 @@ def split_flags(flags: Iterable[str]) -> tuple[tuple[str, ...], str | None]:
 
 
 @dataclass(frozen=True, slots=True)
-class ExecutionView:
-    """Layer 4: intended vs actual motion, deviation, compliance checks and flags.
+class ChannelView:
+    """One logged actuator channel (profile 1.1): its name, unit, intended, actual, deviation."""
 
-    ``flags`` are as logged; ``problems`` are those that are not a ``scenario:`` label.
+    name: str
+    unit: str
+    intended: float | None
+    actual: float | None
+    deviation: float | None
+
+
+_OMIT_EMPTY = {OMIT_EMPTY: True}
+
+
+@dataclass(frozen=True, slots=True)
+class ExecutionView:
+    """Layer 4: intended vs actual, deviation, compliance checks and flags.
+
+    ``intended``/``actual`` are the planar motion (linear m/s, angular rad/s), (None, None)
+    when the record has none; ``channels`` the named actuator channels of profile 1.1, in
+    the robot's own units. ``flags`` are as logged; ``problems`` are those that are not a
+    ``scenario:`` label. ``channels`` and ``deviation_unit`` are left out of JSON when a
+    record has none, so the JSON of a profile 1.0 log reads exactly as before.
     """
 
     intended: tuple[float | None, float | None]
@@ -164,6 +184,13 @@ class ExecutionView:
     flags: tuple[str, ...]
     problems: tuple[str, ...]
     scenario: str | None
+    channels: tuple[ChannelView, ...] = field(default=(), metadata=_OMIT_EMPTY)
+    deviation_unit: str | None = field(default=None, metadata=_OMIT_EMPTY)
+
+    @property
+    def planar(self) -> bool:
+        """Whether the record logged a planar motion (intended or actual)."""
+        return self.intended != (None, None) or self.actual != (None, None)
 
 
 @dataclass(frozen=True, slots=True)
@@ -412,6 +439,17 @@ def _execution(raw: Mapping[str, Any]) -> ExecutionView:
         flags=flags,
         problems=problems,
         scenario=scenario,
+        channels=tuple(
+            ChannelView(
+                name=_str(c.get("name")) or "?",
+                unit=_str(c.get("unit")) or "",
+                intended=_num(c.get("intended")),
+                actual=_num(c.get("actual")),
+                deviation=_num(c.get("deviation")),
+            )
+            for c in _dicts(raw.get("channels"))
+        ),
+        deviation_unit=_str(raw.get("deviation_unit")),
     )
 
 

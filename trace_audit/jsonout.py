@@ -9,13 +9,23 @@ from typing import Any
 
 from pydantic import BaseModel
 
+OMIT_EMPTY = "json_omit_empty"
+"""Dataclass field metadata key: leave the field out of JSON while it is empty or None (for
+fields added later, so the JSON of what had none stays as it was)."""
+
 
 def to_jsonable(value: Any) -> Any:
     """A JSON-ready copy of ``value``: dicts, lists, str, int, float, bool, None."""
     if isinstance(value, BaseModel):
         return value.model_dump(mode="json", by_alias=True)
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: to_jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(value):
+            item = getattr(value, f.name)
+            if f.metadata.get(OMIT_EMPTY) and (item is None or item == ()):
+                continue
+            out[f.name] = to_jsonable(item)
+        return out
     if isinstance(value, dict):
         return {str(k): to_jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple | set | frozenset):

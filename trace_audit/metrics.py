@@ -51,7 +51,9 @@ from trace_audit.chains import (
     score_layers,
     trace_layers,
 )
+from trace_audit.jsonout import OMIT_EMPTY
 from trace_runtime.chain import digest
+from trace_runtime.costs import TIMING_METADATA, CostHistogram
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap, continuity, find_gap
@@ -71,10 +73,12 @@ __all__ = [
     "GROUP_BYS",
     "METRIC_NAMES",
     "AcrossGroups",
+    "ChannelDeviation",
     "DecisionFailure",
     "Gap",
     "GroupBy",
     "GroupMetrics",
+    "LoggingCost",
     "MetricsConfig",
     "MetricsReport",
     "Stat",
@@ -88,7 +92,6 @@ GroupBy = Literal["scenario", "segment", "robot", "hour"]
 GROUP_BYS: tuple[str, ...] = get_args(GroupBy)
 NO_SCENARIO = "(none)"
 SCENARIO_FLAG = "scenario:"
-TIMING_METADATA = "trace.timing"
 
 ProgressCallback = Callable[[int, int | None], None]
 """Called with (cycles done, cycles expected or None) as the scan advances."""
@@ -288,6 +291,34 @@ class ThresholdCheck:
 
 
 @dataclass(frozen=True, slots=True)
+class ChannelDeviation:
+    """Execution deviation of one actuator channel (profile 1.1) over the scored decisions,
+    in the channel's own unit; ``cycles`` counts records naming the channel, ``logged``
+    those that give its deviation (the mean and max are over those)."""
+
+    name: str
+    unit: str
+    cycles: int
+    logged: int
+    mean: float | None
+    max: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class LoggingCost:
+    """The logger's control-thread cost per cycle as the log's writers measured it
+    (``trace.timing`` metadata). Percentiles are None unless every timed segment carries a
+    histogram (a writer may record only the mean); they are within 6.25 % (bucket width)."""
+
+    cycles: int
+    segments: int
+    mean_ns: float
+    p50_ns: int | None
+    p99_ns: int | None
+    max_ns: int | None
+
+
+@dataclass(frozen=True, slots=True)
 class MetricsReport:
     """Everything ``trace-audit metrics`` shows: definitions, tables, failures, thresholds."""
 
@@ -310,6 +341,10 @@ class MetricsReport:
     thresholds: tuple[ThresholdCheck, ...]
     elapsed_s: float
     cycles_per_s: float
+    logging_cost: LoggingCost | None = field(default=None, metadata={OMIT_EMPTY: True})
+    """The logger's own control-thread cost per cycle, from the segments' ``trace.timing``."""
+    channel_deviation: tuple[ChannelDeviation, ...] = field(default=(), metadata={OMIT_EMPTY: True})
+    """Per actuator channel of the execution records (profile 1.1), by name and unit."""
     external_refs: dict[str, int] = field(default_factory=dict)
     """Evidence refs into external recordings, by what became of them: ``resolved``,
     ``broken`` (recording given, message missing or changed) and ``unresolved`` (recording
@@ -373,12 +408,15 @@ class _Partial:
     gaps: list[Gap] = field(default_factory=list)
     gaps_total: int = 0
     cycles: int = 0
-    timing: list[tuple[float, int]] = field(default_factory=list)
+    timing: list[tuple[float, int, CostHistogram | None]] = field(default_factory=list)
+    """(mean ns, cycles, histogram if recorded) per segment with ``trace.timing``."""
+    channels: dict[tuple[str, str], list[float]] = field(default_factory=dict)
+    """(name, unit) -> [cycles, deviations logged, sum, max] of the execution channels."""
     external: dict[str, int] = field(default_factory=dict)
 
     def merge(self, other: _Partial, limit: int) -> None:
-        for state, n in other.external.items():
-            self.external[state] = self.external.get(state, 0) + n
+        for state, count in other.external.items():
+            self.external[state] = self.external.get(state, 0) + count
         for name, acc in other.groups.items():
             mine = self.groups.get(name)
             if mine is None:
@@ -391,6 +429,12 @@ class _Partial:
         self.gaps_total += other.gaps_total
         self.cycles += other.cycles
         self.timing.extend(other.timing)
+        for key, (n, logged, total, top) in other.channels.items():
+            sums = self.channels.setdefault(key, [0, 0, 0.0, -math.inf])
+            sums[0] += n
+            sums[1] += logged
+            sums[2] += total
+            sums[3] = max(sums[3], top)
 
 
 class _Scanner:
@@ -423,9 +467,13 @@ class _Scanner:
             progress(done % _PROGRESS_EVERY)
         timing = segment.metadata.get(TIMING_METADATA)
         if timing:
-            with contextlib.suppress(KeyError, ValueError):
+            with contextlib.suppress(KeyError, ValueError):  # a malformed record: not timed
                 self.partial.timing.append(
-                    (float(timing["commit_mean_ns"]), int(timing.get("cycles", done)))
+                    (
+                        float(timing["commit_mean_ns"]),
+                        int(timing.get("cycles", done)),
+                        CostHistogram.from_metadata(timing),
+                    )
                 )
 
     def _grouper(self, segment: Segment) -> Callable[[Cycle], str]:
@@ -471,6 +519,9 @@ class _Scanner:
         if perception is not None:
             self._count_external(perception)
         missing_dr = dr_problems(action)
+        execution = cycle.payloads.get(TOPIC_EXECUTION)
+        if execution is not None and _HAS_CHANNELS in execution:  # parsed only when it has
+            _add_channels(self.partial.channels, cycle.layer(TOPIC_EXECUTION))
         group = group_of(cycle)
         partial = self.partial
         acc = partial.groups.get(group)
@@ -824,6 +875,7 @@ def _report(
     checks = tuple(_check(name, threshold, overall) for name, threshold in cfg.thresholds.items())
     failures = tuple(sorted(total.failures, key=lambda f: (f.t_ns, f.cycle)))
     gaps = tuple(sorted(total.gaps, key=lambda g: (g.after_t_ns, g.robot)))
+    cost = _logging_cost(total.timing)
     return MetricsReport(
         logs=tuple(str(p) for p in paths),
         segments=segments,
@@ -834,13 +886,15 @@ def _report(
         overall=overall,
         groups=groups,
         across_groups=across,
-        logging_time=_timing(total.timing),
+        logging_time=_timing(cost),
         failures=failures,
         failures_total=total.failures_total,
         gaps=gaps,
         gaps_total=total.gaps_total,
         thresholds=checks,
         elapsed_s=elapsed,
+        logging_cost=cost,
+        channel_deviation=_channel_deviation(total.channels),
         cycles_per_s=total.cycles / elapsed if elapsed > 0 else 0.0,
         external_refs=dict(sorted(total.external.items())),
     )
@@ -929,12 +983,72 @@ def _check(name: str, threshold: float, overall: GroupMetrics) -> ThresholdCheck
     return ThresholdCheck(name, threshold, value, value is not None and value >= threshold)
 
 
-def _timing(entries: list[tuple[float, int]]) -> str:
-    weight = sum(n for _, n in entries)
+_HAS_CHANNELS = b'"channels":[{'
+"""Execution records with channels contain this (compact JSON, PROFILE §6); the others,
+every profile 1.0 record among them, are not parsed again for it."""
+
+
+def _add_channels(into: dict[tuple[str, str], list[float]], execution: Any) -> None:
+    channels = execution.get("channels") if isinstance(execution, dict) else None
+    for channel in channels if isinstance(channels, list) else ():
+        if not isinstance(channel, dict):
+            continue
+        name, unit = channel.get("name"), channel.get("unit")
+        if not isinstance(name, str) or not isinstance(unit, str):
+            continue
+        sums = into.setdefault((name, unit), [0, 0, 0.0, -math.inf])
+        sums[0] += 1
+        deviation = channel.get("deviation")
+        if isinstance(deviation, int | float) and math.isfinite(deviation):
+            sums[1] += 1
+            sums[2] += deviation
+            sums[3] = max(sums[3], deviation)
+
+
+def _channel_deviation(
+    channels: dict[tuple[str, str], list[float]],
+) -> tuple[ChannelDeviation, ...]:
+    return tuple(
+        ChannelDeviation(
+            name=name,
+            unit=unit,
+            cycles=int(n),
+            logged=int(logged),
+            mean=total / logged if logged else None,
+            max=top if logged else None,
+        )
+        for (name, unit), (n, logged, total, top) in sorted(channels.items())
+    )
+
+
+def _logging_cost(entries: list[tuple[float, int, CostHistogram | None]]) -> LoggingCost | None:
+    weight = sum(n for _, n, _ in entries)
     if not entries or weight <= 0:
+        return None
+    mean_ns = sum(m * n for m, n, _ in entries) / weight
+    merged: CostHistogram | None = CostHistogram()
+    for _, _, histogram in entries:
+        if histogram is None or merged is None:
+            merged = None  # percentiles of some segments would not describe the others
+        else:
+            merged.merge(histogram)
+    return LoggingCost(
+        cycles=weight,
+        segments=len(entries),
+        mean_ns=mean_ns,
+        p50_ns=merged.percentile_ns(0.5) if merged else None,
+        p99_ns=merged.percentile_ns(0.99) if merged else None,
+        max_ns=merged.max_ns if merged else None,
+    )
+
+
+def _timing(cost: LoggingCost | None) -> str:
+    if cost is None:
         return "not logged"
-    mean_ns = sum(m * n for m, n in entries) / weight
-    return f"{mean_ns / 1e6:.3f} ms mean per cycle ({TIMING_METADATA} metadata, {weight} cycles)"
+    text = f"{cost.mean_ns / 1e6:.3f} ms mean per cycle"
+    if cost.p50_ns is not None and cost.p99_ns is not None:
+        text += f", p50 {cost.p50_ns / 1e6:.3f} ms, p99 {cost.p99_ns / 1e6:.3f} ms"
+    return f"{text} ({TIMING_METADATA} metadata, {cost.cycles} cycles)"
 
 
 def _definitions(cfg: MetricsConfig) -> dict[str, str]:

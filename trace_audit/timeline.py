@@ -21,6 +21,7 @@ from pathlib import Path
 import orjson
 
 from trace_audit.causal import CounterfactualView, FactorValue, read_decision, split_flags
+from trace_audit.jsonout import OMIT_EMPTY
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap, GapFinder, SealedStamp
@@ -127,12 +128,20 @@ def command_of(cycle: Cycle) -> str | None:
     return None
 
 
-def _flags_of(cycle: Cycle) -> tuple[str, ...]:
+def _execution_of(cycle: Cycle) -> tuple[tuple[str, ...], float | None, str | None]:
+    """The execution record's flags, overall deviation and its unit (one parse a cycle)."""
     data = cycle.payloads.get(TOPIC_EXECUTION)
     layer = orjson.loads(data) if data is not None else cycle.layer(TOPIC_EXECUTION)
     if not isinstance(layer, dict):
-        return ()
-    return tuple(f for f in layer.get("flags") or () if isinstance(f, str))
+        return (), None, None
+    flags = tuple(f for f in layer.get("flags") or () if isinstance(f, str))
+    deviation = layer.get("deviation")
+    unit = layer.get("deviation_unit")
+    return (
+        flags,
+        float(deviation) if isinstance(deviation, int | float) else None,
+        unit if isinstance(unit, str) and unit else None,
+    )
 
 
 def seal_dropped(cycle: Cycle) -> int:
@@ -199,6 +208,10 @@ class Span:
     flagged_cycles: int = 0
     flag_counts: dict[str, int] = field(default_factory=dict)
     """Flags raised while the command held (``scenario:`` labels left out), with counts."""
+    max_deviation: float | None = field(default=None, metadata={OMIT_EMPTY: True})
+    """The largest overall execution deviation while the command held, when the records
+    name its unit (``deviation_unit``, profile 1.1)."""
+    deviation_unit: str | None = field(default=None, metadata={OMIT_EMPTY: True})
 
 
 @dataclass(frozen=True, slots=True)
@@ -254,7 +267,8 @@ def timeline(
     for cycle in log.iter_cycles(lo, hi):
         count += 1
         command = command_of(cycle)
-        flags, scenario = split_flags(_flags_of(cycle))
+        raw_flags, deviation, unit = _execution_of(cycle)
+        flags, scenario = split_flags(raw_flags)
         gap = gap_of(cycle)
         if gap is not None:
             gaps.append(gap)
@@ -279,6 +293,14 @@ def timeline(
             rows.append(current)
         current.cycles += 1
         current.end_cycle, current.end_t_ns = cycle.cycle, cycle.t_ns
+        # Only where the writer names the unit (profile 1.1): a number without one cannot
+        # be read, and the rows of 1.0 logs stay as they were.
+        if (
+            unit is not None
+            and deviation is not None
+            and (current.max_deviation is None or deviation > current.max_deviation)
+        ):
+            current.max_deviation, current.deviation_unit = deviation, unit
         if flags:
             current.flagged_cycles += 1
             for flag in flags:

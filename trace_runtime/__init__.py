@@ -44,6 +44,7 @@ _EXPORTS = {
     "Alternative": "trace_runtime.records",
     "Belief": "trace_runtime.records",
     "BeliefEdge": "trace_runtime.records",
+    "ActuatorChannel": "trace_runtime.records",
     "BeliefNode": "trace_runtime.records",
     "Checkpoint": "trace_runtime.records",
     "ComplianceCheck": "trace_runtime.records",
@@ -67,6 +68,7 @@ _EXPORTS = {
 
 __all__ = [
     "Action",
+    "ActuatorChannel",
     "Alternative",
     "AuditLogger",
     "Belief",
@@ -148,6 +150,7 @@ if TYPE_CHECKING:
     from trace_runtime.recordings import Recordings, external_ref
     from trace_runtime.records import (
         Action,
+        ActuatorChannel,
         Alternative,
         Belief,
         BeliefEdge,

@@ -34,6 +34,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from time import perf_counter_ns
 from types import TracebackType
 from typing import Any, BinaryIO, Literal, Protocol
 
@@ -47,6 +48,7 @@ from trace_runtime.codec import (
     encode_json,
     encode_seal_fields,
 )
+from trace_runtime.costs import TIMING_METADATA, CostHistogram
 from trace_runtime.errors import LogLockedError, RecordError, UsageError
 from trace_runtime.integrity import Signer, encode_checkpoint, load_signer, make_checkpoint
 from trace_runtime.records import (
@@ -104,8 +106,9 @@ class LoggerConfig:
     opener: Opener | None = None
     """How segment files are opened; a plug point for custom storage and fault injection."""
     checkpoint_interval_s: float | None = 10.0
-    """Write a /trace/checkpoint (the chain head) after the seal once this much log time has
-    passed since the last one; one is always written when a segment closes. None: only then."""
+    """Write a /trace/checkpoint (the chain head) after the first seal at or past each
+    multiple of this much log time from the segment's first cycle, however cycles are
+    batched into chunks; one is always written when a segment closes. None: only then."""
     checkpoint_key: str | Path | Signer | None = None
     """Sign checkpoints: an Ed25519 private key file (``trace-audit keygen``) or a ``Signer``.
     None writes unsigned checkpoints (chain-head anchors only)."""
@@ -148,6 +151,7 @@ class _PendingCycle:
     layers: dict[str, LayerValue]
     sensors: list[tuple[str, int, int, bytes]]
     dropped_before: int
+    cost_ns: int
 
 
 class _Handover:
@@ -225,18 +229,37 @@ class _Handover:
         self._wake.set()
 
 
+def next_cycle_time(t_ns: int | None, previous_ns: int) -> int:
+    """The time of the cycle being begun: ``t_ns``, or now when None. ``RecordError`` when
+    it is earlier than ``previous_ns``, the time of the cycle begun before it (0 before the
+    first): time never goes backwards within a session (schemas/PROFILE.md §4)."""
+    if t_ns is None:
+        return time.time_ns()
+    if t_ns < previous_ns:
+        raise time_went_back(t_ns, previous_ns)
+    return t_ns
+
+
+def time_went_back(t_ns: int, previous_ns: int) -> RecordError:
+    """The error for a cycle begun at ``t_ns``, before ``previous_ns``."""
+    return RecordError(
+        f"cycle time {t_ns} ns is earlier than {previous_ns} ns, the previous cycle's "
+        "(or 0 before the first): time must not go backwards (PROFILE section 4)"
+    )
+
+
 class CycleSink(Protocol):
     """What a ``CycleBuilder`` hands its cycle to: the logger, or a test capture."""
 
     def _next_sensor_sequence(self, topic: str) -> int: ...
-    def _commit(self, builder: CycleBuilder) -> None: ...
+    def _commit(self, builder: CycleBuilder, started_ns: int | None) -> None: ...
     def _abort(self, builder: CycleBuilder) -> None: ...
 
 
 class CycleBuilder:
     """One decision cycle being assembled; commit it once, or let ``with`` do it."""
 
-    __slots__ = ("_committed", "_layers", "_logger", "_sensors", "cycle", "t_ns")
+    __slots__ = ("_committed", "_cost_ns", "_layers", "_logger", "_sensors", "cycle", "t_ns")
 
     def __init__(self, logger: CycleSink, cycle: int, t_ns: int) -> None:
         self._logger = logger
@@ -245,6 +268,7 @@ class CycleBuilder:
         self._layers: dict[str, LayerValue] = {}
         self._sensors: list[tuple[str, int, int, bytes]] = []
         self._committed = False
+        self._cost_ns = 0  # control-thread time spent in the logger for this cycle
 
     def sensor(self, topic: str, payload: Any, t_ns: int | None = None) -> EvidenceRef:
         """Log a sensor reading that evidence will point to; return its evidence ref.
@@ -290,7 +314,7 @@ class CycleBuilder:
         if self._committed:
             raise UsageError(f"cycle {self.cycle} is already committed")
         self._committed = True
-        self._logger._commit(self)
+        self._logger._commit(self, None)
 
     def abort(self) -> None:
         """Give the cycle up; it is counted as dropped and the next seal says so."""
@@ -312,6 +336,45 @@ class CycleBuilder:
                 self.commit()
         else:
             self.abort()
+
+
+class _TimedCycleBuilder(CycleBuilder):
+    """A cycle whose logger calls are timed for ``trace.timing`` (trace_runtime.costs).
+
+    One cycle in ``COST_SAMPLE_EVERY`` is timed: a clock read costs ~0.1 us, and timing every
+    call of every cycle added ~12 % to a cycle of built records (bench/bench_logger.py).
+    The rest are plain ``CycleBuilder``s and pay nothing for it.
+    """
+
+    __slots__ = ()
+
+    def sensor(self, topic: str, payload: Any, t_ns: int | None = None) -> EvidenceRef:
+        start = perf_counter_ns()
+        # Forward the arguments as given: a wrapper of CycleBuilder.sensor (a test's tap)
+        # then sees the same call from a timed cycle as from any other.
+        if t_ns is None:
+            ref = super().sensor(topic, payload)
+        else:
+            ref = super().sensor(topic, payload, t_ns)
+        self._cost_ns += perf_counter_ns() - start
+        return ref
+
+    def _add(self, topic: str, record: Any) -> None:
+        start = perf_counter_ns()
+        super()._add(topic, record)
+        self._cost_ns += perf_counter_ns() - start
+
+    def commit(self) -> None:
+        start = perf_counter_ns()
+        if self._committed:
+            raise UsageError(f"cycle {self.cycle} is already committed")
+        self._committed = True
+        self._logger._commit(self, start)
+
+
+COST_SAMPLE_EVERY = 8
+"""Cycles whose numbers are a multiple of this are timed for ``trace.timing``."""
+_UNTIMED = COST_SAMPLE_EVERY - 1  # a power of two: number & _UNTIMED is 0 for timed cycles
 
 
 class AuditLogger:
@@ -354,6 +417,7 @@ class AuditLogger:
         self._lock = threading.Lock()
         self._closed = False
         self._open_cycle: CycleBuilder | None = None
+        self._last_t_ns = 0  # time of the last cycle begun (control thread only)
         self._sensor_seq: dict[str, int] = {}
         # Drops are declared by the seal of the next cycle written after them. The control
         # thread counts what it drops before the hand-over; the writer counts failed writes.
@@ -404,7 +468,8 @@ class AuditLogger:
         self._segment_start_ns: int | None = None
         self._head: tuple[int, int] | None = None  # (cycle, t_ns) of the segment's last seal
         self._sealed_in_segment = 0
-        self._checkpoint_tried_ns: int | None = None  # log time of the last periodic attempt
+        self._checkpoint_due_ns: int | None = None  # log time the next periodic one is due
+        self._costs = CostHistogram()  # this segment's per-cycle control-thread costs
         # Opening the first segment may fail (bad path, no permission): that is a set-up
         # error the integrator must see, so it raises here, unlike every later I/O failure.
         self._open_segment(self._session)
@@ -422,12 +487,24 @@ class AuditLogger:
     # --- control-thread API -------------------------------------------------------------
 
     def cycle(self, t_ns: int | None = None) -> CycleBuilder:
-        """Begin the next decision cycle at ``t_ns`` (default: now, wall clock)."""
+        """Begin the next decision cycle at ``t_ns`` (default: now, wall clock).
+
+        Raises ``RecordError`` when ``t_ns`` is earlier than the previous cycle's time
+        (PROFILE §4: time does not go backwards within a session); the cycle number is then
+        not used.
+        """
         if self._closed:
             raise UsageError("the logger is closed")
         if self._open_cycle is not None and not self._open_cycle._committed:
             raise UsageError(f"cycle {self._open_cycle.cycle} was begun but not committed")
-        builder = CycleBuilder(self, self._next_cycle, time.time_ns() if t_ns is None else t_ns)
+        # next_cycle_time()'s rule, inlined: this runs every cycle on the control thread.
+        if t_ns is None:
+            t_ns = time.time_ns()
+        elif t_ns < self._last_t_ns:
+            raise time_went_back(t_ns, self._last_t_ns)
+        self._last_t_ns = t_ns
+        number = self._next_cycle
+        builder = (CycleBuilder if number & _UNTIMED else _TimedCycleBuilder)(self, number, t_ns)
         self._next_cycle += 1
         self._open_cycle = builder
         return builder
@@ -520,7 +597,7 @@ class AuditLogger:
         self._sensor_seq[topic] = seq + 1
         return seq
 
-    def _commit(self, builder: CycleBuilder) -> None:
+    def _commit(self, builder: CycleBuilder, started_ns: int | None) -> None:
         self.stats.committed += 1
         pending = _PendingCycle(
             builder.cycle,
@@ -528,7 +605,10 @@ class AuditLogger:
             builder._layers,
             builder._sensors,
             self._undeclared_control,
+            -1 if started_ns is None else builder._cost_ns,
         )
+        if started_ns is not None:  # a timed cycle: up to the hand-over
+            pending.cost_ns += perf_counter_ns() - started_ns
         if self._queue is None:
             self._undeclared_control = 0
             self._sync_batch.append(pending)
@@ -596,10 +676,7 @@ class AuditLogger:
             segment = self._segment
             if segment is None:
                 raise SegmentWriteError("no segment could be opened", rolled_back=False)
-            messages, last_seal = self._seal(segment, batch)
-            checkpoint = self._checkpoint_if_due(segment, batch, last_seal)
-            if checkpoint is not None:
-                messages.append(checkpoint)
+            messages, last_seal, checkpoints = self._seal(segment, batch)
             self.stats.bytes_written += segment.write_batch(messages)
         except SegmentWriteError as err:
             self._lose(batch, err, abandon=not err.rolled_back)
@@ -612,20 +689,25 @@ class AuditLogger:
         self.stats.written += len(batch)
         self._head = (batch[-1].cycle, batch[-1].t_ns)
         self._sealed_in_segment += len(batch)
-        if checkpoint is not None:
-            self.stats.checkpoints += 1
+        self.stats.checkpoints += checkpoints
         if self._segment_start_ns is None:
             self._segment_start_ns = batch[0].t_ns
+        for pending in batch:
+            if pending.cost_ns >= 0:  # -1: not a timed cycle
+                self._costs.add(pending.cost_ns)
         self._maybe_sync()
 
     def _seal(
         self, segment: SegmentWriter, batch: list[_PendingCycle]
-    ) -> tuple[list[OutMessage], str]:
+    ) -> tuple[list[OutMessage], str, int]:
+        """The batch's messages in file order, the last seal's digest, and how many periodic
+        checkpoints are among the messages (each right after the seal it names)."""
         messages: list[OutMessage] = []
+        checkpoints = 0
         prev = self._prev_seal
         carried = self._undeclared_writer
         seal_channel = segment.channel(TOPIC_SEAL)
-        for pending in batch:
+        for index, pending in enumerate(batch):
             for topic, sequence, log_time, data in pending.sensors:
                 messages.append(OutMessage(segment.channel(topic), sequence, log_time, data))
             digests: dict[str, str] = {}
@@ -643,7 +725,15 @@ class AuditLogger:
             messages.append(OutMessage(seal_channel, pending.cycle, pending.t_ns, data))
             prev = digest(data)
             carried = 0
-        return messages, prev
+            if self._checkpoint_due(pending.t_ns):
+                sealed = self._sealed_in_segment + index + 1
+                checkpoint = self._checkpoint_message(
+                    segment, pending.cycle, pending.t_ns, prev, sealed, final=False
+                )
+                if checkpoint is not None:
+                    messages.append(checkpoint)
+                    checkpoints += 1
+        return messages, prev, checkpoints
 
     def _lose(self, batch: list[_PendingCycle], err: Exception, *, abandon: bool) -> None:
         self.stats.dropped_io += len(batch)
@@ -702,7 +792,8 @@ class AuditLogger:
         self._segment_start_ns = None
         self._head = None
         self._sealed_in_segment = 0
-        self._checkpoint_tried_ns = None
+        self._checkpoint_due_ns = None
+        self._costs = CostHistogram()
         self.stats.segments.append(path)
 
     def _declare_tail(self) -> None:
@@ -738,6 +829,12 @@ class AuditLogger:
                 except Exception as err:
                     self.stats.checkpoint_failures += 1
                     self._report_once("checkpoint", f"could not write a checkpoint: {err}")
+        if self._costs.cycles and not segment.broken:
+            # The logger's own cost per cycle, for Table II of `trace-audit metrics`.
+            try:
+                segment.add_metadata(TIMING_METADATA, self._costs.to_metadata(COST_SAMPLE_EVERY))
+            except Exception as err:
+                self._report_once("timing", f"could not record the logger's cost: {err}")
         try:
             segment.close()
         except Exception as err:
@@ -750,24 +847,28 @@ class AuditLogger:
             return self.path.with_name(f"{self.path.stem}.{session.segment:06d}.mcap")
         return self.path / "hot" / f"{session.robot_id}_{session.segment:06d}.mcap"
 
-    def _checkpoint_if_due(
-        self, segment: SegmentWriter, batch: list[_PendingCycle], head: str
-    ) -> OutMessage | None:
-        """The periodic checkpoint to append after this batch's last seal, when one is due."""
+    def _checkpoint_due(self, t_ns: int) -> bool:
+        """Whether a periodic checkpoint goes after the seal of the cycle at ``t_ns``.
+
+        They fall on a grid in log time: the first seal at or past each multiple of the
+        interval from the segment's first cycle, so their spacing does not depend on how
+        cycles were batched into chunks. After a pause longer than the interval there is one
+        checkpoint, not one per missed multiple. A checkpoint that could not be built or
+        signed still counts as done: a signer that is down (an HSM that times out) is asked
+        again an interval later, not on every cycle.
+        """
         interval = self.config.checkpoint_interval_s
         if interval is None:
-            return None
-        since = self._checkpoint_tried_ns
-        if since is None:
-            since = batch[0].t_ns if self._segment_start_ns is None else self._segment_start_ns
-        last = batch[-1]
-        if last.t_ns - since < interval * 1e9:
-            return None
-        # Counted as tried even if signing fails: a signer that is down (an HSM that times
-        # out) is asked again an interval later, not on every cycle.
-        self._checkpoint_tried_ns = last.t_ns
-        sealed = self._sealed_in_segment + len(batch)
-        return self._checkpoint_message(segment, last.cycle, last.t_ns, head, sealed, final=False)
+            return False
+        step = max(1, round(interval * 1e9))
+        due = self._checkpoint_due_ns
+        if due is None:
+            start = t_ns if self._segment_start_ns is None else self._segment_start_ns
+            due = self._checkpoint_due_ns = start + step
+        if t_ns < due:
+            return False
+        self._checkpoint_due_ns = due + ((t_ns - due) // step + 1) * step
+        return True
 
     def _checkpoint_message(
         self,

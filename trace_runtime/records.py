@@ -12,14 +12,20 @@ Constructing a model with bad fields raises ``RecordError`` (a ``TraceError``).
 
 from __future__ import annotations
 
+import inspect
 from typing import Any, Literal, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, GetJsonSchemaHandler, ValidationError
+from pydantic.json_schema import JsonSchemaValue
+from pydantic_core import CoreSchema
 
 from trace_runtime.errors import RecordError
 
 PROFILE = "trace"
 PROFILE_VERSION = "1.1"
+"""Major.minor (schemas/PROFILE.md §10). Minor revisions only add optional fields: every
+version 1 log is read as before, and a version 1 reader reads 1.1 logs (ignoring what it
+does not know)."""
 
 TOPIC_PERCEPTION = "/trace/perception"
 TOPIC_BELIEF = "/trace/belief"
@@ -53,6 +59,46 @@ class _Record(BaseModel):
     # stay on pydantic's fast path instead of calling back into Python once per object.
     __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]
 
+    @classmethod
+    def __pydantic_init_subclass__(cls, **kwargs: Any) -> None:
+        super().__pydantic_init_subclass__(**kwargs)
+        cls.__doc__ = _with_field_docs(cls)
+
+    @classmethod
+    def __get_pydantic_json_schema__(
+        cls, core_schema: CoreSchema, handler: GetJsonSchemaHandler
+    ) -> JsonSchemaValue:
+        # The JSON Schemas keep the class's own docstring: their fields carry the meanings.
+        schema = handler.resolve_ref_schema(handler(core_schema))
+        own = cls.__dict__.get("_own_doc")
+        if own:
+            schema["description"] = own
+        return schema
+
+
+def _with_field_docs(model: type[BaseModel]) -> str:
+    """The class docstring followed by one line per field (JSON name, type, default,
+    meaning), so ``help()`` and IDEs show what each field means rather than pydantic's
+    generic text. The meanings are the fields' ``description``s, the same text that the
+    JSON Schemas carry."""
+    head = inspect.cleandoc(model.__dict__.get("__doc__") or "")
+    type.__setattr__(model, "_own_doc", head)
+    lines = [head, "", "Fields (JSON name: type = default, meaning):", ""]
+    for name, info in model.model_fields.items():
+        key = info.alias or name
+        shown = key if key == name else f"{key} (Python: {name})"
+        kind = _type_text(info.annotation)
+        required = info.is_required()
+        default = "" if required else " = " + repr(info.get_default(call_default_factory=True))
+        lines.append(f"    {shown}: {kind}{default}")
+        lines.append(f"        {info.description or '(undocumented)'}")
+    return "\n".join(lines) + "\n"
+
+
+def _type_text(annotation: Any) -> str:
+    text = getattr(annotation, "__name__", None) if isinstance(annotation, type) else None
+    return text or str(annotation).replace("trace_runtime.records.", "").replace("typing.", "")
+
 
 def _describe(model: str, err: ValidationError) -> str:
     first = err.errors()[0]
@@ -80,9 +126,11 @@ def validate_record(model: type[R], data: Any) -> R:
 class Pose(_Record):
     """A pose in SE(3): position in metres and a unit quaternion (x, y, z, w)."""
 
-    position: tuple[float, float, float]
-    orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
-    frame: str = "map"
+    position: tuple[float, float, float] = Field(description="x, y, z in metres, in ``frame``")
+    orientation: tuple[float, float, float, float] = Field(
+        default=(0.0, 0.0, 0.0, 1.0), description="unit quaternion x, y, z, w"
+    )
+    frame: str = Field(default="map", description="the coordinate frame, e.g. map, base_link")
 
 
 class EvidenceRef(_Record):
@@ -95,9 +143,15 @@ class EvidenceRef(_Record):
     stored data (its CDR bytes for ROS 2). PROFILE.md section 11.
     """
 
-    topic: str = Field(min_length=1, description="the topic the message was logged on")
-    log_time_ns: int = Field(ge=0, description="the message's MCAP log time, ns")
-    sequence: int | None = Field(default=None, ge=0, description="the message's MCAP sequence")
+    topic: str = Field(
+        min_length=1,
+        description="the MCAP topic of the sensor message, e.g. /sensors/lidar "
+        "(the topic in the recording when one is named)",
+    )
+    log_time_ns: int = Field(ge=0, description="the MCAP log_time of that message, ns")
+    sequence: int | None = Field(
+        default=None, ge=0, description="the MCAP sequence of that message (per topic)"
+    )
     digest: str | None = Field(default=None, description="sha256 hex of the message data")
     recording: str | None = Field(
         default=None,
@@ -114,17 +168,27 @@ class Region(_Record):
     range_m], ``pixels`` = [u0, v0, u1, v1].
     """
 
-    kind: Literal["beams", "box", "cone", "pixels"]
-    values: list[float]
-    frame: str = "base_link"
+    kind: Literal["beams", "box", "cone", "pixels"] = Field(
+        description="how to read values: beams, box, cone or pixels (see above)"
+    )
+    values: list[float] = Field(description="the region's numbers, in the order kind gives")
+    frame: str = Field(default="base_link", description="the frame a box or cone is in")
 
 
 class Evidence(_Record):
     """One member of an entity's evidence set (Def. 1): sensor, weight, region and ref."""
 
-    sensor: str = Field(min_length=1)
-    weight: float = Field(ge=0.0, le=1.0)
-    region: Region | None = None
+    sensor: str = Field(
+        min_length=1,
+        description="the sensor's name as the robot calls it (e.g. lidar, wrist_camera); "
+        "not a topic: the topic of the reading is in ref.topic",
+    )
+    weight: float = Field(
+        ge=0.0, le=1.0, description="this sensor's share of the entity's evidence, in [0, 1]"
+    )
+    region: Region | None = Field(
+        default=None, description="the part of the reading that supported the detection"
+    )
     ref: EvidenceRef | None = Field(
         default=None, description="null when the link to the sensor reading was not recorded"
     )
@@ -134,24 +198,38 @@ class Evidence(_Record):
 
 
 class Entity(_Record):
-    """An evidence-grounded entity (Def. 1)."""
+    """An evidence-grounded entity (Def. 1).
 
-    id: str = Field(min_length=1)
-    cls: str = Field(alias="class", min_length=1)
-    pose: Pose
-    velocity: tuple[float, float, float] | None = None
+    The class is ``cls`` in Python (``class`` is a keyword) and ``class`` in JSON; a dict
+    handed to the logger may use either key.
+    """
+
+    id: str = Field(min_length=1, description="the entity's id, stable across cycles")
+    cls: str = Field(
+        alias="class", min_length=1, description="the most likely class, e.g. person, box"
+    )
+    pose: Pose = Field(description="where the entity is")
+    velocity: tuple[float, float, float] | None = Field(
+        default=None, description="vx, vy, vz in m/s in the pose's frame, when tracked"
+    )
     confidence: dict[str, float] = Field(
         description="calibrated confidence per class, each in [0, 1]"
     )
-    evidence: list[Evidence] = Field(default_factory=list)
+    evidence: list[Evidence] = Field(
+        default_factory=list, description="the sensor readings the entity was derived from"
+    )
 
 
 class Perception(_Record):
     """Layer 1: the entity set E_t and its evidence aggregation record."""
 
-    entities: list[Entity] = Field(default_factory=list)
-    sensors_used: list[str] = Field(default_factory=list)
-    sensors_unavailable: list[str] = Field(default_factory=list)
+    entities: list[Entity] = Field(default_factory=list, description="the entity set E_t")
+    sensors_used: list[str] = Field(
+        default_factory=list, description="names of the sensors that contributed this cycle"
+    )
+    sensors_unavailable: list[str] = Field(
+        default_factory=list, description="names of the sensors that were expected but missing"
+    )
     robot_pose: Pose | None = Field(
         default=None,
         description="the robot's own pose at this cycle, in the frame of the entities' poses",
@@ -164,29 +242,31 @@ class Perception(_Record):
 class BeliefNode(_Record):
     """A node of the belief graph: an entity, or a derived state such as ``collision_risk``."""
 
-    id: str = Field(min_length=1)
-    kind: Literal["entity", "state"]
-    label: str = ""
+    id: str = Field(min_length=1, description="the node's id, unique in this cycle's graph")
+    kind: Literal["entity", "state"] = Field(
+        description="entity (stands for a perceived entity) or state (derived)"
+    )
+    label: str = Field(default="", description="a human-readable name")
     p: float = Field(ge=0.0, le=1.0, description="P(node holds) / confidence")
-    value: Scalar | None = None
-    unit: str | None = None
+    value: Scalar | None = Field(default=None, description="the state's value, if it has one")
+    unit: str | None = Field(default=None, description="the unit of value, e.g. m, m/s, N")
     entity: str | None = Field(default=None, description="entity id, for kind == entity")
 
 
 class BeliefEdge(_Record):
     """A documented inference: ``child`` was derived from ``parent`` by ``rule``."""
 
-    parent: str = Field(min_length=1)
-    child: str = Field(min_length=1)
+    parent: str = Field(min_length=1, description="id of the node inferred from")
+    child: str = Field(min_length=1, description="id of the node inferred")
     p: float = Field(ge=0.0, le=1.0, description="P(child | parent)")
-    rule: str = Field(min_length=1)
+    rule: str = Field(min_length=1, description="the name of the rule or model that inferred it")
 
 
 class Belief(_Record):
     """Layer 2: the probabilistic scene / causal graph B_t = (V, E, P) (Def. 2)."""
 
-    nodes: list[BeliefNode] = Field(default_factory=list)
-    edges: list[BeliefEdge] = Field(default_factory=list)
+    nodes: list[BeliefNode] = Field(default_factory=list, description="the graph's nodes V")
+    edges: list[BeliefEdge] = Field(default_factory=list, description="the graph's edges E")
 
 
 # --- layer 3: action -------------------------------------------------------------------
@@ -196,16 +276,18 @@ class Factor(_Record):
     """A belief node the decision depended on, with the value the policy saw."""
 
     node: str = Field(min_length=1, description="id of a node in this cycle's belief graph")
-    name: str = ""
-    value: Scalar
-    unit: str | None = None
+    name: str = Field(default="", description="a human-readable name of the factor")
+    value: Scalar = Field(description="the value the policy saw")
+    unit: str | None = Field(default=None, description="the unit of value")
 
 
 class Rationale(_Record):
     """Why the command was chosen: text plus the structured factors (R in Def. 3)."""
 
-    text: str
-    factors: list[Factor] = Field(default_factory=list)
+    text: str = Field(description="the reason in words")
+    factors: list[Factor] = Field(
+        default_factory=list, description="the factors the choice depended on, leading first"
+    )
     truncated: bool = Field(
         default=False, description="set by the writer of the rationale when it ran out of room"
     )
@@ -214,92 +296,146 @@ class Rationale(_Record):
 class Alternative(_Record):
     """A command that was considered and lost, with its score and the reason."""
 
-    command: str = Field(min_length=1)
-    score: float
-    rejected_because: str
+    command: str = Field(min_length=1, description="the command considered")
+    score: float = Field(description="its score under the policy (higher wins)")
+    rejected_because: str = Field(description="why it lost")
 
 
 class Counterfactual(_Record):
     """``would_select`` would have been chosen had ``factor`` satisfied the comparison."""
 
     factor: str = Field(min_length=1, description="belief node id of the factor")
-    comparison: Comparison
-    threshold: Scalar
-    would_select: str = Field(min_length=1)
+    comparison: Comparison = Field(description="how the factor's value is compared")
+    threshold: Scalar = Field(description="the value it is compared with")
+    would_select: str = Field(min_length=1, description="the command that would then be chosen")
 
 
 class TreeNode(_Record):
     """A node of the counterfactual decision tree: a test, or a leaf naming a command."""
 
-    id: str = Field(min_length=1)
-    label: str
-    test: str | None = None
-    command: str | None = None
+    id: str = Field(min_length=1, description="the node's id, unique in the tree")
+    label: str = Field(description="what the node says, for people")
+    test: str | None = Field(default=None, description="the test an inner node makes")
+    command: str | None = Field(default=None, description="the command a leaf selects")
 
 
 class TreeEdge(_Record):
-    parent: str
-    child: str
-    label: str = ""
+    """An edge of the counterfactual decision tree: one outcome of the parent's test."""
+
+    parent: str = Field(description="id of the tree node tested")
+    child: str = Field(description="id of the tree node that outcome leads to")
+    label: str = Field(default="", description="the outcome, e.g. yes / no")
 
 
 class DecisionTree(_Record):
     """The counterfactual decision tree (paper Fig. 2) with the path the policy took."""
 
-    nodes: list[TreeNode]
-    edges: list[TreeEdge]
+    nodes: list[TreeNode] = Field(description="tests and leaves")
+    edges: list[TreeEdge] = Field(description="outcomes")
     taken_path: list[str] = Field(description="node ids from root to the chosen leaf")
 
 
 class Action(_Record):
     """Layer 3: the justified action a*_t = <cmd, A_alt, R, CF> (Def. 3)."""
 
-    command: str = Field(min_length=1)
-    parameters: dict[str, float] = Field(default_factory=dict)
-    score: float | None = None
-    alternatives: list[Alternative] = Field(default_factory=list)
-    rationale: Rationale
-    counterfactuals: list[Counterfactual] = Field(default_factory=list)
+    command: str = Field(min_length=1, description="the command chosen, e.g. SLOW, GRASP")
+    parameters: dict[str, float] = Field(
+        default_factory=dict, description="the command's numeric parameters, by name"
+    )
+    score: float | None = Field(default=None, description="the chosen command's score")
+    alternatives: list[Alternative] = Field(
+        default_factory=list, description="the commands considered that lost"
+    )
+    rationale: Rationale = Field(description="why this command was chosen")
+    counterfactuals: list[Counterfactual] = Field(
+        default_factory=list, description="what would have changed the choice"
+    )
     counterfactuals_none_applicable: bool = Field(
         default=False, description="true when no factor value could change the choice"
     )
-    tree: DecisionTree | None = None
+    tree: DecisionTree | None = Field(
+        default=None, description="the counterfactual decision tree with the taken path"
+    )
 
 
 # --- layer 4: execution ----------------------------------------------------------------
 
 
 class Motion(_Record):
-    """A planar motion command or measurement: linear m/s, angular rad/s."""
+    """A planar motion command or measurement: linear m/s, angular rad/s.
 
-    linear: float
-    angular: float = 0.0
+    The shape of a mobile base. Other robots (arms, grippers, drones) name their own
+    quantities with ``ActuatorChannel`` in ``Execution.channels``.
+    """
+
+    linear: float = Field(description="forward speed, m/s")
+    angular: float = Field(default=0.0, description="yaw rate, rad/s (counter-clockwise)")
+
+
+class ActuatorChannel(_Record):
+    """One commanded-and-measured quantity of any actuator: a joint velocity, a gripper
+    force, an end-effector speed, a thrust. ``intended`` and ``actual`` are in ``unit``."""
+
+    name: str = Field(min_length=1, description="the robot's name for it, e.g. joint_3, grip")
+    unit: str = Field(description="unit of intended, actual and deviation, e.g. rad/s, N")
+    intended: float | None = Field(default=None, description="the commanded value")
+    actual: float | None = Field(default=None, description="the measured value")
+    deviation: float | None = Field(
+        default=None,
+        ge=0.0,
+        description="how far actual was from intended, in unit (usually |actual - intended|)",
+    )
 
 
 class ComplianceCheck(_Record):
-    rule: str = Field(min_length=1)
-    passed: bool
-    value: float | None = None
-    limit: float | None = None
-    detail: str = ""
+    """One safety or compliance rule checked against this cycle's execution."""
+
+    rule: str = Field(min_length=1, description="the rule's name, e.g. max_speed_near_person")
+    passed: bool = Field(description="whether the execution met the rule")
+    value: float | None = Field(default=None, description="the value the rule was checked on")
+    limit: float | None = Field(default=None, description="the rule's limit for that value")
+    detail: str = Field(default="", description="anything else the check reports")
 
 
 class Execution(_Record):
-    """Layer 4: intended vs actual behaviour, deviation delta_t, compliance, flags."""
+    """Layer 4: intended vs actual behaviour, deviation delta_t, compliance, flags.
 
-    intended: Motion
-    actual: Motion
-    deviation: float = Field(ge=0.0)
-    checks: list[ComplianceCheck] = Field(default_factory=list)
-    flags: list[str] = Field(default_factory=list)
+    A mobile base logs ``intended`` and ``actual`` as planar ``Motion``s (profile 1.0).
+    Any other actuator set logs ``channels`` (profile 1.1), one ``ActuatorChannel`` per
+    quantity, each with its unit and its own deviation; a robot may log both.
+    """
+
+    intended: Motion | None = Field(
+        default=None, description="the planar motion commanded (mobile bases)"
+    )
+    actual: Motion | None = Field(
+        default=None, description="the planar motion measured (mobile bases)"
+    )
+    deviation: float = Field(
+        ge=0.0, description="overall deviation delta_t of actual from intended (>= 0)"
+    )
+    checks: list[ComplianceCheck] = Field(
+        default_factory=list, description="the compliance checks run on this execution"
+    )
+    flags: list[str] = Field(
+        default_factory=list, description="labels for anything notable, e.g. e_stop"
+    )
+    channels: list[ActuatorChannel] = Field(
+        default_factory=list,
+        description="intended vs actual per named actuator quantity, with units (profile 1.1)",
+    )
+    deviation_unit: str | None = Field(
+        default=None,
+        description="unit of the overall deviation, e.g. m/s; null: not stated (profile 1.1)",
+    )
 
 
 # --- messages on the wire --------------------------------------------------------------
 
 
 class _Stamp(_Record):
-    cycle: int = Field(ge=0)
-    t_ns: int = Field(ge=0)
+    cycle: int = Field(ge=0, description="the cycle number, +1 per cycle begun (PROFILE §4)")
+    t_ns: int = Field(ge=0, description="the cycle's time in ns; the message's MCAP log_time")
 
 
 class PerceptionMessage(_Stamp, Perception):
@@ -360,7 +496,7 @@ class Checkpoint(_Stamp):
     (see docs/integrity.md); both it and ``key_id`` are null when the logger has no key.
     """
 
-    robot_id: str = Field(min_length=1)
+    robot_id: str = Field(min_length=1, description="the robot whose chain this is")
     segment: int = Field(ge=0, description="number of the segment the checkpoint was written in")
     first_cycle: int = Field(ge=0, description="first cycle of that segment")
     sealed: int = Field(ge=0, description="seals written in the segment, first_cycle..cycle")

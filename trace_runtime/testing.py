@@ -16,7 +16,6 @@ encoding and sealing, so what a test sees is exactly what would have been writte
 from __future__ import annotations
 
 import os
-import time
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
@@ -25,7 +24,7 @@ import orjson
 from trace_runtime.chain import digest
 from trace_runtime.codec import EncodedLayer, LayerValue, encode_checked, encode_seal
 from trace_runtime.errors import UsageError
-from trace_runtime.logger import AuditLogger, CycleBuilder, LoggerStats
+from trace_runtime.logger import AuditLogger, CycleBuilder, LoggerStats, next_cycle_time
 from trace_runtime.records import (
     GENESIS,
     LAYER_MODELS,
@@ -79,6 +78,7 @@ class CaptureLogger:
     _sensor_seq: dict[str, int] = field(default_factory=dict)
     _open: CycleBuilder | None = None
     _closed: bool = False
+    _last_t_ns: int = 0
 
     def cycle(self, t_ns: int | None = None) -> CycleBuilder:
         """Begin the next cycle (default time: now)."""
@@ -86,7 +86,8 @@ class CaptureLogger:
             raise UsageError("the logger is closed")
         if self._open is not None and not self._open._committed:
             raise UsageError(f"cycle {self._open.cycle} was begun but not committed")
-        builder = CycleBuilder(self, self._next_cycle, time.time_ns() if t_ns is None else t_ns)
+        self._last_t_ns = next_cycle_time(t_ns, self._last_t_ns)
+        builder = CycleBuilder(self, self._next_cycle, self._last_t_ns)
         self._next_cycle += 1
         self._open = builder
         return builder
@@ -122,7 +123,7 @@ class CaptureLogger:
         self._sensor_seq[topic] = seq + 1
         return seq
 
-    def _commit(self, builder: CycleBuilder) -> None:
+    def _commit(self, builder: CycleBuilder, started_ns: int | None) -> None:
         layers = builder._layers
         payloads = {
             topic: encode_checked(builder.cycle, builder.t_ns, LAYER_MODELS[topic], record)

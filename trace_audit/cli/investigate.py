@@ -251,11 +251,38 @@ def explain_doc(r: Explanation, lookback_s: float = 600.0) -> Doc:
     if ex is None:
         doc.line(Seg("not logged", "red"), 2)
     else:
+        if ex.channels:
+            doc.table(
+                [
+                    Column("channel"),
+                    Column("intended", "right"),
+                    Column("actual", "right"),
+                    Column("deviation", "right"),
+                    Column("unit"),
+                ],
+                [
+                    [
+                        c.name,
+                        format_value(c.intended),
+                        format_value(c.actual),
+                        format_value(c.deviation),
+                        c.unit,
+                    ]
+                    for c in ex.channels
+                ],
+            )
+        motion: list[tuple[str, Any]] = (
+            [("Intended", _motion(ex.intended)), ("Actual", _motion(ex.actual))]
+            if ex.planar or not ex.channels
+            else []
+        )
+        deviation = format_value(ex.deviation)
+        if ex.deviation_unit and ex.deviation is not None:
+            deviation += f" {ex.deviation_unit}"
         doc.fields(
             [
-                ("Intended", _motion(ex.intended)),
-                ("Actual", _motion(ex.actual)),
-                ("Deviation", format_value(ex.deviation)),
+                *motion,
+                ("Deviation", deviation),
                 (
                     "Checks",
                     "; ".join(
@@ -649,6 +676,8 @@ def timeline_doc(r: Timeline) -> Doc:
         lead = f"{row.leading.label} = {row.leading.shown}" if row.leading else "-"
         flags = ", ".join(f"{k} x{v}" if v > 1 else k for k, v in row.flag_counts.items())
         what: list[Any] = [lead]
+        if row.max_deviation is not None:
+            what.append(f"; max deviation {format_value(row.max_deviation)} {row.deviation_unit}")
         if flags:
             what.append(Seg(f"; flags: {flags}", "bold red"))
         if row.scenario:

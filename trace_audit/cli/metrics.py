@@ -218,6 +218,30 @@ def _share(count: int, total: int) -> str:
     return f"{count}/{total}"
 
 
+def _render_channels(report: MetricsReport, out: Any, boxes: Any) -> None:
+    """Execution deviation per actuator channel, in each channel's own unit."""
+    from rich.table import Table
+
+    table = Table(
+        title="Execution deviation per channel",
+        box=boxes,
+        title_justify="left",
+        show_edge=False,
+        pad_edge=False,
+    )
+    for name in ("channel", "unit", "cycles", "mean", "max"):
+        table.add_column(name, justify="left" if name in ("channel", "unit") else "right")
+    for c in report.channel_deviation:
+        table.add_row(
+            c.name,
+            c.unit,
+            str(c.cycles) if c.logged == c.cycles else f"{c.cycles} ({c.logged} with deviation)",
+            "-" if c.mean is None else f"{c.mean:.4g}",
+            "-" if c.max is None else f"{c.max:.4g}",
+        )
+    out.print(table)
+
+
 def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
     from rich import box
     from rich.table import Table
@@ -292,6 +316,9 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
         f"the seals declare {overall.declared_dropped} dropped"
         + (f", {overall.clock_anomalies} clock anomalies." if overall.clock_anomalies else ".")
     )
+
+    if report.channel_deviation:
+        _render_channels(report, out, boxes)
 
     if report.groups:
         wide = out.width >= 90

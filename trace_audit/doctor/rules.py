@@ -78,7 +78,7 @@ RULES = _rules(
     ("sequence", "§4", "MUST", "MCAP sequence equals the message's cycle"),
     ("same-cycle", "§4", "MUST", "all of a cycle's /trace messages have the same cycle and t_ns"),
     ("cycle-order", "§4", "MUST", "cycle numbers increase from cycle to cycle"),
-    ("time-order", "§4", "SHOULD", "t_ns does not decrease from cycle to cycle"),
+    ("time-order", "§4", "MUST", "t_ns does not decrease from cycle to cycle within a segment"),
     # §5 one cycle in the file
     ("cycle-layout", "§5", "MUST", "a cycle's messages are sensors, then layers, then the seal"),
     ("cycle-in-chunk", "§5", "SHOULD", "all of a cycle's messages are in one chunk"),

@@ -42,6 +42,7 @@ from typing import Any, BinaryIO, Literal, cast
 
 import orjson
 
+from trace_runtime.costs import TIMING_METADATA
 from trace_runtime.cycles import RawMessage
 from trace_runtime.errors import LogReadError, UsageError, VerificationError
 from trace_runtime.integrity import PublicKey
@@ -806,10 +807,15 @@ def _open_writer(
 ) -> _TallyWriter:
     """A SegmentWriter on a partial file whose first write carries compaction's marker."""
     marker = {"partial": segment.path.name, "tier": tier}
+    # The logger's cost statistics describe the source's cycles, which every tier keeps (in
+    # full or summarised): `trace-audit metrics` reads them from whichever copy it opens.
+    carried = [
+        (name, segment.metadata[name]) for name in (TIMING_METADATA,) if name in segment.metadata
+    ]
     writer = SegmentWriter(
         cast(BinaryIO, stream),  # PartialStream has every method SegmentWriter uses
         _tier_session(segment, tier),
-        extra_metadata=[(PARTIAL_METADATA, marker)],
+        extra_metadata=[(PARTIAL_METADATA, marker), *carried],
         **options,
     )
     stream.release()
