@@ -86,6 +86,7 @@ __all__ = [
     "compute_metrics",
     "parse_thresholds",
     "report_from_sums",
+    "scenario_of",
     "score_segment",
 ]
 
@@ -388,6 +389,7 @@ class ScoredDecision:
     segment: Segment
     group: str
     action: Any
+    belief: Any
     perception: Any
     execution: Any
     score: DecisionScore
@@ -475,7 +477,7 @@ class _Scanner:
             robot = segment.session.robot_id
             return lambda _cycle: robot
         if by == "scenario":
-            return lambda cycle: _scenario(cycle.layer(TOPIC_EXECUTION))
+            return lambda cycle: scenario_of(cycle.layer(TOPIC_EXECUTION))
         return lambda cycle: time.strftime(
             "%Y-%m-%d %H:00", time.gmtime(cycle.t_ns // 1_000_000_000)
         )
@@ -532,6 +534,7 @@ class _Scanner:
                     segment,
                     group,
                     action,
+                    belief,
                     perception,
                     execution,
                     score,
@@ -717,7 +720,8 @@ def _et_problems(chains: DecisionChains) -> list[str]:
     return out
 
 
-def _scenario(execution: Any) -> str:
+def scenario_of(execution: Any) -> str:
+    """The scenario an execution record's ``scenario:NAME`` flag names, or ``(none)``."""
     if isinstance(execution, dict):
         for flag in execution.get("flags") or ():
             if isinstance(flag, str) and flag.startswith(SCENARIO_FLAG):
@@ -847,7 +851,9 @@ def compute_metrics(
             _fan_out(pool, tasks, plan=plan, total=total, advance=advance, limit=cfg.max_listed)
     elapsed = time.perf_counter() - started
     segments_read = tuple(str(s.path) for _, segs in plan for s in segs)
-    report = _report(paths, cfg, log=log, total=total, segments=segments_read, elapsed=elapsed)
+    report = _report(
+        paths, cfg, log=log, total=total, segments=segments_read, elapsed=elapsed, by=cfg.by
+    )
     if report.overall.decisions == 0 and cfg.start_ns is None and cfg.end_ns is None:
         # As info, explain and verify say it: nothing to score is an empty log, not 0 %.
         raise LogReadError(str(paths[0]), "the log holds no decision cycles")
@@ -878,14 +884,16 @@ def report_from_sums(
     cfg: MetricsConfig,
     groups: Mapping[str, GroupSums],
     *,
+    by: str | None,
     segments: tuple[str, ...],
     cycles: int,
     elapsed: float,
 ) -> MetricsReport:
     """A report from sums gathered elsewhere (the fleet index's decision rows): the same
-    tables, stds and thresholds as a scan of the logs; nothing listed, timing not logged."""
+    tables, stds and thresholds as a scan of the logs; nothing listed, timing not logged.
+    ``by`` names the grouping of ``groups`` (any label: the index groups by more keys)."""
     total = _Partial(groups=dict(groups), cycles=cycles)
-    report = _report(sources, cfg, log=None, total=total, segments=segments, elapsed=elapsed)
+    report = _report(sources, cfg, log=None, total=total, segments=segments, elapsed=elapsed, by=by)
     if report.overall.decisions == 0:
         raise LogReadError(str(sources[0]) if sources else "index", "no decisions selected")
     return report
@@ -899,6 +907,7 @@ def _report(
     total: _Partial,
     segments: tuple[str, ...],
     elapsed: float,
+    by: str | None,
 ) -> MetricsReport:
     overall_acc = GroupSums()
     for acc in total.groups.values():
@@ -906,9 +915,9 @@ def _report(
     overall = _group("all", overall_acc)
     groups: tuple[GroupMetrics, ...] = ()
     across: AcrossGroups | None = None
-    if cfg.by is not None:
+    if by is not None:
         groups = tuple(_group(name, acc) for name, acc in total.groups.items())
-        across = _across(cfg.by, groups)
+        across = _across(by, groups)
     checks = tuple(_check(name, threshold, overall) for name, threshold in cfg.thresholds.items())
     failures = tuple(sorted(total.failures, key=lambda f: (f.t_ns, f.cycle)))
     gaps = tuple(sorted(total.gaps, key=lambda g: (g.after_t_ns, g.robot)))
@@ -917,7 +926,7 @@ def _report(
         segments=segments,
         skipped_segments=tuple(_shadowed(log)) if log is not None else (),
         unreadable=tuple(f"{p.path}: {p.reason}" for p in log.problems) if log else (),
-        by=cfg.by,
+        by=by,
         definitions=_definitions(cfg),
         overall=overall,
         groups=groups,
