@@ -7,7 +7,7 @@ import sys
 import typer
 from typer.exceptions import TyperException
 
-from trace_audit.cli import integrity, investigate, metrics, storage  # noqa: F401 - register
+from trace_audit.cli import fleet, integrity, investigate, metrics, storage  # noqa: F401 - register
 from trace_audit.cli.app import EXIT_USAGE, app
 
 __all__ = ["app", "main"]
