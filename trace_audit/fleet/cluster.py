@@ -16,7 +16,7 @@ from trace_runtime.errors import UsageError
 
 __all__ = ["dask_executor"]
 
-CONNECT_TIMEOUT_S = 10
+CONNECT_TIMEOUT_S = 5
 
 
 @contextlib.contextmanager
@@ -30,7 +30,7 @@ def dask_executor(address: str) -> Iterator[Executor]:
             "--scheduler needs dask.distributed (pip install 'trace-audit[fleet]')"
         ) from err
     try:
-        client = Client(address, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
+        client = Client(address, timeout=CONNECT_TIMEOUT_S, set_as_default=False)  # type: ignore[no-untyped-call]
     except (OSError, TimeoutError, ValueError) as err:
         raise UsageError(f"cannot reach the Dask scheduler at {address}: {err}") from err
     with client:
@@ -38,4 +38,4 @@ def dask_executor(address: str) -> Iterator[Executor]:
             client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
         except (OSError, TimeoutError) as err:
             raise UsageError(f"the Dask scheduler at {address} has no workers") from err
-        yield client.get_executor()
+        yield client.get_executor()  # type: ignore[no-untyped-call]

@@ -211,7 +211,7 @@ class SegmentRows:
             confidence = entity.get("confidence")
             pose = entity.get("pose")
             position = pose.get("position") if isinstance(pose, dict) else None
-            has_xy = isinstance(position, list | tuple) and len(position) >= 2
+            xy = position if isinstance(position, list | tuple) and len(position) >= 2 else None
             entity_id = str(entity.get("id", ""))
             self.days["entities"].append(day)
             col["segment"].append(name)
@@ -223,8 +223,8 @@ class SegmentRows:
                 _number(confidence.get(cls)) if isinstance(confidence, dict) else None
             )
             col["distance"].append(distances.get(entity_id))
-            col["x"].append(_number(position[0]) if has_xy else None)
-            col["y"].append(_number(position[1]) if has_xy else None)
+            col["x"].append(_number(xy[0]) if xy is not None else None)
+            col["y"].append(_number(xy[1]) if xy is not None else None)
             col["evidence"].append(len(entity.get("evidence") or ()))
 
     def table(self, name: str) -> tuple[pa.Table, list[str]]:
