@@ -9,6 +9,7 @@ what that same verification finds clean. For one decision (``explain``) the chec
 
 from __future__ import annotations
 
+from concurrent.futures import Executor
 from pathlib import Path
 
 from trace_runtime.integrity import PublicKey
@@ -34,10 +35,12 @@ __all__ = [
 ]
 
 
-def verify_log(path: str | Path, *, key: PublicKey | None = None) -> VerifyReport:
+def verify_log(
+    path: str | Path, *, key: PublicKey | None = None, executor: Executor | None = None
+) -> VerifyReport:
     """Verify a segment file, a directory of segments or a log root; never raises on tampering.
 
     Raises ``LogReadError`` only when nothing readable is there (exit 3 at the CLI); a damaged
     segment inside a root is a finding.
     """
-    return verify(open_log(path), key=key)
+    return verify(open_log(path), key=key, executor=executor)

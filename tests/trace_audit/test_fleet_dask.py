@@ -14,7 +14,9 @@ from pathlib import Path
 
 import pytest
 
+from tests.trace_audit.conftest import rewrite_segment
 from tests.trace_audit.test_fleet_index import _fleet
+from trace_runtime.cycles import RawMessage
 
 pytest.importorskip("distributed")
 
@@ -169,3 +171,25 @@ def test_an_unreachable_scheduler_is_a_usage_error(tmp_path: Path) -> None:
     assert done.returncode == 2
     assert done.stderr.startswith("trace-audit: cannot reach the Dask scheduler")
     assert done.stderr.count("\n") == 1
+
+
+def test_verify_on_a_dask_cluster_equals_the_local_json(scheduler: str, tmp_path: Path) -> None:
+    """One task per robot; a tampered cycle in r2 is the same finding either way."""
+    root = _fleet(tmp_path / "logs")
+    victim = sorted((root / "hot").glob("r2_*.mcap"))[1]
+    changed = []
+
+    def tamper(msg: RawMessage) -> bytes:
+        if msg.topic == "/trace/action" and not changed:
+            changed.append(msg.log_time_ns)
+            return msg.data.replace(b'"command":"', b'"command":"X', 1)
+        return msg.data
+
+    rewrite_segment(victim, tmp_path / "tampered.mcap", tamper)
+    (tmp_path / "tampered.mcap").replace(victim)
+    assert changed
+    local = _cli("verify", str(root), "--json")
+    remote = _cli("verify", str(root), "--json", "--scheduler", scheduler)
+    assert local.returncode == remote.returncode == 1, (local.stderr, remote.stderr)
+    assert json.loads(remote.stdout) == json.loads(local.stdout)
+    assert len(json.loads(local.stdout)["robots"]) == 2
