@@ -159,7 +159,7 @@ def _segment_row(segment: Segment, rows: SegmentRows, sha256: str) -> tuple[Any,
     from trace_audit.fleet.tables import schema
 
     info, session = segment.info, segment.session
-    decisions = len(rows.decisions["cycle"])
+    decisions = rows.decisions
     row = {
         "segment": segment.path.name,
         "segment_path": str(segment.path),

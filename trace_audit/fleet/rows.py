@@ -29,9 +29,10 @@ def day_of(t_ns: int) -> str:
 
 
 def _number(value: Any) -> float | None:
-    if isinstance(value, bool):
-        return float(value)
-    if isinstance(value, int | float):
+    kind = type(value)
+    if kind is float:
+        return value  # type: ignore[no-any-return]
+    if kind is int or kind is bool:
         return float(value)
     return None
 
@@ -39,50 +40,59 @@ def _number(value: Any) -> float | None:
 def _distances(belief: Any) -> dict[str, float]:
     """Entity id -> distance to the robot, where the belief graph derives one: a state node
     labelled or named ``distance`` in metres with a documented edge from the entity."""
-    if not isinstance(belief, dict):
+    if type(belief) is not dict:
         return {}
-    nodes = {
-        n.get("id"): n
-        for n in belief.get("nodes") or ()
-        if isinstance(n, dict) and n.get("kind") == "state" and n.get("unit") in _DISTANCE_UNITS
-    }
+    values: dict[Any, float] = {}
+    for node in belief.get("nodes") or ():
+        if (
+            type(node) is dict
+            and node.get("unit") in _DISTANCE_UNITS
+            and node.get("kind") == "state"
+            and "distance" in f"{node.get('label', '')} {node.get('id', '')}".lower()
+        ):
+            value = _number(node.get("value"))
+            if value is not None:
+                values[node.get("id")] = value
+    if not values:
+        return {}
     out: dict[str, float] = {}
     for edge in belief.get("edges") or ():
-        if not isinstance(edge, dict):
-            continue
-        node = nodes.get(edge.get("child"))
-        if node is None:
-            continue
-        name = f"{node.get('label', '')} {node.get('id', '')}".lower()
-        value = _number(node.get("value"))
-        if "distance" in name and value is not None:
-            parent = str(edge.get("parent"))
-            out[parent] = min(value, out.get(parent, value))
+        if type(edge) is dict:
+            value = values.get(edge.get("child"))
+            if value is not None:
+                parent = str(edge.get("parent"))
+                out[parent] = min(value, out.get(parent, value))
     return out
 
 
 @dataclass(slots=True)
 class SegmentRows:
-    """Columns of the decisions, entities and gaps of one segment, filled decision by decision."""
+    """The decisions, entities and gaps of one segment, filled decision by decision.
+
+    Rows are kept as tuples in the tables' column order (one tuple per row is the cheapest
+    thing to build per decision) and turned into columns once, in ``table``."""
 
     segment: Segment
     previous_command: str | None = None
-    decisions: dict[str, list[Any]] = field(default_factory=dict)
-    entities: dict[str, list[Any]] = field(default_factory=dict)
-    gaps: dict[str, list[Any]] = field(default_factory=dict)
+    rows: dict[str, list[tuple[Any, ...]]] = field(default_factory=dict)
     days: dict[str, list[str]] = field(default_factory=dict)
     integrity_failed: int = 0
     first_cycle: int | None = None
     last_cycle: int | None = None
     _hours: dict[int, tuple[str, str]] = field(default_factory=dict)
+    _name: str = ""
+    _path: str = ""
 
     def __post_init__(self) -> None:
-        from trace_audit.fleet.tables import schema
-
         for table in ("decisions", "entities", "gaps"):
-            columns: dict[str, list[Any]] = {name: [] for name in schema(table).names}
-            setattr(self, table, columns)
+            self.rows[table] = []
             self.days[table] = []
+        self._name = self.segment.path.name
+        self._path = str(self.segment.path)
+
+    @property
+    def decisions(self) -> int:
+        return len(self.rows["decisions"])
 
     def _day_hour(self, t_ns: int) -> tuple[str, str]:
         bucket = t_ns // _HOUR_NS
@@ -105,80 +115,84 @@ class SegmentRows:
         self._decision(d, day, hour)
         if d.seal.gap is not None:
             self._gap(d, self._day_hour(d.seal.gap.after_t_ns)[0])
-        if isinstance(d.perception, dict) and d.perception.get("entities"):
-            self._entities(d, day)
+        perception = d.perception
+        if type(perception) is dict and perception.get("entities"):
+            self._entities(d, perception["entities"], day)
 
     def _decision(self, d: ScoredDecision, day: str, hour: str) -> None:
-        col = self.decisions
         self.days["decisions"].append(day)
-        action = d.action if isinstance(d.action, dict) else {}
-        execution = d.execution if isinstance(d.execution, dict) else {}
+        action = d.action if type(d.action) is dict else {}
+        execution = d.execution if type(d.execution) is dict else {}
         rationale = action.get("rationale")
-        raw_factors = rationale.get("factors") if isinstance(rationale, dict) else None
-        factors = [
-            {
-                "node": str(f.get("node", "")),
-                "name": str(f.get("name", "")),
-                "value": _number(f.get("value")),
-                "text": None if _number(f.get("value")) is not None else str(f.get("value")),
-                "unit": f.get("unit"),
-            }
-            for f in raw_factors or ()
-            if isinstance(f, dict)
-        ]
+        raw_factors = rationale.get("factors") if type(rationale) is dict else None
+        factors = []
+        for f in raw_factors or ():
+            if type(f) is dict:
+                raw = f.get("value")
+                value = _number(raw)
+                factors.append(
+                    {
+                        "node": str(f.get("node", "")),
+                        "name": str(f.get("name", "")),
+                        "value": value,
+                        "text": None if value is not None else str(raw),
+                        "unit": f.get("unit"),
+                    }
+                )
         lead = factors[0] if factors else None
         command = action.get("command")
         session = self.segment.session
         score, seal = d.score, d.seal
-        scenario = scenario_of(d.execution)
+        scenario = scenario_of(execution)
         intact = not seal.problems
         self.integrity_failed += not intact
-        values: dict[str, Any] = {
-            "segment": self.segment.path.name,
-            "segment_path": str(self.segment.path),
-            "tier": session.tier,
-            "cycle": d.cycle.cycle,
-            "t_ns": d.cycle.t_ns,
-            "hour": hour,
-            "command": command,
-            "previous_command": self.previous_command,
-            "lead_factor": (lead["name"] or lead["node"]) if lead else None,
-            "lead_value": lead["value"] if lead else None,
-            "lead_text": lead["text"] if lead else None,
-            "lead_unit": lead["unit"] if lead else None,
-            "factors": factors,
-            "alternatives": len(action.get("alternatives") or ()),
-            "counterfactuals": len(action.get("counterfactuals") or ()),
-            "deviation": _number(execution.get("deviation")),
-            "failed_checks": [
-                str(c.get("rule"))
-                for c in execution.get("checks") or ()
-                if isinstance(c, dict) and c.get("passed") is False
-            ],
-            "flags": [str(f) for f in execution.get("flags") or ()],
-            "scenario": None if scenario == NO_SCENARIO else scenario,
-            "et": score.et,
-            "et_partial": score.et_partial,
-            "factors_total": score.factors,
-            "factors_traceable": score.traceable,
-            "dr": not d.dr_problems,
-            "dr_problems": list(d.dr_problems),
-            "sealed": seal.sealed,
-            "seal_verified": intact,
-            "integrity_problems": list(seal.problems),
-            "summarized": d.cycle.summary is not None,
-            "continuity": seal.continuity,
-            "tcs": d.tcs,
-            "window_ns": seal.window_ns,
-            "gap_ns": seal.gap.gap_ns if seal.gap is not None else 0,
-            "missing_cycles": seal.gap.missing_cycles if seal.gap is not None else 0,
-            "dropped": seal.dropped,
-            "clock_anomaly": seal.clock_anomaly,
-            "software_version": session.software_version,
-            "policy_version": session.policy_version,
-        }
-        for name, value in values.items():
-            col[name].append(value)
+        gap = seal.gap
+        self.rows["decisions"].append(
+            (
+                self._name,
+                self._path,
+                session.tier,
+                d.cycle.cycle,
+                d.cycle.t_ns,
+                hour,
+                command,
+                self.previous_command,
+                (lead["name"] or lead["node"]) if lead else None,
+                lead["value"] if lead else None,
+                lead["text"] if lead else None,
+                lead["unit"] if lead else None,
+                factors,
+                len(action.get("alternatives") or ()),
+                len(action.get("counterfactuals") or ()),
+                _number(execution.get("deviation")),
+                [
+                    str(c.get("rule"))
+                    for c in execution.get("checks") or ()
+                    if type(c) is dict and c.get("passed") is False
+                ],
+                [str(f) for f in execution.get("flags") or ()],
+                None if scenario == NO_SCENARIO else scenario,
+                score.et,
+                score.et_partial,
+                score.factors,
+                score.traceable,
+                not d.dr_problems,
+                list(d.dr_problems),
+                seal.sealed,
+                intact,
+                list(seal.problems),
+                d.cycle.summary is not None,
+                seal.continuity,
+                d.tcs,
+                seal.window_ns,
+                gap.gap_ns if gap is not None else 0,
+                gap.missing_cycles if gap is not None else 0,
+                seal.dropped,
+                seal.clock_anomaly,
+                session.software_version,
+                session.policy_version,
+            )
+        )
         if command is not None:
             self.previous_command = str(command)
 
@@ -186,46 +200,49 @@ class SegmentRows:
         gap = d.seal.gap
         assert gap is not None  # the caller checked
         self.days["gaps"].append(day)
-        values = {
-            "segment": self.segment.path.name,
-            "after_cycle": gap.after_cycle,
-            "after_t_ns": gap.after_t_ns,
-            "before_cycle": gap.before_cycle,
-            "before_t_ns": gap.before_t_ns,
-            "period_ns": gap.period_ns,
-            "gap_ns": gap.gap_ns,
-            "missing_cycles": gap.missing_cycles,
-            "declared_dropped": gap.declared_dropped,
-        }
-        for name, value in values.items():
-            self.gaps[name].append(value)
+        self.rows["gaps"].append(
+            (
+                self._name,
+                gap.after_cycle,
+                gap.after_t_ns,
+                gap.before_cycle,
+                gap.before_t_ns,
+                gap.period_ns,
+                gap.gap_ns,
+                gap.missing_cycles,
+                gap.declared_dropped,
+            )
+        )
 
-    def _entities(self, d: ScoredDecision, day: str) -> None:
+    def _entities(self, d: ScoredDecision, entities: Any, day: str) -> None:
         distances = _distances(d.belief)
-        col = self.entities
-        name = self.segment.path.name
-        for entity in d.perception["entities"]:
-            if not isinstance(entity, dict):
+        rows = self.rows["entities"]
+        days = self.days["entities"]
+        name, number, t_ns = self._name, d.cycle.cycle, d.cycle.t_ns
+        for entity in entities:
+            if type(entity) is not dict:
                 continue
             cls = entity.get("class")
             confidence = entity.get("confidence")
             pose = entity.get("pose")
-            position = pose.get("position") if isinstance(pose, dict) else None
-            xy = position if isinstance(position, list | tuple) and len(position) >= 2 else None
+            position = pose.get("position") if type(pose) is dict else None
+            xy = position if type(position) is list and len(position) >= 2 else (None, None)
             entity_id = str(entity.get("id", ""))
-            self.days["entities"].append(day)
-            col["segment"].append(name)
-            col["cycle"].append(d.cycle.cycle)
-            col["t_ns"].append(d.cycle.t_ns)
-            col["entity"].append(entity_id)
-            col["class"].append(None if cls is None else str(cls))
-            col["confidence"].append(
-                _number(confidence.get(cls)) if isinstance(confidence, dict) else None
+            days.append(day)
+            rows.append(
+                (
+                    name,
+                    number,
+                    t_ns,
+                    entity_id,
+                    None if cls is None else str(cls),
+                    _number(confidence.get(cls)) if type(confidence) is dict else None,
+                    distances.get(entity_id),
+                    _number(xy[0]),
+                    _number(xy[1]),
+                    len(entity.get("evidence") or ()),
+                )
             )
-            col["distance"].append(distances.get(entity_id))
-            col["x"].append(_number(xy[0]) if xy is not None else None)
-            col["y"].append(_number(xy[1]) if xy is not None else None)
-            col["evidence"].append(len(entity.get("evidence") or ()))
 
     def table(self, name: str) -> tuple[pa.Table, list[str]]:
         """One table's rows as Arrow, and the partition day of each row."""
@@ -233,5 +250,8 @@ class SegmentRows:
 
         from trace_audit.fleet.tables import schema
 
-        columns: dict[str, list[Any]] = getattr(self, name)
-        return pa.table(columns, schema=schema(name)), self.days[name]
+        shape = schema(name)
+        rows = self.rows[name]
+        columns = list(zip(*rows, strict=True)) if rows else [()] * len(shape)
+        arrays = [pa.array(column, type=f.type) for column, f in zip(columns, shape, strict=True)]
+        return pa.Table.from_arrays(arrays, schema=shape), self.days[name]
