@@ -38,4 +38,6 @@ def dask_executor(address: str) -> Iterator[Executor]:
             client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
         except (OSError, TimeoutError) as err:
             raise UsageError(f"the Dask scheduler at {address} has no workers") from err
-        yield client.get_executor()  # type: ignore[no-untyped-call]
+        # pure=False: a task names a file by path, whose bytes may change between two
+        # calls; Dask must run it again rather than hand back a result it still holds.
+        yield client.get_executor(pure=False)  # type: ignore[no-untyped-call]
