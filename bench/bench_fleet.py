@@ -210,7 +210,7 @@ def bench_dask(root: Path, work: Path, repeats: int) -> dict[str, float]:
             stdout=log,
             stderr=subprocess.STDOUT,
             env=env,
-        )  # fmt: skip
+        )
     ]
 
     def worker() -> subprocess.Popen[bytes]:
