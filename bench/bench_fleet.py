@@ -2,7 +2,7 @@
 from the index against metrics from the logs, and a Dask cluster with 1 and 2 workers.
 
     .venv/bin/python bench/bench_fleet.py [--minutes 30] [--robot-days 10] [--repeats 3]
-                                          [--work DIR]
+                                          [--work DIR (default: $TMPDIR/trace-bench-fleet)]
 
 1. **Index build, CPU per core**: a real sim log root (two robots, ``--minutes`` each,
    routine operation with the paper's fault rates) is scored by ``compute_metrics`` (one
@@ -34,6 +34,7 @@ import socket
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -264,7 +265,9 @@ def main() -> int:
     parser.add_argument("--minutes", type=float, default=30.0, help="per robot, real sim log")
     parser.add_argument("--robot-days", type=int, default=10)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--work", type=Path, default=REPO / "bench" / ".fleet")
+    parser.add_argument(
+        "--work", type=Path, default=Path(tempfile.gettempdir()) / "trace-bench-fleet"
+    )
     parser.add_argument("--skip-dask", action="store_true")
     args = parser.parse_args()
     work: Path = args.work
