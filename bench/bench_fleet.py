@@ -298,10 +298,24 @@ def main() -> int:
         "written_s": time.perf_counter() - started,
     }
 
+    # What `find` shows (the first 1000 in time order), and the size of the whole answer.
     stop_s, stops = median_wall(
-        lambda: find_decisions(synth, action="STOP", near="person", within_m=1.0, limit=100_000),
+        lambda: find_decisions(synth, action="STOP", near="person", within_m=1.0),
         args.repeats,
     )
+    count_sql = (
+        "SELECT software_version, count(*) FROM decisions "
+        "WHERE command = 'STOP' AND nearest['person'] < 1.0 GROUP BY ALL"
+    )
+    count_s, count = median_wall(lambda: run_query(synth, count_sql), args.repeats)
+    # The same answer by joining the entities table (the general form, for any question
+    # about what was seen): one measurement, for comparison.
+    join_sql = (
+        "SELECT count(*) FROM decisions d SEMI JOIN (SELECT robot, cycle, t_ns FROM entities "
+        "WHERE class = 'person' AND distance < 1.0) e USING (robot, cycle, t_ns) "
+        "WHERE d.command = 'STOP'"
+    )
+    join_s, join = median_wall(lambda: run_query(synth, join_sql), 1)
     et_sql = (
         "SELECT robot, day, count(*) AS decisions, avg(et) AS et, avg(dr::INT) AS dr, "
         "avg(tcs) AS tcs FROM decisions GROUP BY ALL ORDER BY robot, day"
@@ -310,7 +324,11 @@ def main() -> int:
     metrics_s, report = median_wall(lambda: index_metrics(synth, ["robot", "day"]), args.repeats)
     results["queries"] = {
         "stop_near_person_s": stop_s,
-        "stop_near_person_rows": len(stops.rows),  # type: ignore[attr-defined]
+        "stop_near_person_rows_shown": len(stops.rows),  # type: ignore[attr-defined]
+        "stop_near_person_count_s": count_s,
+        "stop_near_person_total": count.rows[0][1],  # type: ignore[attr-defined]
+        "stop_near_person_join_entities_s": join_s,
+        "stop_near_person_join_total": join.rows[0][0],  # type: ignore[attr-defined]
         "robot_day_et_table_s": et_s,
         "robot_day_et_rows": len(et_rows.rows),  # type: ignore[attr-defined]
         "metrics_from_index_s": metrics_s,

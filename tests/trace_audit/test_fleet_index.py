@@ -145,6 +145,19 @@ def test_find_stop_near_a_person_links_back_to_explain(fleet: Path, tmp_path: Pa
     for row in records:
         assert row["command"] == "STOP" and row["nearest_m"] < 2.0
         assert row["nearest_class"] == "person"
+    # The decision's nearest-person figure is the entities table's, for every row found.
+    nearest = run_query(
+        tmp_path / "idx",
+        "SELECT robot, cycle, min(distance) FROM entities WHERE class = 'person' GROUP BY ALL",
+    ).rows
+    by_cycle = {(r, c): m for r, c, m in nearest}
+    assert all(by_cycle[row["robot"], row["cycle"]] == row["nearest_m"] for row in records)
+    expected = sum(
+        1
+        for r in run_query(tmp_path / "idx", "SELECT robot, cycle, command FROM decisions").rows
+        if r[2] == "STOP" and by_cycle.get((r[0], r[1]), 99.0) < 2.0
+    )
+    assert len(records) == expected
     first = records[0]
     command = first["explain"].split()
     assert command[:2] == ["trace-audit", "explain"]

@@ -9,6 +9,7 @@ reconstructs the row's decision from its segment.
 from __future__ import annotations
 
 import datetime
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -82,7 +83,9 @@ def connect(index: str | Path) -> duckdb.DuckDBPyConnection:
     root = Path(index)
     if load_manifest(root) is None:
         raise LogReadError(str(root), "not a fleet index (run trace-audit index first)")
+    # No progress bar: DuckDB draws one on the terminal for long queries, into our output.
     con = duckdb.connect(":memory:")
+    con.execute("SET enable_progress_bar = false")
     for table in TABLES:
         files = root / table
         if any(files.rglob("*.parquet")) if files.is_dir() else False:
@@ -152,31 +155,34 @@ def find_decisions(
         "d.robot, d.day, d.t_ns, d.cycle, d.command, d.previous_command, d.lead_factor, "
         "d.lead_value, d.lead_unit, d.et, d.dr, d.seal_verified, d.software_version"
     )
-    source = "decisions d"
     if near is not None or within_m is not None:
-        # The entities first (few are near), then their decisions: a join over all rows
-        # of both tables would cost seconds on a fleet.
-        near_conditions = ["distance IS NOT NULL"]
-        near_params: list[Any] = []
+        # From the decision's own ``nearest`` map (class -> nearest distance), built from
+        # the same entity rows: one scan of one table, no join of two fleet-sized ones.
         if near is not None:
-            near_conditions.append("lower(class) = lower(?)")
-            near_params.append(near)
+            distance = f"d.nearest[{_literal(near)}]"
+            select += f", {_literal(near)} AS nearest_class"
+        else:
+            distance = "list_min(map_values(d.nearest))"
+            select += (
+                ", map_keys(d.nearest)[list_position(map_values(d.nearest), "
+                f"{distance})] AS nearest_class"
+            )
+        select += f", {distance} AS nearest_m"
+        conditions.append(f"{distance} IS NOT NULL")
         if within_m is not None:
-            near_conditions.append("distance < ?")
-            near_params.append(within_m)
-        source = (
-            "decisions d JOIN (SELECT robot, segment, cycle, min(distance) AS nearest_m, "
-            f"arg_min(class, distance) AS nearest_class FROM entities WHERE "
-            f"{' AND '.join(near_conditions)} GROUP BY robot, segment, cycle) n "
-            "ON d.robot = n.robot AND d.segment = n.segment AND d.cycle = n.cycle"
-        )
-        params = near_params + params
-        select += ", n.nearest_class, n.nearest_m"
-    sql = f"SELECT {select}, d.explain FROM {source}"
+            if not math.isfinite(within_m):
+                raise UsageError(f"--within must be a finite distance, got {within_m}")
+            conditions.append(f"{distance} < {float(within_m)!r}")
+    sql = f"SELECT {select}, d.explain FROM decisions d"
     if conditions:
         sql += " WHERE " + " AND ".join(conditions)
     sql += f" ORDER BY d.t_ns, d.robot LIMIT {int(limit)}"
     return run_query(index, sql, params)
+
+
+def _literal(text: str) -> str:
+    """``text`` as a SQL string literal."""
+    return "'" + text.replace("'", "''") + "'"
 
 
 def parse_index_by(text: str | None) -> list[str]:

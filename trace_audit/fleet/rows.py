@@ -112,14 +112,15 @@ class SegmentRows:
         if self.first_cycle is None:
             self.first_cycle = cycle.cycle
         self.last_cycle = cycle.cycle
-        self._decision(d, day, hour)
+        perception = d.perception
+        nearest: dict[str, float] = {}
+        if type(perception) is dict and perception.get("entities"):
+            nearest = self._entities(d, perception["entities"], day)
+        self._decision(d, day, hour, nearest)
         if d.seal.gap is not None:
             self._gap(d, self._day_hour(d.seal.gap.after_t_ns)[0])
-        perception = d.perception
-        if type(perception) is dict and perception.get("entities"):
-            self._entities(d, perception["entities"], day)
 
-    def _decision(self, d: ScoredDecision, day: str, hour: str) -> None:
+    def _decision(self, d: ScoredDecision, day: str, hour: str, nearest: dict[str, float]) -> None:
         self.days["decisions"].append(day)
         action = d.action if type(d.action) is dict else {}
         execution = d.execution if type(d.execution) is dict else {}
@@ -171,6 +172,7 @@ class SegmentRows:
                     if type(c) is dict and c.get("passed") is False
                 ],
                 [str(f) for f in execution.get("flags") or ()],
+                list(nearest.items()),
                 None if scenario == NO_SCENARIO else scenario,
                 score.et,
                 score.et_partial,
@@ -214,8 +216,10 @@ class SegmentRows:
             )
         )
 
-    def _entities(self, d: ScoredDecision, entities: Any, day: str) -> None:
+    def _entities(self, d: ScoredDecision, entities: Any, day: str) -> dict[str, float]:
+        """Add the cycle's entity rows; return the nearest distance of each class seen."""
         distances = _distances(d.belief)
+        nearest: dict[str, float] = {}
         rows = self.rows["entities"]
         days = self.days["entities"]
         name, number, t_ns = self._name, d.cycle.cycle, d.cycle.t_ns
@@ -228,6 +232,10 @@ class SegmentRows:
             position = pose.get("position") if type(pose) is dict else None
             xy = position if type(position) is list and len(position) >= 2 else (None, None)
             entity_id = str(entity.get("id", ""))
+            distance = distances.get(entity_id)
+            if distance is not None and cls is not None:
+                key = str(cls)
+                nearest[key] = min(distance, nearest.get(key, distance))
             days.append(day)
             rows.append(
                 (
@@ -237,12 +245,13 @@ class SegmentRows:
                     entity_id,
                     None if cls is None else str(cls),
                     _number(confidence.get(cls)) if type(confidence) is dict else None,
-                    distances.get(entity_id),
+                    distance,
                     _number(xy[0]),
                     _number(xy[1]),
                     len(entity.get("evidence") or ()),
                 )
             )
+        return nearest
 
     def table(self, name: str) -> tuple[pa.Table, list[str]]:
         """One table's rows as Arrow, and the partition day of each row."""

@@ -58,6 +58,7 @@ def schema(table: str) -> pa.Schema:
             ("deviation", pa.float64()),
             ("failed_checks", strings),
             ("flags", strings),
+            ("nearest", pa.map_(pa.string(), pa.float64())),
             ("scenario", pa.string()),
             ("et", pa.float64()),
             ("et_partial", pa.float64()),
