@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 import subprocess
 import sys
 from collections import Counter
@@ -206,3 +207,19 @@ def test_every_column_is_documented_in_docs_fleet() -> None:
         section = text.split(f"### `{table}`", 1)[1].split("\n### ", 1)[0]
         for name in schema(table).names:
             assert f"| `{name}` |" in section, f"{table}.{name} is not documented"
+
+
+def test_an_index_of_another_version_is_rebuilt_in_place(fleet: Path, tmp_path: Path) -> None:
+    """Every row is re-read, and the old version's files go (none is counted twice)."""
+    index = tmp_path / "idx"
+    build_index([fleet], index)
+    manifest = json.loads((index / MANIFEST).read_text())
+    manifest["version"] = 0
+    (index / MANIFEST).write_text(json.dumps(manifest))
+    day = index / "decisions" / "robot=r1" / "day=1970-01-01"
+    stray = day / "from-version-0.parquet"
+    shutil.copy(sorted(day.glob("*.parquet"))[0], stray)
+    report = build_index([fleet], index)
+    assert len(report.indexed) == report.segments and report.unchanged == 0
+    assert not stray.exists()
+    assert _per_robot(index) == {"r1": 100, "r2": 97}

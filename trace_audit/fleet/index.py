@@ -319,7 +319,8 @@ def build_index(
             stale.update(set(old["files"]) - set(result.files))
         known[result.key] = asdict(result)
     _write_manifest(target, known, settings, cache)
-    for rel in sorted(stale):  # files of an older copy of a segment, listed in our manifest
+    live = {rel for entry in known.values() for rel in entry["files"]}
+    for rel in sorted(stale - live):  # files of an older copy of a segment, or an older index
         with contextlib.suppress(FileNotFoundError):
             (target / rel).unlink()
     elapsed = time.perf_counter() - started
