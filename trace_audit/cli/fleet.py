@@ -149,7 +149,9 @@ def find_command(
     ] = None,
     near: Annotated[
         str | None,
-        typer.Option("--near", help="A perceived entity's class, e.g. person.", show_default=False),
+        typer.Option(
+            "--near", help="A perceived entity's class as logged, e.g. person.", show_default=False
+        ),
     ] = None,
     within: Annotated[
         float | None,
@@ -159,8 +161,12 @@ def find_command(
         str | None,
         typer.Option("--where", help="SQL condition on decisions (alias d).", show_default=False),
     ] = None,
-    robot: Annotated[str | None, typer.Option("--robot", show_default=False)] = None,
-    limit: Annotated[int, typer.Option("--limit", min=1)] = 1000,
+    robot: Annotated[
+        str | None, typer.Option("--robot", help="Only this robot.", show_default=False)
+    ] = None,
+    limit: Annotated[
+        int, typer.Option("--limit", help="At most this many rows, oldest first.", min=1)
+    ] = 1000,
     csv_out: Annotated[bool, typer.Option("--csv", help="Print CSV on stdout.")] = False,
     json_out: JsonOption = False,
     plain: PlainOption = False,
