@@ -47,6 +47,8 @@ Build or update the fleet index: Parquet tables of every decision (decisions, en
 gaps, segments), partitioned by robot and day, scored by the same code as metrics. Only new
 or changed segments are read (keyed by their SHA-256). Schema: docs/fleet.md.
 
+[bold]Examples[/bold]:
+
   trace-audit index logs/ --out fleet-index/
   trace-audit index logs/ --out fleet-index/ --scheduler tcp://10.0.0.5:8786
 """)
@@ -108,6 +110,8 @@ Run SQL (DuckDB) on a fleet index. Tables: decisions (with an explain column: th
 that reconstructs the decision), entities, gaps, segments; robot and day on each. A bad
 statement is one line on stderr, exit 2.
 
+[bold]Examples[/bold]:
+
   trace-audit query fleet-index/ "SELECT robot, day, avg(et) FROM decisions GROUP BY ALL"
   trace-audit query fleet-index/ "SELECT * FROM gaps ORDER BY gap_ns DESC LIMIT 5" --csv
 """)
@@ -134,6 +138,8 @@ def query_command(
 _FIND_HELP = help_text("""
 Find decisions by command, by what the robot saw near it, and by any SQL condition on
 the decisions table; each row ends with the explain command that reconstructs it.
+
+[bold]Examples[/bold]:
 
   trace-audit find fleet-index/ --action STOP --near person --within 1.0
   trace-audit find fleet-index/ --action STOP --where "software_version = '2.4.1'" --json
