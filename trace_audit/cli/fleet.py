@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 import contextlib
-import csv
 import sys
 from collections.abc import Iterator
-from concurrent.futures import Executor
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -15,7 +13,9 @@ import typer
 from trace_audit.cli.app import JsonOption, PlainOption, app, guarded, help_text, print_json
 from trace_audit.cli.render import Column, Doc, emit, progress_bar, show
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
+    from concurrent.futures import Executor
+
     from trace_audit.fleet.index import IndexReport
     from trace_audit.fleet.query import QueryResult
 
@@ -198,6 +198,8 @@ def _print_rows(result: QueryResult, *, json_out: bool, csv_out: bool, plain: bo
         print_json(result.records())
         return
     if csv_out:
+        import csv
+
         writer = csv.writer(sys.stdout)
         writer.writerow(result.columns)
         writer.writerows(result.rows)
