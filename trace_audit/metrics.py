@@ -37,16 +37,17 @@ import math
 import os
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, get_args
+from typing import Any, Literal, NamedTuple, get_args
 
 from trace_audit.chains import (
     DEFAULT_SENSOR_WINDOW,
     EXPECTED_DEPTH_ENTITY,
     EXPECTED_DEPTH_STATE,
     DecisionChains,
+    DecisionScore,
     SensorWindow,
     score_layers,
     trace_layers,
@@ -78,14 +79,20 @@ __all__ = [
     "Gap",
     "GroupBy",
     "GroupMetrics",
+    "GroupSums",
     "LoggingCost",
     "MetricsConfig",
     "MetricsReport",
+    "ScoredDecision",
+    "SealOutcome",
     "Stat",
     "TCSWeights",
     "ThresholdCheck",
     "compute_metrics",
     "parse_thresholds",
+    "report_from_sums",
+    "scenario_of",
+    "score_segment",
 ]
 
 GroupBy = Literal["scenario", "segment", "robot", "hour"]
@@ -359,8 +366,9 @@ class MetricsReport:
 
 
 @dataclass(slots=True)
-class _Acc:
-    """Running sums for one group; merged across segments and processes by addition."""
+class GroupSums:
+    """Running sums for one group; merged across segments and processes by addition (the
+    fleet index rebuilds them from its decision rows, ``report_from_sums``)."""
 
     decisions: int = 0
     sealed: int = 0
@@ -384,7 +392,7 @@ class _Acc:
     dropped: int = 0
     anomalies: int = 0
 
-    def merge(self, other: _Acc) -> None:
+    def merge(self, other: GroupSums) -> None:
         for name in self.__slots__:
             setattr(self, name, getattr(self, name) + getattr(other, name))
 
@@ -398,11 +406,49 @@ class _Stream:
     prev_seal: str | None = None
 
 
+class SealOutcome(NamedTuple):
+    """What the seal check and the gap rule said about one decision, and what it added to
+    its group's TC sums (a fleet index stores these so it can sum them again)."""
+
+    problems: list[str]
+    """Why integrity fails ([] when it holds), ``integrity_problems``."""
+    sealed: bool
+    continuity: float
+    window_ns: int
+    """Time this decision adds to its robot's TC window (0 unsealed or a clock anomaly)."""
+    gap: Gap | None
+    """The gap its seal closes, if any."""
+    dropped: int
+    clock_anomaly: bool
+
+
+@dataclass(frozen=True, slots=True)
+class ScoredDecision:
+    """One decision as metrics scored it: the parsed layers and every per-decision figure.
+
+    Handed to a ``DecisionSink`` (the fleet index) so nothing is scored a second way."""
+
+    cycle: Cycle
+    segment: Segment
+    group: str
+    action: Any
+    belief: Any
+    perception: Any
+    execution: Any
+    score: DecisionScore
+    dr_problems: tuple[str, ...]
+    seal: SealOutcome
+    tcs: float
+
+
+DecisionSink = Callable[[ScoredDecision], None]
+
+
 @dataclass(slots=True)
 class _Partial:
     """What scanning one or more segments produced; merged in segment order."""
 
-    groups: dict[str, _Acc] = field(default_factory=dict)
+    groups: dict[str, GroupSums] = field(default_factory=dict)
     failures: list[DecisionFailure] = field(default_factory=list)
     failures_total: int = 0
     gaps: list[Gap] = field(default_factory=list)
@@ -440,9 +486,12 @@ class _Partial:
 class _Scanner:
     """Scores the cycles of one robot's segments in order, carrying chain and window state."""
 
-    def __init__(self, config: MetricsConfig, partial: _Partial) -> None:
+    def __init__(
+        self, config: MetricsConfig, partial: _Partial, sink: DecisionSink | None = None
+    ) -> None:
         self.config = config
         self.partial = partial
+        self.sink = sink
         recordings = Recordings.open(config.evidence) if config.evidence else None
         self.window = SensorWindow(config.sensor_window, recordings)
         self.stream = _Stream()
@@ -488,7 +537,7 @@ class _Scanner:
             robot = segment.session.robot_id
             return lambda _cycle: robot
         if by == "scenario":
-            return lambda cycle: _scenario(cycle.layer(TOPIC_EXECUTION))
+            return lambda cycle: scenario_of(cycle.layer(TOPIC_EXECUTION))
         return lambda cycle: time.strftime(
             "%Y-%m-%d %H:00", time.gmtime(cycle.t_ns // 1_000_000_000)
         )
@@ -526,8 +575,9 @@ class _Scanner:
         partial = self.partial
         acc = partial.groups.get(group)
         if acc is None:
-            acc = partial.groups[group] = _Acc()
-        integrity, continuity_d = self._seal_and_gap(cycle, segment, acc, perception)
+            acc = partial.groups[group] = GroupSums()
+        seal = self._seal_and_gap(cycle, segment, acc, perception)
+        integrity, continuity_d = seal.problems, seal.continuity
         et, etp = score.et, score.et_partial
         factors, traceable = score.factors, score.traceable
         full = factors > 0 and traceable == factors
@@ -555,6 +605,23 @@ class _Scanner:
         )
         acc.tcs_sum += tcs
         acc.tcs_sq += tcs * tcs
+        if self.sink is not None:
+            execution = cycle.layer(TOPIC_EXECUTION)
+            self.sink(
+                ScoredDecision(
+                    cycle,
+                    segment,
+                    group,
+                    action,
+                    belief,
+                    perception,
+                    execution,
+                    score,
+                    tuple(missing_dr),
+                    seal,
+                    tcs,
+                )
+            )
         if full and dr_ok and intact:
             return
         partial.failures_total += 1
@@ -584,8 +651,8 @@ class _Scanner:
         )
 
     def _seal_and_gap(
-        self, cycle: Cycle, segment: Segment, acc: _Acc, perception: Any
-    ) -> tuple[list[str], float]:
+        self, cycle: Cycle, segment: Segment, acc: GroupSums, perception: Any
+    ) -> SealOutcome:
         """Integrity problems of the cycle (the one seal check, ``verify_cycle``) and its
         continuity; a sealed cycle closes an interval, which the one gap rule judges."""
         stream = self.stream
@@ -594,7 +661,7 @@ class _Scanner:
         status = verify_cycle(cycle, expected, perception_json=parsed)
         integrity = [] if status.ok else integrity_problems(status)
         if status.state == "unsealed":
-            return integrity, 0.0
+            return SealOutcome(integrity, False, 0.0, 0, None, 0, False)
         acc.sealed += 1
         stream.prev_seal = status.seal_digest
         acc.dropped += status.dropped
@@ -602,12 +669,15 @@ class _Scanner:
         prev_t = stream.prev_t_ns
         t_ns = cycle.t_ns
         continuity_d = 1.0
+        window_ns = 0
+        gap: Gap | None = None
         if prev_t is None:
+            window_ns = period
             acc.window_ns += period
         elif t_ns <= prev_t:
             acc.anomalies += 1
         else:
-            interval = t_ns - prev_t
+            interval = window_ns = t_ns - prev_t
             acc.window_ns += interval
             gap = find_gap(
                 stream.prev_cycle,
@@ -629,7 +699,8 @@ class _Scanner:
                     self.partial.gaps.append(gap)
         stream.prev_t_ns = t_ns
         stream.prev_cycle = cycle.cycle
-        return integrity, continuity_d
+        anomaly = prev_t is not None and t_ns <= prev_t
+        return SealOutcome(integrity, True, continuity_d, window_ns, gap, status.dropped, anomaly)
 
     def prefill(self, segment: Segment) -> None:
         """Load the chain and window state at the end of ``segment`` (the one before ours)."""
@@ -728,7 +799,8 @@ def _et_problems(chains: DecisionChains) -> list[str]:
     return out
 
 
-def _scenario(execution: Any) -> str:
+def scenario_of(execution: Any) -> str:
+    """The scenario an execution record's ``scenario:NAME`` flag names, or ``(none)``."""
     if isinstance(execution, dict):
         for flag in execution.get("flags") or ():
             if isinstance(flag, str) and flag.startswith(SCENARIO_FLAG):
@@ -770,13 +842,25 @@ def _shadowed(log: Log) -> list[str]:
     return out
 
 
-def _run_task(task: _Task) -> _Partial:
+def score_segment(
+    path: str | Path,
+    previous: str | Path | None,
+    config: MetricsConfig,
+    sink: DecisionSink | None = None,
+) -> _Partial:
+    """Score one segment as a run over the whole log would: the tail of the robot's
+    ``previous`` segment is read first, so chain links, gaps and refs across the boundary
+    come out the same. Each decision is also handed to ``sink`` (the fleet index)."""
     partial = _Partial()
-    scanner = _Scanner(task.config, partial)
-    if task.previous is not None:
-        scanner.prefill(open_segment(task.previous))
-    scanner.scan(open_segment(task.path))
+    scanner = _Scanner(config, partial, sink)
+    if previous is not None:
+        scanner.prefill(open_segment(previous))
+    scanner.scan(open_segment(path))
     return partial
+
+
+def _run_task(task: _Task) -> _Partial:
+    return score_segment(task.path, task.previous, task.config)
 
 
 def _usable_cpus() -> int:
@@ -798,11 +882,14 @@ def compute_metrics(
     config: MetricsConfig | None = None,
     *,
     progress: ProgressCallback | None = None,
+    executor: Executor | None = None,
 ) -> MetricsReport:
     """Score every decision in the given logs (files, directories or log roots) in one pass.
 
     Memory is bounded: cycles are streamed, sums accumulated, and at most
-    ``config.max_listed`` failing decisions and gaps kept for listing.
+    ``config.max_listed`` failing decisions and gaps kept for listing. Given an
+    ``executor`` (e.g. a Dask cluster's, ``trace_audit.fleet.cluster``), segments are
+    scored there, one task each, instead of in local processes; the report is the same.
     """
     cfg = config or MetricsConfig()
     started = time.perf_counter()
@@ -824,7 +911,9 @@ def compute_metrics(
         for i, seg in enumerate(segs)
     ]
     workers = min(cfg.workers, len(tasks), _usable_cpus())
-    if workers <= 1:
+    if executor is not None:
+        _fan_out(executor, tasks, plan=plan, total=total, advance=advance, limit=cfg.max_listed)
+    elif workers <= 1:
         for _robot, segments in plan:
             partial = _Partial()
             scanner = _Scanner(cfg, partial)
@@ -837,20 +926,55 @@ def compute_metrics(
         # The longest segments start first (a short one left for last keeps both workers
         # busy to the end); the partials are merged in plan order whatever order they finish
         # in, so the sums and the listed failures are the same in every run.
-        sizes = [s.info.bytes for _robot, segs in plan for s in segs]
-        order = sorted(range(len(tasks)), key=lambda i: -sizes[i])
         with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = {i: pool.submit(_run_task, tasks[i]) for i in order}
-            for future in as_completed(futures.values()):
-                advance(future.result().cycles)
-            for i in range(len(tasks)):
-                total.merge(futures[i].result(), cfg.max_listed)
+            _fan_out(pool, tasks, plan=plan, total=total, advance=advance, limit=cfg.max_listed)
     elapsed = time.perf_counter() - started
     segments_read = tuple(str(s.path) for _, segs in plan for s in segs)
-    report = _report(paths, cfg, log=log, total=total, segments=segments_read, elapsed=elapsed)
+    report = _report(
+        paths, cfg, log=log, total=total, segments=segments_read, elapsed=elapsed, by=cfg.by
+    )
     if report.overall.decisions == 0 and cfg.start_ns is None and cfg.end_ns is None:
         # As info, explain and verify say it: nothing to score is an empty log, not 0 %.
         raise LogReadError(str(paths[0]), "the log holds no decision cycles")
+    return report
+
+
+def _fan_out(
+    executor: Executor,
+    tasks: list[_Task],
+    *,
+    plan: list[tuple[str, list[Segment]]],
+    total: _Partial,
+    advance: Callable[[int], None],
+    limit: int,
+) -> None:
+    """Score each task on ``executor``; merge the partials in plan order."""
+    sizes = [s.info.bytes for _robot, segs in plan for s in segs]
+    order = sorted(range(len(tasks)), key=lambda i: -sizes[i])
+    futures = {i: executor.submit(_run_task, tasks[i]) for i in order}
+    for future in as_completed(futures.values()):
+        advance(future.result().cycles)
+    for i in range(len(tasks)):
+        total.merge(futures[i].result(), limit)
+
+
+def report_from_sums(
+    sources: Sequence[str],
+    cfg: MetricsConfig,
+    groups: Mapping[str, GroupSums],
+    *,
+    by: str | None,
+    segments: tuple[str, ...],
+    cycles: int,
+    elapsed: float,
+) -> MetricsReport:
+    """A report from sums gathered elsewhere (the fleet index's decision rows): the same
+    tables, stds and thresholds as a scan of the logs; nothing listed, timing not logged.
+    ``by`` names the grouping of ``groups`` (any label: the index groups by more keys)."""
+    total = _Partial(groups=dict(groups), cycles=cycles)
+    report = _report(sources, cfg, log=None, total=total, segments=segments, elapsed=elapsed, by=by)
+    if report.overall.decisions == 0:
+        raise LogReadError(str(sources[0]) if sources else "index", "no decisions selected")
     return report
 
 
@@ -858,20 +982,21 @@ def _report(
     paths: Sequence[str | Path],
     cfg: MetricsConfig,
     *,
-    log: Log,
+    log: Log | None,
     total: _Partial,
     segments: tuple[str, ...],
     elapsed: float,
+    by: str | None,
 ) -> MetricsReport:
-    overall_acc = _Acc()
+    overall_acc = GroupSums()
     for acc in total.groups.values():
         overall_acc.merge(acc)
     overall = _group("all", overall_acc)
     groups: tuple[GroupMetrics, ...] = ()
     across: AcrossGroups | None = None
-    if cfg.by is not None:
+    if by is not None:
         groups = tuple(_group(name, acc) for name, acc in total.groups.items())
-        across = _across(cfg.by, groups)
+        across = _across(by, groups)
     checks = tuple(_check(name, threshold, overall) for name, threshold in cfg.thresholds.items())
     failures = tuple(sorted(total.failures, key=lambda f: (f.t_ns, f.cycle)))
     gaps = tuple(sorted(total.gaps, key=lambda g: (g.after_t_ns, g.robot)))
@@ -879,9 +1004,9 @@ def _report(
     return MetricsReport(
         logs=tuple(str(p) for p in paths),
         segments=segments,
-        skipped_segments=tuple(_shadowed(log)),
-        unreadable=tuple(f"{p.path}: {p.reason}" for p in log.problems),
-        by=cfg.by,
+        skipped_segments=tuple(_shadowed(log)) if log is not None else (),
+        unreadable=tuple(f"{p.path}: {p.reason}" for p in log.problems) if log else (),
+        by=by,
         definitions=_definitions(cfg),
         overall=overall,
         groups=groups,
@@ -907,7 +1032,7 @@ def _stat(total: float, squares: float, n: int, across: str) -> Stat:
     return Stat(mean, math.sqrt(max(0.0, squares / n - mean * mean)), n, across)
 
 
-def _group(name: str, acc: _Acc) -> GroupMetrics:
+def _group(name: str, acc: GroupSums) -> GroupMetrics:
     n = acc.decisions
     return GroupMetrics(
         name=name,

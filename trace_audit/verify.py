@@ -10,6 +10,7 @@ what that same verification finds clean. For one decision (``explain``) the chec
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import Executor
 from pathlib import Path
 
 from trace_runtime.integrity import PublicKey
@@ -37,7 +38,11 @@ __all__ = [
 
 
 def verify_log(
-    path: str | Path, *, key: PublicKey | None = None, evidence: Sequence[str | Path] = ()
+    path: str | Path,
+    *,
+    key: PublicKey | None = None,
+    evidence: Sequence[str | Path] = (),
+    executor: Executor | None = None,
 ) -> VerifyReport:
     """Verify a segment file, a directory of segments or a log root; never raises on tampering.
 
@@ -48,4 +53,4 @@ def verify_log(
     segment inside a root is a finding.
     """
     recordings = Recordings.open(evidence) if evidence else None
-    return verify(open_log(path), key=key, recordings=recordings)
+    return verify(open_log(path), key=key, recordings=recordings, executor=executor)

@@ -104,6 +104,12 @@ class Recordings:
                     bucket.append(file)
         return cls(files, limits)
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        # Sent to another process (verify on an executor) as its file list, absolute so a
+        # worker in another directory finds the same files; open files are not carried.
+        files = {name: tuple(p.resolve() for p in paths) for name, paths in self._paths.items()}
+        return (type(self), (files, self._limits))
+
     @property
     def names(self) -> list[str]:
         """The recording file names available, sorted."""

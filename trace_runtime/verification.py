@@ -23,6 +23,7 @@ from __future__ import annotations
 import bisect
 from array import array
 from collections.abc import Iterator
+from concurrent.futures import Executor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -1095,7 +1096,11 @@ def problem_finding(problem: FileProblem) -> Finding:
 
 
 def verify(
-    log: Log, *, key: PublicKey | None = None, recordings: Recordings | None = None
+    log: Log,
+    *,
+    key: PublicKey | None = None,
+    recordings: Recordings | None = None,
+    executor: Executor | None = None,
 ) -> VerifyReport:
     """Verify every segment of ``log`` (each robot's chain across its segments and tiers);
     never raises on tampering or damage: those are findings.
@@ -1104,6 +1109,10 @@ def verify(
     a ref into a recording given that does not resolve or whose digest differs is an
     ``evidence_mismatch`` finding; refs into recordings not given are an
     ``external_unresolved`` note (PROFILE.md section 11).
+
+    Given an ``executor`` (local processes, a Dask cluster's), each robot's chain is
+    verified there as one task, by path (every worker must see the files); the results are
+    merged in robot order, so the report is the one a local run gives.
 
     Each segment is verified in every copy the log holds (``log.segments`` and the copies
     they shadow); the copy ``logset.preferred_copies`` reads is the one counted. The files
@@ -1119,11 +1128,14 @@ def verify(
     by_robot: dict[str, list[Segment]] = {}
     for segment in segments:
         by_robot.setdefault(segment.session.robot_id, []).append(segment)
-    for robot_id in sorted(by_robot):
-        robot = _verify_robot(
-            robot_id, by_robot[robot_id], key, sink, report, recordings=recordings
-        )
-        report.robots.append(robot)
+    if executor is None:
+        for robot_id in sorted(by_robot):
+            robot = _verify_robot(
+                robot_id, by_robot[robot_id], key, sink, report, recordings=recordings
+            )
+            report.robots.append(robot)
+    else:
+        _verify_on(executor, by_robot, key, recordings, sink=sink, report=report)
     if key is None and any(s.checkpoints for s in report.segments):
         sink.note(
             Finding(
@@ -1158,6 +1170,70 @@ def verify(
         # Nothing to vouch for: an empty log (exit 3, as info and explain say), not CLEAN.
         raise LogReadError(str(log.root), "the log holds no decision cycles")
     return report
+
+
+@dataclass(frozen=True, slots=True)
+class _RobotTask:
+    """One robot's chain to verify on a worker: its files in the order verify reads them."""
+
+    robot_id: str
+    paths: tuple[str, ...]
+    key: PublicKey | None
+    recordings: Recordings | None
+
+
+@dataclass(frozen=True, slots=True)
+class _RobotResult:
+    robot: RobotSummary
+    segments: list[SegmentSummary]
+    findings: list[Finding]
+    notes: list[Finding]
+    declared: int
+
+
+def _verify_robot_task(task: _RobotTask) -> _RobotResult:
+    segments = [Segment(Path(p)) for p in task.paths]
+    sink = _Sink()
+    report = VerifyReport("", None, False)
+    robot = _verify_robot(
+        task.robot_id, segments, task.key, sink, report, recordings=task.recordings
+    )
+    return _RobotResult(robot, report.segments, sink.findings, sink.notes, sink.declared)
+
+
+def _verify_on(
+    executor: Executor,
+    by_robot: dict[str, list[Segment]],
+    key: PublicKey | None,
+    recordings: Recordings | None,
+    *,
+    sink: _Sink,
+    report: VerifyReport,
+) -> None:
+    """Each robot's chain as one task on ``executor``; merged in robot order as the local
+    loop would have filled the sink and the report. Workers open absolute paths; the
+    summaries name the files as the caller did."""
+    names: dict[str, str] = {}
+    tasks: list[_RobotTask] = []
+    for robot_id in sorted(by_robot):
+        paths = []
+        for segment in by_robot[robot_id]:
+            absolute = str(segment.path.resolve())
+            names[absolute] = str(segment.path)
+            paths.append(absolute)
+        tasks.append(_RobotTask(robot_id, tuple(paths), key, recordings))
+    futures = [executor.submit(_verify_robot_task, task) for task in tasks]
+    for future in futures:
+        result = future.result()
+        report.robots.append(result.robot)
+        for summary in result.segments:
+            summary.path = names.get(summary.path, summary.path)
+            report.segments.append(summary)
+        for finding in result.findings:
+            sink.finding(finding)
+        for note in result.notes:
+            sink.note(note)
+        sink.declared += result.declared
 
 
 def _verify_robot(

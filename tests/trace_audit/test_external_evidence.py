@@ -122,6 +122,24 @@ def test_a_changed_or_missing_message_in_the_recording_is_a_finding(
     assert finding.first_cycle == 7 and "no /scan message" in finding.message
 
 
+def test_verify_on_worker_processes_checks_the_recording_there_too(
+    robot: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """``--scheduler`` and ``--evidence`` together: each worker re-opens the recordings by
+    absolute path, so a changed message is the same finding as in a local run."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    log, bag = robot
+    [recording] = list(bag.glob("*.mcap"))
+    changed = _copy_bag(recording, tmp_path / "changed" / recording.name, change=10)
+    local = verify_log(log, evidence=[changed])
+    with ProcessPoolExecutor(max_workers=1) as pool:
+        remote = verify_log(log, evidence=[changed], executor=pool)
+    assert [(f.kind, f.first_cycle) for f in remote.findings] == [("evidence_mismatch", 10)]
+    assert (remote.external_resolved, remote.ok) == (local.external_resolved, local.ok)
+    assert [f.message for f in remote.findings] == [f.message for f in local.findings]
+
+
 def test_a_recording_not_given_is_unresolved_not_broken(
     robot: tuple[Path, Path], tmp_path: Path
 ) -> None:

@@ -9,6 +9,7 @@ from typer.exceptions import TyperException
 
 from trace_audit.cli import (  # noqa: F401 - each module registers its commands
     doctor,
+    fleet,
     integrity,
     investigate,
     metrics,

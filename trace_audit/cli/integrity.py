@@ -20,6 +20,7 @@ from trace_audit.cli.app import (
     guarded,
     help_text,
 )
+from trace_audit.cli.fleet import SchedulerOption
 from trace_audit.cli.render import Column, Doc, Seg, emit, fmt_duration, fmt_t, setup_logging
 
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
@@ -52,6 +53,8 @@ Exit codes: 0 clean, 1 findings, 2 usage (e.g. a bad key file), 3 unreadable inp
   trace-audit verify /data/fleet/amr-7/ --key amr-7.pub --plain
 
   trace-audit verify run.mcap --json | jq .findings
+
+  trace-audit verify /data/fleet/ --scheduler tcp://10.0.0.5:8786 (one task per robot)
 """
 
 _KEYGEN_HELP = """Create an Ed25519 key pair for signing checkpoints.
@@ -99,9 +102,11 @@ def verify_command(
             show_default=False,
         ),
     ] = None,
+    scheduler: SchedulerOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
+    from trace_audit.cli.fleet import cluster
     from trace_audit.verify import verify_log
     from trace_runtime.integrity import load_public_key
 
@@ -109,7 +114,8 @@ def verify_command(
 
     def run() -> VerifyReport:
         public = load_public_key(key) if key is not None else None
-        return verify_log(log, key=public, evidence=evidence or ())
+        with cluster(scheduler) as executor:
+            return verify_log(log, key=public, evidence=evidence or (), executor=executor)
 
     report = guarded(run)
     emit(report, verify_doc, json_out=json_out, plain=plain)

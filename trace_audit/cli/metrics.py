@@ -17,10 +17,13 @@ from trace_audit.cli.app import (
     guarded,
     print_json,
 )
+from trace_audit.cli.fleet import SchedulerOption, cluster
 from trace_audit.cli.render import progress_bar
 from trace_runtime.errors import UsageError
 
 if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
+    from concurrent.futures import Executor
+
     from trace_audit.metrics import MetricsConfig, MetricsReport, Stat
 
 _PROGRESS_MIN_CYCLES = 20_000
@@ -70,6 +73,8 @@ _HELP = "\n\n".join(
         ("  trace-audit metrics run.mcap --by scenario"),
         ("  trace-audit metrics fleet/ --by robot --json --jobs 2"),
         ("  trace-audit metrics run.mcap --failures --fail-under ET=0.95,DR=95%"),
+        ("  trace-audit metrics --index fleet-index/ --by robot,day"),
+        ("  trace-audit metrics logs/ --scheduler tcp://10.0.0.5:8786 --json"),
     ]
 )
 
@@ -85,16 +90,29 @@ def _parse_by(value: str | None) -> Any:
 @app.command("metrics", help=_HELP)
 def metrics_command(
     logs: Annotated[
-        list[Path],
+        list[Path] | None,
         typer.Argument(
             help="Log files, directories of segments, or log roots.", show_default=False
         ),
-    ],
+    ] = None,
     *,
     by: Annotated[
         str | None,
-        typer.Option("--by", help="Group decisions: scenario, segment, robot or hour (UTC)."),
+        typer.Option(
+            "--by",
+            help="Group decisions: scenario, segment, robot or hour (UTC); with --index also "
+            "day, software_version, policy_version, tier, command, several comma-separated.",
+        ),
     ] = None,
+    index: Annotated[
+        Path | None,
+        typer.Option(
+            "--index",
+            help="Compute from a fleet index (trace-audit index) instead of the logs.",
+            show_default=False,
+        ),
+    ] = None,
+    scheduler: SchedulerOption = None,
     failures: Annotated[
         bool,
         typer.Option("--failures", help="List each failing decision and gap, and what is missing."),
@@ -157,8 +175,10 @@ def metrics_command(
     def run() -> MetricsReport:
         from trace_audit.metrics import MetricsConfig, TCSWeights, parse_thresholds
 
+        if (index is None) == (not logs):
+            raise UsageError("give either logs or --index INDEX")
         config = MetricsConfig(
-            by=_parse_by(by),
+            by=None if index is not None else _parse_by(by),
             gap_tolerance=gap_tolerance,
             sensor_window=sensor_window,
             weights=TCSWeights.parse(tcs_weights) if tcs_weights else TCSWeights(),
@@ -169,7 +189,12 @@ def metrics_command(
             max_listed=10_000 if failures else 0,
             evidence=tuple(str(p) for p in evidence or ()),
         )
-        return _with_progress(logs, config, quiet=json_out or plain)
+        if index is not None:
+            from trace_audit.fleet.query import index_metrics, parse_index_by
+
+            return index_metrics(index, parse_index_by(by), config)
+        with cluster(scheduler) as executor:
+            return _with_progress(logs or [], config, quiet=json_out or plain, executor=executor)
 
     report = guarded(run)
     if json_out:
@@ -186,11 +211,13 @@ def metrics_command(
         raise typer.Exit(EXIT_FINDINGS)
 
 
-def _with_progress(logs: list[Path], config: MetricsConfig, *, quiet: bool) -> MetricsReport:
+def _with_progress(
+    logs: list[Path], config: MetricsConfig, *, quiet: bool, executor: Executor | None
+) -> MetricsReport:
     from trace_audit.metrics import compute_metrics
 
     if quiet or not sys.stderr.isatty():
-        return compute_metrics(logs, config)
+        return compute_metrics(logs, config, executor=executor)
     with progress_bar("scoring cycles", visible=False) as bar:
         task = bar.task_ids[0]
 
@@ -198,7 +225,7 @@ def _with_progress(logs: list[Path], config: MetricsConfig, *, quiet: bool) -> M
             visible = expected is None or expected >= _PROGRESS_MIN_CYCLES
             bar.update(task, completed=done, total=expected, visible=visible)
 
-        return compute_metrics(logs, config, progress=progress)
+        return compute_metrics(logs, config, progress=progress, executor=executor)
 
 
 # --- rendering ----------------------------------------------------------------------------

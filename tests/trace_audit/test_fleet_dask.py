@@ -1,0 +1,195 @@
+"""``--scheduler``: a real ``dask scheduler`` and ``dask worker`` on localhost give the
+same metrics JSON and the same index as a local run."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tests.trace_audit.conftest import rewrite_segment
+from tests.trace_audit.test_fleet_index import _fleet
+from trace_runtime.cycles import RawMessage
+
+pytest.importorskip("distributed")
+
+REPO = Path(__file__).resolve().parents[2]
+TIMING = ("elapsed_s", "cycles_per_s")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _wait_for_port(port: int, proc: subprocess.Popen[bytes], timeout_s: float = 60) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError(f"dask scheduler exited with {proc.returncode}")
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        time.sleep(0.2)
+    raise TimeoutError(f"nothing listens on port {port}")
+
+
+@pytest.fixture(scope="module")
+def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """A scheduler and one worker process (nthreads 1), torn down after the module."""
+    work = tmp_path_factory.mktemp("dask")
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = {**os.environ, "PYTHONPATH": str(REPO), "DASK_DISTRIBUTED__WORKER__DAEMON": "False"}
+    module = [sys.executable, "-m"]
+    logs = [open(work / name, "wb") for name in ("scheduler.log", "worker.log")]  # noqa: SIM115
+    procs = [
+        subprocess.Popen(
+            [
+                *module,
+                "distributed.cli.dask_scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(port),
+                "--dashboard-address",
+                ":0",
+                "--no-show",
+            ],
+            stdout=logs[0],
+            stderr=subprocess.STDOUT,
+            env=env,
+            cwd=work,
+        )
+    ]
+    try:
+        _wait_for_port(port, procs[0])
+        procs.append(
+            subprocess.Popen(
+                [
+                    *module,
+                    "distributed.cli.dask_worker",
+                    address,
+                    "--nworkers",
+                    "1",
+                    "--nthreads",
+                    "1",
+                    "--no-dashboard",
+                    "--local-directory",
+                    str(work),
+                ],
+                stdout=logs[1],
+                stderr=subprocess.STDOUT,
+                env=env,
+                cwd=work,
+            )
+        )
+        yield address
+    finally:
+        for proc in reversed(procs):
+            proc.terminate()
+        for proc in reversed(procs):
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        for log in logs:
+            log.close()
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "trace_audit.cli", *args],
+        capture_output=True,
+        text=True,
+        check=False,
+        cwd=REPO,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        timeout=300,
+    )
+
+
+def _without_timing(text: str) -> dict[str, object]:
+    data: dict[str, object] = json.loads(text)
+    for key in TIMING:
+        data.pop(key)
+    return data
+
+
+def _close(a: object, b: object) -> bool:
+    """Equal, floats to 1e-12 (sums added in another order round in the last bits)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_close(a[k], b[k]) for k in a)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_close(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, float) and isinstance(b, float):
+        return abs(a - b) <= 1e-12
+    return a == b
+
+
+def test_metrics_on_a_dask_cluster_equal_the_local_json(scheduler: str, tmp_path: Path) -> None:
+    """Byte for byte the JSON of local processes (each segment one task, merged in the
+    same order); a single-process run adds the same sums in another order, so it agrees
+    to 1e-12 with every count exact."""
+    root = _fleet(tmp_path / "logs")
+    args = ("metrics", str(root), "--by", "robot", "--failures", "--json")
+    local = _cli(*args, "--jobs", "2")
+    single = _cli(*args)
+    remote = _cli(*args, "--scheduler", scheduler)
+    for done in (local, single, remote):
+        assert done.returncode == 0, done.stderr
+    if len(os.sched_getaffinity(0)) >= 2:  # else --jobs 2 runs in one process
+        assert _without_timing(remote.stdout) == _without_timing(local.stdout)
+    assert _close(_without_timing(remote.stdout), _without_timing(single.stdout))
+
+
+def test_index_on_a_dask_cluster_equals_the_local_index(scheduler: str, tmp_path: Path) -> None:
+    root = _fleet(tmp_path / "logs")
+    assert _cli("index", str(root), "--out", str(tmp_path / "local"), "--json").returncode == 0
+    remote = _cli("index", str(root), "--out", str(tmp_path / "remote"), "--scheduler", scheduler)
+    assert remote.returncode == 0, remote.stderr
+    sql = "SELECT * EXCLUDE (explain) FROM decisions ORDER BY robot, cycle"
+    rows = [
+        _cli("query", str(tmp_path / name), sql, "--json").stdout for name in ("local", "remote")
+    ]
+    assert json.loads(rows[0]) == json.loads(rows[1])
+    assert len(json.loads(rows[0])) == 197
+
+
+def test_an_unreachable_scheduler_is_a_usage_error(tmp_path: Path) -> None:
+    root = _fleet(tmp_path / "logs")
+    done = _cli("metrics", str(root), "--scheduler", f"tcp://127.0.0.1:{_free_port()}")
+    assert done.returncode == 2
+    assert done.stderr.startswith("trace-audit: cannot reach the Dask scheduler")
+    assert done.stderr.count("\n") == 1
+
+
+def test_verify_on_a_dask_cluster_equals_the_local_json(scheduler: str, tmp_path: Path) -> None:
+    """One task per robot; a tampered cycle in r2 is the same finding either way."""
+    root = _fleet(tmp_path / "logs")
+    victim = sorted((root / "hot").glob("r2_*.mcap"))[1]
+    changed = []
+
+    def tamper(msg: RawMessage) -> bytes:
+        if msg.topic == "/trace/action" and not changed:
+            changed.append(msg.log_time_ns)
+            return msg.data.replace(b'"command":"', b'"command":"X', 1)
+        return msg.data
+
+    rewrite_segment(victim, tmp_path / "tampered.mcap", tamper)
+    (tmp_path / "tampered.mcap").replace(victim)
+    assert changed
+    local = _cli("verify", str(root), "--json")
+    remote = _cli("verify", str(root), "--json", "--scheduler", scheduler)
+    assert local.returncode == remote.returncode == 1, (local.stderr, remote.stderr)
+    assert json.loads(remote.stdout) == json.loads(local.stdout)
+    assert len(json.loads(local.stdout)["robots"]) == 2

@@ -1,0 +1,225 @@
+"""``trace-audit index``, ``query`` and ``find``: the fleet index and SQL over it."""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
+
+import typer
+
+from trace_audit.cli.app import JsonOption, PlainOption, app, guarded, help_text, print_json
+from trace_audit.cli.render import Column, Doc, emit, progress_bar, show
+
+if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
+    from concurrent.futures import Executor
+
+    from trace_audit.fleet.index import IndexReport
+    from trace_audit.fleet.query import QueryResult
+
+SchedulerOption = Annotated[
+    str | None,
+    typer.Option(
+        "--scheduler",
+        help="Run on the Dask cluster at this address (tcp://host:8786); workers must see "
+        "the same paths (shared storage). Default: local processes.",
+        show_default=False,
+    ),
+]
+
+
+@contextlib.contextmanager
+def cluster(address: str | None) -> Iterator[Executor | None]:
+    """The Dask cluster's executor for ``--scheduler``, or None (local processes)."""
+    if address is None:
+        yield None
+        return
+    from trace_audit.fleet.cluster import dask_executor
+
+    with dask_executor(address) as executor:
+        yield executor
+
+
+_INDEX_HELP = help_text("""
+Build or update the fleet index: Parquet tables of every decision (decisions, entities,
+gaps, segments), partitioned by robot and day, scored by the same code as metrics. Only new
+or changed segments are read (keyed by their SHA-256). Schema: docs/fleet.md.
+
+[bold]Examples[/bold]:
+
+  trace-audit index logs/ --out fleet-index/
+  trace-audit index logs/ --out fleet-index/ --scheduler tcp://10.0.0.5:8786
+""")
+
+
+@app.command("index", help=_INDEX_HELP)
+def index_command(
+    logs: Annotated[
+        list[Path],
+        typer.Argument(help="Log files, directories or log roots.", show_default=False),
+    ],
+    *,
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="The index directory.", show_default=False)
+    ],
+    jobs: Annotated[
+        int, typer.Option("--jobs", "-j", help="Local processes to spread segments over.", min=1)
+    ] = 1,
+    scheduler: SchedulerOption = None,
+    json_out: JsonOption = False,
+    plain: PlainOption = False,
+) -> None:
+    def run() -> IndexReport:
+        from trace_audit.fleet.index import build_index
+
+        with cluster(scheduler) as executor:
+            if json_out or plain or not sys.stderr.isatty():
+                return build_index(logs, out, workers=jobs, executor=executor)
+            with progress_bar("indexing cycles") as bar:
+                task = bar.task_ids[0]
+
+                def progress(done: int, expected: int | None) -> None:
+                    bar.update(task, completed=done, total=expected)
+
+                return build_index(logs, out, workers=jobs, executor=executor, progress=progress)
+
+    report = guarded(run)
+    emit(report, _index_doc, json_out=json_out, plain=plain)
+
+
+def _index_doc(r: IndexReport) -> Doc:
+    doc = Doc()
+    doc.title(f"Fleet index {r.index} (version {r.version})")
+    doc.fields(
+        [
+            ("segments", f"{r.segments} ({len(r.indexed)} indexed now, {r.unchanged} unchanged)"),
+            ("decisions", f"{r.decisions_total} ({r.decisions_written} written now)"),
+            ("files", f"{r.files}, {r.bytes / 1e6:.2f} MB"),
+            ("speed", f"{r.cycles_per_s:,.0f} cycles/s over {r.elapsed_s:.2f} s"),
+        ]
+    )
+    for problem in r.unreadable:
+        doc.line(f"unreadable, not indexed: {problem}")
+    return doc
+
+
+_QUERY_HELP = help_text("""
+Run SQL (DuckDB) on a fleet index. Tables: decisions (with an explain column: the command
+that reconstructs the decision), entities, gaps, segments; robot and day on each. A bad
+statement is one line on stderr, exit 2.
+
+[bold]Examples[/bold]:
+
+  trace-audit query fleet-index/ "SELECT robot, day, avg(et) FROM decisions GROUP BY ALL"
+  trace-audit query fleet-index/ "SELECT * FROM gaps ORDER BY gap_ns DESC LIMIT 5" --csv
+""")
+
+
+@app.command("query", help=_QUERY_HELP)
+def query_command(
+    index: Annotated[Path, typer.Argument(help="The index directory.", show_default=False)],
+    sql: Annotated[str, typer.Argument(help="One SQL statement.", show_default=False)],
+    *,
+    csv_out: Annotated[bool, typer.Option("--csv", help="Print CSV on stdout.")] = False,
+    limit: Annotated[
+        int | None, typer.Option("--limit", help="Print at most this many rows.", min=0)
+    ] = None,
+    json_out: JsonOption = False,
+    plain: PlainOption = False,
+) -> None:
+    from trace_audit.fleet.query import run_query
+
+    result = guarded(lambda: run_query(index, sql, limit=limit))
+    _print_rows(result, json_out=json_out, csv_out=csv_out, plain=plain)
+
+
+_FIND_HELP = help_text("""
+Find decisions by command, by what the robot saw near it, and by any SQL condition on
+the decisions table; each row ends with the explain command that reconstructs it.
+
+[bold]Examples[/bold]:
+
+  trace-audit find fleet-index/ --action STOP --near person --within 1.0
+  trace-audit find fleet-index/ --action STOP --where "software_version = '2.4.1'" --json
+""")
+
+
+@app.command("find", help=_FIND_HELP)
+def find_command(
+    index: Annotated[Path, typer.Argument(help="The index directory.", show_default=False)],
+    *,
+    action: Annotated[
+        str | None, typer.Option("--action", help="The command, e.g. STOP.", show_default=False)
+    ] = None,
+    near: Annotated[
+        str | None,
+        typer.Option(
+            "--near", help="A perceived entity's class as logged, e.g. person.", show_default=False
+        ),
+    ] = None,
+    within: Annotated[
+        float | None,
+        typer.Option("--within", help="... closer than this many metres.", show_default=False),
+    ] = None,
+    where: Annotated[
+        str | None,
+        typer.Option("--where", help="SQL condition on decisions (alias d).", show_default=False),
+    ] = None,
+    robot: Annotated[
+        str | None, typer.Option("--robot", help="Only this robot.", show_default=False)
+    ] = None,
+    limit: Annotated[
+        int, typer.Option("--limit", help="At most this many rows, oldest first.", min=1)
+    ] = 1000,
+    csv_out: Annotated[bool, typer.Option("--csv", help="Print CSV on stdout.")] = False,
+    json_out: JsonOption = False,
+    plain: PlainOption = False,
+) -> None:
+    from trace_audit.fleet.query import find_decisions
+
+    result = guarded(
+        lambda: find_decisions(
+            index,
+            action=action,
+            near=near,
+            within_m=within,
+            where=where,
+            robot=robot,
+            limit=limit,
+        )
+    )
+    _print_rows(result, json_out=json_out, csv_out=csv_out, plain=plain)
+
+
+def _print_rows(result: QueryResult, *, json_out: bool, csv_out: bool, plain: bool) -> None:
+    if json_out:
+        print_json(result.records())
+        return
+    if csv_out:
+        import csv
+
+        writer = csv.writer(sys.stdout)
+        writer.writerow(result.columns)
+        writer.writerows(result.rows)
+        return
+    emit(result, _rows_doc, json_out=False, plain=plain)
+
+
+def _rows_doc(result: QueryResult) -> Doc:
+    doc = Doc()
+    doc.table([Column(c) for c in result.columns], ([_cell(v) for v in r] for r in result.rows))
+    doc.line(f"{len(result.rows)} rows in {result.elapsed_s * 1000:.0f} ms")
+    return doc
+
+
+def _cell(value: Any) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+__all__ = ["cluster", "find_command", "index_command", "query_command", "show"]

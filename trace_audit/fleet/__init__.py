@@ -1,0 +1,47 @@
+"""The fleet: a Parquet index of every decision, SQL over it with DuckDB, and fan-out of
+``index``/``metrics``/``verify`` over a Dask cluster. Needs the ``fleet`` extra (pyarrow,
+duckdb, dask); nothing here is imported until a fleet command runs.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+_EXPORTS = {
+    "build_index": "trace_audit.fleet.index",
+    "IndexReport": "trace_audit.fleet.index",
+    "run_query": "trace_audit.fleet.query",
+    "find_decisions": "trace_audit.fleet.query",
+    "QueryResult": "trace_audit.fleet.query",
+    "index_metrics": "trace_audit.fleet.query",
+    "dask_executor": "trace_audit.fleet.cluster",
+}
+
+__all__ = [
+    "IndexReport",
+    "QueryResult",
+    "build_index",
+    "dask_executor",
+    "find_decisions",
+    "index_metrics",
+    "run_query",
+]
+
+if TYPE_CHECKING:
+    from trace_audit.fleet.cluster import dask_executor
+    from trace_audit.fleet.index import IndexReport, build_index
+    from trace_audit.fleet.query import QueryResult, find_decisions, index_metrics, run_query
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'trace_audit.fleet' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return __all__

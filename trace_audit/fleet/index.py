@@ -1,0 +1,387 @@
+"""Build and incrementally update the fleet index: Parquet tables of every decision.
+
+The index is a directory::
+
+    INDEX/index.json                                      manifest: version, config, segments
+    INDEX/decisions/robot=R/day=YYYY-MM-DD/<seg>.parquet   one file per segment and day
+    INDEX/entities/...  INDEX/gaps/...  INDEX/segments/...
+
+A segment's rows depend on its bytes and, through the chain link, the sensor window and
+the gap rule at its start, on the bytes of the robot's previous segment. The manifest
+keeps both digests (the log root's catalog's SHA-256, or the file's when it is not in a
+root) for each chain position (robot, segment number, first cycle); a run re-indexes only
+positions whose digests changed: new segments, a segment compacted into another tier, and
+the one after it. Positions not among the inputs are kept (index one new file at a time).
+Each segment is scored by ``trace_audit.metrics.score_segment`` (one task, on a local
+process or a Dask worker), which writes its own files; the manifest is replaced last.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import time
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from trace_audit.fleet.rows import SegmentRows, day_of
+from trace_audit.fleet.tables import INDEX_FORMAT, INDEX_VERSION, TABLES
+from trace_audit.metrics import MetricsConfig, score_segment
+from trace_runtime.errors import LogReadError, UsageError
+from trace_runtime.logset import Log, open_logs
+from trace_runtime.reader import Segment, open_segment
+from trace_runtime.session import TIERS
+from trace_runtime.tiers.catalog import file_digest, refresh_catalog
+
+__all__ = ["MANIFEST", "IndexReport", "build_index", "index_segment", "load_manifest"]
+
+MANIFEST = "index.json"
+ProgressCallback = Callable[[int, int | None], None]
+
+
+@dataclass(frozen=True, slots=True)
+class IndexTask:
+    """One segment to index: its chain position, file, digests and where to write."""
+
+    key: str
+    path: str
+    previous: str | None
+    sha256: str
+    previous_sha256: str | None
+    out: str
+    gap_tolerance: float
+    sensor_window: int
+
+
+@dataclass(frozen=True, slots=True)
+class IndexedSegment:
+    """What indexing one segment wrote (a manifest entry)."""
+
+    key: str
+    robot: str
+    path: str
+    sha256: str
+    previous_sha256: str | None
+    decisions: int
+    entities: int
+    gaps: int
+    files: tuple[str, ...]
+    """Written files, relative to the index directory."""
+
+
+@dataclass(frozen=True, slots=True)
+class IndexReport:
+    """What ``build_index`` did."""
+
+    index: str
+    version: int
+    segments: int
+    indexed: tuple[str, ...]
+    """Segment files (re)indexed in this run."""
+    unchanged: int
+    decisions_written: int
+    decisions_total: int
+    unreadable: tuple[str, ...]
+    elapsed_s: float
+    cycles_per_s: float
+    files: int = 0
+    bytes: int = 0
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+
+# --- one segment (runs on a worker) ----------------------------------------------------------
+
+
+def index_segment(task: IndexTask) -> IndexedSegment:
+    """Score one segment through metrics and write its rows, one Parquet file per table and
+    day; safe to run on a Dask worker that sees the same paths (shared storage)."""
+    import pyarrow.parquet as pq
+
+    segment = open_segment(task.path)
+    rows = SegmentRows(segment, previous_command=_last_command(task.previous))
+    config = MetricsConfig(
+        gap_tolerance=task.gap_tolerance, sensor_window=task.sensor_window, max_listed=0
+    )
+    score_segment(task.path, task.previous, config, rows)
+    out = Path(task.out)
+    robot = segment.session.robot_id
+    stem = task.key.replace("/", "_")
+    files: list[str] = []
+    tables = {name: rows.table(name) for name in ("decisions", "entities", "gaps")}
+    tables["segments"] = _segment_row(segment, rows, task.sha256)
+    for name, (table, days) in tables.items():
+        for day in sorted(set(days)):
+            part = table if len(set(days)) == 1 else _rows_of_day(table, days, day)
+            rel = f"{name}/robot={robot}/day={day}/{stem}.parquet"
+            target = out / rel
+            target.parent.mkdir(parents=True, exist_ok=True)
+            partial = target.with_name(target.name + ".partial")
+            pq.write_table(part, partial, compression="zstd")
+            os.replace(partial, target)
+            files.append(rel)
+    return IndexedSegment(
+        key=task.key,
+        robot=robot,
+        path=task.path,
+        sha256=task.sha256,
+        previous_sha256=task.previous_sha256,
+        decisions=tables["decisions"][0].num_rows,
+        entities=tables["entities"][0].num_rows,
+        gaps=tables["gaps"][0].num_rows,
+        files=tuple(files),
+    )
+
+
+def _rows_of_day(table: Any, days: list[str], day: str) -> Any:
+    import pyarrow as pa
+
+    return table.filter(pa.array([d == day for d in days]))
+
+
+def _last_command(previous: str | None) -> str | None:
+    """The command in force when the segment opened: the previous segment's last action."""
+    if previous is None:
+        return None
+    for cycle in open_segment(previous).iter_cycles(reverse=True):
+        action = cycle.layer("/trace/action")
+        if isinstance(action, dict) and action.get("command"):
+            return str(action["command"])
+    return None
+
+
+def _segment_row(segment: Segment, rows: SegmentRows, sha256: str) -> tuple[Any, list[str]]:
+    import pyarrow as pa
+
+    from trace_audit.fleet.tables import schema
+
+    info, session = segment.info, segment.session
+    decisions = rows.decisions
+    row = {
+        "segment": segment.path.name,
+        "segment_path": str(segment.path),
+        "sha256": sha256,
+        "tier": session.tier,
+        "number": session.segment,
+        "start_ns": info.start_ns,
+        "end_ns": info.end_ns,
+        "first_cycle": rows.first_cycle,
+        "last_cycle": rows.last_cycle,
+        "cycles": decisions,
+        "bytes": info.bytes,
+        "finished": info.finished,
+        "seal_status": "clean" if rows.integrity_failed == 0 else "findings",
+        "integrity_failed": rows.integrity_failed,
+        "software_version": session.software_version,
+        "policy_version": session.policy_version,
+        "period_ns": session.period_ns,
+    }
+    table = pa.Table.from_pylist([row], schema=schema("segments"))
+    return table, [day_of(info.start_ns)]
+
+
+# --- the whole index ---------------------------------------------------------------------------
+
+
+def load_manifest(index: str | Path) -> dict[str, Any] | None:
+    """The index's manifest, or None when the directory holds no index of this version."""
+    try:
+        body = json.loads((Path(index) / MANIFEST).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(body, dict) or body.get("format") != INDEX_FORMAT:
+        return None
+    if body.get("version") != INDEX_VERSION:
+        return None
+    return body
+
+
+def _check_target(out: Path) -> dict[str, Any] | None:
+    """The manifest to update, None for a new index; refuses a directory that is not ours."""
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"{out}: exists and is not a directory")
+    manifest = load_manifest(out)
+    if manifest is None and out.is_dir() and any(out.iterdir()):
+        if (out / MANIFEST).exists():
+            # Another version of our own index: its files are ours, rebuilt in place.
+            return {"segments": {}, "stale_files": _all_files(out)}
+        raise UsageError(f"{out}: not empty and not a fleet index; give a new directory")
+    return manifest
+
+
+def _all_files(out: Path) -> list[str]:
+    return [
+        p.relative_to(out).as_posix()
+        for table in TABLES
+        if (out / table).is_dir()
+        for p in (out / table).rglob("*.parquet")
+    ]
+
+
+def _digests(log: Log, cache: dict[str, Any]) -> dict[Path, str]:
+    """SHA-256 of every segment file: from its log root's catalog when it sits in one,
+    else from the manifest's (size, mtime) cache, else read."""
+    out: dict[Path, str] = {}
+    roots: dict[Path, dict[str, str]] = {}
+    for segment in log.segments:
+        path = segment.path
+        root = path.parent.parent
+        if path.parent.name in TIERS:
+            if root not in roots:
+                roots[root] = _catalog_digests(root)
+            found = roots[root].get(path.resolve().as_posix())
+            if found is not None:
+                out[path] = found
+                continue
+        stat = path.stat()
+        cached = cache.get(str(path.resolve()))
+        if cached and cached[0] == stat.st_size and cached[1] == stat.st_mtime_ns:
+            out[path] = cached[2]
+        else:
+            out[path] = file_digest(path)
+        cache[str(path.resolve())] = [stat.st_size, stat.st_mtime_ns, out[path]]
+    return out
+
+
+def _catalog_digests(root: Path) -> dict[str, str]:
+    try:
+        catalog = refresh_catalog(root)
+    except OSError:  # a read-only archive: the catalog is rebuilt in memory only
+        catalog = refresh_catalog(root, write=False)
+    except LogReadError:
+        return {}
+    return {(root / e.path).resolve().as_posix(): e.sha256 for e in catalog.entries}
+
+
+def _plan(log: Log, digests: dict[Path, str], out: Path, config: MetricsConfig) -> list[IndexTask]:
+    tasks: list[IndexTask] = []
+    for robot in log.robots:
+        segments = log.segments_of(robot)
+        for i, segment in enumerate(segments):
+            session = segment.session
+            previous = segments[i - 1] if i else None
+            tasks.append(
+                IndexTask(
+                    key=f"{robot}/{session.segment:06d}/{session.first_cycle}",
+                    path=str(segment.path.resolve()),
+                    previous=str(previous.path.resolve()) if previous else None,
+                    sha256=digests[segment.path],
+                    previous_sha256=digests[previous.path] if previous else None,
+                    out=str(out),
+                    gap_tolerance=config.gap_tolerance,
+                    sensor_window=config.sensor_window,
+                )
+            )
+    return tasks
+
+
+def build_index(
+    paths: Sequence[str | Path],
+    out: str | Path,
+    *,
+    config: MetricsConfig | None = None,
+    workers: int = 1,
+    executor: Executor | None = None,
+    progress: ProgressCallback | None = None,
+) -> IndexReport:
+    """Index every decision of the given logs into ``out``; only new or changed segments
+    are read. Segments run on ``executor`` (a Dask cluster's) when given, else on up to
+    ``workers`` local processes."""
+    started = time.perf_counter()
+    cfg = config or MetricsConfig()
+    target = Path(out)
+    manifest = _check_target(target) or {"segments": {}}
+    settings = {"gap_tolerance": cfg.gap_tolerance, "sensor_window": cfg.sensor_window}
+    known: dict[str, Any] = dict(manifest.get("segments", {}))
+    if manifest.get("config") not in (None, settings):
+        known = {}  # scored under other settings: every row is rebuilt
+    log = open_logs(paths)
+    cache: dict[str, Any] = dict(manifest.get("digests", {}))
+    tasks = _plan(log, _digests(log, cache), target, cfg)
+    todo = [t for t in tasks if not _unchanged(known.get(t.key), t)]
+    opened = {str(s.path.resolve()): s for s in log.segments}
+    expected = sum(opened[t.path].info.channels.get("/trace/seal", 0) for t in todo)
+    target.mkdir(parents=True, exist_ok=True)
+    done: list[IndexedSegment] = []
+    cycles = 0
+    for result in _run(todo, executor, workers):
+        done.append(result)
+        cycles += result.decisions
+        if progress is not None:
+            progress(cycles, expected or None)
+    stale = set(manifest.get("stale_files", []))
+    for result in done:
+        old = known.get(result.key)
+        if old is not None:
+            stale.update(set(old["files"]) - set(result.files))
+        known[result.key] = asdict(result)
+    _write_manifest(target, known, settings, cache)
+    live = {rel for entry in known.values() for rel in entry["files"]}
+    for rel in sorted(stale - live):  # files of an older copy of a segment, or an older index
+        with contextlib.suppress(FileNotFoundError):
+            (target / rel).unlink()
+    elapsed = time.perf_counter() - started
+    files = [target / rel for entry in known.values() for rel in entry["files"]]
+    return IndexReport(
+        index=str(target),
+        version=INDEX_VERSION,
+        segments=len(known),
+        indexed=tuple(r.path for r in done),
+        unchanged=len(tasks) - len(todo),
+        decisions_written=cycles,
+        decisions_total=sum(int(e["decisions"]) for e in known.values()),
+        unreadable=tuple(f"{p.path}: {p.reason}" for p in log.problems),
+        elapsed_s=elapsed,
+        cycles_per_s=cycles / elapsed if elapsed > 0 else 0.0,
+        files=len(files),
+        bytes=sum(f.stat().st_size for f in files if f.exists()),
+    )
+
+
+def _unchanged(entry: dict[str, Any] | None, task: IndexTask) -> bool:
+    return (
+        entry is not None
+        and entry.get("sha256") == task.sha256
+        and entry.get("previous_sha256") == task.previous_sha256
+    )
+
+
+def _run(
+    tasks: list[IndexTask], executor: Executor | None, workers: int
+) -> Iterator[IndexedSegment]:
+    """Index each task on ``executor``, in local processes, or here; yields as they finish
+    (the first failure is raised as soon as it arrives)."""
+    if executor is not None:
+        yield from _as_done(executor, tasks)
+    elif workers > 1 and len(tasks) > 1:
+        with ProcessPoolExecutor(max_workers=min(workers, len(tasks))) as pool:
+            yield from _as_done(pool, tasks)
+    else:
+        for task in tasks:
+            yield index_segment(task)
+
+
+def _as_done(executor: Executor, tasks: list[IndexTask]) -> Iterator[IndexedSegment]:
+    # The longest segments first, so a short one left for last keeps every worker busy.
+    ordered = sorted(tasks, key=lambda t: -Path(t.path).stat().st_size)
+    futures = [executor.submit(index_segment, t) for t in ordered]
+    for future in as_completed(futures):
+        yield future.result()
+
+
+def _write_manifest(
+    out: Path, segments: dict[str, Any], settings: dict[str, Any], digests: dict[str, Any]
+) -> None:
+    body = {
+        "format": INDEX_FORMAT,
+        "version": INDEX_VERSION,
+        "config": settings,
+        "segments": dict(sorted(segments.items())),
+        "digests": digests,
+    }
+    partial = out / (MANIFEST + ".partial")
+    partial.write_text(json.dumps(body, indent=1) + "\n", encoding="utf-8")
+    os.replace(partial, out / MANIFEST)

@@ -1,0 +1,286 @@
+"""SQL over the fleet index on DuckDB (embedded, no server), and what is built on it:
+named questions (``find_decisions``) and fleet metrics without re-reading the logs.
+
+The tables are views over the Parquet files (Hive partitions ``robot`` and ``day`` come back
+as columns). ``decisions`` gains ``explain``: the exact ``trace-audit explain`` command that
+reconstructs the row's decision from its segment.
+"""
+
+from __future__ import annotations
+
+import datetime
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from trace_audit.fleet.index import load_manifest
+from trace_audit.fleet.tables import TABLES, schema
+from trace_audit.metrics import NO_SCENARIO, GroupSums, MetricsConfig, MetricsReport
+from trace_runtime.errors import LogReadError, UsageError
+
+if TYPE_CHECKING:
+    import duckdb
+
+__all__ = [
+    "INDEX_GROUP_BYS",
+    "QueryResult",
+    "connect",
+    "find_decisions",
+    "index_metrics",
+    "run_query",
+]
+
+INDEX_GROUP_BYS: dict[str, str] = {
+    "robot": "robot",
+    "day": "CAST(day AS VARCHAR)",
+    "hour": "hour",
+    "segment": "segment",
+    "scenario": f"COALESCE(scenario, '{NO_SCENARIO}')",
+    "software_version": "software_version",
+    "policy_version": "policy_version",
+    "tier": "tier",
+    "command": "command",
+}
+"""What ``metrics --index --by`` may group by (comma-separated for several), as SQL."""
+
+_EXPLAIN = (
+    "'trace-audit explain ' || segment_path || ' --t ' || "
+    "CAST(t_ns // 1000000000 AS VARCHAR) || '.' || lpad(CAST(t_ns % 1000000000 AS VARCHAR), 9, '0')"
+)
+
+
+@dataclass(frozen=True, slots=True)
+class QueryResult:
+    """Rows of a query, with their column names."""
+
+    columns: tuple[str, ...]
+    rows: list[tuple[Any, ...]]
+    elapsed_s: float
+
+    def records(self) -> list[dict[str, Any]]:
+        """Rows as JSON-ready dicts (dates as ISO text)."""
+        return [{c: _plain(v) for c, v in zip(self.columns, row, strict=True)} for row in self.rows]
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, datetime.date | datetime.datetime):
+        return value.isoformat()
+    if isinstance(value, list):
+        return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    return value
+
+
+def connect(index: str | Path) -> duckdb.DuckDBPyConnection:
+    """An in-memory DuckDB with the index's tables as views; ``LogReadError`` when
+    ``index`` is not a fleet index of this version."""
+    import duckdb
+
+    root = Path(index)
+    if load_manifest(root) is None:
+        raise LogReadError(str(root), "not a fleet index (run trace-audit index first)")
+    # No progress bar: DuckDB draws one on the terminal for long queries, into our output.
+    con = duckdb.connect(":memory:")
+    con.execute("SET enable_progress_bar = false")
+    for table in TABLES:
+        files = root / table
+        if any(files.rglob("*.parquet")) if files.is_dir() else False:
+            glob = (files / "**" / "*.parquet").as_posix().replace("'", "''")
+            source = (
+                f"read_parquet('{glob}', hive_partitioning = true, "
+                "hive_types = {'robot': VARCHAR, 'day': DATE})"
+            )
+        else:  # no rows yet (e.g. no gaps): an empty view of the right shape
+            import pyarrow as pa
+
+            empty = schema(table).empty_table()
+            empty = empty.append_column("robot", pa.array([], pa.string()))
+            empty = empty.append_column("day", pa.array([], pa.date32()))
+            con.register(f"_empty_{table}", empty)
+            source = f"_empty_{table}"
+        extra = f", {_EXPLAIN} AS explain" if table == "decisions" else ""
+        con.execute(f"CREATE VIEW {table} AS SELECT *{extra} FROM {source}")
+    return con
+
+
+def run_query(
+    index: str | Path, sql: str, params: Sequence[Any] = (), *, limit: int | None = None
+) -> QueryResult:
+    """Run one SQL statement on the index; a bad statement is a ``UsageError`` (one line)."""
+    import duckdb
+
+    started = time.perf_counter()
+    con = connect(index)
+    try:
+        cursor = con.execute(sql, list(params))
+        if cursor.description is None:
+            return QueryResult((), [], time.perf_counter() - started)
+        columns = tuple(d[0] for d in cursor.description)
+        rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+    except duckdb.Error as err:
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise UsageError(f"SQL: {first}") from err
+    finally:
+        con.close()
+    return QueryResult(columns, rows, time.perf_counter() - started)
+
+
+def find_decisions(
+    index: str | Path,
+    *,
+    action: str | None = None,
+    near: str | None = None,
+    within_m: float | None = None,
+    where: str | None = None,
+    robot: str | None = None,
+    limit: int = 1000,
+) -> QueryResult:
+    """Decisions by command, by a perceived entity's class and distance, and by any SQL
+    condition on the decisions' columns; each row with ``robot``, ``t_ns`` and ``explain``."""
+    conditions: list[str] = []
+    params: list[Any] = []
+    if action is not None:
+        conditions.append("upper(d.command) = upper(?)")
+        params.append(action)
+    if robot is not None:
+        conditions.append("d.robot = ?")
+        params.append(robot)
+    if where:
+        conditions.append(f"({where})")
+    select = (
+        "d.robot, d.day, d.t_ns, d.cycle, d.command, d.previous_command, d.lead_factor, "
+        "d.lead_value, d.lead_unit, d.et, d.dr, d.seal_verified, d.software_version"
+    )
+    if near is not None or within_m is not None:
+        # From the decision's own ``nearest`` map (class -> nearest distance), built from
+        # the same entity rows: one scan of one table, no join of two fleet-sized ones.
+        if near is not None:
+            distance = f"d.nearest[{_literal(near)}]"
+            select += f", {_literal(near)} AS nearest_class"
+        else:
+            distance = "list_min(map_values(d.nearest))"
+            select += (
+                ", map_keys(d.nearest)[list_position(map_values(d.nearest), "
+                f"{distance})] AS nearest_class"
+            )
+        select += f", {distance} AS nearest_m"
+        conditions.append(f"{distance} IS NOT NULL")
+        if within_m is not None:
+            if not math.isfinite(within_m):
+                raise UsageError(f"--within must be a finite distance, got {within_m}")
+            conditions.append(f"{distance} < {float(within_m)!r}")
+    sql = f"SELECT {select}, d.explain FROM decisions d"
+    if conditions:
+        sql += " WHERE " + " AND ".join(conditions)
+    sql += f" ORDER BY d.t_ns, d.robot LIMIT {int(limit)}"
+    return run_query(index, sql, params)
+
+
+def _literal(text: str) -> str:
+    """``text`` as a SQL string literal."""
+    return "'" + text.replace("'", "''") + "'"
+
+
+def parse_index_by(text: str | None) -> list[str]:
+    """``robot,day`` -> ["robot", "day"]; ``UsageError`` naming what is allowed."""
+    if not text:
+        return []
+    keys = [k.strip() for k in text.split(",") if k.strip()]
+    for key in keys:
+        if key not in INDEX_GROUP_BYS:
+            raise UsageError(
+                f"cannot group the index by {key!r} (use {', '.join(INDEX_GROUP_BYS)})"
+            )
+    return keys
+
+
+def index_metrics(
+    index: str | Path, by: Sequence[str] = (), config: MetricsConfig | None = None
+) -> MetricsReport:
+    """ET, ET_partial, TC, DR and TCS from the index's decision rows, without reading a log:
+    the sums metrics keeps per group, summed again by DuckDB (``report_from_sums``)."""
+    from trace_audit.metrics import report_from_sums
+
+    started = time.perf_counter()
+    cfg = config or MetricsConfig()
+    manifest = load_manifest(index)
+    if manifest is None:
+        raise LogReadError(str(index), "not a fleet index (run trace-audit index first)")
+    built = manifest.get("config", {})
+    for name in ("gap_tolerance", "sensor_window"):
+        if built.get(name) != getattr(cfg, name):
+            raise UsageError(
+                f"the index was built with {name} {built.get(name)}, not "
+                f"{getattr(cfg, name)}: rebuild it or drop the option"
+            )
+    if cfg.start_ns is not None or cfg.end_ns is not None:
+        raise UsageError("--start/--end are not supported with --index (filter in SQL)")
+    for key in by:
+        if key not in INDEX_GROUP_BYS:
+            raise UsageError(f"cannot group the index by {key!r}")
+    group = " || ', ' || ".join(f"CAST({INDEX_GROUP_BYS[k]} AS VARCHAR)" for k in by) or "'all'"
+    w = cfg.weights
+    total = w.et + w.et_partial + w.dr + w.continuity + w.integrity
+    gate = "NOT seal_verified" if w.integrity_gate else "false"
+    tcs = (
+        f"CASE WHEN {gate} THEN 0.0 ELSE ({w.et!r} * et + {w.et_partial!r} * et_partial + "
+        f"{w.dr!r} * dr::DOUBLE + {w.continuity!r} * continuity + "
+        f"{w.integrity!r} * seal_verified::DOUBLE) / {total!r} END"
+    )
+    sql = f"""
+        WITH d AS (SELECT *, {group} AS g, {tcs} AS tcs_w FROM decisions)
+        SELECT g, count(*), sum(sealed::INT), sum(summarized::INT),
+               fsum(et), fsum(et * et), fsum(et_partial), fsum(et_partial * et_partial),
+               sum((factors_total > 0 AND factors_traceable = factors_total)::INT),
+               sum(factors_total), sum(factors_traceable), sum((factors_total = 0)::INT),
+               sum(dr::INT), sum(seal_verified::INT), fsum(tcs_w), fsum(tcs_w * tcs_w),
+               sum(window_ns), sum(gap_ns), sum((gap_ns > 0)::INT), sum(missing_cycles),
+               sum(dropped), sum(clock_anomaly::INT), list(DISTINCT segment)
+        FROM d GROUP BY g ORDER BY g
+    """
+    result = run_query(index, sql)
+    groups: dict[str, GroupSums] = {}
+    segments: set[str] = set()
+    cycles = 0
+    for row in result.rows:
+        (name, n, sealed, summarized, et, et2, etp, etp2, full, factors, traceable) = row[:11]
+        (no_factors, dr, intact, tcs_sum, tcs2, window, gap, gaps, missing) = row[11:20]
+        (dropped, anomalies, names) = row[20:]
+        groups[str(name)] = GroupSums(
+            decisions=n,
+            sealed=sealed,
+            summarized=summarized,
+            et_sum=et,
+            et_sq=et2,
+            etp_sum=etp,
+            etp_sq=etp2,
+            full=full,
+            factors=factors,
+            factors_traceable=traceable,
+            no_factors=no_factors,
+            dr_ok=dr,
+            integrity_ok=intact,
+            tcs_sum=tcs_sum,
+            tcs_sq=tcs2,
+            window_ns=int(window),
+            gap_ns=int(gap),
+            gaps=gaps,
+            missing_cycles=int(missing),
+            dropped=int(dropped),
+            anomalies=anomalies,
+        )
+        segments.update(names)
+        cycles += n
+    return report_from_sums(
+        [str(index)],
+        cfg,
+        groups,
+        by=",".join(by) or None,
+        segments=tuple(sorted(segments)),
+        cycles=cycles,
+        elapsed=time.perf_counter() - started,
+    )
