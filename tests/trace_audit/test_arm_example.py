@@ -91,3 +91,16 @@ def test_metrics_reports_deviation_per_channel_and_the_loggers_cost(arm_log: Pat
     plain = CliRunner().invoke(app, ["metrics", str(arm_log), "--plain"]).stdout
     assert "Execution deviation per channel" in plain and "gripper_force" in plain
     assert compute_metrics([V1_FIXTURE]).channel_deviation == ()
+
+
+def test_the_incident_report_draws_the_arms_channels_in_their_units(arm_log: Path) -> None:
+    from trace_audit.report import build_report
+
+    report = build_report(arm_log, t="6.5")
+    samples = report.data.samples
+    assert samples, "the report gathered no cycles of the window"
+    drawn = set().union(*(s.channels for s in samples))
+    assert {f"{name} ({unit})" for name, unit in CHANNELS.items()} <= drawn
+    assert "linear speed (m/s)" not in drawn  # the arm logged no planar motion
+    for name, unit in CHANNELS.items():
+        assert f"{name} ({unit})" in report.html

@@ -79,15 +79,16 @@ def parse_window(text: str) -> float:
 def execution_channels(view: ExecutionView) -> dict[str, tuple[float | None, float | None]]:
     """Each execution channel the record offers: name (with unit) -> (intended, actual).
 
-    The one place that knows the shape of the execution record's motion: when the record
-    gains channels (joints, a gripper), they are added here and every figure and table of
-    the report shows them."""
-    if view.intended == (None, None) and view.actual == (None, None):
-        return {}  # no planar motion logged
-    return {
-        "linear speed (m/s)": (view.intended[0], view.actual[0]),
-        "angular speed (rad/s)": (view.intended[1], view.actual[1]),
-    }
+    The one place that knows the shapes of the execution record: the planar motion of a
+    mobile base, and the named actuator channels (joints, a gripper, thrust) of profile 1.1
+    in the robot's own names and units. Every figure and table of the report follows it."""
+    shown: dict[str, tuple[float | None, float | None]] = {}
+    if view.planar:
+        shown["linear speed (m/s)"] = (view.intended[0], view.actual[0])
+        shown["angular speed (rad/s)"] = (view.intended[1], view.actual[1])
+    for channel in view.channels:
+        shown[f"{channel.name} ({channel.unit})"] = (channel.intended, channel.actual)
+    return shown
 
 
 @dataclass(frozen=True, slots=True)
