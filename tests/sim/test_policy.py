@@ -26,19 +26,28 @@ def _ped_close_values() -> dict[str, object]:
     return {"ped_1.collision_risk": 0.7, "ped_1.distance": 1.5, "aisle_blocked": 0.01}
 
 
-def test_paper_example_stops_and_its_counterfactuals_match_the_paper() -> None:
-    """Worker at 1.5 m, risk 0.70: STOP; would SLOW if d >= 2.0, CONTINUE if risk < 0.2."""
+def test_paper_example_stops_and_its_counterfactuals_respect_the_speed_limit() -> None:
+    """Worker at 1.5 m, risk 0.70: STOP; would SLOW if d >= 2.0, and SLOW (not the paper's
+    CONTINUE) if risk < 0.2: the worker is still within the 4 m slow zone that keeps the
+    robot under the 0.5 m/s limit within 3 m of a person."""
     values = _ped_close_values()
     outcome = evaluate(PED, values)
     assert outcome.command == STOP
     assert outcome.path == ("root", "ped_in_path", "ped_close", "stop_ped")
     assert factors_of(outcome) == ["ped_1.collision_risk", "ped_1.distance"]
+    assert factors_of(outcome, PED) == ["ped_1.collision_risk", "ped_1.distance", "aisle_blocked"]
     found = {
         (c.factor, c.comparison, c.threshold, c.would_select)
-        for c in probe(PED, values, factors_of(outcome))
+        for c in probe(PED, values, factors_of(outcome, PED))
     }
     assert ("ped_1.distance", ">=", 2.0, SLOW) in found
-    assert ("ped_1.collision_risk", "<", 0.2, CONTINUE) in found
+    assert ("ped_1.collision_risk", "<", 0.2, SLOW) in found
+    far = {**values, "ped_1.distance": 5.0}
+    found_far = {
+        (c.factor, c.comparison, c.threshold, c.would_select)
+        for c in probe(PED, far, factors_of(evaluate(PED, far), PED))
+    }
+    assert ("ped_1.collision_risk", "<", 0.2, CONTINUE) in found_far
 
 
 def test_alternatives_score_below_the_choice_and_say_why() -> None:
