@@ -169,9 +169,36 @@ def _render(result: RunResult) -> None:
     table.add_row("bytes written", f"{result.bytes_written:,}")
     table.add_row("cycles per write", f"{result.batch_cycles}")
     table.add_row("speed", f"{result.cycles_per_s:,.0f} cycles/s ({result.elapsed_s:.1f} s)")
+    for name, out in result.safety.items():
+        table.add_row(
+            f"safety: {name}",
+            f"min separation person {_m(out['min_separation_person_m'])}, "
+            f"vehicle {_m(out['min_separation_vehicle_m'])}; "
+            f"near misses {out['near_miss_events']} ({out['near_miss_cycles']} cycles); "
+            f"STOPs {out['stops']}, time to stop median {_s(out['time_to_stop_median_s'])}, "
+            f"max {_s(out['time_to_stop_max_s'])}",
+        )
+    for cls, q in result.perception.get("per_class", {}).items():
+        table.add_row(
+            f"perception: {cls}",
+            f"precision {_share(q['precision'])}, recall {_share(q['recall'])} "
+            f"(true -> perceived: {result.perception['confusion'][cls]})",
+        )
     table.add_row("log", str(result.out))
     table.add_row("truth", f"{result.truth} (ground truth; metrics must not read it)")
     Console().print(table)
+
+
+def _m(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f} m"
+
+
+def _s(value: float | None) -> str:
+    return "-" if value is None else f"{value:.1f} s"
+
+
+def _share(value: float | None) -> str:
+    return "-" if value is None else f"{100 * value:.1f}%"
 
 
 @app.command("scenarios")

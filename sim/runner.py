@@ -28,6 +28,7 @@ from sim.faults import (
     truth_path_for,
 )
 from sim.perception import CORRIDOR_MAX_M, Perceiver, PerceptionOutput
+from sim.quality import QualityMeter
 from sim.records import (
     RationaleBuffer,
     action_record,
@@ -108,6 +109,10 @@ class RunResult:
     elapsed_s: float
     seed: int
     batch_cycles: int = 1
+    perception: dict[str, Any] = field(default_factory=dict)
+    """Classification quality against the world's ground truth (``sim.quality``)."""
+    safety: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Safety outcomes per scenario against the world's ground truth (``sim.quality``)."""
 
     @property
     def cycles_per_s(self) -> float:
@@ -129,6 +134,8 @@ class RunResult:
             "cycles_per_s": round(self.cycles_per_s, 1),
             "seed": self.seed,
             "batch_cycles": self.batch_cycles,
+            "perception": self.perception,
+            "safety": self.safety,
         }
 
 
@@ -249,6 +256,8 @@ def run(config: RunConfig, progress: Callable[[int, int], None] | None = None) -
         elapsed_s=elapsed,
         seed=config.seed,
         batch_cycles=config.batch_cycles,
+        perception=sim.quality.perception(),
+        safety=sim.quality.outcomes(),
     )
 
 
@@ -297,6 +306,7 @@ class _Pipeline:
         self.injector = FaultInjector(config.faults, np.random.default_rng(seeds[2]))
         self.actuator = Actuator(np.random.default_rng(seeds[3]))
         self.steering = Steering()
+        self.quality = QualityMeter()
         self.perceiver = Perceiver()
         self.decider = Decider()
         self.logger = logger
@@ -382,6 +392,7 @@ class _Pipeline:
         self._unsettled.append(_Unsettled(cycle_no, t_ns, scenario, faults.write_timeout, pending))
         self.settle()
         self._held = outcome.path[-1]
+        self.quality.observe(world, seen, scenario, outcome.command, actuator.linear)
         world.apply_motion(actuator.linear, actuator.angular)
         world.step_actors()
         return outcome.command
