@@ -340,3 +340,47 @@ def test_cli_unwritable_output_exits_3(tmp_path: Path) -> None:
     res = CliRunner().invoke(app, ["run", "--out", str(blocker / "run.mcap"), "--cycles", "1"])
     assert res.exit_code == 3
     assert "Traceback" not in res.output
+
+
+def test_with_faults_off_at_most_2_percent_of_cycles_fail_a_compliance_check(
+    clean: RunResult,
+) -> None:
+    """The policy enforces the monitor's rules itself, so a failed check is an anomaly."""
+    cycles = _cycles(clean)
+    failed = [
+        c.cycle
+        for c in cycles
+        if c.execution is not None and any(not ch.passed for ch in c.execution.checks)
+    ]
+    assert len(cycles) == 500
+    assert len(failed) <= 0.02 * len(cycles), failed
+
+
+@pytest.mark.parametrize("seed", [1, 6, 9])
+def test_forklift_scenario_exercises_the_vehicle_branch_with_a_logged_turn(
+    seed: int, tmp_path: Path
+) -> None:
+    """At least 10% of cycles are not CONTINUE, the vehicle branch decides some of them, and
+    the execution record shows the U-turn a REROUTE starts (intended yaw rate 0.6 rad/s)."""
+    result = run(
+        RunConfig(
+            out=tmp_path / "f.mcap",
+            scenario="forklift",
+            cycles=100,
+            seed=seed,
+            faults=FaultRates.off(),
+        )
+    )
+    cycles = _cycles(result)
+    commands = Counter(c.action.command for c in cycles if c.action is not None)
+    assert commands["CONTINUE"] <= 90, commands
+    leaves = {c.action.tree.taken_path[-1] for c in cycles if c.action and c.action.tree}
+    assert leaves & {"stop_vehicle", "reroute_vehicle"}, leaves
+    turning = [
+        c.cycle
+        for c in cycles
+        if c.execution is not None
+        and "u_turn" in c.execution.flags
+        and c.execution.intended.angular == 0.6
+    ]
+    assert len(turning) >= 20, turning
