@@ -55,9 +55,9 @@ CASES: dict[str, RunConfig] = {
 }
 
 GOLDEN = {
-    "paper": "2f208603cd25640ead60b55d8d3dc1561730087250daf79a672e24db5db9d78f",
-    "heavy": "d3ba00c43d0c5211b819ce1aca8b34a07bea4eedac8d020b2f56b5aeb7f1f3a8",
-    "duration": "748807d54619e4aeed8b6e975d7c1697fdba7f45b6d9fc94e8fef9b4fd197d21",
+    "paper": "04a133c9810ac376192ffb37594de70a982769c7ae850c2d39bac488369dcc08",
+    "heavy": "65bbc3a765a76bf8917e52142ed62a62ad99ff6df7514b97e5b03d7c72fed2de",
+    "duration": "92d4e4fe5028ac94fef7e2fd472a18c44a9f2f2f2390ee895878fd39f0ec1e7d",
 }
 
 
