@@ -147,17 +147,19 @@ Plan = list[tuple[str, Callable[[dict[str, object], str], float]]]
 def intervention_plan(node: str, edges: Iterable[tuple[str, str, str]]) -> Plan:
     """The descendants of ``node`` that a ``do(node = x)`` changes, in an order where each
     comes after its parents, each with its rule. ``edges`` are (parent, child, rule)."""
-    edges = list(edges)
-    children: dict[str, list[tuple[str, str]]] = {}
+    children: dict[str, list[str]] = {}
+    parents: dict[str, list[str]] = {}
     rule_into: dict[str, set[str]] = {}
     for parent, child, rule in edges:
-        children.setdefault(parent, []).append((child, rule))
-        rule_into.setdefault(child, set()).add(rule)
+        if rule in RULES:
+            children.setdefault(parent, []).append(child)
+            parents.setdefault(child, []).append(parent)
+            rule_into.setdefault(child, set()).add(rule)
     reached: set[str] = set()
     stack = [node]
     while stack:
-        for child, rule in children.get(stack.pop(), ()):
-            if rule in RULES and child not in reached:
+        for child in children.get(stack.pop(), ()):
+            if child not in reached:
                 reached.add(child)
                 stack.append(child)
     order: list[str] = []
@@ -168,8 +170,8 @@ def intervention_plan(node: str, edges: Iterable[tuple[str, str, str]]) -> Plan:
         if n in done:
             return
         done.add(n)
-        for parent, child, _ in edges:
-            if child == n and parent in reached:
+        for parent in parents.get(n, ()):
+            if parent in reached:
                 visit(parent)
         order.append(n)
 
@@ -177,10 +179,9 @@ def intervention_plan(node: str, edges: Iterable[tuple[str, str, str]]) -> Plan:
         visit(n)
     plan = []
     for n in order:
-        rules = [r for r in rule_into[n] if r in RULES]
-        if len(rules) != 1:
-            raise UnknownRuleError(f"{n} is derived by {len(rules)} known rules")
-        plan.append((n, RULES[rules[0]].compute))
+        if len(rule_into[n]) != 1:
+            raise UnknownRuleError(f"{n} is derived by {len(rule_into[n])} rules")
+        plan.append((n, RULES[next(iter(rule_into[n]))].compute))
     return plan
 
 

@@ -51,7 +51,7 @@ class Decider:
 
     def __init__(self, size: int | None = None) -> None:
         self._size = CACHE_SIZE if size is None else size
-        self._cache: dict[tuple[PolicyInput, tuple[str, ...], tuple[Any, ...]], Decision] = {}
+        self._cache: dict[tuple[PolicyInput, tuple[Any, ...]], Decision] = {}
         self.hits = 0
         self.misses = 0
 
@@ -62,8 +62,8 @@ class Decider:
         ``held`` the leaf taken in the previous cycle."""
         values: dict[str, Any] = {n.id: n.value for n in graph.nodes}
         inp = PolicyInput.from_nodes(graph.nodes, held)
-        read = tuple(values.values())
-        key = (inp, tuple(values), read)
+        read = tuple(values.get(n) for n in _decisive_nodes(inp))
+        key = (inp, read)
         decision = self._cache.get(key)
         if decision is not None:
             self.hits += 1
@@ -84,6 +84,18 @@ def _shareable(read: tuple[Any, ...]) -> bool:
         type(x) is str or (type(x) is float and (x != 0.0 or math.copysign(1.0, x) > 0))
         for x in read
     )
+
+
+def _decisive_nodes(inp: PolicyInput) -> list[str]:
+    """Every node the decision depends on: what the tree reads, and what an intervention on
+    a factor recomputes its descendants from (``sim.belief.RULES``' parents)."""
+    nodes = []
+    for e, risk, distance in inp.peds:
+        nodes += [risk, distance, f"{e}.intent", f"{e}.conflict"]
+    for e, risk, ttc in inp.vehicles:
+        nodes += [risk, ttc, f"{e}.distance", f"{e}.closing", f"{e}.conflict"]
+    nodes += [inp.aisle, "corridor.clearance"]
+    return nodes
 
 
 def graph_edges(graph: BeliefGraph) -> list[tuple[str, str, str]]:

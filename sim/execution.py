@@ -29,6 +29,8 @@ TAU_S = 0.25
 NOISE_LINEAR = 0.02
 NOISE_ANGULAR = 0.02
 HALF_TRACK_M = 0.25  # converts an angular-rate error into a wheel-speed error
+TURN_NOISE_FULL = 0.3
+"""Speed (m/s, or rad/s commanded) from which the angular noise is at its full level."""
 
 MAX_YAW_RATE = 0.6
 """rad/s: the turn rate of a REROUTE, and the bound on the lane-keeping steer."""
@@ -123,7 +125,14 @@ class Actuator:
         prev_err = abs(want_v - self.linear)
         noise = self.rng.normal(0.0, 1.0, 2)
         v = self.linear + self._alpha * (want_v - self.linear) + NOISE_LINEAR * float(noise[0])
-        w = self.angular + self._alpha * (want_w - self.angular) + NOISE_ANGULAR * float(noise[1])
+        # Turning noise comes from the wheels' speed control: a robot held still on its
+        # brakes does not turn (else it would drift in heading through a long STOP).
+        moving = min(1.0, (abs(self.linear) + abs(want_v) + abs(want_w)) / TURN_NOISE_FULL)
+        w = (
+            self.angular
+            + self._alpha * (want_w - self.angular)
+            + NOISE_ANGULAR * moving * float(noise[1])
+        )
         v = max(0.0, v)
         self.linear, self.angular = v, w
         dev = math.hypot(want_v - v, HALF_TRACK_M * (want_w - w))

@@ -55,9 +55,9 @@ CASES: dict[str, RunConfig] = {
 }
 
 GOLDEN = {
-    "paper": "04a133c9810ac376192ffb37594de70a982769c7ae850c2d39bac488369dcc08",
-    "heavy": "65bbc3a765a76bf8917e52142ed62a62ad99ff6df7514b97e5b03d7c72fed2de",
-    "duration": "92d4e4fe5028ac94fef7e2fd472a18c44a9f2f2f2390ee895878fd39f0ec1e7d",
+    "paper": "70fae614600aee3fbb22ca6132ab4d6dc38a8b2aed840af841f12e00d608753e",
+    "heavy": "8b1f0a81405948a630f9a4157eeb3db00335d02d6fddd1848770959df01cbf25",
+    "duration": "9c440e1c5ff11c56d6cae43a5ddfc578bd374d44c22998cdfbf2e04e0e51e58c",
 }
 
 
