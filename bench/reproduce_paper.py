@@ -20,14 +20,19 @@ import statistics
 import subprocess
 import sys
 import tempfile
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from sim import SCENARIOS, FaultRates, RunConfig, read_truth, run
+from sim import SCENARIOS, FaultRates, RunConfig, RunResult, read_truth, run
 from sim.baselines import BaselinesReport, MethodResult
 from sim.baselines.cost import WARM_UP_CYCLES
 from sim.baselines.evaluate import Spread
+from sim.replay import check_counterfactuals
 from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
+from trace_runtime.logset import open_log
+from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION
 
 # The paper's reported figures (Tables II and III), quoted for comparison only.
 PAPER_TABLE_II = {"ET": "98.6 ± 7.0", "TC": "99.0", "DR": "98.1", "Time": "0.12 ms"}
@@ -46,6 +51,22 @@ class Run:
     seed: int
     report: MetricsReport
     truth_counts: dict[str, int]
+    example: dict[str, Any] | None = None
+    """The paper's example cycle (t = 20.0 s) as logged."""
+
+
+@dataclass
+class Behaviour:
+    """A faults-off run, judged as a robotics engineer would (issue 16)."""
+
+    seed: int
+    result: RunResult
+    cycles: int
+    failed_checks: int
+    non_continue: dict[str, float]
+
+
+EXAMPLE_T_NS = 20_000_000_000
 
 
 def simulate(seed: int, workdir: Path) -> Run:
@@ -55,7 +76,34 @@ def simulate(seed: int, workdir: Path) -> Run:
     counts: dict[str, int] = {}
     for line in read_truth(result.truth):  # only to describe what was injected, not to score
         counts[line["kind"]] = counts.get(line["kind"], 0) + 1
-    return Run(seed, report, counts)
+    action = open_log(out).cycle_at(EXAMPLE_T_NS).json(TOPIC_ACTION)
+    replay = check_counterfactuals(out)
+    example = {
+        "command": action["command"] if action else None,
+        "counterfactuals": action["counterfactuals"] if action else [],
+        "rationale": action["rationale"]["text"] if action else "",
+        "replay_ok": replay.ok,
+        "replayed": replay.counterfactuals,
+        "unverifiable": sum(replay.unverifiable.values()),
+    }
+    return Run(seed, report, counts, example)
+
+
+def behave(seed: int, workdir: Path) -> Behaviour:
+    out = workdir / f"clean-{seed}.mcap"
+    result = run(RunConfig(out=out, scenario="all", cycles=100, seed=seed, faults=FaultRates.off()))
+    cycles = failed = 0
+    commands: dict[str, Counter[str]] = {}
+    for cycle in open_log(out).iter_cycles():
+        execution, action = cycle.json(TOPIC_EXECUTION), cycle.json(TOPIC_ACTION)
+        if execution is None or action is None:
+            continue
+        cycles += 1
+        failed += any(not c["passed"] for c in execution["checks"])
+        scenario = next(f[9:] for f in execution["flags"] if f.startswith("scenario:"))
+        commands.setdefault(scenario, Counter())[action["command"]] += 1
+    share = {s: 1 - c["CONTINUE"] / sum(c.values()) for s, c in commands.items()}
+    return Behaviour(seed, result, cycles, failed, share)
 
 
 def pct(value: float | None, digits: int = 1) -> str:
@@ -82,7 +130,7 @@ def git_revision() -> str:
         return "unknown"
 
 
-def render(main: Run, sweep: list[Run], seeds: list[int]) -> str:
+def render(main: Run, sweep: list[Run], seeds: list[int], clean: list[Behaviour]) -> str:
     r = main.report
     o = r.overall
     across = r.across_groups
@@ -195,12 +243,115 @@ def render(main: Run, sweep: list[Run], seeds: list[int]) -> str:
     for label, values in _sweep_rows(sweep):
         add(f"| {label} | {mean_std(values)} | {min(values) * 100:.1f} | {max(values) * 100:.1f} |")
     add("")
+    lines.extend(_behaviour(main, clean))
     add("## Differences, honestly")
     add("")
     for paragraph in _differences(main, sweep):
         add(paragraph)
         add("")
     return "\n".join(lines).rstrip() + "\n"
+
+
+def _behaviour(main: Run, clean: list[Behaviour]) -> list[str]:
+    """The decisions the metrics audit, judged as a robotics engineer would (issue 16)."""
+    out = ["## The robot's decisions, with faults off", ""]
+    seeds = f"{clean[0].seed}..{clean[-1].seed}"
+    cycles = sum(b.cycles for b in clean)
+    failed = sum(b.failed_checks for b in clean)
+    out.append(
+        f"The auditability figures mean something only if the decisions are sound. Seeds "
+        f"{seeds}, the same 500-cycle runs with no fault injected: {failed} of {cycles} cycles "
+        f"({100 * failed / cycles:.1f}%) fail a compliance check (person speed limit, stop "
+        "response, maximum speed, command tracking). The policy slows within 4 m of a person "
+        "before the monitor's 0.5 m/s limit applies at 3 m, and the monitor allows braking at "
+        "the actuator's rate; so a failed check is an anomaly, not routine."
+    )
+    out += ["", "Share of cycles that are not CONTINUE, per scenario (min over seeds / mean):", ""]
+    out += ["| scenario | min | mean |", "|---|---|---|"]
+    for name in SCENARIOS:
+        shares = [b.non_continue.get(name, 0.0) for b in clean]
+        out.append(f"| {name} | {pct(min(shares))} | {pct(statistics.fmean(shares))} |")
+    out += ["", "Safety outcomes against the simulator's ground truth, over the same seeds:", ""]
+    out.append(
+        "| scenario | min separation to a person | to a vehicle | near-miss events (< 0.5 m) "
+        "| STOPs | time to stop, median / max |"
+    )
+    out.append("|---|---|---|---|---|---|")
+    for name in SCENARIOS:
+        rows = [b.result.safety[name] for b in clean if name in b.result.safety]
+        person = [r["min_separation_person_m"] for r in rows if r["min_separation_person_m"]]
+        vehicle = [r["min_separation_vehicle_m"] for r in rows if r["min_separation_vehicle_m"]]
+        medians = [r["time_to_stop_median_s"] for r in rows if r["time_to_stop_median_s"]]
+        maxes = [r["time_to_stop_max_s"] for r in rows if r["time_to_stop_max_s"]]
+        out.append(
+            f"| {name} | {_metres(person)} | {_metres(vehicle)} | "
+            f"{sum(r['near_miss_events'] for r in rows)} | {sum(r['stops'] for r in rows)} | "
+            f"{_seconds(statistics.median(medians) if medians else None)} / "
+            f"{_seconds(max(maxes) if maxes else None)} |"
+        )
+    confusion: dict[str, Counter[str]] = {}
+    for b in clean:
+        for true, row in b.result.perception["confusion"].items():
+            confusion.setdefault(true, Counter()).update(row)
+    classes = list(next(iter(confusion.values())))
+    out += [
+        "",
+        "Perception's classification against ground truth (entity-cycles, observed entities "
+        "matched to the nearest actor within 1 m; `none`: nothing there):",
+        "",
+        "| true \\ perceived | " + " | ".join(classes) + " | recall |",
+        "|---|" + "---|" * (len(classes) + 1),
+    ]
+    for true, row in confusion.items():
+        total = sum(row.values())
+        recall = pct(row[true] / total) if true in classes and total else "—"
+        out.append(f"| {true} | " + " | ".join(str(row[c]) for c in classes) + f" | {recall} |")
+    precision = []
+    for c in classes:
+        said = sum(confusion[t][c] for t in confusion)
+        precision.append(pct(confusion[c][c] / said) if said else "—")
+    out.append("| precision | " + " | ".join(precision) + " | |")
+    ex = main.example or {}
+    cfs = "; ".join(
+        f"would {c['would_select']} if {c['factor']} {c['comparison']} {c['threshold']}"
+        for c in ex.get("counterfactuals", [])
+    )
+    out += [
+        "",
+        f"**The paper's example** (seed {main.seed}, t = 20.0 s, the worker in front of the "
+        f"robot): {ex.get('command')}; {cfs or 'no counterfactual logged'}. Rationale: "
+        f'"{ex.get("rationale")}". With the risk below 0.2 the robot would SLOW, not '
+        "CONTINUE as in the paper: the worker is within the 4 m slow zone, and cruising past a "
+        "person within 3 m breaks the speed limit the compliance monitor checks. The aisle "
+        "state is a factor of every decision, so the log shows that the aisle was clear.",
+        "",
+        f"`trace-sim check-counterfactuals` on this run re-ran {ex.get('replayed')} logged "
+        "counterfactuals from the logged belief graphs, each an intervention propagated "
+        "through the graph's rules: "
+        + ("all hold" if ex.get("replay_ok") else "SOME DO NOT HOLD")
+        + f" ({ex.get('unverifiable')} could not be re-run: the previous cycle, whose taken "
+        "path sets the policy's hysteresis, was lost to an injected write timeout).",
+        "",
+        "**What this does to ET, TC and DR.** Every decision names the aisle state as a factor "
+        "(it decides the branch a counterfactual takes), so a decision has one more chain to "
+        "trace: an injected fault that breaks one chain costs a smaller share of ET(d), which "
+        "raises mean ET and ET_partial, while the share of fully traceable decisions, which "
+        "any broken chain spoils, does not move beyond seed noise. The longer rationale also "
+        "means a rationale cut to half its size (the truncation fault) more often keeps at "
+        "least one factor, so fewer decisions have none (ET(d) = 0); DR counts the truncation "
+        "itself and does not change. TC depends only on the dropped writes, which the new "
+        "policy does not affect.",
+        "",
+    ]
+    return out
+
+
+def _metres(values: list[float]) -> str:
+    return f"{min(values):.2f} m" if values else "—"
+
+
+def _seconds(value: float | None) -> str:
+    return "—" if value is None else f"{value:.1f} s"
 
 
 def _no_factor_count(report: MetricsReport) -> int:
@@ -597,7 +748,8 @@ def main() -> int:
             work = Path(tmp)
             main_run = simulate(args.seed, work)
             sweep = [simulate(seed, work) for seed in seeds]
-        text = render(main_run, sweep, seeds).rstrip("\n") + "\n\n" + baselines
+            clean = [behave(seed, work) for seed in range(1, 11)]
+        text = render(main_run, sweep, seeds, clean).rstrip("\n") + "\n\n" + baselines
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text)
     print(text)

@@ -5,19 +5,28 @@ Node ids are stable and readable; the investigator and the metrics rely on them:
 - ``<entity>`` (kind ``entity``, ``entity=<perception entity id>``, value = its class)
 - ``<entity>.distance`` (m), parent ``<entity>``
 - ``<entity>.intent`` (person: standing | crossing | approaching | leaving), parent ``<entity>``
-- ``<entity>.ttc`` (forklift, s, 99 = not closing), parent ``<entity>.distance``
-- ``<entity>.collision_risk`` in [0, 1]; person: parents ``.distance`` and ``.intent``;
-  forklift: parent ``.ttc``
+- ``<entity>.conflict`` in [0, 1]: how close the entity's predicted path comes to the robot's
+  (person: lateral conflict; forklift: miss distance, 0 unless seen moving), parent ``<entity>``
+- ``<entity>.closing`` (forklift, m/s towards the robot), parent ``<entity>``
+- ``<entity>.ttc`` (forklift, s, 99 = not closing), parents ``.distance`` and ``.closing``
+- ``<entity>.collision_risk`` in [0, 1]; person: parents ``.distance``, ``.intent`` and
+  ``.conflict``; forklift: parents ``.ttc`` and ``.conflict``
 - ``corridor`` (entity), ``corridor.clearance`` (m), ``aisle_blocked`` (P(blocked)), parent
   ``corridor.clearance`` and, when an obstacle bounds the clearance, ``<obstacle>.distance``
+
+Every derived value is a function of its parents' logged values only (``RULES``, keyed by the
+edge's rule text), so an intervention on one node can be propagated to its descendants from
+the logged graph alone (``intervene``): that is what the counterfactuals are.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from sim.perception import CORRIDOR_MAX_M, PerceivedEntity, PerceptionOutput
+from trace_runtime.errors import TraceError
 
 CRUISE_MPS = 1.2
 TTC_CAP_S = 99.0
@@ -27,18 +36,160 @@ _INTENT_WEIGHT = {"standing": 0.85, "crossing": 1.0, "approaching": 1.0, "leavin
 
 RULE_RANGE = "range: |entity - robot| from the fused track position"
 RULE_INTENT = "intent: entity velocity relative to the robot's heading"
-RULE_PED_RISK = (
-    "risk = lateral conflict (path occupancy while the robot arrives at cruise) "
-    "x proximity sigmoid((4.0 m - distance) / 1.2 m) x intent weight"
+RULE_PED_CONFLICT = (
+    "conflict = exp(-(closest approach of the person's predicted path to the robot's path "
+    "while the robot arrives at cruise / 0.8 m)^2)"
 )
-RULE_TTC = "ttc = distance / closing speed (99 s when not closing)"
-RULE_VEH_RISK = (
-    "risk = lateral conflict x sigmoid((4.5 s - ttc) / 1.0 s); 0 unless the vehicle is seen "
-    "moving at 0.5 m/s or more"
+RULE_PED_RISK = "risk = conflict x proximity sigmoid((4.0 m - distance) / 1.2 m) x intent weight"
+RULE_CLOSING = "closing = speed of the vehicle towards the robot, both as tracked"
+RULE_TTC = "ttc = distance / closing speed (99 s when closing < 0.05 m/s)"
+RULE_VEH_CONFLICT = (
+    "conflict = exp(-(predicted miss distance beyond the robot's half width / 0.5 m)^2); "
+    "0 unless the vehicle is seen moving at 0.5 m/s or more"
 )
+RULE_VEH_RISK = "risk = conflict x sigmoid((4.5 s - ttc) / 1.0 s)"
 RULE_CLEARANCE = "clearance = nearest non-person LiDAR return inside the corridor"
 RULE_BLOCKED = "P(blocked) = sigmoid((4.0 m - clearance) / 0.5 m)"
 RULE_OBSTACLE = "obstacle bounds the corridor clearance"
+
+
+def _entity_of(node: str) -> str:
+    return node.rsplit(".", 1)[0]
+
+
+def ped_risk(distance: float, intent: str, conflict: float) -> float:
+    """A pedestrian's collision risk from its parents (``RULE_PED_RISK``)."""
+    return round(conflict * _sigmoid((4.0 - distance) / 1.2) * _INTENT_WEIGHT[intent], 3)
+
+
+def time_to_collision(distance: float, closing: float) -> float:
+    """A vehicle's time to collision from its parents (``RULE_TTC``)."""
+    return round(min(TTC_CAP_S, distance / closing), 3) if closing > 0.05 else TTC_CAP_S
+
+
+def vehicle_risk(ttc: float, conflict: float) -> float:
+    """A vehicle's collision risk from its parents (``RULE_VEH_RISK``)."""
+    return round(conflict * _sigmoid((4.5 - ttc) / 1.0), 3)
+
+
+def p_blocked(clearance: float) -> float:
+    """P(aisle blocked) from the corridor clearance (``RULE_BLOCKED``)."""
+    return round(_sigmoid((4.0 - clearance) / 0.5), 3)
+
+
+@dataclass(frozen=True, slots=True)
+class Rule:
+    """How a derived node's value follows from its parents' (named from the child's id)."""
+
+    compute: Callable[[dict[str, object], str], float]
+    parents: Callable[[str], tuple[str, ...]]
+
+
+def _rule_ped_risk(v: dict[str, object], child: str) -> float:
+    e = _entity_of(child)
+    return ped_risk(float(v[f"{e}.distance"]), str(v[f"{e}.intent"]), float(v[f"{e}.conflict"]))  # type: ignore[arg-type]
+
+
+def _rule_ttc(v: dict[str, object], child: str) -> float:
+    e = _entity_of(child)
+    return time_to_collision(float(v[f"{e}.distance"]), float(v[f"{e}.closing"]))  # type: ignore[arg-type]
+
+
+def _rule_veh_risk(v: dict[str, object], child: str) -> float:
+    e = _entity_of(child)
+    return vehicle_risk(float(v[f"{e}.ttc"]), float(v[f"{e}.conflict"]))  # type: ignore[arg-type]
+
+
+def _rule_blocked(v: dict[str, object], child: str) -> float:
+    return p_blocked(float(v["corridor.clearance"]))  # type: ignore[arg-type]
+
+
+def _named(*suffixes: str) -> Callable[[str], tuple[str, ...]]:
+    return lambda child: tuple(f"{_entity_of(child)}.{s}" for s in suffixes)
+
+
+RULES: dict[str, Rule] = {
+    RULE_PED_RISK: Rule(_rule_ped_risk, _named("distance", "intent", "conflict")),
+    RULE_TTC: Rule(_rule_ttc, _named("distance", "closing")),
+    RULE_VEH_RISK: Rule(_rule_veh_risk, _named("ttc", "conflict")),
+    RULE_BLOCKED: Rule(_rule_blocked, lambda _: ("corridor.clearance",)),
+}
+"""Edge rule -> how the child's value follows from its parents' values. Rules not listed
+(range, intent, conflict, closing, clearance) derive a node from sensor data, not from other
+nodes: an intervention stops there. ``RULE_OBSTACLE`` names the obstacle behind a clearance
+(the clearance is measured, not computed from that distance), so it propagates nothing."""
+
+
+def missing_rule_edges(edges: Iterable[tuple[str, str, str]]) -> list[tuple[str, str]]:
+    """(parent, child) edges that a derived node's rule reads but the graph lacks: where an
+    intervention cannot be propagated from the graph alone."""
+    have: dict[str, set[str]] = {}
+    rule_of: dict[str, str] = {}
+    for parent, child, rule in edges:
+        if rule in RULES:
+            have.setdefault(child, set()).add(parent)
+            rule_of[child] = rule
+    return [
+        (parent, child)
+        for child, rule in rule_of.items()
+        for parent in RULES[rule].parents(child)
+        if parent not in have[child]
+    ]
+
+
+class UnknownRuleError(TraceError):
+    """A logged edge into a descendant names a rule this policy does not know."""
+
+
+Plan = list[tuple[str, Callable[[dict[str, object], str], float]]]
+
+
+def intervention_plan(node: str, edges: Iterable[tuple[str, str, str]]) -> Plan:
+    """The descendants of ``node`` that a ``do(node = x)`` changes, in an order where each
+    comes after its parents, each with its rule. ``edges`` are (parent, child, rule)."""
+    children: dict[str, list[str]] = {}
+    parents: dict[str, list[str]] = {}
+    rule_into: dict[str, set[str]] = {}
+    for parent, child, rule in edges:
+        if rule in RULES:
+            children.setdefault(parent, []).append(child)
+            parents.setdefault(child, []).append(parent)
+            rule_into.setdefault(child, set()).add(rule)
+    reached: set[str] = set()
+    stack = [node]
+    while stack:
+        for child in children.get(stack.pop(), ()):
+            if child not in reached:
+                reached.add(child)
+                stack.append(child)
+    order: list[str] = []
+    done = {node}
+
+    def visit(n: str) -> None:
+        # Parents first; the graph is a DAG by construction (entity -> state -> risk).
+        if n in done:
+            return
+        done.add(n)
+        for parent in parents.get(n, ()):
+            if parent in reached:
+                visit(parent)
+        order.append(n)
+
+    for n in sorted(reached):
+        visit(n)
+    plan = []
+    for n in order:
+        if len(rule_into[n]) != 1:
+            raise UnknownRuleError(f"{n} is derived by {len(rule_into[n])} rules")
+        plan.append((n, RULES[next(iter(rule_into[n]))].compute))
+    return plan
+
+
+def intervene(values: dict[str, object], plan: Plan, node: str, x: float) -> None:
+    """``do(node = x)`` in place: set it and recompute its descendants by their rules."""
+    values[node] = x
+    for child, rule in plan:
+        values[child] = rule(values, child)
 
 
 @dataclass(slots=True)  # not frozen: ~4x cheaper to create
@@ -108,7 +259,8 @@ def build_belief(
         p_d = _distance_confidence(e)
         did = f"{e.id}.distance"
         distance_ids.add(did)
-        nodes.append(Node(did, "state", "distance", p_d, round(d, 3), "m"))
+        d = round(d, 3)  # derived values follow from the logged value, so a replay agrees
+        nodes.append(Node(did, "state", "distance", p_d, d, "m"))
         edges.append(Edge(e.id, did, p_d, RULE_RANGE))
         if e.cls == "person":
             speed_e = math.hypot(vx, vy)
@@ -124,33 +276,42 @@ def build_belief(
             iid, rid = f"{e.id}.intent", f"{e.id}.collision_risk"
             nodes.append(Node(iid, "state", "pedestrian intent", p_i, intent))
             edges.append(Edge(e.id, iid, p_i, RULE_INTENT))
-            g = _lateral_conflict(rx, ry, vy, 6.0)
-            prox = _sigmoid((4.0 - d) / 1.2)
-            risk = round(g * prox * _INTENT_WEIGHT[intent], 3)
+            cid = f"{e.id}.conflict"
+            g = round(_lateral_conflict(rx, ry, vy, 6.0), 3)
+            nodes.append(Node(cid, "state", "path conflict", p_d, g))
+            edges.append(Edge(e.id, cid, p_d, RULE_PED_CONFLICT))
+            risk = ped_risk(d, intent, g)
             p_r = round(conf * p_d, 3)
             nodes.append(Node(rid, "state", "collision risk", p_r, risk))
             edges.append(Edge(did, rid, p_d, RULE_PED_RISK))
             edges.append(Edge(iid, rid, p_i, RULE_PED_RISK))
+            edges.append(Edge(cid, rid, p_d, RULE_PED_RISK))
         elif e.cls == "forklift":
             rel_vx = vx - speed
-            closing = -(rel_vx * rx + vy * ry) / max(d, 1e-6)
-            ttc = min(TTC_CAP_S, d / closing) if closing > 0.05 else TTC_CAP_S
-            ttc = round(ttc, 3)
-            tid, rid = f"{e.id}.ttc", f"{e.id}.collision_risk"
+            closing = round(-(rel_vx * rx + vy * ry) / max(d, 1e-6), 3)
+            kid, tid = f"{e.id}.closing", f"{e.id}.ttc"
+            cid, rid = f"{e.id}.conflict", f"{e.id}.collision_risk"
+            nodes.append(Node(kid, "state", "closing speed", p_d, closing, "m/s"))
+            edges.append(Edge(e.id, kid, p_d, RULE_CLOSING))
+            ttc = time_to_collision(d, closing)
             nodes.append(Node(tid, "state", "time to collision", p_d, ttc, "s"))
             edges.append(Edge(did, tid, p_d, RULE_TTC))
+            edges.append(Edge(kid, tid, p_d, RULE_TTC))
             y_pred = ry + vy * min(ttc, 5.0)
             # Miss distance beyond the robot's half width (the track is the near face).
             miss = max(0.0, min(abs(ry), abs(y_pred)) - 0.35)
-            g = math.exp(-((miss / 0.5) ** 2))
             # A vehicle standing still is an obstacle (see aisle_blocked), not on a course.
             # Perception reports zero velocity until a track's motion is confirmed, so a
             # vehicle whose motion is unknown is never taken to be moving.
             moving = 1.0 if math.hypot(vx, vy) >= VEHICLE_MOVING_MPS else 0.0
-            risk = round(moving * g * _sigmoid((4.5 - ttc) / 1.0), 3)
+            g = round(moving * math.exp(-((miss / 0.5) ** 2)), 3)
+            nodes.append(Node(cid, "state", "path conflict", p_d, g))
+            edges.append(Edge(e.id, cid, p_d, RULE_VEH_CONFLICT))
+            risk = vehicle_risk(ttc, g)
             p_r = round(conf * p_d, 3)
             nodes.append(Node(rid, "state", "collision risk", p_r, risk))
             edges.append(Edge(tid, rid, p_d, RULE_VEH_RISK))
+            edges.append(Edge(cid, rid, p_d, RULE_VEH_RISK))
 
     corridor = perception.corridor
     lidar_seen = any(ev.sensor == "lidar" and ev.weight >= 0.5 for ev in corridor.evidence)
@@ -159,7 +320,7 @@ def build_belief(
     clearance = round(min(corridor.clearance, CORRIDOR_MAX_M), 3)
     nodes.append(Node("corridor.clearance", "state", "corridor clearance", p_c, clearance, "m"))
     edges.append(Edge("corridor", "corridor.clearance", p_c, RULE_CLEARANCE))
-    blocked = round(_sigmoid((4.0 - clearance) / 0.5), 3)
+    blocked = p_blocked(clearance)
     nodes.append(Node("aisle_blocked", "state", "aisle blocked", blocked, blocked))
     edges.append(Edge("corridor.clearance", "aisle_blocked", p_c, RULE_BLOCKED))
     if corridor.blocker is not None and f"{corridor.blocker}.distance" in distance_ids:

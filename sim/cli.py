@@ -1,6 +1,7 @@
-"""``trace-sim``: parse, call ``sim.run``, render.
+"""``trace-sim``: parse, call ``sim.run`` (or ``sim.replay``), render.
 
-Exit codes: 0 ok, 2 usage, 3 unwritable output.
+Exit codes: 0 ok, 1 findings (``check-counterfactuals``), 2 usage, 3 unwritable output or
+unreadable log.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from sim.runner import (
 )
 from sim.scenarios import EPISODE_CYCLES, SCENARIOS
 
+EXIT_FINDINGS = 1
 EXIT_USAGE = 2
 EXIT_OUTPUT = 3
 
@@ -167,9 +169,36 @@ def _render(result: RunResult) -> None:
     table.add_row("bytes written", f"{result.bytes_written:,}")
     table.add_row("cycles per write", f"{result.batch_cycles}")
     table.add_row("speed", f"{result.cycles_per_s:,.0f} cycles/s ({result.elapsed_s:.1f} s)")
+    for name, out in result.safety.items():
+        table.add_row(
+            f"safety: {name}",
+            f"min separation person {_m(out['min_separation_person_m'])}, "
+            f"vehicle {_m(out['min_separation_vehicle_m'])}; "
+            f"near misses {out['near_miss_events']} ({out['near_miss_cycles']} cycles); "
+            f"STOPs {out['stops']}, time to stop median {_s(out['time_to_stop_median_s'])}, "
+            f"max {_s(out['time_to_stop_max_s'])}",
+        )
+    for cls, q in result.perception.get("per_class", {}).items():
+        table.add_row(
+            f"perception: {cls}",
+            f"precision {_share(q['precision'])}, recall {_share(q['recall'])} "
+            f"(true -> perceived: {result.perception['confusion'][cls]})",
+        )
     table.add_row("log", str(result.out))
     table.add_row("truth", f"{result.truth} (ground truth; metrics must not read it)")
     Console().print(table)
+
+
+def _m(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f} m"
+
+
+def _s(value: float | None) -> str:
+    return "-" if value is None else f"{value:.1f} s"
+
+
+def _share(value: float | None) -> str:
+    return "-" if value is None else f"{100 * value:.1f}%"
 
 
 @app.command("scenarios")
@@ -319,6 +348,64 @@ def _render_baselines(data: dict[str, Any]) -> None:
         row = {p["actions"]: p["overhead_cpu_us"] for p in data["scaling"] if p["entities"] == n}
         scaling.add_row(str(n), *(f"{row[k]:.0f}" for k in actions))
     console.print(scaling)
+
+
+_CHECK_HELP = """Re-run every logged decision and counterfactual against the policy.
+
+For each cycle the policy input is rebuilt from the logged belief graph and the previous
+cycle's taken path (the policy's hysteresis). The logged command must be what the policy
+chooses; each counterfactual must hold under do(factor = threshold), the change propagated
+to the factor's descendants through the logged edges' rules. Cycles the log cannot re-run
+(a belief edge lost, the previous cycle missing) are counted as unverifiable.
+
+Exit 0 when everything re-runs as logged, 1 listing each one that does not, 3 when the log
+cannot be read.
+
+[bold]Example[/bold]:
+
+  trace-sim check-counterfactuals run.mcap --json
+"""
+
+
+@app.command("check-counterfactuals", help=_help(_CHECK_HELP))
+def check_counterfactuals_cmd(
+    log: Annotated[Path, typer.Argument(help="a .mcap file or a log root directory")],
+    as_json: Annotated[bool, typer.Option("--json", help="print the report as JSON")] = False,
+    plain: Annotated[bool, typer.Option("--plain", help="plain text, no colour")] = False,
+) -> None:
+    """Re-run every logged decision and counterfactual against the policy."""
+    from sim.replay import check_counterfactuals
+    from trace_runtime import TraceError
+
+    try:
+        report = check_counterfactuals(log)
+    except TraceError as err:
+        _fail(f"cannot read {log}: {err}", EXIT_OUTPUT)
+        return
+    if as_json:
+        sys.stdout.write(json.dumps(report.as_dict(), indent=2) + "\n")
+    else:
+        lines = [
+            f"{report.path}: {report.cycles} cycles, {report.decisions} decisions and "
+            f"{report.counterfactuals} counterfactuals re-run",
+            *(
+                f"unverifiable: {n} counterfactuals ({why})"
+                for why, n in report.unverifiable.items()
+            ),
+            *(
+                f"cycle {f.cycle} (t = {f.t_ns / 1e9:.1f} s): {f.what} {f.claim!r}: {f.got}"
+                for f in report.findings
+            ),
+            "all hold" if report.ok else f"{len(report.findings)} do not hold",
+        ]
+        if plain:
+            sys.stdout.write("\n".join(lines) + "\n")
+        else:
+            from rich.console import Console
+
+            Console(highlight=False).print("\n".join(lines), markup=False)
+    if not report.ok:
+        raise typer.Exit(EXIT_FINDINGS)
 
 
 def main() -> None:

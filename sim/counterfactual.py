@@ -1,8 +1,11 @@
 """Counterfactuals found by probing the policy, not by reading its thresholds.
 
-For each factor of a decision, the prober intervenes on that one belief node (all others
-held), scans from the observed value towards each end of the factor's domain, and bisects
-the first bracket where the command changes. The boundary is then snapped to two decimals
+For each factor of a decision, the prober intervenes on that one belief node the way
+``do(node = x)`` does on a causal graph: the node is set, its descendants are recomputed
+from it by the belief graph's own rules (``sim.belief.intervene``; moving a pedestrian's
+distance moves its collision risk), every other node is held. It scans from the observed
+value towards each end of the factor's domain and bisects the first bracket where the
+command changes. The boundary is then snapped to two decimals
 only if the policy confirms the snapped value. What is reported is therefore true of the
 policy by construction:
 
@@ -15,9 +18,10 @@ returns nothing: a partial set of counterfactuals would look complete to an inve
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 
+from sim.belief import Plan, intervene, intervention_plan
 from sim.policy import PolicyInput, choose
 from trace_runtime.errors import TraceError
 
@@ -30,6 +34,8 @@ _DOMAINS = {
     "collision_risk": (0.0, 1.0, 0.0005),
     "aisle_blocked": (0.0, 1.0, 0.0005),
     "clearance": (0.0, 10.0, 0.002),
+    "closing": (-5.0, 5.0, 0.002),
+    "conflict": (0.0, 1.0, 0.0005),
 }
 
 
@@ -56,17 +62,24 @@ def probe(
     values: Mapping[str, object],
     factors: list[str],
     budget: int = DEFAULT_BUDGET,
+    edges: Iterable[tuple[str, str, str]] = (),
 ) -> list[Found]:
-    """Counterfactuals for each numeric factor, in both directions; raise BudgetExhaustedError."""
+    """Counterfactuals for each numeric factor, in both directions; raise BudgetExhaustedError.
+
+    ``edges`` are the belief graph's (parent, child, rule): an intervention on a factor is
+    propagated to its descendants through them. Without edges nothing is propagated."""
     spent = 0
+    edge_list = list(edges)
+    base_values = dict(values)
     v = dict(values)
+    plan: Plan = []
 
     def run(node: str, x: float) -> str:
         nonlocal spent
         spent += 1
         if spent > budget:
             raise BudgetExhaustedError(f"counterfactual probing exceeded {budget} evaluations")
-        v[node] = x
+        intervene(v, plan, node, x)
         return choose(inp, v)
 
     spent = 1
@@ -76,13 +89,14 @@ def probe(
         current = values[node]
         if not isinstance(current, (int, float)) or isinstance(current, bool):
             continue
+        plan = intervention_plan(node, edge_list) if edge_list else []
         lo_d, hi_d, tol = domain_of(node)
         c = float(current)
         for end in (hi_d, lo_d):
             hit = _search(run, node, c, end, tol=tol, base=base)
             if hit is not None:
                 found.append(hit)
-        v[node] = current
+        v.update(base_values)
     return found
 
 
@@ -124,13 +138,21 @@ def _search(
     return Found(node, "<=", other, would)
 
 
-def holds(inp: PolicyInput, values: Mapping[str, object], cf: Found) -> bool:
-    """Re-run the policy with the counterfactual value: does it select ``would_select``?"""
+def holds(
+    inp: PolicyInput,
+    values: Mapping[str, object],
+    cf: Found,
+    edges: Iterable[tuple[str, str, str]] = (),
+) -> bool:
+    """Re-run the policy under ``do(factor = threshold)`` (propagated through ``edges``):
+    does it select ``would_select``?"""
     x = cf.threshold
     if cf.comparison == ">":
         x += STRICT_EPS
     elif cf.comparison == "<":
         x -= STRICT_EPS
     v = dict(values)
-    v[cf.factor] = x
+    edge_list = list(edges)
+    plan = intervention_plan(cf.factor, edge_list) if edge_list else []
+    intervene(v, plan, cf.factor, x)
     return choose(inp, v) == cf.would_select

@@ -1,14 +1,14 @@
 """Layer 3 for one cycle: the choice, the scored alternatives, the counterfactuals and the
 rationale, remembered per policy input.
 
-All of it is a pure function of the values of the belief nodes the policy reads (each
-pedestrian's collision risk and distance, each vehicle's risk and time to collision, the
-aisle state) and of which nodes those are. A robot waiting in a clear aisle, or behind a
-worker who stands still, sees the same input cycle after cycle: the decision is then
-taken from a small cache instead of being re-derived, probes included. The counterfactuals
-stay true of the policy by construction: they are the prober's answer for exactly this
-input. Faults that act on one cycle (a cut probing budget, a short rationale buffer) are
-applied by the caller on top.
+All of it is a pure function of the belief graph's node values (the nodes the policy reads,
+and the ones an intervention propagates from: conflicts, intents, closing speeds, the
+clearance), of which nodes those are, and of the leaf held from the previous cycle. A
+robot waiting in a clear aisle, or behind a worker who stands still, sees the same input
+cycle after cycle: the decision is then taken from a small cache instead of being
+re-derived, probes included. The counterfactuals stay true of the policy by construction:
+they are the prober's answer for exactly this input. Faults that act on one cycle (a cut
+probing budget, a short rationale buffer) are applied by the caller on top.
 """
 
 from __future__ import annotations
@@ -55,11 +55,14 @@ class Decider:
         self.hits = 0
         self.misses = 0
 
-    def decide(self, graph: BeliefGraph) -> tuple[PolicyInput, dict[str, Any], Decision]:
-        """The policy input and node values of ``graph``, and the decision on them."""
+    def decide(
+        self, graph: BeliefGraph, held: str | None = None
+    ) -> tuple[PolicyInput, dict[str, Any], Decision]:
+        """The policy input and node values of ``graph``, and the decision on them, with
+        ``held`` the leaf taken in the previous cycle."""
         values: dict[str, Any] = {n.id: n.value for n in graph.nodes}
-        inp = PolicyInput.from_nodes(graph.nodes)
-        read = tuple(values[n] for n in _read_nodes(inp))
+        inp = PolicyInput.from_nodes(graph.nodes, held)
+        read = tuple(values.get(n) for n in _decisive_nodes(inp))
         key = (inp, read)
         decision = self._cache.get(key)
         if decision is not None:
@@ -77,29 +80,42 @@ class Decider:
 def _shareable(read: tuple[Any, ...]) -> bool:
     """Whether inputs equal to ``read`` are the same input: equal values can print
     differently (1 and 1.0, 0.0 and -0.0), and the rationale quotes them."""
-    return all(type(x) is float and (x != 0.0 or math.copysign(1.0, x) > 0) for x in read)
+    return all(
+        type(x) is str or (type(x) is float and (x != 0.0 or math.copysign(1.0, x) > 0))
+        for x in read
+    )
 
 
-def _read_nodes(inp: PolicyInput) -> list[str]:
-    """Every belief node ``choose``/``evaluate`` may read for this input."""
-    nodes = [n for _, risk, other in (*inp.peds, *inp.vehicles) for n in (risk, other)]
-    nodes.append(inp.aisle)
+def _decisive_nodes(inp: PolicyInput) -> list[str]:
+    """Every node the decision depends on: what the tree reads, and what an intervention on
+    a factor recomputes its descendants from (``sim.belief.RULES``' parents)."""
+    nodes = []
+    for e, risk, distance in inp.peds:
+        nodes += [risk, distance, f"{e}.intent", f"{e}.conflict"]
+    for e, risk, ttc in inp.vehicles:
+        nodes += [risk, ttc, f"{e}.distance", f"{e}.closing", f"{e}.conflict"]
+    nodes += [inp.aisle, "corridor.clearance"]
     return nodes
+
+
+def graph_edges(graph: BeliefGraph) -> list[tuple[str, str, str]]:
+    """(parent, child, rule) of each edge: what an intervention propagates through."""
+    return [(e.parent, e.child, e.rule) for e in graph.edges]
 
 
 def derive(inp: PolicyInput, values: dict[str, Any], graph: BeliefGraph) -> Decision:
     """Evaluate the policy, score the alternatives, probe, and write the rationale."""
     outcome = evaluate(inp, values)
-    factors = factors_of(outcome)
+    factors = factors_of(outcome, inp)
     score, alternatives = score_alternatives(outcome, values)
     found: list[Found] | None
     try:
-        found = probe(inp, values, factors, DEFAULT_BUDGET)
+        found = probe(inp, values, factors, DEFAULT_BUDGET, graph_edges(graph))
     except BudgetExhaustedError:
         found = None
     phrases = describe(outcome, values)
     buffer = RationaleBuffer(RATIONALE_CAPACITY)
-    write_rationale(buffer, phrases, outcome.tests, outcome.command, graph)
+    write_rationale(buffer, phrases, outcome.tests, outcome.command, graph, factors=factors)
     return Decision(
         outcome=outcome,
         factors=factors,

@@ -1,4 +1,17 @@
-"""Layer 4: commanded motion, actuator lag and noise, and the compliance monitor."""
+"""Layer 4: commanded motion, actuator lag and noise, and the compliance monitor.
+
+The monitor's rules and the policy agree by construction: the policy slows before the
+speed limit near people applies, and the monitor allows for the braking it can see (the
+actuator's first-order lag towards a command within the limit); its stop tolerance sits
+above the actuator's noise floor. With no fault injected a failed check therefore means the
+robot did something wrong, not that the monitor and the policy disagree.
+
+Motion (``Steering``, the executive under the policy): STOP, SLOW and CONTINUE keep to the
+route's centre line with a lane-keeping steer bounded to ``MAX_YAW_RATE``. REROUTE is a path
+change, never an instantaneous flip: the 4 m aisle leaves no room to pass a forklift or an
+obstacle, so the robot turns back along the route, a U-turn at ``MAX_YAW_RATE`` (radius
+0.5 m at 0.3 m/s, about 5 s) that is completed once begun (a STOP still halts it).
+"""
 
 from __future__ import annotations
 
@@ -16,13 +29,59 @@ TAU_S = 0.25
 NOISE_LINEAR = 0.02
 NOISE_ANGULAR = 0.02
 HALF_TRACK_M = 0.25  # converts an angular-rate error into a wheel-speed error
+TURN_NOISE_FULL = 0.3
+"""Speed (m/s, or rad/s commanded) from which the angular noise is at its full level."""
+
+MAX_YAW_RATE = 0.6
+"""rad/s: the turn rate of a REROUTE, and the bound on the lane-keeping steer."""
+K_YAW, K_LATERAL = 1.5, 0.8
+"""Lane keeping: w = -K_YAW * heading error - K_LATERAL * lateral offset (stable at 0.3 and
+1.2 m/s: both closed-loop poles have real part -0.75 /s)."""
 
 MAX_SPEED = 1.5
 PERSON_ZONE_M = 3.0
 PERSON_SPEED = 0.5
 STOP_GRACE_S = 1.0
-STOP_SPEED = 0.05
+STOP_SPEED = 0.1
+"""m/s: five standard deviations of the actuator's speed noise, so a stopped robot passes."""
 ENVELOPE_SLACK = 0.1
+BRAKING_SLACK = 3 * NOISE_LINEAR
+"""Allowed above the lag's expected speed while braking towards a command within a limit."""
+
+
+TURN_DONE_RAD = 0.15
+"""A U-turn ends within this of the reversed route heading (lane keeping takes over)."""
+
+
+class Steering:
+    """Turns the chosen command into (linear, angular), remembering a U-turn in progress."""
+
+    def __init__(self) -> None:
+        self.turning_from: int | None = None
+        """Direction of travel along the route when the U-turn in progress began."""
+
+    def steer(
+        self, command: str, *, heading_error: float, lateral: float, direction: int
+    ) -> tuple[float, float]:
+        """(linear, angular) for this cycle. ``heading_error`` (rad) and ``lateral`` (m, left)
+        are the robot's offsets from its direction of travel along the route."""
+        if (
+            self.turning_from is not None
+            and direction != self.turning_from
+            and heading_error >= -TURN_DONE_RAD
+        ):
+            self.turning_from = None  # heading back along the route: the turn is done
+        if command == REROUTE and self.turning_from is None:
+            self.turning_from = direction
+        if command == STOP:
+            return 0.0, 0.0
+        linear, _ = MOTION[command]
+        if self.turning_from is not None:
+            # A U-turn is completed once begun, at the REROUTE speed whatever the command,
+            # unless a STOP halts it: half a turn would leave the robot across the aisle.
+            return min(linear, MOTION[REROUTE][0]), MAX_YAW_RATE
+        w = -K_YAW * heading_error - K_LATERAL * lateral
+        return linear, round(max(-MAX_YAW_RATE, min(MAX_YAW_RATE, w)), 4)
 
 
 @dataclass(slots=True)  # not frozen: ~4x cheaper to create
@@ -52,13 +111,28 @@ class Actuator:
         self._alpha = 1.0 - math.exp(-PERIOD_S / TAU_S)
         self._stop_since: float | None = None
 
-    def step(self, command: str, t: float, belief: BeliefGraph) -> Executed:
-        """Apply ``command`` for one period; measure and check the result."""
-        want_v, want_w = MOTION[command]
+    def step(
+        self,
+        command: str,
+        t: float,
+        belief: BeliefGraph,
+        want: tuple[float, float] | None = None,
+    ) -> Executed:
+        """Apply ``command`` (as ``want`` = (linear, angular) when steered) for one period;
+        measure and check the result."""
+        want_v, want_w = MOTION[command] if want is None else want
+        prev_v = self.linear
         prev_err = abs(want_v - self.linear)
         noise = self.rng.normal(0.0, 1.0, 2)
         v = self.linear + self._alpha * (want_v - self.linear) + NOISE_LINEAR * float(noise[0])
-        w = self.angular + self._alpha * (want_w - self.angular) + NOISE_ANGULAR * float(noise[1])
+        # Turning noise comes from the wheels' speed control: a robot held still on its
+        # brakes does not turn (else it would drift in heading through a long STOP).
+        moving = min(1.0, (abs(self.linear) + abs(want_v) + abs(want_w)) / TURN_NOISE_FULL)
+        w = (
+            self.angular
+            + self._alpha * (want_w - self.angular)
+            + NOISE_ANGULAR * moving * float(noise[1])
+        )
         v = max(0.0, v)
         self.linear, self.angular = v, w
         dev = math.hypot(want_v - v, HALF_TRACK_M * (want_w - w))
@@ -90,13 +164,21 @@ class Actuator:
                 ):
                     nearest = (m.value, pid)
         if nearest is not None and nearest[0] < PERSON_ZONE_M:
+            # Braking towards a speed within the limit, at the actuator's rate, complies: the
+            # limit cannot be met faster than the robot can brake.
+            braking = want_v <= PERSON_SPEED and v <= (
+                prev_v + self._alpha * (want_v - prev_v) + BRAKING_SLACK
+            )
+            detail = f"{nearest[1]} at {nearest[0]:.2f} m (< {PERSON_ZONE_M} m)"
+            if v > PERSON_SPEED and braking:
+                detail += f"; braking towards {want_v:.1f} m/s at the actuator's rate"
             checks.append(
                 Check(
                     "person_speed_limit",
-                    v <= PERSON_SPEED,
+                    v <= PERSON_SPEED or braking,
                     round(v, 3),
                     PERSON_SPEED,
-                    f"{nearest[1]} at {nearest[0]:.2f} m (< {PERSON_ZONE_M} m)",
+                    detail,
                 )
             )
         else:

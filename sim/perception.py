@@ -560,6 +560,9 @@ class Perceiver:
                 looks = [] if c.truncated else [look]
                 t = Track(self._new_id(cls), logp, wx, wy, width=c.width, looks=looks)
                 self.tracks.append(t)
+                # The corridor must know whose returns these are from the first look: a
+                # person seen for the first time is not an obstacle that blocks the aisle.
+                track_of[c.index] = t
             else:
                 t = known
                 t.x += 0.5 * (wx - t.x)

@@ -1,4 +1,5 @@
-"""Layer 3 policy: the paper's Fig. 2 decision tree, extended with a vehicle branch.
+"""Layer 3 policy: the paper's Fig. 2 decision tree, extended with a vehicle branch and the
+speed limit near people that the compliance monitor enforces.
 
 ::
 
@@ -6,10 +7,22 @@
       yes -> vehicle_close: ttc < 3.0 s?        yes -> STOP      no -> REROUTE
       no  -> ped_in_path: pedestrian in path? (max pedestrian collision_risk >= 0.2)
                yes -> ped_close: d_ped < 2.0 m?  yes -> STOP      no -> SLOW
-               no  -> path_clear: aisle_blocked < 0.5?  yes -> CONTINUE  no -> REROUTE
+               no  -> path_clear: aisle_blocked < 0.5?
+                        yes -> person_near: nearest person < 4.0 m?  yes -> SLOW
+                                                                       no -> CONTINUE
+                        no  -> REROUTE
 
-The policy is a pure function of belief node values, so it can be re-run on a logged
-belief graph (``PolicyInput.from_nodes``) and probed with interventions on single nodes.
+``person_near`` slows the robot before the monitor's 0.5 m/s limit within 3 m of a person
+applies (from cruise the actuator needs about 0.5 s, i.e. up to a metre of closing).
+
+Every threshold has a hysteresis band: once a test has sent the robot down its "act" branch
+(the leaf taken in the previous cycle is below it), the value must cross back past a
+``hold`` level to leave it, so a value hovering at a threshold does not flip the command
+cycle by cycle. Which leaf was held is part of the input (``PolicyInput.held``, logged as the
+previous cycle's taken path) and each test's text says when its hold level applied.
+
+The policy is a pure function of belief node values and the held leaf, so it can be re-run
+on a logged belief graph (``PolicyInput.from_nodes``) and probed with interventions.
 """
 
 from __future__ import annotations
@@ -27,8 +40,35 @@ TTC_STOP_S = 3.0
 PED_RISK = 0.2
 PED_STOP_M = 2.0
 BLOCKED = 0.5
+PERSON_SLOW_M = 4.0
 
 AISLE = "aisle_blocked"
+
+
+@dataclass(frozen=True, slots=True)
+class Threshold:
+    """A decision threshold with hysteresis: ``hold`` applies while one of ``held_by`` (the
+    leaves on the test's acting side) was taken in the previous cycle."""
+
+    enter: float
+    hold: float
+    held_by: frozenset[str]
+
+
+THRESHOLDS: dict[str, Threshold] = {
+    "root": Threshold(VEHICLE_RISK, 0.4, frozenset({"stop_vehicle", "reroute_vehicle"})),
+    "vehicle_close": Threshold(TTC_STOP_S, 3.5, frozenset({"stop_vehicle"})),
+    "ped_in_path": Threshold(PED_RISK, 0.15, frozenset({"stop_ped", "slow"})),
+    "ped_close": Threshold(PED_STOP_M, 2.3, frozenset({"stop_ped"})),
+    "path_clear": Threshold(BLOCKED, 0.4, frozenset({"reroute_path"})),
+    "person_near": Threshold(PERSON_SLOW_M, 4.5, frozenset({"slow_near", "slow", "stop_ped"})),
+}
+
+
+def limit(test: str, held: str | None) -> float:
+    """The threshold of ``test`` given the leaf taken in the previous cycle."""
+    spec = THRESHOLDS[test]
+    return spec.hold if held in spec.held_by else spec.enter
 
 
 class _NodeLike(Protocol):
@@ -56,6 +96,8 @@ TREE: tuple[TreeSpec, ...] = (
     TreeSpec("stop_ped", "STOP", command=STOP),
     TreeSpec("slow", "SLOW", command=SLOW),
     TreeSpec("path_clear", "path clear?", f"aisle_blocked < {BLOCKED}"),
+    TreeSpec("person_near", "person within 4 m?", f"nearest person distance < {PERSON_SLOW_M} m"),
+    TreeSpec("slow_near", "SLOW", command=SLOW),
     TreeSpec("continue", "CONTINUE", command=CONTINUE),
     TreeSpec("reroute_path", "REROUTE", command=REROUTE),
 )
@@ -68,8 +110,10 @@ TREE_EDGES: tuple[tuple[str, str, str], ...] = (
     ("ped_in_path", "path_clear", "no"),
     ("ped_close", "stop_ped", "yes"),
     ("ped_close", "slow", "no"),
-    ("path_clear", "continue", "yes"),
+    ("path_clear", "person_near", "yes"),
     ("path_clear", "reroute_path", "no"),
+    ("person_near", "slow_near", "yes"),
+    ("person_near", "continue", "no"),
 )
 _PARENT = {child: parent for parent, child, _ in TREE_EDGES}
 _BRANCH = {child: label for _, child, label in TREE_EDGES}
@@ -90,16 +134,18 @@ TESTS = {spec.id: spec for spec in TREE}
 
 @dataclass(frozen=True, slots=True)
 class PolicyInput:
-    """Which belief nodes the policy reads: pedestrians, vehicles and the aisle state."""
+    """Which belief nodes the policy reads (pedestrians, vehicles, the aisle state) and the
+    leaf it took in the previous cycle (for hysteresis; None: no previous decision)."""
 
     peds: tuple[tuple[str, str, str], ...] = ()
     """(entity, collision_risk node, distance node) per pedestrian."""
     vehicles: tuple[tuple[str, str, str], ...] = ()
     """(entity, collision_risk node, ttc node) per vehicle."""
     aisle: str = AISLE
+    held: str | None = None
 
     @classmethod
-    def from_nodes(cls, nodes: Iterable[_NodeLike]) -> PolicyInput:
+    def from_nodes(cls, nodes: Iterable[_NodeLike], held: str | None = None) -> PolicyInput:
         """Read the structure off a belief graph (live, or decoded from a log)."""
         ids = {n.id: n.value for n in nodes}
         peds, vehicles = [], []
@@ -111,7 +157,7 @@ class PolicyInput:
                 peds.append((nid, risk, f"{nid}.distance"))
             elif value == "forklift" and risk in ids and f"{nid}.ttc" in ids:
                 vehicles.append((nid, risk, f"{nid}.ttc"))
-        return cls(tuple(peds), tuple(vehicles))
+        return cls(tuple(peds), tuple(vehicles), held=held if held in LEAVES else None)
 
 
 @dataclass(frozen=True, slots=True)
@@ -120,10 +166,23 @@ class Outcome:
     path: tuple[str, ...]
     tests: tuple[tuple[str, str | None], ...]
     """(tree node, belief node it tested) for each test on the taken path."""
+    held: str | None = None
+    """The previous cycle's leaf, which set the hysteresis of these tests."""
+
+
+def _limits(held: str | None) -> tuple[float, ...]:
+    return tuple(limit(t, held) for t in _ORDER)
+
+
+_ORDER = ("root", "vehicle_close", "ped_in_path", "ped_close", "path_clear", "person_near")
+_LIMITS = {held: _limits(held) for held in (None, *LEAVES)}
+"""Per held leaf, the thresholds in ``_ORDER`` (the prober calls ``choose`` very often)."""
 
 
 def evaluate(inp: PolicyInput, v: Mapping[str, object]) -> Outcome:
     """Run the tree on node values ``v``; return the command, the path and what was tested."""
+    veh_t, ttc_t, ped_t, close_t, blocked_t, near_t = _LIMITS[inp.held]
+    held = inp.held
     veh: tuple[str, str, str] | None = None
     best = -1.0
     for item in inp.vehicles:
@@ -131,34 +190,42 @@ def evaluate(inp: PolicyInput, v: Mapping[str, object]) -> Outcome:
         if r > best:
             best, veh = r, item
     tests: tuple[tuple[str, str | None], ...]
-    if veh is not None and best >= VEHICLE_RISK:
+    if veh is not None and best >= veh_t:
         tests = (("root", veh[1]), ("vehicle_close", veh[2]))
-        if float(v[veh[2]]) < TTC_STOP_S:  # type: ignore[arg-type]
-            return Outcome(STOP, LEAF_PATHS["stop_vehicle"], tests)
-        return Outcome(REROUTE, LEAF_PATHS["reroute_vehicle"], tests)
+        if float(v[veh[2]]) < ttc_t:  # type: ignore[arg-type]
+            return Outcome(STOP, LEAF_PATHS["stop_vehicle"], tests, held)
+        return Outcome(REROUTE, LEAF_PATHS["reroute_vehicle"], tests, held)
     root = ("root", veh[1] if veh is not None else None)
 
     nearest: tuple[str, str, str] | None = None
     nearest_d = 0.0
     top: tuple[str, str, str] | None = None
     top_r = -1.0
+    closest: tuple[str, str, str] | None = None
+    closest_d = 0.0
     for item in inp.peds:
         r = float(v[item[1]])  # type: ignore[arg-type]
+        d = float(v[item[2]])  # type: ignore[arg-type]
         if r > top_r:
             top_r, top = r, item
-        if r >= PED_RISK:
-            d = float(v[item[2]])  # type: ignore[arg-type]
-            if nearest is None or d < nearest_d:
-                nearest, nearest_d = item, d
+        if closest is None or d < closest_d:
+            closest, closest_d = item, d
+        if r >= ped_t and (nearest is None or d < nearest_d):
+            nearest, nearest_d = item, d
+    near_node = closest[2] if closest is not None else None
     if nearest is not None:
         tests = (root, ("ped_in_path", nearest[1]), ("ped_close", nearest[2]))
-        if nearest_d < PED_STOP_M:
-            return Outcome(STOP, LEAF_PATHS["stop_ped"], tests)
-        return Outcome(SLOW, LEAF_PATHS["slow"], tests)
-    tests = (root, ("ped_in_path", top[1] if top is not None else None), ("path_clear", inp.aisle))
-    if float(v[inp.aisle]) < BLOCKED:  # type: ignore[arg-type]
-        return Outcome(CONTINUE, LEAF_PATHS["continue"], tests)
-    return Outcome(REROUTE, LEAF_PATHS["reroute_path"], tests)
+        if nearest_d < close_t:
+            return Outcome(STOP, LEAF_PATHS["stop_ped"], tests, held)
+        return Outcome(SLOW, LEAF_PATHS["slow"], tests, held)
+    in_path = ("ped_in_path", top[1] if top is not None else None)
+    if float(v[inp.aisle]) >= blocked_t:  # type: ignore[arg-type]
+        tests = (root, in_path, ("path_clear", inp.aisle))
+        return Outcome(REROUTE, LEAF_PATHS["reroute_path"], tests, held)
+    tests = (root, in_path, ("path_clear", inp.aisle), ("person_near", near_node))
+    if near_node is not None and closest_d < near_t:
+        return Outcome(SLOW, LEAF_PATHS["slow_near"], tests, held)
+    return Outcome(CONTINUE, LEAF_PATHS["continue"], tests, held)
 
 
 def choose(inp: PolicyInput, v: Mapping[str, Any]) -> str:
@@ -166,92 +233,113 @@ def choose(inp: PolicyInput, v: Mapping[str, Any]) -> str:
 
     The prober calls this thousands of times per second; a test pins it to ``evaluate``.
     """
+    veh_t, ttc_t, ped_t, close_t, blocked_t, near_t = _LIMITS[inp.held]
     veh_risk, veh_ttc = -1.0, ""
     for _, risk, ttc in inp.vehicles:
         r = v[risk]
         if r > veh_risk:
             veh_risk, veh_ttc = r, ttc
-    if veh_risk >= VEHICLE_RISK:
-        return STOP if v[veh_ttc] < TTC_STOP_S else REROUTE
+    if veh_risk >= veh_t:
+        return STOP if v[veh_ttc] < ttc_t else REROUTE
     nearest = -1.0
+    closest = -1.0
     for _, risk, dist in inp.peds:
-        if v[risk] >= PED_RISK:
-            d = v[dist]
-            if nearest < 0.0 or d < nearest:
-                nearest = d
+        d = v[dist]
+        if closest < 0.0 or d < closest:
+            closest = d
+        if v[risk] >= ped_t and (nearest < 0.0 or d < nearest):
+            nearest = d
     if nearest >= 0.0:
-        return STOP if nearest < PED_STOP_M else SLOW
-    return CONTINUE if v[inp.aisle] < BLOCKED else REROUTE
+        return STOP if nearest < close_t else SLOW
+    if v[inp.aisle] >= blocked_t:
+        return REROUTE
+    return SLOW if 0.0 <= closest < near_t else CONTINUE
 
 
-def factors_of(outcome: Outcome) -> list[str]:
-    """The belief nodes the decision depended on, in tree order, without repeats."""
+def factors_of(outcome: Outcome, inp: PolicyInput | None = None) -> list[str]:
+    """The belief nodes the decision depended on, in tree order, without repeats.
+
+    With ``inp``, the aisle state is a factor even when the taken path did not test it: a
+    counterfactual that moves a tested value (a pedestrian's risk below its threshold) sends
+    the tree down the branch that reads it, so what it would then choose depends on it.
+    """
     seen: list[str] = []
     for _, node in outcome.tests:
         if node is not None and node not in seen:
             seen.append(node)
+    if inp is not None and inp.aisle not in seen:
+        seen.append(inp.aisle)
     return seen
 
 
 # --- alternatives ----------------------------------------------------------------------
 
-_THRESHOLD = {
-    "root": VEHICLE_RISK,
-    "vehicle_close": TTC_STOP_S,
-    "ped_in_path": PED_RISK,
-    "ped_close": PED_STOP_M,
-    "path_clear": BLOCKED,
-}
+
+def _held_note(test: str, held: str | None) -> str:
+    """Say so when the hysteresis level, not the entry threshold, decided a test."""
+    if held not in THRESHOLDS[test].held_by:
+        return ""
+    return f"; hysteresis: hold level, {LEAVES[held]} at {held} last cycle"
 
 
-def _why(test: str, node: str | None, v: Mapping[str, object], branch: str) -> str:
+def _why(
+    test: str, node: str | None, v: Mapping[str, object], branch: str, held: str | None = None
+) -> str:
     if node is None:
         return {
             "root": "no vehicle detected",
             "ped_in_path": "no pedestrian detected",
+            "person_near": "no person detected",
         }.get(test, f"{test}: {branch}")
     value = v[node]
-    t = _THRESHOLD[test]
+    t = limit(test, held)
+    note = _held_note(test, held)
     shown = f"{value:.2f}" if isinstance(value, float) else str(value)
     if test == "root":
         op = ">=" if branch == "yes" else "<"
         return (
-            f"vehicle on a collision course ({node} {shown} {op} {t:.2f})"
+            f"vehicle on a collision course ({node} {shown} {op} {t:.2f}{note})"
             if branch == "yes"
-            else f"no vehicle on a collision course ({node} {shown} {op} {t:.2f})"
+            else f"no vehicle on a collision course ({node} {shown} {op} {t:.2f}{note})"
         )
     if test == "vehicle_close":
         return (
-            f"vehicle too close to manoeuvre ({node} {shown} s < {t:.1f} s)"
+            f"vehicle too close to manoeuvre ({node} {shown} s < {t:.1f} s{note})"
             if branch == "yes"
-            else f"vehicle far enough to avoid ({node} {shown} s >= {t:.1f} s)"
+            else f"vehicle far enough to avoid ({node} {shown} s >= {t:.1f} s{note})"
         )
     if test == "ped_in_path":
         return (
-            f"pedestrian in path ({node} {shown} >= {t:.2f})"
+            f"pedestrian in path ({node} {shown} >= {t:.2f}{note})"
             if branch == "yes"
-            else f"no pedestrian in path ({node} {shown} < {t:.2f})"
+            else f"no pedestrian in path ({node} {shown} < {t:.2f}{note})"
         )
     if test == "ped_close":
         return (
-            f"pedestrian inside stop distance ({node} {shown} m < {t:.1f} m)"
+            f"pedestrian inside stop distance ({node} {shown} m < {t:.1f} m{note})"
             if branch == "yes"
-            else f"pedestrian beyond stop distance ({node} {shown} m >= {t:.1f} m)"
+            else f"pedestrian beyond stop distance ({node} {shown} m >= {t:.1f} m{note})"
+        )
+    if test == "person_near":
+        return (
+            f"person within the slow zone ({node} {shown} m < {t:.1f} m{note})"
+            if branch == "yes"
+            else f"no person within the slow zone ({node} {shown} m >= {t:.1f} m{note})"
         )
     return (
-        f"path clear ({node} {shown} < {t:.2f})"
+        f"path clear ({node} {shown} < {t:.2f}{note})"
         if branch == "yes"
-        else f"aisle blocked ({node} {shown} >= {t:.2f})"
+        else f"aisle blocked ({node} {shown} >= {t:.2f}{note})"
     )
 
 
-def _margin(test: str, node: str | None, v: Mapping[str, object]) -> float:
+def _margin(test: str, node: str | None, v: Mapping[str, object], held: str | None) -> float:
     if node is None:
         return 1.0
     value = v[node]
     if not isinstance(value, (int, float)):
         return 1.0
-    t = _THRESHOLD[test]
+    t = limit(test, held)
     return min(1.0, abs(float(value) - t) / max(abs(t), 1e-9))
 
 
@@ -274,8 +362,8 @@ def score_alternatives(outcome: Outcome, v: Mapping[str, object]) -> tuple[float
     out: list[Scored] = []
     for cmd, split, branch in _SPLITS[outcome.path]:
         node = tested.get(split)
-        reason = _why(split, node, v, branch)
-        penalty = 1.01 + _margin(split, node, v)
+        reason = _why(split, node, v, branch, outcome.held)
+        penalty = 1.01 + _margin(split, node, v, outcome.held)
         out.append(Scored(cmd, round(PROGRESS[cmd] - penalty, 3), reason))
     return PROGRESS[outcome.command], out
 
@@ -310,5 +398,5 @@ def describe(outcome: Outcome, v: Mapping[str, object]) -> list[str]:
     """One phrase per test on the taken path, for the rationale text."""
     phrases = []
     for (test, node), nxt in zip(outcome.tests, outcome.path[1:], strict=False):
-        phrases.append(_why(test, node, v, _BRANCH[nxt]))
+        phrases.append(_why(test, node, v, _BRANCH[nxt], outcome.held))
     return phrases

@@ -195,27 +195,45 @@ def write_rationale(
     tests: tuple[tuple[str, str | None], ...],
     command: str,
     graph: BeliefGraph,
+    *,
+    factors: list[str] | None = None,
 ) -> None:
-    """Write the rationale: each test's phrase, then the node it tested, then the command."""
+    """Write the rationale: each test's phrase, then the node it tested; then each other
+    factor (one the taken path did not test) with its value; then the command."""
     nodes = {n.id: n for n in graph.nodes}
     seen: set[str] = set()
+
+    def factor(node: str) -> None:
+        seen.add(node)
+        n = nodes[node]
+        buffer.add_factor(
+            {"node": node, "name": node.rsplit(".", 1)[-1], "value": n.value, "unit": n.unit}
+        )
+
     for i, ((_, node), phrase) in enumerate(zip(tests, phrases, strict=True)):
         buffer.add_text(("" if i == 0 else "; ") + phrase)
         if node is not None and node not in seen:
-            seen.add(node)
-            n = nodes[node]
-            buffer.add_factor(
-                {"node": node, "name": node.rsplit(".", 1)[-1], "value": n.value, "unit": n.unit}
-            )
+            factor(node)
+    for node in factors or ():
+        if node not in seen:
+            value = nodes[node].value
+            shown = f"{value:.2f}" if isinstance(value, float) else str(value)
+            buffer.add_text(f"; also read on the branches not taken: {node} {shown}")
+            factor(node)
     buffer.add_text(f" -> {command}")
 
 
 def rationale_size(
-    phrases: list[str], tests: tuple[tuple[str, str | None], ...], command: str, graph: BeliefGraph
+    phrases: list[str],
+    tests: tuple[tuple[str, str | None], ...],
+    command: str,
+    graph: BeliefGraph,
+    *,
+    factors: list[str] | None = None,
 ) -> int:
     """Bytes the full rationale needs."""
     probe = RationaleBuffer(1 << 30)
-    write_rationale(probe, phrases, tests, command, graph)
+    write_rationale(probe, phrases, tests, command, graph, factors=factors)
     return probe.used
 
 

@@ -17,8 +17,8 @@ import numpy as np
 
 from sim.belief import BeliefGraph, Edge, build_belief
 from sim.counterfactual import BudgetExhaustedError, probe
-from sim.decision import Decider, Decision
-from sim.execution import Actuator
+from sim.decision import Decider, Decision, graph_edges
+from sim.execution import Actuator, Steering
 from sim.faults import (
     CycleFaults,
     FailingOpener,
@@ -29,7 +29,7 @@ from sim.faults import (
 )
 from sim.nulllog import NullLogger
 from sim.perception import CORRIDOR_MAX_M, Perceiver, PerceptionOutput
-from sim.policy import REROUTE
+from sim.quality import QualityMeter
 from sim.records import (
     RationaleBuffer,
     action_record,
@@ -51,12 +51,12 @@ from trace_runtime import AuditLogger, LoggerConfig, TraceError
 PERIOD_NS = 100_000_000
 CYCLES_PER_DAY = 864_000
 SOFTWARE_VERSION = "trace-sim 0.1"
-POLICY_VERSION = "fig2-v1"
+POLICY_VERSION = "fig2-v2"
+"""v2: speed limit near people in the tree, hysteresis, counterfactuals as interventions."""
 TIMEOUT_BUDGET = 2
 """Probe budget (policy evaluations) left when a counterfactual timeout is injected."""
 DURATION_BATCH = 50
 """Cycles per write that ``trace-sim run --duration`` uses unless told otherwise."""
-REROUTE_COOLDOWN_S = 5.0
 EPISODE_ROOM_M = 28.0
 """Straight aisle an episode needs ahead: the farthest spawn (~15 m) plus 10 s of driving."""
 
@@ -113,6 +113,10 @@ class RunResult:
     elapsed_s: float
     seed: int
     batch_cycles: int = 1
+    perception: dict[str, Any] = field(default_factory=dict)
+    """Classification quality against the world's ground truth (``sim.quality``)."""
+    safety: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Safety outcomes per scenario against the world's ground truth (``sim.quality``)."""
 
     @property
     def cycles_per_s(self) -> float:
@@ -134,6 +138,8 @@ class RunResult:
             "cycles_per_s": round(self.cycles_per_s, 1),
             "seed": self.seed,
             "batch_cycles": self.batch_cycles,
+            "perception": self.perception,
+            "safety": self.safety,
         }
 
 
@@ -258,6 +264,8 @@ def run(config: RunConfig, progress: Callable[[int, int], None] | None = None) -
         elapsed_s=elapsed,
         seed=config.seed,
         batch_cycles=config.batch_cycles,
+        perception=sim.quality.perception(),
+        safety=sim.quality.outcomes(),
     )
 
 
@@ -309,12 +317,15 @@ class _Pipeline:
         self.sensor_rng = np.random.default_rng(seeds[1])
         self.injector = FaultInjector(config.faults, np.random.default_rng(seeds[2]))
         self.actuator = Actuator(np.random.default_rng(seeds[3]))
+        self.steering = Steering()
+        self.quality = QualityMeter()
         self.perceiver = Perceiver()
         self.decider = Decider()
         self.logger = logger
         self.opener = opener
         self.truth = truth
         self._unsettled: list[_Unsettled] = []
+        self._held: str | None = None  # the leaf taken last cycle (the policy's hysteresis)
         self._written = 0
         self._dropped = 0
 
@@ -359,16 +370,23 @@ class _Pipeline:
                 decision, action = self._decide(graph, faults, pending)
                 outcome = decision.outcome
                 # Layer 4
-                executed = actuator.step(outcome.command, world.t, graph)
-                flip = (
-                    outcome.command == REROUTE
-                    and world.t - world.robot.last_flip_t >= REROUTE_COOLDOWN_S
+                heading_error, lateral = world.robot.offsets()
+                want = self.steering.steer(
+                    outcome.command,
+                    heading_error=heading_error,
+                    lateral=lateral,
+                    direction=world.robot.direction,
                 )
+                executed = actuator.step(outcome.command, world.t, graph, want)
                 flags = [f"scenario:{scenario}"]
                 if any(not ch.passed for ch in executed.checks):
                     flags.append("compliance_violation")
                 if seen.sensors_unavailable:
                     flags.append("sensor_degraded")
+                if self.steering.turning_from is not None:
+                    # The executive is completing a U-turn that a REROUTE began, whatever
+                    # this cycle's command: the intended motion above is that turn.
+                    flags.append("u_turn")
                 logged_factors = [f["node"] for f in action["rationale"]["factors"]]
                 corrupt, skip = self._audit_faults(
                     seen, graph, decision.factors, logged_factors, faults, pending
@@ -385,7 +403,9 @@ class _Pipeline:
             opener.set_failing(False)
         self._unsettled.append(_Unsettled(cycle_no, t_ns, scenario, faults.write_timeout, pending))
         self.settle()
-        world.apply_motion(actuator.linear, actuator.angular, flip)
+        self._held = outcome.path[-1]
+        self.quality.observe(world, seen, scenario, outcome.command, actuator.linear)
+        world.apply_motion(actuator.linear, actuator.angular)
         world.step_actors()
         return outcome.command
 
@@ -419,12 +439,14 @@ class _Pipeline:
         self, graph: BeliefGraph, faults: CycleFaults, pending: Pending
     ) -> tuple[Decision, dict[str, Any]]:
         """Layer 3: the (remembered) decision, with this cycle's probing and rationale faults."""
-        inp, values, decision = self.decider.decide(graph)
+        inp, values, decision = self.decider.decide(graph, self._held)
         outcome = decision.outcome
         cfs = decision.counterfactuals
         if faults.cf_timeout:
             try:
-                cfs = counterfactual_records(probe(inp, values, decision.factors, TIMEOUT_BUDGET))
+                cfs = counterfactual_records(
+                    probe(inp, values, decision.factors, TIMEOUT_BUDGET, graph_edges(graph))
+                )
             except BudgetExhaustedError:
                 cfs = None
         if cfs is None:
@@ -434,9 +456,9 @@ class _Pipeline:
         rationale = decision.rationale
         if faults.truncate:
             phrases, tests, command = decision.phrases, outcome.tests, outcome.command
-            capacity = rationale_size(phrases, tests, command, graph) // 2
+            capacity = rationale_size(phrases, tests, command, graph, factors=decision.factors) // 2
             buffer = RationaleBuffer(capacity)
-            write_rationale(buffer, phrases, tests, command, graph)
+            write_rationale(buffer, phrases, tests, command, graph, factors=decision.factors)
             rationale = buffer.rationale()
             kept = [f["node"] for f in rationale["factors"]]
             pending.append(

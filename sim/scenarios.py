@@ -73,12 +73,16 @@ def _multi_ped(world: World) -> list[Actor]:
 
 
 def _forklift(world: World) -> list[Actor]:
-    # Head-on in the aisle; the driver brakes once within 4 m of the robot.
+    # Head-on down the aisle's centre towards a pick position 4-6 m closer, where it stops
+    # to load for the rest of the episode: first a vehicle on a collision course, then an
+    # obstacle in a 4 m aisle that leaves no room to pass. The driver also brakes for a
+    # robot in the way within 4 m.
     ahead = float(world.rng.uniform(11.0, 13.0))
     speed = float(world.rng.uniform(1.6, 2.0))
+    drive_s = float(world.rng.uniform(4.0, 6.0)) / speed
     x, y, h = world.along_route(ahead, float(world.rng.uniform(-0.2, 0.2)))
     fx, fy, _, _ = _frame(h)
-    legs = [(10.0, -fx * speed, -fy * speed)]
+    legs = [(drive_s, -fx * speed, -fy * speed), (60.0, 0.0, 0.0)]
     return [
         Actor(
             "forklift",
@@ -89,6 +93,7 @@ def _forklift(world: World) -> list[Actor]:
             heading=h + math.pi,
             legs=legs,
             brake_within_m=4.0,
+            path_half_width_m=1.5,
             name="forklift",
         )
     ]
@@ -110,6 +115,10 @@ SCENARIOS: dict[str, Scenario] = {
         Scenario("ped_crossing", "pedestrian crossing the aisle at medium distance", _ped_crossing),
         Scenario("ped_close", "worker standing about 1.5 m in front of the robot", _ped_close),
         Scenario("multi_ped", "three pedestrians with different trajectories", _multi_ped),
-        Scenario("forklift", "forklift approaching head-on on a collision course", _forklift),
+        Scenario(
+            "forklift",
+            "forklift approaching head-on, then stopping to load in the aisle",
+            _forklift,
+        ),
     )
 }

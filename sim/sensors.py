@@ -213,8 +213,9 @@ def _rays(heading: float, oy: float, shelves: np.ndarray) -> _Rays:
         last=None,
         local={},
     )
-    if len(_RAYS) < 64:
-        _RAYS[key] = rays
+    if len(_RAYS) >= 64:  # the robot turns and changes lane: keep the latest poses
+        del _RAYS[next(iter(_RAYS))]
+    _RAYS[key] = rays
     return rays
 
 

@@ -38,6 +38,12 @@ def shelf_boxes() -> np.ndarray:
 
 # The robot shuttles along the aisle y = 7 between the west and east cross-aisles, turning
 # around at each end (and whenever it reroutes). A straight route keeps "ahead" meaningful.
+POSE_YAW_STEP = 0.01
+POSE_LATERAL_STEP = 0.01
+"""Grid of the pose the robot reports (and its sensors render from), in rad and m from the
+route: a return moves by at most 2.5 mrad x range (1 cm at 4 m, the LiDAR's 1.5 cm noise)."""
+LATERAL_MAX_M = 1.4
+"""How far from the aisle's centre line the robot may go (4 m aisle, 0.6 m wide robot)."""
 ROUTE_START = (2.5, 7.0)
 ROUTE_END = (47.5, 7.0)
 
@@ -68,13 +74,22 @@ class Route:
 
 @dataclass(slots=True)
 class RobotState:
-    """Ground-truth robot state. ``s`` runs along the route; ``direction`` flips on REROUTE."""
+    """Ground-truth robot state. ``s`` runs along the route and ``direction`` says which way
+    the robot travels along it; ``yaw`` (rad, left positive) and ``lateral`` (m, left of the
+    route's increasing ``s``) are its offsets from the route's centre line. A turn past 90
+    degrees reverses ``direction`` (and re-expresses ``yaw``): the heading stays continuous."""
 
     s: float = 0.0
     direction: int = 1
     linear: float = 0.0
     angular: float = 0.0
     last_flip_t: float = -1e9
+    yaw: float = 0.0
+    lateral: float = 0.0
+
+    def offsets(self) -> tuple[float, float]:
+        """(heading error, lateral offset to the left of the direction of travel)."""
+        return self.yaw, self.direction * self.lateral
 
 
 @dataclass(slots=True)
@@ -90,6 +105,9 @@ class Actor:
     legs: list[tuple[float, float, float]] = field(default_factory=list)
     leg_t: float = 0.0
     brake_within_m: float = 0.0  # a driver / walker stops when this close to the robot
+    path_half_width_m: float = 0.0
+    """With ``brake_within_m``: brake only when the robot is this close to the actor's line
+    of travel (a driver stops for a robot in the way, not for one that has given way)."""
     vx: float = 0.0
     vy: float = 0.0
     name: str = ""
@@ -104,8 +122,15 @@ class Actor:
                 self.legs.pop(0)
                 self.leg_t = 0.0
         if self.brake_within_m > 0.0:
-            gap = math.hypot(self.x - robot_xy[0], self.y - robot_xy[1])
-            if gap < self.brake_within_m:
+            dx, dy = robot_xy[0] - self.x, robot_xy[1] - self.y
+            gap = math.hypot(dx, dy)
+            in_way = True
+            speed = math.hypot(vx, vy)
+            if self.path_half_width_m > 0.0 and speed > 0.0:
+                ahead = (dx * vx + dy * vy) / speed
+                aside = abs(dx * vy - dy * vx) / speed
+                in_way = ahead > 0.0 and aside < self.path_half_width_m
+            if gap < self.brake_within_m and in_way:
                 vx = vy = 0.0
         self.vx, self.vy = vx, vy
         self.x += vx * dt
@@ -122,7 +147,7 @@ class World:
         self.actors: list[Actor] = []
         self.shelves = shelf_boxes()
         self.t = 0.0
-        self._pose_key: tuple[float, int] | None = None
+        self._pose_key: tuple[float, int, float, float] | None = None
         self._pose = (0.0, 0.0, 0.0)
 
     # --- robot pose -----------------------------------------------------------------
@@ -130,14 +155,19 @@ class World:
     def robot_pose(self) -> tuple[float, float, float]:
         """(x, y, heading) of the robot."""
         robot = self.robot
-        key = (robot.s, robot.direction)
+        key = (robot.s, robot.direction, robot.yaw, robot.lateral)
         if key == self._pose_key:  # asked for several times a cycle
             return self._pose
         x, y = self.route.point(robot.s)
         tx, ty = self.route.tangent(robot.s)
+        # The offsets from the route are reported on a grid (see POSE_*_STEP): the sensors'
+        # ray geometry is cached per pose, and a robot driving straight stays on one.
+        lateral = round(robot.lateral / POSE_LATERAL_STEP) * POSE_LATERAL_STEP
+        yaw = round(robot.yaw / POSE_YAW_STEP) * POSE_YAW_STEP
+        x, y = x - ty * lateral, y + tx * lateral
         if robot.direction < 0:
             tx, ty = -tx, -ty
-        self._pose_key, self._pose = key, (x, y, math.atan2(ty, tx))
+        self._pose_key, self._pose = key, (x, y, math.atan2(ty, tx) + yaw)
         return self._pose
 
     def along_route(self, ahead_m: float, lateral_m: float) -> tuple[float, float, float]:
@@ -154,14 +184,24 @@ class World:
 
     # --- dynamics -------------------------------------------------------------------
 
-    def apply_motion(self, linear: float, angular: float, flip: bool) -> None:
-        """Move the robot one period with its actual (post-actuator) speeds."""
+    def apply_motion(self, linear: float, angular: float, flip: bool = False) -> None:
+        """Move the robot one period with its actual (post-actuator) speeds (unicycle model).
+
+        ``flip`` turns the robot around on the spot (tests only; the robot itself turns at
+        its yaw rate)."""
         robot = self.robot
         robot.linear, robot.angular = linear, angular
         if flip:
             robot.direction = -robot.direction
             robot.last_flip_t = self.t
-        robot.s += robot.direction * linear * PERIOD_S
+        robot.yaw += angular * PERIOD_S
+        robot.s += robot.direction * linear * math.cos(robot.yaw) * PERIOD_S
+        lateral = robot.lateral + robot.direction * linear * math.sin(robot.yaw) * PERIOD_S
+        robot.lateral = max(-LATERAL_MAX_M, min(LATERAL_MAX_M, lateral))
+        if abs(robot.yaw) > math.pi / 2:  # now travelling the other way along the route
+            robot.direction = -robot.direction
+            robot.yaw -= math.copysign(math.pi, robot.yaw)
+            robot.last_flip_t = self.t
         if not 0.0 < robot.s < self.route.length:  # end of the aisle: turn around
             robot.s = min(self.route.length, max(0.0, robot.s))
             robot.direction = -robot.direction

@@ -55,9 +55,9 @@ CASES: dict[str, RunConfig] = {
 }
 
 GOLDEN = {
-    "paper": "dcf8b64a313b684a5b83377bd780fbdf8359003bb3f9afe9f479ba00a13b459c",
-    "heavy": "e4f8da915f396397775c5a6b25cc742c99bb414c8331787822d57a5991d77773",
-    "duration": "5b9d8e79bcaa6b4cc7bedeba6d66e8c7de9a124726f6135e01d3677c6ae084d0",
+    "paper": "122a1c89378f49e3b15078d9645d01e2162f811d18eecc156f10fee051f221b6",
+    "heavy": "b2958a064a947bf3add4c228649997408c93ec7255d43f8db5f61d816cb6142d",
+    "duration": "8bd92732ab703b9bb6e9f219921500a5c4fc834983643bfa0fea8cdc8d96ac21",
 }
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sim.belief import RULE_PED_RISK, intervene, intervention_plan, ped_risk
 from sim.counterfactual import BudgetExhaustedError, holds, probe
 from sim.policy import (
     CONTINUE,
@@ -13,6 +14,7 @@ from sim.policy import (
     STOP,
     PolicyInput,
     choose,
+    describe,
     evaluate,
     factors_of,
     score_alternatives,
@@ -26,19 +28,28 @@ def _ped_close_values() -> dict[str, object]:
     return {"ped_1.collision_risk": 0.7, "ped_1.distance": 1.5, "aisle_blocked": 0.01}
 
 
-def test_paper_example_stops_and_its_counterfactuals_match_the_paper() -> None:
-    """Worker at 1.5 m, risk 0.70: STOP; would SLOW if d >= 2.0, CONTINUE if risk < 0.2."""
+def test_paper_example_stops_and_its_counterfactuals_respect_the_speed_limit() -> None:
+    """Worker at 1.5 m, risk 0.70: STOP; would SLOW if d >= 2.0, and SLOW (not the paper's
+    CONTINUE) if risk < 0.2: the worker is still within the 4 m slow zone that keeps the
+    robot under the 0.5 m/s limit within 3 m of a person."""
     values = _ped_close_values()
     outcome = evaluate(PED, values)
     assert outcome.command == STOP
     assert outcome.path == ("root", "ped_in_path", "ped_close", "stop_ped")
     assert factors_of(outcome) == ["ped_1.collision_risk", "ped_1.distance"]
+    assert factors_of(outcome, PED) == ["ped_1.collision_risk", "ped_1.distance", "aisle_blocked"]
     found = {
         (c.factor, c.comparison, c.threshold, c.would_select)
-        for c in probe(PED, values, factors_of(outcome))
+        for c in probe(PED, values, factors_of(outcome, PED))
     }
     assert ("ped_1.distance", ">=", 2.0, SLOW) in found
-    assert ("ped_1.collision_risk", "<", 0.2, CONTINUE) in found
+    assert ("ped_1.collision_risk", "<", 0.2, SLOW) in found
+    far = {**values, "ped_1.distance": 5.0}
+    found_far = {
+        (c.factor, c.comparison, c.threshold, c.would_select)
+        for c in probe(PED, far, factors_of(evaluate(PED, far), PED))
+    }
+    assert ("ped_1.collision_risk", "<", 0.2, CONTINUE) in found_far
 
 
 def test_alternatives_score_below_the_choice_and_say_why() -> None:
@@ -157,3 +168,51 @@ def test_fast_choose_agrees_with_evaluate(values: list[float]) -> None:
         for k, x in zip(keys, values, strict=True)
     }
     assert choose(inp, v) == evaluate(inp, v).command
+
+
+def test_hysteresis_holds_a_slow_until_the_risk_drops_below_the_hold_level() -> None:
+    """Risk hovering at 0.19 after a SLOW stays SLOW (hold 0.15) and the text says why; a
+    fresh decision at 0.19 does not slow for the pedestrian in path."""
+    values: dict[str, object] = {
+        "ped_1.collision_risk": 0.19,
+        "ped_1.distance": 5.0,
+        "aisle_blocked": 0.0,
+    }
+    fresh = evaluate(PED, values)
+    assert fresh.command == CONTINUE
+    held = PolicyInput(peds=PED.peds, held="slow")
+    outcome = evaluate(held, values)
+    assert outcome.command == SLOW and outcome.path[-1] == "slow"
+    assert any("hysteresis" in p for p in describe(outcome, values))
+    assert choose(held, values) == SLOW
+    assert evaluate(held, {**values, "ped_1.collision_risk": 0.14}).command == CONTINUE
+
+
+def test_an_intervention_on_distance_moves_the_risk_through_the_graphs_rule() -> None:
+    """do(distance = x) recomputes collision_risk from its rule: the counterfactual on the
+    distance is then what the whole graph would give, not the tree's test alone."""
+    edges = [
+        ("ped_1.distance", "ped_1.collision_risk", RULE_PED_RISK),
+        ("ped_1.intent", "ped_1.collision_risk", RULE_PED_RISK),
+        ("ped_1.conflict", "ped_1.collision_risk", RULE_PED_RISK),
+    ]
+    values: dict[str, object] = {
+        "ped_1.distance": 3.0,
+        "ped_1.intent": "standing",
+        "ped_1.conflict": 1.0,
+        "ped_1.collision_risk": ped_risk(3.0, "standing", 1.0),
+        "aisle_blocked": 0.0,
+    }
+    assert evaluate(PED, values).command == SLOW  # risk 0.59: pedestrian in path
+    plan = intervention_plan("ped_1.distance", edges)
+    moved = dict(values)
+    intervene(moved, plan, "ped_1.distance", 9.0)
+    assert moved["ped_1.collision_risk"] == ped_risk(9.0, "standing", 1.0) < 0.2
+    found = probe(PED, values, ["ped_1.distance"], edges=edges)
+    # Farther away the propagated risk falls under 0.2, beyond the 4 m slow zone: CONTINUE.
+    up = [c for c in found if c.comparison in (">=", ">")]
+    assert len(up) == 1 and up[0].would_select == CONTINUE and 5.0 < up[0].threshold < 6.0
+    for cf in found:
+        assert holds(PED, values, cf, edges)
+    # Held fixed (no edges), the risk stays 0.59 at any distance: no CONTINUE is reachable.
+    assert all(c.would_select != CONTINUE for c in probe(PED, values, ["ped_1.distance"]))

@@ -14,8 +14,7 @@ from typer.testing import CliRunner
 
 from sim import FaultRates, RunConfig, RunResult, parse_duration, read_truth, run
 from sim.cli import app
-from sim.counterfactual import Found, holds
-from sim.policy import PolicyInput, evaluate
+from sim.replay import check_counterfactuals
 from trace_runtime import Cycle, open_log
 
 SCENARIO_FLAG = "scenario:"
@@ -142,20 +141,13 @@ def test_clear_path_never_stops_for_a_vehicle_or_a_person(seed: int, tmp_path: P
     assert commands["CONTINUE"] > 80
 
 
-def test_every_logged_counterfactual_holds_when_the_policy_is_rerun(faulty: RunResult) -> None:
-    checked = 0
-    for c in _cycles(faulty):
-        action, belief = c.action, c.belief
-        assert action is not None and belief is not None
-        values = _node_values(c)
-        inp = PolicyInput.from_nodes(belief.nodes)
-        # The logged decision is what the policy gives on the logged belief.
-        assert evaluate(inp, values).command == action.command
-        for cf in action.counterfactuals:
-            found = Found(cf.factor, cf.comparison, float(cf.threshold), cf.would_select)
-            assert holds(inp, values, found), (c.cycle, cf)
-            checked += 1
-    assert checked > 500
+def test_every_logged_decision_and_counterfactual_holds_when_the_policy_is_rerun(
+    faulty: RunResult,
+) -> None:
+    """The replay (``trace-sim check-counterfactuals``) re-runs each one from the log."""
+    report = check_counterfactuals(faulty.out)
+    assert report.findings == []
+    assert report.decisions > 400 and report.counterfactuals > 500
 
 
 def _resolves(ref: Any, cycle: Cycle, by_key: dict[tuple[str, int], Any]) -> Any:
@@ -348,3 +340,47 @@ def test_cli_unwritable_output_exits_3(tmp_path: Path) -> None:
     res = CliRunner().invoke(app, ["run", "--out", str(blocker / "run.mcap"), "--cycles", "1"])
     assert res.exit_code == 3
     assert "Traceback" not in res.output
+
+
+def test_with_faults_off_at_most_2_percent_of_cycles_fail_a_compliance_check(
+    clean: RunResult,
+) -> None:
+    """The policy enforces the monitor's rules itself, so a failed check is an anomaly."""
+    cycles = _cycles(clean)
+    failed = [
+        c.cycle
+        for c in cycles
+        if c.execution is not None and any(not ch.passed for ch in c.execution.checks)
+    ]
+    assert len(cycles) == 500
+    assert len(failed) <= 0.02 * len(cycles), failed
+
+
+@pytest.mark.parametrize("seed", [1, 6, 9])
+def test_forklift_scenario_exercises_the_vehicle_branch_with_a_logged_turn(
+    seed: int, tmp_path: Path
+) -> None:
+    """At least 10% of cycles are not CONTINUE, the vehicle branch decides some of them, and
+    the execution record shows the U-turn a REROUTE starts (intended yaw rate 0.6 rad/s)."""
+    result = run(
+        RunConfig(
+            out=tmp_path / "f.mcap",
+            scenario="forklift",
+            cycles=100,
+            seed=seed,
+            faults=FaultRates.off(),
+        )
+    )
+    cycles = _cycles(result)
+    commands = Counter(c.action.command for c in cycles if c.action is not None)
+    assert commands["CONTINUE"] <= 90, commands
+    leaves = {c.action.tree.taken_path[-1] for c in cycles if c.action and c.action.tree}
+    assert leaves & {"stop_vehicle", "reroute_vehicle"}, leaves
+    turning = [
+        c.cycle
+        for c in cycles
+        if c.execution is not None
+        and "u_turn" in c.execution.flags
+        and c.execution.intended.angular == 0.6
+    ]
+    assert len(turning) >= 20, turning
