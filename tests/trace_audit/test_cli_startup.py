@@ -60,6 +60,11 @@ def test_help_imports_no_library(command: str) -> None:
     # the help is drawn plain, so rich markup in a help text must not show up as tags
     assert "[bold]" not in out.stdout
     assert "[/" not in out.stdout
+    # arguments in the usage line as LOG, not typer's "{log}"
+    usage = out.stdout.splitlines()[0]
+    assert "{" not in usage
+    arguments = usage.partition("[OPTIONS]")[2].split()
+    assert all(a.strip("[].") == a.strip("[].").upper() for a in arguments), usage
 
 
 def test_a_command_registered_the_usual_way_gets_the_plain_help() -> None:

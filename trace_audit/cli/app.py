@@ -72,6 +72,19 @@ class _Command(TyperCommand):
             short_help = " ".join(help.strip().split("\n\n")[0].split())
         super().__init__(*args, help=help, short_help=short_help, **kwargs)
 
+    def collect_usage_pieces(self, ctx: Any) -> list[str]:
+        # "explain [OPTIONS] LOG", as click and every Unix tool write it; typer 0.29 writes
+        # a required argument as "{log}", which reads like a template placeholder.
+        pieces = [self.options_metavar] if self.options_metavar else []
+        for param in self.get_params(ctx):
+            if param.param_type_name != "argument":
+                continue
+            name = (param.metavar or param.name or "ARG").upper()
+            if param.nargs != 1:
+                name += "..."
+            pieces.append(name if param.required else f"[{name}]")
+        return pieces
+
 
 class _App(typer.Typer):
     """The typer app, whose commands are ``_Command`` unless one asks for another class.
