@@ -218,3 +218,27 @@ def test_recordings_refuse_a_file_that_is_not_mcap(tmp_path: Path) -> None:
     recordings = Recordings.open([bad])
     with pytest.raises(LogReadError):
         recordings.check({"recording": "x_0.mcap", "topic": "/scan", "log_time_ns": 1})
+
+
+def test_the_incident_report_resolves_the_recording_when_given_it(
+    robot: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """``report --evidence``: the same resolution as explain, metrics and verify, shown in
+    the page, and the reproduce commands carry the recording."""
+    from trace_audit.report import build_report
+
+    log, bag = robot
+    without = build_report(log, cycle=10)
+    given = build_report(log, cycle=10, evidence=[bag])
+    assert {e.state for e in without.data.explanation.external_evidence} == {"unresolved"}
+    assert {e.state for e in given.data.explanation.external_evidence} == {"resolved"}
+    assert "not checked (recording not given" in without.html
+    assert "resolved, digest matches" in given.html and "LaserScan" in given.html
+    assert f"--evidence {bag}" in given.html
+    assert given.data.metrics.external_refs.get("resolved", 0) >= 1
+    assert given.data.integrity.external_resolved >= 1 and given.data.integrity.ok
+    [recording] = list(bag.glob("*.mcap"))
+    changed = _copy_bag(recording, tmp_path / "c" / recording.name, change=10)
+    broken = build_report(log, cycle=10, evidence=[changed])
+    assert {e.state for e in broken.data.explanation.external_evidence} == {"broken"}
+    assert not broken.data.integrity.ok

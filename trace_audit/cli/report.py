@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from trace_audit.cli.app import JsonOption, PlainOption, app, guarded, help_text
-from trace_audit.cli.investigate import LogArgument, TimeOption
+from trace_audit.cli.investigate import EvidenceOption, LogArgument, TimeOption
 from trace_audit.cli.render import Doc, Seg, emit
 
 if TYPE_CHECKING:
@@ -67,6 +67,7 @@ def report_command(  # noqa: PLR0917 - typer maps each parameter to an option
             show_default=False,
         ),
     ] = None,
+    evidence: EvidenceOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
@@ -75,7 +76,14 @@ def report_command(  # noqa: PLR0917 - typer maps each parameter to an option
 
     def run() -> tuple[IncidentReport, Path]:
         public = load_public_key(key) if key is not None else None
-        report = build_report(log, t=t, cycle=cycle, window_s=parse_window(window), key=public)
+        report = build_report(
+            log,
+            t=t,
+            cycle=cycle,
+            window_s=parse_window(window),
+            key=public,
+            evidence=evidence or (),
+        )
         return report, write_report(report, out)
 
     if json_out or plain or not sys.stderr.isatty():

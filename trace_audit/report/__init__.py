@@ -15,6 +15,7 @@ matplotlib is the ``report`` extra; it is imported only when a figure is drawn.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -60,6 +61,7 @@ def build_report(
     cycle: int | None = None,
     window_s: float = DEFAULT_WINDOW_S,
     key: PublicKey | None = None,
+    evidence: Sequence[str | Path] = (),
     command_name: str = "trace-audit",
 ) -> IncidentReport:
     """The incident report of the decision in force at ``t`` (or cycle ``cycle``)."""
@@ -69,7 +71,7 @@ def build_report(
         raise UsageError("the report needs matplotlib: pip install 'trace-audit[report]'") from err
     from trace_audit.report.page import render_page
 
-    data = gather_report(path, t=t, cycle=cycle, window_s=window_s, key=key)
+    data = gather_report(path, t=t, cycle=cycle, window_s=window_s, key=key, evidence=evidence)
     return IncidentReport(data, render_page(data, command_name=command_name))
 
 

@@ -15,7 +15,7 @@ the log): how the situation built up, and what the robot did next.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,6 +28,7 @@ from trace_audit.causal import (
     read_decision,
 )
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, SensorWindow
+from trace_audit.evidence import open_recordings
 from trace_audit.explain import Explanation, explain
 from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
 from trace_audit.timeline import TimeArg, Timeline, as_log, timeline
@@ -168,6 +169,8 @@ class ReportData:
     integrity_scope: tuple[str, ...]
     key_id: str | None
     not_retained: tuple[str, ...] = field(default=())
+    evidence: tuple[str, ...] = ()
+    """The external recordings given (``--evidence``), as the investigator named them."""
 
     @property
     def decision(self) -> Decision:
@@ -181,21 +184,28 @@ def gather_report(
     cycle: int | None = None,
     window_s: float = DEFAULT_WINDOW_S,
     key: PublicKey | None = None,
+    evidence: Sequence[str | Path] = (),
 ) -> ReportData:
-    """Gather the report of the decision in force at ``t`` (or cycle ``cycle``) in a log."""
+    """Gather the report of the decision in force at ``t`` (or cycle ``cycle``) in a log.
+
+    ``evidence``: external recordings (MCAP files, rosbag2 directories) the log's evidence
+    refs may name; explain, metrics and verify resolve and digest-check them there."""
     if not 0 < window_s <= MAX_WINDOW_S:
         raise UsageError(f"window must be in (0, {MAX_WINDOW_S:.0f}] s, got {window_s}")
     log = as_log(path)
-    result = explain(log, t=t, cycle=cycle)
+    result = explain(log, t=t, cycle=cycle, evidence=evidence)
     before = int(window_s * 2 / 3 * 1e9)
     start = max(log.start_ns, result.t_ns - before)
     end = min(log.end_ns, start + int(window_s * 1e9))
     spans = timeline(log, start=start, end=end)
     samples, target, sensors = _samples(log, start, end, result)
     entities = _entities(target, sensors) if target is not None else ()
-    metrics = compute_metrics([path], MetricsConfig(start_ns=start, end_ns=end))
+    metrics = compute_metrics(
+        [path],
+        MetricsConfig(start_ns=start, end_ns=end, evidence=tuple(str(e) for e in evidence)),
+    )
     scope = [s for s in log.segments if s.end_ns >= start and s.start_ns <= end]
-    integrity = verify(Log(scope, log.root), key=key)
+    integrity = verify(Log(scope, log.root), key=key, recordings=open_recordings(evidence))
     session = next(
         (s.session for s in log.segments if s.path.name == result.decision.segment),
         log.segments[0].session,
@@ -217,6 +227,7 @@ def gather_report(
         integrity=integrity,
         integrity_scope=tuple(s.path.name for s in scope),
         key_id=key.key_id if key is not None else None,
+        evidence=tuple(str(e) for e in evidence),
         not_retained=_not_retained(result),
     )
 

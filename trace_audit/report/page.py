@@ -443,7 +443,32 @@ def _causal(data: ReportData) -> str:
             f"{MAX_GRAPH_NODES} drawn here: the table below and "
             "trace-audit export --format dot show it."
         )
-    return _figure(causal_figure(data), caption) + table
+    return _figure(causal_figure(data), caption) + table + _external(data)
+
+
+def _external(data: ReportData) -> str:
+    """The decision's evidence refs into external recordings (e.g. a rosbag2 bag): resolved
+    and decoded, broken, or not checked because the recording was not given."""
+    refs = data.explanation.external_evidence
+    if not refs:
+        return ""
+    state = {
+        "resolved": '<span class="ok">resolved, digest matches</span>',
+        "broken": '<span class="bad">broken</span>',
+        "unresolved": "not checked (recording not given: --evidence)",
+    }
+    rows = [
+        [
+            escape(e.entity),
+            escape(f"{e.recording} {e.topic} @ {_t(e.log_time_ns)}"),
+            state.get(e.state, escape(e.state)) + (f" {escape(e.detail)}" if e.detail else ""),
+            escape(e.schema or ""),
+        ]
+        for e in refs
+    ]
+    return "<h3>Evidence in external recordings</h3>" + _table(
+        ["entity", "message", "status", "type"], rows, set()
+    )
 
 
 def _counterfactuals(data: ReportData) -> str:
@@ -600,19 +625,23 @@ def _reproduce(data: ReportData, command_name: str) -> str:
     at = f"--t {e.t_ns / 1e9:.9g}"
     start, end = f"{data.start_ns / 1e9:.9g}", f"{data.end_ns / 1e9:.9g}"
     key = " --key PUBLIC_KEY" if data.key_id else ""
+    given = "".join(f" --evidence {shlex.quote(e)}" for e in data.evidence)
     lines = [
         (
             "Summary, factors, chains, counterfactuals, execution, this decision's scores",
-            f"{command_name} explain {log} {at}",
+            f"{command_name} explain {log} {at}{given}",
         ),
         ("Commands over the window", f"{command_name} timeline {log} --from {start} --to {end}"),
-        ("Integrity", f"{command_name} verify {log}{key}"),
+        ("Integrity", f"{command_name} verify {log}{key}{given}"),
         (
             "Window auditability",
-            f"{command_name} metrics {log} --start {start} --end {end} --failures",
+            f"{command_name} metrics {log} --start {start} --end {end} --failures{given}",
         ),
         ("Causal graph as Graphviz", f"{command_name} export {log} {at} --format dot"),
-        ("This report", f"{command_name} report {log} {at} --window {data.window_s:g}s"),
+        (
+            "This report",
+            f"{command_name} report {log} {at} --window {data.window_s:g}s{key}{given}",
+        ),
     ]
     return "".join(
         f"<h3>{escape(what)}</h3><pre>{escape(command)}</pre>" for what, command in lines
