@@ -379,6 +379,9 @@ def check_counterfactuals_cmd(
 
     try:
         report = check_counterfactuals(log)
+    except SimUsageError as err:
+        _fail(str(err), EXIT_USAGE)
+        return
     except TraceError as err:
         _fail(f"cannot read {log}: {err}", EXIT_OUTPUT)
         return

@@ -23,6 +23,7 @@ from typing import Any
 from sim.belief import missing_rule_edges
 from sim.counterfactual import Found, holds
 from sim.policy import LEAVES, PolicyInput, evaluate
+from sim.runner import POLICY_VERSION, SimUsageError
 from trace_runtime.logset import open_log
 from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF
 
@@ -96,8 +97,19 @@ def _taken_leaf(action: dict[str, Any] | None) -> str | None:
 def check_counterfactuals(
     path: str | Path, progress: Callable[[int], None] | None = None
 ) -> ReplayReport:
-    """Re-run every logged decision and counterfactual of the log at ``path``."""
+    """Re-run every logged decision and counterfactual of the log at ``path``.
+
+    Only the simulator's own policy can be re-run, so a log another robot (or an earlier
+    policy) wrote is refused with ``SimUsageError`` instead of being judged by rules it never
+    followed."""
     log = open_log(path)
+    policies = sorted({s.session.policy_version for s in log.segments})
+    if policies != [POLICY_VERSION]:
+        named = ", ".join(repr(p) for p in policies) or "none"
+        raise SimUsageError(
+            f"{path} was written by policy {named}; check-counterfactuals re-runs only the "
+            f"simulator's policy {POLICY_VERSION!r} (trace-sim run writes such logs)"
+        )
     report = ReplayReport(Path(path))
     prev_cycle: int | None = None
     prev_leaf: str | None = None
@@ -118,10 +130,14 @@ def check_counterfactuals(
         if not held_known:
             _unverifiable(report, "previous cycle not in the log (hysteresis state unknown)", cfs)
             continue
-        nodes = [_Node(n["id"], n["value"]) for n in belief["nodes"]]
+        nodes = [_Node(n["id"], n.get("value")) for n in belief["nodes"]]
         values = {n.id: n.value for n in nodes}
         edges = [(e["parent"], e["child"], e["rule"]) for e in belief["edges"]]
-        inp = PolicyInput.from_nodes(nodes, held)
+        try:
+            inp = PolicyInput.from_nodes(nodes, held)
+        except (KeyError, TypeError, ValueError):
+            _unverifiable(report, "belief graph lacks a value the policy reads", cfs)
+            continue
         report.decisions += 1
         got = evaluate(inp, values).command
         if got != action["command"]:

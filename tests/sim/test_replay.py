@@ -59,3 +59,23 @@ def test_an_unreadable_log_exits_3_with_one_line(tmp_path: Path) -> None:
     result = CliRunner().invoke(app, ["check-counterfactuals", str(bad)])
     assert result.exit_code == 3
     assert result.output.count("\n") == 1 and "trace-sim: cannot read" in result.output
+
+
+def test_a_log_another_robot_wrote_is_refused_in_one_line_exit_2(tmp_path: Path) -> None:
+    """The replay can only re-run the simulator's own policy: another robot's log (here the
+    pick-and-place arm example) is a usage error, not a finding and not a traceback."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[2]
+    out = tmp_path / "other.mcap"
+    subprocess.run(
+        [sys.executable, str(root / "examples" / "pick_and_place_arm.py"), "--out", str(out)],
+        check=True,
+        capture_output=True,
+        timeout=120,
+    )
+    result = CliRunner().invoke(app, ["check-counterfactuals", str(out)])
+    assert result.exit_code == 2, result.output
+    [line] = result.stderr.strip().splitlines()
+    assert "re-runs only the simulator's policy" in line
