@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from trace_runtime.cycles import RawMessage
-from trace_runtime.errors import LogReadError
+from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.mcap_file import DEFAULT_LIMITS, McapFile, ReadLimits
 from trace_runtime.records import EvidenceRef
 
@@ -86,7 +86,11 @@ class Recordings:
     @classmethod
     def open(cls, paths: Iterable[str | Path], limits: ReadLimits = DEFAULT_LIMITS) -> Recordings:
         """Index the MCAP files at ``paths``; raise ``LogReadError`` for a path that is
-        missing or a directory without MCAP files (the investigator asked for it)."""
+        missing or a directory without MCAP files (the investigator asked for it).
+
+        Refs name their recording by file name, so two different files of one name are
+        refused (``UsageError``): checking a ref against whichever copy happens to match
+        would let an altered copy pass beside an intact one."""
         files: dict[str, list[Path]] = {}
         for raw in paths:
             path = Path(raw)
@@ -100,8 +104,15 @@ class Recordings:
                 raise LogReadError(str(path), "no such recording")
             for file in found:
                 bucket = files.setdefault(file.name, [])
-                if file not in bucket:
+                if all(file.resolve() != known.resolve() for known in bucket):
                     bucket.append(file)
+        for name, bucket in files.items():
+            if len(bucket) > 1:
+                shown = ", ".join(str(p) for p in bucket)
+                raise UsageError(
+                    f"two recordings named {name} were given ({shown}): evidence refs name "
+                    "their recording by file name, so give only the one the log cites"
+                )
         return cls(files, limits)
 
     def __reduce__(self) -> tuple[Any, ...]:

@@ -22,7 +22,7 @@ from trace_audit.doctor import doctor_log
 from trace_audit.explain import explain
 from trace_audit.metrics import MetricsConfig, compute_metrics
 from trace_audit.verify import verify_log
-from trace_runtime.errors import LogReadError
+from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.recordings import Recordings
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -242,3 +242,22 @@ def test_the_incident_report_resolves_the_recording_when_given_it(
     broken = build_report(log, cycle=10, evidence=[changed])
     assert {e.state for e in broken.data.explanation.external_evidence} == {"broken"}
     assert not broken.data.integrity.ok
+
+
+def test_two_recordings_of_one_name_are_refused_not_checked_against_either(
+    robot: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """An altered copy given beside the intact bag must not pass because the intact one
+    matches: the name is ambiguous, so the command says so (exit 2)."""
+    log, bag = robot
+    [recording] = list(bag.glob("*.mcap"))
+    altered = _copy_bag(recording, tmp_path / "bad_bag" / recording.name, change=10)
+    with pytest.raises(UsageError, match="two recordings named"):
+        Recordings.open([altered.parent, bag])
+    result = CliRunner().invoke(
+        app, ["verify", str(log), "--evidence", str(altered.parent), "--evidence", str(bag)]
+    )
+    assert result.exit_code == 2, result.output
+    assert "two recordings named" in result.stderr
+    # the same file given twice (as a file and inside its directory) is one recording
+    assert Recordings.open([recording, bag]).names == [recording.name]
