@@ -92,8 +92,8 @@ class Arm:
 
     def step(self, command: str) -> tuple[list[float], float]:
         """Apply ``command``; return the intended joint velocities and gripper force."""
-        if command == "HALT":
-            target_vel, target_grip = [0.0] * len(JOINTS), self.grip_n
+        if command == "HALT":  # stop moving, keep holding what is in the gripper
+            target_vel, target_grip = [0.0] * len(JOINTS), held_grip(self)
         elif command == "RETRY":
             target_vel, target_grip = [0.0] * len(JOINTS), GRIP_N
         elif command == "RELEASE":
@@ -119,6 +119,12 @@ class Arm:
             self.progress = 0
             self.slip_at = self.rng.randrange(5, CARRY_CYCLES - 5)
         return target_vel, target_grip
+
+
+def held_grip(arm: Arm) -> float:
+    """The force a HALT holds: whatever the gripper has now (a halted arm must not drop the
+    part), as the action and the execution record both state it."""
+    return round(arm.grip_n, 3)
 
 
 def ee_speed(joint_vel: list[float]) -> float:
@@ -247,6 +253,14 @@ def _belief(arm: Arm, hand_m: float | None, grip_ratio: float, to_place: float) 
     return Belief(nodes=nodes, edges=edges)
 
 
+def _grip_command(command: str, arm: Arm) -> float:
+    """The gripper force the command asks for (N): the same figure the execution record
+    gives as the gripper's intended force."""
+    if command in ("GRASP", "RETRY"):
+        return GRIP_N
+    return held_grip(arm) if command == "HALT" else 0.0
+
+
 def _action(
     command: str, arm: Arm, hand_m: float | None, grip_ratio: float, to_place: float
 ) -> Action:
@@ -261,7 +275,7 @@ def _action(
     counterfactuals = _counterfactuals(command, hand_m, grip_ratio, to_place)
     return Action(
         command=command,
-        parameters={"grip_force_n": GRIP_N if command in ("GRASP", "RETRY") else 0.0},
+        parameters={"grip_force_n": _grip_command(command, arm)},
         alternatives=[
             Alternative(
                 command=c, score=0.0, rejected_because="lower priority rule or condition unmet"
