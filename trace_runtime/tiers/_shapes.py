@@ -38,28 +38,76 @@ class ShapeError(TraceError, ValueError):
 
 
 class Shape:
-    """A compiled shape: its descriptor, leaf paths (and which are vectors), extract, build."""
+    """A shape: its descriptor, leaf paths (and which are vectors), extract and build.
 
-    __slots__ = ("build", "descriptor", "extract", "key", "paths", "plans", "vectors")
+    The two functions are compiled on first use (a few milliseconds a shape): a seek into
+    a cold block lays out all of its ~100 shapes but builds messages of only a few.
+    """
 
-    def __init__(
-        self,
-        descriptor: Descriptor,
-        key: bytes,
-        *,
-        paths: list[Path],
-        vectors: frozenset[int],
-        extract: Callable[[Any], tuple[Any, ...]],
-        build: Callable[[Any], Any],
-    ) -> None:
+    __slots__ = ("_build", "_extract", "descriptor", "key", "paths", "plans", "vectors")
+
+    def __init__(self, descriptor: Descriptor, key: bytes) -> None:
+        if type(descriptor) is not dict and type(descriptor) is not list:
+            raise ShapeError("a shape's root must be an object or an array")
         self.descriptor = descriptor
         self.key = key
+        paths: list[Path] = []
+        vectors: list[int] = []
+        _leaves(descriptor, (), paths, vectors)
         self.paths = paths
-        self.vectors = vectors
-        self.extract = extract
-        self.build = build
-        self.plans: dict[int, Any] = {}
+        self.vectors = frozenset(vectors)
+        self._extract: Callable[[Any], tuple[Any, ...]] | None = None
+        self._build: Callable[[Any], Any] | None = None
+        self.plans: dict[Any, Any] = {}
         """Per-topic decoding plans, filled in by the codec."""
+
+    @property
+    def extract(self) -> Callable[[Any], tuple[Any, ...]]:
+        """The leaves of a parsed message in slot order; raises if it has another shape."""
+        if self._extract is None:
+            self._compile()
+        assert self._extract is not None
+        return self._extract
+
+    @property
+    def build(self) -> Callable[[Any], Any]:
+        """A new message from a row of leaves in slot order."""
+        if self._build is None:
+            self._compile()
+        assert self._build is not None
+        return self._build
+
+    def _compile(self) -> None:
+        gen = _Generator()
+        body = gen.container(self.descriptor, "c0", ())
+        if gen.paths != self.paths or frozenset(gen.vectors) != self.vectors:
+            raise ShapeError("shape leaves disagree with the generated code")  # a bug, not data
+        extract_src = "\n".join(
+            [
+                "def extract(c0):",
+                *(f"    {line}" for line in gen.checks),
+                f"    return ({', '.join(gen.out)},)" if gen.out else "    return ()",
+            ]
+        )
+        build_src = f"def build(v):\n    return {body}"
+        namespace: dict[str, Any] = {"K": tuple(gen.keys), "_CONTAINERS": (dict, list)}
+        code = compile(extract_src + "\n" + build_src + "\n", "<trace-shape>", "exec")
+        exec(code, namespace)
+        self._extract = namespace["extract"]
+        self._build = namespace["build"]
+
+
+def _leaves(desc: Descriptor, path: Path, paths: list[Path], vectors: list[int]) -> None:
+    """The leaf paths of a descriptor in the generated code's slot order (depth first, in
+    key / index order; empty containers have none), and which of them are vectors."""
+    items = desc.items() if type(desc) is dict else enumerate(desc)
+    for key, child in items:
+        if type(child) is int:
+            if child == VECTOR:
+                vectors.append(len(paths))
+            paths.append((*path, key))
+        elif child:
+            _leaves(child, (*path, key), paths, vectors)
 
 
 def describe(value: Any) -> Descriptor:
@@ -115,29 +163,8 @@ def _check(desc: Any, depth: int, count: list[int]) -> None:
 
 
 def compile_shape(descriptor: Descriptor, key: bytes) -> Shape:
-    """Generate and compile the extractor and builder of a (checked) descriptor."""
-    if type(descriptor) is not dict and type(descriptor) is not list:
-        raise ShapeError("a shape's root must be an object or an array")
-    gen = _Generator()
-    body = gen.container(descriptor, "c0", ())
-    extract_src = "\n".join(
-        [
-            "def extract(c0):",
-            *(f"    {line}" for line in gen.checks),
-            f"    return ({', '.join(gen.out)},)" if gen.out else "    return ()",
-        ]
-    )
-    build_src = f"def build(v):\n    return {body}"
-    namespace: dict[str, Any] = {"K": tuple(gen.keys), "_CONTAINERS": (dict, list)}
-    exec(compile(extract_src + "\n" + build_src + "\n", "<trace-shape>", "exec"), namespace)
-    return Shape(
-        descriptor,
-        key,
-        paths=gen.paths,
-        vectors=frozenset(gen.vectors),
-        extract=namespace["extract"],
-        build=namespace["build"],
-    )
+    """The shape of a (checked) descriptor; its code is generated and compiled on first use."""
+    return Shape(descriptor, key)
 
 
 class _Generator:
