@@ -41,7 +41,7 @@ import zstandard
 from trace_runtime.cycles import Cycle, RawMessage, assemble_hot
 from trace_runtime.errors import LogReadError, TraceError
 from trace_runtime.records import TOPIC_CHECKPOINT, TOPIC_SEAL
-from trace_runtime.tiers._shapes import Shape, ShapeError, check_descriptor, compile_shape, describe
+from trace_runtime.tiers._shapes import Shape, ShapeError, compile_shape, describe
 from trace_runtime.tiers.warm import assemble_warm
 
 CODEC = "trace-cold-v1"
@@ -632,9 +632,7 @@ def _decode_body(body: bytes) -> DecodedBlock:
         key = text.encode()
         shape = _COMPILED.get(key)
         if shape is None:
-            descriptor = orjson.loads(key)
-            check_descriptor(descriptor)
-            shape = _shape_for(descriptor, key)
+            shape = _shape_for(orjson.loads(key), key)  # checks the descriptor
         shapes.append((int(topic_id), shape))
 
     reader = _ColumnReader()
@@ -926,9 +924,7 @@ class PartialBlock:
             key = text.encode()
             shape = _COMPILED.get(key)
             if shape is None:
-                descriptor = orjson.loads(key)
-                check_descriptor(descriptor)
-                shape = _shape_for(descriptor, key)
+                shape = _shape_for(orjson.loads(key), key)  # checks the descriptor
             self.shapes.append((int(topic_id), shape))
 
         self._body = body
@@ -1137,7 +1133,8 @@ class PartialBlock:
                     back = row[slot]
                     if type(back) is int:
                         row[slot] = _hex_of(built, hexes, index - back)
-            datas[index] = dumps(shape.build(row))
+            build = shape.build if shape.compiled else shape.build_uncompiled
+            datas[index] = dumps(build(row))
         names = self.topic_names
         return [
             RawMessage(names[self.topic_ids[i]], self.sequences[i], self.times[i], built[i])
