@@ -342,3 +342,26 @@ def test_seal_anchors_bound_what_a_seek_builds(
         cold_log.segments[0].clear_caches()
         assert cold_log.cycle_at(cycle.t_ns) == cycle
     assert chain_problems(segment) == []
+
+
+def test_a_seek_into_a_block_that_ends_unsealed_matches_assembling_it() -> None:
+    stream = [
+        RawMessage(topic, i // 3, 100 * i, orjson.dumps({"cycle": i // 3, "v": i}))
+        for i, topic in enumerate(["/trace/action", "/sensors/x", TOPIC_SEAL] * 3)
+    ]
+    stream.append(RawMessage("/trace/action", 3, 5_000, b'{"cycle":3,"v":9}'))  # never sealed
+    block = BlockEncoder(level=1).encode(stream, "hot")
+    run = [RawMessage(cold_module.BLOCK_TOPIC, 0, 0, block)]
+    whole = cold_module.assemble_cold(run, "seg")
+    assert [c.sealed for c in whole] == [True, True, True, False]
+    for t_ns in (-1, 0, 200, 250, 500, 800, 4_999, 5_000, 9_000):
+        expected = [c for c in whole if c.t_ns <= t_ns]
+        found = cold_module.ColdAssembler().cycle_at(run, "seg", t_ns)
+        assert found == (expected[-1] if expected else None)
+    # a block that ends with its seal takes the partial path: the same answers
+    sealed = BlockEncoder(level=1).encode(stream[:-1], "hot")
+    run = [RawMessage(cold_module.BLOCK_TOPIC, 0, 0, sealed)]
+    assembler = cold_module.ColdAssembler()
+    for t_ns in (0, 200, 499, 500, 800, 9_000):
+        expected = [c for c in whole[:3] if c.t_ns <= t_ns]
+        assert assembler.cycle_at(run, "seg", t_ns) == (expected[-1] if expected else None)

