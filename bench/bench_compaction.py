@@ -25,12 +25,14 @@ Reported: medians of wall and CPU seconds (the process and its children), cycles
 ratios compaction / anchor (CPU, and wall) and 2 workers / 1 (wall), with the load average.
 Then, on the compacted root: bytes per sealed cycle beside the hot files and MCAP default
 zstd chunks; reading every cycle; and ``cycle_at`` at 40 random times, hot and cold, each
-a first ask (caches cleared) and cold asked again (median ms).
+a first ask (caches cleared) and cold asked again (median ms); and a first cold ask in a
+new process (nothing decoded or compiled yet), median of 9 processes.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import random
 import resource
@@ -39,6 +41,7 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -48,6 +51,7 @@ from bench_tiers import mcap_default_bytes
 
 from sim import RunConfig, run
 from trace_runtime import open_log
+from trace_runtime.tiers.cold import ColdAssembler
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -154,7 +158,65 @@ def seeks_ms(hot: Any, cold: Any, rng: random.Random) -> dict[str, float]:
             samples.append(time.perf_counter() - started)
         out[label] = statistics.median(samples) * 1e3
     assert all(hot.cycle_at(t) == cold.cycle_at(t) for t in times[:10])
+    # the same first asks answered by decoding the whole block (as before partial decodes),
+    # alternating with the partial ones so a busy spell hits both: a paired ratio
+    whole: list[float] = []
+    partial: list[float] = []
+    for t_ns in times:
+        for kind in (whole, partial):
+            with _whole_block_seeks(kind is whole):
+                cold.clear_caches()
+                started = time.perf_counter()
+                cold.cycle_at(t_ns)
+                kind.append(time.perf_counter() - started)
+    out["cold, first ask, whole-block decode"] = statistics.median(whole) * 1e3
+    out["cold, whole / partial (paired)"] = statistics.median(
+        w / p for w, p in zip(whole, partial, strict=True)
+    )
     return out
+
+
+@contextlib.contextmanager
+def _whole_block_seeks(on: bool) -> Iterator[None]:
+    """Without ``ColdAssembler.cycle_at`` the reader assembles the whole block and filters."""
+    saved = ColdAssembler.cycle_at
+    if on:
+        ColdAssembler.cycle_at = None  # type: ignore[assignment,method-assign]
+    try:
+        yield
+    finally:
+        ColdAssembler.cycle_at = saved  # type: ignore[method-assign]
+
+
+FIRST_SEEK = """
+import random, sys, time
+from trace_runtime import open_log
+
+log = open_log(sys.argv[1])
+log.cycle_at(log.start_ns)  # the reader itself warm (files, summaries), on another block
+t_ns = random.Random(int(sys.argv[2])).randrange(log.start_ns, log.end_ns)
+log.clear_caches()
+started = time.perf_counter()
+log.cycle_at(t_ns)
+print((time.perf_counter() - started) * 1e3)
+"""
+
+
+def fresh_process_seeks_ms(root: Path, runs: int = 9) -> float:
+    """Median ms of a first cold ``cycle_at`` in a new process (nothing decoded or
+    compiled yet: what ``trace-audit explain`` on a cold log pays), over ``runs`` times."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    samples = []
+    for seed in range(runs):
+        out = subprocess.run(
+            [sys.executable, "-c", FIRST_SEEK, str(root), str(seed)],
+            check=True,
+            capture_output=True,
+            text=True,
+            env=env,
+        )
+        samples.append(float(out.stdout))
+    return statistics.median(samples)
 
 
 def read_all(opened: Any) -> float:
@@ -246,6 +308,7 @@ def main() -> int:
     reads = {"hot": read_all(hot), "cold": read_all(cold)}
     print(f"read every cycle: hot {reads['hot']:,.0f}/s, cold {reads['cold']:,.0f}/s")
     seeks = seeks_ms(hot, cold, random.Random(5))
+    seeks["cold, first ask in a new process"] = fresh_process_seeks_ms(cold_root)
     print(
         "cycle_at, median ms: "
         + ", ".join(f"{k} {v:.2f}" for k, v in seeks.items())

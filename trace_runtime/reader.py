@@ -166,12 +166,12 @@ class Segment(McapFile):
     def _assemble(self, run: Sequence[RawMessage]) -> list[Cycle]:
         return self._assembler(run, self.path.name) if run else []
 
-    def _chunk_cycles(
+    def _chunk_run(
         self, offset: int, lead: list[RawMessage] | None = None
-    ) -> tuple[list[Cycle], list[RawMessage]]:
-        """The cycles the chunk at ``offset`` closes (with their first messages from earlier
-        chunks), and the messages it leaves open for the next chunk. The file's last chunk
-        also gives the unfinished cycle after its last seal."""
+    ) -> tuple[list[RawMessage], list[RawMessage]]:
+        """The messages of the cycles the chunk at ``offset`` closes (with their first
+        messages from earlier chunks), and the messages it leaves open for the next chunk.
+        The file's last chunk also gives the unfinished cycle after its last seal."""
         closed, tail = self._closed_in(offset)
         if self.is_damaged(offset):
             return [], []  # the cycle it cut is lost with it; verify reports the damage
@@ -181,7 +181,27 @@ class Segment(McapFile):
             closed, tail = closed + tail, []
         if not closed:
             return [], lead + tail
-        return self._assemble(lead + closed if lead else closed), tail
+        return (lead + closed if lead else closed), tail
+
+    def _chunk_cycles(
+        self, offset: int, lead: list[RawMessage] | None = None
+    ) -> tuple[list[Cycle], list[RawMessage]]:
+        """The cycles the chunk at ``offset`` closes, and what it leaves open (``_chunk_run``)."""
+        run, tail = self._chunk_run(offset, lead)
+        return self._assemble(run), tail
+
+    def _chunk_cycle_at(self, offset: int, t_ns: int) -> Cycle | None:
+        """The last cycle the chunk at ``offset`` closes at or before ``t_ns``. An assembler
+        that can build one cycle of a run (cold: without decoding the whole block) does."""
+        run, _tail = self._chunk_run(offset)
+        if not run:
+            return None
+        one_cycle = getattr(self._assembler, "cycle_at", None)
+        if one_cycle is not None:
+            found: Cycle | None = one_cycle(run, self.path.name, t_ns)
+            return found
+        cycles = [c for c in self._assemble(run) if c.t_ns <= t_ns]
+        return cycles[-1] if cycles else None
 
     def _iter_runs(self, offsets: Sequence[int]) -> Iterator[list[Cycle]]:
         """Cycles chunk by chunk, oldest first; what a chunk leaves open carries into the
@@ -222,9 +242,9 @@ class Segment(McapFile):
         # its cycle by several periods, and a closing checkpoint chunk holds no cycle. Step
         # back until a chunk has a cycle at or before t (a few chunks at most in practice).
         for offset in self.offsets_back_from(t_ns):
-            cycles = [c for c in self._chunk_cycles(offset)[0] if c.t_ns <= t_ns]
-            if cycles:
-                return cycles[-1]
+            found = self._chunk_cycle_at(offset, t_ns)
+            if found is not None:
+                return found
         if self.loose:
             cycles = [c for c in self._assemble(self.loose) if c.t_ns <= t_ns]
             if cycles:

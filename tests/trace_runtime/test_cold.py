@@ -6,6 +6,7 @@ from __future__ import annotations
 import hashlib
 import json
 import random
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +21,13 @@ from trace_runtime.cycles import RawMessage
 from trace_runtime.records import TOPIC_CHECKPOINT, TOPIC_SEAL
 from trace_runtime.tiers import ColdOptions, WarmPolicy, chain_problems, compact, decode_block
 from trace_runtime.tiers import cold as cold_module
-from trace_runtime.tiers.cold import BlockEncoder, ColdFormatError, iter_blocks, split_plain
+from trace_runtime.tiers.cold import (
+    BlockEncoder,
+    ColdFormatError,
+    PartialBlock,
+    iter_blocks,
+    split_plain,
+)
 
 from .test_tiers import make_root
 
@@ -167,13 +174,13 @@ def test_seek_into_a_cold_segment_decodes_one_block(
 ) -> None:
     hot, cold = (open_log(p) for p in hot_and_cold)
     calls = []
-    real = cold_module.decode_block
+    real = cold_module._block_body  # where every decode, whole or partial, starts
 
     def counting(block: bytes) -> Any:
         calls.append(1)
         return real(block)
 
-    monkeypatch.setattr(cold_module, "decode_block", counting)
+    monkeypatch.setattr(cold_module, "_block_body", counting)
     rng = random.Random(3)
     for t_ns in [
         hot.start_ns,
@@ -264,3 +271,97 @@ def test_blocks_split_on_whole_cycles() -> None:
         ["/trace/a", TOPIC_SEAL],
         ["/trace/a"],
     ]
+
+
+# --- partial decodes (a seek builds one cycle) --------------------------------------------------
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(stream=_streams(), data=st.data())
+def test_a_partial_decode_gives_the_bytes_of_a_whole_one(
+    stream: list[RawMessage], data: st.DataObject
+) -> None:
+    kept, _plain, positions = split_plain(stream)
+    kept = kept or [RawMessage("/t", 0, 0, b'{"a":1}')]
+    block = BlockEncoder(level=1).encode(kept, "hot", positions)
+    whole = decode_block(block).messages
+    first = data.draw(st.integers(0, len(kept) - 1))
+    last = data.draw(st.integers(first, len(kept) - 1))
+    partial = PartialBlock(cold_module._block_body(block))
+    assert partial.messages(first, last) == whole[first : last + 1]
+    assert partial.messages(0, len(kept) - 1) == whole  # and the rest, after a first part
+
+
+def test_a_partial_decode_reads_columns_that_vectors_and_scalars_share() -> None:
+    """``[1, 2, 3]`` is a vector (element columns p.0, p.1, p.2); ``[{..}, 2, 3]`` has scalar
+    leaves p.1 and p.2 in the same columns; ``null`` is a scalar leaf on the vector's path."""
+    values = [
+        {"p": [{"x": 1}, 5, 6]},
+        {"p": None},
+        {"p": [1, 2, 3]},
+        {"p": [{"x": 2}, 7, 8]},
+        {"p": [4, 5, 6]},
+        {"p": None},
+    ]
+    stream = [RawMessage("/t", i, i, orjson.dumps(v)) for i, v in enumerate(values * 3)]
+    encoder = BlockEncoder(level=1)
+    block = encoder.encode(stream, "hot")
+    assert encoder.raw_messages == 0  # coded as columns, not kept verbatim
+    whole = decode_block(block).messages
+    assert whole == stream
+    for first in range(len(stream)):
+        for last in range(first, len(stream)):
+            partial = PartialBlock(cold_module._block_body(block))
+            assert partial.messages(first, last) == stream[first : last + 1]
+
+
+def test_seal_anchors_bound_what_a_seek_builds(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    hot = make_root(tmp_path / "hot", cycles=150)
+    cold = tmp_path / "cold"
+    shutil.copytree(hot, cold)
+    monkeypatch.setattr(cold_module, "SEAL_ANCHOR_CYCLES", 8)
+    compact(cold, "cold", older_than_ns=0, cold=ColdOptions(block_cycles=64))
+    hot_log, cold_log = open_log(hot), open_log(cold)
+    segment = cold_log.segments[0]
+    blocks = [m.data for m in segment.iter_messages() if m.topic == cold_module.BLOCK_TOPIC]
+    assert len(blocks) == 3
+    for data in blocks:
+        partial = PartialBlock(cold_module._block_body(data))
+        whole = decode_block(data).messages
+        seals = [i for i, m in enumerate(whole) if m.topic == TOPIC_SEAL]
+        last_span = (seals[-2] + 1, seals[-1])
+        assert partial.messages(*last_span) == whole[last_span[0] : last_span[1] + 1]
+        built = [i for i, d in enumerate(partial.datas) if d is not None]
+        # the last cycle's chain starts at the anchor 8 seals back at most, not at seal 0
+        anchor = seals[(len(seals) - 1) // 8 * 8 - 1] if len(seals) > 8 else -1
+        assert min(i for i in built if whole[i].topic == TOPIC_SEAL) > anchor
+    # every cycle found by a seek, byte for byte as in the hot original
+    for cycle in hot_log.iter_cycles():
+        cold_log.segments[0].clear_caches()
+        assert cold_log.cycle_at(cycle.t_ns) == cycle
+    assert chain_problems(segment) == []
+
+
+def test_a_seek_into_a_block_that_ends_unsealed_matches_assembling_it() -> None:
+    stream = [
+        RawMessage(topic, i // 3, 100 * i, orjson.dumps({"cycle": i // 3, "v": i}))
+        for i, topic in enumerate(["/trace/action", "/sensors/x", TOPIC_SEAL] * 3)
+    ]
+    stream.append(RawMessage("/trace/action", 3, 5_000, b'{"cycle":3,"v":9}'))  # never sealed
+    block = BlockEncoder(level=1).encode(stream, "hot")
+    run = [RawMessage(cold_module.BLOCK_TOPIC, 0, 0, block)]
+    whole = cold_module.assemble_cold(run, "seg")
+    assert [c.sealed for c in whole] == [True, True, True, False]
+    for t_ns in (-1, 0, 200, 250, 500, 800, 4_999, 5_000, 9_000):
+        expected = [c for c in whole if c.t_ns <= t_ns]
+        found = cold_module.ColdAssembler().cycle_at(run, "seg", t_ns)
+        assert found == (expected[-1] if expected else None)
+    # a block that ends with its seal takes the partial path: the same answers
+    sealed = BlockEncoder(level=1).encode(stream[:-1], "hot")
+    run = [RawMessage(cold_module.BLOCK_TOPIC, 0, 0, sealed)]
+    assembler = cold_module.ColdAssembler()
+    for t_ns in (0, 200, 499, 500, 800, 9_000):
+        expected = [c for c in whole[:3] if c.t_ns <= t_ns]
+        assert assembler.cycle_at(run, "seg", t_ns) == (expected[-1] if expected else None)

@@ -18,7 +18,7 @@ values, and shapes read from a file are validated before they are compiled.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 from trace_runtime.errors import TraceError
@@ -26,6 +26,9 @@ from trace_runtime.errors import TraceError
 MAX_DEPTH = 32
 MAX_LEAVES = 1 << 16
 _SMALL_LIST = 8
+_COMPILE_AFTER = 100
+"""Messages built by walking a shape's descriptor before its code is compiled: compiling
+costs 0.5-5 ms, walking 5-60 us a message more than the compiled code."""
 
 SCALAR = 0
 VECTOR = 1
@@ -38,28 +41,119 @@ class ShapeError(TraceError, ValueError):
 
 
 class Shape:
-    """A compiled shape: its descriptor, leaf paths (and which are vectors), extract, build."""
+    """A shape: its descriptor, leaf paths (and which are vectors), extract and build.
 
-    __slots__ = ("build", "descriptor", "extract", "key", "paths", "plans", "vectors")
+    The two functions are compiled on first use (a few milliseconds a shape): a seek into
+    a cold block lays out all of its ~100 shapes but builds messages of only a few.
+    """
 
-    def __init__(
-        self,
-        descriptor: Descriptor,
-        key: bytes,
-        *,
-        paths: list[Path],
-        vectors: frozenset[int],
-        extract: Callable[[Any], tuple[Any, ...]],
-        build: Callable[[Any], Any],
-    ) -> None:
+    __slots__ = (
+        "_build",
+        "_extract",
+        "_uncompiled_builds",
+        "descriptor",
+        "key",
+        "paths",
+        "plans",
+        "vectors",
+    )
+
+    def __init__(self, descriptor: Descriptor, key: bytes) -> None:
+        if (type(descriptor) is not dict and type(descriptor) is not list) or not descriptor:
+            raise ShapeError("a shape must be a non-empty object or array")
         self.descriptor = descriptor
         self.key = key
+        paths: list[Path] = []
+        vectors: list[int] = []
+        _leaves(descriptor, (), paths, vectors)
         self.paths = paths
-        self.vectors = vectors
-        self.extract = extract
-        self.build = build
-        self.plans: dict[int, Any] = {}
+        self.vectors = frozenset(vectors)
+        self._extract: Callable[[Any], tuple[Any, ...]] | None = None
+        self._build: Callable[[Any], Any] | None = None
+        self._uncompiled_builds = 0
+        self.plans: dict[Any, Any] = {}
         """Per-topic decoding plans, filled in by the codec."""
+
+    @property
+    def extract(self) -> Callable[[Any], tuple[Any, ...]]:
+        """The leaves of a parsed message in slot order; raises if it has another shape."""
+        if self._extract is None:
+            self._compile()
+        assert self._extract is not None
+        return self._extract
+
+    @property
+    def build(self) -> Callable[[Any], Any]:
+        """A new message from a row of leaves in slot order."""
+        if self._build is None:
+            self._compile()
+        assert self._build is not None
+        return self._build
+
+    @property
+    def compiled(self) -> bool:
+        return self._build is not None
+
+    def build_uncompiled(self, row: Any) -> Any:
+        """What ``build`` gives, by walking the descriptor: slower a message, but without
+        compiling (for the few messages a seek builds of a shape it has not yet seen)."""
+        self._uncompiled_builds += 1
+        if self._uncompiled_builds >= _COMPILE_AFTER:
+            self._compile()  # this shape keeps coming back: compiling pays from here on
+        return _fill(self.descriptor, iter(row))
+
+    def _compile(self) -> None:
+        gen = _Generator()
+        body = gen.container(self.descriptor, "c0", ())
+        if gen.paths != self.paths or frozenset(gen.vectors) != self.vectors:
+            raise ShapeError("shape leaves disagree with the generated code")  # a bug, not data
+        extract_src = "\n".join(
+            [
+                "def extract(c0):",
+                *(f"    {line}" for line in gen.checks),
+                f"    return ({', '.join(gen.out)},)" if gen.out else "    return ()",
+            ]
+        )
+        build_src = f"def build(v):\n    return {body}"
+        namespace: dict[str, Any] = {"K": tuple(gen.keys), "_CONTAINERS": (dict, list)}
+        code = compile(extract_src + "\n" + build_src + "\n", "<trace-shape>", "exec")
+        exec(code, namespace)
+        self._extract = namespace["extract"]
+        self._build = namespace["build"]
+
+
+def _fill(desc: Descriptor, leaves: Iterator[Any]) -> Any:
+    if type(desc) is dict:
+        return {k: next(leaves) if type(c) is int else _fill(c, leaves) for k, c in desc.items()}
+    return [next(leaves) if type(c) is int else _fill(c, leaves) for c in desc]
+
+
+def _leaves(
+    desc: Descriptor, path: Path, paths: list[Path], vectors: list[int], depth: int = 1
+) -> None:
+    """The leaf paths of a descriptor in the generated code's slot order (depth first, in
+    key / index order; empty containers have none), and which of them are vectors. Checks
+    the descriptor as it goes (it may come from a file): what ``check_descriptor`` checks."""
+    if depth > MAX_DEPTH:
+        raise ShapeError(f"shape nested deeper than {MAX_DEPTH}")
+    items = desc.items() if type(desc) is dict else enumerate(desc)
+    for key, child in items:
+        kind = type(child)
+        if kind is int:
+            if child == VECTOR:
+                vectors.append(len(paths))
+            elif child != SCALAR:
+                raise ShapeError(f"bad shape node {child!r}")
+            paths.append((*path, key))
+            if len(paths) > MAX_LEAVES:
+                raise ShapeError(f"shape has more than {MAX_LEAVES} leaves")
+        elif kind is dict or kind is list:
+            if child:
+                _leaves(child, (*path, key), paths, vectors, depth + 1)
+        else:
+            raise ShapeError(f"bad shape node {child!r}")
+        if type(key) is not str and type(desc) is dict:
+            raise ShapeError("shape object keys must be strings")
 
 
 def describe(value: Any) -> Descriptor:
@@ -91,53 +185,12 @@ def check_descriptor(descriptor: Any) -> None:
     """Raise ``ShapeError`` unless ``descriptor`` is a well-formed shape (read from a file)."""
     if not isinstance(descriptor, dict | list) or not descriptor:
         raise ShapeError("a shape must be a non-empty object or array")
-    count = [0]
-    _check(descriptor, 0, count)
-
-
-def _check(desc: Any, depth: int, count: list[int]) -> None:
-    if depth > MAX_DEPTH:
-        raise ShapeError(f"shape nested deeper than {MAX_DEPTH}")
-    if type(desc) is dict:
-        for key, child in desc.items():
-            if type(key) is not str:
-                raise ShapeError("shape object keys must be strings")
-            _check(child, depth + 1, count)
-    elif type(desc) is list:
-        for child in desc:
-            _check(child, depth + 1, count)
-    elif type(desc) is int and desc in (SCALAR, VECTOR):
-        count[0] += 1
-        if count[0] > MAX_LEAVES:
-            raise ShapeError(f"shape has more than {MAX_LEAVES} leaves")
-    else:
-        raise ShapeError(f"bad shape node {desc!r}")
+    _leaves(descriptor, (), [], [])
 
 
 def compile_shape(descriptor: Descriptor, key: bytes) -> Shape:
-    """Generate and compile the extractor and builder of a (checked) descriptor."""
-    if type(descriptor) is not dict and type(descriptor) is not list:
-        raise ShapeError("a shape's root must be an object or an array")
-    gen = _Generator()
-    body = gen.container(descriptor, "c0", ())
-    extract_src = "\n".join(
-        [
-            "def extract(c0):",
-            *(f"    {line}" for line in gen.checks),
-            f"    return ({', '.join(gen.out)},)" if gen.out else "    return ()",
-        ]
-    )
-    build_src = f"def build(v):\n    return {body}"
-    namespace: dict[str, Any] = {"K": tuple(gen.keys), "_CONTAINERS": (dict, list)}
-    exec(compile(extract_src + "\n" + build_src + "\n", "<trace-shape>", "exec"), namespace)
-    return Shape(
-        descriptor,
-        key,
-        paths=gen.paths,
-        vectors=frozenset(gen.vectors),
-        extract=namespace["extract"],
-        build=namespace["build"],
-    )
+    """The shape of a (checked) descriptor; its code is generated and compiled on first use."""
+    return Shape(descriptor, key)
 
 
 class _Generator:
