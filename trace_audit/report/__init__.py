@@ -79,6 +79,8 @@ def write_report(report: IncidentReport, out: str | Path) -> Path:
     """Write the page to ``out`` (through a temporary file, so a reader never sees half a
     report); ``UsageError`` when the path cannot be written."""
     target = Path(out)
+    if target.is_dir() or not target.name or target.name in (".", ".."):
+        raise UsageError(f"--out names a directory ({target}): give the report's file name")
     partial = target.with_name(f".{target.name}.partial")
     try:
         partial.write_text(report.html, encoding="utf-8")
