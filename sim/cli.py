@@ -311,11 +311,23 @@ def _render_baselines(data: dict[str, Any]) -> None:
     from rich.console import Console
     from rich.table import Table
 
+    several = len(data["seeds"]) > 1
+
     def pm(m: dict[str, Any], key: str) -> str:
         s = m["spread_over_seeds"][key]
-        return f"{s['mean'] * 100:.1f} ± {s['std'] * 100:.1f}"
+        # one seed has no spread to show: "± 0.0" would read as a measured std
+        return (
+            f"{s['mean'] * 100:.1f} ± {s['std'] * 100:.1f}" if several else f"{s['mean'] * 100:.1f}"
+        )
 
-    table = Table(title="TRACE vs post-hoc explanations (mean ± std across seeds; CPU time)")
+    o = data["overhead"]
+    title = (
+        f"TRACE vs post-hoc explanations: {len(data['seeds'])} seed(s), "
+        f"{data['methods']['TRACE']['decisions']} logged decisions ("
+        + ("mean ± std across seeds" if several else "one seed: no spread")
+        + "; CPU time)"
+    )
+    table = Table(title=title)
     for col in ("method", "ET %", "ET_partial %", "DR %", "ms / decision", "bytes / decision"):
         table.add_column(col, justify="left" if col == "method" else "right")
     for name, m in data["methods"].items():
@@ -329,7 +341,6 @@ def _render_baselines(data: dict[str, Any]) -> None:
         )
     console = Console()
     console.print(table)
-    o = data["overhead"]
     console.print(
         f"TRACE per cycle (CPU): {o['on_cpu_us']:.0f} us logged, {o['off_cpu_us']:.0f} us with "
         f"a null logger -> {o['overhead_cpu_us']:.0f} us overhead (paper: 120 us); "

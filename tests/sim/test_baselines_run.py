@@ -111,6 +111,12 @@ def test_the_command_prints_json_and_a_plain_table(monkeypatch: pytest.MonkeyPat
     assert plain.exit_code == 0, plain.output
     rows = [line.split("\t") for line in plain.output.splitlines()]
     assert [r[0] for r in rows[1:5]] == ["TRACE", "LIME", "SHAP", "attention"]
+    table = CliRunner().invoke(app, args)
+    assert table.exit_code == 0, table.output
+    # one seed: the table says so and shows no "± 0.0" that would read as a measured spread
+    text = " ".join(table.output.split())  # rich wraps the title to the terminal
+    assert "one seed: no spread" in text and "±" not in text
+    assert f"{data['methods']['TRACE']['decisions']} logged decisions" in text
 
 
 _NO_OPTION = (
