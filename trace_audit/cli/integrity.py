@@ -154,8 +154,12 @@ def verify_doc(r: VerifyReport) -> Doc:
         rows.append(
             (
                 "external evidence",
-                f"{r.external_resolved} ref(s) resolved in the recordings given, "
-                f"{r.external_unresolved} not checked (recording not given)",
+                f"{r.external_resolved} ref(s) resolved in the recordings given"
+                + (
+                    f", {r.external_unresolved} not checked (recording not given: --evidence)"
+                    if r.external_unresolved
+                    else ""
+                ),
             )
         )
     doc.fields(rows)

@@ -400,8 +400,8 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
         ext = report.external_refs
         out.print(
             f"  evidence refs into external recordings: {ext.get('resolved', 0)} resolved, "
-            f"{ext.get('broken', 0)} broken, {ext.get('unresolved', 0)} unresolved "
-            "(recording not given: --evidence)",
+            f"{ext.get('broken', 0)} broken, {ext.get('unresolved', 0)} unresolved"
+            + (" (recording not given: --evidence)" if ext.get("unresolved") else ""),
             markup=False,
             soft_wrap=True,
         )
