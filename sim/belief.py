@@ -185,6 +185,31 @@ def intervention_plan(node: str, edges: Iterable[tuple[str, str, str]]) -> Plan:
     return plan
 
 
+Edges = tuple[tuple[str, str, str], ...]
+
+
+class PlanCache:
+    """Intervention plans remembered per (graph edges, node), for the last ``size`` graph
+    shapes. A plan is a pure function of the two, and a prober re-plans the same factors of
+    the same graph shape cycle after cycle while the same entities are tracked."""
+
+    def __init__(self, size: int = 64) -> None:
+        self._size = size
+        self._by_edges: dict[Edges, dict[str, Plan]] = {}
+
+    def plan(self, node: str, edges: Edges) -> Plan:
+        """``intervention_plan(node, edges)``, worked out once per graph shape and node."""
+        plans = self._by_edges.get(edges)
+        if plans is None:
+            if len(self._by_edges) >= self._size:
+                del self._by_edges[next(iter(self._by_edges))]  # the oldest shape
+            plans = self._by_edges[edges] = {}
+        found = plans.get(node)
+        if found is None:
+            found = plans[node] = intervention_plan(node, edges)
+        return found
+
+
 def intervene(values: dict[str, object], plan: Plan, node: str, x: float) -> None:
     """``do(node = x)`` in place: set it and recompute its descendants by their rules."""
     values[node] = x
