@@ -66,7 +66,7 @@ _Local = tuple[np.ndarray, np.ndarray, list[float], list[float]]
 @dataclass(slots=True)
 class _Beams:
     """Beam directions for one heading (headings lie on a grid, so they repeat), and the
-    parts of every scan's slab tests that depend on the heading alone.
+    parts of every scan's slab tests that depend on the heading (and the map) alone.
 
     Directions closer than 1e-12 to an axis are nudged off it, so every slab test divides
     by a non-zero component."""
@@ -77,8 +77,9 @@ class _Beams:
     dy_list: list[float]
     inv_x: np.ndarray
     inv_y: np.ndarray
-    ahead_x: np.ndarray  # (beams,) bool: the beam runs towards +x
     wall_x: np.ndarray  # (2, 2, beams): the x bounds of the two wall rows (see _Table)
+    shelf_x: np.ndarray  # (2, shelves, beams): the x bound of each shelf the beam enters
+    # through (x0 or x1, by the beam's direction), and the one it leaves through
     local: dict[float, _Local]  # see _local_dirs
 
 
@@ -119,26 +120,22 @@ class _Table:
 
 @dataclass(slots=True)
 class _Rays:
-    """The map geometry that does not move with ``x``, for one (heading, y, map).
-
-    Per (heading, y) the y-slabs of the shelves and the side walls are fixed, and a scan only
-    recomputes the x-slabs. An entry is a few whole-array steps, so a turning robot (a new
-    pose every cycle) pays little for a new one."""
+    """What does not move with ``x``, for one (heading, y, map): per (heading, y) the
+    y-slabs of the shelves and the side walls are fixed, and a scan only recomputes the
+    x-slabs. The robot turns at a bounded rate, so a new pose comes every cycle of a turn:
+    an entry holds only what its tables need, worked out for the shelves in range."""
 
     beams: _Beams
-    x_in: np.ndarray  # (shelves, beams): the shelf's x bound the beam enters through
-    x_out: np.ndarray
-    y_in: np.ndarray  # (shelves, beams), +inf / -inf where the pair cannot hit
-    y_out: np.ndarray
+    shelf: _Shelves
+    oy: float
     wall_y: np.ndarray  # (beams,): range to the wall the beam meets in y
-    boxes: tuple[tuple[float, float, float, float], ...]
     cy2: tuple[float, ...]  # squared y-distance to each shelf
     by_near: dict[tuple[bool, ...], _Table]  # the table of the shelves in range
     last: tuple[float, np.ndarray] | None  # the last scan's x and its ranges (a robot stands)
 
 
 _SHELVES: dict[bytes, _Shelves] = {}
-_BEAMS: dict[float, _Beams] = {}
+_BEAMS: dict[tuple[float, bytes], _Beams] = {}
 _RAYS: dict[tuple[float, float, bytes], _Rays] = {}
 
 
@@ -155,9 +152,10 @@ def _shelves(key: bytes, shelves: np.ndarray) -> _Shelves:
     return found
 
 
-def _beams(heading: float) -> _Beams:
-    """The cached beam directions of ``heading``."""
-    beams = _BEAMS.get(heading)
+def _beams(heading: float, shelf: _Shelves, map_key: bytes) -> _Beams:
+    """The cached beam directions of ``heading`` (``shelf`` the map, ``map_key`` its bytes)."""
+    key = (heading, map_key)
+    beams = _BEAMS.get(key)
     if beams is not None:
         return beams
     ang = BEAM_ANGLES + heading
@@ -170,10 +168,13 @@ def _beams(heading: float) -> _Beams:
     # Row 0, the x wall: t_in = (x_wall - ox) * inv_x; the other bounds never bind.
     # Row 1, the y wall: (x at infinity behind - ox) * inv_x = -inf, so t_in = wall_y.
     wall_x: np.ndarray = np.array(((np.where(ahead_x, WIDTH_M, 0.0), -forward), (forward, forward)))
-    beams = _Beams(dx, dy, dx.tolist(), dy.tolist(), inv_x, 1.0 / dys, ahead_x, wall_x, {})
+    shelf_x: np.ndarray = np.array(
+        (np.where(ahead_x, shelf.x0, shelf.x1), np.where(ahead_x, shelf.x1, shelf.x0))
+    )
+    beams = _Beams(dx, dy, dx.tolist(), dy.tolist(), inv_x, 1.0 / dys, wall_x, shelf_x, {})
     if len(_BEAMS) >= 1024:  # a turn on the 0.01 rad grid passes ~315 of them
         del _BEAMS[next(iter(_BEAMS))]
-    _BEAMS[heading] = beams
+    _BEAMS[key] = beams
     return beams
 
 
@@ -185,34 +186,19 @@ def _rays(heading: float, oy: float, shelves: np.ndarray) -> _Rays:
     if rays is not None:
         return rays
     shelf = _shelves(map_key, shelves)
-    beams = _beams(heading)
+    beams = _beams(heading, shelf, map_key)
     inv_y = beams.inv_y
-    y0 = shelf.y0 - oy
-    y0 *= inv_y
-    y1 = shelf.y1 - oy
-    y1 *= inv_y
-    y_in, y_out = np.minimum(y0, y1), np.maximum(y0, y1)
-    # A pair whose y-slab is behind the robot never hits (the hit needs 0 < t <= y_out); one
-    # whose y-slab starts beyond the LiDAR's range can only lower a range that is beyond it
-    # to another such range, and every range beyond LIDAR_RANGE_MAX reads as "no return".
-    cannot = y_out <= 0.0
-    cannot |= y_in > LIDAR_RANGE_MAX
-    y_in[cannot] = np.inf
-    y_out[cannot] = -np.inf
-    ahead_x = beams.ahead_x
     rays = _Rays(
         beams=beams,
-        x_in=np.where(ahead_x, shelf.x0, shelf.x1),
-        x_out=np.where(ahead_x, shelf.x1, shelf.x0),
-        y_in=y_in,
-        y_out=y_out,
+        shelf=shelf,
+        oy=oy,
         wall_y=np.where(inv_y > 0, (HEIGHT_M - oy) * inv_y, -oy * inv_y),
-        boxes=shelf.boxes,
         cy2=tuple((min(max(oy, b[1]), b[3]) - oy) ** 2 for b in shelf.boxes),
         by_near={},
         last=None,
     )
-    if len(_RAYS) >= 64:  # the robot turns and changes lane: keep the latest poses
+    # Straight driving keeps one entry for many cycles; a turn never comes back to a pose.
+    if len(_RAYS) >= 16:
         del _RAYS[next(iter(_RAYS))]
     _RAYS[key] = rays
     return rays
@@ -221,25 +207,33 @@ def _rays(heading: float, oy: float, shelves: np.ndarray) -> _Rays:
 def _table(rays: _Rays, near: tuple[bool, ...]) -> _Table:
     """The walls' rows, then those of the shelves in range."""
     rows = np.flatnonzero(near)
-    n = 2 + len(rows)
-    beams = len(rays.wall_y)
+    n, beams = 2 + len(rows), len(rays.wall_y)
+    inv_y, oy = rays.beams.inv_y, rays.oy
+    y0 = rays.shelf.y0[rows] - oy
+    y0 *= inv_y
+    y1 = rays.shelf.y1[rows] - oy
+    y1 *= inv_y
+    y_in, y_out = np.empty((n, beams)), np.empty((n, beams))
+    y_in[0], y_in[1], y_out[:2] = -np.inf, rays.wall_y, np.inf
+    shelf_in, shelf_out = y_in[2:], y_out[2:]
+    np.minimum(y0, y1, out=shelf_in)
+    np.maximum(y0, y1, out=shelf_out)
+    # A pair whose y-slab is behind the robot never hits (the hit needs 0 < t <= y_out); one
+    # whose y-slab starts beyond the LiDAR's range can only lower a range that is beyond it
+    # to another such range, and every range beyond LIDAR_RANGE_MAX reads as "no return".
+    cannot = shelf_out <= 0.0
+    cannot |= shelf_in > LIDAR_RANGE_MAX
+    np.copyto(shelf_in, np.inf, where=cannot)
+    np.copyto(shelf_out, -np.inf, where=cannot)
     x = np.empty((2, n, beams))
     x[:, :2] = rays.beams.wall_x
-    x[0, 2:] = rays.x_in[rows]
-    x[1, 2:] = rays.x_out[rows]
-    y_in = np.empty((n, beams))
-    y_in[0] = -np.inf
-    y_in[1] = rays.wall_y
-    y_in[2:] = rays.y_in[rows]
-    y_out = np.empty((n, beams))
-    y_out[:2] = np.inf
-    y_out[2:] = rays.y_out[rows]
+    x[:, 2:] = rays.beams.shelf_x[:, rows]
     return _Table(
         x=x,
         inv_x=rays.beams.inv_x,
         y_in=y_in,
         y_out=y_out,
-        ahead=bool(y_in[2:].min(initial=np.inf) > 0.0),
+        ahead=bool(shelf_in.min(initial=np.inf) > 0.0),
     )
 
 
@@ -254,7 +248,7 @@ def _static_ranges(rays: _Rays, ox: float, oy: float) -> np.ndarray:
     # Only shelves within range can be hit.
     near = tuple(
         (min(max(ox, box[0]), box[2]) - ox) ** 2 + cy2 < LIDAR_RANGE_MAX**2
-        for box, cy2 in zip(rays.boxes, rays.cy2, strict=True)
+        for box, cy2 in zip(rays.shelf.boxes, rays.cy2, strict=True)
     )
     table = rays.by_near.get(near)
     if table is None:
