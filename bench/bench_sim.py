@@ -16,12 +16,15 @@ Measured in one invocation, each figure the median of ``--runs`` (default 3):
    tapped run, replayed through a fresh ``AuditLogger`` with the same configuration
    (synchronous, same batch, same garbage-collector settings as ``sim.run``).
 4. the simulator alone, derived: 1 / (1/total - 1/logger), on CPU time (a cross-check of 2).
+   With ``--vs TREE`` (another checkout, e.g. the tree before a change), the simulator alone
+   of this tree and of TREE, each in a fresh child process, in turn, ``--runs`` pairs: the
+   medians and the median of the pairwise ratios.
 5. where the time goes, CPU microseconds per cycle: the simulator's stages, from a run with
    thin timing wrappers; the logger's parts, each timed on its own on the captured records
    (validation, canonical encoding, sensor refs, seals, chunk writing); the rest of the
    logger is its bookkeeping (the replay total minus those parts).
 
-Run: ``.venv/bin/python bench/bench_sim.py [--cycles 20000] [--runs 3] [--batch 50]``
+Run: ``.venv/bin/python bench/bench_sim.py [--cycles 20000] [--runs 3] [--batch 50] [--vs TREE]``
 """
 
 from __future__ import annotations
@@ -29,7 +32,10 @@ from __future__ import annotations
 import argparse
 import io
 import logging
+import os
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from collections import defaultdict
@@ -190,6 +196,37 @@ def _sim_only(config: RunConfig) -> float:
         names["AuditLogger"] = AuditLogger
 
 
+def _child_sim_only(tree: Path, cycles: int, seed: int, faults: str, batch: int) -> float:
+    """CPU seconds of ``_sim_only`` on ``cycles`` cycles, in a fresh process importing ``sim``
+    (and ``trace_runtime``) from ``tree``."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    argv = [sys.executable, __file__, "--child-sim-only", str(cycles), "--seed", str(seed)]
+    argv += ["--faults", faults, "--batch", str(batch)]
+    done = subprocess.run(argv, env=env, cwd=tree, capture_output=True, text=True, check=True)
+    return float(done.stdout.split()[-1])
+
+
+def _compare_trees(vs: Path, args: argparse.Namespace) -> None:
+    """Print the simulator alone of this tree against ``vs``, in child processes in turn."""
+    here = Path(__file__).resolve().parents[1]
+    ours, theirs = [], []
+    for _ in range(args.runs):
+        ours.append(_child_sim_only(here, args.cycles, args.seed, args.faults, args.batch))
+        theirs.append(_child_sim_only(vs, args.cycles, args.seed, args.faults, args.batch))
+    ratios = sorted(t / o for o, t in zip(ours, theirs, strict=True))
+    n = args.cycles
+    print(
+        f"sim alone, this tree vs {vs} ({args.runs} pairs of child processes in turn, "
+        f"{n:,} cycles each)"
+    )
+    print(
+        f"  this tree {1e6 * statistics.median(ours) / n:6.0f} us a cycle   "
+        f"{vs.name} {1e6 * statistics.median(theirs) / n:6.0f} us a cycle   "
+        f"speed-up {statistics.median(ratios):.2f}x (pairs {', '.join(f'{r:.2f}' for r in ratios)})"
+    )
+    print()
+
+
 def _replay(cycles: list[Captured], out: Path, batch: int) -> float:
     """CPU seconds for ``AuditLogger`` to take and write ``cycles``."""
     logger = AuditLogger(
@@ -335,9 +372,24 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--faults", choices=("on", "off"), default="on")
     parser.add_argument("--replay-cycles", type=int, default=5_000)
+    parser.add_argument("--vs", type=Path, help="another checkout to compare the simulator with")
+    parser.add_argument("--child-sim-only", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     faults = FaultRates() if args.faults == "on" else FaultRates.off()
     n, batch = args.cycles, args.batch
+    if args.child_sim_only is not None:  # one measurement for --vs, in this process
+        with tempfile.TemporaryDirectory() as tmp:
+            config = RunConfig(
+                out=Path(tmp) / "sim.mcap",
+                total_cycles=args.child_sim_only,
+                seed=args.seed,
+                faults=faults,
+                batch_cycles=batch,
+            )
+            print(_sim_only(config))
+        return
+    if args.vs is not None:
+        _compare_trees(args.vs.resolve(), args)
 
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)

@@ -77,31 +77,41 @@ def p_blocked(clearance: float) -> float:
     return round(_sigmoid((4.0 - clearance) / 0.5), 3)
 
 
+Compute = Callable[[dict[str, object]], float]
+"""A derived node's value from the current node values."""
+
+
 @dataclass(frozen=True, slots=True)
 class Rule:
-    """How a derived node's value follows from its parents' (named from the child's id)."""
+    """How a derived node's value follows from its parents' (named from the child's id).
 
-    compute: Callable[[dict[str, object], str], float]
+    ``bind(child)`` is the child's computation with its parents' ids worked out once: a
+    plan is re-run dozens of times per probe."""
+
+    bind: Callable[[str], Compute]
     parents: Callable[[str], tuple[str, ...]]
 
 
-def _rule_ped_risk(v: dict[str, object], child: str) -> float:
+def _bind_ped_risk(child: str) -> Compute:
     e = _entity_of(child)
-    return ped_risk(float(v[f"{e}.distance"]), str(v[f"{e}.intent"]), float(v[f"{e}.conflict"]))  # type: ignore[arg-type]
+    d, i, c = f"{e}.distance", f"{e}.intent", f"{e}.conflict"
+    return lambda v: ped_risk(float(v[d]), str(v[i]), float(v[c]))  # type: ignore[arg-type]
 
 
-def _rule_ttc(v: dict[str, object], child: str) -> float:
+def _bind_ttc(child: str) -> Compute:
     e = _entity_of(child)
-    return time_to_collision(float(v[f"{e}.distance"]), float(v[f"{e}.closing"]))  # type: ignore[arg-type]
+    d, c = f"{e}.distance", f"{e}.closing"
+    return lambda v: time_to_collision(float(v[d]), float(v[c]))  # type: ignore[arg-type]
 
 
-def _rule_veh_risk(v: dict[str, object], child: str) -> float:
+def _bind_veh_risk(child: str) -> Compute:
     e = _entity_of(child)
-    return vehicle_risk(float(v[f"{e}.ttc"]), float(v[f"{e}.conflict"]))  # type: ignore[arg-type]
+    t, c = f"{e}.ttc", f"{e}.conflict"
+    return lambda v: vehicle_risk(float(v[t]), float(v[c]))  # type: ignore[arg-type]
 
 
-def _rule_blocked(v: dict[str, object], child: str) -> float:
-    return p_blocked(float(v["corridor.clearance"]))  # type: ignore[arg-type]
+def _bind_blocked(child: str) -> Compute:
+    return lambda v: p_blocked(float(v["corridor.clearance"]))  # type: ignore[arg-type]
 
 
 def _named(*suffixes: str) -> Callable[[str], tuple[str, ...]]:
@@ -109,10 +119,10 @@ def _named(*suffixes: str) -> Callable[[str], tuple[str, ...]]:
 
 
 RULES: dict[str, Rule] = {
-    RULE_PED_RISK: Rule(_rule_ped_risk, _named("distance", "intent", "conflict")),
-    RULE_TTC: Rule(_rule_ttc, _named("distance", "closing")),
-    RULE_VEH_RISK: Rule(_rule_veh_risk, _named("ttc", "conflict")),
-    RULE_BLOCKED: Rule(_rule_blocked, lambda _: ("corridor.clearance",)),
+    RULE_PED_RISK: Rule(_bind_ped_risk, _named("distance", "intent", "conflict")),
+    RULE_TTC: Rule(_bind_ttc, _named("distance", "closing")),
+    RULE_VEH_RISK: Rule(_bind_veh_risk, _named("ttc", "conflict")),
+    RULE_BLOCKED: Rule(_bind_blocked, lambda _: ("corridor.clearance",)),
 }
 """Edge rule -> how the child's value follows from its parents' values. Rules not listed
 (range, intent, conflict, closing, clearance) derive a node from sensor data, not from other
@@ -141,7 +151,7 @@ class UnknownRuleError(TraceError):
     """A logged edge into a descendant names a rule this policy does not know."""
 
 
-Plan = list[tuple[str, Callable[[dict[str, object], str], float]]]
+Plan = list[tuple[str, Compute]]
 
 
 def intervention_plan(node: str, edges: Iterable[tuple[str, str, str]]) -> Plan:
@@ -181,15 +191,40 @@ def intervention_plan(node: str, edges: Iterable[tuple[str, str, str]]) -> Plan:
     for n in order:
         if len(rule_into[n]) != 1:
             raise UnknownRuleError(f"{n} is derived by {len(rule_into[n])} rules")
-        plan.append((n, RULES[next(iter(rule_into[n]))].compute))
+        plan.append((n, RULES[next(iter(rule_into[n]))].bind(n)))
     return plan
+
+
+Edges = tuple[tuple[str, str, str], ...]
+
+
+class PlanCache:
+    """Intervention plans remembered per (graph edges, node), for the last ``size`` graph
+    shapes. A plan is a pure function of the two, and a prober re-plans the same factors of
+    the same graph shape cycle after cycle while the same entities are tracked."""
+
+    def __init__(self, size: int = 64) -> None:
+        self._size = size
+        self._by_edges: dict[Edges, dict[str, Plan]] = {}
+
+    def plan(self, node: str, edges: Edges) -> Plan:
+        """``intervention_plan(node, edges)``, worked out once per graph shape and node."""
+        plans = self._by_edges.get(edges)
+        if plans is None:
+            if len(self._by_edges) >= self._size:
+                del self._by_edges[next(iter(self._by_edges))]  # the oldest shape
+            plans = self._by_edges[edges] = {}
+        found = plans.get(node)
+        if found is None:
+            found = plans[node] = intervention_plan(node, edges)
+        return found
 
 
 def intervene(values: dict[str, object], plan: Plan, node: str, x: float) -> None:
     """``do(node = x)`` in place: set it and recompute its descendants by their rules."""
     values[node] = x
-    for child, rule in plan:
-        values[child] = rule(values, child)
+    for child, compute in plan:
+        values[child] = compute(values)
 
 
 @dataclass(slots=True)  # not frozen: ~4x cheaper to create

@@ -21,7 +21,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 
-from sim.belief import Plan, intervene, intervention_plan
+from sim.belief import Plan, PlanCache, intervene, intervention_plan
 from sim.policy import PolicyInput, choose
 from trace_runtime.errors import TraceError
 
@@ -63,13 +63,16 @@ def probe(
     factors: list[str],
     budget: int = DEFAULT_BUDGET,
     edges: Iterable[tuple[str, str, str]] = (),
+    *,
+    plans: PlanCache | None = None,
 ) -> list[Found]:
     """Counterfactuals for each numeric factor, in both directions; raise BudgetExhaustedError.
 
     ``edges`` are the belief graph's (parent, child, rule): an intervention on a factor is
-    propagated to its descendants through them. Without edges nothing is propagated."""
+    propagated to its descendants through them. Without edges nothing is propagated.
+    ``plans`` remembers how, across calls (the plans are the same either way)."""
     spent = 0
-    edge_list = list(edges)
+    edge_list = tuple(edges)
     base_values = dict(values)
     v = dict(values)
     plan: Plan = []
@@ -89,7 +92,12 @@ def probe(
         current = values[node]
         if not isinstance(current, (int, float)) or isinstance(current, bool):
             continue
-        plan = intervention_plan(node, edge_list) if edge_list else []
+        if not edge_list:
+            plan = []
+        elif plans is not None:
+            plan = plans.plan(node, edge_list)
+        else:
+            plan = intervention_plan(node, edge_list)
         lo_d, hi_d, tol = domain_of(node)
         c = float(current)
         for end in (hi_d, lo_d):

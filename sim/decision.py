@@ -17,7 +17,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from sim.belief import BeliefGraph
+from sim.belief import BeliefGraph, PlanCache
 from sim.counterfactual import DEFAULT_BUDGET, BudgetExhaustedError, Found, probe
 from sim.policy import Outcome, PolicyInput, describe, evaluate, factors_of, score_alternatives
 from sim.records import (
@@ -52,6 +52,8 @@ class Decider:
     def __init__(self, size: int | None = None) -> None:
         self._size = CACHE_SIZE if size is None else size
         self._cache: dict[tuple[PolicyInput, tuple[Any, ...]], Decision] = {}
+        self.plans = PlanCache()
+        """Intervention plans, shared by every probe of this robot's graphs."""
         self.hits = 0
         self.misses = 0
 
@@ -69,7 +71,7 @@ class Decider:
             self.hits += 1
             return inp, values, decision
         self.misses += 1
-        decision = derive(inp, values, graph)
+        decision = derive(inp, values, graph, self.plans)
         if self._size > 0 and _shareable(read):
             if len(self._cache) >= self._size:
                 del self._cache[next(iter(self._cache))]  # the oldest entry
@@ -103,14 +105,20 @@ def graph_edges(graph: BeliefGraph) -> list[tuple[str, str, str]]:
     return [(e.parent, e.child, e.rule) for e in graph.edges]
 
 
-def derive(inp: PolicyInput, values: dict[str, Any], graph: BeliefGraph) -> Decision:
-    """Evaluate the policy, score the alternatives, probe, and write the rationale."""
+def derive(
+    inp: PolicyInput,
+    values: dict[str, Any],
+    graph: BeliefGraph,
+    plans: PlanCache | None = None,
+) -> Decision:
+    """Evaluate the policy, score the alternatives, probe (with ``plans`` remembered
+    across calls), and write the rationale."""
     outcome = evaluate(inp, values)
     factors = factors_of(outcome, inp)
     score, alternatives = score_alternatives(outcome, values)
     found: list[Found] | None
     try:
-        found = probe(inp, values, factors, DEFAULT_BUDGET, graph_edges(graph))
+        found = probe(inp, values, factors, DEFAULT_BUDGET, graph_edges(graph), plans=plans)
     except BudgetExhaustedError:
         found = None
     phrases = describe(outcome, values)

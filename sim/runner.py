@@ -445,7 +445,14 @@ class _Pipeline:
         if faults.cf_timeout:
             try:
                 cfs = counterfactual_records(
-                    probe(inp, values, decision.factors, TIMEOUT_BUDGET, graph_edges(graph))
+                    probe(
+                        inp,
+                        values,
+                        decision.factors,
+                        TIMEOUT_BUDGET,
+                        graph_edges(graph),
+                        plans=self.decider.plans,
+                    )
                 )
             except BudgetExhaustedError:
                 cfs = None

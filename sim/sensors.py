@@ -60,163 +60,181 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-@dataclass(frozen=True, slots=True)
-class _Pairs:
-    """(beam, shelf) pairs a scan must slab-test: per pair, the shelf's x-slab bounds in the
-    order the beam meets them, and its y-slab entry and exit ranges (fixed for a given y)."""
-
-    beam: np.ndarray
-    box: np.ndarray
-    inv_x: np.ndarray
-    x_in: np.ndarray  # the shelf's x bound the beam enters through (x0 or x1)
-    x_out: np.ndarray
-    y_in: np.ndarray  # ranges at which the beam enters and leaves the shelf's y-slab
-    y_out: np.ndarray
-    ahead: bool  # every y-slab starts ahead of the robot, so every slab entry is at t > 0
-
-    def subset(self, keep: np.ndarray) -> _Pairs:
-        return _Pairs(
-            beam=self.beam[keep],
-            box=self.box[keep],
-            inv_x=self.inv_x[keep],
-            x_in=self.x_in[keep],
-            x_out=self.x_out[keep],
-            y_in=self.y_in[keep],
-            y_out=self.y_out[keep],
-            ahead=bool((self.y_in[keep] > 0.0).all()),
-        )
-
-
-@dataclass(frozen=True, slots=True)
-class _Table:
-    """``_Pairs`` laid out one column per beam, for a scan that is a handful of whole-array steps.
-
-    Column ``i`` holds beam ``i``'s slab tests: row 0 the wall it leaves through in x, row 1
-    the wall it meets in y, then its (beam, shelf) pairs, padded with tests that never hit.
-    Each wall is written as a slab test whose other bounds are infinite, so it yields exactly
-    the wall's range: ``(x - ox) * inv_x`` for the x wall, ``wall_y`` for the y wall. The
-    minimum of a set of floats does not depend on the order it is taken in, so a column's
-    minimum is bit for bit the minimum the pair list gives. (Rows, not columns, per test:
-    numpy takes a minimum across rows in a few vector steps, along a short row slowly.)
-    """
-
-    x: np.ndarray  # (2, tests, beams): the x bound entered through, the x bound left through
-    inv_x: np.ndarray  # (beams,)
-    y_in: np.ndarray  # (tests, beams)
-    y_out: np.ndarray
-    ahead: bool  # as ``_Pairs.ahead`` (the walls are always ahead)
-
-
-def _table(pairs: _Pairs, inv_x: np.ndarray, wall_y: np.ndarray) -> _Table:
-    beams = len(inv_x)
-    counts = np.bincount(pairs.beam, minlength=beams)
-    rows = 2 + int(counts.max(initial=0))
-    inf = np.inf
-    forward = np.where(inv_x > 0.0, inf, -inf)  # the x at infinity ahead of each beam
-    # Padding: entering at x = infinity ahead gives t_in = inf, i.e. never the nearest.
-    x = np.empty((2, rows, beams))
-    x[:] = forward
-    y_in = np.zeros((rows, beams))
-    y_out = np.zeros((rows, beams))
-    # Row 0, the x wall: t_in = (x_wall - ox) * inv_x; the other bounds never bind.
-    x[0, 0] = np.where(inv_x > 0.0, WIDTH_M, 0.0)
-    y_in[0], y_out[0] = -inf, inf
-    # Row 1, the y wall: (x at infinity behind - ox) * inv_x = -inf, so t_in = wall_y.
-    x[0, 1] = -forward
-    y_in[1], y_out[1] = wall_y, inf
-    # The pairs, in their order within each beam.
-    order = np.argsort(pairs.beam, kind="stable")
-    beam = pairs.beam[order]
-    starts = np.cumsum(counts) - counts
-    row = 2 + np.arange(len(beam)) - starts[beam]
-    x[0, row, beam] = pairs.x_in[order]
-    x[1, row, beam] = pairs.x_out[order]
-    y_in[row, beam] = pairs.y_in[order]
-    y_out[row, beam] = pairs.y_out[order]
-    return _Table(x=x, inv_x=inv_x, y_in=y_in, y_out=y_out, ahead=pairs.ahead)
-
-
 _Local = tuple[np.ndarray, np.ndarray, list[float], list[float]]
 
 
 @dataclass(slots=True)
-class _Rays:
-    """Beam directions for one heading, and the map geometry that does not move with ``x``.
+class _Beams:
+    """Beam directions for one heading (headings lie on a grid, so they repeat), and the
+    parts of every scan's slab tests that depend on the heading (and the map) alone.
 
-    The route is straight, so the robot's heading takes two values and its ``y`` one: per
-    (heading, y, map) the y-slabs of the shelves and the side walls are fixed, and a scan only
-    recomputes the x-slabs, of the (beam, shelf) pairs that can meet at all. Every range is
-    computed with the same floating-point operations as a direct slab test of every beam
-    against every shelf in range, so scans are bit-for-bit what that test gives.
-    """
+    Directions closer than 1e-12 to an axis are nudged off it, so every slab test divides
+    by a non-zero component."""
 
     dx: np.ndarray
     dy: np.ndarray
     dx_list: list[float]
     dy_list: list[float]
     inv_x: np.ndarray
-    pos_x: np.ndarray
-    wall_y: np.ndarray  # range to the wall the beam meets in y
-    boxes: tuple[tuple[float, float, float, float], ...]
-    cy2: tuple[float, ...]  # squared y-distance to each shelf
-    pairs: _Pairs
-    by_near: dict[tuple[bool, ...], _Table]  # ``pairs`` restricted to the shelves in range
-    last: tuple[float, np.ndarray] | None  # the last scan's x and its ranges (a robot stands)
+    inv_y: np.ndarray
+    wall_x: np.ndarray  # (2, 2, beams): the x bounds of the two wall rows (see _Table)
+    shelf_x: np.ndarray  # (2, shelves, beams): the x bound of each shelf the beam enters
+    # through (x0 or x1, by the beam's direction), and the one it leaves through
     local: dict[float, _Local]  # see _local_dirs
 
 
+@dataclass(frozen=True, slots=True)
+class _Shelves:
+    """The static map, each shelf bound spread over one row per shelf and one column per
+    beam: numpy is several times faster on arrays of one shape than when it broadcasts a
+    column across a row."""
+
+    boxes: tuple[tuple[float, float, float, float], ...]
+    x0: np.ndarray  # (shelves, beams)
+    y0: np.ndarray
+    x1: np.ndarray
+    y1: np.ndarray
+
+
+@dataclass(frozen=True, slots=True)
+class _Table:
+    """The slab tests of one scan, one row per obstacle and one column per beam, so that a
+    scan is a handful of whole-array steps and a minimum across rows.
+
+    Row 0 is the wall each beam leaves through in x, row 1 the wall it meets in y, then one
+    row per shelf in range. Each wall is written as a slab test whose other bounds are
+    infinite, so it yields exactly the wall's range: ``(x - ox) * inv_x`` for the x wall,
+    ``wall_y`` for the y wall. A (beam, shelf) pair that cannot hit (its y-slab is behind
+    the robot, or starts beyond the LiDAR's range) enters its y-slab at +inf and leaves it
+    at -inf, so it never hits. Every other test is the textbook slab test's arithmetic, and
+    the minimum of a set of floats does not depend on the order it is taken in, so a beam's
+    range is bit for bit what a direct test of every beam against every shelf in range gives.
+    """
+
+    x: np.ndarray  # (2, rows, beams): the x bound entered through, the x bound left through
+    inv_x: np.ndarray  # (beams,)
+    y_in: np.ndarray  # (rows, beams): ranges at which the beam enters and leaves the y-slab
+    y_out: np.ndarray
+    ahead: bool  # every y-slab that can hit starts ahead of the robot (so t_in > 0 holds)
+
+
+@dataclass(slots=True)
+class _Rays:
+    """What does not move with ``x``, for one (heading, y, map): per (heading, y) the
+    y-slabs of the shelves and the side walls are fixed, and a scan only recomputes the
+    x-slabs. The robot turns at a bounded rate, so a new pose comes every cycle of a turn:
+    an entry holds only what its tables need, worked out for the shelves in range."""
+
+    beams: _Beams
+    shelf: _Shelves
+    oy: float
+    wall_y: np.ndarray  # (beams,): range to the wall the beam meets in y
+    cy2: tuple[float, ...]  # squared y-distance to each shelf
+    by_near: dict[tuple[bool, ...], _Table]  # the table of the shelves in range
+    last: tuple[float, np.ndarray] | None  # the last scan's x and its ranges (a robot stands)
+
+
+_SHELVES: dict[bytes, _Shelves] = {}
+_BEAMS: dict[tuple[float, bytes], _Beams] = {}
 _RAYS: dict[tuple[float, float, bytes], _Rays] = {}
 
 
-def _rays(heading: float, oy: float, shelves: np.ndarray) -> _Rays:
-    """The cached ray geometry of ``heading`` from height ``oy`` among ``shelves``."""
-    key = (heading, oy, shelves.tobytes())
-    rays = _RAYS.get(key)
-    if rays is not None:
-        return rays
+def _shelves(key: bytes, shelves: np.ndarray) -> _Shelves:
+    """The cached row-per-shelf layout of ``shelves`` (``key`` its bytes)."""
+    found = _SHELVES.get(key)
+    if found is None:
+        cols = [np.repeat(shelves[:, k : k + 1], LIDAR_BEAMS, axis=1) for k in range(4)]
+        boxes = tuple((float(a), float(b), float(c), float(d)) for a, b, c, d in shelves)
+        found = _Shelves(boxes, cols[0], cols[1], cols[2], cols[3])
+        if len(_SHELVES) >= 8:
+            del _SHELVES[next(iter(_SHELVES))]
+        _SHELVES[key] = found
+    return found
+
+
+def _beams(heading: float, shelf: _Shelves, map_key: bytes) -> _Beams:
+    """The cached beam directions of ``heading`` (``shelf`` the map, ``map_key`` its bytes)."""
+    key = (heading, map_key)
+    beams = _BEAMS.get(key)
+    if beams is not None:
+        return beams
     ang = BEAM_ANGLES + heading
     dx, dy = np.cos(ang), np.sin(ang)
     dxs = np.where(np.abs(dx) < 1e-12, 1e-12, dx)
     dys = np.where(np.abs(dy) < 1e-12, 1e-12, dy)
-    inv_x, inv_y = 1.0 / dxs, 1.0 / dys
-    y0 = (shelves[:, 1] - oy) * inv_y[:, None]
-    y1 = (shelves[:, 3] - oy) * inv_y[:, None]
-    y_in, y_out = np.minimum(y0, y1), np.maximum(y0, y1)
-    # A pair whose y-slab is behind the robot never hits (the hit needs 0 < t <= y_out); one
-    # whose y-slab starts beyond the LiDAR's range can only lower a range that is beyond it
-    # to another such range, and every range beyond LIDAR_RANGE_MAX reads as "no return".
-    beam, box = np.nonzero((y_out > 0.0) & (y_in <= LIDAR_RANGE_MAX))
-    pos = inv_x[beam] > 0.0
-    boxes = tuple((float(a), float(b), float(c), float(d)) for a, b, c, d in shelves)
-    pairs = _Pairs(
-        beam=beam,
-        box=box,
-        inv_x=inv_x[beam],
-        x_in=np.where(pos, shelves[box, 0], shelves[box, 2]),
-        x_out=np.where(pos, shelves[box, 2], shelves[box, 0]),
-        y_in=y_in[beam, box],
-        y_out=y_out[beam, box],
-        ahead=bool((y_in[beam, box] > 0.0).all()),
+    inv_x = 1.0 / dxs
+    ahead_x = inv_x > 0.0
+    forward = np.where(ahead_x, np.inf, -np.inf)  # the x at infinity ahead of each beam
+    # Row 0, the x wall: t_in = (x_wall - ox) * inv_x; the other bounds never bind.
+    # Row 1, the y wall: (x at infinity behind - ox) * inv_x = -inf, so t_in = wall_y.
+    wall_x: np.ndarray = np.array(((np.where(ahead_x, WIDTH_M, 0.0), -forward), (forward, forward)))
+    shelf_x: np.ndarray = np.array(
+        (np.where(ahead_x, shelf.x0, shelf.x1), np.where(ahead_x, shelf.x1, shelf.x0))
     )
+    beams = _Beams(dx, dy, dx.tolist(), dy.tolist(), inv_x, 1.0 / dys, wall_x, shelf_x, {})
+    if len(_BEAMS) >= 1024:  # a turn on the 0.01 rad grid passes ~315 of them
+        del _BEAMS[next(iter(_BEAMS))]
+    _BEAMS[key] = beams
+    return beams
+
+
+def _rays(heading: float, oy: float, shelves: np.ndarray) -> _Rays:
+    """The cached ray geometry of ``heading`` from height ``oy`` among ``shelves``."""
+    map_key = shelves.tobytes()
+    key = (heading, oy, map_key)
+    rays = _RAYS.get(key)
+    if rays is not None:
+        return rays
+    shelf = _shelves(map_key, shelves)
+    beams = _beams(heading, shelf, map_key)
+    inv_y = beams.inv_y
     rays = _Rays(
-        dx=dx,
-        dy=dy,
-        dx_list=dx.tolist(),
-        dy_list=dy.tolist(),
-        inv_x=inv_x,
-        pos_x=dxs > 0,
-        wall_y=np.where(dys > 0, (HEIGHT_M - oy) * inv_y, -oy * inv_y),
-        boxes=boxes,
-        cy2=tuple((min(max(oy, b[1]), b[3]) - oy) ** 2 for b in boxes),
-        pairs=pairs,
+        beams=beams,
+        shelf=shelf,
+        oy=oy,
+        wall_y=np.where(inv_y > 0, (HEIGHT_M - oy) * inv_y, -oy * inv_y),
+        cy2=tuple((min(max(oy, b[1]), b[3]) - oy) ** 2 for b in shelf.boxes),
         by_near={},
         last=None,
-        local={},
     )
-    if len(_RAYS) >= 64:  # the robot turns and changes lane: keep the latest poses
+    # Straight driving keeps one entry for many cycles; a turn never comes back to a pose.
+    if len(_RAYS) >= 16:
         del _RAYS[next(iter(_RAYS))]
     _RAYS[key] = rays
     return rays
+
+
+def _table(rays: _Rays, near: tuple[bool, ...]) -> _Table:
+    """The walls' rows, then those of the shelves in range."""
+    rows = np.flatnonzero(near)
+    n, beams = 2 + len(rows), len(rays.wall_y)
+    inv_y, oy = rays.beams.inv_y, rays.oy
+    y0 = rays.shelf.y0[rows] - oy
+    y0 *= inv_y
+    y1 = rays.shelf.y1[rows] - oy
+    y1 *= inv_y
+    y_in, y_out = np.empty((n, beams)), np.empty((n, beams))
+    y_in[0], y_in[1], y_out[:2] = -np.inf, rays.wall_y, np.inf
+    shelf_in, shelf_out = y_in[2:], y_out[2:]
+    np.minimum(y0, y1, out=shelf_in)
+    np.maximum(y0, y1, out=shelf_out)
+    # A pair whose y-slab is behind the robot never hits (the hit needs 0 < t <= y_out); one
+    # whose y-slab starts beyond the LiDAR's range can only lower a range that is beyond it
+    # to another such range, and every range beyond LIDAR_RANGE_MAX reads as "no return".
+    cannot = shelf_out <= 0.0
+    cannot |= shelf_in > LIDAR_RANGE_MAX
+    np.copyto(shelf_in, np.inf, where=cannot)
+    np.copyto(shelf_out, -np.inf, where=cannot)
+    x = np.empty((2, n, beams))
+    x[:, :2] = rays.beams.wall_x
+    x[:, 2:] = rays.beams.shelf_x[:, rows]
+    return _Table(
+        x=x,
+        inv_x=rays.beams.inv_x,
+        y_in=y_in,
+        y_out=y_out,
+        ahead=bool(shelf_in.min(initial=np.inf) > 0.0),
+    )
 
 
 def _static_ranges(rays: _Rays, ox: float, oy: float) -> np.ndarray:
@@ -230,11 +248,11 @@ def _static_ranges(rays: _Rays, ox: float, oy: float) -> np.ndarray:
     # Only shelves within range can be hit.
     near = tuple(
         (min(max(ox, box[0]), box[2]) - ox) ** 2 + cy2 < LIDAR_RANGE_MAX**2
-        for box, cy2 in zip(rays.boxes, rays.cy2, strict=True)
+        for box, cy2 in zip(rays.shelf.boxes, rays.cy2, strict=True)
     )
     table = rays.by_near.get(near)
     if table is None:
-        table = _table(rays.pairs.subset(np.array(near)[rays.pairs.box]), rays.inv_x, rays.wall_y)
+        table = _table(rays, near)
         rays.by_near[near] = table
     # Entering the x-slab through x_in is min(x0, x1) of the textbook slab test, exactly.
     t = table.x - ox
@@ -248,17 +266,17 @@ def _static_ranges(rays: _Rays, ox: float, oy: float) -> np.ndarray:
     return best
 
 
-def _local_dirs(rays: _Rays, heading: float, c: float, s: float) -> _Local:
+def _local_dirs(beams: _Beams, heading: float, c: float, s: float) -> _Local:
     """Every beam's direction in the frame of a box actor with ``heading`` (c, s its cos, sin);
     actors keep their heading (pallets, a forklift on the aisle), so this is mostly cached."""
-    local = rays.local.get(heading)
+    local = beams.local.get(heading)
     if local is None:
-        ldx, ldy = c * rays.dx + s * rays.dy, -s * rays.dx + c * rays.dy
+        ldx, ldy = c * beams.dx + s * beams.dy, -s * beams.dx + c * beams.dy
         ldx = np.where(np.abs(ldx) < 1e-12, 1e-12, ldx)
         ldy = np.where(np.abs(ldy) < 1e-12, 1e-12, ldy)
         local = (ldx, ldy, ldx.tolist(), ldy.tolist())
-        if len(rays.local) < 64:
-            rays.local[heading] = local
+        if len(beams.local) < 64:
+            beams.local[heading] = local
     return local
 
 
@@ -286,7 +304,7 @@ def _actor_ranges(
         # A handful of beams.
         r = 0.5 * actor.length
         c = dist * dist - r * r
-        dxs, dys = rays.dx_list, rays.dy_list
+        dxs, dys = rays.beams.dx_list, rays.beams.dy_list
         for i in range(i0, i1 + 1):
             b = dxs[i] * rx + dys[i] * ry
             disc = b * b - c
@@ -296,7 +314,7 @@ def _actor_ranges(
     c, s = math.cos(actor.heading), math.sin(actor.heading)
     # Ray origin and direction in the actor's frame (directions cached per actor heading).
     lx, ly = -(c * rx + s * ry), -(-s * rx + c * ry)
-    ldx_all, ldy_all, ldx_list, ldy_list = _local_dirs(rays, actor.heading, c, s)
+    ldx_all, ldy_all, ldx_list, ldy_list = _local_dirs(rays.beams, actor.heading, c, s)
     hl, hw = 0.5 * actor.length, 0.5 * actor.width
     ax, bx, ay, by = -hl - lx, hl - lx, -hw - ly, hw - ly
     if i1 - i0 < _FEW_BEAMS:

@@ -5,7 +5,14 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sim.belief import RULE_PED_RISK, intervene, intervention_plan, ped_risk
+from sim.belief import (
+    RULE_BLOCKED,
+    RULE_PED_RISK,
+    PlanCache,
+    intervene,
+    intervention_plan,
+    ped_risk,
+)
 from sim.counterfactual import BudgetExhaustedError, holds, probe
 from sim.policy import (
     CONTINUE,
@@ -216,3 +223,37 @@ def test_an_intervention_on_distance_moves_the_risk_through_the_graphs_rule() ->
         assert holds(PED, values, cf, edges)
     # Held fixed (no edges), the risk stays 0.59 at any distance: no CONTINUE is reachable.
     assert all(c.would_select != CONTINUE for c in probe(PED, values, ["ped_1.distance"]))
+
+
+PARENTS = ("distance", "intent", "conflict")
+
+
+def test_plan_cache_gives_the_plan_intervention_plan_gives_and_forgets_the_oldest_shape() -> None:
+    """Remembered plans recompute the same descendants, per graph shape; a probe with the
+    cache finds exactly the counterfactuals a probe without it finds."""
+    shapes = [
+        (
+            *((f"ped_{k}.{s}", f"ped_{k}.collision_risk", RULE_PED_RISK) for s in PARENTS),
+            ("corridor.clearance", "aisle_blocked", RULE_BLOCKED),
+        )
+        for k in range(3)
+    ]
+    cache = PlanCache(size=2)
+    for edges in shapes:
+        for node in (edges[0][0], "corridor.clearance", edges[1][0]):
+            remembered = [child for child, _ in cache.plan(node, edges)]
+            assert remembered == [child for child, _ in intervention_plan(node, edges)]
+            assert cache.plan(node, edges) is cache.plan(node, edges)
+    assert list(cache._by_edges) == shapes[1:]  # the oldest shape made room
+    values: dict[str, object] = {
+        "ped_0.distance": 3.0,
+        "ped_0.intent": "standing",
+        "ped_0.conflict": 1.0,
+        "ped_0.collision_risk": ped_risk(3.0, "standing", 1.0),
+        "corridor.clearance": 9.0,
+        "aisle_blocked": 0.0,
+    }
+    ped = PolicyInput(peds=(("ped_0", "ped_0.collision_risk", "ped_0.distance"),))
+    factors = ["ped_0.distance", "aisle_blocked", "ped_0.collision_risk"]
+    plain = probe(ped, values, factors, edges=shapes[0])
+    assert plain and probe(ped, values, factors, edges=shapes[0], plans=cache) == plain

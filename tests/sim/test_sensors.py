@@ -130,3 +130,21 @@ def test_scan_sees_actors_as_the_plain_ray_test_does(
             if dist > 0.5 * math.hypot(actor.length, actor.width):  # not on top of the robot
                 expected = np.minimum(expected, _reference_actor(actor, pose))
         assert np.array_equal(_as_seen(scan.truth), _as_seen(expected))
+
+
+def test_a_turning_robot_sees_the_plain_slab_test_through_cache_turnover() -> None:
+    """A new (heading, y) almost every scan, more than the caches hold, with repeats."""
+    world = World(np.random.default_rng(0))
+    rng = np.random.default_rng(5)
+    poses = [
+        (
+            float(rng.uniform(0.5, 49.5)),
+            round(float(rng.uniform(5.6, 8.4)), 2),
+            float(rng.choice([0.0, math.pi])) + round(float(rng.uniform(-1.6, 1.6)), 2),
+        )
+        for _ in range(150)
+    ]
+    for ox, oy, heading in poses + poses[::-1]:
+        fast = sensors._static_ranges(sensors._rays(heading, oy, world.shelves), ox, oy)
+        slow = _reference_map(world, ox, oy, heading)
+        assert np.array_equal(_as_seen(fast), _as_seen(slow)), (ox, oy, heading)
