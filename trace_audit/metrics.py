@@ -905,8 +905,13 @@ def compute_metrics(
         if progress is not None:
             progress(done, expected)
 
+    # A cluster's worker resolves a relative path in its own directory: name files by
+    # absolute path there (the report still names them as given).
+    def where(path: Path) -> str:
+        return str(path.absolute()) if executor is not None else str(path)
+
     tasks = [
-        _Task(str(seg.path), str(segs[i - 1].path) if i else None, cfg)
+        _Task(where(seg.path), where(segs[i - 1].path) if i else None, cfg)
         for _robot, segs in plan
         for i, seg in enumerate(segs)
     ]

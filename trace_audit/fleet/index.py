@@ -292,7 +292,9 @@ def build_index(
     ``workers`` local processes."""
     started = time.perf_counter()
     cfg = config or MetricsConfig()
-    target = Path(out)
+    # Absolute on the client: a Dask worker runs in its own directory, where a relative
+    # --out would name another place (the files landed there, the manifest here).
+    target = Path(out).absolute()
     manifest = _check_target(target) or {"segments": {}}
     settings = {"gap_tolerance": cfg.gap_tolerance, "sensor_window": cfg.sensor_window}
     known: dict[str, Any] = dict(manifest.get("segments", {}))
@@ -326,7 +328,7 @@ def build_index(
     elapsed = time.perf_counter() - started
     files = [target / rel for entry in known.values() for rel in entry["files"]]
     return IndexReport(
-        index=str(target),
+        index=str(out),
         version=INDEX_VERSION,
         segments=len(known),
         indexed=tuple(r.path for r in done),
