@@ -230,7 +230,7 @@ def _listener(reply: bytes) -> tuple[socket.socket, threading.Thread]:
             except TimeoutError:
                 continue
             except OSError:  # closed by the test
-                return
+                break
             with contextlib.suppress(OSError):
                 conn.sendall(reply)
             held.append(conn)
