@@ -55,10 +55,10 @@ def _check_is_scheduler(address: str) -> None:
     ``identity`` round trip with a deadline tells a scheduler from all of these."""
     import asyncio
 
-    from distributed.comm import connect
+    from distributed.comm import connect  # type: ignore[attr-defined]
 
     async def identity() -> object:
-        comm = await connect(address, timeout=CONNECT_TIMEOUT_S)
+        comm = await connect(address, timeout=CONNECT_TIMEOUT_S)  # type: ignore[no-untyped-call]
         try:
             await comm.write({"op": "identity", "reply": True})
             return await comm.read()
