@@ -102,6 +102,8 @@ def _index_doc(r: IndexReport) -> Doc:
     )
     for problem in r.unreadable:
         doc.line(f"unreadable, not indexed: {problem}")
+    for note in r.notes:
+        doc.line(f"note: {note}")
     return doc
 
 

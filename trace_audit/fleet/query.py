@@ -81,17 +81,23 @@ def connect(index: str | Path) -> duckdb.DuckDBPyConnection:
     import duckdb
 
     root = Path(index)
-    if load_manifest(root) is None:
+    manifest = load_manifest(root)
+    if manifest is None:
         raise LogReadError(str(root), "not a fleet index (run trace-audit index first)")
     # No progress bar: DuckDB draws one on the terminal for long queries, into our output.
     con = duckdb.connect(":memory:")
     con.execute("SET enable_progress_bar = false")
+    listed = sorted(
+        rel for entry in manifest.get("segments", {}).values() for rel in entry.get("files", ())
+    )
     for table in TABLES:
-        files = root / table
-        if any(files.rglob("*.parquet")) if files.is_dir() else False:
-            glob = (files / "**" / "*.parquet").as_posix().replace("'", "''")
+        # The files the manifest lists, not a glob: a stray or leftover file in the
+        # directory is not the index's and must not be counted.
+        files = [(root / rel).as_posix() for rel in listed if rel.startswith(f"{table}/")]
+        if files:
+            names = ", ".join(_literal(f) for f in files)
             source = (
-                f"read_parquet('{glob}', hive_partitioning = true, "
+                f"read_parquet([{names}], hive_partitioning = true, "
                 "hive_types = {'robot': VARCHAR, 'day': DATE})"
             )
         else:  # no rows yet (e.g. no gaps): an empty view of the right shape
