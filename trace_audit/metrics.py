@@ -356,6 +356,9 @@ class MetricsReport:
     """Evidence refs into external recordings, by what became of them: ``resolved``,
     ``broken`` (recording given, message missing or changed) and ``unresolved`` (recording
     not given: not checked). Counted per citation in the perception records."""
+    not_in_index: tuple[str, ...] = field(default=(), metadata={OMIT_EMPTY: True})
+    """Fields a report from the fleet index cannot fill (the index holds no logger timing,
+    execution channels or external refs): read them from the logs, not as zero."""
 
     @property
     def passed(self) -> bool:

@@ -118,3 +118,24 @@ def test_a_manifest_of_another_version_is_rebuilt_in_place(tmp_path: Path) -> No
     again = _index(root, "--out", tmp_path / "idx")
     assert again["decisions_written"] == first["decisions_total"]
     assert _count(tmp_path / "idx") == first["decisions_total"]
+
+
+def test_metrics_from_the_index_says_what_the_index_does_not_hold(tmp_path: Path) -> None:
+    """--failures and --evidence need the logs (one line, exit 2); the failing count is the
+    logs' count, and timing, channels and external refs say "not in the index"."""
+    root = write_log(tmp_path / "logs", robot_id="r1", max_segment_s=3.0)
+    _index(root, "--out", tmp_path / "idx")
+    for extra in (["--failures"], ["--evidence", str(tmp_path)]):
+        done = _cli("metrics", "--index", tmp_path / "idx", *extra)
+        assert done.returncode == 2, done.stderr
+        assert done.stderr.count("\n") == 1 and "index" in done.stderr
+    logs = json.loads(_cli("metrics", root, "--json").stdout)
+    index = json.loads(_cli("metrics", "--index", tmp_path / "idx", "--json").stdout)
+    assert logs["failures_total"] > 0
+    assert index["failures_total"] == logs["failures_total"]
+    assert index["gaps_total"] == logs["gaps_total"]
+    assert "not in the index" in index["logging_time"]
+    assert set(index["not_in_index"]) >= {"logging_cost", "channel_deviation", "external_refs"}
+    assert "not_in_index" not in logs
+    text = _cli("metrics", "--index", tmp_path / "idx", "--plain").stdout
+    assert "not in the index" in text and "not logged" not in text

@@ -8,6 +8,7 @@ reconstructs the row's decision from its segment.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
 import math
 import time
@@ -245,17 +246,22 @@ def index_metrics(
                sum(factors_total), sum(factors_traceable), sum((factors_total = 0)::INT),
                sum(dr::INT), sum(seal_verified::INT), fsum(tcs_w), fsum(tcs_w * tcs_w),
                sum(window_ns), sum(gap_ns), sum((gap_ns > 0)::INT), sum(missing_cycles),
-               sum(dropped), sum(clock_anomaly::INT), list(DISTINCT segment)
+               sum(dropped), sum(clock_anomaly::INT), list(DISTINCT segment),
+               count(*) FILTER (WHERE NOT (factors_total > 0
+                   AND factors_traceable = factors_total AND dr AND seal_verified))
         FROM d GROUP BY g ORDER BY g
     """
+    if cfg.evidence:
+        raise UsageError("--evidence is not supported with --index (run metrics on the logs)")
     result = run_query(index, sql)
     groups: dict[str, GroupSums] = {}
     segments: set[str] = set()
-    cycles = 0
+    cycles = failures_total = 0
     for row in result.rows:
         (name, n, sealed, summarized, et, et2, etp, etp2, full, factors, traceable) = row[:11]
         (no_factors, dr, intact, tcs_sum, tcs2, window, gap, gaps, missing) = row[11:20]
-        (dropped, anomalies, names) = row[20:]
+        (dropped, anomalies, names, failing) = row[20:]
+        failures_total += failing
         groups[str(name)] = GroupSums(
             decisions=n,
             sealed=sealed,
@@ -281,7 +287,7 @@ def index_metrics(
         )
         segments.update(names)
         cycles += n
-    return report_from_sums(
+    report = report_from_sums(
         [str(index)],
         cfg,
         groups,
@@ -289,4 +295,13 @@ def index_metrics(
         segments=tuple(sorted(segments)),
         cycles=cycles,
         elapsed=time.perf_counter() - started,
+    )
+    # Counted from the rows as the logs count them; the listing itself stays with the logs.
+    gaps_total = sum(g.gaps for g in groups.values())
+    return dataclasses.replace(
+        report,
+        failures_total=failures_total,
+        gaps_total=gaps_total,
+        logging_time="not in the index",
+        not_in_index=("logging_cost", "channel_deviation", "external_refs", "failures", "gaps"),
     )
