@@ -196,23 +196,42 @@ def find_command(
 
 
 def _print_rows(result: QueryResult, *, json_out: bool, csv_out: bool, plain: bool) -> None:
+    if (json_out or csv_out) and result.total is not None:
+        # The rows go to stdout; that they were cut, to stderr.
+        sys.stderr.write(f"trace-audit: note: {_count(result)}\n")
     if json_out:
         print_json(result.records())
         return
     if csv_out:
         import csv
 
+        from trace_audit.fleet.query import plain as plain_value
+
         writer = csv.writer(sys.stdout)
         writer.writerow(result.columns)
-        writer.writerows(result.rows)
+        for row in result.rows:
+            writer.writerow([_csv_cell(plain_value(v)) for v in row])
         return
     emit(result, _rows_doc, json_out=False, plain=plain)
+
+
+def _count(result: QueryResult) -> str:
+    if result.total is None:
+        return f"{len(result.rows)} rows"
+    return f"{len(result.rows)} of {result.total} rows (--limit {len(result.rows)})"
+
+
+def _csv_cell(value: Any) -> Any:
+    """Nested values (lists, structs, maps) as JSON text a CSV reader can parse."""
+    import json
+
+    return json.dumps(value, ensure_ascii=False) if isinstance(value, list | dict) else value
 
 
 def _rows_doc(result: QueryResult) -> Doc:
     doc = Doc()
     doc.table([Column(c) for c in result.columns], ([_cell(v) for v in r] for r in result.rows))
-    doc.line(f"{len(result.rows)} rows in {result.elapsed_s * 1000:.0f} ms")
+    doc.line(f"{_count(result)} in {result.elapsed_s * 1000:.0f} ms")
     return doc
 
 
@@ -221,6 +240,12 @@ def _cell(value: Any) -> str:
         return "-"
     if isinstance(value, float):
         return f"{value:.6g}"
+    if isinstance(value, list | dict):
+        import json
+
+        from trace_audit.fleet.query import plain as plain_value
+
+        return json.dumps(plain_value(value), ensure_ascii=False)
     return str(value)
 
 

@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import decimal
 import math
 import time
+import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,20 +62,49 @@ class QueryResult:
     columns: tuple[str, ...]
     rows: list[tuple[Any, ...]]
     elapsed_s: float
+    total: int | None = None
+    """Rows the statement gave when more than ``rows`` (cut by a limit); None when whole."""
 
     def records(self) -> list[dict[str, Any]]:
         """Rows as JSON-ready dicts (dates as ISO text)."""
-        return [{c: _plain(v) for c, v in zip(self.columns, row, strict=True)} for row in self.rows]
+        return [{c: plain(v) for c, v in zip(self.columns, row, strict=True)} for row in self.rows]
 
 
-def _plain(value: Any) -> Any:
-    if isinstance(value, datetime.date | datetime.datetime):
+def plain(value: Any) -> Any:
+    """A DuckDB value as JSON-ready data: DECIMAL as a number, dates and times as ISO 8601
+    text, INTERVAL as an ISO 8601 duration, UUID as text, BLOB as hex."""
+    if isinstance(value, datetime.date | datetime.datetime | datetime.time):
         return value.isoformat()
-    if isinstance(value, list):
-        return [_plain(v) for v in value]
+    if isinstance(value, datetime.timedelta):
+        return _duration(value)
+    if isinstance(value, decimal.Decimal):
+        exponent = value.as_tuple().exponent
+        return int(value) if isinstance(exponent, int) and exponent >= 0 else float(value)
+    if isinstance(value, uuid.UUID):
+        return str(value)
+    if isinstance(value, bytes | bytearray | memoryview):
+        return bytes(value).hex()
+    if isinstance(value, list | tuple):
+        return [plain(v) for v in value]
     if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
+        return {str(k): plain(v) for k, v in value.items()}
     return value
+
+
+def _duration(value: datetime.timedelta) -> str:
+    sign = "-" if value < datetime.timedelta(0) else ""
+    value = abs(value)
+    hours, rest = divmod(value.seconds, 3600)
+    minutes, seconds = divmod(rest, 60)
+    clock = ""
+    if hours:
+        clock += f"{hours}H"
+    if minutes:
+        clock += f"{minutes}M"
+    if seconds or value.microseconds:
+        clock += f"{seconds + value.microseconds / 1e6:g}S"
+    text = (f"{value.days}D" if value.days else "") + (f"T{clock}" if clock else "")
+    return f"{sign}P{text or 'T0S'}"
 
 
 def connect(index: str | Path) -> duckdb.DuckDBPyConnection:
@@ -110,30 +141,64 @@ def connect(index: str | Path) -> duckdb.DuckDBPyConnection:
             con.register(f"_empty_{table}", empty)
             source = f"_empty_{table}"
         extra = f", {_EXPLAIN} AS explain" if table == "decisions" else ""
-        con.execute(f"CREATE VIEW {table} AS SELECT *{extra} FROM {source}")
+        try:
+            con.execute(f"CREATE VIEW {table} AS SELECT *{extra} FROM {source}")
+        except duckdb.Error as err:  # a listed file gone or damaged: the index is unreadable
+            con.close()
+            first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+            raise LogReadError(
+                str(root), f"{first} (run trace-audit index again to rebuild it)"
+            ) from err
     return con
 
 
 def run_query(
     index: str | Path, sql: str, params: Sequence[Any] = (), *, limit: int | None = None
 ) -> QueryResult:
-    """Run one SQL statement on the index; a bad statement is a ``UsageError`` (one line)."""
+    """Run one SQL statement on the index; a bad statement is a ``UsageError`` (one line),
+    a Parquet file of the index that cannot be read a ``LogReadError``. With ``limit``,
+    the rows past it are counted (not kept) so the result can say it was cut."""
     import duckdb
 
     started = time.perf_counter()
     con = connect(index)
     try:
+        statements = con.extract_statements(sql)
+        if not statements:
+            raise UsageError("no SQL statement given (only blanks, ';' or comments)")
+        if len(statements) > 1:
+            raise UsageError(f"give one SQL statement at a time ({len(statements)} given)")
         cursor = con.execute(sql, list(params))
         if cursor.description is None:
             return QueryResult((), [], time.perf_counter() - started)
         columns = tuple(d[0] for d in cursor.description)
         rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+        total = None if limit is None or len(rows) < limit else len(rows) + _rest(cursor)
     except duckdb.Error as err:
         first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        if isinstance(err, duckdb.IOException | duckdb.InvalidInputException) and (
+            ".parquet" in first
+        ):  # the index's own file is damaged or gone: unreadable input, not a usage error
+            raise LogReadError(str(index), f"SQL: {first}") from err
         raise UsageError(f"SQL: {first}") from err
     finally:
         con.close()
-    return QueryResult(columns, rows, time.perf_counter() - started)
+    return QueryResult(
+        columns,
+        rows,
+        time.perf_counter() - started,
+        total=total if total is not None and total > len(rows) else None,
+    )
+
+
+def _rest(cursor: Any) -> int:
+    """Rows left in a result, counted in Arrow batches (bounded memory, no Python rows)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        # DuckDB warns that Arrow output of a DB-API result copies rows: it is counted only.
+        warnings.filterwarnings("ignore", message="Arrow output on a DB-API result")
+        return sum(batch.num_rows for batch in cursor.to_arrow_reader(65_536))
 
 
 def find_decisions(
@@ -183,8 +248,12 @@ def find_decisions(
     sql = f"SELECT {select}, d.explain FROM decisions d"
     if conditions:
         sql += " WHERE " + " AND ".join(conditions)
-    sql += f" ORDER BY d.t_ns, d.robot LIMIT {int(limit)}"
-    return run_query(index, sql, params)
+    found = run_query(index, sql + f" ORDER BY d.t_ns, d.robot LIMIT {int(limit)}", params)
+    if len(found.rows) < limit:
+        return found
+    # As many rows as the limit: count the matches so the output can say it was cut.
+    count = run_query(index, f"SELECT count(*) FROM ({sql})", params).rows[0][0]
+    return dataclasses.replace(found, total=int(count) if count > len(found.rows) else None)
 
 
 def _literal(text: str) -> str:
