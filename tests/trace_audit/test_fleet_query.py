@@ -93,3 +93,45 @@ def test_a_cut_result_says_so(index: Path) -> None:
     assert "3 of 100 rows (--limit 3)" in whole.stdout
     uncut = _run("find", index, "--limit", "500", "--plain")
     assert "100 rows" in uncut.stdout and " of " not in uncut.stdout.splitlines()[-1]
+
+
+@pytest.mark.parametrize(
+    "sql",
+    [
+        "COPY (SELECT 42 AS a) TO '{out}'",
+        "SELECT * FROM read_csv('{secret}')",
+        "ATTACH '{out}.db'",
+        "INSTALL httpfs",
+        "SET enable_external_access = true",
+    ],
+)
+def test_query_reads_the_index_and_nothing_else(index: Path, tmp_path: Path, sql: str) -> None:
+    """The views read the index's listed files; any other file or the network is refused
+    (one line, exit 2), and nothing is written."""
+    secret = tmp_path / "secret.csv"
+    secret.write_text("a,b\n1,2\n", encoding="utf-8")
+    out = tmp_path / "copied.csv"
+    done = _run("query", index, sql.format(out=out, secret=secret))
+    _one_line(done, 2)
+    assert not out.exists() and not Path(f"{out}.db").exists()
+    assert "1,2" not in done.stdout
+    still = _run(
+        "query",
+        index,
+        "SELECT count(*) AS n FROM decisions JOIN segments USING (segment)",
+        "--json",
+    )
+    assert json.loads(still.stdout) == [{"n": 100}]
+
+
+def test_help_examples_are_each_their_own_line() -> None:
+    for command in ("index", "query", "find"):
+        text = _run(command, "--help").stdout
+        examples = [line.strip() for line in text.splitlines() if "trace-audit " + command in line]
+        assert len(examples) >= 2, text
+        assert all(line.count("trace-audit ") == 1 for line in examples), examples
+
+
+def test_json_and_csv_together_is_a_usage_error(index: Path) -> None:
+    _one_line(_run("query", index, "SELECT 1", "--json", "--csv"), 2, "--json or --csv")
+    _one_line(_run("find", index, "--json", "--csv"), 2, "--json or --csv")

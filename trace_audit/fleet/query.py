@@ -149,6 +149,13 @@ def connect(index: str | Path) -> duckdb.DuckDBPyConnection:
             raise LogReadError(
                 str(root), f"{first} (run trace-audit index again to rebuild it)"
             ) from err
+    # The index's files and nothing else: a query reads no other file, writes none (COPY,
+    # ATTACH), loads no extension and reaches no network, and cannot undo this. The views
+    # keep working (DuckDB checks each file against allowed_paths).
+    every = [(root / rel).as_posix() for rel in listed]
+    con.execute("SET allowed_paths = ?", [every])
+    con.execute("SET enable_external_access = false")
+    con.execute("SET lock_configuration = true")
     return con
 
 
