@@ -107,9 +107,11 @@ def _duration(value: datetime.timedelta) -> str:
     return f"{sign}P{text or 'T0S'}"
 
 
-def connect(index: str | Path) -> duckdb.DuckDBPyConnection:
+def connect(index: str | Path, *, confined: bool = True) -> duckdb.DuckDBPyConnection:
     """An in-memory DuckDB with the index's tables as views; ``LogReadError`` when
-    ``index`` is not a fleet index of this version."""
+    ``index`` is not a fleet index of this version. ``confined`` (the CLI's only mode):
+    the session reads the index's files and nothing else; off, it is a full DuckDB (a
+    script of the caller's own that also writes files, e.g. ``bench/``)."""
     import duckdb
 
     root = Path(index)
@@ -152,6 +154,8 @@ def connect(index: str | Path) -> duckdb.DuckDBPyConnection:
     # The index's files and nothing else: a query reads no other file, writes none (COPY,
     # ATTACH), loads no extension and reaches no network, and cannot undo this. The views
     # keep working (DuckDB checks each file against allowed_paths).
+    if not confined:
+        return con
     every = [(root / rel).as_posix() for rel in listed]
     con.execute("SET allowed_paths = ?", [every])
     con.execute("SET enable_external_access = false")
