@@ -135,3 +135,7 @@ def test_help_examples_are_each_their_own_line() -> None:
 def test_json_and_csv_together_is_a_usage_error(index: Path) -> None:
     _one_line(_run("query", index, "SELECT 1", "--json", "--csv"), 2, "--json or --csv")
     _one_line(_run("find", index, "--json", "--csv"), 2, "--json or --csv")
+
+
+def test_a_bad_where_names_the_condition(index: Path) -> None:
+    _one_line(_run("find", index, "--where", "garbage (("), 2, "--where 'garbage (('")

@@ -186,7 +186,11 @@ def find_command(
     ] = None,
     within: Annotated[
         float | None,
-        typer.Option("--within", help="... closer than this many metres.", show_default=False),
+        typer.Option(
+            "--within",
+            help="... closer than this many metres (without --near: an entity of any class).",
+            show_default=False,
+        ),
     ] = None,
     where: Annotated[
         str | None,

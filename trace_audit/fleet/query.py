@@ -259,7 +259,12 @@ def find_decisions(
     sql = f"SELECT {select}, d.explain FROM decisions d"
     if conditions:
         sql += " WHERE " + " AND ".join(conditions)
-    found = run_query(index, sql + f" ORDER BY d.t_ns, d.robot LIMIT {int(limit)}", params)
+    try:
+        found = run_query(index, sql + f" ORDER BY d.t_ns, d.robot LIMIT {int(limit)}", params)
+    except UsageError as err:
+        if where:  # the error is about SQL the user did not write around the condition
+            raise UsageError(f"--where {where!r}: {err}") from err
+        raise
     if len(found.rows) < limit:
         return found
     # As many rows as the limit: count the matches so the output can say it was cut.
