@@ -266,3 +266,15 @@ def test_a_scheduler_address_that_is_not_dask_is_one_line(tmp_path: Path, reply:
     assert done.stderr.count("\n") == 1, done.stderr
     assert done.stdout == ""
     assert took < 30
+
+
+@pytest.mark.parametrize("address", ["garbage", "", "http://127.0.0.1:8787"])
+def test_a_malformed_scheduler_address_is_one_line(tmp_path: Path, address: str) -> None:
+    """No 'Exception ignored in Client.__del__' traceback after the line, and no wait."""
+    root = _fleet(tmp_path / "logs")
+    started = time.monotonic()
+    done = _cli("metrics", str(root), "--scheduler", address)
+    assert done.returncode == 2
+    assert done.stderr.startswith("trace-audit: cannot reach the Dask scheduler"), done.stderr
+    assert done.stderr.count("\n") == 1, done.stderr
+    assert time.monotonic() - started < 10
