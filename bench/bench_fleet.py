@@ -44,7 +44,7 @@ sys.path.insert(0, str(REPO))
 
 from sim import RunConfig, run  # noqa: E402
 from trace_audit.fleet.index import MANIFEST, build_index  # noqa: E402
-from trace_audit.fleet.query import find_decisions, index_metrics, run_query  # noqa: E402
+from trace_audit.fleet.query import connect, find_decisions, index_metrics, run_query  # noqa: E402
 from trace_audit.fleet.tables import INDEX_FORMAT, INDEX_VERSION, schema  # noqa: E402
 from trace_audit.metrics import MetricsConfig, compute_metrics  # noqa: E402
 
@@ -108,10 +108,8 @@ def synthesize(real: Path, out: Path, robot_days: int) -> int:
     """Replicate the real index's rows into ``robot_days`` robot-days (see module doc)."""
     import duckdb
 
-    from trace_audit.fleet.query import connect
-
     shutil.rmtree(out, ignore_errors=True)
-    con = connect(real)
+    con = connect(real, confined=False)  # it writes the synthetic files with COPY
     con.execute(
         "CREATE TABLE base AS SELECT row_number() OVER (ORDER BY robot, cycle) - 1 AS i, * "
         "EXCLUDE (explain) FROM decisions"
@@ -153,7 +151,10 @@ def synthesize(real: Path, out: Path, robot_days: int) -> int:
             )
         written += block * per_day
         segments[f"{robot}/synthetic"] = {
-            "files": [f"decisions/robot={robot}/day={day}/synthetic.parquet"],
+            "files": [  # the views read the files a manifest lists
+                f"{table}/robot={robot}/day={day}/synthetic.parquet"
+                for table in ("decisions", "entities")
+            ],
             "decisions": block * per_day,
         }
     con.close()
@@ -323,7 +324,22 @@ def main() -> int:
     )
     et_s, et_rows = median_wall(lambda: run_query(synth, et_sql), args.repeats)
     metrics_s, report = median_wall(lambda: index_metrics(synth, ["robot", "day"]), args.repeats)
+
+    # Anchor for the confined session `query` runs in (allowed_paths, no external access):
+    # the same table on a full DuckDB session over the same files.
+    def et_table(confined: bool) -> object:
+        con = connect(synth, confined=confined)
+        try:
+            return con.execute(et_sql).fetchall()
+        finally:
+            con.close()
+
+    et_open_s, _ = median_wall(lambda: et_table(False), args.repeats)
+    et_confined_s, _ = median_wall(lambda: et_table(True), args.repeats)
     results["queries"] = {
+        "robot_day_et_table_full_duckdb_s": et_open_s,
+        "robot_day_et_table_confined_s": et_confined_s,
+        "confined_over_full": et_confined_s / et_open_s,
         "stop_near_person_s": stop_s,
         "stop_near_person_rows_shown": len(stops.rows),  # type: ignore[attr-defined]
         "stop_near_person_count_s": count_s,

@@ -356,6 +356,9 @@ class MetricsReport:
     """Evidence refs into external recordings, by what became of them: ``resolved``,
     ``broken`` (recording given, message missing or changed) and ``unresolved`` (recording
     not given: not checked). Counted per citation in the perception records."""
+    not_in_index: tuple[str, ...] = field(default=(), metadata={OMIT_EMPTY: True})
+    """Fields a report from the fleet index cannot fill (the index holds no logger timing,
+    execution channels or external refs): read them from the logs, not as zero."""
 
     @property
     def passed(self) -> bool:
@@ -905,8 +908,13 @@ def compute_metrics(
         if progress is not None:
             progress(done, expected)
 
+    # A cluster's worker resolves a relative path in its own directory: name files by
+    # absolute path there (the report still names them as given).
+    def where(path: Path) -> str:
+        return str(path.absolute()) if executor is not None else str(path)
+
     tasks = [
-        _Task(str(seg.path), str(segs[i - 1].path) if i else None, cfg)
+        _Task(where(seg.path), where(segs[i - 1].path) if i else None, cfg)
         for _robot, segs in plan
         for i, seg in enumerate(segs)
     ]

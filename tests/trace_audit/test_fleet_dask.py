@@ -3,11 +3,13 @@ same metrics JSON and the same index as a local run."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -106,13 +108,13 @@ def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
             log.close()
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+def _cli(*args: str, cwd: Path = REPO) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, "-m", "trace_audit.cli", *args],
         capture_output=True,
         text=True,
         check=False,
-        cwd=REPO,
+        cwd=cwd,
         env={**os.environ, "PYTHONPATH": str(REPO)},
         timeout=300,
     )
@@ -193,3 +195,86 @@ def test_verify_on_a_dask_cluster_equals_the_local_json(scheduler: str, tmp_path
     assert local.returncode == remote.returncode == 1, (local.stderr, remote.stderr)
     assert json.loads(remote.stdout) == json.loads(local.stdout)
     assert len(json.loads(local.stdout)["robots"]) == 2
+
+
+def test_relative_paths_on_a_dask_cluster_are_the_clients(scheduler: str, tmp_path: Path) -> None:
+    """The workers run in another directory: relative inputs and a relative --out name the
+    client's files, so the index lands where the client said and metrics reads the logs."""
+    _fleet(tmp_path / "logs")
+    done = _cli("index", "logs", "--out", "idx", "--scheduler", scheduler, "--json", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    count = _cli("query", "idx", "SELECT count(*) AS n FROM decisions", "--json", cwd=tmp_path)
+    assert json.loads(count.stdout) == [{"n": 197}]
+    remote = _cli("metrics", "logs", "--scheduler", scheduler, "--json", cwd=tmp_path)
+    local = _cli("metrics", "logs", "--json", cwd=tmp_path)
+    assert remote.returncode == local.returncode == 0, remote.stderr
+    assert _close(_without_timing(remote.stdout), _without_timing(local.stdout))
+    verify = _cli("verify", "logs", "--scheduler", scheduler, "--json", cwd=tmp_path)
+    assert verify.returncode == 0, verify.stderr
+
+
+def _listener(reply: bytes) -> tuple[socket.socket, threading.Thread]:
+    """A TCP listener on localhost that is not a Dask scheduler: it answers each
+    connection with ``reply`` (bytes of another protocol) and keeps it open."""
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    server.settimeout(0.5)
+    held: list[socket.socket] = []
+
+    def serve() -> None:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            try:
+                conn, _ = server.accept()
+            except TimeoutError:
+                continue
+            except OSError:  # closed by the test
+                break
+            with contextlib.suppress(OSError):
+                conn.sendall(reply)
+            held.append(conn)
+        for conn in held:
+            conn.close()
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    return server, thread
+
+
+@pytest.mark.parametrize(
+    "reply",
+    [
+        b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n",
+        b"",  # accepts and says nothing
+        b"\xff" * 64,  # garbage a Dask client would read as a huge frame length
+    ],
+)
+def test_a_scheduler_address_that_is_not_dask_is_one_line(tmp_path: Path, reply: bytes) -> None:
+    root = _fleet(tmp_path / "logs")
+    server, thread = _listener(reply)
+    port = server.getsockname()[1]
+    try:
+        started = time.monotonic()
+        done = _cli("metrics", str(root), "--scheduler", f"tcp://127.0.0.1:{port}", "--json")
+        took = time.monotonic() - started
+    finally:
+        server.close()
+        thread.join(5)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.startswith("trace-audit: cannot reach the Dask scheduler"), done.stderr
+    assert done.stderr.count("\n") == 1, done.stderr
+    assert done.stdout == ""
+    assert took < 30
+
+
+@pytest.mark.parametrize("address", ["garbage", "", "http://127.0.0.1:8787"])
+def test_a_malformed_scheduler_address_is_one_line(tmp_path: Path, address: str) -> None:
+    """No 'Exception ignored in Client.__del__' traceback after the line, and no wait."""
+    root = _fleet(tmp_path / "logs")
+    started = time.monotonic()
+    done = _cli("metrics", str(root), "--scheduler", address)
+    assert done.returncode == 2
+    assert done.stderr.startswith("trace-audit: cannot reach the Dask scheduler"), done.stderr
+    assert done.stderr.count("\n") == 1, done.stderr
+    assert time.monotonic() - started < 10

@@ -10,7 +10,16 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from trace_audit.cli.app import JsonOption, PlainOption, app, guarded, help_text, print_json
+from trace_audit.cli.app import (
+    EXIT_USAGE,
+    JsonOption,
+    PlainOption,
+    app,
+    fail,
+    guarded,
+    help_text,
+    print_json,
+)
 from trace_audit.cli.render import Column, Doc, emit, progress_bar, show
 
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
@@ -50,7 +59,12 @@ or changed segments are read (keyed by their SHA-256). Schema: docs/fleet.md.
 [bold]Examples[/bold]:
 
   trace-audit index logs/ --out fleet-index/
+
   trace-audit index logs/ --out fleet-index/ --scheduler tcp://10.0.0.5:8786
+
+Two different logs at one chain position (two roots whose robot has the same id) are
+refused, exit 2; of two copies of one segment (a truncated one beside the intact file)
+the intact one is indexed and the other named in a note.
 """)
 
 
@@ -102,18 +116,27 @@ def _index_doc(r: IndexReport) -> Doc:
     )
     for problem in r.unreadable:
         doc.line(f"unreadable, not indexed: {problem}")
+    for note in r.notes:
+        doc.line(f"note: {note}")
     return doc
 
 
 _QUERY_HELP = help_text("""
-Run SQL (DuckDB) on a fleet index. Tables: decisions (with an explain column: the command
-that reconstructs the decision), entities, gaps, segments; robot and day on each. A bad
-statement is one line on stderr, exit 2.
+Run one SQL statement (DuckDB) on a fleet index. Tables: decisions (with an explain
+column: the command that reconstructs the decision), entities, gaps, segments; robot and
+day on each. A bad statement, none or several is one line on stderr, exit 2; a damaged
+index file, exit 3. The statement reads the index's files and nothing else: other files,
+COPY, ATTACH, extensions and the network are refused (export with --csv or --json, or
+point DuckDB itself at the Parquet files). SQL that starts with a comment (--) goes
+after a lone --.
 
 [bold]Examples[/bold]:
 
   trace-audit query fleet-index/ "SELECT robot, day, avg(et) FROM decisions GROUP BY ALL"
+
   trace-audit query fleet-index/ "SELECT * FROM gaps ORDER BY gap_ns DESC LIMIT 5" --csv
+
+  trace-audit query fleet-index/ --json -- "$(cat stops-per-robot.sql)"
 """)
 
 
@@ -131,6 +154,7 @@ def query_command(
 ) -> None:
     from trace_audit.fleet.query import run_query
 
+    _one_format(json_out=json_out, csv_out=csv_out)
     result = guarded(lambda: run_query(index, sql, limit=limit))
     _print_rows(result, json_out=json_out, csv_out=csv_out, plain=plain)
 
@@ -142,6 +166,7 @@ the decisions table; each row ends with the explain command that reconstructs it
 [bold]Examples[/bold]:
 
   trace-audit find fleet-index/ --action STOP --near person --within 1.0
+
   trace-audit find fleet-index/ --action STOP --where "software_version = '2.4.1'" --json
 """)
 
@@ -161,7 +186,11 @@ def find_command(
     ] = None,
     within: Annotated[
         float | None,
-        typer.Option("--within", help="... closer than this many metres.", show_default=False),
+        typer.Option(
+            "--within",
+            help="... closer than this many metres (without --near: an entity of any class).",
+            show_default=False,
+        ),
     ] = None,
     where: Annotated[
         str | None,
@@ -179,6 +208,7 @@ def find_command(
 ) -> None:
     from trace_audit.fleet.query import find_decisions
 
+    _one_format(json_out=json_out, csv_out=csv_out)
     result = guarded(
         lambda: find_decisions(
             index,
@@ -193,24 +223,48 @@ def find_command(
     _print_rows(result, json_out=json_out, csv_out=csv_out, plain=plain)
 
 
+def _one_format(*, json_out: bool, csv_out: bool) -> None:
+    if json_out and csv_out:
+        fail("give --json or --csv, not both", EXIT_USAGE)
+
+
 def _print_rows(result: QueryResult, *, json_out: bool, csv_out: bool, plain: bool) -> None:
+    if (json_out or csv_out) and result.total is not None:
+        # The rows go to stdout; that they were cut, to stderr.
+        sys.stderr.write(f"trace-audit: note: {_count(result)}\n")
     if json_out:
         print_json(result.records())
         return
     if csv_out:
         import csv
 
+        from trace_audit.fleet.query import plain as plain_value
+
         writer = csv.writer(sys.stdout)
         writer.writerow(result.columns)
-        writer.writerows(result.rows)
+        for row in result.rows:
+            writer.writerow([_csv_cell(plain_value(v)) for v in row])
         return
     emit(result, _rows_doc, json_out=False, plain=plain)
+
+
+def _count(result: QueryResult) -> str:
+    if result.total is None:
+        return f"{len(result.rows)} rows"
+    return f"{len(result.rows)} of {result.total} rows (--limit {len(result.rows)})"
+
+
+def _csv_cell(value: Any) -> Any:
+    """Nested values (lists, structs, maps) as JSON text a CSV reader can parse."""
+    import json
+
+    return json.dumps(value, ensure_ascii=False) if isinstance(value, list | dict) else value
 
 
 def _rows_doc(result: QueryResult) -> Doc:
     doc = Doc()
     doc.table([Column(c) for c in result.columns], ([_cell(v) for v in r] for r in result.rows))
-    doc.line(f"{len(result.rows)} rows in {result.elapsed_s * 1000:.0f} ms")
+    doc.line(f"{_count(result)} in {result.elapsed_s * 1000:.0f} ms")
     return doc
 
 
@@ -219,6 +273,12 @@ def _cell(value: Any) -> str:
         return "-"
     if isinstance(value, float):
         return f"{value:.6g}"
+    if isinstance(value, list | dict):
+        import json
+
+        from trace_audit.fleet.query import plain as plain_value
+
+        return json.dumps(plain_value(value), ensure_ascii=False)
     return str(value)
 
 

@@ -192,6 +192,12 @@ def metrics_command(
         if index is not None:
             from trace_audit.fleet.query import index_metrics, parse_index_by
 
+            if failures:  # the index counts them; what each one misses is in the logs
+                raise UsageError(
+                    "--failures is not supported with --index (run metrics on the logs, or "
+                    "trace-audit find INDEX --where 'NOT d.dr' for the rows)"
+                )
+
             return index_metrics(index, parse_index_by(by), config)
         with cluster(scheduler) as executor:
             return _with_progress(logs or [], config, quiet=json_out or plain, executor=executor)
@@ -396,6 +402,14 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
         out.print(f"  not read: {skipped}", markup=False, soft_wrap=True)
     for problem in report.unreadable:
         out.print(f"  unreadable file, not scored: {problem}", markup=False, soft_wrap=True)
+    if report.not_in_index:
+        out.print(
+            "  not in the index: logging time, execution deviation per channel, evidence "
+            "refs into external recordings, the failing decisions and gaps themselves "
+            "(run metrics on the logs for them)",
+            markup=False,
+            soft_wrap=True,
+        )
     if report.external_refs:
         ext = report.external_refs
         out.print(

@@ -29,10 +29,13 @@ def dask_executor(address: str) -> Iterator[Executor]:
         raise UsageError(
             "--scheduler needs dask.distributed (pip install 'trace-audit[fleet]')"
         ) from err
+    _check_is_scheduler(address)
     try:
         client = Client(address, timeout=CONNECT_TIMEOUT_S, set_as_default=False)  # type: ignore[no-untyped-call]
-    except (OSError, TimeoutError, ValueError) as err:
-        raise UsageError(f"cannot reach the Dask scheduler at {address}: {err}") from err
+    except Exception as err:  # the probe passed: a scheduler that went away just now
+        raise UsageError(
+            f"cannot reach the Dask scheduler at {address}: {_first_line(err)}"
+        ) from err
     with client:
         try:
             client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
@@ -41,3 +44,49 @@ def dask_executor(address: str) -> Iterator[Executor]:
         # pure=False: a task names a file by path, whose bytes may change between two
         # calls; Dask must run it again rather than hand back a result it still holds.
         yield client.get_executor(pure=False)  # type: ignore[no-untyped-call]
+
+
+def _check_is_scheduler(address: str) -> None:
+    """Ask ``address`` who it is, within a bounded time, before a ``Client`` is made.
+
+    ``Client`` waits forever on a listener that accepts and says nothing, reads another
+    protocol's bytes as a frame length (an HTTP server at the dashboard port 8787 makes it
+    allocate exabytes), and a half-made client prints a traceback when collected. One
+    ``identity`` round trip with a deadline tells a scheduler from all of these."""
+    import asyncio
+
+    from distributed.comm import connect  # type: ignore[attr-defined]
+
+    async def identity() -> object:
+        comm = await connect(address, timeout=CONNECT_TIMEOUT_S)  # type: ignore[no-untyped-call]
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    try:
+        reply = asyncio.run(asyncio.wait_for(identity(), 2 * CONNECT_TIMEOUT_S))
+    except TimeoutError as err:
+        raise UsageError(
+            f"cannot reach the Dask scheduler at {address}: no answer within "
+            f"{2 * CONNECT_TIMEOUT_S} s (is it the scheduler's port, usually 8786?)"
+        ) from err
+    except (OSError, ValueError) as err:  # refused, unroutable, or not an address
+        raise UsageError(
+            f"cannot reach the Dask scheduler at {address}: {_first_line(err)}"
+        ) from err
+    except Exception as err:  # a foreign protocol surfaces as any error, even MemoryError
+        raise UsageError(
+            f"cannot reach the Dask scheduler at {address}: something else answers there "
+            "(is it the scheduler's port, usually 8786?)"
+        ) from err
+    if not isinstance(reply, dict) or reply.get("type") != "Scheduler":
+        raise UsageError(
+            f"cannot reach the Dask scheduler at {address}: something else answers there"
+        )
+
+
+def _first_line(err: BaseException) -> str:
+    text = str(err).strip()
+    return text.splitlines()[0] if text else type(err).__name__

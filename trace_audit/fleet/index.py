@@ -19,6 +19,7 @@ process or a Dask worker), which writes its own files; the manifest is replaced 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
 import time
@@ -29,11 +30,12 @@ from pathlib import Path
 from typing import Any
 
 from trace_audit.fleet.rows import SegmentRows, day_of
-from trace_audit.fleet.tables import INDEX_FORMAT, INDEX_VERSION, TABLES
+from trace_audit.fleet.tables import INDEX_FORMAT, INDEX_VERSION
 from trace_audit.metrics import MetricsConfig, score_segment
 from trace_runtime.errors import LogReadError, UsageError
-from trace_runtime.logset import Log, open_logs
+from trace_runtime.logset import Log, copy_rank, open_logs
 from trace_runtime.reader import Segment, open_segment
+from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.session import TIERS
 from trace_runtime.tiers.catalog import file_digest, refresh_catalog
 
@@ -200,25 +202,133 @@ def load_manifest(index: str | Path) -> dict[str, Any] | None:
 
 
 def _check_target(out: Path) -> dict[str, Any] | None:
-    """The manifest to update, None for a new index; refuses a directory that is not ours."""
+    """The manifest to update, None for a new index; refuses a directory that is not ours,
+    and a manifest that cannot be read (nothing in the directory is touched then)."""
     if out.exists() and not out.is_dir():
         raise UsageError(f"{out}: exists and is not a directory")
-    manifest = load_manifest(out)
-    if manifest is None and out.is_dir() and any(out.iterdir()):
-        if (out / MANIFEST).exists():
-            # Another version of our own index: its files are ours, rebuilt in place.
-            return {"segments": {}, "stale_files": _all_files(out)}
+    if (out / MANIFEST).exists():
+        try:
+            body = json.loads((out / MANIFEST).read_text(encoding="utf-8"))
+        except (OSError, ValueError) as err:
+            raise LogReadError(
+                str(out / MANIFEST),
+                "unreadable index manifest; nothing changed (rebuild into a new directory)",
+            ) from err
+        if not isinstance(body, dict) or body.get("format") != INDEX_FORMAT:
+            raise LogReadError(
+                str(out / MANIFEST),
+                "not a fleet index manifest; nothing changed (give a new directory)",
+            )
+        if body.get("version") != INDEX_VERSION:
+            # Another version of our own index: the files its manifest lists are ours,
+            # rebuilt in place; anything else in the directory is left alone.
+            return {"segments": {}, "stale_files": _listed_files(body)}
+        return body
+    if out.is_dir() and any(out.iterdir()):
         raise UsageError(f"{out}: not empty and not a fleet index; give a new directory")
-    return manifest
+    return None
 
 
-def _all_files(out: Path) -> list[str]:
+def _listed_files(manifest: dict[str, Any]) -> list[str]:
+    """The Parquet files a manifest names (relative to the index), and nothing else."""
+    entries = manifest.get("segments")
+    if not isinstance(entries, dict):
+        return []
     return [
-        p.relative_to(out).as_posix()
-        for table in TABLES
-        if (out / table).is_dir()
-        for p in (out / table).rglob("*.parquet")
+        rel
+        for entry in entries.values()
+        if isinstance(entry, dict)
+        for rel in entry.get("files") or ()
+        if isinstance(rel, str) and rel.endswith(".parquet") and ".." not in Path(rel).parts
     ]
+
+
+def _files_intact(out: Path, entry: dict[str, Any]) -> bool:
+    """Whether every file the manifest lists for a position is there and has a readable
+    Parquet footer (a deleted or half-written file is indexed again)."""
+    import pyarrow.parquet as pq
+
+    for rel in entry.get("files") or ():
+        try:
+            pq.read_metadata(out / rel)
+        except Exception:  # missing, truncated or not Parquet: all mean re-index
+            return False
+    return True
+
+
+# --- one segment per chain position ------------------------------------------------------------
+
+
+def _position(segment: Segment) -> str:
+    session = segment.session
+    return f"{session.robot_id}/{session.segment:06d}/{session.first_cycle}"
+
+
+def _identity(segment: Segment) -> str:
+    """What tells two recordings apart: the bytes of the first seal (its chain link and
+    layer digests); two copies of one segment, however truncated, share it."""
+    for cycle in segment.iter_cycles():
+        sealed = cycle.payloads.get(TOPIC_SEAL)
+        if sealed is not None:
+            return hashlib.sha256(sealed).hexdigest()
+    return f"empty@{segment.info.start_ns}"
+
+
+def _copy_order(segment: Segment) -> tuple[int, int, int]:
+    """Which copy of one segment to index: an intact copy before a recovered (truncated)
+    one, then ``copy_rank`` (the owner of copy choice across tiers)."""
+    return (0 if segment.info.finished else 1, *copy_rank(segment))
+
+
+def _different_logs(a: str | Path, b: str | Path, key: str) -> UsageError:
+    robot, number, cycle = key.split("/")
+    return UsageError(
+        f"{a} and {b} are two different logs of robot {robot} at segment {int(number)} "
+        f"(cycle {cycle}); index them into separate indexes or give the robots distinct ids"
+    )
+
+
+def _one_copy_each(log: Log) -> tuple[set[Path], list[str]]:
+    """Inputs holding one chain position twice: the same segment in two copies keeps the
+    best (the others are named in a note); two different logs are refused (exit 2), since
+    one position holds one segment's rows."""
+    by_key: dict[str, list[Segment]] = {}
+    for segment in log.segments:
+        by_key.setdefault(_position(segment), []).append(segment)
+    left_out: set[Path] = set()
+    notes: list[str] = []
+    for key, copies in by_key.items():
+        if len(copies) < 2:
+            continue
+        first = _identity(copies[0])
+        for other in copies[1:]:
+            if _identity(other) != first:
+                raise _different_logs(copies[0].path, other.path, key)
+        best = min(copies, key=_copy_order)
+        for copy in copies:
+            if copy is not best:
+                left_out.add(copy.path)
+                kind = "a recovered (truncated) copy" if not copy.info.finished else "a copy"
+                notes.append(f"{copy.path}: {kind} of {best.path}, which is indexed")
+    return left_out, notes
+
+
+def _against_manifest(task: IndexTask, entry: dict[str, Any] | None) -> str | None:
+    """A position the index already holds from another file that is still there: refused
+    when it is another log; a note (and the task dropped) when the indexed copy is the
+    better one. None: index the task."""
+    if entry is None or entry.get("path") == task.path or not Path(entry["path"]).is_file():
+        return None  # new, the same file, or moved (compacted into another tier)
+    try:
+        held = open_segment(entry["path"])
+    except LogReadError:
+        return None  # the indexed file is no longer readable: the new copy replaces it
+    new = open_segment(task.path)
+    if _identity(held) != _identity(new):
+        raise _different_logs(entry["path"], task.path, task.key)
+    if _copy_order(held) <= _copy_order(new):
+        return f"{task.path}: a copy of {entry['path']}, which stays indexed"
+    return None
 
 
 def _digests(log: Log, cache: dict[str, Any]) -> dict[Path, str]:
@@ -256,10 +366,16 @@ def _catalog_digests(root: Path) -> dict[str, str]:
     return {(root / e.path).resolve().as_posix(): e.sha256 for e in catalog.entries}
 
 
-def _plan(log: Log, digests: dict[Path, str], out: Path, config: MetricsConfig) -> list[IndexTask]:
+def _plan(
+    log: Log,
+    digests: dict[Path, str],
+    out: Path,
+    config: MetricsConfig,
+    left_out: set[Path] = frozenset(),  # type: ignore[assignment]
+) -> list[IndexTask]:
     tasks: list[IndexTask] = []
     for robot in log.robots:
-        segments = log.segments_of(robot)
+        segments = [s for s in log.segments_of(robot) if s.path not in left_out]
         for i, segment in enumerate(segments):
             session = segment.session
             previous = segments[i - 1] if i else None
@@ -292,7 +408,9 @@ def build_index(
     ``workers`` local processes."""
     started = time.perf_counter()
     cfg = config or MetricsConfig()
-    target = Path(out)
+    # Absolute on the client: a Dask worker runs in its own directory, where a relative
+    # --out would name another place (the files landed there, the manifest here).
+    target = Path(out).absolute()
     manifest = _check_target(target) or {"segments": {}}
     settings = {"gap_tolerance": cfg.gap_tolerance, "sensor_window": cfg.sensor_window}
     known: dict[str, Any] = dict(manifest.get("segments", {}))
@@ -300,8 +418,21 @@ def build_index(
         known = {}  # scored under other settings: every row is rebuilt
     log = open_logs(paths)
     cache: dict[str, Any] = dict(manifest.get("digests", {}))
-    tasks = _plan(log, _digests(log, cache), target, cfg)
-    todo = [t for t in tasks if not _unchanged(known.get(t.key), t)]
+    left_out, notes = _one_copy_each(log)
+    tasks = _plan(log, _digests(log, cache), target, cfg, left_out)
+    kept: list[IndexTask] = []
+    for task in tasks:
+        note = _against_manifest(task, known.get(task.key))
+        if note is None:
+            kept.append(task)
+        else:
+            notes.append(note)
+    tasks = kept
+    todo = [
+        t
+        for t in tasks
+        if not (_unchanged(known.get(t.key), t) and _files_intact(target, known[t.key]))
+    ]
     opened = {str(s.path.resolve()): s for s in log.segments}
     expected = sum(opened[t.path].info.channels.get("/trace/seal", 0) for t in todo)
     target.mkdir(parents=True, exist_ok=True)
@@ -326,7 +457,7 @@ def build_index(
     elapsed = time.perf_counter() - started
     files = [target / rel for entry in known.values() for rel in entry["files"]]
     return IndexReport(
-        index=str(target),
+        index=str(out),
         version=INDEX_VERSION,
         segments=len(known),
         indexed=tuple(r.path for r in done),
@@ -338,6 +469,7 @@ def build_index(
         cycles_per_s=cycles / elapsed if elapsed > 0 else 0.0,
         files=len(files),
         bytes=sum(f.stat().st_size for f in files if f.exists()),
+        notes=tuple(notes),
     )
 
 

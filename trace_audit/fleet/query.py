@@ -8,9 +8,12 @@ reconstructs the row's decision from its segment.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
+import decimal
 import math
 import time
+import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -59,39 +62,76 @@ class QueryResult:
     columns: tuple[str, ...]
     rows: list[tuple[Any, ...]]
     elapsed_s: float
+    total: int | None = None
+    """Rows the statement gave when more than ``rows`` (cut by a limit); None when whole."""
 
     def records(self) -> list[dict[str, Any]]:
         """Rows as JSON-ready dicts (dates as ISO text)."""
-        return [{c: _plain(v) for c, v in zip(self.columns, row, strict=True)} for row in self.rows]
+        return [{c: plain(v) for c, v in zip(self.columns, row, strict=True)} for row in self.rows]
 
 
-def _plain(value: Any) -> Any:
-    if isinstance(value, datetime.date | datetime.datetime):
+def plain(value: Any) -> Any:
+    """A DuckDB value as JSON-ready data: DECIMAL as a number, dates and times as ISO 8601
+    text, INTERVAL as an ISO 8601 duration, UUID as text, BLOB as hex."""
+    if isinstance(value, datetime.date | datetime.datetime | datetime.time):
         return value.isoformat()
-    if isinstance(value, list):
-        return [_plain(v) for v in value]
+    if isinstance(value, datetime.timedelta):
+        return _duration(value)
+    if isinstance(value, decimal.Decimal):
+        exponent = value.as_tuple().exponent
+        return int(value) if isinstance(exponent, int) and exponent >= 0 else float(value)
+    if isinstance(value, uuid.UUID):
+        return str(value)
+    if isinstance(value, bytes | bytearray | memoryview):
+        return bytes(value).hex()
+    if isinstance(value, list | tuple):
+        return [plain(v) for v in value]
     if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
+        return {str(k): plain(v) for k, v in value.items()}
     return value
 
 
-def connect(index: str | Path) -> duckdb.DuckDBPyConnection:
+def _duration(value: datetime.timedelta) -> str:
+    sign = "-" if value < datetime.timedelta(0) else ""
+    value = abs(value)
+    hours, rest = divmod(value.seconds, 3600)
+    minutes, seconds = divmod(rest, 60)
+    clock = ""
+    if hours:
+        clock += f"{hours}H"
+    if minutes:
+        clock += f"{minutes}M"
+    if seconds or value.microseconds:
+        clock += f"{seconds + value.microseconds / 1e6:g}S"
+    text = (f"{value.days}D" if value.days else "") + (f"T{clock}" if clock else "")
+    return f"{sign}P{text or 'T0S'}"
+
+
+def connect(index: str | Path, *, confined: bool = True) -> duckdb.DuckDBPyConnection:
     """An in-memory DuckDB with the index's tables as views; ``LogReadError`` when
-    ``index`` is not a fleet index of this version."""
+    ``index`` is not a fleet index of this version. ``confined`` (the CLI's only mode):
+    the session reads the index's files and nothing else; off, it is a full DuckDB (a
+    script of the caller's own that also writes files, e.g. ``bench/``)."""
     import duckdb
 
     root = Path(index)
-    if load_manifest(root) is None:
+    manifest = load_manifest(root)
+    if manifest is None:
         raise LogReadError(str(root), "not a fleet index (run trace-audit index first)")
     # No progress bar: DuckDB draws one on the terminal for long queries, into our output.
     con = duckdb.connect(":memory:")
     con.execute("SET enable_progress_bar = false")
+    listed = sorted(
+        rel for entry in manifest.get("segments", {}).values() for rel in entry.get("files", ())
+    )
     for table in TABLES:
-        files = root / table
-        if any(files.rglob("*.parquet")) if files.is_dir() else False:
-            glob = (files / "**" / "*.parquet").as_posix().replace("'", "''")
+        # The files the manifest lists, not a glob: a stray or leftover file in the
+        # directory is not the index's and must not be counted.
+        files = [(root / rel).as_posix() for rel in listed if rel.startswith(f"{table}/")]
+        if files:
+            names = ", ".join(_literal(f) for f in files)
             source = (
-                f"read_parquet('{glob}', hive_partitioning = true, "
+                f"read_parquet([{names}], hive_partitioning = true, "
                 "hive_types = {'robot': VARCHAR, 'day': DATE})"
             )
         else:  # no rows yet (e.g. no gaps): an empty view of the right shape
@@ -103,30 +143,73 @@ def connect(index: str | Path) -> duckdb.DuckDBPyConnection:
             con.register(f"_empty_{table}", empty)
             source = f"_empty_{table}"
         extra = f", {_EXPLAIN} AS explain" if table == "decisions" else ""
-        con.execute(f"CREATE VIEW {table} AS SELECT *{extra} FROM {source}")
+        try:
+            con.execute(f"CREATE VIEW {table} AS SELECT *{extra} FROM {source}")
+        except duckdb.Error as err:  # a listed file gone or damaged: the index is unreadable
+            con.close()
+            first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+            raise LogReadError(
+                str(root), f"{first} (run trace-audit index again to rebuild it)"
+            ) from err
+    # The index's files and nothing else: a query reads no other file, writes none (COPY,
+    # ATTACH), loads no extension and reaches no network, and cannot undo this. The views
+    # keep working (DuckDB checks each file against allowed_paths).
+    if not confined:
+        return con
+    every = [(root / rel).as_posix() for rel in listed]
+    con.execute("SET allowed_paths = ?", [every])
+    con.execute("SET enable_external_access = false")
+    con.execute("SET lock_configuration = true")
     return con
 
 
 def run_query(
     index: str | Path, sql: str, params: Sequence[Any] = (), *, limit: int | None = None
 ) -> QueryResult:
-    """Run one SQL statement on the index; a bad statement is a ``UsageError`` (one line)."""
+    """Run one SQL statement on the index; a bad statement is a ``UsageError`` (one line),
+    a Parquet file of the index that cannot be read a ``LogReadError``. With ``limit``,
+    the rows past it are counted (not kept) so the result can say it was cut."""
     import duckdb
 
     started = time.perf_counter()
     con = connect(index)
     try:
+        statements = con.extract_statements(sql)
+        if not statements:
+            raise UsageError("no SQL statement given (only blanks, ';' or comments)")
+        if len(statements) > 1:
+            raise UsageError(f"give one SQL statement at a time ({len(statements)} given)")
         cursor = con.execute(sql, list(params))
         if cursor.description is None:
             return QueryResult((), [], time.perf_counter() - started)
         columns = tuple(d[0] for d in cursor.description)
         rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
+        total = None if limit is None or len(rows) < limit else len(rows) + _rest(cursor)
     except duckdb.Error as err:
         first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        if isinstance(err, duckdb.IOException | duckdb.InvalidInputException) and (
+            ".parquet" in first
+        ):  # the index's own file is damaged or gone: unreadable input, not a usage error
+            raise LogReadError(str(index), f"SQL: {first}") from err
         raise UsageError(f"SQL: {first}") from err
     finally:
         con.close()
-    return QueryResult(columns, rows, time.perf_counter() - started)
+    return QueryResult(
+        columns,
+        rows,
+        time.perf_counter() - started,
+        total=total if total is not None and total > len(rows) else None,
+    )
+
+
+def _rest(cursor: Any) -> int:
+    """Rows left in a result, counted in Arrow batches (bounded memory, no Python rows)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        # DuckDB warns that Arrow output of a DB-API result copies rows: it is counted only.
+        warnings.filterwarnings("ignore", message="Arrow output on a DB-API result")
+        return sum(batch.num_rows for batch in cursor.to_arrow_reader(65_536))
 
 
 def find_decisions(
@@ -176,8 +259,17 @@ def find_decisions(
     sql = f"SELECT {select}, d.explain FROM decisions d"
     if conditions:
         sql += " WHERE " + " AND ".join(conditions)
-    sql += f" ORDER BY d.t_ns, d.robot LIMIT {int(limit)}"
-    return run_query(index, sql, params)
+    try:
+        found = run_query(index, sql + f" ORDER BY d.t_ns, d.robot LIMIT {int(limit)}", params)
+    except UsageError as err:
+        if where:  # the error is about SQL the user did not write around the condition
+            raise UsageError(f"--where {where!r}: {err}") from err
+        raise
+    if len(found.rows) < limit:
+        return found
+    # As many rows as the limit: count the matches so the output can say it was cut.
+    count = run_query(index, f"SELECT count(*) FROM ({sql})", params).rows[0][0]
+    return dataclasses.replace(found, total=int(count) if count > len(found.rows) else None)
 
 
 def _literal(text: str) -> str:
@@ -239,17 +331,22 @@ def index_metrics(
                sum(factors_total), sum(factors_traceable), sum((factors_total = 0)::INT),
                sum(dr::INT), sum(seal_verified::INT), fsum(tcs_w), fsum(tcs_w * tcs_w),
                sum(window_ns), sum(gap_ns), sum((gap_ns > 0)::INT), sum(missing_cycles),
-               sum(dropped), sum(clock_anomaly::INT), list(DISTINCT segment)
+               sum(dropped), sum(clock_anomaly::INT), list(DISTINCT segment),
+               count(*) FILTER (WHERE NOT (factors_total > 0
+                   AND factors_traceable = factors_total AND dr AND seal_verified))
         FROM d GROUP BY g ORDER BY g
     """
+    if cfg.evidence:
+        raise UsageError("--evidence is not supported with --index (run metrics on the logs)")
     result = run_query(index, sql)
     groups: dict[str, GroupSums] = {}
     segments: set[str] = set()
-    cycles = 0
+    cycles = failures_total = 0
     for row in result.rows:
         (name, n, sealed, summarized, et, et2, etp, etp2, full, factors, traceable) = row[:11]
         (no_factors, dr, intact, tcs_sum, tcs2, window, gap, gaps, missing) = row[11:20]
-        (dropped, anomalies, names) = row[20:]
+        (dropped, anomalies, names, failing) = row[20:]
+        failures_total += failing
         groups[str(name)] = GroupSums(
             decisions=n,
             sealed=sealed,
@@ -275,7 +372,7 @@ def index_metrics(
         )
         segments.update(names)
         cycles += n
-    return report_from_sums(
+    report = report_from_sums(
         [str(index)],
         cfg,
         groups,
@@ -283,4 +380,13 @@ def index_metrics(
         segments=tuple(sorted(segments)),
         cycles=cycles,
         elapsed=time.perf_counter() - started,
+    )
+    # Counted from the rows as the logs count them; the listing itself stays with the logs.
+    gaps_total = sum(g.gaps for g in groups.values())
+    return dataclasses.replace(
+        report,
+        failures_total=failures_total,
+        gaps_total=gaps_total,
+        logging_time="not in the index",
+        not_in_index=("logging_cost", "channel_deviation", "external_refs", "failures", "gaps"),
     )
