@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from trace_audit.fleet.rows import SegmentRows, day_of
-from trace_audit.fleet.tables import INDEX_FORMAT, INDEX_VERSION, TABLES
+from trace_audit.fleet.tables import INDEX_FORMAT, INDEX_VERSION, TABLES, parquet_options
 from trace_audit.metrics import MetricsConfig, score_segment
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.logset import Log, open_logs
@@ -120,7 +120,7 @@ def index_segment(task: IndexTask) -> IndexedSegment:
             target = out / rel
             target.parent.mkdir(parents=True, exist_ok=True)
             partial = target.with_name(target.name + ".partial")
-            pq.write_table(part, partial, compression="zstd")
+            pq.write_table(part, partial, **parquet_options(part.schema))
             os.replace(partial, target)
             files.append(rel)
     return IndexedSegment(
