@@ -3,11 +3,15 @@ from the index against metrics from the logs, and a Dask cluster with 1 and 2 wo
 
     .venv/bin/python bench/bench_fleet.py [--minutes 30] [--robot-days 10] [--repeats 3]
                                           [--work DIR (default: $TMPDIR/trace-bench-fleet)]
+                                          [--against GIT_REF] [--build-only] [--skip-dask]
 
 1. **Index build, CPU per core**: a real sim log root (two robots, ``--minutes`` each,
    routine operation with the paper's fault rates) is scored by ``compute_metrics`` (one
    process) and indexed by ``build_index`` into a fresh directory (one process), in
    alternating rounds; medians of CPU seconds, cycles/s each and the ratio index/metrics.
+   With ``--against REF`` the same is also measured for the code of git ``REF`` (exported
+   to a temporary tree), each round a fresh process per tree, trees alternating, so a
+   change's before and after are read in one run (``--build-only`` stops after this).
 2. **10 robot-days (8.6 M decisions)**: simulating 8.6 M cycles here takes hours, so the
    index rows are *synthetic*: the real index's decisions (and their entities) replicated
    24 x per robot-day with fresh cycle numbers, times (10 Hz), segment names and robots,
@@ -98,6 +102,63 @@ def bench_build(root: Path, work: Path, repeats: int) -> dict[str, float]:
         "index_cycles_per_s": decisions / i,
         "ratio_index_to_metrics": m / i,
     }
+
+
+_ROUND = """
+import json, shutil, sys, time
+from pathlib import Path
+import pyarrow.parquet  # imported before the clock starts, as in the in-process rounds
+from trace_audit.fleet.index import build_index
+from trace_audit.metrics import MetricsConfig, compute_metrics
+root, out = Path(sys.argv[1]), Path(sys.argv[2])
+started = time.process_time()
+report = compute_metrics([root], MetricsConfig(max_listed=0))
+metrics_s = time.process_time() - started
+shutil.rmtree(out, ignore_errors=True)
+started = time.process_time()
+build_index([root], out)
+index_s = time.process_time() - started
+print(json.dumps([report.overall.decisions, metrics_s, index_s]))
+"""
+"""One round of step 1 in a fresh process of whichever tree is on its PYTHONPATH."""
+
+
+def bench_against(ref: str, root: Path, work: Path, repeats: int) -> dict[str, object]:
+    """Step 1 for this tree and for git ``ref``, rounds alternating between the two."""
+    tree = work / f"tree-{ref.replace('/', '_')}"
+    shutil.rmtree(tree, ignore_errors=True)
+    tree.mkdir(parents=True)
+    archive = subprocess.run(
+        ["git", "-C", str(REPO), "archive", ref], check=True, capture_output=True
+    ).stdout
+    subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
+    rounds: dict[str, list[list[float]]] = {"this": [], ref: []}
+    for _ in range(repeats):
+        for name, source in (("this", REPO), (ref, tree)):
+            done = subprocess.run(
+                [sys.executable, "-c", _ROUND, str(root), str(work / f"index-{name}")],
+                env={**os.environ, "PYTHONPATH": str(source)},
+                check=True,
+                capture_output=True,
+                text=True,
+            )
+            rounds[name].append(json.loads(done.stdout.splitlines()[-1]))
+    out: dict[str, object] = {}
+    for name, runs in rounds.items():
+        decisions = runs[0][0]
+        m = statistics.median(r[1] for r in runs)
+        i = statistics.median(r[2] for r in runs)
+        out[name] = {
+            "metrics_cycles_per_s": decisions / m,
+            "index_cycles_per_s": decisions / i,
+            "ratio_index_to_metrics": m / i,
+            "ratios_per_round": [round(r[1] / r[2], 3) for r in runs],
+        }
+    this_i = statistics.median(r[2] for r in rounds["this"])
+    ref_i = statistics.median(r[2] for r in rounds[ref])
+    out["index_cpu_this_over_ref"] = this_i / ref_i
+    shutil.rmtree(tree, ignore_errors=True)
+    return out
 
 
 def index_bytes(index: Path) -> int:
@@ -270,6 +331,8 @@ def main() -> int:
         "--work", type=Path, default=Path(tempfile.gettempdir()) / "trace-bench-fleet"
     )
     parser.add_argument("--skip-dask", action="store_true")
+    parser.add_argument("--against", metavar="GIT_REF", help="also time step 1 for this ref")
+    parser.add_argument("--build-only", action="store_true", help="stop after step 1")
     args = parser.parse_args()
     work: Path = args.work
     work.mkdir(parents=True, exist_ok=True)
@@ -279,6 +342,8 @@ def main() -> int:
     results: dict[str, object] = {"cpus": len(os.sched_getaffinity(0))}
     build = bench_build(root, work, args.repeats)
     results["build"] = build
+    if args.against:
+        results["build_against"] = bench_against(args.against, root, work, args.repeats)
     real = work / "index"
     real_decisions = int(build["decisions"])
     real_bytes = index_bytes(real)
@@ -287,6 +352,10 @@ def main() -> int:
         "bytes": real_bytes,
         "bytes_per_decision": real_bytes / real_decisions,
     }
+    if args.build_only:
+        json.dump(results, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return 0
 
     synth = work / "index-10-robot-days"
     started = time.perf_counter()
