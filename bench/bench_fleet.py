@@ -9,9 +9,10 @@ from the index against metrics from the logs, and a Dask cluster with 1 and 2 wo
    routine operation with the paper's fault rates) is scored by ``compute_metrics`` (one
    process) and indexed by ``build_index`` into a fresh directory (one process), in
    alternating rounds; medians of CPU seconds, cycles/s each and the ratio index/metrics.
-   With ``--against REF`` the same is also measured for the code of git ``REF`` (exported
-   to a temporary tree), each round a fresh process per tree, trees alternating, so a
-   change's before and after are read in one run (``--build-only`` stops after this).
+   With ``--against REF``, ``trace-audit metrics`` and ``trace-audit index`` (one job each,
+   fresh processes, CPU of the process) are also timed for this tree and for git ``REF``
+   (exported to a temporary tree), order alternating, so a change's before and after are
+   read in one run (``--build-only`` stops after step 1).
 2. **10 robot-days (8.6 M decisions)**: simulating 8.6 M cycles here takes hours, so the
    index rows are *synthetic*: the real index's decisions (and their entities) replicated
    24 x per robot-day with fresh cycle numbers, times (10 Hz), segment names and robots,
@@ -33,6 +34,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import shutil
 import socket
 import statistics
@@ -104,27 +106,25 @@ def bench_build(root: Path, work: Path, repeats: int) -> dict[str, float]:
     }
 
 
-_ROUND = """
-import json, shutil, sys, time
-from pathlib import Path
-import pyarrow.parquet  # imported before the clock starts, as in the in-process rounds
-from trace_audit.fleet.index import build_index
-from trace_audit.metrics import MetricsConfig, compute_metrics
-root, out = Path(sys.argv[1]), Path(sys.argv[2])
-started = time.process_time()
-report = compute_metrics([root], MetricsConfig(max_listed=0))
-metrics_s = time.process_time() - started
-shutil.rmtree(out, ignore_errors=True)
-started = time.process_time()
-build_index([root], out)
-index_s = time.process_time() - started
-print(json.dumps([report.overall.decisions, metrics_s, index_s]))
-"""
-"""One round of step 1 in a fresh process of whichever tree is on its PYTHONPATH."""
+def _cli_cpu(tree: Path, *args: str) -> float:
+    """CPU seconds (user + system, the process and its children) of one ``trace-audit``
+    command run from ``tree``."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    subprocess.run(
+        [sys.executable, "-m", "trace_audit.cli", *args, "--json"],
+        env={**os.environ, "PYTHONPATH": str(tree)},
+        check=True,
+        stdout=subprocess.DEVNULL,
+    )
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
 
 
-def bench_against(ref: str, root: Path, work: Path, repeats: int) -> dict[str, object]:
-    """Step 1 for this tree and for git ``ref``, rounds alternating between the two."""
+def bench_against(
+    ref: str, root: Path, work: Path, repeats: int, decisions: int
+) -> dict[str, object]:
+    """``trace-audit metrics`` and ``trace-audit index`` (fresh processes, one job each,
+    as a user runs them) for this tree and for git ``ref``, rounds alternating."""
     tree = work / f"tree-{ref.replace('/', '_')}"
     shutil.rmtree(tree, ignore_errors=True)
     tree.mkdir(parents=True)
@@ -132,33 +132,30 @@ def bench_against(ref: str, root: Path, work: Path, repeats: int) -> dict[str, o
         ["git", "-C", str(REPO), "archive", ref], check=True, capture_output=True
     ).stdout
     subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
-    rounds: dict[str, list[list[float]]] = {"this": [], ref: []}
-    for _ in range(repeats):
-        for name, source in (("this", REPO), (ref, tree)):
-            done = subprocess.run(
-                [sys.executable, "-c", _ROUND, str(root), str(work / f"index-{name}")],
-                env={**os.environ, "PYTHONPATH": str(source)},
-                check=True,
-                capture_output=True,
-                text=True,
-            )
-            rounds[name].append(json.loads(done.stdout.splitlines()[-1]))
-    out: dict[str, object] = {}
+    trees = [("this", REPO), (ref, tree)]
+    rounds: dict[str, list[tuple[float, float]]] = {"this": [], ref: []}
+    for n in range(repeats):
+        for name, source in trees if n % 2 == 0 else trees[::-1]:  # ABBA: neither always first
+            metrics_s = _cli_cpu(source, "metrics", str(root), "--jobs", "1")
+            out = work / f"index-{name.replace('/', '_')}"
+            shutil.rmtree(out, ignore_errors=True)
+            index_s = _cli_cpu(source, "index", str(root), "--out", str(out), "--jobs", "1")
+            rounds[name].append((metrics_s, index_s))
+    result: dict[str, object] = {}
     for name, runs in rounds.items():
-        decisions = runs[0][0]
-        m = statistics.median(r[1] for r in runs)
-        i = statistics.median(r[2] for r in runs)
-        out[name] = {
+        m = statistics.median(r[0] for r in runs)
+        i = statistics.median(r[1] for r in runs)
+        result[name] = {
             "metrics_cycles_per_s": decisions / m,
             "index_cycles_per_s": decisions / i,
             "ratio_index_to_metrics": m / i,
-            "ratios_per_round": [round(r[1] / r[2], 3) for r in runs],
+            "ratios_per_round": [round(r[0] / r[1], 3) for r in runs],
         }
-    this_i = statistics.median(r[2] for r in rounds["this"])
-    ref_i = statistics.median(r[2] for r in rounds[ref])
-    out["index_cpu_this_over_ref"] = this_i / ref_i
+    this_i = statistics.median(r[1] for r in rounds["this"])
+    ref_i = statistics.median(r[1] for r in rounds[ref])
+    result["index_cpu_this_over_ref"] = this_i / ref_i
     shutil.rmtree(tree, ignore_errors=True)
-    return out
+    return result
 
 
 def index_bytes(index: Path) -> int:
@@ -343,7 +340,9 @@ def main() -> int:
     build = bench_build(root, work, args.repeats)
     results["build"] = build
     if args.against:
-        results["build_against"] = bench_against(args.against, root, work, args.repeats)
+        results["build_against"] = bench_against(
+            args.against, root, work, args.repeats, int(build["decisions"])
+        )
     real = work / "index"
     real_decisions = int(build["decisions"])
     real_bytes = index_bytes(real)
