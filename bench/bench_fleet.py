@@ -3,11 +3,16 @@ from the index against metrics from the logs, and a Dask cluster with 1 and 2 wo
 
     .venv/bin/python bench/bench_fleet.py [--minutes 30] [--robot-days 10] [--repeats 3]
                                           [--work DIR (default: $TMPDIR/trace-bench-fleet)]
+                                          [--against GIT_REF] [--build-only] [--skip-dask]
 
 1. **Index build, CPU per core**: a real sim log root (two robots, ``--minutes`` each,
    routine operation with the paper's fault rates) is scored by ``compute_metrics`` (one
    process) and indexed by ``build_index`` into a fresh directory (one process), in
    alternating rounds; medians of CPU seconds, cycles/s each and the ratio index/metrics.
+   With ``--against REF``, ``trace-audit metrics`` and ``trace-audit index`` (one job each,
+   fresh processes, CPU of the process) are also timed for this tree and for git ``REF``
+   (exported to a temporary tree), order alternating, so a change's before and after are
+   read in one run (``--build-only`` stops after step 1).
 2. **10 robot-days (8.6 M decisions)**: simulating 8.6 M cycles here takes hours, so the
    index rows are *synthetic*: the real index's decisions (and their entities) replicated
    24 x per robot-day with fresh cycle numbers, times (10 Hz), segment names and robots,
@@ -29,6 +34,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import shutil
 import socket
 import statistics
@@ -98,6 +104,58 @@ def bench_build(root: Path, work: Path, repeats: int) -> dict[str, float]:
         "index_cycles_per_s": decisions / i,
         "ratio_index_to_metrics": m / i,
     }
+
+
+def _cli_cpu(tree: Path, *args: str) -> float:
+    """CPU seconds (user + system, the process and its children) of one ``trace-audit``
+    command run from ``tree``."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    subprocess.run(
+        [sys.executable, "-m", "trace_audit.cli", *args, "--json"],
+        env={**os.environ, "PYTHONPATH": str(tree)},
+        check=True,
+        stdout=subprocess.DEVNULL,
+    )
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+
+
+def bench_against(
+    ref: str, root: Path, work: Path, repeats: int, decisions: int
+) -> dict[str, object]:
+    """``trace-audit metrics`` and ``trace-audit index`` (fresh processes, one job each,
+    as a user runs them) for this tree and for git ``ref``, rounds alternating."""
+    tree = work / f"tree-{ref.replace('/', '_')}"
+    shutil.rmtree(tree, ignore_errors=True)
+    tree.mkdir(parents=True)
+    archive = subprocess.run(
+        ["git", "-C", str(REPO), "archive", ref], check=True, capture_output=True
+    ).stdout
+    subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
+    trees = [("this", REPO), (ref, tree)]
+    rounds: dict[str, list[tuple[float, float]]] = {"this": [], ref: []}
+    for n in range(repeats):
+        for name, source in trees if n % 2 == 0 else trees[::-1]:  # ABBA: neither always first
+            metrics_s = _cli_cpu(source, "metrics", str(root), "--jobs", "1")
+            out = work / f"index-{name.replace('/', '_')}"
+            shutil.rmtree(out, ignore_errors=True)
+            index_s = _cli_cpu(source, "index", str(root), "--out", str(out), "--jobs", "1")
+            rounds[name].append((metrics_s, index_s))
+    result: dict[str, object] = {}
+    for name, runs in rounds.items():
+        m = statistics.median(r[0] for r in runs)
+        i = statistics.median(r[1] for r in runs)
+        result[name] = {
+            "metrics_cycles_per_s": decisions / m,
+            "index_cycles_per_s": decisions / i,
+            "ratio_index_to_metrics": m / i,
+            "ratios_per_round": [round(r[0] / r[1], 3) for r in runs],
+        }
+    this_i = statistics.median(r[1] for r in rounds["this"])
+    ref_i = statistics.median(r[1] for r in rounds[ref])
+    result["index_cpu_this_over_ref"] = this_i / ref_i
+    shutil.rmtree(tree, ignore_errors=True)
+    return result
 
 
 def index_bytes(index: Path) -> int:
@@ -271,6 +329,8 @@ def main() -> int:
         "--work", type=Path, default=Path(tempfile.gettempdir()) / "trace-bench-fleet"
     )
     parser.add_argument("--skip-dask", action="store_true")
+    parser.add_argument("--against", metavar="GIT_REF", help="also time step 1 for this ref")
+    parser.add_argument("--build-only", action="store_true", help="stop after step 1")
     args = parser.parse_args()
     work: Path = args.work
     work.mkdir(parents=True, exist_ok=True)
@@ -280,6 +340,10 @@ def main() -> int:
     results: dict[str, object] = {"cpus": len(os.sched_getaffinity(0))}
     build = bench_build(root, work, args.repeats)
     results["build"] = build
+    if args.against:
+        results["build_against"] = bench_against(
+            args.against, root, work, args.repeats, int(build["decisions"])
+        )
     real = work / "index"
     real_decisions = int(build["decisions"])
     real_bytes = index_bytes(real)
@@ -288,6 +352,10 @@ def main() -> int:
         "bytes": real_bytes,
         "bytes_per_decision": real_bytes / real_decisions,
     }
+    if args.build_only:
+        json.dump(results, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return 0
 
     synth = work / "index-10-robot-days"
     started = time.perf_counter()

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from trace_audit.fleet.rows import SegmentRows, day_of
-from trace_audit.fleet.tables import INDEX_FORMAT, INDEX_VERSION
+from trace_audit.fleet.tables import INDEX_FORMAT, INDEX_VERSION, parquet_options
 from trace_audit.metrics import MetricsConfig, score_segment
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.logset import Log, copy_rank, open_logs
@@ -122,7 +122,7 @@ def index_segment(task: IndexTask) -> IndexedSegment:
             target = out / rel
             target.parent.mkdir(parents=True, exist_ok=True)
             partial = target.with_name(target.name + ".partial")
-            pq.write_table(part, partial, compression="zstd")
+            pq.write_table(part, partial, **parquet_options(part.schema))
             os.replace(partial, target)
             files.append(rel)
     return IndexedSegment(

@@ -3,6 +3,13 @@
 ``SegmentRows`` is a ``trace_audit.metrics.DecisionSink``: metrics reads the segment and
 scores each decision once (ET, ET_partial, DR, the seal check, the gap rule); this module
 only copies those figures and the parsed layers' fields into columns. Nothing here scores.
+
+The rows are built for speed (bench/bench_fleet.py, docs/fleet.md "Build cost"): a row is
+one tuple of plain scalars, and the list-, struct- and map-valued columns are kept flat
+(one list of values and one of offsets per column), so a decision adds no Python
+container that lives on: the cyclic garbage collector, which walks every live container,
+then has almost nothing to walk while metrics allocates. Columns that are the same for
+every row of a segment (its name, path, tier, versions) are filled once, in ``table``.
 """
 
 from __future__ import annotations
@@ -20,7 +27,13 @@ if TYPE_CHECKING:
 __all__ = ["SegmentRows", "day_of"]
 
 _HOUR_NS = 3_600_000_000_000
-_DISTANCE_UNITS = ("m", "meter", "metre", "meters", "metres")
+_DISTANCE_UNITS = frozenset(("m", "meter", "metre", "meters", "metres"))
+
+_SEGMENT_CONSTANTS = ("segment", "segment_path", "tier", "software_version", "policy_version")
+"""Decision columns equal on every row of a segment: not stored per row."""
+_FLAT = ("factors", "failed_checks", "flags", "nearest", "dr_problems", "integrity_problems")
+"""Decision columns holding a list (or map) per row: kept as flat values and offsets."""
+_FACTOR_FIELDS = ("node", "name", "value", "text", "unit")
 
 
 def day_of(t_ns: int) -> str:
@@ -46,8 +59,8 @@ def _distances(belief: Any) -> dict[str, float]:
     for node in belief.get("nodes") or ():
         if (
             type(node) is dict
-            and node.get("unit") in _DISTANCE_UNITS
             and node.get("kind") == "state"
+            and node.get("unit") in _DISTANCE_UNITS
             and "distance" in f"{node.get('label', '')} {node.get('id', '')}".lower()
         ):
             value = _number(node.get("value"))
@@ -66,29 +79,53 @@ def _distances(belief: Any) -> dict[str, float]:
 
 
 @dataclass(slots=True)
-class SegmentRows:
-    """The decisions, entities and gaps of one segment, filled decision by decision.
+class _Flat:
+    """A list-valued column kept flat: every row's items in one list, and where each row
+    ends (Arrow's own layout, so the column is built without a Python list per row)."""
 
-    Rows are kept as tuples in the tables' column order (one tuple per row is the cheapest
-    thing to build per decision) and turned into columns once, in ``table``."""
+    offsets: list[int] = field(default_factory=lambda: [0])
+    items: list[Any] = field(default_factory=list)
+
+    def add(self, items: list[Any] | tuple[Any, ...]) -> None:
+        if items:
+            self.items.extend(items)
+        self.offsets.append(len(self.items))
+
+    def array(self, item_type: pa.DataType) -> pa.Array:
+        import pyarrow as pa
+
+        return pa.ListArray.from_arrays(
+            pa.array(self.offsets, pa.int32()),
+            pa.array(self.items, item_type),
+            type=pa.list_(item_type),
+        )
+
+
+@dataclass(slots=True)
+class SegmentRows:
+    """The decisions, entities and gaps of one segment, filled decision by decision."""
 
     segment: Segment
     previous_command: str | None = None
     rows: dict[str, list[tuple[Any, ...]]] = field(default_factory=dict)
+    """Per table, one tuple of scalars per row (the decisions' flat columns excluded)."""
     days: dict[str, list[str]] = field(default_factory=dict)
     integrity_failed: int = 0
     first_cycle: int | None = None
     last_cycle: int | None = None
+    flat: dict[str, _Flat] = field(default_factory=dict)
+    _factor_items: tuple[list[Any], ...] = ()
+    _nearest_values: list[float] = field(default_factory=list)
     _hours: dict[int, tuple[str, str]] = field(default_factory=dict)
     _name: str = ""
-    _path: str = ""
 
     def __post_init__(self) -> None:
         for table in ("decisions", "entities", "gaps"):
             self.rows[table] = []
             self.days[table] = []
+        self.flat = {name: _Flat() for name in _FLAT}
+        self._factor_items = tuple([] for _ in _FACTOR_FIELDS)
         self._name = self.segment.path.name
-        self._path = str(self.segment.path)
 
     @property
     def decisions(self) -> int:
@@ -120,69 +157,79 @@ class SegmentRows:
         if d.seal.gap is not None:
             self._gap(d, self._day_hour(d.seal.gap.after_t_ns)[0])
 
-    def _decision(self, d: ScoredDecision, day: str, hour: str, nearest: dict[str, float]) -> None:
-        self.days["decisions"].append(day)
-        action = d.action if type(d.action) is dict else {}
-        execution = d.execution if type(d.execution) is dict else {}
-        rationale = action.get("rationale")
+    def _factors(self, rationale: Any) -> tuple[str | None, float | None, str | None, Any]:
+        """Add the decision's factors to the flat ``factors`` column; return the leading
+        one's name, value, text and unit (all None without factors)."""
         raw_factors = rationale.get("factors") if type(rationale) is dict else None
-        factors = []
+        nodes, names, values, texts, units = self._factor_items
+        lead: tuple[str | None, float | None, str | None, Any] = (None, None, None, None)
+        count = 0
         for f in raw_factors or ():
             if type(f) is dict:
                 raw = f.get("value")
                 value = _number(raw)
-                factors.append(
-                    {
-                        "node": str(f.get("node", "")),
-                        "name": str(f.get("name", "")),
-                        "value": value,
-                        "text": None if value is not None else str(raw),
-                        "unit": f.get("unit"),
-                    }
-                )
-        lead = factors[0] if factors else None
+                node, name = str(f.get("node", "")), str(f.get("name", ""))
+                text = None if value is not None else str(raw)
+                unit = f.get("unit")
+                if not count:
+                    lead = (name or node, value, text, unit)
+                count += 1
+                nodes.append(node)
+                names.append(name)
+                values.append(value)
+                texts.append(text)
+                units.append(unit)
+        factors = self.flat["factors"]
+        factors.offsets.append(factors.offsets[-1] + count)
+        return lead
+
+    def _decision(self, d: ScoredDecision, day: str, hour: str, nearest: dict[str, float]) -> None:
+        self.days["decisions"].append(day)
+        action = d.action if type(d.action) is dict else {}
+        execution = d.execution if type(d.execution) is dict else {}
+        lead_factor, lead_value, lead_text, lead_unit = self._factors(action.get("rationale"))
         command = action.get("command")
-        session = self.segment.session
         score, seal = d.score, d.seal
         scenario = scenario_of(execution)
         intact = not seal.problems
         self.integrity_failed += not intact
         gap = seal.gap
+        flat = self.flat
+        flat["failed_checks"].add(
+            [
+                str(c.get("rule"))
+                for c in execution.get("checks") or ()
+                if type(c) is dict and c.get("passed") is False
+            ]
+        )
+        flat["flags"].add([str(f) for f in execution.get("flags") or ()])
+        flat["nearest"].add(tuple(nearest))
+        if nearest:
+            self._nearest_values.extend(nearest.values())
+        flat["dr_problems"].add(d.dr_problems)
+        flat["integrity_problems"].add(seal.problems)
         self.rows["decisions"].append(
             (
-                self._name,
-                self._path,
-                session.tier,
                 d.cycle.cycle,
                 d.cycle.t_ns,
                 hour,
                 command,
                 self.previous_command,
-                (lead["name"] or lead["node"]) if lead else None,
-                lead["value"] if lead else None,
-                lead["text"] if lead else None,
-                lead["unit"] if lead else None,
-                factors,
+                lead_factor,
+                lead_value,
+                lead_text,
+                lead_unit,
                 len(action.get("alternatives") or ()),
                 len(action.get("counterfactuals") or ()),
                 _number(execution.get("deviation")),
-                [
-                    str(c.get("rule"))
-                    for c in execution.get("checks") or ()
-                    if type(c) is dict and c.get("passed") is False
-                ],
-                [str(f) for f in execution.get("flags") or ()],
-                list(nearest.items()),
                 None if scenario == NO_SCENARIO else scenario,
                 score.et,
                 score.et_partial,
                 score.factors,
                 score.traceable,
                 not d.dr_problems,
-                list(d.dr_problems),
                 seal.sealed,
                 intact,
-                list(seal.problems),
                 d.cycle.summary is not None,
                 seal.continuity,
                 d.tcs,
@@ -191,8 +238,6 @@ class SegmentRows:
                 gap.missing_cycles if gap is not None else 0,
                 seal.dropped,
                 seal.clock_anomaly,
-                session.software_version,
-                session.policy_version,
             )
         )
         if command is not None:
@@ -222,7 +267,7 @@ class SegmentRows:
         nearest: dict[str, float] = {}
         rows = self.rows["entities"]
         days = self.days["entities"]
-        name, number, t_ns = self._name, d.cycle.cycle, d.cycle.t_ns
+        number, t_ns = d.cycle.cycle, d.cycle.t_ns
         for entity in entities:
             if type(entity) is not dict:
                 continue
@@ -239,7 +284,6 @@ class SegmentRows:
             days.append(day)
             rows.append(
                 (
-                    name,
                     number,
                     t_ns,
                     entity_id,
@@ -261,6 +305,67 @@ class SegmentRows:
 
         shape = schema(name)
         rows = self.rows[name]
-        columns = list(zip(*rows, strict=True)) if rows else [()] * len(shape)
+        if name == "decisions":
+            return pa.Table.from_arrays(self._decision_arrays(shape), schema=shape), self.days[name]
+        constant_segment = name == "entities"  # not stored per row: filled here
+        width = len(shape) - constant_segment
+        columns: list[Any] = list(zip(*rows, strict=True)) if rows else [()] * width
+        if constant_segment:
+            columns.insert(0, [self._name] * len(rows))
         arrays = [pa.array(column, type=f.type) for column, f in zip(columns, shape, strict=True)]
         return pa.Table.from_arrays(arrays, schema=shape), self.days[name]
+
+    def _decision_arrays(self, shape: pa.Schema) -> list[pa.Array]:
+        """The decisions' columns in schema order: scalar ones from the row tuples, list
+        ones from their flat values, the segment's constants repeated."""
+        import pyarrow as pa
+
+        rows = self.rows["decisions"]
+        n = len(rows)
+        session = self.segment.session
+        constant = {
+            "segment": self._name,
+            "segment_path": str(self.segment.path),
+            "tier": session.tier,
+            "software_version": session.software_version,
+            "policy_version": session.policy_version,
+        }
+        scalar_names = [
+            f.name for f in shape if f.name not in _FLAT and f.name not in _SEGMENT_CONSTANTS
+        ]
+        columns = list(zip(*rows, strict=True)) if rows else [()] * len(scalar_names)
+        scalars = dict(zip(scalar_names, columns, strict=True))
+        arrays: list[pa.Array] = []
+        for f in shape:
+            if f.name in constant:
+                arrays.append(pa.array([constant[f.name]] * n, f.type))
+            elif f.name == "factors":
+                arrays.append(self._factor_array(f.type))
+            elif f.name == "nearest":
+                flat = self.flat["nearest"]
+                arrays.append(
+                    pa.MapArray.from_arrays(
+                        pa.array(flat.offsets, pa.int32()),
+                        pa.array(flat.items, pa.string()),
+                        pa.array(self._nearest_values, pa.float64()),
+                        type=f.type,
+                    )
+                )
+            elif f.name in _FLAT:
+                arrays.append(self.flat[f.name].array(f.type.value_type))
+            else:
+                arrays.append(pa.array(scalars[f.name], f.type))
+        return arrays
+
+    def _factor_array(self, list_type: pa.DataType) -> pa.Array:
+        import pyarrow as pa
+
+        struct = list_type.value_type
+        children = [
+            pa.array(items, struct.field(i).type) for i, items in enumerate(self._factor_items)
+        ]
+        return pa.ListArray.from_arrays(
+            pa.array(self.flat["factors"].offsets, pa.int32()),
+            pa.StructArray.from_arrays(children, fields=list(struct)),
+            type=list_type,
+        )

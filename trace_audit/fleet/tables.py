@@ -8,12 +8,19 @@ partitioning (DuckDB, pyarrow.dataset, Spark, Trino) gives them back as columns.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     import pyarrow as pa
 
-__all__ = ["INDEX_FORMAT", "INDEX_VERSION", "PARTITION_COLUMNS", "TABLES", "schema"]
+__all__ = [
+    "INDEX_FORMAT",
+    "INDEX_VERSION",
+    "PARTITION_COLUMNS",
+    "TABLES",
+    "parquet_options",
+    "schema",
+]
 
 INDEX_FORMAT = "trace-fleet-index"
 INDEX_VERSION = 1
@@ -22,6 +29,23 @@ version is rebuilt from the logs, not read."""
 
 PARTITION_COLUMNS = ("robot", "day")
 TABLES = ("decisions", "entities", "gaps", "segments")
+_RISING = ("cycle", "t_ns")
+"""Integer columns that climb row by row: delta-encoded, not dictionary-encoded."""
+
+
+def parquet_options(shape: pa.Schema) -> dict[str, Any]:
+    """``pyarrow.parquet.write_table`` settings for one table's file: zstd; dictionaries
+    only for top-level strings (names, commands, versions repeat; a dictionary of distinct
+    floats and times costs bytes and time); ``cycle`` and ``t_ns`` as deltas. On the bench
+    log this writes ~0.66x the bytes of pyarrow's defaults, a little faster (docs/fleet.md);
+    any Parquet reader reads both encodings."""
+    import pyarrow as pa
+
+    return {
+        "compression": "zstd",
+        "use_dictionary": [f.name for f in shape if f.type == pa.string()],
+        "column_encoding": {name: "DELTA_BINARY_PACKED" for name in _RISING if name in shape.names},
+    }
 
 
 def schema(table: str) -> pa.Schema:
