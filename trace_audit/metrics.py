@@ -52,6 +52,7 @@ from trace_audit.chains import (
     score_layers,
     trace_layers,
 )
+from trace_audit.evidence import open_recordings
 from trace_audit.jsonout import OMIT_EMPTY
 from trace_runtime.chain import digest
 from trace_runtime.costs import TIMING_METADATA, CostHistogram
@@ -61,7 +62,6 @@ from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap, continuity, find_gap
 from trace_runtime.integrity import SealStatus, verify_cycle
 from trace_runtime.logset import Log, open_logs
 from trace_runtime.reader import Segment, open_segment
-from trace_runtime.recordings import Recordings
 from trace_runtime.records import (
     TOPIC_ACTION,
     TOPIC_BELIEF,
@@ -495,8 +495,7 @@ class _Scanner:
         self.config = config
         self.partial = partial
         self.sink = sink
-        recordings = Recordings.open(config.evidence) if config.evidence else None
-        self.window = SensorWindow(config.sensor_window, recordings)
+        self.window = SensorWindow(config.sensor_window, open_recordings(config.evidence))
         self.stream = _Stream()
         self.session_prev: str | None = None
 

@@ -13,9 +13,9 @@ from collections.abc import Sequence
 from concurrent.futures import Executor
 from pathlib import Path
 
+from trace_audit.evidence import open_recordings
 from trace_runtime.integrity import PublicKey
 from trace_runtime.logset import open_log
-from trace_runtime.recordings import Recordings
 from trace_runtime.verification import (
     Finding,
     FindingKind,
@@ -52,5 +52,5 @@ def verify_log(
     Raises ``LogReadError`` only when nothing readable is there (exit 3 at the CLI); a damaged
     segment inside a root is a finding.
     """
-    recordings = Recordings.open(evidence) if evidence else None
+    recordings = open_recordings(evidence)
     return verify(open_log(path), key=key, recordings=recordings, executor=executor)

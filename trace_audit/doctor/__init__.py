@@ -16,6 +16,7 @@ from pathlib import Path
 
 from trace_audit.doctor.rules import RULES, DoctorReport, Problem, Rule, SegmentDoctor
 from trace_audit.doctor.structure import check_structure
+from trace_audit.evidence import open_recordings
 from trace_runtime.errors import LogReadError
 from trace_runtime.logset import find_segment_files, open_log
 from trace_runtime.recordings import Recordings
@@ -63,7 +64,7 @@ def doctor_log(
     files = find_segment_files(root)
     if not files:
         raise LogReadError(str(root), "no .mcap segment here")
-    recordings = Recordings.open(evidence) if evidence else None
+    recordings = open_recordings(evidence)
     report = DoctorReport(str(root))
     by_name: dict[str, SegmentDoctor] = {}
     total, done = sum(f.stat().st_size for f in files), 0
