@@ -47,7 +47,7 @@ from pathlib import Path
 from typing import Any
 
 import orjson
-from bench_tiers import mcap_default_bytes
+from bench_tiers import mcap_default_bytes, seek_medians_ms
 
 from sim import RunConfig, run
 from trace_runtime import open_log
@@ -141,23 +141,7 @@ def measure(variant: Variant, argv: list[str]) -> None:
 def seeks_ms(hot: Any, cold: Any, rng: random.Random) -> dict[str, float]:
     """Median ms of ``cycle_at`` at random times: a first ask (caches cleared), and asked again."""
     times = [rng.randrange(hot.start_ns, hot.end_ns) for _ in range(40)]
-    out = {}
-    for label, opened, forget in (
-        ("hot, first ask", hot, True),
-        ("cold, first ask", cold, True),
-        ("cold, asked again", cold, False),
-    ):
-        samples = []
-        for t_ns in times:
-            if forget:
-                opened.clear_caches()
-            else:
-                opened.cycle_at(t_ns)
-            started = time.perf_counter()
-            opened.cycle_at(t_ns)
-            samples.append(time.perf_counter() - started)
-        out[label] = statistics.median(samples) * 1e3
-    assert all(hot.cycle_at(t) == cold.cycle_at(t) for t in times[:10])
+    out = seek_medians_ms(hot, cold, times, hot_label="hot, first ask")
     # the same first asks answered by decoding the whole block (as before partial decodes),
     # alternating with the partial ones so a busy spell hits both: a paired ratio
     whole: list[float] = []

@@ -189,6 +189,29 @@ def json_floor(root: Path) -> int:
     return cycles
 
 
+def seek_medians_ms(hot: Any, cold: Any, times: list[int], hot_label: str) -> dict[str, float]:
+    """Median ms of ``cycle_at`` at ``times``: hot and cold as a first ask (caches cleared
+    before each), and cold asked again; checks that both tiers give the same cycles."""
+    seeks = {}
+    for label, opened, forget in (
+        (hot_label, hot, True),
+        ("cold, first ask", cold, True),
+        ("cold, asked again", cold, False),
+    ):
+        samples = []
+        for t_ns in times:
+            if forget:
+                opened.clear_caches()
+            else:
+                opened.cycle_at(t_ns)
+            started = time.perf_counter()
+            opened.cycle_at(t_ns)
+            samples.append(time.perf_counter() - started)
+        seeks[label] = statistics.median(samples) * 1e3
+    assert all(hot.cycle_at(t) == cold.cycle_at(t) for t in times[:10])
+    return seeks
+
+
 def bench_log(name: str, root: Path, work: Path, repeats: int, jobs: int) -> dict[str, Any]:
     log = open_log(root)
     cycles = sum(1 for c in log.iter_cycles() if c.sealed)
@@ -249,23 +272,7 @@ def bench_log(name: str, root: Path, work: Path, repeats: int, jobs: int) -> dic
     speed["read all cycles, cold"] = timed(repeats, read_all(compacted))
     rng = random.Random(5)
     times = [rng.randrange(log.start_ns, log.end_ns) for _ in range(40)]
-    seeks = {}
-    for label, opened, forget in (
-        ("hot", log, True),
-        ("cold, first ask", compacted, True),
-        ("cold, asked again", compacted, False),
-    ):
-        samples = []
-        for t_ns in times:
-            if forget:
-                opened.clear_caches()
-            else:
-                opened.cycle_at(t_ns)
-            started = time.perf_counter()
-            opened.cycle_at(t_ns)
-            samples.append(time.perf_counter() - started)
-        seeks[label] = statistics.median(samples) * 1e3
-    assert all(log.cycle_at(t) == compacted.cycle_at(t) for t in times[:10])
+    seeks = seek_medians_ms(log, compacted, times, hot_label="hot")
 
     per_cycle = {k: v / cycles for k, v in sizes.items()}
     results.update(
