@@ -90,6 +90,7 @@ NoteKind = Literal[
     "uncovered_sensors",
     "no_checkpoints",
     "external_unresolved",
+    "clock_backwards",
 ]
 """Things an investigator should know that are not tampering."""
 
@@ -236,6 +237,8 @@ class _Scan:
     external_unresolved: dict[str, int] = field(default_factory=dict)  # recording -> refs
     damaged: list[tuple[int, int, int]] = field(default_factory=list)
     """Cycle ranges lost in damaged chunks: (first, last, sealed cycles lost)."""
+    backsteps: list[tuple[int, int, int, int]] = field(default_factory=list)
+    """Where time went backwards: (cycle, t, the cycle before, its t)."""
 
 
 def _prefix(hex_digest: str) -> int:
@@ -332,6 +335,8 @@ class _SegmentCheck:
             )
         if scan.external_unresolved:
             self._note_external_unresolved()
+        if scan.backsteps:
+            self._note_clock_backwards()
         if s.recovered:
             self.note(
                 "recovered",
@@ -339,6 +344,21 @@ class _SegmentCheck:
                 "filled); read by a linear scan",
                 (s.first_cycle, s.last_cycle, s.start_ns, s.end_ns),
             )
+
+    def _note_clock_backwards(self) -> None:
+        # Not tampering (the seals chain), but the profile forbids it, and it makes a time in
+        # this segment name more than one decision: the investigator must be told.
+        steps = self.scan.backsteps
+        cycle, t_ns, before, before_ns = steps[0]
+        more = f" and {len(steps) - 1} more time(s)" if len(steps) > 1 else ""
+        self.note(
+            "clock_backwards",
+            f"the robot's clock stepped back within the segment: cycle {cycle} is "
+            f"{(before_ns - t_ns) / 1e9:.3f} s earlier than cycle {before}{more} (PROFILE "
+            "section 4 forbids it; the chain is intact, but a time here may name more than "
+            "one decision)",
+            (cycle, steps[-1][0], t_ns, steps[-1][1]),
+        )
 
     def _note_external_unresolved(self) -> None:
         s, missing = self.summary, self.scan.external_unresolved
@@ -419,7 +439,11 @@ class _SegmentCheck:
         scan = self.scan
         wanted = {c.cycle for _, _, c in self.checkpoints if c is not None}
         expected = self.entry
+        before: tuple[int, int] | None = None
         for cycle in self._iter_cycles_resuming():
+            if before is not None and cycle.t_ns < before[1]:
+                scan.backsteps.append((cycle.cycle, cycle.t_ns, *before))
+            before = (cycle.cycle, cycle.t_ns)
             status = verify_cycle(cycle)
             if status.state == "unsealed":
                 scan.unsealed.append((len(scan.num), cycle.cycle, cycle.t_ns))

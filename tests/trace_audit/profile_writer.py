@@ -36,6 +36,7 @@ class Faults:
     unsealed_tail: bool = False  # a closed file ends with layer messages and no seal
     no_session: bool = False
     lz4: bool = False
+    clock_step_back_at: int | None = None  # from this cycle on, t_ns is 2.5 periods earlier
 
 
 def _compact(value: object, spaced: bool = False) -> bytes:
@@ -124,6 +125,8 @@ def write_profile_log(path: Path, cycles: int = 30, faults: Faults = Faults()) -
         last_seal = (0, 0)
         for cycle in range(cycles):
             t_ns = 1_000_000_000 + cycle * PERIOD_NS
+            if faults.clock_step_back_at is not None and cycle >= faults.clock_step_back_at:
+                t_ns -= PERIOD_NS * 5 // 2
             distance = round(1.0 + (cycle % 10) * 0.4, 2)
             reading = _compact({"range_m": distance})
             ref = {

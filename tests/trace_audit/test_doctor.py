@@ -196,3 +196,9 @@ def test_a_summary_that_hides_a_chunk_breaks_the_summary_rule(tmp_path: Path) ->
     report = doctor_log(path)
     summary = [p for p in report.errors if p.rule == "summary-agrees"]
     assert summary and "1 chunk(s) have no Chunk Index" in summary[0].message
+
+
+def test_time_going_backwards_is_a_broken_must(tmp_path: Path) -> None:
+    log = write_profile_log(tmp_path / "p.mcap", faults=Faults(clock_step_back_at=12))
+    report = doctor_log(log)
+    assert "time-order" in _broken(report)

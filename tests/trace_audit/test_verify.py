@@ -21,6 +21,7 @@ import pytest
 from typer.testing import CliRunner
 
 from tests.trace_audit.conftest import PERIOD_NS, T0_NS, fill_cycle, write_log
+from tests.trace_audit.profile_writer import Faults, write_profile_log
 from tests.trace_audit.test_verify_tamper import decode, flip_byte, write, write_signed_log
 from trace_audit.cli import app
 from trace_audit.verify import verify_log
@@ -78,6 +79,27 @@ def test_two_robots_in_one_root_are_verified_separately(tmp_path: Path) -> None:
     report = verify_log(root)
     assert report.ok and [r.robot_id for r in report.robots] == ["amr-1", "amr-2"]
     assert report.cycles_valid == 200
+
+
+def test_a_clock_stepping_back_within_a_segment_is_a_note_that_names_the_cycle(
+    tmp_path: Path,
+) -> None:
+    """The chain is intact, so it is not tampering; but PROFILE section 4 forbids it, and an
+    investigator asking "what happened at t" must know that t is ambiguous in that segment."""
+    log = write_profile_log(tmp_path / "p.mcap", faults=Faults(clock_step_back_at=12))
+    report = verify_log(log)
+    assert report.ok and report.findings == []
+    (note,) = [n for n in report.notes if n.kind == "clock_backwards"]
+    assert (note.first_cycle, note.last_cycle) == (12, 12)
+    assert "0.150 s earlier than cycle 11" in note.message
+    assert "section 4" in note.message
+    plain = CliRunner().invoke(app, ["verify", str(log), "--plain"])
+    assert plain.exit_code == 0 and "backwards" in plain.output
+
+
+def test_an_honest_profile_log_has_no_clock_note(tmp_path: Path) -> None:
+    report = verify_log(write_profile_log(tmp_path / "p.mcap"))
+    assert report.ok and "clock_backwards" not in _kinds(report.notes)
 
 
 def test_a_signed_log_without_the_key_is_checked_but_says_so(tmp_path: Path) -> None:

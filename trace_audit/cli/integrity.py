@@ -40,8 +40,9 @@ truncated segment, missing segment, checkpoint mismatch, bad signature, key mism
 unsigned checkpoint, damaged segment.
 
 Not findings, reported as notes: cycles the logger declared dropped, warm summary cycles
-(chain verified, payloads not retained), and cycles after the last checkpoint of a crashed
-robot (they chain-verify, but no signature vouches for them yet).
+(chain verified, payloads not retained), cycles after the last checkpoint of a crashed
+robot (they chain-verify, but no signature vouches for them yet), and a clock that stepped
+back within a segment (PROFILE section 4 forbids it; the seals still chain).
 
 Without --key the chain is checked but a log re-chained by someone else is not detected.
 Exit codes: 0 clean, 1 findings, 2 usage (e.g. a bad key file), 3 unreadable input.
