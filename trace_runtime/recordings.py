@@ -45,6 +45,9 @@ class ExternalCheck:
     message: RawMessage | None = None
     path: Path | None = None
     """The file the message was found in (None unless resolved)."""
+    absent: bool = False
+    """Broken because the recording holds no message of that topic and time at all (cut
+    short, or the message removed), not because a message differs."""
 
 
 def external_ref(
@@ -151,11 +154,12 @@ class Recordings:
         if not paths:
             return ExternalCheck("unresolved", name, f"recording {name} not given")
         sequence, want = ref.get("sequence"), ref.get("digest")
-        why = f"no {topic} message at log_time_ns={t_ns} in {name}"
+        why, absent = f"no {topic} message at log_time_ns={t_ns} in {name}", True
         for path in paths:
             for msg in self._file(path).iter_messages(t_ns, t_ns):
                 if msg.topic != topic or msg.log_time_ns != t_ns:
                     continue
+                absent = False
                 if sequence is not None and msg.sequence != sequence:
                     why = f"sequence {sequence} does not match the recorded {msg.sequence}"
                     continue
@@ -163,4 +167,4 @@ class Recordings:
                     why = f"{topic} message data in {name} does not match the ref's digest"
                     continue
                 return ExternalCheck("resolved", name, "", msg, path)
-        return ExternalCheck("broken", name, why)
+        return ExternalCheck("broken", name, why, absent=absent)

@@ -41,7 +41,7 @@ from trace_runtime.integrity import (
 )
 from trace_runtime.logset import FileProblem, Log, copy_rank
 from trace_runtime.reader import Segment
-from trace_runtime.recordings import Recordings
+from trace_runtime.recordings import ExternalCheck, Recordings
 from trace_runtime.records import GENESIS, Checkpoint
 from trace_runtime.session import TIER_METADATA, TIERS
 
@@ -239,6 +239,19 @@ class _Scan:
     """Cycle ranges lost in damaged chunks: (first, last, sealed cycles lost)."""
     backsteps: list[tuple[int, int, int, int]] = field(default_factory=list)
     """Where time went backwards: (cycle, t, the cycle before, its t)."""
+    absent_open: dict[str, _AbsentRun] = field(default_factory=dict)  # recording -> open run
+    absent_runs: list[_AbsentRun] = field(default_factory=list)
+
+
+@dataclass(slots=True)
+class _AbsentRun:
+    """Consecutive citing cycles whose refs name messages a given recording does not hold."""
+
+    recording: str
+    first: tuple[int, int]  # (cycle, t)
+    last: tuple[int, int]
+    refs: int
+    detail: str  # the first one
 
 
 def _prefix(hex_digest: str) -> int:
@@ -299,6 +312,7 @@ class _SegmentCheck:
     def run(self) -> None:
         self._read_checkpoints()
         self._scan_cycles()
+        self._report_absent_runs()
         self._report_damaged_chunks()
         self._check_structure()
         self._check_unsealed()
@@ -504,18 +518,22 @@ class _SegmentCheck:
         """Evidence refs into external recordings: a changed or missing message in a
         recording that was given is a finding; a recording not given is only counted."""
         broken: list[str] = []
+        scan = self.scan
         for ref in status.external:
             name = str(ref.get("recording"))
             if self.recordings is None:
-                unresolved = self.scan.external_unresolved
-                unresolved[name] = unresolved.get(name, 0) + 1
+                scan.external_unresolved[name] = scan.external_unresolved.get(name, 0) + 1
                 continue
             check = self.recordings.check(ref)
+            if check.absent:
+                self._extend_absent_run(check, status)
+                scan.bad_positions.add(position)
+                continue
+            scan.absent_runs.extend(filter(None, [scan.absent_open.pop(name, None)]))
             if check.state == "resolved":
-                self.scan.external_ok += 1
+                scan.external_ok += 1
             elif check.state == "unresolved":
-                unresolved = self.scan.external_unresolved
-                unresolved[name] = unresolved.get(name, 0) + 1
+                scan.external_unresolved[name] = scan.external_unresolved.get(name, 0) + 1
             elif check.detail not in broken:
                 broken.append(check.detail)
         if broken:
@@ -526,6 +544,33 @@ class _SegmentCheck:
                 f"resolve: {'; '.join(broken)}",
                 (status.cycle, status.cycle, status.t_ns, status.t_ns),
             )
+
+    def _extend_absent_run(self, check: ExternalCheck, status: SealStatus) -> None:
+        # A recording cut short loses every message after the cut: one finding for the run
+        # says so, where one per cycle would bury it.
+        at = (status.cycle, status.t_ns)
+        run = self.scan.absent_open.get(check.recording)
+        if run is None:
+            self.scan.absent_open[check.recording] = _AbsentRun(
+                check.recording, at, at, 1, check.detail
+            )
+        else:
+            run.last, run.refs = at, run.refs + 1
+
+    def _report_absent_runs(self) -> None:
+        scan = self.scan
+        runs = sorted([*scan.absent_runs, *scan.absent_open.values()], key=lambda r: r.first)
+        for run in runs:
+            (first, first_ns), (last, last_ns) = run.first, run.last
+            where = f"cycle {first}" if first == last else f"cycles {first}..{last}"
+            self.finding(
+                "evidence_mismatch",
+                f"{where}: {run.refs} evidence ref(s) name messages that recording "
+                f"{run.recording} does not hold (the first: {run.detail}); a run of them "
+                "means the recording was cut short or those messages removed",
+                (first, last, first_ns, last_ns),
+            )
+        scan.absent_runs, scan.absent_open = [], {}
 
     # --- the chain inside the segment ------------------------------------------------------
 

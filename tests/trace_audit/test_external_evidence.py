@@ -45,9 +45,16 @@ def robot(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     return out, out.with_name("robot_bag")
 
 
-def _copy_bag(src: Path, dst: Path, change: int | None = None, drop: int | None = None) -> Path:
+def _copy_bag(
+    src: Path,
+    dst: Path,
+    change: int | None = None,
+    drop: int | None = None,
+    stop: int | None = None,
+) -> Path:
     """Copy a recording message by message; flip a byte of message ``change``, leave out
-    message ``drop`` (by sequence): what a damaged or edited recording looks like."""
+    message ``drop`` and every message from ``stop`` on (by sequence): what a damaged, edited
+    or cut-short recording looks like."""
     dst.parent.mkdir(parents=True, exist_ok=True)
     with src.open("rb") as f_in, dst.open("wb") as f_out:
         reader = make_reader(f_in)
@@ -61,7 +68,7 @@ def _copy_bag(src: Path, dst: Path, change: int | None = None, drop: int | None 
                 ids[channel.id] = writer.register_channel(
                     channel.topic, channel.message_encoding, sid
                 )
-            if message.sequence == drop:
+            if message.sequence == drop or (stop is not None and message.sequence >= stop):
                 continue
             data = message.data
             if message.sequence == change:
@@ -120,6 +127,23 @@ def test_a_changed_or_missing_message_in_the_recording_is_a_finding(
     dropped = _copy_bag(recording, tmp_path / "dropped" / recording.name, drop=7)
     [finding] = verify_log(log, evidence=[dropped]).findings
     assert finding.first_cycle == 7 and "no /scan message" in finding.message
+
+
+def test_a_recording_cut_short_is_one_finding_for_the_run_of_cycles_it_lost(
+    robot: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """Every missing message is real missing evidence, but 15 identical findings bury the
+    one fact: the recording ends at cycle 24. One finding spans the run, with its count."""
+    log, bag = robot
+    [recording] = list(bag.glob("*.mcap"))
+    cut = _copy_bag(recording, tmp_path / "cut" / recording.name, stop=25, drop=10)
+    report = verify_log(log, evidence=[cut])
+    spans = sorted((f.kind, f.first_cycle, f.last_cycle) for f in report.findings)
+    assert spans == [("evidence_mismatch", 10, 10), ("evidence_mismatch", 25, CYCLES - 1)]
+    run = max(report.findings, key=lambda f: f.last_cycle or 0)
+    assert f"{CYCLES - 25} evidence ref(s)" in run.message
+    assert "no /scan message" in run.message and recording.name in run.message
+    assert report.cycles_valid == CYCLES - 1 - (CYCLES - 25)
 
 
 def test_verify_on_worker_processes_checks_the_recording_there_too(
