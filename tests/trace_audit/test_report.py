@@ -201,6 +201,15 @@ def test_a_log_with_hundreds_of_entities_gives_a_bounded_page(
 def test_a_crashed_log_is_reported_and_said_so(crashed_log: Path) -> None:
     page = parse_report(build_report(crashed_log, t=t_s(45)).html)
     assert "recovered from a segment the robot did not close" in page.section_text["summary"]
+    # The chain verifies, but no checkpoint was written after this decision: not a green badge
+    integrity = page.section_text["integrity"]
+    assert "CLEAN, NOT ANCHORED" in integrity and "not yet: no checkpoint" in integrity
+
+
+def test_a_decision_a_checkpoint_vouches_for_is_anchored(sample_log: Path) -> None:
+    integrity = parse_report(build_report(sample_log, t=t_s(45)).html).section_text["integrity"]
+    assert "NOT ANCHORED" not in integrity
+    assert "yes: a checkpoint vouches for the chain through cycle 99" in integrity
 
 
 def test_warm_summary_says_what_was_not_retained_and_cold_matches_hot(tmp_path: Path) -> None:

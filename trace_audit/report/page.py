@@ -47,7 +47,8 @@ SECTIONS = (
 """Section ids and headings, in page order (the tests check every one is there)."""
 
 _CSS = """
-:root { --ink:#1d1d1f; --muted:#5f6368; --line:#d8d8d8; --bad:#c0392b; --ok:#1e7b34; }
+:root { --ink:#1d1d1f; --muted:#5f6368; --line:#d8d8d8; --bad:#c0392b; --ok:#1e7b34;
+        --warn:#9a6700; }
 * { box-sizing: border-box; }
 body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, "Helvetica Neue", Arial,
        sans-serif; color: var(--ink); margin: 0; background: #f4f5f7; line-height: 1.45;
@@ -65,6 +66,7 @@ p.lead { font-size: 1.15rem; margin: .6rem 0 .4rem; }
 .verdict { display: inline-block; padding: .15rem .6rem; border-radius: .3rem;
            font-weight: 700; color: white; }
 .verdict.pass { background: var(--ok); } .verdict.fail { background: var(--bad); }
+.verdict.warn { background: var(--warn); }
 .command { display: inline-block; padding: .05rem .5rem; border-radius: .3rem;
            font-weight: 700; color: white; }
 .bad { color: var(--bad); font-weight: 600; } .ok { color: var(--ok); font-weight: 600; }
@@ -290,11 +292,14 @@ def _integrity(data: ReportData) -> str:
         if seal.verified
         else '<span class="verdict fail">seal does NOT verify</span>'
     )
-    window_verdict = (
-        '<span class="verdict pass">CLEAN</span>'
-        if report.ok
-        else f'<span class="verdict fail">{len(report.findings)} FINDING(S)</span>'
-    )
+    anchored, anchor_text = _anchoring(data)
+    if not report.ok:
+        window_verdict = f'<span class="verdict fail">{len(report.findings)} FINDING(S)</span>'
+    elif anchored:
+        window_verdict = '<span class="verdict pass">CLEAN</span>'
+    else:  # chained, but nothing signed or checkpointed vouches for this decision yet
+        window_verdict = '<span class="verdict warn">CLEAN, NOT ANCHORED</span>'
+
     if data.key_id is not None:
         signatures = (
             f"checked against key {escape(data.key_id)}: "
@@ -309,6 +314,7 @@ def _integrity(data: ReportData) -> str:
     rows = [
         ("This decision", f"{verdict} ({escape(seal.state)})"),
         ("Hash chain", escape(f"prev {link} {seal.prev_source}") if seal.sealed else "not sealed"),
+        ("Anchored", escape(anchor_text)),
         (
             "Segments holding the window",
             f"{window_verdict} {escape(', '.join(data.integrity_scope))}: "
@@ -319,6 +325,21 @@ def _integrity(data: ReportData) -> str:
     ]
     findings = [f"{f.kind}: {f.message}" for f in report.findings]
     return _fields(rows) + _problems([*seal.problems, *findings]) + _notes(report.notes)
+
+
+def _anchoring(data: ReportData) -> tuple[bool, str]:
+    """Whether a checkpoint in the segments holding the window vouches for this decision."""
+    cycle = data.explanation.cycle
+    robots = [r for r in data.integrity.robots if r.robot_id == data.explanation.robot]
+    through = robots[0].anchored_cycle if robots else None
+    if through is not None and cycle <= through:
+        return True, f"yes: a checkpoint vouches for the chain through cycle {through}"
+    covered = "no checkpoint" if through is None else f"checkpoints reach only cycle {through}"
+    return False, (
+        f"not yet: {covered} in the segments holding the window; this decision is chained, "
+        "but nothing vouches for it there (the robot crashed, or the log is cut); a later "
+        "segment's checkpoint may: run trace-audit verify on the whole log"
+    )
 
 
 def _notes(notes: Sequence[Finding]) -> str:
