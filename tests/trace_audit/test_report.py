@@ -23,7 +23,7 @@ from trace_audit.causal import format_value
 from trace_audit.cli import app
 from trace_audit.report import build_report, parse_window
 from trace_audit.report.page import SECTIONS
-from trace_runtime import AuditLogger, LoggerConfig
+from trace_runtime import AuditLogger, LoggerConfig, open_segment
 from trace_runtime.errors import UsageError
 
 runner = CliRunner()
@@ -204,6 +204,24 @@ def test_a_crashed_log_is_reported_and_said_so(crashed_log: Path) -> None:
     # The chain verifies, but no checkpoint was written after this decision: not a green badge
     integrity = page.section_text["integrity"]
     assert "CLEAN, NOT ANCHORED" in integrity and "not yet: no checkpoint" in integrity
+
+
+def test_a_robot_restarted_with_its_clock_from_zero_is_not_mixed_into_the_window(
+    tmp_path: Path,
+) -> None:
+    """Two runs of one robot in one root, both starting at the same clock time (a monotonic
+    clock after a reboot): the report of a decision in the second run draws only its run."""
+    root = write_log(tmp_path / "root")
+    write_log(root)  # the same robot again: the chain goes on, the times start over
+    data = build_report(root, t=t_s(45)).data
+    segment = data.explanation.decision.segment
+    cycles = [s.cycle for s in data.samples]
+    assert cycles and cycles == sorted(cycles)
+    assert data.explanation.cycle in cycles
+    assert data.integrity_scope == (segment,)
+    run_cycles = {c.cycle for c in open_segment(root / "hot" / segment).iter_cycles()}
+    assert set(cycles) <= run_cycles
+    assert data.metrics.overall.decisions == len(cycles)
 
 
 def test_a_decision_a_checkpoint_vouches_for_is_anchored(sample_log: Path) -> None:
