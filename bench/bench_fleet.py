@@ -36,7 +36,6 @@ import json
 import os
 import resource
 import shutil
-import socket
 import statistics
 import subprocess
 import sys
@@ -239,84 +238,28 @@ def median_wall(call: Callable[[], object], repeats: int) -> tuple[float, object
     return statistics.median(times), result
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def bench_dask(root: Path, work: Path, repeats: int) -> dict[str, float]:
     from concurrent.futures import Executor
 
     from trace_audit.fleet.cluster import dask_executor
-
-    port = _free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    py = [sys.executable, "-m"]
-    log = open(work / "dask.log", "wb")  # noqa: SIM115
-    procs = [
-        subprocess.Popen(
-            [
-                *py,
-                "distributed.cli.dask_scheduler",
-                "--host",
-                "127.0.0.1",
-                "--port",
-                str(port),
-                "--dashboard-address",
-                ":0",
-                "--no-show",
-            ],
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            env=env,
-        )
-    ]
-
-    def worker() -> subprocess.Popen[bytes]:
-        return subprocess.Popen(
-            [
-                *py,
-                "distributed.cli.dask_worker",
-                address,
-                "--nthreads",
-                "1",
-                "--no-dashboard",
-                "--local-directory",
-                str(work),
-            ],
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            env=env,
-        )
+    from trace_audit.fleet.local import LocalDask
 
     def metrics_on(executor: Executor) -> object:
         return compute_metrics([root], MetricsConfig(), executor=executor)
 
     out: dict[str, float] = {}
-    try:
-        time.sleep(3)
-        procs.append(worker())
-        with dask_executor(address) as executor:
+    with LocalDask(work / "dask", pythonpath=REPO) as cluster:
+        cluster.add_worker()
+        with dask_executor(cluster.address) as executor:
             metrics_on(executor)  # warm the worker: imports, first segment open
             out["dask_1_worker_s"], _ = median_wall(lambda: metrics_on(executor), repeats)
-        procs.append(worker())
+        cluster.add_worker()
         time.sleep(5)
-        with dask_executor(address) as executor:
+        with dask_executor(cluster.address) as executor:
             metrics_on(executor)
             out["dask_2_workers_s"], _ = median_wall(lambda: metrics_on(executor), repeats)
-        out["dask_speedup_2_over_1"] = out["dask_1_worker_s"] / out["dask_2_workers_s"]
-        out["load_average_1min"] = os.getloadavg()[0]
-    finally:
-        for proc in reversed(procs):
-            proc.terminate()
-        for proc in reversed(procs):
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-        log.close()
+    out["dask_speedup_2_over_1"] = out["dask_1_worker_s"] / out["dask_2_workers_s"]
+    out["load_average_1min"] = os.getloadavg()[0]
     return out
 
 

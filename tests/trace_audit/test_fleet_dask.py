@@ -18,6 +18,7 @@ import pytest
 
 from tests.trace_audit.conftest import rewrite_segment
 from tests.trace_audit.test_fleet_index import _fleet
+from trace_audit.fleet.local import LocalDask, free_port
 from trace_runtime.cycles import RawMessage
 
 pytest.importorskip("distributed")
@@ -26,86 +27,12 @@ REPO = Path(__file__).resolve().parents[2]
 TIMING = ("elapsed_s", "cycles_per_s")
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _wait_for_port(port: int, proc: subprocess.Popen[bytes], timeout_s: float = 60) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise RuntimeError(f"dask scheduler exited with {proc.returncode}")
-        with socket.socket() as s:
-            if s.connect_ex(("127.0.0.1", port)) == 0:
-                return
-        time.sleep(0.2)
-    raise TimeoutError(f"nothing listens on port {port}")
-
-
 @pytest.fixture(scope="module")
 def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """A scheduler and one worker process (nthreads 1), torn down after the module."""
-    work = tmp_path_factory.mktemp("dask")
-    port = _free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    env = {**os.environ, "PYTHONPATH": str(REPO), "DASK_DISTRIBUTED__WORKER__DAEMON": "False"}
-    module = [sys.executable, "-m"]
-    logs = [open(work / name, "wb") for name in ("scheduler.log", "worker.log")]  # noqa: SIM115
-    procs = [
-        subprocess.Popen(
-            [
-                *module,
-                "distributed.cli.dask_scheduler",
-                "--host",
-                "127.0.0.1",
-                "--port",
-                str(port),
-                "--dashboard-address",
-                ":0",
-                "--no-show",
-            ],
-            stdout=logs[0],
-            stderr=subprocess.STDOUT,
-            env=env,
-            cwd=work,
-        )
-    ]
-    try:
-        _wait_for_port(port, procs[0])
-        procs.append(
-            subprocess.Popen(
-                [
-                    *module,
-                    "distributed.cli.dask_worker",
-                    address,
-                    "--nworkers",
-                    "1",
-                    "--nthreads",
-                    "1",
-                    "--no-dashboard",
-                    "--local-directory",
-                    str(work),
-                ],
-                stdout=logs[1],
-                stderr=subprocess.STDOUT,
-                env=env,
-                cwd=work,
-            )
-        )
-        yield address
-    finally:
-        for proc in reversed(procs):
-            proc.terminate()
-        for proc in reversed(procs):
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        for log in logs:
-            log.close()
+    with LocalDask(tmp_path_factory.mktemp("dask"), pythonpath=REPO) as cluster:
+        cluster.add_worker()
+        yield cluster.address
 
 
 def _cli(*args: str, cwd: Path = REPO) -> subprocess.CompletedProcess[str]:
@@ -169,7 +96,7 @@ def test_index_on_a_dask_cluster_equals_the_local_index(scheduler: str, tmp_path
 
 def test_an_unreachable_scheduler_is_a_usage_error(tmp_path: Path) -> None:
     root = _fleet(tmp_path / "logs")
-    done = _cli("metrics", str(root), "--scheduler", f"tcp://127.0.0.1:{_free_port()}")
+    done = _cli("metrics", str(root), "--scheduler", f"tcp://127.0.0.1:{free_port()}")
     assert done.returncode == 2
     assert done.stderr.startswith("trace-audit: cannot reach the Dask scheduler")
     assert done.stderr.count("\n") == 1
@@ -179,7 +106,7 @@ def test_verify_on_a_dask_cluster_equals_the_local_json(scheduler: str, tmp_path
     """One task per robot; a tampered cycle in r2 is the same finding either way."""
     root = _fleet(tmp_path / "logs")
     victim = sorted((root / "hot").glob("r2_*.mcap"))[1]
-    changed = []
+    changed: list[int] = []
 
     def tamper(msg: RawMessage) -> bytes:
         if msg.topic == "/trace/action" and not changed:
