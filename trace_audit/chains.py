@@ -202,7 +202,7 @@ class SensorWindow:
             if sequence is not None and msg.sequence != sequence:
                 why = why or f"sequence {sequence} does not match the logged {msg.sequence}"
                 continue
-            if want is not None and self._digest(msg) != want:
+            if want is not None and self.digest_of(msg) != want:
                 why = "digest does not match the logged message data"
                 continue
             return ""
@@ -236,7 +236,10 @@ class SensorWindow:
         """resolved, broken or unresolved: what became of a ref into an external recording."""
         return self.check_external(ref).state
 
-    def _digest(self, msg: RawMessage) -> str:
+    def digest_of(self, msg: RawMessage) -> str:
+        """SHA-256 hex of the data of ``msg``, a message in the window (pushed and not yet
+        fallen out): computed once while it stays, so the seal check's evidence step reuses
+        what resolving refs hashed."""
         found = self._digests.get(id(msg))
         if found is None:
             found = self._digests[id(msg)] = hashlib.sha256(msg.data).hexdigest()

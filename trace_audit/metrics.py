@@ -567,7 +567,7 @@ class _Scanner:
         belief = cycle.layer(TOPIC_BELIEF)
         perception = cycle.layer(TOPIC_PERCEPTION)
         score = score_layers(action, belief, perception, window=window)
-        if perception is not None:
+        if perception is not None and _may_cite_recording(cycle.payloads.get(TOPIC_PERCEPTION)):
             self._count_external(perception)
         missing_dr = dr_problems(action)
         execution = cycle.payloads.get(TOPIC_EXECUTION)
@@ -660,7 +660,9 @@ class _Scanner:
         stream = self.stream
         expected = stream.prev_seal if stream.prev_seal is not None else self.session_prev
         parsed = perception if TOPIC_PERCEPTION in cycle.payloads else None
-        status = verify_cycle(cycle, expected, perception_json=parsed)
+        status = verify_cycle(
+            cycle, expected, perception_json=parsed, sensor_digest=self.window.digest_of
+        )
         integrity = [] if status.ok else integrity_problems(status)
         if status.state == "unsealed":
             return SealOutcome(integrity, False, 0.0, 0, None, 0, False)
@@ -1118,6 +1120,15 @@ def _check(name: str, threshold: float, overall: GroupMetrics) -> ThresholdCheck
 _HAS_CHANNELS = b'"channels":[{'
 """Execution records with channels contain this (compact JSON, PROFILE §6); the others,
 every profile 1.0 record among them, are not parsed again for it."""
+
+
+def _may_cite_recording(perception: bytes | None) -> bool:
+    """False only when the stored perception message cannot hold a ``recording`` key: the
+    word is not in its bytes and no escape (a backslash) could spell it otherwise. Most logs
+    cite no external recording, and two byte searches cost a fraction of walking every
+    entity's evidence to find that out. (None: a warm summary cycle, whose parsed layer is
+    walked.) A backslash, not ``\\u``: one byte is found by memchr, a pair is not."""
+    return perception is None or b"recording" in perception or b"\\" in perception
 
 
 def _add_channels(into: dict[tuple[str, str], list[float]], execution: Any) -> None:

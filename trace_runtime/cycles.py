@@ -10,7 +10,7 @@ the same values.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any, Protocol, TypeVar
 
 import orjson
@@ -45,6 +45,26 @@ class RawMessage:
     sequence: int
     log_time_ns: int
     data: bytes
+
+
+# The slot setters of RawMessage, taken once. A frozen dataclass's __init__ sets each field
+# through object.__setattr__ (about 0.9 us a message); the reader makes every message of a
+# log, 8-10 a decision cycle, so it fills the slots directly instead (about a third of that).
+_new_object = object.__new__
+_set_topic, _set_sequence, _set_log_time, _set_data = (
+    getattr(RawMessage, f.name).__set__ for f in fields(RawMessage)
+)
+
+
+def raw_message(topic: str, sequence: int, log_time_ns: int, data: bytes) -> RawMessage:
+    """``RawMessage(topic, sequence, log_time_ns, data)``, built faster: the same value (equal,
+    same hash, as frozen), for the reader's inner loop."""
+    message = _new_object(RawMessage)
+    _set_topic(message, topic)
+    _set_sequence(message, sequence)
+    _set_log_time(message, log_time_ns)
+    _set_data(message, data)
+    return message
 
 
 @dataclass(slots=True)
@@ -152,11 +172,12 @@ def assemble_hot(messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
     payloads: dict[str, bytes] = {}
     sensors: list[RawMessage] = []
     for msg in messages:
-        if msg.topic == TOPIC_CHECKPOINT:
-            continue  # a chain-head anchor, not part of any cycle (trace_runtime.integrity)
-        if msg.topic.startswith("/trace/"):
-            payloads[msg.topic] = msg.data
-            if msg.topic == TOPIC_SEAL:
+        topic = msg.topic
+        if topic.startswith("/trace/"):
+            if topic == TOPIC_CHECKPOINT:
+                continue  # a chain-head anchor, not part of any cycle (trace_runtime.integrity)
+            payloads[topic] = msg.data
+            if topic == TOPIC_SEAL:
                 cycles.append(Cycle(msg.sequence, msg.log_time_ns, payloads, sensors, segment))
                 payloads, sensors = {}, []
         else:

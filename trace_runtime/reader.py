@@ -9,6 +9,7 @@ lead into the next chunk, so every reader sees the same cycles however the file 
 
 from __future__ import annotations
 
+import bisect
 import itertools
 import logging
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -210,8 +211,10 @@ class Segment(McapFile):
             yield self._assemble(self.loose)
         carried: list[RawMessage] = []
         previous: int | None = None
+        order = self._file_order()  # what previous_offset bisects, fetched once, not per chunk
         for offset in offsets:
-            follows = previous is not None and self.previous_offset(offset) == previous
+            at = bisect.bisect_left(order, offset)
+            follows = previous is not None and at > 0 and order[at - 1] == previous
             cycles, carried = self._chunk_cycles(offset, carried if follows else None)
             yield cycles
             previous = offset
