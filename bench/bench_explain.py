@@ -5,9 +5,12 @@ both measured here in the same run. Reported per log, as medians over ``--sample
 times (the same fractions of each log's range):
 
 - ``call``:  ``explain(path, t=...)`` as the CLI runs it: open the log, seek, reconstruct.
-- ``open``:  ``open_log(path)`` alone (every segment's header, metadata and summary).
-- ``first seek``: ``open_log(path).cycle_at(t)``: open plus the first seek into a segment,
-  which loads that segment's chunk table.
+  A log root with a catalog is opened lazily (only the segments the query reaches).
+- ``call, all opened``: ``explain(open_log(path), t=...)``: every segment opened first, as
+  for a root without a catalog (a hot root straight from the logger).
+- ``open``:  ``open_log(path, lazy=True)`` alone (the catalog checked against the files).
+- ``first seek``: ``open_log(path, lazy=True).cycle_at(t)``: open plus the first seek into a
+  segment, which opens it and loads its chunk table.
 - ``hot``:   ``explain(log, t=...)`` on an open ``Log`` whose chunk tables are all loaded:
   what explain itself costs (seek, look-back, chains, graphs, seal check).
 - ``seek``:  ``Log.cycle_at(t)`` on that hot ``Log``.
@@ -17,9 +20,12 @@ clock or, with ``--clock cpu``, by this process's CPU time (steadier when other 
 the machine: a wait for a core is not counted, a cache miss is).
 
 Logs are made with the simulator when missing (a log root; the day takes a while: ~10-15
-min at ~1,200 cycles/s). ``--profile`` prints where a day's ``call`` spends its time.
+min at ~1,200 cycles/s), and catalogued (``catalog.json``, as compaction or ``trace-audit
+catalog`` leaves a root) when they have no catalog. ``--profile`` prints where a day's
+``call`` spends its time.
 
-    .venv/bin/python bench/bench_explain.py --day /tmp/bench/day --minute /tmp/bench/minute
+    .venv/bin/python bench/bench_explain.py --clock cpu \
+        --day /tmp/explain-bench/day --minute /tmp/explain-bench/minute
 """
 
 from __future__ import annotations
@@ -39,6 +45,7 @@ from typing import Any
 
 from trace_audit.explain import explain
 from trace_runtime.logset import open_log
+from trace_runtime.tiers.catalog import CATALOG_NAME, refresh_catalog
 
 DAY_CYCLES = 864_000
 MINUTE_CYCLES = 600
@@ -46,8 +53,14 @@ BUDGET = 1.5
 
 
 def _ensure(path: Path, cycles: int, seed: int, batch: int) -> None:
-    if path.exists():
-        return
+    if not path.exists():
+        _generate(path, cycles, seed, batch)
+    if not (path / CATALOG_NAME).exists():
+        print(f"cataloguing {path} (one SHA-256 pass over its files) ...", file=sys.stderr)
+        refresh_catalog(path)
+
+
+def _generate(path: Path, cycles: int, seed: int, batch: int) -> None:
     from sim.runner import RunConfig, run
 
     print(
@@ -84,21 +97,30 @@ def _samples(path: Path, fractions: list[float], clock: Callable[[], float]) -> 
     times = [start + int(f * (end - start)) for f in fractions]
     explain(path, t=times[0])  # warm the page cache and imports; not counted
     calls = _each(lambda t: explain(path, t=t), times, clock)
-    opens = _each(lambda _t: open_log(path), times, clock)
-    firsts = _each(lambda t: open_log(path).cycle_at(t), times, clock)
+    eager = _each(lambda t: explain(open_log(path), t=t), times, clock)
+    opens = _each(lambda _t: open_log(path, lazy=True), times, clock)
+    firsts = _each(lambda t: open_log(path, lazy=True).cycle_at(t), times, clock)
     for segment in log.segments:  # load every chunk table: what remains is explain's own
         segment.cycle_at(segment.info.start_ns)
     hot = _each(lambda t: explain(log, t=t), times, clock)
     seeks = _each(log.cycle_at, times, clock)
-    return {"calls": calls, "opens": opens, "firsts": firsts, "hot": hot, "seeks": seeks}
+    return {
+        "calls": calls,
+        "eager": eager,
+        "opens": opens,
+        "firsts": firsts,
+        "hot": hot,
+        "seeks": seeks,
+    }
 
 
 def _measure(path: Path, fractions: list[float], rounds: list[dict[str, Any]]) -> dict[str, Any]:
     log = open_log(path)
     start, end = log.start_ns, log.end_ns
     times = [start + int(f * (end - start)) for f in fractions]
-    calls, opens, firsts, hot, seeks = (
-        [x for r in rounds for x in r[key]] for key in ("calls", "opens", "firsts", "hot", "seeks")
+    calls, eager, opens, firsts, hot, seeks = (
+        [x for r in rounds for x in r[key]]
+        for key in ("calls", "eager", "opens", "firsts", "hot", "seeks")
     )
     held = [explain(log, t=t).held.cycles for t in times]
     chunks = sum(s.info.chunk_count for s in log.segments)
@@ -110,6 +132,7 @@ def _measure(path: Path, fractions: list[float], rounds: list[dict[str, Any]]) -
         "hours": (end - start) / 3.6e12,
         "call_ms": statistics.median(calls) * 1e3,
         "call_p90_ms": sorted(calls)[int(0.9 * (len(calls) - 1))] * 1e3,
+        "call_all_opened_ms": statistics.median(eager) * 1e3,
         "open_ms": statistics.median(opens) * 1e3,
         "first_seek_ms": statistics.median(firsts) * 1e3,
         "hot_ms": statistics.median(hot) * 1e3,
@@ -175,7 +198,14 @@ def main() -> None:
     day = _measure(args.day, fractions, rounds["day"])
     ratios = {
         key: day[key] / minute[key] if minute[key] > 0 else float("inf")
-        for key in ("call_ms", "open_ms", "first_seek_ms", "hot_ms", "seek_ms")
+        for key in (
+            "call_ms",
+            "call_all_opened_ms",
+            "open_ms",
+            "first_seek_ms",
+            "hot_ms",
+            "seek_ms",
+        )
     }
     result = {
         "samples": args.samples,
@@ -197,6 +227,7 @@ def main() -> None:
         print(f"{'':14}{'1-minute log':>16}{'24 h log':>16}{'ratio':>10}")
         for key, label in (
             ("call_ms", "call (ms)"),
+            ("call_all_opened_ms", "  all opened"),
             ("open_ms", "  open"),
             ("first_seek_ms", "  open+seek"),
             ("hot_ms", "hot explain"),

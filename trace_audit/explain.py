@@ -193,7 +193,7 @@ def explain(
         raise UsageError("give exactly one of a time (--t) or a cycle number (--cycle)")
     if lookback_s < 0:
         raise UsageError(f"lookback must be >= 0 s, got {lookback_s}")
-    log = as_log(source)
+    log = as_log(source, lazy=True)
     require_cycles(log)
     t_ns = resolve_time(t, log)
     if t_ns is not None:
@@ -212,7 +212,10 @@ def explain(
     needs_window = sensor_window > 0 and any(
         c.missing is not None and c.missing.level == "sensor_reading" for c in chains.factors
     )
-    period = max((s.session.period_ns for s in log.segments), default=0)
+    # The cadence the robot kept when it decided: the period of the segment holding the
+    # decision (the walk back, the gap to the previous seal and the output use it).
+    holder = log.segment_named(target.segment)
+    period = holder.session.period_ns if holder is not None else log.period_ns
     back = _look_back(
         log,
         target,
@@ -233,7 +236,7 @@ def explain(
     tree = tree_graph_data(decision.tree) if decision.tree else None
     return Explanation(
         path=str(log.root),
-        robot=log.segments[0].session.robot_id,
+        robot=log.first_robot,
         log_start_ns=log.start_ns,
         log_end_ns=log.end_ns,
         recovered=log.recovered,
@@ -344,7 +347,7 @@ def _check_seal(log: Log, target: Cycle, prev_sealed: Cycle | None) -> SealCheck
         prev_cycle: int | None = prev_sealed.cycle
         source = f"the previous seal (cycle {prev_sealed.cycle})"
     else:
-        segment = next((s for s in log.segments if s.path.name == target.segment), None)
+        segment = log.segment_named(target.segment)
         expected = segment.session.prev_seal if segment is not None else GENESIS
         prev_cycle = None
         source = (

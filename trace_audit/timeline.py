@@ -93,17 +93,18 @@ def resolve_time(value: TimeArg, log: Log) -> int | None:
     return value.resolve(log)
 
 
-def as_log(source: LogSource) -> Log:
-    """An open ``Log`` for a path (file, directory or log root) or an already open one."""
-    return source if isinstance(source, Log) else open_log(source)
+def as_log(source: LogSource, *, lazy: bool = False) -> Log:
+    """An open ``Log`` for a path (file, directory or log root) or an already open one.
+
+    ``lazy``: the caller asks about one moment, so a catalogued root's segments are opened
+    only when a query reaches them (``open_log``)."""
+    return source if isinstance(source, Log) else open_log(source, lazy=lazy)
 
 
 def require_cycles(log: Log) -> None:
     """Raise ``LogReadError`` when the log holds no decision cycle at all (an empty log)."""
-    for segment in log.segments:
-        counts = segment.info.channels
-        if any(n > 0 for topic, n in counts.items() if topic.startswith("/trace/")):
-            return
+    if log.holds_trace_messages():
+        return
     if next(log.iter_cycles(), None) is None:
         recovered = " (recovered from an unfinished segment)" if log.recovered else ""
         raise LogReadError(str(log.root), f"the log holds no decision cycles{recovered}")

@@ -5,6 +5,10 @@ Every reader of more than one file (``explain``, ``metrics``, ``verify``, compac
 retention) opens logs here, so they all read the same copy of every segment and agree on
 what could not be read (``Log.problems``): one unreadable file in a root is a problem to
 report, not a reason to refuse the other segments.
+
+A question about one moment (``explain``) needs one segment of a day's two dozen:
+``open_log(root, lazy=True)`` takes each segment's time range from the root's catalog when
+the catalog still describes every file, and opens a segment only when a query reaches it.
 """
 
 from __future__ import annotations
@@ -13,8 +17,11 @@ import bisect
 import hashlib
 import logging
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
+
+import orjson
 
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeError, UsageError
@@ -110,8 +117,42 @@ def find_segment_files(path: Path) -> list[Path]:
     return [path]
 
 
+@dataclass(slots=True)
+class _Unopened:
+    """A segment the catalog vouches for, opened when a query first reaches it.
+
+    ``start_ns`` and ``end_ns`` are the catalog's; they equal the segment's own (a finished
+    segment's statistics) because the catalog row was made from this very file, unchanged
+    since (same size and modification time)."""
+
+    path: Path
+    robot: str
+    start_ns: int
+    end_ns: int
+    limits: ReadLimits
+    opened: Segment | None = field(default=None, repr=False)
+
+    def open(self) -> Segment:
+        if self.opened is None:
+            self.opened = Segment(self.path, self.limits)
+        return self.opened
+
+
+_Slot = Segment | _Unopened
+
+
+def _opened(slot: _Slot) -> Segment:
+    return slot if isinstance(slot, Segment) else slot.open()
+
+
 class Log:
-    """One or more segments read as one log: per robot, in chain order, across tiers."""
+    """One or more segments read as one log: per robot, in chain order, across tiers.
+
+    A lazily opened log (``open_log(..., lazy=True)`` on a catalogued root) answers time
+    queries (``cycle_at``, ``iter_cycles``, ``start_ns``, ``end_ns``, ``segment_named``) by
+    opening only the segments they reach; ``segments`` and everything built on it open the
+    rest on first use.
+    """
 
     def __init__(
         self,
@@ -128,16 +169,62 @@ class Log:
                 reason or "no readable TRACE segments found",
             )
         kept, self.shadowed = preferred_copies(segments)
-        self.segments = sorted(kept, key=lambda s: (s.start_ns, s.path.name))
-        self._starts = [s.start_ns for s in self.segments]
+        self._place(sorted(kept, key=lambda s: (s.start_ns, s.path.name)))
         # A segment that holds nothing (a logger opened and closed without a cycle) has no
         # time range; its zeros must not stretch the log's range back to the epoch.
-        self._timed = [s for s in self.segments if s.holds_messages] or self.segments
+        self._timed: list[_Slot] = [s for s in kept if s.holds_messages] or list(kept)
+        self._recovered = any(not s.finished for s in kept)
+
+    @classmethod
+    def _catalogued(cls, slots: Sequence[_Unopened], root: Path) -> Log:
+        """A log of finished segments that each hold messages, one copy each (what
+        ``_catalogued_slots`` admits), none of them opened yet."""
+        log = cls.__new__(cls)
+        log.root, log.problems, log.shadowed = root, [], []
+        log._place(sorted(slots, key=lambda s: (s.start_ns, s.path.name)))
+        log._timed = list(log._slots)
+        log._recovered = False
+        return log
+
+    def _place(self, slots: Sequence[_Slot]) -> None:
+        self._slots = list(slots)
+        self._starts = [s.start_ns for s in self._slots]
+        opened = [s for s in self._slots if isinstance(s, Segment)]
+        self._all: list[Segment] | None = opened if len(opened) == len(self._slots) else None
+
+    @property
+    def segments(self) -> list[Segment]:
+        """Every segment read, by start time (a lazily opened log opens them all here)."""
+        if self._all is None:
+            self._all = [_opened(s) for s in self._slots]
+        return self._all
 
     @property
     def robots(self) -> list[str]:
         """The robots whose segments make up the log, sorted."""
         return sorted({s.session.robot_id for s in self.segments})
+
+    @property
+    def first_robot(self) -> str:
+        """The robot of the log's earliest segment."""
+        first = self._slots[0]
+        return first.robot if isinstance(first, _Unopened) else first.session.robot_id
+
+    def segment_named(self, name: str) -> Segment | None:
+        """The segment read from a file of this name (the name a ``Cycle`` carries)."""
+        slot = next((s for s in self._slots if s.path.name == name), None)
+        return None if slot is None else _opened(slot)
+
+    def holds_trace_messages(self) -> bool:
+        """Whether a segment's summary counts any message on a ``/trace/`` topic (False
+        also when no segment has a summary: a scan must decide)."""
+        if self._all is None:
+            return True  # the catalog admits only segments that hold sealed cycles
+        for segment in self._all:
+            counts = segment.info.channels
+            if any(n > 0 for topic, n in counts.items() if topic.startswith("/trace/")):
+                return True
+        return False
 
     def segments_of(self, robot_id: str) -> list[Segment]:
         """One robot's segments in chain order (segment number, then first cycle)."""
@@ -162,8 +249,11 @@ class Log:
 
     def clear_caches(self) -> None:
         """Forget what every segment decoded lately (to measure a first read)."""
-        for segment in self.segments:
-            segment.clear_caches()
+        for slot in self._slots:
+            if isinstance(slot, Segment):
+                slot.clear_caches()
+            elif slot.opened is not None:
+                slot.opened.clear_caches()
 
     @property
     def start_ns(self) -> int:
@@ -174,34 +264,40 @@ class Log:
         return max(s.end_ns for s in self._timed)
 
     @property
+    def period_ns(self) -> int:
+        """The longest cycle period of any segment (0 for none)."""
+        return max((s.session.period_ns for s in self.segments), default=0)
+
+    @property
     def recovered(self) -> bool:
-        return any(not s.finished for s in self.segments)
+        return self._recovered
 
     def iter_cycles(
         self, start_ns: int | None = None, end_ns: int | None = None, *, reverse: bool = False
     ) -> Iterator[Cycle]:
         """Every cycle in time order across segments (or newest first)."""
-        segments = [
+        slots = [
             s
-            for s in self.segments
+            for s in self._slots
             if (start_ns is None or s.end_ns >= start_ns)
             and (end_ns is None or s.start_ns <= end_ns)
         ]
-        for segment in reversed(segments) if reverse else segments:
-            yield from segment.iter_cycles(start_ns, end_ns, reverse=reverse)
+        for slot in reversed(slots) if reverse else slots:
+            yield from _opened(slot).iter_cycles(start_ns, end_ns, reverse=reverse)
 
     def cycle_at(self, t_ns: int) -> Cycle:
         """The cycle in force at ``t_ns``; ``TimeOutOfRangeError`` outside the log's range."""
-        if t_ns < self.start_ns or t_ns > self.end_ns + max(
-            (s.session.period_ns for s in self.segments), default=0
-        ):
-            raise TimeOutOfRangeError(t_ns, self.start_ns, self.end_ns)
+        start, end = self.start_ns, self.end_ns
+        # A time up to one period past the last cycle is still that cycle's; the periods
+        # (every segment's) are read only for such a time.
+        if t_ns < start or (t_ns > end and t_ns > end + self.period_ns):
+            raise TimeOutOfRangeError(t_ns, start, end)
         index = bisect.bisect_right(self._starts, t_ns)
-        for segment in reversed(self.segments[:index]):
-            found = segment.cycle_at(t_ns)
+        for slot in reversed(self._slots[:index]):
+            found = _opened(slot).cycle_at(t_ns)
             if found is not None:
                 return found
-        raise TimeOutOfRangeError(t_ns, self.start_ns, self.end_ns)
+        raise TimeOutOfRangeError(t_ns, start, end)
 
     def get_cycle(self, number: int) -> Cycle | None:
         """The cycle with this number (a scan bounded to the segment that covers it)."""
@@ -254,19 +350,105 @@ def open_logs(paths: Sequence[str | Path], limits: ReadLimits = DEFAULT_LIMITS) 
     return Log(segments, Path(paths[0]), problems)
 
 
-def open_log(path: str | Path, limits: ReadLimits = DEFAULT_LIMITS) -> Log:
+def open_log(path: str | Path, limits: ReadLimits = DEFAULT_LIMITS, *, lazy: bool = False) -> Log:
     """Open a segment file, a directory of segments, or a log root (hot/ warm/ cold/).
 
     A single file that cannot be read raises ``LogReadError``; in a directory, unreadable
     files are listed in ``Log.problems`` (one warning each) and the others are read.
+
+    ``lazy``: for a query about one moment. When the root's catalog still describes every
+    segment file (``_catalogued_slots``), no segment is opened until a query reaches it;
+    otherwise every segment is opened, as without it.
     """
     root = Path(path)
     files = _files_of(root)
     if not root.is_dir():
         return Log([Segment(root, limits)], root)
+    if lazy:
+        slots = _catalogued_slots(root, files, limits)
+        if slots is not None:
+            return Log._catalogued(slots, root)
     segments, problems = open_segments(files, limits)
     opened = Log(segments, root, problems)
     for problem in opened.problems:
         what = "not a TRACE segment" if problem.foreign else "unreadable"
         log.warning("%s: %s, skipped (%s)", problem.path, what, problem.reason)
     return opened
+
+
+def _catalogued_slots(
+    root: Path, files: Sequence[Path], limits: ReadLimits
+) -> list[_Unopened] | None:
+    """The segments of a log root as its catalog describes them, or None when opening
+    them all is the only way to be sure what they are.
+
+    The catalog is trusted only when its rows are exactly the files found, each with the
+    size and modification time it had when its row was made, and when every row is simple
+    enough that opening the files would add nothing: one copy of each segment (no copy in
+    two tiers to choose between), finished, holding sealed cycles, and no file the catalog
+    could not read (opening would make it a problem to report).
+    """
+    catalog = _catalog_rows(root)
+    if catalog is None or len(catalog) != len(files):
+        return None
+    rows = {row["path"]: row for row in catalog}
+    copies = {(row["robot"], row["segment"]) for row in catalog}
+    if len(rows) != len(files) or len(copies) != len(rows):
+        return None
+    slots: list[_Unopened] = []
+    for file in files:
+        try:
+            row = rows.get(file.relative_to(root).as_posix())
+            stat = file.stat()
+        except (ValueError, OSError):
+            return None
+        if (
+            row is None
+            or row["bytes"] != stat.st_size
+            or row["mtime_ns"] != stat.st_mtime_ns
+            or row["finished"] is not True
+            or row["cycles"] <= 0
+        ):
+            return None
+        slots.append(_Unopened(file, row["robot"], row["start_ns"], row["end_ns"], limits))
+    return slots
+
+
+_CATALOG_NAME = "catalog.json"
+_CATALOG_FORMAT = "trace-catalog-v1"
+_CATALOG_FIELDS = {
+    "path": str,
+    "robot": str,
+    "segment": int,
+    "start_ns": int,
+    "end_ns": int,
+    "finished": bool,
+    "cycles": int,
+    "bytes": int,
+    "mtime_ns": int,
+}
+
+
+def _catalog_rows(root: Path) -> list[dict[str, Any]] | None:
+    """The rows of a root's catalog (``trace_runtime.tiers.catalog``), the fields a lazy log
+    needs checked for type, or None when there is no catalog that is whole and clean.
+
+    Read here rather than through ``tiers.catalog.load_catalog`` because importing the tiers
+    package loads the writer and the ``mcap`` library (~30 ms) into every ``explain``; a test
+    pins these rows to ``load_catalog``'s entries.
+    """
+    try:
+        body = orjson.loads((root / _CATALOG_NAME).read_bytes())
+    except (OSError, orjson.JSONDecodeError):
+        return None
+    if not isinstance(body, dict) or body.get("format") != _CATALOG_FORMAT or body.get("problems"):
+        return None
+    rows = body.get("segments")
+    if not isinstance(rows, list):
+        return None
+    for row in rows:
+        if not isinstance(row, dict) or not all(
+            type(row.get(name)) is kind for name, kind in _CATALOG_FIELDS.items()
+        ):
+            return None
+    return rows

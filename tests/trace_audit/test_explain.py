@@ -31,10 +31,12 @@ from trace_audit.causal import (
 from trace_audit.chains import trace_cycle
 from trace_audit.cli import app
 from trace_audit.explain import explain, find_cycle
+from trace_audit.jsonout import to_jsonable
 from trace_runtime import AuditLogger, LoggerConfig, RawMessage, open_log
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
 from trace_runtime.records import TOPIC_ACTION, TOPIC_SEAL, DecisionTree, TreeEdge, TreeNode
 from trace_runtime.testing import synthetic_cycle
+from trace_runtime.tiers import refresh_catalog
 
 
 def _graph(result: object) -> nx.DiGraph:
@@ -438,3 +440,20 @@ def test_a_counterfactual_tree_thousands_of_levels_deep_is_drawn_bounded(tmp_pat
     result = runner.invoke(app, ["explain", str(path), "--t", "1.0", "--json"])
     assert result.exit_code == 0
     assert len(json.loads(result.stdout)["tree"]["nodes"]) == depth + 1
+
+
+def test_a_catalogued_root_is_explained_alike_from_the_one_segment_it_needs(
+    tmp_path: Path,
+) -> None:
+    """``explain`` opens a catalogued root lazily; its answer is the full log's, field for
+    field, at every cycle (across segment boundaries, where the walk back reaches the
+    previous segment) and between cycles."""
+    root = write_log(tmp_path / "root", max_segment_s=3.0)
+    refresh_catalog(root)
+    full = open_log(root)
+    assert len(full.segments) >= 3
+    assert open_log(root, lazy=True)._all is None  # nothing opened: the catalog is trusted
+    for index in range(0, 90, 7):
+        for t in (t_ns(index), t_ns(index) + PERIOD_NS // 2):
+            lazy = to_jsonable(explain(root, t=t))
+            assert lazy == to_jsonable(explain(full, t=t))

@@ -27,7 +27,7 @@ def main() -> None:
     Usage errors (an unknown option, a bad value) are one line on stderr with exit code 2,
     like every other error, instead of click's framed block."""
     try:
-        code = app(standalone_mode=False)
+        code = app.runner_for(sys.argv[1:])(standalone_mode=False)
     except TyperException as err:  # the command line's own errors: unknown option, bad value
         ctx = getattr(err, "ctx", None)
         command = ctx.command_path if ctx is not None else "trace-audit"

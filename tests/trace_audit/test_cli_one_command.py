@@ -1,0 +1,48 @@
+"""``trace-audit COMMAND ...`` runs a group holding that command alone (``_App.runner_for``):
+typer would otherwise build all fifteen commands first. What it prints must not change."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+from typer.main import get_command
+
+from trace_audit.cli import app
+
+ALL_COMMANDS = tuple(c.name or "" for c in app.registered_commands)
+
+
+def _run(runner: Any, args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[str, str]:
+    """What a command line prints (its help), or the error it stops with and where."""
+    try:
+        runner.main(args, prog_name="trace-audit", standalone_mode=False)
+    except Exception as err:  # a usage error: its text and the command it names
+        ctx = getattr(err, "ctx", None)
+        return type(err).__name__, f"{ctx.command_path if ctx else ''}: {err}"
+    return "ok", capsys.readouterr().out
+
+
+@pytest.mark.parametrize("command", ALL_COMMANDS)
+def test_a_command_alone_prints_what_it_prints_among_all(
+    command: str, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("COLUMNS", "100")
+    whole = get_command(app)
+    alone = app.runner_for([command, "--help"])
+    assert alone is not app and list(alone.commands) == [command]  # type: ignore[attr-defined]
+    for args in ([command, "--help"], [command, "--no-such-option"]):
+        assert _run(alone, args, capsys) == _run(whole, args, capsys)
+
+
+@pytest.mark.parametrize(
+    "args", [[], ["--help"], ["explian", "LOG"], ["--json"], ["EXPLAIN"], ["-h", "explain"]]
+)
+def test_anything_but_a_command_name_first_meets_the_whole_app(args: list[str]) -> None:
+    assert app.runner_for(args) is app
+
+
+def test_the_app_keeps_all_its_commands() -> None:
+    app.runner_for(["explain"])
+    assert tuple(c.name for c in app.registered_commands) == ALL_COMMANDS
+    assert len(ALL_COMMANDS) > 1
