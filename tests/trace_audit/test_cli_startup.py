@@ -99,3 +99,15 @@ def test_compact_help_defaults_are_the_librarys() -> None:
 
     shown = (storage._DEFAULT_RETENTION, storage._DEFAULT_BLOCK_CYCLES)
     assert shown == (f"{DEFAULT_RETENTION_NS // 86_400_000_000_000}d", ColdOptions().block_cycles)
+
+
+def test_help_names_values_as_click_does_not_by_python_type() -> None:
+    """ "--evidence PATH" and "LOGS...", not typer's "--evidence <list[Path]>"."""
+    from typer.testing import CliRunner
+
+    from trace_audit.cli import app
+
+    shown = CliRunner().invoke(app, ["metrics", "--help"]).output
+    assert "--evidence PATH" in shown and "--jobs INTEGER" in shown and "--end NUMBER" in shown
+    assert "\n  LOGS...  " in shown
+    assert "<" not in shown.split("Arguments:")[1].replace("<=", "")

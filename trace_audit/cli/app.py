@@ -79,13 +79,48 @@ class _Command(TyperCommand):
         # a required argument as "{log}", which reads like a template placeholder.
         pieces = [self.options_metavar] if self.options_metavar else []
         for param in self.get_params(ctx):
-            if param.param_type_name != "argument":
-                continue
-            name = (param.metavar or param.name or "ARG").upper()
-            if param.nargs != 1:
-                name += "..."
-            pieces.append(name if param.required else f"[{name}]")
+            if param.param_type_name == "argument":
+                name = _argument_name(param)
+                pieces.append(name if param.required else f"[{name}]")
         return pieces
+
+    def format_options(self, ctx: Any, formatter: Any) -> None:
+        # typer 0.29 names a value by its Python type ("--evidence <list[Path]>", "log
+        # <path>"); the usage line's names ("LOG", "--evidence PATH") read as click's do.
+        sections: dict[str, list[tuple[str, str]]] = {"argument": [], "option": []}
+        for param in self.get_params(ctx):
+            record = param.get_help_record(ctx)
+            if record is None or param.param_type_name not in sections:
+                continue
+            first, text = record
+            if param.param_type_name == "argument":
+                first = _argument_name(param)
+            else:
+                first = _VALUE_TYPE.sub(lambda m: _VALUE_WORDS.get(m[1], m[1].upper()), first)
+            sections[param.param_type_name].append((first, text))
+        for title, kind in (("Arguments", "argument"), ("Options", "option")):
+            if sections[kind]:
+                with formatter.section(title):
+                    formatter.write_dl(sections[kind])
+
+
+_VALUE_TYPE = re.compile(r"<([^<>]+)>")
+_VALUE_WORDS = {
+    "str": "TEXT",
+    "list[str]": "TEXT",
+    "path": "PATH",
+    "list[Path]": "PATH",
+    "int": "INTEGER",
+    "int range": "INTEGER",
+    "float": "NUMBER",
+    "float range": "NUMBER",
+}
+"""How an option's value is named in help, by the type name typer gives it."""
+
+
+def _argument_name(param: Any) -> str:
+    name = str(param.metavar or param.name or "ARG").upper()
+    return name + "..." if param.nargs != 1 else name
 
 
 class _App(typer.Typer):
