@@ -144,6 +144,9 @@ class Explanation:
     external_evidence: tuple[ExternalEvidence, ...] = ()
     """The decision's evidence refs into external recordings: resolved (and decoded),
     broken, or unresolved (recording not given)."""
+    clock_run: tuple[str, ...] = ()
+    """When the robot's clock restarted in the log: the segments of the run that holds the
+    decision (a time may name a decision in another run too); empty otherwise."""
 
     @property
     def stale(self) -> bool:
@@ -170,6 +173,12 @@ def find_cycle(log: Log, number: int) -> Cycle:
         else:
             hi = mid - 1
         first = first or found
+    # Cycle numbers follow time only within one run of the robot's clock: after a restart
+    # with a monotonic clock the search above can miss, and a scan bounded by each
+    # segment's first cycle finds it.
+    found_by_scan = log.get_cycle(number)
+    if found_by_scan is not None:
+        return found_by_scan
     last = next(log.iter_cycles(reverse=True), None)
     oldest = next(log.iter_cycles(), None)
     span = f"cycles {oldest.cycle}..{last.cycle}" if oldest and last else "no cycles"
@@ -203,6 +212,7 @@ def explain(
         assert cycle is not None
         target = find_cycle(log, cycle)
         offset = 0
+    whole, log = log, log.clock_run(target.segment)
     decision = read_decision(target)
     recordings = open_recordings(evidence)
     # Refs usually point into the decision's own cycle; the earlier cycles of the sensor
@@ -235,11 +245,11 @@ def explain(
     graph = causal_graph_data(target, chains, decision)
     tree = tree_graph_data(decision.tree) if decision.tree else None
     return Explanation(
-        path=str(log.root),
+        path=str(whole.root),
         robot=log.first_robot,
-        log_start_ns=log.start_ns,
-        log_end_ns=log.end_ns,
-        recovered=log.recovered,
+        log_start_ns=whole.start_ns,
+        log_end_ns=whole.end_ns,
+        recovered=whole.recovered,
         query_t_ns=t_ns,
         query_cycle=cycle,
         cycle=target.cycle,
@@ -254,6 +264,7 @@ def explain(
         graph=graph,
         tree=tree,
         external_evidence=tuple(describe_refs(target.layer(TOPIC_PERCEPTION), recordings)),
+        clock_run=() if log is whole else tuple(s.path.name for s in log.segments),
     )
 
 

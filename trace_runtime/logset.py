@@ -127,6 +127,7 @@ class _Unopened:
 
     path: Path
     robot: str
+    segment: int
     start_ns: int
     end_ns: int
     limits: ReadLimits
@@ -143,6 +144,15 @@ _Slot = Segment | _Unopened
 
 def _opened(slot: _Slot) -> Segment:
     return slot if isinstance(slot, Segment) else slot.open()
+
+
+def _robot_of(slot: _Slot) -> str:
+    return slot.robot if isinstance(slot, _Unopened) else slot.session.robot_id
+
+
+def _chain_key(slot: _Slot) -> tuple[int, str]:
+    number = slot.segment if isinstance(slot, _Unopened) else slot.session.segment
+    return number, slot.path.name
 
 
 class Log:
@@ -184,6 +194,35 @@ class Log:
         log._place(sorted(slots, key=lambda s: (s.start_ns, s.path.name)))
         log._timed = list(log._slots)
         log._recovered = False
+        return log
+
+    def clock_run(self, segment_name: str) -> Log:
+        """The log cut to one robot's run of segments around ``segment_name`` whose times
+        follow on from one another.
+
+        A robot restarted with a monotonic clock starts its times again lower (PROFILE
+        section 4 allows it across segments), so one time can name decisions of two runs;
+        a walk back in time from a decision must stay in its own run. The log itself when
+        it is one robot's and its clock never went back."""
+        at = next((s for s in self._slots if s.path.name == segment_name), None)
+        if at is None:
+            return self
+        robot = _robot_of(at)
+        chain = sorted((s for s in self._slots if _robot_of(s) == robot), key=_chain_key)
+        lo = hi = chain.index(at)
+        while lo > 0 and chain[lo - 1].end_ns <= chain[lo].start_ns:
+            lo -= 1
+        while hi + 1 < len(chain) and chain[hi].end_ns <= chain[hi + 1].start_ns:
+            hi += 1
+        if hi - lo + 1 == len(self._slots):
+            return self
+        run = chain[lo : hi + 1]
+        log = Log.__new__(Log)
+        log.root, log.problems, log.shadowed = self.root, list(self.problems), []
+        log._place(sorted(run, key=lambda s: (s.start_ns, s.path.name)))
+        timed = [s for s in run if isinstance(s, _Unopened) or s.holds_messages]
+        log._timed = timed or list(run)
+        log._recovered = any(isinstance(s, Segment) and not s.finished for s in run)
         return log
 
     def _place(self, slots: Sequence[_Slot]) -> None:
@@ -410,7 +449,9 @@ def _catalogued_slots(
             or row["cycles"] <= 0
         ):
             return None
-        slots.append(_Unopened(file, row["robot"], row["start_ns"], row["end_ns"], limits))
+        slots.append(
+            _Unopened(file, row["robot"], row["segment"], row["start_ns"], row["end_ns"], limits)
+        )
     return slots
 
 

@@ -18,6 +18,7 @@ from tests.trace_audit.conftest import (
     rewrite_segment,
     stretch,
     t_ns,
+    t_s,
     write_log,
 )
 from trace_audit.causal import (
@@ -457,3 +458,36 @@ def test_a_catalogued_root_is_explained_alike_from_the_one_segment_it_needs(
         for t in (t_ns(index), t_ns(index) + PERIOD_NS // 2):
             lazy = to_jsonable(explain(root, t=t))
             assert lazy == to_jsonable(explain(full, t=t))
+
+
+# --- a robot restarted with its clock from zero -------------------------------------------------
+
+
+@pytest.mark.parametrize("catalogued", [False, True], ids=["opened", "lazy"])
+def test_a_restarted_clock_keeps_each_explanation_in_its_own_run(
+    tmp_path: Path, catalogued: bool
+) -> None:
+    """Two runs of one robot in one root, both starting at T0 (a monotonic clock after a
+    reboot): every cycle number is found, and the walk back (held since, previous seal)
+    never steps into the other run's cycles at the same times."""
+    root = write_log(tmp_path / "root")
+    write_log(root)  # the same robot again: the chain goes on, the times start over
+    if catalogued:
+        refresh_catalog(root)
+    first, second = sorted(p.name for p in (root / "hot").glob("*.mcap"))
+    for number in (0, 45, 99, 100, 145, 199):
+        r = explain(root, cycle=number)
+        assert r.cycle == number
+        assert r.clock_run == ((first,) if number < 100 else (second,))
+        assert r.held.since_cycle <= number and r.held.since_cycle >= (0 if number < 100 else 100)
+        assert r.seal.verified and r.seal.prev_ok
+    by_time = explain(root, t=t_ns(45))
+    assert by_time.decision.segment == second and by_time.held.since_cycle >= 100
+    shown = CliRunner().invoke(app, ["explain", str(root), "--t", t_s(45), "--plain"]).output
+    assert "the robot's clock restarted in this log" in shown
+
+
+def test_one_clock_run_is_the_whole_log(sample_log: Path) -> None:
+    log = open_log(sample_log)
+    assert log.clock_run(log.segments[0].path.name) is log
+    assert explain(sample_log, t=t_ns(45)).clock_run == ()

@@ -185,6 +185,19 @@ def explain_doc(r: Explanation, lookback_s: float = 600.0) -> Doc:
                 ),
             )
         )
+    if r.clock_run:
+        run = r.clock_run[0] if len(r.clock_run) == 1 else f"{r.clock_run[0]}..{r.clock_run[-1]}"
+        rows.append(
+            (
+                "Clock",
+                Seg(
+                    f"the robot's clock restarted in this log: read in the run of {run}; "
+                    "another run may hold a decision at the same time (ask by --cycle)",
+                    "yellow",
+                    None,
+                ),
+            )
+        )
     if d.summary:
         rows.append(("Tier", "warm summary: only what the summary kept is shown"))
     action = d.command or "?"

@@ -194,7 +194,7 @@ def gather_report(
         raise UsageError(f"window must be in (0, {MAX_WINDOW_S:.0f}] s, got {window_s}")
     whole = as_log(path)
     result = explain(whole, t=t, cycle=cycle, evidence=evidence)
-    log = _one_clock(whole, result.decision.segment)
+    log = whole.clock_run(result.decision.segment)
     before = int(window_s * 2 / 3 * 1e9)
     start = max(log.start_ns, result.t_ns - before)
     end = min(log.end_ns, start + int(window_s * 1e9))
@@ -231,26 +231,6 @@ def gather_report(
         evidence=tuple(str(e) for e in evidence),
         not_retained=_not_retained(result),
     )
-
-
-def _one_clock(log: Log, segment_name: str) -> Log:
-    """The segments around the decision's whose times run on from one another.
-
-    A robot restarted with a monotonic clock starts its times again lower (PROFILE section 4),
-    so a window of log time would mix decisions of two runs; the report keeps to the run of
-    segments that holds the decision (the whole log when its clock never restarted)."""
-    segments = log.segments
-    at = next((i for i, s in enumerate(segments) if s.path.name == segment_name), None)
-    if at is None:
-        return log
-    lo = hi = at
-    while lo > 0 and segments[lo - 1].end_ns <= segments[lo].start_ns:
-        lo -= 1
-    while hi + 1 < len(segments) and segments[hi].end_ns <= segments[hi + 1].start_ns:
-        hi += 1
-    if lo == 0 and hi == len(segments) - 1:
-        return log
-    return Log(segments[lo : hi + 1], log.root)
 
 
 def _samples(
