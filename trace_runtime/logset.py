@@ -28,6 +28,7 @@ from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeE
 from trace_runtime.integrity import SealStatus, verify_cycle
 from trace_runtime.mcap_file import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.reader import Segment
+from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.session import TIER_METADATA, TIERS
 
 log = logging.getLogger("trace_runtime")
@@ -68,11 +69,10 @@ def preferred_copies(segments: Sequence[Segment]) -> tuple[list[Segment], list[S
     root. The copy read is the one holding the most (``copy_rank``); the others are listed
     as shadowed. Only copies that opened are compared, so a damaged copy never shadows a
     readable one. A byte-identical copy (a segment copied by hand into another directory)
-    is read once. Two different files of one tier with one chain position are both read
-    (``verify`` reports the fork).
+    is read once, and so is a copy proven to be the segment cut short (``cut_short_copy``).
+    Any other two files of one tier with one chain position are both read (``verify``
+    reports the fork).
     """
-    if not any(s.path.parent.name in ("warm", "cold") for s in segments):
-        return list(segments), []
     chosen: dict[tuple[str, int, int, str], Segment] = {}
     same_tier: list[Segment] = []
     shadowed: list[Segment] = []
@@ -83,8 +83,11 @@ def preferred_copies(segments: Sequence[Segment]) -> tuple[list[Segment], list[S
         if other is None:
             chosen[key] = segment
         elif other.session.tier == session.tier:
-            if _same_bytes(segment.path, other.path):
+            if _same_bytes(segment.path, other.path) or cut_short_copy(segment, other):
                 shadowed.append(segment)
+            elif cut_short_copy(other, segment):
+                shadowed.append(other)
+                chosen[key] = segment
             else:
                 same_tier.append(segment)
         elif copy_rank(segment) < copy_rank(other):
@@ -93,6 +96,26 @@ def preferred_copies(segments: Sequence[Segment]) -> tuple[list[Segment], list[S
         else:
             shadowed.append(segment)
     return same_tier + list(chosen.values()), shadowed
+
+
+def cut_short_copy(copy: Segment, of: Segment) -> bool:
+    """Whether ``copy`` is ``of`` cut short (a crash, an interrupted copy), holding nothing
+    that ``of`` does not: ``copy`` is unfinished and ``of`` finished, and the last seal of
+    ``copy`` is, byte for byte, ``of``'s seal of that cycle. A seal commits to its cycle and,
+    through the hash chain, to every cycle before it in the segment."""
+    if copy.finished or not of.finished:
+        return False
+    try:
+        last = next((c for c in copy.iter_cycles(reverse=True) if c.sealed), None)
+        same = of.cycle_at(last.t_ns) if last is not None else None
+    except LogReadError:
+        return False
+    return (
+        last is not None
+        and same is not None
+        and same.cycle == last.cycle
+        and same.payloads.get(TOPIC_SEAL) == last.payloads[TOPIC_SEAL]
+    )
 
 
 def _same_bytes(a: Path, b: Path) -> bool:

@@ -39,7 +39,7 @@ from trace_runtime.integrity import (
     iter_checkpoints,
     verify_cycle,
 )
-from trace_runtime.logset import FileProblem, Log, copy_rank
+from trace_runtime.logset import FileProblem, Log, copy_rank, cut_short_copy
 from trace_runtime.reader import Segment
 from trace_runtime.recordings import ExternalCheck, Recordings
 from trace_runtime.records import GENESIS, Checkpoint
@@ -1390,17 +1390,20 @@ def _verify_robot(
                 )
         if len(copies) > 1:
             tiers = ", ".join(c.session.tier for c in copies)
+            # A copy cut short ends at an earlier seal of the same chain: not a fork.
+            cut = [r for r in results[1:] if cut_short_copy(r.segment, first)]
+            also = f"; {len(cut)} of them cut short (a prefix of it)" if cut else ""
             sink.note(
                 Finding(
                     "duplicate_segment",
                     f"segment {number} is present {len(copies)} "
-                    f"times ({tiers}); each copy was verified",
+                    f"times ({tiers}); each copy was verified{also}",
                     robot_id,
                     _display_name(first.path),
                     number,
                 )
             )
-            tails = {r.tail.digest if r.tail else None for r in results}
+            tails = {r.tail.digest if r.tail else None for r in results if r not in cut}
             if len(tails) > 1:
                 sink.finding(
                     Finding(

@@ -8,6 +8,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+from tests.trace_audit.conftest import write_log
 from tests.trace_audit.test_verify_tamper import _write_plain, decode, write_signed_log
 from tests.trace_runtime.test_tiers import make_root
 from trace_audit.verify import verify_log
@@ -107,3 +108,38 @@ def test_a_missing_final_checkpoint_is_still_truncation_when_others_exist(tmp_pa
     report = verify_log(path, key=signer.public_key)
     assert _kinds(report.findings) == ["truncated"]
     assert report.findings[0].first_cycle == 30
+
+
+def test_a_half_copied_segment_beside_its_original_is_read_once_and_accuses_nothing(
+    tmp_path: Path,
+) -> None:
+    """A copy cut short (cp interrupted, a disk filled) holds a prefix of the segment: its
+    last seal is the original's seal of that cycle. verify notes it instead of calling the
+    two a fork, and metrics count each decision once."""
+    from trace_audit.metrics import compute_metrics
+
+    root = write_log(tmp_path / "root")
+    original = root / "hot" / "amr-7_000000.mcap"
+    (root / "hot" / "copy").mkdir()
+    half = root / "hot" / "copy" / original.name
+    half.write_bytes(original.read_bytes()[: original.stat().st_size // 2])
+    report = verify_log(root)
+    assert report.ok, report.findings
+    assert report.cycles == 100
+    (note,) = [n for n in report.notes if n.kind == "duplicate_segment"]
+    assert "cut short" in note.message
+    assert compute_metrics([root]).overall.decisions == 100
+    assert compute_metrics([original, half]).overall.decisions == 100
+
+
+def test_a_cut_copy_that_differs_from_the_original_is_still_a_fork(tmp_path: Path) -> None:
+    """Only a proven prefix is set aside: a truncated copy of another recording at the same
+    chain position is read, and verify reports the two heads."""
+    root = write_log(tmp_path / "root")
+    other = write_log(tmp_path / "other.mcap", skip=lambda i: i == 5)
+    (root / "hot" / "copy").mkdir()
+    cut = root / "hot" / "copy" / "amr-7_000000.mcap"
+    cut.write_bytes(other.read_bytes()[: other.stat().st_size // 2])
+    report = verify_log(root)
+    assert not report.ok
+    assert "modified" in _kinds(report.findings)

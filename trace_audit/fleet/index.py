@@ -293,7 +293,7 @@ def _one_copy_each(log: Log) -> tuple[set[Path], list[str]]:
     best (the others are named in a note); two different logs are refused (exit 2), since
     one position holds one segment's rows."""
     by_key: dict[str, list[Segment]] = {}
-    for segment in log.segments:
+    for segment in [*log.segments, *log.shadowed]:
         by_key.setdefault(_position(segment), []).append(segment)
     left_out: set[Path] = set()
     notes: list[str] = []
