@@ -44,8 +44,8 @@ from trace_runtime.codec import (
     LayerValue,
     check_layer,
     digest_keeping_gil,
-    encode_checked,
     encode_json,
+    encode_layer,
     encode_seal_fields,
 )
 from trace_runtime.costs import TIMING_METADATA, CostHistogram
@@ -63,7 +63,7 @@ from trace_runtime.records import (
     TOPIC_SEAL,
     EvidenceRef,
 )
-from trace_runtime.segment import OutMessage, SegmentWriteError, SegmentWriter
+from trace_runtime.segment import MessageFields, OutMessage, SegmentWriteError, SegmentWriter
 from trace_runtime.session import MIN_PERIOD_NS, TIERS, SessionInfo
 
 if sys.platform != "win32":  # Linux is the target; elsewhere the writer lock is skipped
@@ -699,39 +699,43 @@ class AuditLogger:
 
     def _seal(
         self, segment: SegmentWriter, batch: list[_PendingCycle]
-    ) -> tuple[list[OutMessage], str, int]:
+    ) -> tuple[list[MessageFields], str, int]:
         """The batch's messages in file order, the last seal's digest, and how many periodic
-        checkpoints are among the messages (each right after the seal it names)."""
-        messages: list[OutMessage] = []
+        checkpoints are among the messages (each right after the seal it names).
+
+        Messages are plain tuples and the channel ids are looked up once per batch: this
+        loop runs five or more times per cycle on the writer, holding the GIL."""
+        messages: list[MessageFields] = []
+        append = messages.append
         checkpoints = 0
         prev = self._prev_seal
         carried = self._undeclared_writer
-        seal_channel = segment.channel(TOPIC_SEAL)
+        channel = segment.channel
+        layer_channels = {topic: channel(topic) for topic in LAYER_MODELS}
+        seal_channel = channel(TOPIC_SEAL)
         for index, pending in enumerate(batch):
+            cycle, t_ns = pending.cycle, pending.t_ns
             for topic, sequence, log_time, data in pending.sensors:
-                messages.append(OutMessage(segment.channel(topic), sequence, log_time, data))
+                append((channel(topic), sequence, log_time, data))
             digests: dict[str, str] = {}
             for topic, record in pending.layers.items():
                 if isinstance(record, EncodedLayer):  # a dict, encoded on the control thread
                     data, digests[topic] = record
                 else:
-                    data = encode_checked(pending.cycle, pending.t_ns, LAYER_MODELS[topic], record)
+                    data = encode_layer(cycle, t_ns, record, LAYER_MODELS[topic])
                     digests[topic] = digest_keeping_gil(data)
-                messages.append(
-                    OutMessage(segment.channel(topic), pending.cycle, pending.t_ns, data)
-                )
-            dropped = carried + pending.dropped_before
-            data = encode_seal_fields(pending.cycle, pending.t_ns, digests, prev, dropped)
-            messages.append(OutMessage(seal_channel, pending.cycle, pending.t_ns, data))
+                append((layer_channels[topic], cycle, t_ns, data))
+            data = encode_seal_fields(cycle, t_ns, digests, prev, carried + pending.dropped_before)
+            append((seal_channel, cycle, t_ns, data))
             prev = digest(data)
             carried = 0
-            if self._checkpoint_due(pending.t_ns):
+            if self._checkpoint_due(t_ns):
                 sealed = self._sealed_in_segment + index + 1
                 checkpoint = self._checkpoint_message(
-                    segment, pending.cycle, pending.t_ns, prev, sealed, final=False
+                    segment, cycle, t_ns, prev, sealed, final=False
                 )
                 if checkpoint is not None:
-                    messages.append(checkpoint)
+                    append(checkpoint)
                     checkpoints += 1
         return messages, prev, checkpoints
 
