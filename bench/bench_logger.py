@@ -215,10 +215,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer cycles and kill runs")
     args = parser.parse_args()
-    n_paced = 600 if args.quick else 2000
-    n_fast = 5000 if args.quick else 20000
-    kills = 10 if args.quick else 20
-    work = Path(tempfile.mkdtemp(prefix="bench-logger-"))
+    # Every run writes ~300 MB of logs: they go when the run ends, however it ends.
+    with tempfile.TemporaryDirectory(prefix="bench-logger-") as work:
+        run(Path(work), quick=args.quick)
+
+
+def run(work: Path, *, quick: bool) -> None:
+    n_paced = 600 if quick else 2000
+    n_fast = 5000 if quick else 20000
+    kills = 10 if quick else 20
     records = _cycles(max(n_paced, 2000))
     size = statistics.median(
         sum(len(encode_layer(i, i, r)) for r in layers) for i, layers in enumerate(records[:200])
