@@ -7,7 +7,6 @@ import hashlib
 import json
 import random
 import shutil
-from array import array
 from pathlib import Path
 from typing import Any
 
@@ -124,29 +123,6 @@ def test_columns_of_one_shape_round_trip(rows: list[tuple[Any, ...]]) -> None:
         for i, (f, n, o, v, z) in enumerate(rows)
     ]
     assert _round_trip(BlockEncoder(level=1), stream) == stream
-
-
-_column_floats = (
-    st.floats(allow_nan=False, allow_infinity=False)
-    | st.decimals(places=4, min_value=-(10**6), max_value=10**6, allow_nan=False).map(float)
-    | st.integers(min_value=-(2**63), max_value=2**63).map(float)
-    | st.sampled_from([0.0, -0.0, 0.5, 1.5, -2.5, 1e300, -1e300, 2.0**62, -(2.0**62)])
-)
-
-
-@settings(max_examples=300, deadline=None)
-@given(
-    values=st.lists(_column_floats, min_size=32, max_size=80),
-    k=st.integers(min_value=0, max_value=len(cold_module._SCALES) - 1),
-)
-def test_the_bulk_decimal_coding_gives_the_bytes_of_the_exact_one(
-    values: list[float], k: int
-) -> None:
-    """numpy's whole-column decimal test and packing equal the Python path, byte for byte
-    (rounding half to even, values that overflow when scaled, int64 edges, wrapping deltas)."""
-    raw = cold_module._le_bytes(array("d", values))
-    scale = cold_module._SCALES[k]
-    assert cold_module._decimal_bulk(values, raw, scale) == cold_module._decimal(values, raw, scale)
 
 
 def test_corrupt_blocks_raise_a_format_error() -> None:

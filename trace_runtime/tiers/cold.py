@@ -502,63 +502,19 @@ class BlockEncoder:
             # -0.0 == 0.0, so the check below cannot see a lost sign: list where they were.
             negative_zeros = _negative_zeros(values, raw)
             tries = range(_DEC_TRIES) if hint is None else (hint, *range(_DEC_TRIES))
-            scaled_as = _decimal_bulk if len(values) >= _BULK_MIN else _decimal
             for k in tries:
-                packed = scaled_as(values, raw, _SCALES[k])
-                if packed is _OUT_OF_RANGE:
+                scale = _SCALES[k]
+                try:
+                    ints = list(map(round, map(mul, values, repeat(scale))))
+                except OverflowError:  # beyond the float range once scaled: not a decimal
                     break
-                if packed is not None:
-                    self._hints[hint_key] = k
-                    return _DEC, [k, negative_zeros], packed
+                if list(map(truediv, ints, repeat(scale))) == values:
+                    packed = _pack_i64(ints, delta=True)
+                    if packed is not None:
+                        self._hints[hint_key] = k
+                        return _DEC, [k, negative_zeros], packed
         self._hints[hint_key] = -1
         return _F64, None, _shuffle(raw, 8)
-
-
-_OUT_OF_RANGE = b"\xff"
-"""What ``_decimal`` gives when a value scaled is beyond the float range: no larger scale
-can work either."""
-_BULK_MIN = 32
-"""Columns at least this long are tried as decimals with numpy (below, its per-call cost
-is more than the Python loop's)."""
-
-
-def _decimal(values: list[float], raw: bytes, scale: float) -> bytes | None:
-    """The column as delta-coded integers ``round(v * scale)`` if every ``i / scale`` gives
-    ``v`` back exactly (packed, as ``_pack_i64``), None if not (or an integer is beyond
-    int64), ``_OUT_OF_RANGE`` if a scaled value overflows."""
-    try:
-        ints = list(map(round, map(mul, values, repeat(scale))))
-    except OverflowError:  # beyond the float range once scaled: not a decimal
-        return _OUT_OF_RANGE
-    if list(map(truediv, ints, repeat(scale))) == values:
-        return _pack_i64(ints, delta=True)
-    return None
-
-
-def _decimal_bulk(values: list[float], raw: bytes, scale: float) -> bytes | None:
-    """``_decimal`` over the whole column at once with numpy (~40% of the encoder's
-    per-value work was here), giving the same bytes. Python's ``round`` of a float and
-    ``rint`` both round half to even; ``int / float`` converts the integer to the float it
-    came from, so dividing the rounded floats is the same check; int64 ranges and deltas
-    that could wrap around are left to the exact Python path."""
-    import numpy as np  # here: only compaction encodes, and readers should not load numpy
-
-    floats = np.frombuffer(raw, dtype="<f8")
-    with np.errstate(over="ignore"):  # an overflow is what the next line looks for
-        scaled = floats * scale
-    if not np.isfinite(scaled).all():
-        return _OUT_OF_RANGE
-    rounded = np.rint(scaled)
-    if not np.array_equal(rounded / scale, floats):
-        return None
-    low, high = float(rounded.min()), float(rounded.max())
-    if low < -(2.0**62) or high >= 2.0**62:  # deltas could leave int64: decide exactly
-        return _decimal(values, raw, scale)
-    ints = rounded.astype("<i8")
-    deltas = np.empty_like(ints)
-    deltas[0] = ints[0]
-    np.subtract(ints[1:], ints[:-1], out=deltas[1:])
-    return deltas.view(np.uint8).reshape(-1, 8).T.tobytes()
 
 
 def _negative_zeros(values: list[float], raw: bytes) -> list[int]:
