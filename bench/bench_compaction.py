@@ -27,12 +27,20 @@ Then, on the compacted root: bytes per sealed cycle beside the hot files and MCA
 zstd chunks; reading every cycle; and ``cycle_at`` at 40 random times, hot and cold, each
 a first ask (caches cleared) and cold asked again (median ms); and a first cold ask in a
 new process (nothing decoded or compiled yet), median of 9 processes.
+
+``--paired`` measures, instead, the codec's fast paths against the slow ones they replace,
+in one process, alternating block by block over ``--blocks`` blocks of the first segment
+(the only before/after figure that held still on a busy shared machine): the check decode
+with digest references taken from the input's digests or hashed again, and compaction's
+pipeline check on the source block's objects or on the decoded copies; encoding a block,
+for scale.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import itertools
 import os
 import random
 import resource
@@ -41,7 +49,7 @@ import statistics
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -51,6 +59,9 @@ from bench_tiers import mcap_default_bytes, seek_medians_ms
 
 from sim import RunConfig, run
 from trace_runtime import open_log
+from trace_runtime.reader import open_segment
+from trace_runtime.records import TOPIC_SEAL
+from trace_runtime.tiers import cold as cold_codec
 from trace_runtime.tiers.cold import ColdAssembler
 
 REPO = Path(__file__).resolve().parent.parent
@@ -211,16 +222,82 @@ def read_all(opened: Any) -> float:
     return n / (time.perf_counter() - started)
 
 
+def paired_fast_paths(segment: Path, blocks: int, passes: int = 5) -> dict[str, float]:
+    """Microseconds per cycle of each fast path and the slow one it replaced, alternating
+    block by block (the order flips every block and pass), and the median paired ratios."""
+    opened = open_segment(segment)
+    source = cold_codec.iter_blocks(opened.iter_messages(), cold_codec.DEFAULT_BLOCK_CYCLES)
+    encoder = cold_codec.BlockEncoder()
+    items = []
+    for block in itertools.islice(source, blocks):
+        kept, plain, positions = cold_codec.split_plain(block)
+        data, decoded = encoder.encode_checked(kept, opened.session.tier, positions)
+        digests = list(encoder._last_digests)
+        items.append((block, kept, plain, positions, data, digests, decoded))
+    cycles = sum(sum(m.topic == TOPIC_SEAL for m in item[0]) for item in items)
+
+    def encode(fast: bool, item: tuple[Any, ...]) -> bytes:  # the same either way: for scale
+        return encoder._encode(item[1], opened.session.tier, item[3], verbatim=False)
+
+    def check(fast: bool, item: tuple[Any, ...]) -> Any:
+        data, digests = item[4], item[5]
+        return cold_codec._check_decode(data, digests) if fast else cold_codec.decode_block(data)
+
+    def compare(fast: bool, item: tuple[Any, ...]) -> bool:
+        block, kept, plain, positions, _data, _digests, decoded = item
+        if fast:
+            return bool(list(cold_codec.merge_plain(kept, plain, positions)) == block)
+        return bool(list(cold_codec.merge_plain(decoded.messages, plain, decoded.plain)) == block)
+
+    stages: dict[str, Callable[[bool, tuple[Any, ...]], Any]] = {
+        "encode": encode,
+        "check decode": check,
+        "compare with source": compare,
+    }
+    spent = {(name, fast): 0.0 for name in stages for fast in (False, True)}
+    ratios: dict[str, list[float]] = {name: [] for name in stages}
+    with cold_codec.gc_paused():
+        for number in range(passes):
+            for at, item in enumerate(items):
+                for name, stage in stages.items():
+                    took = {}
+                    for fast in (True, False) if (at + number) % 2 else (False, True):
+                        started = time.thread_time()
+                        stage(fast, item)
+                        took[fast] = time.thread_time() - started
+                    spent[name, False] += took[False]
+                    spent[name, True] += took[True]
+                    ratios[name].append(took[False] / max(took[True], 1e-9))
+    results: dict[str, float] = {}
+    for name in stages:
+        for fast, label in ((False, "before"), (True, "after")):
+            results[f"{name}, {label}, us/cycle"] = spent[name, fast] / passes / cycles * 1e6
+        results[f"{name}, before / after (paired)"] = statistics.median(ratios[name])
+    return results
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--hours", type=float, default=2.0, help="simulated hours (default 2)")
     parser.add_argument("--repeats", type=int, default=3, help="rounds (medians are taken)")
     parser.add_argument("--log", type=Path, default=Path("/tmp/trace-bench-compaction"))
     parser.add_argument("--json", type=Path, default=None, help="also write results here")
+    parser.add_argument(
+        "--paired", action="store_true", help="only the fast paths against the slow ones"
+    )
+    parser.add_argument("--blocks", type=int, default=24, help="blocks for --paired")
     args = parser.parse_args()
 
     source = args.log / f"{args.hours:g}h"
     cycles = build_log(source, args.hours)
+    if args.paired:
+        paired = paired_fast_paths(sorted(source.rglob("*.mcap"))[0], args.blocks)
+        for label, value in paired.items():
+            print(f"{label:<44} {value:>8.3f}")
+        print(f"load average {os.getloadavg()[0]:.2f} on {len(os.sched_getaffinity(0))} CPUs")
+        if args.json:
+            args.json.write_text(orjson.dumps(paired, option=orjson.OPT_INDENT_2).decode())
+        return 0
     work = args.log / "work"
     segments = sorted(source.rglob("*.mcap"))
     py = sys.executable

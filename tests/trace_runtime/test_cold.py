@@ -277,6 +277,33 @@ def test_blocks_split_on_whole_cycles() -> None:
 
 
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(stream=_streams())
+def test_the_encoders_check_decodes_as_a_plain_decode_does(stream: list[RawMessage]) -> None:
+    """The check takes digest references from the encoder's digests of its input instead of
+    hashing decoded messages again: what it returns is what any reader decodes."""
+    kept, _plain, positions = split_plain(stream)
+    data, checked = BlockEncoder(level=1).encode_checked(kept, "hot", positions)
+    assert checked.messages == decode_block(data).messages == kept
+
+
+def test_the_check_decode_uses_the_digests_it_is_given() -> None:
+    """With a wrong digest for a referenced message, the check decode differs from the input
+    (so ``encode_checked`` would not accept the block): it is the comparison with the input
+    that makes the borrowed digests safe."""
+    chain = [RawMessage("/t", 0, 0, b'{"i":0}')]
+    for i in range(1, 30):
+        prev = hashlib.sha256(chain[-1].data).hexdigest()
+        chain.append(RawMessage("/t", i, i, orjson.dumps({"i": i, "prev": prev})))
+    data, checked = BlockEncoder(level=1).encode_checked(chain, "hot")
+    assert checked.messages == chain
+    wrong = [hashlib.sha256(m.data).hexdigest() for m in chain]
+    wrong[10] = "0" * 64
+    decoded = cold_module._check_decode(data, wrong).messages
+    assert decoded[:11] == chain[:11]
+    assert decoded[11] != chain[11]
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(stream=_streams(), data=st.data())
 def test_a_partial_decode_gives_the_bytes_of_a_whole_one(
     stream: list[RawMessage], data: st.DataObject

@@ -32,7 +32,7 @@ from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from itertools import accumulate, chain, repeat
-from operator import attrgetter, mul, sub, truediv
+from operator import mul, sub, truediv
 from typing import Any
 
 import orjson
@@ -219,7 +219,6 @@ class _Column:
     groups: list[int] | None = field(default_factory=list)
 
 
-_FIELDS = attrgetter("topic", "sequence", "log_time_ns", "data")
 LENGTHS = -1
 """Last path element of a vector's lengths column (element columns end in the index)."""
 
@@ -270,6 +269,7 @@ class BlockEncoder:
         self._noncanonical: set[str] = set()
         self._strict = False
         self._last_raw = 0
+        self._last_digests: list[str] = []
         self.raw_messages = 0
         self.messages = 0
         self.retries = 0
@@ -298,10 +298,10 @@ class BlockEncoder:
             for strict, verbatim in ((False, False), (True, False), (True, True)):
                 self._strict = strict
                 data = self._encode(expected, tier, plain, verbatim=verbatim)
-                decoded = decode_block(data)
-                if decoded.plain == list(plain) and list(map(_FIELDS, decoded.messages)) == list(
-                    map(_FIELDS, expected)
-                ):
+                decoded = _check_decode(data, self._last_digests)
+                # (a list == of the messages: a C loop over the dataclass's __eq__, faster
+                # than comparing two lists of field tuples)
+                if decoded.plain == list(plain) and decoded.messages == expected:
                     break
                 self.retries += 1
             else:
@@ -325,6 +325,7 @@ class BlockEncoder:
         new_shapes: Counter[str] = Counter()
         last_seq: dict[int, int] = {}
         digests: dict[str, int] = {}
+        digest_list: list[str] = []
         sha256 = hashlib.sha256
         loads, dumps = orjson.loads, orjson.dumps
         by_sig = self._by_sig
@@ -336,7 +337,9 @@ class BlockEncoder:
             seq_deltas.append(msg.sequence - last_seq.get(topic_id, 0))
             last_seq[topic_id] = msg.sequence
             data = msg.data
-            digests.setdefault(sha256(data).hexdigest(), index)
+            digest = sha256(data).hexdigest()
+            digest_list.append(digest)
+            digests.setdefault(digest, index)
             shape: Shape | None = None
             row: tuple[Any, ...] = ()
             try:
@@ -387,6 +390,7 @@ class BlockEncoder:
             shape_ids.append(group + 1)
 
         self._last_raw = len(raw)
+        self._last_digests = digest_list
         topic_names = list(topics)
         columns: dict[tuple[int, tuple[Any, ...]], _Column] = {}
         vector_values: dict[tuple[int, tuple[Any, ...]], list[list[Any]]] = {}
@@ -610,7 +614,20 @@ def decode_block(block: bytes) -> DecodedBlock:
         return _decode_body(body)
 
 
-def _decode_body(body: bytes) -> DecodedBlock:
+def _check_decode(block: bytes, digests: list[str]) -> DecodedBlock:
+    """``decode_block`` for the encoder's check, given the digests of the messages the block
+    was made from: a digest reference is resolved from them instead of hashing the message
+    it points at again. The check then compares every decoded message with its input, so
+    when it passes each digest used was the digest of the decoded bytes too, and a plain
+    decode gives the same result (when it fails, the block is not used)."""
+    body = _block_body(block)
+    with _malformed_as_format_error(), gc_paused():
+        return _decode_body(body, dict(enumerate(digests)))
+
+
+def _decode_body(body: bytes, known_digests: dict[int, str] | None = None) -> DecodedBlock:
+    """A block body's messages; ``known_digests`` (message position -> SHA-256 hex) is
+    only ever the encoder's check (``_check_decode``)."""
     (head_len,) = struct.unpack_from("<I", body, 0)
     header = orjson.loads(body[4 : 4 + head_len])
     pos = 4 + head_len
@@ -681,7 +698,7 @@ def _decode_body(body: bytes) -> DecodedBlock:
         for index, data in zip(positions[group], map(dumps, map(shape.build, rows)), strict=True):
             datas[index] = data
             built[index] = 1
-    hexes: dict[int, str] = {}
+    hexes: dict[int, str] = known_digests if known_digests is not None else {}
     sequential = []
     for group, shape, rows_list, slots in waiting:
         filled = _fill_digests(

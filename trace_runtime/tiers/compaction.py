@@ -871,11 +871,14 @@ def _encode_blocks(
     for number, block in enumerate(source):
         kept, plain, positions = split_plain(block)
         raw_before = encoder.raw_messages
-        data, check = encoder.encode_checked(kept, source_tier, positions)
+        data, _decoded = encoder.encode_checked(kept, source_tier, positions)
         # The block, decoded again with its plain messages put back, must be the source
-        # block as it was read, message for message (encode_checked compared it with what
-        # it was given; this catches a pipeline that gave it something else).
-        if list(merge_plain(check.messages, plain, check.plain)) != block:
+        # block as it was read, message for message. encode_checked proved that the block
+        # decodes to ``kept``, message for message, with its plain ones at ``positions``;
+        # this catches a pipeline that gave it something else. Comparing ``kept`` itself
+        # rather than its decoded copies proves the same and finds the source's own objects
+        # in both lists, so == compares pointers (~6 us a cycle, 1.5% of a compaction).
+        if list(merge_plain(kept, plain, positions)) != block:
             raise VerificationError(f"block {number} does not decode to the source messages")
         entry = index_entry(block)
         first = min(m.log_time_ns for m in block)
