@@ -32,6 +32,9 @@ from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.session import TIER_METADATA, TIERS
 
 log = logging.getLogger("trace_runtime")
+fork_log = logging.getLogger("trace_runtime.forks")
+"""Where a fork (two recordings at one chain position) is warned of; a caller that refuses
+forks itself (the fleet index) silences it."""
 
 
 PARTIAL_MARK = ".partial"
@@ -66,56 +69,84 @@ def preferred_copies(segments: Sequence[Segment]) -> tuple[list[Segment], list[S
     """One copy of each segment of a robot's chain: ``(read, shadowed)``.
 
     While a compaction runs (or after one was interrupted) a segment sits in two tiers of a
-    root. The copy read is the one holding the most (``copy_rank``); the others are listed
-    as shadowed. Only copies that opened are compared, so a damaged copy never shadows a
-    readable one. A byte-identical copy (a segment copied by hand into another directory)
-    is read once, and so is a copy proven to be the segment cut short (``cut_short_copy``).
-    Any other two files of one tier with one chain position are both read (``verify``
-    reports the fork).
+    root; a segment copied by hand may sit beside its original, whole or cut short. Exactly
+    one copy of each chain position is read, so no decision is counted twice: the lossless
+    one before a lossy one, a finished file before a recovered one, then the lower tier
+    (``copy_rank``), and a copy proven to be another cut short (``cut_short_copy``) always
+    gives way to the longer. The others are listed as shadowed (``verify`` checks each).
+    Only copies that opened are compared, so a damaged copy never shadows a readable one.
+    Two files of one tier at one position that are neither the same bytes nor one cut from
+    the other are two recordings (a fork): one is read, a warning names both, and
+    ``verify`` reports the fork.
     """
-    chosen: dict[tuple[str, int, int, str], Segment] = {}
-    same_tier: list[Segment] = []
-    shadowed: list[Segment] = []
+    by_position: dict[tuple[str, int, int, str], list[Segment]] = {}
     for segment in segments:
         session = segment.session
         key = (session.robot_id, session.segment, session.first_cycle, session.prev_seal)
-        other = chosen.get(key)
-        if other is None:
-            chosen[key] = segment
-        elif other.session.tier == session.tier:
-            if _same_bytes(segment.path, other.path) or cut_short_copy(segment, other):
-                shadowed.append(segment)
-            elif cut_short_copy(other, segment):
-                shadowed.append(other)
-                chosen[key] = segment
-            else:
-                same_tier.append(segment)
-        elif copy_rank(segment) < copy_rank(other):
-            shadowed.append(other)
-            chosen[key] = segment
-        else:
-            shadowed.append(segment)
-    return same_tier + list(chosen.values()), shadowed
+        by_position.setdefault(key, []).append(segment)
+    read: list[Segment] = []
+    shadowed: list[Segment] = []
+    for copies in by_position.values():
+        best, *others = _best_copy_first(copies)
+        read.append(best)
+        shadowed.extend(others)
+    return read, shadowed
+
+
+def _best_copy_first(copies: list[Segment]) -> list[Segment]:
+    if len(copies) == 1:
+        return copies
+    ranked = sorted(copies, key=lambda s: (copy_rank(s)[0], not s.finished, *copy_rank(s)[1:]))
+    best = ranked[0]
+    for other in ranked[1:]:
+        if cut_short_copy(best, other):
+            best = other
+    others = [c for c in ranked if c is not best]
+    for other in others:
+        if (
+            other.session.tier == best.session.tier
+            and not _same_bytes(other.path, best.path)
+            and not cut_short_copy(other, best)
+        ):
+            fork_log.warning(
+                "%s and %s are two different recordings of segment %d of robot %s (a fork; "
+                "trace-audit verify reports it): reading %s",
+                best.path,
+                other.path,
+                best.session.segment,
+                best.session.robot_id,
+                best.path.name,
+            )
+    return [best, *others]
 
 
 def cut_short_copy(copy: Segment, of: Segment) -> bool:
     """Whether ``copy`` is ``of`` cut short (a crash, an interrupted copy), holding nothing
-    that ``of`` does not: ``copy`` is unfinished and ``of`` finished, and the last seal of
-    ``copy`` is, byte for byte, ``of``'s seal of that cycle. A seal commits to its cycle and,
-    through the hash chain, to every cycle before it in the segment."""
-    if copy.finished or not of.finished:
+    that ``of`` does not: ``copy`` is unfinished, its last seal is, byte for byte, ``of``'s
+    seal of that cycle, and ``of`` is finished or goes on past it. A seal commits to its
+    cycle and, through the hash chain, to every cycle before it in the segment."""
+    if copy.finished:
         return False
     try:
-        last = next((c for c in copy.iter_cycles(reverse=True) if c.sealed), None)
+        last = _last_sealed(copy)
         same = of.cycle_at(last.t_ns) if last is not None else None
+        if (
+            last is None
+            or same is None
+            or same.cycle != last.cycle
+            or same.payloads.get(TOPIC_SEAL) != last.payloads[TOPIC_SEAL]
+        ):
+            return False
+        if of.finished:
+            return True
+        end = _last_sealed(of)
     except LogReadError:
         return False
-    return (
-        last is not None
-        and same is not None
-        and same.cycle == last.cycle
-        and same.payloads.get(TOPIC_SEAL) == last.payloads[TOPIC_SEAL]
-    )
+    return end is not None and end.cycle > last.cycle
+
+
+def _last_sealed(segment: Segment) -> Cycle | None:
+    return next((c for c in segment.iter_cycles(reverse=True) if c.sealed), None)
 
 
 def _same_bytes(a: Path, b: Path) -> bool:
@@ -354,8 +385,11 @@ class Log:
         # (every segment's) are read only for such a time.
         if t_ns < start or (t_ns > end and t_ns > end + self.period_ns):
             raise TimeOutOfRangeError(t_ns, start, end)
-        index = bisect.bisect_right(self._starts, t_ns)
-        for slot in reversed(self._slots[:index]):
+        candidates = self._slots[: bisect.bisect_right(self._starts, t_ns)]
+        # A segment whose span holds t first: after a restart with a monotonic clock, a later
+        # run starting lower must not answer for a time only the earlier run reached.
+        spanning = [s for s in candidates if t_ns <= s.end_ns]
+        for slot in [*reversed(spanning), *reversed(candidates)]:
             found = _opened(slot).cycle_at(t_ns)
             if found is not None:
                 return found

@@ -13,6 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from tests.trace_audit.conftest import (
+    DEFAULT_SCRIPT,
     PERIOD_NS,
     T0_NS,
     rewrite_segment,
@@ -491,3 +492,15 @@ def test_one_clock_run_is_the_whole_log(sample_log: Path) -> None:
     log = open_log(sample_log)
     assert log.clock_run(log.segments[0].path.name) is log
     assert explain(sample_log, t=t_ns(45)).clock_run == ()
+
+
+def test_a_time_only_the_earlier_run_reached_is_answered_from_that_run(tmp_path: Path) -> None:
+    """A robot killed at ~10 s and restarted with its clock from zero for 3 s: t = 9.5 s
+    lies only in the first run; it must not be answered by the restarted run's last
+    decision (with a made-up gap of 6.6 s)."""
+    root = write_log(tmp_path / "root")  # t 100.0 .. 109.9 s
+    write_log(root, DEFAULT_SCRIPT[:1])  # restarted: 100.0 .. 102.9 s, cycles 100..129
+    late = explain(root, t=t_ns(95))
+    assert (late.cycle, late.offset_ns, late.stale) == (95, 0, False)
+    early = explain(root, t=t_ns(2))  # both runs hold 100.2 s: the later run answers
+    assert early.cycle == 102 and early.clock_run

@@ -143,3 +143,63 @@ def test_a_cut_copy_that_differs_from_the_original_is_still_a_fork(tmp_path: Pat
     report = verify_log(root)
     assert not report.ok
     assert "modified" in _kinds(report.findings)
+
+
+def _half(src: Path, dst: Path) -> Path:
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    dst.write_bytes(src.read_bytes()[: src.stat().st_size // 2])
+    return dst
+
+
+def test_a_half_copy_of_a_crashed_segment_gives_way_to_the_longer_recovered_file(
+    tmp_path: Path,
+) -> None:
+    """Both files are unfinished (the robot was killed): the longer one is read, wherever
+    it sorts, and the half copy is noted as cut short, not a fork."""
+    from trace_audit.metrics import compute_metrics
+
+    root = write_log(tmp_path / "root", finish=False)
+    crashed = root / "hot" / "amr-7_000000.mcap"
+    alone = verify_log(root)
+    half = _half(crashed, root / "hot" / "amr-7_000000-copy.mcap")  # sorts after, read first
+    report = verify_log(root)
+    assert report.ok, report.findings
+    assert report.cycles == alone.cycles
+    assert compute_metrics([root]).overall.decisions == alone.cycles
+    assert compute_metrics([half, crashed]).overall.decisions == alone.cycles
+    assert open_log(root).shadowed[0].path == half
+
+
+def test_a_cut_hot_copy_beside_the_intact_cold_segment_is_not_read(tmp_path: Path) -> None:
+    """The original was compacted to cold; a half copy of the hot file sits in hot/: the
+    intact cold copy is read (every cycle), and nothing is called modified."""
+    root = write_log(tmp_path / "root")
+    hot = root / "hot" / "amr-7_000000.mcap"
+    saved = hot.read_bytes()
+    compact(root, "cold", older_than_ns=0)
+    assert not hot.exists()
+    (root / "hot" / "amr-7_000000.mcap").write_bytes(saved[: len(saved) // 2])
+    report = verify_log(root)
+    assert report.ok, report.findings
+    assert report.cycles == 100
+    log = open_log(root)
+    assert [s.session.tier for s in log.segments] == ["cold"]
+    assert log.end_ns - log.start_ns == 99 * 100_000_000
+
+
+def test_a_fork_is_read_once_and_still_reported(tmp_path: Path, caplog) -> None:  # type: ignore[no-untyped-def]
+    """Another recording's cut file at the same position: the finished original is read
+    (counted once), a warning names both files, and verify reports the fork."""
+    from trace_audit.metrics import compute_metrics
+
+    root = write_log(tmp_path / "root")
+    other = write_log(tmp_path / "other.mcap", skip=lambda i: i == 5)
+    _half(other, root / "hot" / "amr-7_000000-copy.mcap")
+    with caplog.at_level("WARNING", logger="trace_runtime"):
+        log = open_log(root)
+    assert [s.path.name for s in log.segments] == ["amr-7_000000.mcap"]
+    assert "two different recordings of segment 0" in caplog.text
+    assert compute_metrics([root]).overall.decisions == 100
+    report = verify_log(root)
+    assert not report.ok and "modified" in _kinds(report.findings)
+    assert report.cycles == 100

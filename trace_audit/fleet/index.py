@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import logging
 import os
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -33,7 +34,7 @@ from trace_audit.fleet.rows import SegmentRows, day_of
 from trace_audit.fleet.tables import INDEX_FORMAT, INDEX_VERSION, parquet_options
 from trace_audit.metrics import MetricsConfig, score_segment
 from trace_runtime.errors import LogReadError, UsageError
-from trace_runtime.logset import Log, copy_rank, open_logs
+from trace_runtime.logset import Log, open_logs, preferred_copies
 from trace_runtime.reader import Segment, open_segment
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.session import TIERS
@@ -274,18 +275,23 @@ def _identity(segment: Segment) -> str:
     return f"empty@{segment.info.start_ns}"
 
 
-def _copy_order(segment: Segment) -> tuple[int, int, int]:
-    """Which copy of one segment to index: an intact copy before a recovered (truncated)
-    one, then ``copy_rank`` (the owner of copy choice across tiers)."""
-    return (0 if segment.info.finished else 1, *copy_rank(segment))
-
-
 def _different_logs(a: str | Path, b: str | Path, key: str) -> UsageError:
     robot, number, cycle = key.split("/")
     return UsageError(
         f"{a} and {b} are two different logs of robot {robot} at segment {int(number)} "
         f"(cycle {cycle}); index them into separate indexes or give the robots distinct ids"
     )
+
+
+def _open_refusing_forks(paths: Sequence[str | Path]) -> Log:
+    # The index refuses two recordings at one position itself, naming both (one line):
+    # the readers' warning about the same fork would say it twice.
+    forks = logging.getLogger("trace_runtime.forks")
+    was, forks.disabled = forks.disabled, True
+    try:
+        return open_logs(paths)
+    finally:
+        forks.disabled = was
 
 
 def _one_copy_each(log: Log) -> tuple[set[Path], list[str]]:
@@ -304,7 +310,7 @@ def _one_copy_each(log: Log) -> tuple[set[Path], list[str]]:
         for other in copies[1:]:
             if _identity(other) != first:
                 raise _different_logs(copies[0].path, other.path, key)
-        best = min(copies, key=_copy_order)
+        best = copies[0]  # the copy every reader reads (logset.preferred_copies)
         for copy in copies:
             if copy is not best:
                 left_out.add(copy.path)
@@ -326,7 +332,8 @@ def _against_manifest(task: IndexTask, entry: dict[str, Any] | None) -> str | No
     new = open_segment(task.path)
     if _identity(held) != _identity(new):
         raise _different_logs(entry["path"], task.path, task.key)
-    if _copy_order(held) <= _copy_order(new):
+    (read,), _ = preferred_copies([held, new])
+    if read is held:
         return f"{task.path}: a copy of {entry['path']}, which stays indexed"
     return None
 
@@ -416,7 +423,7 @@ def build_index(
     known: dict[str, Any] = dict(manifest.get("segments", {}))
     if manifest.get("config") not in (None, settings):
         known = {}  # scored under other settings: every row is rebuilt
-    log = open_logs(paths)
+    log = _open_refusing_forks(paths)
     cache: dict[str, Any] = dict(manifest.get("digests", {}))
     left_out, notes = _one_copy_each(log)
     tasks = _plan(log, _digests(log, cache), target, cfg, left_out)
