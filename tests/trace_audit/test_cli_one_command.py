@@ -35,11 +35,23 @@ def test_a_command_alone_prints_what_it_prints_among_all(
         assert _run(alone, args, capsys) == _run(whole, args, capsys)
 
 
-@pytest.mark.parametrize(
-    "args", [[], ["--help"], ["explian", "LOG"], ["--json"], ["EXPLAIN"], ["-h", "explain"]]
-)
+@pytest.mark.parametrize("args", [["explian", "LOG"], ["--json"], ["EXPLAIN"], ["-h", "explain"]])
 def test_anything_but_a_command_name_first_meets_the_whole_app(args: list[str]) -> None:
     assert app.runner_for(args) is app
+
+
+@pytest.mark.parametrize("args", [[], ["--help"]])
+def test_the_command_list_is_the_whole_apps_without_building_parameters(
+    args: list[str], capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The top-level help lists names and help only: it is drawn from stand-ins without
+    parameters (building every command's was most of its time), and prints the same."""
+    monkeypatch.setenv("COLUMNS", "100")
+    listing = app.runner_for(args)
+    assert listing is not app
+    assert all(not c.params for c in listing.commands.values())  # type: ignore[attr-defined]
+    whole = get_command(app)
+    assert _run(listing, args or ["--help"], capsys) == _run(whole, args or ["--help"], capsys)
 
 
 def test_the_app_keeps_all_its_commands() -> None:

@@ -17,7 +17,7 @@ from typing import Annotated, Any, NoReturn, TypeVar
 import typer
 from typer.core import TyperCommand, TyperGroup
 from typer.main import get_group
-from typer.models import CommandFunctionType
+from typer.models import CommandFunctionType, CommandInfo
 
 from trace_runtime.errors import TimeOutOfRangeError, TraceError, UsageError
 
@@ -143,14 +143,38 @@ class _App(typer.Typer):
         command's parsing, errors and help name no other command, so they come out the same;
         anything else (no command, ``--help``, an unknown or misspelt name) meets them all."""
         name = args[0] if args else None
+        if self.registered_groups or self.registered_callback:
+            return self
+        if list(args) in ([], ["--help"]):
+            return get_group(self._listing())
         chosen = [info for info in self.registered_commands if info.name == name]
-        if len(chosen) != 1 or self.registered_groups or self.registered_callback:
+        if len(chosen) != 1:
             return self
         alone = copy.copy(self)
         alone.registered_commands = chosen
         # As a group, as the whole app is: typer would run an app of one command as that
         # command (its usage line would lose the command's name).
         return get_group(alone)
+
+    def _listing(self) -> _App:
+        """The app as its own help lists it: each command's name and help, none of its
+        parameters (the list shows no parameter; building them all is most of the time
+        ``trace-audit --help`` took)."""
+        listing = copy.copy(self)
+        listing.registered_commands = [_without_parameters(i) for i in self.registered_commands]
+        return listing
+
+
+def _without_parameters(info: CommandInfo) -> CommandInfo:
+    shown = copy.copy(info)
+    # typer takes a command's help from its function's docstring when none was given
+    shown.help = info.help if info.help is not None else getattr(info.callback, "__doc__", None)
+    shown.callback = _no_parameters
+    return shown
+
+
+def _no_parameters() -> None:
+    pass
 
 
 # The help is drawn by click's plain formatter (``rich_markup_mode=None``), not typer's rich
