@@ -15,11 +15,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from trace_runtime import AuditLogger, LoggerConfig, open_log
+from tests.trace_runtime.test_integrity import _write
+from trace_runtime import LoggerConfig, open_log
 from trace_runtime.chain import digest
 from trace_runtime.cycles import Cycle, RawMessage, raw_message
 from trace_runtime.integrity import SealStatus, _seal_status, verify_cycle
-from trace_runtime.testing import synthetic_cycle
 
 _U64 = st.integers(min_value=0, max_value=2**64 - 1)
 
@@ -71,28 +71,10 @@ def test_seal_status_fast_build_is_the_dataclass_value(values: tuple[object, ...
 
 @pytest.fixture()
 def cycles(tmp_path: Path) -> list[Cycle]:
+    """Four cycles, each citing a lidar reading by digest (written by the integrity tests'
+    own helper)."""
     path = tmp_path / "run.mcap"
-    logger = AuditLogger(
-        path,
-        robot_id="amr-1",
-        period_s=0.1,
-        config=LoggerConfig(threaded=False, fsync_interval_s=None),
-    )
-    for i in range(4):
-        with logger.cycle(i * 100_000_000) as c:
-            ref = c.sensor("/sensors/lidar", {"ranges": [1.0 + i / 100, 2.0]})
-            p, b, a, e = synthetic_cycle(i)
-            entity = p.entities[0]
-            evidence = entity.evidence[0].model_copy(update={"ref": ref})
-            c.perception(
-                p.model_copy(
-                    update={"entities": [entity.model_copy(update={"evidence": [evidence]})]}
-                )
-            )
-            c.belief(b)
-            c.action(a)
-            c.execution(e)
-    logger.close()
+    _write(path, 4, LoggerConfig(threaded=False, fsync_interval_s=None))
     return list(open_log(path).iter_cycles())
 
 
