@@ -29,6 +29,7 @@ from trace_runtime.logset import Log, open_log
 from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION, TOPIC_SEAL
 
 __all__ = [
+    "ClockRun",
     "Gap",
     "LogSource",
     "Span",
@@ -213,6 +214,20 @@ class Span:
     """The largest overall execution deviation while the command held, when the records
     name its unit (``deviation_unit``, profile 1.1)."""
     deviation_unit: str | None = field(default=None, metadata={OMIT_EMPTY: True})
+    run: int | None = field(default=None, metadata={OMIT_EMPTY: True})
+    """Which run of the robot's clock (``Timeline.clock_runs``, from 0) holds the row, when
+    its clock restarted in the log."""
+
+
+@dataclass(frozen=True, slots=True)
+class ClockRun:
+    """A run of segments whose times follow on from one another (a restart with a monotonic
+    clock starts the next one lower: PROFILE section 4)."""
+
+    segments: tuple[str, ...]
+    first_cycle: int | None
+    last_cycle: int | None
+    cycles: int
 
 
 @dataclass(frozen=True, slots=True)
@@ -230,6 +245,9 @@ class Timeline:
     rows: tuple[Span, ...]
     gaps: tuple[Gap, ...]
     recovered: bool
+    clock_runs: tuple[ClockRun, ...] = field(default=(), metadata={OMIT_EMPTY: True})
+    """When the robot's clock restarted in the log: its runs, in chain order; the rows and
+    gaps of each run are its own (a run's first row is no decision change). Empty else."""
 
 
 def _window(log: Log, start: TimeArg, end: TimeArg) -> tuple[int, int]:
@@ -259,22 +277,79 @@ def timeline(
     log = as_log(source)
     require_cycles(log)
     lo, hi = _window(log, start, end)
-    period = _period_ns(log)
-    gap_of = gap_stepper(log, gap_tolerance)
+    runs = log.clock_runs()
+    if len({run.first_robot for run in runs}) > 1:
+        runs = [log]  # several robots: one sequence, as before
     rows: list[Span] = []
     gaps: list[Gap] = []
+    counts: list[tuple[int, int, int | None, int | None]] = []
+    for number, run in enumerate(runs):
+        found = _rows(
+            run,
+            lo,
+            hi,
+            every=every,
+            gap_tolerance=gap_tolerance,
+            run=number if len(runs) > 1 else None,
+        )
+        rows.extend(found.rows)
+        gaps.extend(found.gaps)
+        counts.append((found.cycles, found.changes, found.first_cycle, found.last_cycle))
+    clock_runs = (
+        tuple(
+            ClockRun(tuple(s.path.name for s in run.segments), first, last, n)
+            for run, (n, _, first, last) in zip(runs, counts, strict=True)
+        )
+        if len(runs) > 1
+        else ()
+    )
+    robot = log.segments[0].session.robot_id
+    return Timeline(
+        str(log.root),
+        robot,
+        lo,
+        hi,
+        every,
+        sum(c[0] for c in counts),
+        sum(c[1] for c in counts),
+        tuple(rows),
+        tuple(gaps),
+        log.recovered,
+        clock_runs,
+    )
+
+
+@dataclass(slots=True)
+class _RunRows:
+    rows: list[Span]
+    gaps: list[Gap]
+    cycles: int = 0
+    changes: int = 0
+    first_cycle: int | None = None
+    last_cycle: int | None = None
+
+
+def _rows(
+    log: Log, lo: int, hi: int, *, every: bool, gap_tolerance: float, run: int | None
+) -> _RunRows:
+    """The rows and gaps of one run of the clock between ``lo`` and ``hi``."""
+    period = _period_ns(log)
+    gap_of = gap_stepper(log, gap_tolerance)
+    out = _RunRows([], [])
     current: Span | None = None
-    count = changes = 0
     for cycle in log.iter_cycles(lo, hi):
-        count += 1
+        out.cycles += 1
+        if out.first_cycle is None:
+            out.first_cycle = cycle.cycle
+        out.last_cycle = cycle.cycle
         command = command_of(cycle)
         raw_flags, deviation, unit = _execution_of(cycle)
         flags, scenario = split_flags(raw_flags)
         gap = gap_of(cycle)
         if gap is not None:
-            gaps.append(gap)
+            out.gaps.append(gap)
         changed = current is not None and command != current.command
-        changes += changed
+        out.changes += changed
         if current is None or every or changed:
             if current is not None:
                 current.held_ns = cycle.t_ns - current.t_ns
@@ -290,8 +365,9 @@ def timeline(
                 end_cycle=cycle.cycle,
                 end_t_ns=cycle.t_ns,
                 scenario=scenario,
+                run=run,
             )
-            rows.append(current)
+            out.rows.append(current)
         current.cycles += 1
         current.end_cycle, current.end_t_ns = cycle.cycle, cycle.t_ns
         # Only where the writer names the unit (profile 1.1): a number without one cannot
@@ -308,19 +384,7 @@ def timeline(
                 current.flag_counts[flag] = current.flag_counts.get(flag, 0) + 1
     if current is not None:
         current.held_ns = current.end_t_ns + period - current.t_ns
-    robot = log.segments[0].session.robot_id
-    return Timeline(
-        str(log.root),
-        robot,
-        lo,
-        hi,
-        every,
-        count,
-        changes,
-        tuple(rows),
-        tuple(gaps),
-        log.recovered,
-    )
+    return out
 
 
 # --- why ---------------------------------------------------------------------------------

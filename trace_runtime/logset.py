@@ -279,6 +279,21 @@ class Log:
         log._recovered = any(isinstance(s, Segment) and not s.finished for s in run)
         return log
 
+    def clock_runs(self) -> list[Log]:
+        """The log cut into the runs of its robots' clocks (``clock_run``), each robot's in
+        chain order; ``[self]`` when no clock went back between segments."""
+        runs: list[Log] = []
+        seen: set[str] = set()
+        for slot in sorted(self._slots, key=lambda s: (_robot_of(s), *_chain_key(s))):
+            if slot.path.name in seen:
+                continue
+            run = self.clock_run(slot.path.name)
+            if run is self:
+                return [self]
+            seen.update(s.path.name for s in run._slots)
+            runs.append(run)
+        return runs
+
     def _place(self, slots: Sequence[_Slot]) -> None:
         self._slots = list(slots)
         self._starts = [s.start_ns for s in self._slots]

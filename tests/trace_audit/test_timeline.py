@@ -5,8 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from typer.testing import CliRunner
 
 from tests.trace_audit.conftest import PERIOD_NS, T0_NS, stretch, t_ns, write_log
+from trace_audit.cli import app
+from trace_audit.jsonout import to_jsonable
 from trace_audit.timeline import TimePoint, command_of, timeline
 from trace_runtime import open_log
 from trace_runtime.errors import UsageError
@@ -102,3 +105,27 @@ def test_command_of_matches_the_full_parse(sample_log: Path) -> None:
     for cycle in open_log(sample_log).iter_cycles():
         action = cycle.action
         assert action is not None and command_of(cycle) == action.command
+
+
+def test_a_restarted_clock_gives_one_sequence_per_run_never_merged_by_time(
+    tmp_path: Path,
+) -> None:
+    """Two runs of one robot whose times overlap (a restart with a monotonic clock): each
+    run's rows are its own, its first row is no decision change, and the text shows the
+    runs one after the other."""
+    root = write_log(tmp_path / "root")
+    write_log(root)
+    alone = timeline(write_log(tmp_path / "one.mcap"))
+    both = timeline(root)
+    assert [(r.first_cycle, r.last_cycle, r.cycles) for r in both.clock_runs] == [
+        (0, 99, 100),
+        (100, 199, 100),
+    ]
+    assert both.changes == 2 * alone.changes and both.cycles == 200
+    runs = [row.run for row in both.rows]
+    assert runs == sorted(runs) and set(runs) == {0, 1}
+    second = [row for row in both.rows if row.run == 1]
+    assert second[0].previous is None and second[0].cycle == 100
+    assert "clock_runs" not in to_jsonable(alone) and "run" not in to_jsonable(alone.rows[0])
+    shown = CliRunner().invoke(app, ["timeline", str(root), "--plain"]).output
+    assert shown.index("clock run 1 of 2") < shown.index("clock run 2 of 2")

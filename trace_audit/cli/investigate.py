@@ -684,8 +684,38 @@ def timeline_doc(r: Timeline) -> Doc:
         f"{len(r.gaps)} gap{'s' if len(r.gaps) != 1 else ''}"
         + ("; recovered from an unfinished segment" if r.recovered else "")
     )
+    if not r.clock_runs:
+        _timeline_table(doc, r, list(r.rows), list(r.gaps))
+        return doc
+    # The clock restarted: each run is its own sequence (times start again lower), so the
+    # runs are shown one after the other, never merged by time.
+    doc.line(
+        Seg(
+            f"The robot's clock restarted {len(r.clock_runs) - 1} time(s) in this log: each "
+            "run of its clock is shown on its own.",
+            "yellow",
+        )
+    )
+    for number, run in enumerate(r.clock_runs):
+        cycles = (
+            f"cycles {run.first_cycle}..{run.last_cycle}"
+            if run.first_cycle is not None
+            else "no cycle in the window"
+        )
+        shown = run.segments[0] if len(run.segments) == 1 else f"{run.segments[0]}.."
+        doc.line(f"clock run {number + 1} of {len(r.clock_runs)}: {cycles} ({shown})")
+        in_run = [g for g in r.gaps if _in_run(g.after_cycle, run)]
+        _timeline_table(doc, r, [row for row in r.rows if row.run == number], in_run)
+    return doc
+
+
+def _in_run(cycle: int, run: Any) -> bool:
+    return run.first_cycle is not None and run.first_cycle <= cycle <= run.last_cycle
+
+
+def _timeline_table(doc: Doc, r: Timeline, rows: list[Any], gaps: list[Gap]) -> None:
     events: list[tuple[int, int, list[Any]]] = []
-    for row in r.rows:
+    for row in rows:
         lead = f"{row.leading.label} = {row.leading.shown}" if row.leading else "-"
         flags = ", ".join(f"{k} x{v}" if v > 1 else k for k, v in row.flag_counts.items())
         what: list[Any] = [lead]
@@ -710,7 +740,7 @@ def timeline_doc(r: Timeline) -> Doc:
                 ],
             )
         )
-    for gap in r.gaps:
+    for gap in gaps:
         events.append((gap.after_t_ns, 1, _gap_row(gap)))
     events.sort(key=lambda e: (e[0], e[1]))
     doc.table(
@@ -723,7 +753,6 @@ def timeline_doc(r: Timeline) -> Doc:
         ],
         [e[2] for e in events],
     )
-    return doc
 
 
 def _gap_row(gap: Gap) -> list[Any]:
