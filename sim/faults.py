@@ -150,12 +150,15 @@ def truth_path_for(out: Path) -> Path:
 
 
 class TruthLog:
-    """Appends one JSON line per injected fault: cycle, t_ns, scenario, kind, detail."""
+    """Appends one JSON line per injected fault: cycle, t_ns, scenario, kind, detail.
 
-    def __init__(self, path: Path) -> None:
+    ``keep=True`` adds to what the file holds: a run into an existing log root continues the
+    robot's chain there (a restart), and the earlier run's truth must stay beside it."""
+
+    def __init__(self, path: Path, *, keep: bool = False) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         self.path = path
-        self._f: IO[bytes] = open(path, "wb")  # noqa: SIM115 - closed in close()
+        self._f: IO[bytes] = open(path, "ab" if keep else "wb")  # noqa: SIM115 - closed in close()
         self.counts: dict[str, int] = {}
 
     def write(

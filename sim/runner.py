@@ -199,7 +199,7 @@ def run(config: RunConfig, progress: Callable[[int, int], None] | None = None) -
             out.parent.mkdir(parents=True, exist_ok=True)
         else:
             out.mkdir(parents=True, exist_ok=True)
-        truth = TruthLog(truth_path)
+        truth = TruthLog(truth_path, keep=out.suffix != ".mcap")
         logger: AuditLogger | NullLogger = (
             NullLogger()
             if not config.audit

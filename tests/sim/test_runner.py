@@ -129,3 +129,17 @@ def test_cli_duration_runs_batch_by_default_and_scenario_runs_refuse_batch(
         app, ["run", "--duration", "10s", "--batch", "0", "--out", str(tmp_path / "g.mcap")]
     )
     assert res.exit_code == 2 and res.stderr.count("\n") == 1
+
+
+def test_a_second_run_into_a_log_root_keeps_the_first_runs_truth(tmp_path: Path) -> None:
+    """The second run continues the robot's chain in the root (a restart): the ground truth
+    of the faults injected in the first run stays in the sidecar beside the second's."""
+    root = tmp_path / "root"
+    first = run(RunConfig(out=root, total_cycles=300, seed=1))
+    first_truth = read_truth(first.truth)
+    assert first_truth
+    second = run(RunConfig(out=root, total_cycles=300, seed=2))
+    both = read_truth(second.truth)
+    assert second.truth == first.truth
+    assert both[: len(first_truth)] == first_truth and len(both) > len(first_truth)
+    assert min(t["cycle"] for t in both[len(first_truth) :]) >= 300
