@@ -257,10 +257,15 @@ class GroupMetrics:
     declared_dropped: int
     """Sum of the seals' ``dropped`` counts: cycles the logger says it could not write."""
     clock_anomalies: int
-    """Sealed cycles whose time is not after the previous sealed cycle's (no interval)."""
+    """Sealed cycles whose time is not after the previous sealed cycle's within a segment
+    (no interval)."""
     integrity_ok: int
     integrity_failed: int
     tcs: Stat
+    clock_restarts: int | None = field(default=None, metadata={OMIT_EMPTY: True})
+    """Segments whose first sealed time is not after the previous segment's last: a restart
+    with a monotonic clock (PROFILE section 4 allows it). The run starts a new window, as a
+    log's first cycle does. None when there is none."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -394,6 +399,7 @@ class GroupSums:
     missing_cycles: int = 0
     dropped: int = 0
     anomalies: int = 0
+    restarts: int = 0
 
     def merge(self, other: GroupSums) -> None:
         for name in self.__slots__:
@@ -407,6 +413,8 @@ class _Stream:
     prev_t_ns: int | None = None
     prev_cycle: int = -1
     prev_seal: str | None = None
+    prev_segment: str = ""
+    """The file the last sealed cycle came from."""
 
 
 class SealOutcome(NamedTuple):
@@ -675,9 +683,15 @@ class _Scanner:
         continuity_d = 1.0
         window_ns = 0
         gap: Gap | None = None
-        if prev_t is None:
+        restart = (
+            prev_t is not None
+            and t_ns <= prev_t
+            and stream.prev_segment not in ("", segment.path.name)
+        )
+        if prev_t is None or restart:
             window_ns = period
             acc.window_ns += period
+            acc.restarts += restart
         elif t_ns <= prev_t:
             acc.anomalies += 1
         else:
@@ -703,7 +717,8 @@ class _Scanner:
                     self.partial.gaps.append(gap)
         stream.prev_t_ns = t_ns
         stream.prev_cycle = cycle.cycle
-        anomaly = prev_t is not None and t_ns <= prev_t
+        stream.prev_segment = segment.path.name
+        anomaly = prev_t is not None and t_ns <= prev_t and not restart
         return SealOutcome(integrity, True, continuity_d, window_ns, gap, status.dropped, anomaly)
 
     def prefill(self, segment: Segment) -> None:
@@ -723,6 +738,7 @@ class _Scanner:
         if last_sealed is not None:
             self.stream.prev_t_ns = last_sealed.t_ns
             self.stream.prev_cycle = last_sealed.cycle
+            self.stream.prev_segment = segment.path.name
             self.stream.prev_seal = digest(last_sealed.payloads[TOPIC_SEAL])
 
 
@@ -1069,6 +1085,7 @@ def _group(name: str, acc: GroupSums) -> GroupMetrics:
         integrity_ok=acc.integrity_ok,
         integrity_failed=n - acc.integrity_ok,
         tcs=_stat(acc.tcs_sum, acc.tcs_sq, n, "decisions"),
+        clock_restarts=acc.restarts or None,
     )
 
 

@@ -579,3 +579,21 @@ def test_analysis_window_cuts_without_false_chain_breaks(tmp_path: Path) -> None
     assert _comparable(one) == _comparable(two)
     with pytest.raises(UsageError):
         MetricsConfig(start_ns=t(5), end_ns=t(1))
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_clock_restart_between_segments_is_not_an_anomaly(tmp_path: Path, jobs: int) -> None:
+    """Two runs of one robot, the second starting its clock from the same time (PROFILE
+    section 4 allows it across segments): counted as a restart, each run its own window;
+    a step back inside one segment stays a clock anomaly."""
+    from tests.trace_audit.conftest import write_log
+    from tests.trace_audit.profile_writer import Faults, write_profile_log
+
+    root = write_log(tmp_path / "root")
+    write_log(root)
+    overall = compute_metrics([root], MetricsConfig(workers=jobs)).overall
+    assert (overall.clock_anomalies, overall.clock_restarts) == (0, 1)
+    assert overall.window_s == pytest.approx(2 * 10.0)
+    stepped = write_profile_log(tmp_path / "p.mcap", faults=Faults(clock_step_back_at=12))
+    inside = compute_metrics([stepped]).overall
+    assert (inside.clock_anomalies, inside.clock_restarts) == (1, None)

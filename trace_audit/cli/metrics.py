@@ -347,7 +347,13 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
         f"  Sealed {overall.sealed}, unsealed {overall.unsealed}, integrity failed "
         f"{overall.integrity_failed}; the gaps hold ~{overall.missing_cycles} missing cycles, "
         f"the seals declare {overall.declared_dropped} dropped"
-        + (f", {overall.clock_anomalies} clock anomalies." if overall.clock_anomalies else ".")
+        + (f", {overall.clock_anomalies} clock anomalies" if overall.clock_anomalies else "")
+        + (
+            f"; the robot's clock restarted {overall.clock_restarts} time(s) between segments "
+            "(allowed; each run starts its own window)."
+            if overall.clock_restarts
+            else "."
+        )
     )
 
     if report.channel_deviation:
