@@ -91,6 +91,7 @@ NoteKind = Literal[
     "no_checkpoints",
     "external_unresolved",
     "clock_backwards",
+    "clock_restart",
 ]
 """Things an investigator should know that are not tampering."""
 
@@ -1444,6 +1445,24 @@ def _verify_robot(
         for r in results:
             if r.anchor is not None and (anchor is None or r.anchor.cycle >= anchor.cycle):
                 anchor = r.anchor
+        start = main.summary.start_ns
+        if tail is not None and start is not None and start <= tail.t_ns:
+            sink.note(
+                Finding(
+                    "clock_restart",
+                    f"the robot's clock restarted: segment {number} starts at "
+                    f"{start / 1e9:.3f} s, not after cycle {tail.cycle} at {tail.t_ns / 1e9:.3f} s "
+                    "(PROFILE section 4 allows it across segments; a time may name a decision "
+                    "in each run: explain by --cycle, or read each run apart)",
+                    robot_id,
+                    _display_name(first.path),
+                    number,
+                    main.summary.first_cycle,
+                    main.summary.first_cycle,
+                    start,
+                    start,
+                )
+            )
         if main.tail is not None:
             tail = main.tail  # an empty segment (killed before its first write) passes it on
         previous = number

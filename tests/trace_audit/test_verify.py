@@ -97,6 +97,17 @@ def test_a_clock_stepping_back_within_a_segment_is_a_note_that_names_the_cycle(
     assert plain.exit_code == 0 and "backwards" in plain.output
 
 
+def test_a_clock_restart_between_segments_is_a_note_not_a_finding(tmp_path: Path) -> None:
+    root = write_log(tmp_path / "root")
+    write_log(root)  # the same robot again, its clock from the same time
+    report = verify_log(root)
+    assert report.ok and report.findings == []
+    (note,) = [n for n in report.notes if n.kind == "clock_restart"]
+    assert (note.segment_no, note.first_cycle) == (1, 100)
+    assert "not after cycle 99" in note.message
+    assert "clock_restart" not in _kinds(verify_log(write_log(tmp_path / "one")).notes)
+
+
 def test_an_honest_profile_log_has_no_clock_note(tmp_path: Path) -> None:
     report = verify_log(write_profile_log(tmp_path / "p.mcap"))
     assert report.ok and "clock_backwards" not in _kinds(report.notes)
