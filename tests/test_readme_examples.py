@@ -1,0 +1,64 @@
+"""The README's "Investigating" commands run as written on the log the README tells a reader
+to make (``trace-sim run --scenario all --cycles 100 --seed 42 --out run.mcap``)."""
+
+from __future__ import annotations
+
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from trace_audit.cli import app
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def _investigating_commands() -> list[list[str]]:
+    text = README.read_text()
+    block = text.split("## Investigating", 1)[1].split("```sh", 1)[1].split("```", 1)[0]
+    commands = []
+    for line in block.splitlines():
+        command = line.split("#", 1)[0].strip()
+        if command.startswith("trace-audit ") and " run.mcap" in command:
+            commands.append(shlex.split(command)[1:])
+    return commands
+
+
+def test_the_readme_names_the_log_to_make_and_the_commands_to_run() -> None:
+    assert "--cycles 100 --seed 42 --out run.mcap" in README.read_text()
+    assert len(_investigating_commands()) >= 6
+
+
+@pytest.mark.parametrize("args", _investigating_commands(), ids=lambda a: " ".join(a[:3]))
+def test_a_readme_command_runs_on_the_readme_log(
+    args: list[str], readme_log: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(readme_log)
+    done = CliRunner().invoke(app, [*args, "--plain"] if args[0] != "export" else args)
+    assert done.exit_code == 0, (args, done.output)
+    assert not re.search(r"Traceback", done.output)
+
+
+@pytest.fixture(scope="module")
+def readme_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from sim.cli import app as sim_app
+
+    where = tmp_path_factory.mktemp("readme")
+    made = CliRunner().invoke(
+        sim_app,
+        [
+            "run",
+            "--scenario",
+            "all",
+            "--cycles",
+            "100",
+            "--seed",
+            "42",
+            "--out",
+            str(where / "run.mcap"),
+        ],
+    )
+    assert made.exit_code == 0, made.output
+    return where
