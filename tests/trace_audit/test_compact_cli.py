@@ -166,3 +166,17 @@ def test_compact_and_catalog_have_help_with_examples() -> None:
     for command in ("compact", "catalog"):
         result = invoke(command, "--help")
         assert result.exit_code == 0 and "Examples" in result.stdout
+
+
+def test_a_log_on_the_robots_own_clock_is_not_dated_1970(tmp_path: Path) -> None:
+    """The sim writes times from 0 s: the catalog and compaction show them as seconds; a
+    system clock's times stay UTC dates."""
+    from tests.trace_audit.conftest import write_log
+
+    root = write_log(tmp_path / "root")
+    shown = CliRunner().invoke(app, ["catalog", str(root), "--plain"]).output
+    assert "100.000 s" in shown and "1970" not in shown
+    moved = CliRunner().invoke(
+        app, ["compact", str(root), "--tier", "cold", "--dry-run", "--plain"]
+    )
+    assert "1970" not in moved.output and "109.900 s" in moved.output

@@ -271,10 +271,17 @@ def _span(ns: int) -> str:
     return f"{ns / 1e9:g}s"
 
 
+_YEAR_2000_NS = 946_684_800 * 10**9
+
+
 def _when(t_ns: int | None) -> str:
+    """A log time as a UTC date when it can be one; a robot's own clock (a simulator's, a
+    monotonic one) starts near zero, and reads as seconds, not as a day in 1970."""
     if t_ns is None:
         return "-"
-    return datetime.fromtimestamp(t_ns / 1e9, tz=UTC).strftime("%Y-%m-%d %H:%M:%S")
+    if t_ns < _YEAR_2000_NS:
+        return f"{t_ns / 1e9:.3f} s"
+    return datetime.fromtimestamp(t_ns / 1e9, tz=UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
 
 
 def _render_report(report: CompactionReport, out: Any) -> None:
@@ -288,7 +295,7 @@ def _render_report(report: CompactionReport, out: Any) -> None:
     )
     out.print(
         f"  segments older than {_span(report.older_than_ns)} before the {report.reference}"
-        f" ({_when(report.reference_ns)} UTC)"
+        f" ({_when(report.reference_ns)})"
     )
     for leftover in report.leftovers:
         out.print(f"  leftover {leftover.path}: {leftover.action}")
@@ -358,7 +365,7 @@ def _render_catalog(catalog: Catalog, out: Any) -> None:
     from rich.table import Table
 
     boxes = box.ASCII if out.no_color else box.SIMPLE_HEAVY
-    table = Table(box=boxes, show_edge=False, title=f"catalog of {catalog.root} (times UTC)")
+    table = Table(box=boxes, show_edge=False, title=f"catalog of {catalog.root}")
     for name in ("robot", "seg", "tier", "start", "end", "cycles", "size"):
         table.add_column(
             name, justify="right" if name in ("seg", "cycles", "size") else "left", no_wrap=True
