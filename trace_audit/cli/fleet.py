@@ -108,7 +108,12 @@ def _index_doc(r: IndexReport) -> Doc:
     doc.title(f"Fleet index {r.index} (version {r.version})")
     doc.fields(
         [
-            ("segments", f"{r.segments} ({len(r.indexed)} indexed now, {r.unchanged} unchanged)"),
+            (
+                "segments",
+                f"{r.segments} in the index; of this run's inputs {len(r.indexed)} indexed now, "
+                f"{r.unchanged} unchanged"
+                + (f", {len(r.notes)} left out (notes below)" if r.notes else ""),
+            ),
             ("decisions", f"{r.decisions_total} ({r.decisions_written} written now)"),
             ("files", f"{r.files}, {r.bytes / 1e6:.2f} MB"),
             ("speed", f"{r.cycles_per_s:,.0f} cycles/s over {r.elapsed_s:.2f} s"),
