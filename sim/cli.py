@@ -36,13 +36,24 @@ app = typer.Typer(
     add_completion=False,
     no_args_is_help=True,
     pretty_exceptions_enable=False,
-    rich_markup_mode="rich",
+    # click's plain help, as trace-audit's: typer's rich panels import rich and pygments for
+    # every --help, and print values as Python types ("<int>", "<bool>"). trace-audit's
+    # command class that renames them is not imported here: sim/cli.py stays free of
+    # trace_audit (tests/trace_runtime/test_layering.py), so each value is named by metavar.
+    rich_markup_mode=None,
+    context_settings={"max_content_width": 100},
 )
 
 
 def _fail(message: str, code: int) -> None:
     sys.stderr.write(f"trace-sim: {message}\n")
     raise typer.Exit(code)
+
+
+def _summary(text: str) -> str:
+    """The first paragraph, for the command list (click cuts a derived one at ~45 characters
+    with "...")."""
+    return " ".join(text.strip().split("\n\n")[0].split())
 
 
 def _help(text: str) -> str:
@@ -67,7 +78,7 @@ expected share of lost cycles is still 1%, in rarer and longer gaps; the ground-
 sidecar lists every lost cycle with its batch. --batch 1 gives the paper's cycle-by-cycle
 losses, at the paper runs' speed.
 
-[bold]Examples[/bold]:
+Examples:
 
   trace-sim run --scenario all --cycles 100 --seed 42 --out run.mcap
 
@@ -77,24 +88,38 @@ losses, at the paper runs' speed.
 """
 
 
-@app.command("run", help=_help(_RUN_HELP))
+@app.command("run", help=_help(_RUN_HELP), short_help=_summary(_RUN_HELP))
 def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
-    out: Annotated[Path, typer.Option("--out", "-o", help="a .mcap file or a log root directory")],
-    scenario: Annotated[str, typer.Option(help="all, or one of: " + ", ".join(SCENARIOS))] = "all",
-    cycles: Annotated[int, typer.Option(help="decision cycles per scenario (10 Hz)")] = 100,
-    seed: Annotated[int, typer.Option(help="random seed; same seed, same log")] = 0,
+    out: Annotated[
+        Path,
+        typer.Option("--out", "-o", metavar="PATH", help="a .mcap file or a log root directory"),
+    ],
+    scenario: Annotated[
+        str, typer.Option(metavar="TEXT", help="all, or one of: " + ", ".join(SCENARIOS))
+    ] = "all",
+    cycles: Annotated[
+        int, typer.Option(metavar="INTEGER", help="decision cycles per scenario (10 Hz)")
+    ] = 100,
+    seed: Annotated[
+        int, typer.Option(metavar="INTEGER", help="random seed; same seed, same log")
+    ] = 0,
     faults: Annotated[
-        str, typer.Option(help="on: inject faults at the paper's rates; off: none")
+        str,
+        typer.Option(metavar="on|off", help="on: inject faults at the paper's rates; off: none"),
     ] = "on",
     duration: Annotated[
         str | None,
-        typer.Option(help="routine operation for this long (e.g. 24h), cycling through scenarios"),
+        typer.Option(
+            metavar="TEXT",
+            help="routine operation for this long (e.g. 24h), cycling through scenarios",
+        ),
     ] = None,
     batch: Annotated[
         int | None,
         typer.Option(
+            metavar="INTEGER",
             help=f"cycles per write, --duration runs only (default {DURATION_BATCH}); "
-            "1 writes cycle by cycle like the paper's runs"
+            "1 writes cycle by cycle like the paper's runs",
         ),
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="print the summary as JSON")] = False,
@@ -207,7 +232,7 @@ def scenarios_cmd(
 ) -> None:
     """List the scenarios.
 
-    [bold]Example[/bold]: trace-sim scenarios --json
+    Example: trace-sim scenarios --json
     """
     rows = [{"name": s.name, "description": s.description} for s in SCENARIOS.values()]
     if as_json:
@@ -231,9 +256,9 @@ seeds, explains their decisions on --seeds evaluation runs (5 scenarios x --cycl
 faults at the paper's rates), and scores every method's output with the metrics TRACE is
 scored with (docs/metrics.md, "Explanation baselines"). Then TRACE's cost per cycle with
 the audit logger on and off (same runs), and its growth with entities n and actions k.
-Needs the \\[baselines] extra. Figures: mean over seeds (std across seeds with --json).
+Needs the [baselines] extra. Figures: mean over seeds (std across seeds with --json).
 
-[bold]Examples[/bold]:
+Examples:
 
   trace-sim baselines
 
@@ -241,13 +266,22 @@ Needs the \\[baselines] extra. Figures: mean over seeds (std across seeds with -
 """
 
 
-@app.command("baselines", help=_help(_BASELINES_HELP))
+@app.command("baselines", help=_help(_BASELINES_HELP), short_help=_summary(_BASELINES_HELP))
 def baselines_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
-    cycles: Annotated[int, typer.Option(help="decision cycles per scenario and run")] = 100,
-    seed: Annotated[int, typer.Option(help="first evaluation seed (the others follow)")] = 1,
-    seeds: Annotated[int, typer.Option(help="evaluation runs, one per seed")] = 5,
+    cycles: Annotated[
+        int, typer.Option(metavar="INTEGER", help="decision cycles per scenario and run")
+    ] = 100,
+    seed: Annotated[
+        int, typer.Option(metavar="INTEGER", help="first evaluation seed (the others follow)")
+    ] = 1,
+    seeds: Annotated[
+        int, typer.Option(metavar="INTEGER", help="evaluation runs, one per seed")
+    ] = 5,
     explain: Annotated[
-        int, typer.Option(help="decisions explained per run by each method (a random sample)")
+        int,
+        typer.Option(
+            metavar="INTEGER", help="decisions explained per run by each method (a random sample)"
+        ),
     ] = 100,
     as_json: Annotated[bool, typer.Option("--json", help="print the report as JSON")] = False,
     plain: Annotated[
@@ -372,15 +406,17 @@ to the factor's descendants through the logged edges' rules. Cycles the log cann
 Exit 0 when everything re-runs as logged, 1 listing each one that does not, 3 when the log
 cannot be read.
 
-[bold]Example[/bold]:
+Example:
 
   trace-sim check-counterfactuals run.mcap --json
 """
 
 
-@app.command("check-counterfactuals", help=_help(_CHECK_HELP))
+@app.command("check-counterfactuals", help=_help(_CHECK_HELP), short_help=_summary(_CHECK_HELP))
 def check_counterfactuals_cmd(
-    log: Annotated[Path, typer.Argument(help="a .mcap file or a log root directory")],
+    log: Annotated[
+        Path, typer.Argument(metavar="LOG", help="a .mcap file or a log root directory")
+    ],
     as_json: Annotated[bool, typer.Option("--json", help="print the report as JSON")] = False,
     plain: Annotated[bool, typer.Option("--plain", help="plain text, no colour")] = False,
 ) -> None:

@@ -52,6 +52,7 @@ __all__ = [
     "RobotSummary",
     "SegmentSummary",
     "VerifyReport",
+    "is_external_evidence",
     "problem_finding",
     "verify",
 ]
@@ -253,6 +254,17 @@ class _AbsentRun:
     last: tuple[int, int]
     refs: int
     detail: str  # the first one
+
+
+_EXTERNAL = "external recording"
+"""Named in the message of every finding about a ref into an external recording (changed
+or absent), so ``is_external_evidence`` can tell them from in-log refs."""
+
+
+def is_external_evidence(finding: Finding) -> bool:
+    """True for an evidence mismatch of a ref into an external recording (PROFILE section 11),
+    whether the message it names differs or is not there."""
+    return finding.kind == "evidence_mismatch" and _EXTERNAL in finding.message
 
 
 def _prefix(hex_digest: str) -> int:
@@ -541,7 +553,7 @@ class _SegmentCheck:
             self.scan.bad_positions.add(position)
             self.finding(
                 "evidence_mismatch",
-                f"cycle {status.cycle}: evidence ref into an external recording does not "
+                f"cycle {status.cycle}: evidence ref into an {_EXTERNAL} does not "
                 f"resolve: {'; '.join(broken)}",
                 (status.cycle, status.cycle, status.t_ns, status.t_ns),
             )
@@ -564,13 +576,19 @@ class _SegmentCheck:
         for run in runs:
             (first, first_ns), (last, last_ns) = run.first, run.last
             where = f"cycle {first}" if first == last else f"cycles {first}..{last}"
-            self.finding(
-                "evidence_mismatch",
-                f"{where}: {run.refs} evidence ref(s) name messages that recording "
-                f"{run.recording} does not hold (the first: {run.detail}); a run of them "
-                "means the recording was cut short or those messages removed",
-                (first, last, first_ns, last_ns),
-            )
+            if run.refs == 1:
+                what = (
+                    f"an evidence ref names a message that {_EXTERNAL} {run.recording} "
+                    f"does not hold: {run.detail}"
+                )
+            else:
+                # only a run says something about the recording as a whole
+                what = (
+                    f"{run.refs} evidence refs name messages that {_EXTERNAL} "
+                    f"{run.recording} does not hold (the first: {run.detail}); a run of them "
+                    "means the recording was cut short or those messages removed"
+                )
+            self.finding("evidence_mismatch", f"{where}: {what}", (first, last, first_ns, last_ns))
         scan.absent_runs, scan.absent_open = [], {}
 
     # --- the chain inside the segment ------------------------------------------------------

@@ -141,9 +141,54 @@ def test_a_recording_cut_short_is_one_finding_for_the_run_of_cycles_it_lost(
     spans = sorted((f.kind, f.first_cycle, f.last_cycle) for f in report.findings)
     assert spans == [("evidence_mismatch", 10, 10), ("evidence_mismatch", 25, CYCLES - 1)]
     run = max(report.findings, key=lambda f: f.last_cycle or 0)
-    assert f"{CYCLES - 25} evidence ref(s)" in run.message
+    assert f"{CYCLES - 25} evidence refs" in run.message
     assert "no /scan message" in run.message and recording.name in run.message
     assert report.cycles_valid == CYCLES - 1 - (CYCLES - 25)
+
+
+def test_one_missing_message_is_said_plainly_and_a_run_as_a_run(
+    robot: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """The words "the first" and "a run of them" only fit when several refs are missing."""
+    log, bag = robot
+    [recording] = list(bag.glob("*.mcap"))
+    cut = _copy_bag(recording, tmp_path / "cut" / recording.name, stop=25, drop=10)
+    one, run = sorted(verify_log(log, evidence=[cut]).findings, key=lambda f: f.first_cycle or 0)
+    assert one.message.startswith(
+        f"cycle 10: an evidence ref names a message that external recording {recording.name} "
+        "does not hold: no /scan message"
+    )
+    assert "the first" not in one.message and "a run of them" not in one.message
+    assert run.message.startswith(f"cycles 25..{CYCLES - 1}: {CYCLES - 25} evidence refs name")
+    assert "(the first: no /scan message" in run.message and "cut short" in run.message
+
+
+def test_doctor_breaks_external_digest_for_refs_the_recording_does_not_hold(
+    robot: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """PROFILE section 11: "the message is not there" breaks the rule as a changed message
+    does. A cut recording is one problem for its run of cycles (not one per ref), located
+    by its cycle range, and a changed message before the cut stays a problem of its own."""
+    log, bag = robot
+    [recording] = list(bag.glob("*.mcap"))
+    damaged = _copy_bag(recording, tmp_path / "d" / recording.name, change=5, drop=10, stop=25)
+    report = doctor_log(log, evidence=[damaged])
+    assert not report.conforms
+    located = [(p.rule, p.section, p.cycle, p.last_cycle, p.count) for p in report.errors]
+    assert located == [
+        ("external-digest", "§11", 5, 5, 1),
+        ("external-digest", "§11", 10, 10, 1),
+        ("external-digest", "§11", 25, CYCLES - 1, 1),
+    ]
+    changed, dropped, cut = report.errors
+    assert "does not match the ref's digest" in changed.message
+    assert "no /scan message" in dropped.message
+    assert f"{CYCLES - 25} evidence refs" in cut.message and recording.name in cut.message
+
+    runner = CliRunner()
+    shown = runner.invoke(app, ["doctor", str(log), "--evidence", str(damaged), "--plain"])
+    assert shown.exit_code == 1, shown.output
+    assert "CONFORMS" not in shown.stdout and f"cycles 25..{CYCLES - 1}" in shown.stdout
 
 
 def test_verify_on_worker_processes_checks_the_recording_there_too(

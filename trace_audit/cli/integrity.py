@@ -45,7 +45,8 @@ robot (they chain-verify, but no signature vouches for them yet), and a clock th
 back within a segment (PROFILE section 4 forbids it; the seals still chain).
 
 Without --key the chain is checked but a log re-chained by someone else is not detected.
-Exit codes: 0 clean, 1 findings, 2 usage (e.g. a bad key file), 3 unreadable input.
+With --scheduler, a root of several robots is verified on a Dask cluster, one task per
+robot. Exit codes: 0 clean, 1 findings, 2 usage (e.g. a bad key file), 3 unreadable input.
 
 [bold]Examples[/bold]:
 
@@ -55,7 +56,7 @@ Exit codes: 0 clean, 1 findings, 2 usage (e.g. a bad key file), 3 unreadable inp
 
   trace-audit verify run.mcap --json | jq .findings
 
-  trace-audit verify /data/fleet/ --scheduler tcp://10.0.0.5:8786 (one task per robot)
+  trace-audit verify /data/fleet/ --scheduler tcp://10.0.0.5:8786
 """
 
 _KEYGEN_HELP = """Create an Ed25519 key pair for signing checkpoints.

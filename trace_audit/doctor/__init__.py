@@ -20,7 +20,7 @@ from trace_audit.evidence import open_recordings
 from trace_runtime.errors import LogReadError
 from trace_runtime.logset import find_segment_files, open_log
 from trace_runtime.recordings import Recordings
-from trace_runtime.verification import Finding, verify
+from trace_runtime.verification import Finding, is_external_evidence, verify
 
 __all__ = ["RULES", "DoctorReport", "Problem", "Rule", "SegmentDoctor", "doctor_log"]
 
@@ -108,8 +108,10 @@ def _verify_into(
             continue
         rule = _FINDING_RULES.get(finding.kind)
         if finding.kind == "evidence_mismatch":
-            # in-log refs are checked (with their window) by the content checks
-            if "external recording" not in finding.message:
+            # in-log refs are checked (with their window) by the content checks; a ref into
+            # an external recording breaks §11 whether its message differs or is not there
+            # (verify already makes a run of absent ones one finding, so one problem)
+            if not is_external_evidence(finding):
                 continue
             rule = "external-digest"
         _file(finding, rule or "seal-chain", report, by_name)
@@ -124,4 +126,4 @@ def _file(
 ) -> None:
     name = finding.segment.rsplit("/", 1)[-1]
     segment = by_name.get(name) or report.segments[0]
-    segment.add(rule, finding.message, cycle=finding.first_cycle)
+    segment.add(rule, finding.message, cycle=finding.first_cycle, last_cycle=finding.last_cycle)

@@ -146,6 +146,9 @@ class Problem:
     """How many times the same rule broke the same way (only the first is located)."""
     key: str = ""
     """What makes two problems of a rule "the same way" (e.g. the topic)."""
+    last_cycle: int | None = None
+    """The last cycle of a problem that spans a run of cycles (e.g. refs into a recording
+    cut short), else ``cycle``."""
 
 
 @dataclass(slots=True)
@@ -169,6 +172,7 @@ class SegmentDoctor:
         cycle: int | None = None,
         offset: int | None = None,
         key: str | None = None,
+        last_cycle: int | None = None,
     ) -> None:
         """Record a problem. The same rule broken the same way again (same ``key``, by default
         the same message) only counts up: the first place is the one reported."""
@@ -178,11 +182,12 @@ class SegmentDoctor:
             if seen.rule == rule and seen.key == key:
                 self.problems[i] = Problem(
                     rule, spec.section, spec.level, seen.message, seen.cycle, seen.offset,
-                    seen.count + 1, key,
+                    seen.count + 1, key, seen.last_cycle,
                 )  # fmt: skip
                 return
+        last = cycle if last_cycle is None else last_cycle
         self.problems.append(
-            Problem(rule, spec.section, spec.level, message, cycle, offset, 1, key)
+            Problem(rule, spec.section, spec.level, message, cycle, offset, 1, key, last)
         )
         if spec.level == "MUST":
             self.conforms = False
