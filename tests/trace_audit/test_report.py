@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import re
 from pathlib import Path
 from typing import Any
@@ -391,3 +392,11 @@ def test_terminal_and_json_carry_the_pages_anchoring_verdict(
         99,
     )
     assert line.split(None, 1)[1] == "clean"
+
+
+def test_a_recovered_log_is_warned_about_once(
+    crashed_log: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    with caplog.at_level(logging.WARNING, logger="trace_runtime"):
+        build_report(crashed_log, t=t_s(45))
+    assert sum("no summary" in m for m in caplog.messages) == 1

@@ -14,8 +14,10 @@ the log): how the situation built up, and what the robot did next.
 
 from __future__ import annotations
 
+import logging
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -257,10 +259,11 @@ def gather_report(
     spans = timeline(log, start=start, end=end)
     samples, target, sensors = _samples(log, start, end, result)
     entities = _entities(target, sensors) if target is not None else ()
-    metrics = compute_metrics(
-        [path] if log is whole else [s.path for s in log.segments],
-        MetricsConfig(start_ns=start, end_ns=end, evidence=tuple(str(e) for e in evidence)),
-    )
+    with _warned_once(whole):
+        metrics = compute_metrics(
+            [path] if log is whole else [s.path for s in log.segments],
+            MetricsConfig(start_ns=start, end_ns=end, evidence=tuple(str(e) for e in evidence)),
+        )
     scope = [s for s in log.segments if s.end_ns >= start and s.start_ns <= end]
     integrity = verify(Log(scope, log.root), key=key, recordings=open_recordings(evidence))
     session = next(
@@ -287,6 +290,39 @@ def gather_report(
         evidence=tuple(str(e) for e in evidence),
         not_retained=_not_retained(result),
     )
+
+
+class _SaidAlready(logging.Filter):
+    """Drops the reader's "no summary" warning for a file it has already been given for."""
+
+    def __init__(self, paths: set[Path]) -> None:
+        super().__init__()
+        self.paths = paths
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        args = record.args
+        if (
+            "no summary" in str(record.msg)
+            and isinstance(args, tuple)
+            and args
+            and isinstance(args[0], str | Path)
+        ):
+            return Path(args[0]).resolve() not in self.paths
+        return True
+
+
+@contextmanager
+def _warned_once(log: Log) -> Iterator[None]:
+    """While the metrics open the log's files a second time (they take paths, not an open
+    ``Log``), keep the reader from repeating what it said when they were first opened: "no
+    summary (unfinished segment); recovered N messages by scan" once per file is enough."""
+    said = _SaidAlready({s.path.resolve() for s in log.segments if not s.finished})
+    logger = logging.getLogger("trace_runtime")
+    logger.addFilter(said)
+    try:
+        yield
+    finally:
+        logger.removeFilter(said)
 
 
 def _samples(
