@@ -62,6 +62,10 @@ class SealCheck:
     layer messages and the evidenced sensor readings against the seal). ``prev_source`` says
     what the seal's ``prev`` was compared with: the previous sealed cycle in this log, the
     segment's recorded ``prev_seal`` (the previous segment is not in the log), or genesis.
+
+    ``in_flight``: the cycle is the one the robot was writing when it was killed (layer
+    messages after the last seal of a crashed segment, PROFILE §8). It is not verified (it
+    was never sealed) but nothing failed: verify makes it a note, not a finding.
     """
 
     state: str
@@ -79,6 +83,7 @@ class SealCheck:
     dropped_before: int
     verified: bool
     problems: tuple[str, ...]
+    in_flight: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -368,11 +373,17 @@ def _check_seal(log: Log, target: Cycle, prev_sealed: Cycle | None) -> SealCheck
         )
     status = verify_cycle(target, expected)
     sealed = status.state != "unsealed"
+    in_flight = not sealed and _in_flight(log, target)
     content_bad = bool(status.modified or status.missing or status.extra)
     compared = sealed and (content_bad or len(target.payloads) > 1)
     prev_ok = {"ok": True, "broken": False}.get(status.link) if sealed else None
     problems: list[str] = []
-    if not sealed:
+    if in_flight:
+        problems.append(
+            "the robot stopped while writing this cycle: it was never sealed, so its content "
+            "cannot be verified"
+        )
+    elif not sealed:
         problems.append("the cycle is not sealed")
     problems += [f"{t} does not match its seal digest" for t in status.modified]
     problems += [f"{t} is logged but not named by the seal" for t in status.extra]
@@ -398,7 +409,26 @@ def _check_seal(log: Log, target: Cycle, prev_sealed: Cycle | None) -> SealCheck
         dropped_before=status.dropped,
         verified=sealed and not problems,
         problems=tuple(problems),
+        in_flight=in_flight,
     )
+
+
+def _in_flight(log: Log, target: Cycle) -> bool:
+    """Whether an unsealed cycle is the one the robot was writing when it stopped.
+
+    verify's rule (``trace_runtime.verification``, the unsealed check): unsealed cycles after
+    the last seal of a segment the robot never closed are the crash's cut, anything else
+    without a seal is a finding. The segment's newest cycles are read back to its last seal.
+    """
+    segment = log.segment_named(target.segment)
+    if segment is None or segment.finished:
+        return False
+    for cycle in segment.iter_cycles(reverse=True):
+        if cycle.sealed:
+            return False
+        if cycle.cycle == target.cycle and cycle.t_ns == target.t_ns:
+            return True
+    return False
 
 
 def _scores(

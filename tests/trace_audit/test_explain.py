@@ -22,6 +22,7 @@ from tests.trace_audit.conftest import (
     t_s,
     write_log,
 )
+from tests.trace_audit.in_flight import cut_in_flight
 from trace_audit.causal import (
     causal_graph,
     causal_graph_data,
@@ -504,3 +505,37 @@ def test_a_time_only_the_earlier_run_reached_is_answered_from_that_run(tmp_path:
     assert (late.cycle, late.offset_ns, late.stale) == (95, 0, False)
     early = explain(root, t=t_ns(2))  # both runs hold 100.2 s: the later run answers
     assert early.cycle == 102 and early.clock_run
+
+
+def test_the_cycle_in_flight_at_a_crash_is_unsealed_not_a_failed_seal(
+    crashed_log: Path, tmp_path: Path
+) -> None:
+    """PROFILE §8: the layer messages after a crashed segment's last seal are the cycle the
+    robot was writing when it was killed; its content cannot be verified, but nothing failed."""
+    cut = cut_in_flight(crashed_log, tmp_path / "cut.mcap")
+    r = explain(cut, t=t_ns(99))
+    assert (r.cycle, r.seal.sealed, r.seal.in_flight, r.seal.verified) == (99, False, True, False)
+    assert r.seal.problems == (
+        "the robot stopped while writing this cycle: it was never sealed, so its content "
+        "cannot be verified",
+    )
+    shown = CliRunner().invoke(app, ["explain", str(cut), "--t", t_s(99), "--plain"])
+    assert shown.exit_code == 0, shown.output
+    seal_line = next(line for line in shown.stdout.splitlines() if line.startswith("Seal"))
+    assert "[UNSEALED]" in seal_line and "FAILED" not in shown.stdout
+    assert "the robot stopped while writing this cycle" in shown.stdout
+    # the cycle before it was sealed before the kill and verifies as usual
+    assert explain(cut, t=t_ns(98)).seal.verified
+
+
+def test_an_unsealed_last_cycle_of_a_closed_segment_still_fails(
+    crashed_log: Path, tmp_path: Path
+) -> None:
+    """A segment the robot closed was not cut by a crash: a cycle without a seal there is
+    a finding (inserted, or its seal removed), shown as a failed check."""
+    closed = cut_in_flight(crashed_log, tmp_path / "closed.mcap", finished=True)
+    r = explain(closed, t=t_ns(99))
+    assert (r.seal.sealed, r.seal.in_flight, r.seal.verified) == (False, False, False)
+    assert r.seal.problems == ("the cycle is not sealed",)
+    shown = CliRunner().invoke(app, ["explain", str(closed), "--t", t_s(99), "--plain"])
+    assert "[FAILED] not sealed" in shown.stdout and "UNSEALED" not in shown.stdout

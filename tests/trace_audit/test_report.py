@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import re
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,7 @@ from tests.trace_audit.conftest import (
     t_s,
     write_log,
 )
+from tests.trace_audit.in_flight import cut_in_flight
 from tests.trace_audit.report_html import parse_report
 from trace_audit.causal import format_value
 from trace_audit.cli import app
@@ -324,3 +326,77 @@ def test_cli_reports_a_cycle_number_and_says_where_it_wrote(
     assert summary["out"] == str(out.resolve()) and out.stat().st_size == summary["size_bytes"]
     plain = _cli("report", sample_log, "--cycle", "45", "--out", out, "--plain")
     assert plain.exit_code == 0 and str(out.resolve()) in plain.stdout
+
+
+def _verdicts(log: Path, t: str, out: Path) -> tuple[dict[str, Any], str, Any]:
+    """The report's JSON summary, its terminal Integrity line and the page, for one t."""
+    done = _cli("report", log, "--t", t, "--out", out, "--json")
+    assert done.exit_code == 0, done.output
+    plain = _cli("report", log, "--t", t, "--out", out, "--plain")
+    assert plain.exit_code == 0, plain.output
+    line = next(x for x in plain.stdout.splitlines() if x.startswith("Integrity"))
+    return json.loads(done.stdout), line, parse_report(out.read_text("utf-8"))
+
+
+def test_the_cycle_in_flight_at_a_crash_is_unsealed_everywhere_not_a_failure(
+    crashed_log: Path, tmp_path: Path
+) -> None:
+    """PROFILE §8: the cycle the robot was writing when it was killed is UNSEALED (amber):
+    its content cannot be verified, but it is the normal end of a crashed segment."""
+    cut = cut_in_flight(crashed_log, tmp_path / "cut.mcap")
+    summary, line, page = _verdicts(cut, t_s(99), tmp_path / "cut.html")
+    assert summary["cycle"] == 99
+    assert (summary["integrity"], summary["integrity_ok"], summary["decision_verified"]) == (
+        "unsealed",
+        True,
+        False,
+    )
+    assert summary["integrity_findings"] == 0
+    assert summary["anchored"] is False and summary["anchored_through"] is None
+    assert "UNSEALED: the robot stopped while writing this cycle" in line
+    assert "NOT clean" not in line
+    text = " ".join([page.by_id["in-short"], *page.section_text.values()])
+    assert "does NOT verify" not in text
+    assert "the robot stopped while writing this decision" in page.by_id["in-short"]
+    integrity = page.section_text["integrity"]
+    assert "UNSEALED" in integrity and "its content cannot be verified" in integrity
+    assert "is chained" not in integrity  # it never reached the chain
+    assert "the chain ends at the seal of cycle 98" in integrity
+
+
+def test_an_unsealed_last_cycle_of_a_closed_segment_is_still_not_clean(
+    crashed_log: Path, tmp_path: Path
+) -> None:
+    closed = cut_in_flight(crashed_log, tmp_path / "closed.mcap", finished=True)
+    summary, line, page = _verdicts(closed, t_s(99), tmp_path / "closed.html")
+    assert (summary["integrity"], summary["integrity_ok"]) == ("failed", False)
+    assert summary["integrity_findings"] >= 1
+    assert "NOT clean" in line and "UNSEALED" not in line
+    assert "record of this decision does NOT verify" in page.by_id["in-short"]
+
+
+def test_terminal_and_json_carry_the_pages_anchoring_verdict(
+    crashed_log: Path, sample_log: Path, tmp_path: Path
+) -> None:
+    """A crashed log's page says CLEAN, NOT ANCHORED: so do the terminal line and --json."""
+    summary, line, page = _verdicts(crashed_log, t_s(45), tmp_path / "crashed.html")
+    assert "CLEAN, NOT ANCHORED" in page.section_text["integrity"]
+    assert (summary["integrity"], summary["integrity_ok"]) == ("not_anchored", True)
+    assert summary["anchored"] is False and summary["anchored_through"] is None
+    assert line.split(None, 1)[1] == "clean, NOT ANCHORED (cycles 0..99)"
+    summary, line, page = _verdicts(sample_log, t_s(45), tmp_path / "finished.html")
+    assert "NOT ANCHORED" not in page.section_text["integrity"]
+    assert (summary["integrity"], summary["anchored"], summary["anchored_through"]) == (
+        "clean",
+        True,
+        99,
+    )
+    assert line.split(None, 1)[1] == "clean"
+
+
+def test_a_recovered_log_is_warned_about_once(
+    crashed_log: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    with caplog.at_level(logging.WARNING, logger="trace_runtime"):
+        build_report(crashed_log, t=t_s(45))
+    assert sum("no summary" in m for m in caplog.messages) == 1

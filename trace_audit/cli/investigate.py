@@ -335,6 +335,9 @@ def explain_doc(r: Explanation, lookback_s: float = 600.0) -> Doc:
     seal = r.seal
     if seal.verified:
         status = Seg("✔ seal verifies", "bold green", "[ok] seal verifies")
+    elif seal.in_flight:
+        # The normal end of a crashed segment (PROFILE §8): unverifiable, not a failed check.
+        status = Seg("⚠ UNSEALED", "bold yellow", "[UNSEALED]")
     elif not seal.sealed:
         status = Seg("✘ not sealed", "bold red", "[FAILED] not sealed")
     else:
@@ -376,7 +379,7 @@ def explain_doc(r: Explanation, lookback_s: float = 600.0) -> Doc:
             )
     doc.fields(rows)
     for problem in seal.problems:
-        doc.line(Seg(f"- {problem}", "red"), 2)
+        doc.line(Seg(f"- {problem}", "yellow" if seal.in_flight else "red"), 2)
     return doc
 
 

@@ -105,6 +105,7 @@ def _summary(report: IncidentReport, written: Path) -> dict[str, Any]:
 
     data = report.data
     e = data.explanation
+    verdict = data.verdict
     return {
         "out": str(written.resolve()),
         "size_bytes": report.size_bytes,
@@ -115,8 +116,14 @@ def _summary(report: IncidentReport, written: Path) -> dict[str, Any]:
         "window_start_ns": data.start_ns,
         "window_end_ns": data.end_ns,
         "cycles_in_window": len(data.samples),
-        "integrity_ok": data.integrity.ok and e.seal.verified,
-        "integrity_findings": len(data.integrity.findings),
+        # One verdict for the page, this summary and the terminal line (ReportData.verdict)
+        "integrity": verdict.kind,
+        "integrity_ok": verdict.ok,
+        "integrity_findings": verdict.findings,
+        "decision_verified": verdict.decision_verified,
+        "anchored": verdict.anchored,
+        "anchored_through": verdict.anchored_through,
+        "unanchored_cycles": list(verdict.unanchored) if verdict.unanchored else None,
         "sections": [section for section, _ in SECTIONS],
     }
 
@@ -124,13 +131,7 @@ def _summary(report: IncidentReport, written: Path) -> dict[str, Any]:
 def _summary_doc(summary: dict[str, Any]) -> Doc:
     doc = Doc()
     doc.title(["Incident report: ", Seg(summary["out"], "bold")])
-    integrity = (
-        Seg("clean", "green")
-        if summary["integrity_ok"]
-        else Seg(
-            f"NOT clean ({summary['integrity_findings']} findings; see the report)", "bold red"
-        )
-    )
+    integrity = _integrity_line(summary)
     doc.fields(
         [
             (
@@ -149,3 +150,24 @@ def _summary_doc(summary: dict[str, Any]) -> Doc:
         ]
     )
     return doc
+
+
+def _integrity_line(summary: dict[str, Any]) -> Seg:
+    """The page's integrity verdict in one line: the same four cases as its badges."""
+    kind = summary["integrity"]
+    unanchored = summary["unanchored_cycles"]
+    if kind == "failed":
+        findings = summary["integrity_findings"]
+        why = f"{findings} finding{'s' if findings != 1 else ''}"
+        if not summary["decision_verified"]:
+            why += ", this decision's seal does not verify"
+        return Seg(f"NOT clean ({why}; see the report)", "bold red")
+    if kind == "unsealed":
+        return Seg(
+            "UNSEALED: the robot stopped while writing this cycle; its content cannot be verified",
+            "bold yellow",
+        )
+    if kind == "not_anchored":
+        span = f" (cycles {unanchored[0]}..{unanchored[1]})" if unanchored else ""
+        return Seg(f"clean, NOT ANCHORED{span}", "bold yellow")
+    return Seg("clean", "green")

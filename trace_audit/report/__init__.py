@@ -22,6 +22,7 @@ from pathlib import Path
 from trace_audit.report.data import (
     DEFAULT_WINDOW_S,
     ReportData,
+    Verdict,
     execution_channels,
     gather_report,
     parse_window,
@@ -34,6 +35,7 @@ __all__ = [
     "DEFAULT_WINDOW_S",
     "IncidentReport",
     "ReportData",
+    "Verdict",
     "build_report",
     "execution_channels",
     "gather_report",

@@ -14,11 +14,13 @@ the log): how the situation built up, and what the robot did next.
 
 from __future__ import annotations
 
+import logging
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from trace_audit.causal import (
     Decision,
@@ -47,6 +49,7 @@ __all__ = [
     "ReportData",
     "RobotPose",
     "Sample",
+    "Verdict",
     "execution_channels",
     "gather_report",
     "parse_window",
@@ -149,6 +152,32 @@ class RobotPose:
 
 
 @dataclass(frozen=True, slots=True)
+class Verdict:
+    """The report's integrity verdict: what the page's badges, the terminal line and --json
+    all say, so that no two of them disagree.
+
+    ``kind``: ``failed`` (a finding in the segments holding the window, or this decision's
+    seal does not verify), ``unsealed`` (the decision is the cycle the robot was writing when
+    it was killed: nothing failed, but its content cannot be verified), ``not_anchored``
+    (clean, but no checkpoint there vouches for this decision yet) or ``clean``.
+    """
+
+    kind: Literal["clean", "not_anchored", "unsealed", "failed"]
+    findings: int
+    decision_verified: bool
+    anchored: bool
+    anchored_through: int | None
+    """The last cycle a checkpoint in the segments holding the window vouches for."""
+    unanchored: tuple[int, int] | None
+    """The cycles there no checkpoint vouches for yet (first, last), if any."""
+
+    @property
+    def ok(self) -> bool:
+        """Nothing failed (an unsealed cycle in flight or a missing anchor is no failure)."""
+        return self.kind != "failed"
+
+
+@dataclass(frozen=True, slots=True)
 class ReportData:
     """Everything the incident report shows, each part from its library owner."""
 
@@ -176,6 +205,35 @@ class ReportData:
     def decision(self) -> Decision:
         return self.explanation.decision
 
+    @property
+    def verdict(self) -> Verdict:
+        """The one integrity verdict of the report (see ``Verdict``)."""
+        e, report = self.explanation, self.integrity
+        robot = next((r for r in report.robots if r.robot_id == e.robot), None)
+        through = robot.anchored_cycle if robot is not None else None
+        # An unsealed cycle is not in the chain, so no checkpoint can vouch for it.
+        anchored = e.seal.sealed and through is not None and e.cycle <= through
+        unanchored = None
+        if robot is not None and robot.last_cycle is not None:
+            first = through + 1 if through is not None else robot.first_cycle
+            if first is not None and first <= robot.last_cycle:
+                unanchored = (first, robot.last_cycle)
+        kind: Literal["clean", "not_anchored", "unsealed", "failed"]
+        if not report.ok or not (e.seal.verified or e.seal.in_flight):
+            kind = "failed"
+        elif e.seal.in_flight:
+            kind = "unsealed"
+        else:
+            kind = "clean" if anchored else "not_anchored"
+        return Verdict(
+            kind=kind,
+            findings=len(report.findings),
+            decision_verified=e.seal.verified,
+            anchored=anchored,
+            anchored_through=through,
+            unanchored=unanchored,
+        )
+
 
 def gather_report(
     path: str | Path,
@@ -201,10 +259,11 @@ def gather_report(
     spans = timeline(log, start=start, end=end)
     samples, target, sensors = _samples(log, start, end, result)
     entities = _entities(target, sensors) if target is not None else ()
-    metrics = compute_metrics(
-        [path] if log is whole else [s.path for s in log.segments],
-        MetricsConfig(start_ns=start, end_ns=end, evidence=tuple(str(e) for e in evidence)),
-    )
+    with _warned_once(whole):
+        metrics = compute_metrics(
+            [path] if log is whole else [s.path for s in log.segments],
+            MetricsConfig(start_ns=start, end_ns=end, evidence=tuple(str(e) for e in evidence)),
+        )
     scope = [s for s in log.segments if s.end_ns >= start and s.start_ns <= end]
     integrity = verify(Log(scope, log.root), key=key, recordings=open_recordings(evidence))
     session = next(
@@ -231,6 +290,39 @@ def gather_report(
         evidence=tuple(str(e) for e in evidence),
         not_retained=_not_retained(result),
     )
+
+
+class _SaidAlready(logging.Filter):
+    """Drops the reader's "no summary" warning for a file it has already been given for."""
+
+    def __init__(self, paths: set[Path]) -> None:
+        super().__init__()
+        self.paths = paths
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        args = record.args
+        if (
+            "no summary" in str(record.msg)
+            and isinstance(args, tuple)
+            and args
+            and isinstance(args[0], str | Path)
+        ):
+            return Path(args[0]).resolve() not in self.paths
+        return True
+
+
+@contextmanager
+def _warned_once(log: Log) -> Iterator[None]:
+    """While the metrics open the log's files a second time (they take paths, not an open
+    ``Log``), keep the reader from repeating what it said when they were first opened: "no
+    summary (unfinished segment); recovered N messages by scan" once per file is enough."""
+    said = _SaidAlready({s.path.resolve() for s in log.segments if not s.finished})
+    logger = logging.getLogger("trace_runtime")
+    logger.addFilter(said)
+    try:
+        yield
+    finally:
+        logger.removeFilter(said)
 
 
 def _samples(

@@ -70,6 +70,7 @@ p.lead { font-size: 1.15rem; margin: .6rem 0 .4rem; }
 .command { display: inline-block; padding: .05rem .5rem; border-radius: .3rem;
            font-weight: 700; color: white; }
 .bad { color: var(--bad); font-weight: 600; } .ok { color: var(--ok); font-weight: 600; }
+.warn { color: var(--warn); font-weight: 600; }
 table { border-collapse: collapse; width: 100%; margin: .4rem 0 .8rem; font-size: .92rem; }
 th, td { text-align: left; padding: .3rem .5rem; border-bottom: 1px solid var(--line);
          vertical-align: top; }
@@ -206,6 +207,9 @@ def _in_short(data: ReportData) -> str:
         + (
             "record of this decision verifies (not altered)."
             if e.seal.verified
+            else '<span class="warn">robot stopped while writing this decision: it was never '
+            "sealed, so its record cannot be verified</span>."
+            if e.seal.in_flight
             else '<span class="bad">record of this decision does NOT verify</span>.'
         )
     )
@@ -286,16 +290,20 @@ def _parameters(parameters: dict[str, float]) -> str:
 
 
 def _integrity(data: ReportData) -> str:
-    seal, report = data.explanation.seal, data.integrity
-    verdict = (
-        '<span class="verdict pass">seal verifies</span>'
-        if seal.verified
-        else '<span class="verdict fail">seal does NOT verify</span>'
-    )
-    anchored, anchor_text = _anchoring(data)
+    seal, report, verdict = data.explanation.seal, data.integrity, data.verdict
+    if seal.verified:
+        decision = '<span class="verdict pass">seal verifies</span>'
+    elif seal.in_flight:  # the normal end of a crashed segment (PROFILE §8), not a failure
+        decision = (
+            '<span class="verdict warn">UNSEALED</span> the robot stopped while writing this '
+            "cycle; its content cannot be verified"
+        )
+    else:
+        decision = '<span class="verdict fail">seal does NOT verify</span>'
     if not report.ok:
         window_verdict = f'<span class="verdict fail">{len(report.findings)} FINDING(S)</span>'
-    elif anchored:
+    elif verdict.anchored or seal.in_flight:
+        # the segments are clean; whether this decision is anchored is the Anchored row's
         window_verdict = '<span class="verdict pass">CLEAN</span>'
     else:  # chained, but nothing signed or checkpointed vouches for this decision yet
         window_verdict = '<span class="verdict warn">CLEAN, NOT ANCHORED</span>'
@@ -311,10 +319,20 @@ def _integrity(data: ReportData) -> str:
             f"{report.checkpoints_valid} match the chain"
         )
     link = "matches" if seal.prev_ok else "does NOT match"
+    if seal.sealed:
+        chain = f"prev {link} {seal.prev_source}"
+    elif seal.in_flight:
+        chain = "not chained: the robot stopped before sealing it" + (
+            f"; the chain ends at the seal of cycle {seal.prev_cycle}"
+            if seal.prev_cycle is not None
+            else ""
+        )
+    else:
+        chain = "not sealed"
     rows = [
-        ("This decision", f"{verdict} ({escape(seal.state)})"),
-        ("Hash chain", escape(f"prev {link} {seal.prev_source}") if seal.sealed else "not sealed"),
-        ("Anchored", escape(anchor_text)),
+        ("This decision", f"{decision} ({escape(seal.state)})"),
+        ("Hash chain", escape(chain)),
+        ("Anchored", escape(_anchoring(data))),
         (
             "Segments holding the window",
             f"{window_verdict} {escape(', '.join(data.integrity_scope))}: "
@@ -324,18 +342,24 @@ def _integrity(data: ReportData) -> str:
         ("Declared drops", str(report.declared_dropped)),
     ]
     findings = [f"{f.kind}: {f.message}" for f in report.findings]
-    return _fields(rows) + _problems([*seal.problems, *findings]) + _notes(report.notes)
+    # The cycle in flight's one "problem" is the verdict row itself, not a failure to list.
+    problems = [] if seal.in_flight else list(seal.problems)
+    return _fields(rows) + _problems([*problems, *findings]) + _notes(report.notes)
 
 
-def _anchoring(data: ReportData) -> tuple[bool, str]:
+def _anchoring(data: ReportData) -> str:
     """Whether a checkpoint in the segments holding the window vouches for this decision."""
-    cycle = data.explanation.cycle
-    robots = [r for r in data.integrity.robots if r.robot_id == data.explanation.robot]
-    through = robots[0].anchored_cycle if robots else None
-    if through is not None and cycle <= through:
-        return True, f"yes: a checkpoint vouches for the chain through cycle {through}"
+    verdict = data.verdict
+    through = verdict.anchored_through
+    if verdict.anchored:
+        return f"yes: a checkpoint vouches for the chain through cycle {through}"
     covered = "no checkpoint" if through is None else f"checkpoints reach only cycle {through}"
-    return False, (
+    if not data.explanation.seal.sealed:
+        return (
+            f"no: an unsealed cycle is not in the chain, so no checkpoint can vouch for it "
+            f"({covered} in the segments holding the window)"
+        )
+    return (
         f"not yet: {covered} in the segments holding the window; this decision is chained, "
         "but nothing vouches for it there (the robot crashed, or the log is cut); a later "
         "segment's checkpoint may: run trace-audit verify on the whole log"
