@@ -58,9 +58,9 @@ or changed segments are read (keyed by their SHA-256). Schema: docs/fleet.md.
 
 [bold]Examples[/bold]:
 
-  trace-audit index logs/ --out fleet-index/
+  trace-audit index logs/ --out idx/
 
-  trace-audit index logs/ --out fleet-index/ --scheduler tcp://10.0.0.5:8786
+  trace-audit index logs/ --out idx/ --scheduler tcp://10.0.0.5:8786
 
 Two different logs at one chain position (two roots whose robot has the same id) are
 refused, exit 2; of two copies of one segment (a truncated one beside the intact file)
@@ -137,11 +137,11 @@ after a lone --.
 
 [bold]Examples[/bold]:
 
-  trace-audit query fleet-index/ "SELECT robot, day, avg(et) FROM decisions GROUP BY ALL"
+  trace-audit query idx/ "SELECT robot, avg(et) FROM decisions GROUP BY ALL"
 
-  trace-audit query fleet-index/ "SELECT * FROM gaps ORDER BY gap_ns DESC LIMIT 5" --csv
+  trace-audit query idx/ --csv "SELECT * FROM gaps ORDER BY gap_ns DESC"
 
-  trace-audit query fleet-index/ --json -- "$(cat stops-per-robot.sql)"
+  trace-audit query idx/ --json -- "$(cat stops-per-robot.sql)"
 """)
 
 
@@ -170,9 +170,9 @@ the decisions table; each row ends with the explain command that reconstructs it
 
 [bold]Examples[/bold]:
 
-  trace-audit find fleet-index/ --action STOP --near person --within 1.0
+  trace-audit find idx/ --action STOP --near person --within 1.0
 
-  trace-audit find fleet-index/ --action STOP --where "software_version = '2.4.1'" --json
+  trace-audit find idx/ --action STOP --where "software_version='2.4'" --json
 """)
 
 

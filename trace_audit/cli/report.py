@@ -34,7 +34,7 @@ findings are shown in the report and do not change the exit code (use verify for
 
   trace-audit report run.mcap --t 20.0
 
-  trace-audit report logs/ --t +600 --window 60s --out incident.html --key keys/robot.pub
+  trace-audit report logs/ --t +600 --window 60s --key keys/robot.pub
 
   trace-audit report run.mcap --cycle 200 --json
 """
