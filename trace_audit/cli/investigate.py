@@ -547,7 +547,7 @@ regard to case; one the log never shows is a usage error (exit 2) listing those 
 
   trace-audit why run.mcap --action STOP
 
-  trace-audit why run.mcap --action STOP --t 12.3
+  trace-audit why run.mcap --action STOP --t 25
 
   trace-audit why logs/amr-7/ --action reroute --json
 """
