@@ -367,15 +367,24 @@ def write_log(
     return path
 
 
-def rewrite_segment(src: Path, dst: Path, mutate: Callable[[RawMessage], bytes | None]) -> Path:
+def rewrite_segment(
+    src: Path,
+    dst: Path,
+    mutate: Callable[[RawMessage], bytes | None],
+    *,
+    chunk_size: int = 1 << 30,
+    finish: bool = True,
+) -> Path:
     """Copy a segment message by message with the plain ``mcap`` Writer, through ``mutate``.
 
     ``mutate`` returns the data to write (changed or not) or None to leave the message out:
-    how a test tampers with a log. Everything goes in one chunk, so no cycle is split.
+    how a test tampers with a log. By default everything goes in one chunk, so no cycle is
+    split. ``finish=False`` leaves the file as a killed writer does: every chunk written, no
+    summary, no footer.
     """
     segment = open_segment(src)
     with open(dst, "wb") as f:
-        writer = Writer(f, chunk_size=1 << 30)
+        writer = Writer(f, chunk_size=chunk_size)
         writer.start(profile="trace", library="tests")
         writer.add_metadata(SESSION_METADATA, segment.metadata[SESSION_METADATA])
         channels: dict[str, int] = {}
@@ -391,7 +400,10 @@ def rewrite_segment(src: Path, dst: Path, mutate: Callable[[RawMessage], bytes |
             writer.add_message(
                 channels[msg.topic], msg.log_time_ns, data, msg.log_time_ns, sequence=msg.sequence
             )
-        writer.finish()  # type: ignore[no-untyped-call]
+        if finish:
+            writer.finish()  # type: ignore[no-untyped-call]
+        else:
+            writer.flush()  # the last chunk reached the disk; the summary never did
     return dst
 
 

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mcap.writer import Writer
-
+from tests.trace_audit.conftest import rewrite_segment
 from trace_runtime import open_segment
+from trace_runtime.cycles import RawMessage
 from trace_runtime.records import TOPIC_SEAL
-from trace_runtime.session import SESSION_METADATA
 
 
 def cut_in_flight(
@@ -22,32 +21,10 @@ def cut_in_flight(
     middle of a crashed segment: that one is a finding, not the cycle in flight.
     ``finished=True`` closes the file instead: a closed segment whose last cycle has no seal
     was not cut by a crash, so that unsealed cycle is a finding too."""
-    segment = open_segment(src)
-    messages = list(segment.iter_messages())
-    seals = [m.sequence for m in messages if m.topic == TOPIC_SEAL]
+    seals = [m.sequence for m in open_segment(src).iter_messages() if m.topic == TOPIC_SEAL]
     drop = seals[-1] if unsealed is None else unsealed
-    with open(dst, "wb") as f:
-        writer = Writer(f, chunk_size=2048)
-        writer.start(profile="trace", library="tests")
-        writer.add_metadata(SESSION_METADATA, segment.metadata[SESSION_METADATA])
-        channels: dict[str, int] = {}
-        for msg in messages:
-            if msg.topic == TOPIC_SEAL and msg.sequence == drop:
-                continue
-            if msg.topic not in channels:
-                schema = writer.register_schema(name=msg.topic, encoding="jsonschema", data=b"{}")
-                channels[msg.topic] = writer.register_channel(
-                    topic=msg.topic, message_encoding="json", schema_id=schema
-                )
-            writer.add_message(
-                channels[msg.topic],
-                msg.log_time_ns,
-                msg.data,
-                msg.log_time_ns,
-                sequence=msg.sequence,
-            )
-        if finished:
-            writer.finish()  # type: ignore[no-untyped-call]
-        else:
-            writer.flush()  # the last batch reached the disk; the summary never did
-    return dst
+
+    def without_its_seal(msg: RawMessage) -> bytes | None:
+        return None if msg.topic == TOPIC_SEAL and msg.sequence == drop else msg.data
+
+    return rewrite_segment(src, dst, without_its_seal, chunk_size=2048, finish=finished)
