@@ -224,6 +224,12 @@ def test_a_robot_restarted_with_its_clock_from_zero_is_not_mixed_into_the_window
     run_cycles = {c.cycle for c in open_segment(root / "hot" / segment).iter_cycles()}
     assert set(cycles) <= run_cycles
     assert data.metrics.overall.decisions == len(cycles)
+    # Segment 0 is in the root, outside the window: not "removed by retention"
+    (start,) = [n for n in data.integrity.notes if n.kind == "chain_start"]
+    assert "retention" not in start.message and "outside the window" in start.message
+    # and the page's metrics command scores what the page scored: the run's segment alone
+    page = parse_report(build_report(root, t=t_s(45)).html).section_text["reproduce"]
+    assert f"metrics {root / 'hot' / segment} --start" in page
 
 
 def test_a_decision_a_checkpoint_vouches_for_is_anchored(sample_log: Path) -> None:

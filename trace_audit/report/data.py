@@ -14,6 +14,7 @@ the log): how the situation built up, and what the robot did next.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Iterator, Mapping, Sequence
@@ -38,6 +39,7 @@ from trace_runtime.cycles import Cycle
 from trace_runtime.errors import UsageError
 from trace_runtime.integrity import PublicKey
 from trace_runtime.logset import Log
+from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_BELIEF, TOPIC_PERCEPTION
 from trace_runtime.session import SessionInfo
 from trace_runtime.verification import VerifyReport, verify
@@ -200,6 +202,9 @@ class ReportData:
     not_retained: tuple[str, ...] = field(default=())
     evidence: tuple[str, ...] = ()
     """The external recordings given (``--evidence``), as the investigator named them."""
+    window_inputs: tuple[str, ...] = ()
+    """What the window's metrics read when not the whole log: the segment files of the run
+    of the robot's clock that holds the decision (its clock restarted in the log)."""
 
     @property
     def decision(self) -> Decision:
@@ -259,13 +264,16 @@ def gather_report(
     spans = timeline(log, start=start, end=end)
     samples, target, sensors = _samples(log, start, end, result)
     entities = _entities(target, sensors) if target is not None else ()
+    inputs = () if log is whole else tuple(str(s.path) for s in log.segments)
     with _warned_once(whole):
         metrics = compute_metrics(
-            [path] if log is whole else [s.path for s in log.segments],
+            list(inputs) or [path],
             MetricsConfig(start_ns=start, end_ns=end, evidence=tuple(str(e) for e in evidence)),
         )
     scope = [s for s in log.segments if s.end_ns >= start and s.start_ns <= end]
-    integrity = verify(Log(scope, log.root), key=key, recordings=open_recordings(evidence))
+    integrity = _window_integrity(
+        verify(Log(scope, log.root), key=key, recordings=open_recordings(evidence)), whole, scope
+    )
     session = next(
         (s.session for s in log.segments if s.path.name == result.decision.segment),
         log.segments[0].session,
@@ -289,7 +297,30 @@ def gather_report(
         key_id=key.key_id if key is not None else None,
         evidence=tuple(str(e) for e in evidence),
         not_retained=_not_retained(result),
+        window_inputs=inputs,
     )
+
+
+def _window_integrity(report: VerifyReport, whole: Log, scope: Sequence[Segment]) -> VerifyReport:
+    """verify of the window's segments, told what it could not see: a chain that starts
+    after segment 0 there is the window's start when the log holds the earlier segments,
+    not retention having removed them."""
+    first = min((s.session.segment for s in scope), default=0)
+    earlier = any(s.session.segment < first for s in whole.segments)
+    if not earlier:
+        return report
+    report.notes = [
+        dataclasses.replace(
+            n,
+            message=f"verified from segment {first}, the first that holds the window; the "
+            "earlier segments are in the log but outside the window (trace-audit verify on "
+            "the whole log checks the chain into it)",
+        )
+        if n.kind == "chain_start"
+        else n
+        for n in report.notes
+    ]
+    return report
 
 
 class _SaidAlready(logging.Filter):

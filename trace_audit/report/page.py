@@ -671,6 +671,8 @@ def _reproduce(data: ReportData, command_name: str) -> str:
     start, end = f"{data.start_ns / 1e9:.9g}", f"{data.end_ns / 1e9:.9g}"
     key = " --key PUBLIC_KEY" if data.key_id else ""
     given = "".join(f" --evidence {shlex.quote(e)}" for e in data.evidence)
+    # After a clock restart the window's figures come from its run's segments alone.
+    window = " ".join(shlex.quote(p) for p in data.window_inputs) or log
     lines = [
         (
             "Summary, factors, chains, counterfactuals, execution, this decision's scores",
@@ -680,7 +682,7 @@ def _reproduce(data: ReportData, command_name: str) -> str:
         ("Integrity", f"{command_name} verify {log}{key}{given}"),
         (
             "Window auditability",
-            f"{command_name} metrics {log} --start {start} --end {end} --failures{given}",
+            f"{command_name} metrics {window} --start {start} --end {end} --failures{given}",
         ),
         ("Causal graph as Graphviz", f"{command_name} export {log} {at} --format dot"),
         (
