@@ -191,8 +191,12 @@ def explain_doc(r: Explanation, lookback_s: float = 600.0) -> Doc:
             (
                 "Clock",
                 Seg(
-                    f"the robot's clock restarted in this log: read in the run of {run}; "
-                    "another run may hold a decision at the same time (ask by --cycle)",
+                    f"the robot's clock restarted in this log: read in the run of {run}"
+                    + (
+                        "; another run may hold a decision at the same time (ask by --cycle)"
+                        if r.query_t_ns is not None
+                        else ""
+                    ),
                     "yellow",
                     None,
                 ),
