@@ -15,8 +15,9 @@ Names are imported on first use, so ``import trace_audit`` (and the CLI's start-
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from trace_runtime.lazy import lazy_exports
 
 _EXPORTS = {
     "open_log": "trace_runtime.logset",
@@ -86,14 +87,4 @@ if TYPE_CHECKING:
     from trace_runtime.logset import open_log
 
 
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'trace_audit' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return __all__
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, __all__)

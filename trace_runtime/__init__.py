@@ -7,8 +7,9 @@ pays only for what it touches.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from trace_runtime.lazy import lazy_exports
 
 _EXPORTS = {
     "Cycle": "trace_runtime.cycles",
@@ -176,14 +177,4 @@ if TYPE_CHECKING:
     from trace_runtime.session import SessionInfo
 
 
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'trace_runtime' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return __all__
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, __all__)

@@ -5,8 +5,9 @@ duckdb, dask); nothing here is imported until a fleet command runs.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from trace_runtime.lazy import lazy_exports
 
 _EXPORTS = {
     "build_index": "trace_audit.fleet.index",
@@ -34,14 +35,4 @@ if TYPE_CHECKING:
     from trace_audit.fleet.query import QueryResult, find_decisions, index_metrics, run_query
 
 
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'trace_audit.fleet' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return __all__
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, __all__)

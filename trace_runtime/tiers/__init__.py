@@ -7,8 +7,9 @@ pull compaction (and the reader) in behind it: the imports stay one way.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from trace_runtime.lazy import lazy_exports
 
 _EXPORTS = {
     "CATALOG_NAME": "trace_runtime.tiers.catalog",
@@ -101,14 +102,4 @@ if TYPE_CHECKING:
     from trace_runtime.tiers.warm import WarmPolicy, assemble_warm, summarize
 
 
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'trace_runtime.tiers' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return __all__
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, __all__)
