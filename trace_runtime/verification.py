@@ -542,7 +542,9 @@ class _SegmentCheck:
                 self._extend_absent_run(check, status)
                 scan.bad_positions.add(position)
                 continue
-            scan.absent_runs.extend(filter(None, [scan.absent_open.pop(name, None)]))
+            ended = scan.absent_open.pop(name, None)  # the recording holds this one: a run ends
+            if ended is not None:
+                scan.absent_runs.append(ended)
             if check.state == "resolved":
                 scan.external_ok += 1
             elif check.state == "unresolved":
