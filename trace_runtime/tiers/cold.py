@@ -625,35 +625,78 @@ def _check_decode(block: bytes, digests: list[str]) -> DecodedBlock:
         return _decode_body(body, dict(enumerate(digests)))
 
 
+@dataclass(slots=True)
+class _BlockStreams:
+    """What every decode of a block reads first: its header, the per-message streams
+    (topic, shape, sequence, time; the raw messages no shape describes) and its compiled
+    shapes. ``columns_at`` is where the column bodies start."""
+
+    header: dict[str, Any]
+    n: int
+    topic_names: list[str]
+    topic_ids: list[int]
+    shape_ids: list[int]
+    sequences: list[int]
+    times: list[int]
+    raw_lens: list[int]
+    raw_body: bytes
+    shapes: list[tuple[int, Shape]]
+    columns_at: int
+
+    @classmethod
+    def read(cls, body: bytes) -> _BlockStreams:
+        (head_len,) = struct.unpack_from("<I", body, 0)
+        header = orjson.loads(body[4 : 4 + head_len])
+        pos = 4 + head_len
+        n = int(header["n"])
+        topic_code, shape_code, *sizes = header["msg"]
+        parts: list[bytes] = []
+        for size in sizes:
+            parts.append(body[pos : pos + size])
+            pos += size
+        topic_body, shape_body, seq_body, time_body, raw_len_body, raw_body = parts
+        topic_ids = _unpack_small(topic_code, topic_body)
+        shape_ids = _unpack_small(shape_code, shape_body)
+        seq_deltas = _unpack_stream(seq_body, delta=False)
+        times = _unpack_stream(time_body, delta=True)
+        raw_lens = _unpack_i64(raw_len_body, delta=False) if raw_len_body else []
+        if not (len(topic_ids) == len(shape_ids) == len(seq_deltas) == len(times) == n):
+            raise ColdFormatError("message streams disagree on the message count")
+        sequences: list[int] = []
+        last_seq: dict[int, int] = {}
+        for topic_id, delta in zip(topic_ids, seq_deltas, strict=True):
+            last_seq[topic_id] = sequence = last_seq.get(topic_id, 0) + delta
+            sequences.append(sequence)
+        shapes: list[tuple[int, Shape]] = []
+        for topic_id, text in header["shapes"]:
+            key = text.encode()
+            shape = _COMPILED.get(key)
+            if shape is None:
+                shape = _shape_for(orjson.loads(key), key)  # checks the descriptor
+            shapes.append((int(topic_id), shape))
+        topic_names = [str(t) for t in header["topics"]]
+        return cls(
+            header,
+            n,
+            topic_names,
+            topic_ids,
+            shape_ids,
+            sequences,
+            times,
+            raw_lens,
+            raw_body,
+            shapes,
+            pos,
+        )
+
+
 def _decode_body(body: bytes, known_digests: dict[int, str] | None = None) -> DecodedBlock:
     """A block body's messages; ``known_digests`` (message position -> SHA-256 hex) is
     only ever the encoder's check (``_check_decode``)."""
-    (head_len,) = struct.unpack_from("<I", body, 0)
-    header = orjson.loads(body[4 : 4 + head_len])
-    pos = 4 + head_len
-    n = int(header["n"])
-    topic_code, shape_code, *sizes = header["msg"]
-    parts: list[bytes] = []
-    for size in sizes:
-        parts.append(body[pos : pos + size])
-        pos += size
-    topic_body, shape_body, seq_body, time_body, raw_len_body, raw_body = parts
-    topic_names: list[str] = header["topics"]
-    topic_ids = _unpack_small(topic_code, topic_body)
-    shape_ids = _unpack_small(shape_code, shape_body)
-    seq_deltas = _unpack_stream(seq_body, delta=False)
-    times = _unpack_stream(time_body, delta=True)
-    raw_lens = _unpack_i64(raw_len_body, delta=False) if raw_len_body else []
-    if not (len(topic_ids) == len(shape_ids) == len(seq_deltas) == len(times) == n):
-        raise ColdFormatError("message streams disagree on the message count")
-
-    shapes: list[tuple[int, Shape]] = []
-    for topic_id, text in header["shapes"]:
-        key = text.encode()
-        shape = _COMPILED.get(key)
-        if shape is None:
-            shape = _shape_for(orjson.loads(key), key)  # checks the descriptor
-        shapes.append((int(topic_id), shape))
+    streams = _BlockStreams.read(body)
+    header, n, shapes = streams.header, streams.n, streams.shapes
+    shape_ids, raw_lens, raw_body = streams.shape_ids, streams.raw_lens, streams.raw_body
+    pos = streams.columns_at
 
     reader = _ColumnReader()
     for topic_id, path, codec, size, param in header["cols"]:
@@ -720,14 +763,8 @@ def _decode_body(body: bytes, known_digests: dict[int, str] | None = None) -> De
                     row[slot] = _hex_of(datas, hexes, index - back)
             datas[index] = dumps(shape.build(row))
 
-    sequences: list[int] = []
-    last_seq: dict[int, int] = {}
-    for topic_id, delta in zip(topic_ids, seq_deltas, strict=True):
-        sequence = last_seq.get(topic_id, 0) + delta
-        last_seq[topic_id] = sequence
-        sequences.append(sequence)
-    topics = list(map(topic_names.__getitem__, topic_ids))
-    messages = list(map(RawMessage, topics, sequences, times, datas))
+    topics = list(map(streams.topic_names.__getitem__, streams.topic_ids))
+    messages = list(map(RawMessage, topics, streams.sequences, streams.times, datas))
     plain = [int(p) for p in header.get("plain", [])]
     return DecodedBlock(str(header["tier"]), messages, plain)
 
@@ -907,41 +944,22 @@ class PartialBlock:
     """
 
     def __init__(self, body: bytes) -> None:
-        (head_len,) = struct.unpack_from("<I", body, 0)
-        header = orjson.loads(body[4 : 4 + head_len])
-        pos = 4 + head_len
-        self.n = n = int(header["n"])
+        streams = _BlockStreams.read(body)
+        header, pos, raw_lens, raw_body = (
+            streams.header,
+            streams.columns_at,
+            streams.raw_lens,
+            streams.raw_body,
+        )
+        self.n = n = streams.n
         self.tier = str(header["tier"])
         self.plain = [int(p) for p in header.get("plain", [])]
-        topic_code, shape_code, *sizes = header["msg"]
-        parts: list[bytes] = []
-        for size in sizes:
-            parts.append(body[pos : pos + size])
-            pos += size
-        topic_body, shape_body, seq_body, time_body, raw_len_body, raw_body = parts
-        self.topic_names: list[str] = [str(t) for t in header["topics"]]
-        self.topic_ids = _unpack_small(topic_code, topic_body)
-        self.shape_ids = _unpack_small(shape_code, shape_body)
-        seq_deltas = _unpack_stream(seq_body, delta=False)
-        self.times = _unpack_stream(time_body, delta=True)
-        raw_lens = _unpack_i64(raw_len_body, delta=False) if raw_len_body else []
-        if not (
-            len(self.topic_ids) == len(self.shape_ids) == len(seq_deltas) == len(self.times) == n
-        ):
-            raise ColdFormatError("message streams disagree on the message count")
-        self.sequences: list[int] = []
-        last_seq: dict[int, int] = {}
-        for topic_id, delta in zip(self.topic_ids, seq_deltas, strict=True):
-            last_seq[topic_id] = sequence = last_seq.get(topic_id, 0) + delta
-            self.sequences.append(sequence)
-
-        self.shapes: list[tuple[int, Shape]] = []
-        for topic_id, text in header["shapes"]:
-            key = text.encode()
-            shape = _COMPILED.get(key)
-            if shape is None:
-                shape = _shape_for(orjson.loads(key), key)  # checks the descriptor
-            self.shapes.append((int(topic_id), shape))
+        self.topic_names = streams.topic_names
+        self.topic_ids = streams.topic_ids
+        self.shape_ids = streams.shape_ids
+        self.times = streams.times
+        self.sequences = streams.sequences
+        self.shapes = streams.shapes
 
         self._body = body
         self._specs: dict[tuple[int, tuple[Any, ...]], tuple[str, Any, int, int]] = {}
