@@ -134,6 +134,18 @@ def measure_overhead(
     )
 
 
+def log_synthetic_cycle(c: Any, records: dict[str, Any]) -> None:
+    """Hand a ``synthetic_cycle`` to a cycle builder as a robot would: the scan first, its
+    ref into every entity's evidence, then the four layers."""
+    ref = c.sensor("/sensors/lidar", records["scan"])
+    for entity in records["perception"]["entities"]:
+        entity["evidence"][0]["ref"] = ref
+    c.perception(records["perception"])
+    c.belief(records["belief"])
+    c.action(records["action"])
+    c.execution(records["execution"])
+
+
 def synthetic_cycle(n: int, k: int, cycle: int) -> dict[str, Any]:
     """Records of one decision with ``n`` entities and ``k`` candidate actions (plain dicts),
     shaped like the simulator's; ``ref`` is filled in by the caller."""
@@ -227,15 +239,8 @@ def _loop(logger: AuditLogger | NullLogger, n: int, k: int, cycles: int) -> tupl
     for i in range(WARM_UP_CYCLES + cycles):
         if i == WARM_UP_CYCLES:
             started, cpu_started = time.perf_counter(), time.process_time()
-        records = synthetic_cycle(n, k, i)
         with logger.cycle(i * PERIOD_NS) as c:
-            ref = c.sensor("/sensors/lidar", records["scan"])
-            for entity in records["perception"]["entities"]:
-                entity["evidence"][0]["ref"] = ref
-            c.perception(records["perception"])
-            c.belief(records["belief"])
-            c.action(records["action"])
-            c.execution(records["execution"])
+            log_synthetic_cycle(c, synthetic_cycle(n, k, i))
     elapsed, cpu = time.perf_counter() - started, time.process_time() - cpu_started
     logger.close()
     return elapsed / cycles, cpu / cycles

@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from sim import FaultRates, RunConfig, run
 from sim.baselines import BaselinesConfig, BaselinesReport, run_baselines
-from sim.baselines.cost import synthetic_cycle
+from sim.baselines.cost import log_synthetic_cycle, synthetic_cycle
 from sim.cli import app
 from trace_audit.metrics import compute_metrics
 from trace_runtime.testing import CaptureLogger
@@ -33,15 +33,8 @@ def test_the_null_logger_runs_the_same_cycles_and_writes_no_log(tmp_path: Path) 
 @pytest.mark.parametrize(("n", "k"), [(1, 2), (7, 5)])
 def test_synthetic_scaling_records_are_valid_and_sized_by_n_and_k(n: int, k: int) -> None:
     log = CaptureLogger()
-    records = synthetic_cycle(n, k, 0)
     with log.cycle(0) as c:
-        ref = c.sensor("/sensors/lidar", records["scan"])
-        for entity in records["perception"]["entities"]:
-            entity["evidence"][0]["ref"] = ref
-        c.perception(records["perception"])
-        c.belief(records["belief"])
-        c.action(records["action"])
-        c.execution(records["execution"])
+        log_synthetic_cycle(c, synthetic_cycle(n, k, 0))
     cycle = log.cycles[0]
     assert cycle.perception is not None and len(cycle.perception.entities) == n
     assert cycle.action is not None and len(cycle.action.alternatives) == k - 1
