@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import bisect
 import hashlib
+import itertools
 import logging
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -258,19 +259,37 @@ class Log:
         section 4 allows it across segments), so one time can name decisions of two runs;
         a walk back in time from a decision must stay in its own run. The log itself when
         it is one robot's and its clock never went back."""
-        at = next((s for s in self._slots if s.path.name == segment_name), None)
-        if at is None:
+        runs = self._clock_runs()
+        run = next((r for r in runs if any(s.path.name == segment_name for s in r)), None)
+        if run is None or len(run) == len(self._slots):
             return self
-        robot = _robot_of(at)
-        chain = sorted((s for s in self._slots if _robot_of(s) == robot), key=_chain_key)
-        lo = hi = chain.index(at)
-        while lo > 0 and chain[lo - 1].end_ns <= chain[lo].start_ns:
-            lo -= 1
-        while hi + 1 < len(chain) and chain[hi].end_ns <= chain[hi + 1].start_ns:
-            hi += 1
-        if hi - lo + 1 == len(self._slots):
-            return self
-        run = chain[lo : hi + 1]
+        return self._of_run(run)
+
+    def clock_runs(self) -> list[Log]:
+        """The log cut into the runs of its robots' clocks (``clock_run``), each robot's in
+        chain order; ``[self]`` when it is one robot's and its clock never went back."""
+        runs = self._clock_runs()
+        return [self] if len(runs) == 1 else [self._of_run(run) for run in runs]
+
+    def _clock_runs(self) -> list[list[_Slot]]:
+        """Each robot's segments in chain order, split where a segment ends after the next
+        one starts."""
+        by_robot: dict[str, list[_Slot]] = {}
+        for slot in self._slots:
+            by_robot.setdefault(_robot_of(slot), []).append(slot)
+        runs: list[list[_Slot]] = []
+        for robot in sorted(by_robot):
+            chain = sorted(by_robot[robot], key=_chain_key)
+            run = [chain[0]]
+            for before, after in itertools.pairwise(chain):
+                if before.end_ns > after.start_ns:
+                    runs.append(run)
+                    run = []
+                run.append(after)
+            runs.append(run)
+        return runs
+
+    def _of_run(self, run: list[_Slot]) -> Log:
         log = Log.__new__(Log)
         log.root, log.problems, log.shadowed = self.root, list(self.problems), []
         log._place(sorted(run, key=lambda s: (s.start_ns, s.path.name)))
@@ -278,21 +297,6 @@ class Log:
         log._timed = timed or list(run)
         log._recovered = any(isinstance(s, Segment) and not s.finished for s in run)
         return log
-
-    def clock_runs(self) -> list[Log]:
-        """The log cut into the runs of its robots' clocks (``clock_run``), each robot's in
-        chain order; ``[self]`` when no clock went back between segments."""
-        runs: list[Log] = []
-        seen: set[str] = set()
-        for slot in sorted(self._slots, key=lambda s: (_robot_of(s), *_chain_key(s))):
-            if slot.path.name in seen:
-                continue
-            run = self.clock_run(slot.path.name)
-            if run is self:
-                return [self]
-            seen.update(s.path.name for s in run._slots)
-            runs.append(run)
-        return runs
 
     def _place(self, slots: Sequence[_Slot]) -> None:
         self._slots = list(slots)
