@@ -41,7 +41,7 @@ if TYPE_CHECKING:
     from trace_audit.chains import FactorChain
     from trace_audit.explain import Explanation
     from trace_audit.info import LogInfo
-    from trace_audit.timeline import Timeline, WhyResult
+    from trace_audit.timeline import ClockRun, Timeline, WhyResult
     from trace_runtime.gaps import Gap
 
 # The library (networkx, pydantic models) is imported inside each command, so that
@@ -716,7 +716,7 @@ def timeline_doc(r: Timeline) -> Doc:
     return doc
 
 
-def _in_run(cycle: int, run: Any) -> bool:
+def _in_run(cycle: int, run: ClockRun) -> bool:
     return run.first_cycle is not None and run.first_cycle <= cycle <= run.last_cycle
 
 
