@@ -717,7 +717,8 @@ def timeline_doc(r: Timeline) -> Doc:
 
 
 def _in_run(cycle: int, run: ClockRun) -> bool:
-    return run.first_cycle is not None and run.first_cycle <= cycle <= run.last_cycle
+    first, last = run.first_cycle, run.last_cycle
+    return first is not None and last is not None and first <= cycle <= last
 
 
 def _timeline_table(doc: Doc, r: Timeline, rows: list[Any], gaps: list[Gap]) -> None:
