@@ -22,7 +22,8 @@ from pydantic import ValidationError
 from trace_runtime.chain import digest
 from trace_runtime.cycles import Assembler, Cycle, HotAssembler, RawMessage
 from trace_runtime.errors import LogReadError, NotTraceLogError
-from trace_runtime.mcap_file import DEFAULT_LIMITS, McapFile, ReadLimits
+from trace_runtime.mcap_file import McapFile
+from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import PROFILE, TOPIC_SEAL, Seal
 from trace_runtime.session import SESSION_METADATA, SessionInfo
 from trace_runtime.tiers.cold import ColdAssembler

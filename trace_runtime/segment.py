@@ -37,7 +37,7 @@ from mcap.records import (
 )
 
 from trace_runtime.errors import TraceError
-from trace_runtime.mcap_file import CHUNK_TABLE_ATTACHMENT, MAGIC
+from trace_runtime.mcap_records import CHUNK_TABLE_ATTACHMENT, MAGIC
 from trace_runtime.records import LAYER_TOPICS, PROFILE, TOPIC_SEAL
 from trace_runtime.schemas import SENSOR_SCHEMA_NAME, schema_bytes, schema_name
 from trace_runtime.session import SESSION_METADATA, SessionInfo
