@@ -22,10 +22,10 @@ from typing import Any
 
 import numpy as np
 
-from sim.baselines.cost import Overhead, ScalingPoint, measure_overhead, measure_scaling
-from sim.baselines.explain import METHODS, Explainers, train_explainers
-from sim.baselines.features import DecisionInput, read_decision_input
-from sim.baselines.scoring import ExplanationScore, score_explanation
+from evaluation.baselines.cost import Overhead, ScalingPoint, measure_overhead, measure_scaling
+from evaluation.baselines.explain import METHODS, Explainers, train_explainers
+from evaluation.baselines.features import DecisionInput, read_decision_input
+from evaluation.baselines.scoring import ExplanationScore, score_explanation
 from sim.faults import FaultRates
 from sim.runner import RunConfig, SimUsageError, run
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, SensorWindow

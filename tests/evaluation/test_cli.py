@@ -7,7 +7,7 @@ import re
 import pytest
 from typer.testing import CliRunner
 
-from sim.cli import app
+from evaluation.cli import app
 
 COMMANDS = ["run", "scenarios", "baselines", "check-counterfactuals"]
 
