@@ -124,8 +124,9 @@ def update_motion(t: Track, tick: int) -> None:
     if n < VELOCITY_MIN_LOOKS:
         t.motion, t.vx, t.vy = "unknown", 0.0, 0.0
         return
-    # Two passes instead of seven: each sum adds the same terms in the same order from the
-    # same int 0 that sum() starts from, and max() keeps the first of equals as this does.
+    # Two passes over the looks: each sum adds the same terms in the same order from the
+    # same int 0 that sum() starts from, and max() keeps the first of equals as this does,
+    # so the figures are those of the plain sum() and max() formulas, bit for bit.
     st: float = 0  # an int 0, as sum() starts from
     sx: float = 0
     sy: float = 0

@@ -1,4 +1,4 @@
-"""``trace-sim --help`` names values in words, as ``trace-audit --help`` does (review F9)."""
+"""``trace-sim --help`` names values in words, as ``trace-audit --help`` does."""
 
 from __future__ import annotations
 
