@@ -8,7 +8,7 @@ from typing import Any
 import orjson
 import pytest
 
-from sim.baselines.scoring import Citation, ExplanationRecord, as_action, score_explanation
+from evaluation.baselines.scoring import Citation, ExplanationRecord, as_action, score_explanation
 from trace_audit.chains import SensorWindow
 from trace_runtime.cycles import RawMessage
 

@@ -1,4 +1,4 @@
-"""``trace-sim --help`` names values in words, as ``trace-audit --help`` does (review F9)."""
+"""``trace-sim --help`` names values in words, as ``trace-audit --help`` does."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import re
 import pytest
 from typer.testing import CliRunner
 
-from sim.cli import app
+from evaluation.cli import app
 
 COMMANDS = ["run", "scenarios", "baselines", "check-counterfactuals"]
 

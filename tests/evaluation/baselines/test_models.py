@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from sim.baselines.attention import AttentionModel
-from sim.baselines.features import FEATURES, MAX_TOKENS, TOKEN_FEATURES, read_decision_input
+from evaluation.baselines.attention import AttentionModel
+from evaluation.baselines.features import FEATURES, MAX_TOKENS, TOKEN_FEATURES, read_decision_input
 
 
 def _belief() -> dict[str, Any]:

@@ -20,9 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from sim.baselines.attention import AttentionModel, FloatArray, IntArray
-from sim.baselines.features import COMMAND_INDEX, FEATURES, MAX_TOKENS, DecisionInput
-from sim.baselines.scoring import Citation, ExplanationRecord
+from evaluation.baselines.attention import AttentionModel, FloatArray, IntArray
+from evaluation.baselines.features import COMMAND_INDEX, FEATURES, MAX_TOKENS, DecisionInput
+from evaluation.baselines.scoring import Citation, ExplanationRecord
 from sim.policy import COMMANDS
 
 __all__ = ["METHODS", "TOP_CITED", "Explainers", "train_explainers"]

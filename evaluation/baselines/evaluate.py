@@ -22,10 +22,10 @@ from typing import Any
 
 import numpy as np
 
-from sim.baselines.cost import Overhead, ScalingPoint, measure_overhead, measure_scaling
-from sim.baselines.explain import METHODS, Explainers, train_explainers
-from sim.baselines.features import DecisionInput, read_decision_input
-from sim.baselines.scoring import ExplanationScore, score_explanation
+from evaluation.baselines.cost import Overhead, ScalingPoint, measure_overhead, measure_scaling
+from evaluation.baselines.explain import METHODS, Explainers, train_explainers
+from evaluation.baselines.features import DecisionInput, read_decision_input
+from evaluation.baselines.scoring import ExplanationScore, score_explanation
 from sim.faults import FaultRates
 from sim.runner import RunConfig, SimUsageError, run
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, SensorWindow
@@ -161,55 +161,11 @@ class BaselinesReport:
     def as_dict(self) -> dict[str, Any]:
         """The JSON of ``trace-sim baselines --json``."""
 
-        def spread(s: Spread, digits: int = 4) -> dict[str, float]:
-            return {k: round(v, digits) for k, v in vars_of(s).items()}
-
-        methods = {}
-        for name, m in self.methods.items():
-            methods[name] = {
-                "ET": round(m.et.mean, 4),
-                "ET_partial": round(m.et_partial.mean, 4),
-                "DR": round(m.dr.mean, 4),
-                "ms_per_decision": round(m.ms_per_decision.mean, 4),
-                "bytes_per_decision": round(m.bytes_per_decision.mean, 1),
-                "decisions": m.decisions,
-                "cited_factors": m.citations,
-                "cited_without_link": m.unlinked,
-                "spread_over_seeds": {
-                    "ET": spread(m.et),
-                    "ET_partial": spread(m.et_partial),
-                    "DR": spread(m.dr),
-                    "ms_per_decision": spread(m.ms_per_decision),
-                    "bytes_per_decision": spread(m.bytes_per_decision, 1),
-                },
-            }
+        methods = {name: _method_dict(m) for name, m in self.methods.items()}
         return {
             "methods": methods,
-            "overhead": {
-                "on_us": round(self.overhead.on_us, 1),
-                "off_us": round(self.overhead.off_us, 1),
-                "overhead_us": round(self.overhead.overhead_us, 1),
-                "on_cpu_us": round(self.overhead.on_cpu_us, 1),
-                "off_cpu_us": round(self.overhead.off_cpu_us, 1),
-                "overhead_cpu_us": round(self.overhead.overhead_cpu_us, 1),
-                "cycles_per_run": self.overhead.cycles,
-                "runs_per_side": self.overhead.runs,
-                "same_commands": self.overhead.same_commands,
-            },
-            "scaling": [
-                {
-                    "entities": p.entities,
-                    "actions": p.actions,
-                    "on_us": round(p.on_us, 1),
-                    "off_us": round(p.off_us, 1),
-                    "overhead_us": round(p.overhead_us, 1),
-                    "on_cpu_us": round(p.on_cpu_us, 1),
-                    "off_cpu_us": round(p.off_cpu_us, 1),
-                    "overhead_cpu_us": round(p.overhead_cpu_us, 1),
-                    "bytes_per_cycle": p.bytes_per_cycle,
-                }
-                for p in self.scaling
-            ],
+            "overhead": _overhead_dict(self.overhead),
+            "scaling": [_scaling_dict(p) for p in self.scaling],
             "policy_accuracy": round(self.policy_accuracy.mean, 4),
             "attention_accuracy": round(self.attention_accuracy.mean, 4),
             "seeds": [s.seed for s in self.seeds],
@@ -225,6 +181,61 @@ class BaselinesReport:
                 for name in ("TRACE", *METHODS)
             },
         }
+
+
+def _spread(s: Spread, digits: int = 4) -> dict[str, float]:
+    return {k: round(v, digits) for k, v in vars_of(s).items()}
+
+
+def _method_dict(m: MethodResult) -> dict[str, Any]:
+    """One method's row of the JSON: means over seeds, and their spread."""
+    return {
+        "ET": round(m.et.mean, 4),
+        "ET_partial": round(m.et_partial.mean, 4),
+        "DR": round(m.dr.mean, 4),
+        "ms_per_decision": round(m.ms_per_decision.mean, 4),
+        "bytes_per_decision": round(m.bytes_per_decision.mean, 1),
+        "decisions": m.decisions,
+        "cited_factors": m.citations,
+        "cited_without_link": m.unlinked,
+        "spread_over_seeds": {
+            "ET": _spread(m.et),
+            "ET_partial": _spread(m.et_partial),
+            "DR": _spread(m.dr),
+            "ms_per_decision": _spread(m.ms_per_decision),
+            "bytes_per_decision": _spread(m.bytes_per_decision, 1),
+        },
+    }
+
+
+def _overhead_dict(o: Overhead) -> dict[str, Any]:
+    """TRACE's cost per cycle on the paper's runs, logger on and off."""
+    return {
+        "on_us": round(o.on_us, 1),
+        "off_us": round(o.off_us, 1),
+        "overhead_us": round(o.overhead_us, 1),
+        "on_cpu_us": round(o.on_cpu_us, 1),
+        "off_cpu_us": round(o.off_cpu_us, 1),
+        "overhead_cpu_us": round(o.overhead_cpu_us, 1),
+        "cycles_per_run": o.cycles,
+        "runs_per_side": o.runs,
+        "same_commands": o.same_commands,
+    }
+
+
+def _scaling_dict(p: ScalingPoint) -> dict[str, Any]:
+    """TRACE's cost per cycle with ``p.entities`` entities and ``p.actions`` actions."""
+    return {
+        "entities": p.entities,
+        "actions": p.actions,
+        "on_us": round(p.on_us, 1),
+        "off_us": round(p.off_us, 1),
+        "overhead_us": round(p.overhead_us, 1),
+        "on_cpu_us": round(p.on_cpu_us, 1),
+        "off_cpu_us": round(p.off_cpu_us, 1),
+        "overhead_cpu_us": round(p.overhead_cpu_us, 1),
+        "bytes_per_cycle": p.bytes_per_cycle,
+    }
 
 
 def vars_of(s: Spread) -> dict[str, float]:
@@ -296,37 +307,10 @@ def _score_seed(
             for p in score.problems:
                 kind = _problem_kind(p)
                 problems[record.method][kind] = problems[record.method].get(kind, 0) + 1
-    report = compute_metrics([log_path], MetricsConfig(max_listed=10_000))
-    o = report.overall
-    trace_problems: dict[str, int] = {}
-    for failure in report.failures:
-        for p in failure.problems:
-            kind = _problem_kind(p)
-            trace_problems[kind] = trace_problems.get(kind, 0) + 1
-    methods = {
-        "TRACE": MethodSeed(
-            et=o.et.mean,
-            et_partial=o.et_partial.mean,
-            dr=o.dr if o.dr is not None else 0.0,
-            ms_per_decision=trace_ms,
-            bytes_per_decision=statistics.fmean(trace_bytes),
-            decisions=o.decisions,
-            citations=o.factors,
-            unlinked=trace_problems.get("ET: factor_node missing", 0),
-        )
-    }
+    trace, trace_problems = _trace_seed(log_path, trace_bytes, trace_ms)
+    methods = {"TRACE": trace}
     for m in METHODS:
-        got = scores[m]
-        methods[m] = MethodSeed(
-            et=statistics.fmean(s.et for s in got),
-            et_partial=statistics.fmean(s.et_partial for s in got),
-            dr=statistics.fmean(float(s.dr) for s in got),
-            ms_per_decision=statistics.median(seconds[m]) * 1e3,
-            bytes_per_decision=statistics.fmean(s.bytes for s in got),
-            decisions=len(got),
-            citations=sum(s.citations for s in got),
-            unlinked=problems[m].get("ET: factor_node missing", 0),
-        )
+        methods[m] = _method_seed(scores[m], seconds[m], problems[m])
     return SeedResult(
         seed=seed,
         decisions=len(inputs),
@@ -334,6 +318,46 @@ def _score_seed(
         attention_accuracy=explainers.attention_accuracy(inputs),
         methods=methods,
         problems={"TRACE": trace_problems, **problems},
+    )
+
+
+def _trace_seed(
+    log_path: Path, trace_bytes: list[int], trace_ms: float
+) -> tuple[MethodSeed, dict[str, int]]:
+    """TRACE's figures on one run, by the investigator's metrics, and its problems by kind."""
+    report = compute_metrics([log_path], MetricsConfig(max_listed=10_000))
+    o = report.overall
+    trace_problems: dict[str, int] = {}
+    for failure in report.failures:
+        for p in failure.problems:
+            kind = _problem_kind(p)
+            trace_problems[kind] = trace_problems.get(kind, 0) + 1
+    trace = MethodSeed(
+        et=o.et.mean,
+        et_partial=o.et_partial.mean,
+        dr=o.dr if o.dr is not None else 0.0,
+        ms_per_decision=trace_ms,
+        bytes_per_decision=statistics.fmean(trace_bytes),
+        decisions=o.decisions,
+        citations=o.factors,
+        unlinked=trace_problems.get("ET: factor_node missing", 0),
+    )
+    return trace, trace_problems
+
+
+def _method_seed(
+    got: list[ExplanationScore], seconds: list[float], problems: dict[str, int]
+) -> MethodSeed:
+    """A baseline's figures on one run, from its scored explanations."""
+    return MethodSeed(
+        et=statistics.fmean(s.et for s in got),
+        et_partial=statistics.fmean(s.et_partial for s in got),
+        dr=statistics.fmean(float(s.dr) for s in got),
+        ms_per_decision=statistics.median(seconds) * 1e3,
+        bytes_per_decision=statistics.fmean(s.bytes for s in got),
+        decisions=len(got),
+        citations=sum(s.citations for s in got),
+        unlinked=problems.get("ET: factor_node missing", 0),
     )
 
 

@@ -155,27 +155,7 @@ def synthetic_cycle(n: int, k: int, cycle: int) -> dict[str, Any]:
     for i in range(n):
         eid = f"ped_{i}"
         d = 1.0 + 0.3 * i + 0.01 * (cycle % 7)
-        entities.append(
-            {
-                "id": eid,
-                "class": "person",
-                "pose": {
-                    "position": [d, 0.5 * i, 0.0],
-                    "orientation": [0.0, 0.0, 0.0, 1.0],
-                    "frame": "map",
-                },
-                "velocity": [0.0, 0.5, 0.0],
-                "confidence": {"person": 0.97, "forklift": 0.01, "pallet": 0.02},
-                "evidence": [
-                    {
-                        "sensor": "lidar",
-                        "weight": 1.0,
-                        "region": {"kind": "beams", "values": [i, i + 5], "frame": "lidar"},
-                        "ref": None,
-                    }
-                ],
-            }
-        )
+        entities.append(_synthetic_entity(eid, i, d))
         nodes += [
             {"id": eid, "kind": "entity", "label": "person", "p": 0.97, "value": "person",
              "entity": eid},
@@ -190,8 +170,49 @@ def synthetic_cycle(n: int, k: int, cycle: int) -> dict[str, Any]:
              "rule": "risk = proximity"},
         ]  # fmt: skip
     factors = [f"ped_{i}.collision_risk" for i in range(n)]
-    commands = [f"A{j}" for j in range(k)]
-    action = {
+    action = _synthetic_action(factors, [f"A{j}" for j in range(k)])
+    execution = {
+        "intended": {"linear": 0.5, "angular": 0.0},
+        "actual": {"linear": 0.49, "angular": 0.0},
+        "deviation": 0.01,
+        "checks": [{"rule": "max_speed", "passed": True, "value": 0.49, "limit": 1.5}],
+        "flags": [],
+    }
+    return {
+        "scan": {"ranges": [round(1.0 + 0.01 * b, 2) for b in range(10 * n)]},
+        "perception": {"entities": entities, "sensors_used": ["lidar"]},
+        "belief": {"nodes": nodes, "edges": edges},
+        "action": action,
+        "execution": execution,
+    }
+
+
+def _synthetic_entity(eid: str, i: int, d: float) -> dict[str, Any]:
+    """Pedestrian ``i`` at distance ``d``, with one LiDAR evidence item."""
+    return {
+        "id": eid,
+        "class": "person",
+        "pose": {
+            "position": [d, 0.5 * i, 0.0],
+            "orientation": [0.0, 0.0, 0.0, 1.0],
+            "frame": "map",
+        },
+        "velocity": [0.0, 0.5, 0.0],
+        "confidence": {"person": 0.97, "forklift": 0.01, "pallet": 0.02},
+        "evidence": [
+            {
+                "sensor": "lidar",
+                "weight": 1.0,
+                "region": {"kind": "beams", "values": [i, i + 5], "frame": "lidar"},
+                "ref": None,
+            }
+        ],
+    }
+
+
+def _synthetic_action(factors: list[str], commands: list[str]) -> dict[str, Any]:
+    """The first of ``commands`` chosen over the others, with a what-if per factor each."""
+    return {
         "command": commands[0],
         "parameters": {"linear": 0.5, "angular": 0.0},
         "score": 1.0,
@@ -211,20 +232,6 @@ def synthetic_cycle(n: int, k: int, cycle: int) -> dict[str, Any]:
             for c in commands[1:]
         ],
         "counterfactuals_none_applicable": False,
-    }
-    execution = {
-        "intended": {"linear": 0.5, "angular": 0.0},
-        "actual": {"linear": 0.49, "angular": 0.0},
-        "deviation": 0.01,
-        "checks": [{"rule": "max_speed", "passed": True, "value": 0.49, "limit": 1.5}],
-        "flags": [],
-    }
-    return {
-        "scan": {"ranges": [round(1.0 + 0.01 * b, 2) for b in range(10 * n)]},
-        "perception": {"entities": entities, "sensors_used": ["lidar"]},
-        "belief": {"nodes": nodes, "edges": edges},
-        "action": action,
-        "execution": execution,
     }
 
 

@@ -12,14 +12,14 @@ never imports. Its ML libraries are the ``[baselines]`` extra.
 
 from __future__ import annotations
 
-from sim.baselines.evaluate import (
+from evaluation.baselines.evaluate import (
     BaselinesConfig,
     BaselinesReport,
     MethodResult,
     SeedResult,
     run_baselines,
 )
-from sim.baselines.scoring import (
+from evaluation.baselines.scoring import (
     Citation,
     ExplanationRecord,
     ExplanationScore,

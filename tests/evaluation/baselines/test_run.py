@@ -9,10 +9,10 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from evaluation.baselines import BaselinesConfig, BaselinesReport, run_baselines
+from evaluation.baselines.cost import log_synthetic_cycle, synthetic_cycle
+from evaluation.cli import app
 from sim import FaultRates, RunConfig, run
-from sim.baselines import BaselinesConfig, BaselinesReport, run_baselines
-from sim.baselines.cost import log_synthetic_cycle, synthetic_cycle
-from sim.cli import app
 from trace_audit.metrics import compute_metrics
 from trace_runtime.testing import CaptureLogger
 
@@ -85,15 +85,15 @@ def test_the_command_rejects_bad_options_with_exit_2() -> None:
 
 
 def test_the_command_prints_json_and_a_plain_table(monkeypatch: pytest.MonkeyPatch) -> None:
-    import sim.baselines
+    import evaluation.baselines
 
-    real = sim.baselines.run_baselines
+    real = evaluation.baselines.run_baselines
 
     def small(config: BaselinesConfig, progress: object = None) -> BaselinesReport:
         # keep the command's parsing; shrink only what it has no option for
         return real(replace(config, **{k: getattr(SMALL, k) for k in _NO_OPTION}))
 
-    monkeypatch.setattr(sim.baselines, "run_baselines", small)
+    monkeypatch.setattr(evaluation.baselines, "run_baselines", small)
     args = ["baselines", "--seeds", "1", "--cycles", "10", "--explain", "3"]
     result = CliRunner().invoke(app, [*args, "--json"])
     assert result.exit_code == 0, result.output
