@@ -66,7 +66,7 @@ from trace_runtime.records import (
     EvidenceRef,
     validate_record,
 )
-from trace_runtime.segment import MessageFields, OutMessage, SegmentWriteError, SegmentWriter
+from trace_runtime.segment_writer import MessageFields, OutMessage, SegmentWriteError, SegmentWriter
 from trace_runtime.session import MIN_PERIOD_NS, TIERS, SessionInfo
 
 _validate_evidence_ref = EvidenceRef.__pydantic_validator__.validate_python

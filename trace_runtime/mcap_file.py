@@ -35,7 +35,7 @@ from trace_runtime.errors import LogLimitError, LogReadError
 log = logging.getLogger("trace_runtime")
 
 MAGIC = b"\x89MCAP0\r\n"
-# Defined here, not by the writer (segment.py), so that reading does not import the `mcap`
+# Defined here, not by the writer (segment_writer.py), so that reading does not import the `mcap`
 # library the writer builds records with (~30 ms of start-up).
 CHUNK_TABLE_ATTACHMENT = "trace.chunk_columns"
 """An attachment holding every chunk's start times, then end times, then file offsets, each

@@ -14,7 +14,7 @@ import pytest
 from trace_runtime import EvidenceRef, Execution, Motion, Perception, RecordError
 from trace_runtime.codec import encode_layer
 from trace_runtime.logger import _Handover, _PendingCycle, _Wakeup
-from trace_runtime.segment import OutMessage, SegmentWriter
+from trace_runtime.segment_writer import OutMessage, SegmentWriter
 from trace_runtime.session import SessionInfo
 from trace_runtime.testing import CaptureLogger, synthetic_cycle
 
