@@ -90,3 +90,20 @@ def test_a_byte_identical_copy_in_another_directory_is_read_once(
     log = open_log(root)
     assert [c.cycle for c in log.iter_cycles()] == cycles
     assert [s.path.name for s in log.shadowed] == [first.name]
+
+
+def test_a_finished_copy_ranks_before_a_recovered_copy_of_the_same_tier(
+    tmp_path: Path, log_writer: Callable[..., AuditLogger]
+) -> None:
+    """``copy_rank`` alone puts the intact file first: every reader that sorts copies by it
+    (the log, verify, the fleet index) prefers the same one."""
+    root = _root(tmp_path, log_writer)
+    original = sorted((root / "hot").glob("*.mcap"))[0]
+    (root / "hot" / "copy").mkdir()
+    half = root / "hot" / "copy" / original.name
+    half.write_bytes(original.read_bytes()[: original.stat().st_size // 2])
+    log = open_log(root)
+    (cut,) = [s for s in log.shadowed if s.path == half]
+    (kept,) = [s for s in log.segments if s.path == original]
+    assert copy_rank(kept) < copy_rank(cut)
+    assert sorted([cut, kept], key=copy_rank) == [kept, cut]
