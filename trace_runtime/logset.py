@@ -31,6 +31,7 @@ from trace_runtime.integrity import SealStatus, verify_cycle
 from trace_runtime.mcap_file import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
+from trace_runtime.segment_names import parse_segment_name
 from trace_runtime.session import TIER_METADATA, TIERS
 
 log = logging.getLogger("trace_runtime")
@@ -177,6 +178,17 @@ def find_segment_files(path: Path) -> list[Path]:
     if path.is_dir():
         return sorted(p for p in path.rglob("*.mcap") if p.is_file() and PARTIAL_MARK not in p.name)
     return [path]
+
+
+def robot_segment_files(root: Path, robot_id: str) -> dict[int, list[Path]]:
+    """``robot_id``'s segment files among a log root's (``find_segment_files``), by segment
+    number, known by their names (``parse_segment_name``): nothing is opened."""
+    numbered: dict[int, list[Path]] = {}
+    for path in find_segment_files(root):
+        parsed = parse_segment_name(path.name)
+        if parsed is not None and parsed[0] == robot_id:
+            numbered.setdefault(parsed[1], []).append(path)
+    return numbered
 
 
 @dataclass(slots=True)

@@ -234,15 +234,15 @@ def test_close_returns_within_its_timeout_when_the_disk_hangs(tmp_path: Path) ->
         assert elapsed < 2.0
         assert logger.stats.written == 3
         assert logger.stats.dropped_undelivered == 10
-        assert logger._thread is not None and logger._thread.daemon
+        assert logger._writer._thread is not None and logger._writer._thread.daemon
     finally:
         # The disk comes back: the writer finishes the batch it was in and ends the
         # segment, declaring the cycles it never wrote (schemas/PROFILE.md §7).
         hang.clear()
         release.set()
-        assert logger._thread is not None
-        logger._thread.join(5)
-    assert not logger._thread.is_alive()
+        assert logger._writer._thread is not None
+        logger._writer._thread.join(5)
+    assert not logger._writer._thread.is_alive()
     stats = logger.stats  # cycle 3 was written after all; 4..12 never will be
     assert (stats.written, stats.dropped_undelivered, stats.committed) == (4, 9, 13)
     assert [c.cycle for c in open_log(path).iter_cycles()] == [0, 1, 2, 3]
