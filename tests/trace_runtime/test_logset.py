@@ -48,8 +48,8 @@ def test_a_single_unreadable_file_is_still_an_error(tmp_path: Path) -> None:
 def test_a_lossless_cold_copy_is_read_before_a_lossy_warm_one(
     tmp_path: Path, log_writer: Callable[..., AuditLogger]
 ) -> None:
-    """The reader used to rank warm (summaries) before cold (lossless) while metrics ranked
-    cold first: two commands could read two copies of one segment."""
+    """Of a warm copy (summaries) and a cold one (lossless) of the same segments, every
+    reader reads the cold one, so no two commands read two different copies."""
     root = _root(tmp_path, log_writer)
     full = [(c.cycle, c.payloads) for c in open_log(root).iter_cycles()]
     warm_root = tmp_path / "warm_root"
