@@ -112,7 +112,8 @@ class ChainWriter:
             self._writer_lock.release()
 
     def write_batch(self, batch: list[PendingCycle]) -> None:
-        """Seal and write cycles; called with ``_lock`` held. Swallows every failure."""
+        """Seal and write cycles, one caller at a time (``WriterThread`` holds its lock).
+        Swallows every failure."""
         try:
             self.check_storage()
             self._maybe_rotate(batch[0].t_ns)
