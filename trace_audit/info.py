@@ -11,8 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from trace_audit.timeline import LogSource, as_log, gap_stepper, require_cycles, seal_dropped
+from trace_runtime.chain_writer import CLOSE_METADATA
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, CycleRange, Gap
-from trace_runtime.logger import CLOSE_METADATA
 from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
 

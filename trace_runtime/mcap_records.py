@@ -18,8 +18,8 @@ import zstandard
 from trace_runtime.errors import LogReadError
 
 MAGIC = b"\x89MCAP0\r\n"
-# Defined here, not by the writer, so that reading does not import the `mcap` library the
-# writer builds records with (~30 ms of start-up).
+# Defined here, not by the writer (segment_writer.py), so that reading does not import the
+# `mcap` library the writer builds records with (~30 ms of start-up).
 CHUNK_TABLE_ATTACHMENT = "trace.chunk_columns"
 """An attachment holding every chunk's start times, then end times, then file offsets, each
 a column of little-endian uint64, in time order (written only when the chunks are in time

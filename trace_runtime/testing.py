@@ -15,7 +15,6 @@ encoding and sealing, so what a test sees is exactly what would have been writte
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
@@ -23,8 +22,9 @@ import orjson
 
 from trace_runtime.chain import digest
 from trace_runtime.codec import EncodedLayer, LayerValue, encode_checked, encode_seal
+from trace_runtime.cycle_builder import CycleBuilder, next_cycle_time
 from trace_runtime.errors import UsageError
-from trace_runtime.logger import AuditLogger, CycleBuilder, LoggerStats, next_cycle_time
+from trace_runtime.logger import AuditLogger, LoggerStats
 from trace_runtime.records import (
     GENESIS,
     LAYER_MODELS,
@@ -340,12 +340,5 @@ def simulate_crash(logger: AuditLogger) -> None:
     """Leave a (synchronous) logger as a killed process would: every written batch stays on
     disk, the open segment never gets its summary or closing checkpoint, and the writer lock
     is gone (the kernel drops it with the process). For tests of crash recovery."""
-    segment = logger._segment
-    if segment is not None:
-        segment._stream.flush()
-        os.fsync(segment._stream.fileno())
-        segment._stream.close()
-    logger._segment = None
+    logger._chain.crash()
     logger._closed = True
-    if logger._writer_lock is not None:
-        logger._writer_lock.release()

@@ -224,3 +224,21 @@ def test_an_index_of_another_version_is_rebuilt_in_place(fleet: Path, tmp_path: 
     assert len(report.indexed) == report.segments and report.unchanged == 0
     assert stray.exists()
     assert _per_robot(index) == {"r1": 100, "r2": 97}
+
+
+def test_metrics_and_the_index_count_a_segment_and_its_truncated_copy_once(
+    tmp_path: Path,
+) -> None:
+    """A root holding a segment and, beside it, a copy cut in half: ``metrics`` counts each
+    cycle once, as the index does, and as the root without the copy."""
+    root = write_log(tmp_path / "root", robot_id="r1")
+    alone = compute_metrics([root]).overall.decisions
+    original = root / "hot" / "r1_000000.mcap"
+    (root / "hot" / "copy").mkdir()
+    half = root / "hot" / "copy" / original.name
+    half.write_bytes(original.read_bytes()[: original.stat().st_size // 2])
+    report = build_index([root], tmp_path / "idx")
+    assert compute_metrics([root]).overall.decisions == alone
+    assert compute_metrics([half, original]).overall.decisions == alone
+    assert report.decisions_total == alone
+    assert index_metrics(tmp_path / "idx", []).overall.decisions == alone

@@ -285,7 +285,7 @@ elif target == "unlink":
 elif target == "fsync":
     wrap(os, "fsync")
 elif target == "write_batch":
-    from trace_runtime.segment import SegmentWriter
+    from trace_runtime.segment_writer import SegmentWriter
     wrap(SegmentWriter, "write_batch")
 print("start", flush=True)
 compact(

@@ -261,6 +261,7 @@ def _files_intact(out: Path, entry: dict[str, Any]) -> bool:
 
 
 def _position(segment: Segment) -> str:
+    """The index key of a segment's chain position: ``robot/segment/first cycle``."""
     session = segment.session
     return f"{session.robot_id}/{session.segment:06d}/{session.first_cycle}"
 
@@ -384,11 +385,10 @@ def _plan(
     for robot in log.robots:
         segments = [s for s in log.segments_of(robot) if s.path not in left_out]
         for i, segment in enumerate(segments):
-            session = segment.session
             previous = segments[i - 1] if i else None
             tasks.append(
                 IndexTask(
-                    key=f"{robot}/{session.segment:06d}/{session.first_cycle}",
+                    key=_position(segment),
                     path=str(segment.path.resolve()),
                     previous=str(previous.path.resolve()) if previous else None,
                     sha256=digests[segment.path],
@@ -399,6 +399,49 @@ def _plan(
                 )
             )
     return tasks
+
+
+def _select(
+    tasks: list[IndexTask], known: dict[str, Any], target: Path, notes: list[str]
+) -> tuple[list[IndexTask], list[IndexTask]]:
+    """The tasks the index keeps (a copy of a position it already holds from a better file
+    is dropped, with a note) and, of those, the ones to (re)index."""
+    kept: list[IndexTask] = []
+    for task in tasks:
+        note = _against_manifest(task, known.get(task.key))
+        if note is None:
+            kept.append(task)
+        else:
+            notes.append(note)
+    todo = [
+        t
+        for t in kept
+        if not (_unchanged(known.get(t.key), t) and _files_intact(target, known[t.key]))
+    ]
+    return kept, todo
+
+
+def _store(
+    target: Path,
+    done: list[IndexedSegment],
+    known: dict[str, Any],
+    stale: set[str],
+    *,
+    settings: dict[str, Any],
+    cache: dict[str, Any],
+) -> None:
+    """Record the indexed segments in ``known`` and the manifest, then delete the files no
+    entry lists any more (an older copy of a segment's rows, or an older index's)."""
+    for result in done:
+        old = known.get(result.key)
+        if old is not None:
+            stale.update(set(old["files"]) - set(result.files))
+        known[result.key] = asdict(result)
+    _write_manifest(target, known, settings, cache)
+    live = {rel for entry in known.values() for rel in entry["files"]}
+    for rel in sorted(stale - live):
+        with contextlib.suppress(FileNotFoundError):
+            (target / rel).unlink()
 
 
 def build_index(
@@ -427,19 +470,7 @@ def build_index(
     cache: dict[str, Any] = dict(manifest.get("digests", {}))
     left_out, notes = _one_copy_each(log)
     tasks = _plan(log, _digests(log, cache), target, cfg, left_out)
-    kept: list[IndexTask] = []
-    for task in tasks:
-        note = _against_manifest(task, known.get(task.key))
-        if note is None:
-            kept.append(task)
-        else:
-            notes.append(note)
-    tasks = kept
-    todo = [
-        t
-        for t in tasks
-        if not (_unchanged(known.get(t.key), t) and _files_intact(target, known[t.key]))
-    ]
+    tasks, todo = _select(tasks, known, target, notes)
     opened = {str(s.path.resolve()): s for s in log.segments}
     expected = sum(opened[t.path].info.channels.get("/trace/seal", 0) for t in todo)
     target.mkdir(parents=True, exist_ok=True)
@@ -451,16 +482,7 @@ def build_index(
         if progress is not None:
             progress(cycles, expected or None)
     stale = set(manifest.get("stale_files", []))
-    for result in done:
-        old = known.get(result.key)
-        if old is not None:
-            stale.update(set(old["files"]) - set(result.files))
-        known[result.key] = asdict(result)
-    _write_manifest(target, known, settings, cache)
-    live = {rel for entry in known.values() for rel in entry["files"]}
-    for rel in sorted(stale - live):  # files of an older copy of a segment, or an older index
-        with contextlib.suppress(FileNotFoundError):
-            (target / rel).unlink()
+    _store(target, done, known, stale, settings=settings, cache=cache)
     elapsed = time.perf_counter() - started
     files = [target / rel for entry in known.values() for rel in entry["files"]]
     return IndexReport(

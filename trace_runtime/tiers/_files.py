@@ -21,7 +21,7 @@ from typing import BinaryIO
 
 from trace_runtime.errors import UsageError
 from trace_runtime.records import PROFILE
-from trace_runtime.segment import LIBRARY
+from trace_runtime.segment_writer import LIBRARY
 
 PARTIAL_SUFFIX = ".partial"
 LOCK_NAME = ".compact.lock"

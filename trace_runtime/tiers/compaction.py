@@ -49,7 +49,7 @@ from trace_runtime.integrity import PublicKey
 from trace_runtime.logset import FileProblem, Log, open_segments
 from trace_runtime.reader import Segment
 from trace_runtime.records import MESSAGE_MODELS, TOPIC_SEAL
-from trace_runtime.segment import OutMessage, SegmentWriteError, SegmentWriter
+from trace_runtime.segment_writer import OutMessage, SegmentWriteError, SegmentWriter
 from trace_runtime.session import TIER_METADATA, TIERS, SessionInfo
 from trace_runtime.tiers._files import (
     PARTIAL_METADATA,

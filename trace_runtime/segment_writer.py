@@ -67,6 +67,29 @@ def _end(builder: _RecordBuilder) -> bytes:
     return bytes(builder.end())  # type: ignore[no-untyped-call]
 
 
+def _message_records(
+    messages: Sequence[MessageFields],
+) -> tuple[bytearray, dict[int, bytearray], int, int]:
+    """A batch's message records as one chunk holds them, each channel's message-index
+    entries (packed as they are made), and the batch's first and last log time."""
+    records = bytearray()
+    indexes: dict[int, bytearray] = {}
+    start = end = messages[0][2]
+    pack, pack_entry = _MESSAGE_HEADER.pack, _INDEX_ENTRY.pack
+    for channel_id, sequence, log_time, data in messages:
+        index = indexes.get(channel_id)
+        if index is None:
+            index = indexes[channel_id] = bytearray()
+        index += pack_entry(log_time, len(records))
+        records += pack(_OPCODE_MESSAGE, 22 + len(data), channel_id, sequence, log_time, log_time)
+        records += data
+        if log_time < start:
+            start = log_time
+        elif log_time > end:
+            end = log_time
+    return records, indexes, start, end
+
+
 class SegmentWriteError(TraceError):
     """A batch could not be written. ``rolled_back`` says whether the segment is still usable."""
 
@@ -202,27 +225,45 @@ class SegmentWriter:
             raise SegmentWriteError("segment is closed", rolled_back=False)
         if not messages:
             return 0
-        records = bytearray()
-        # Per channel: its message-index entries, packed as they are made.
-        indexes: dict[int, bytearray] = {}
-        start = end = messages[0][2]
-        pack, pack_entry = _MESSAGE_HEADER.pack, _INDEX_ENTRY.pack
-        for channel_id, sequence, log_time, data in messages:
-            index = indexes.get(channel_id)
-            if index is None:
-                index = indexes[channel_id] = bytearray()
-            index += pack_entry(log_time, len(records))
-            records += pack(
-                _OPCODE_MESSAGE, 22 + len(data), channel_id, sequence, log_time, log_time
-            )
-            records += data
-            if log_time < start:
-                start = log_time
-            elif log_time > end:
-                end = log_time
+        records, indexes, start, end = _message_records(messages)
         payload = self._compressor.compress(records) if self._compressor else bytes(records)
 
         before = self.offset
+        chunk_offset = self.offset + len(self._pending)  # where this batch's chunk will start
+        out, chunk_length, offsets = self._chunk(records, payload, indexes, start, end)
+        index_length = len(out) - chunk_length
+        self._write_now(bytes(out))
+
+        self._chunk_indexes.append(
+            ChunkIndex(
+                message_start_time=start,
+                message_end_time=end,
+                chunk_start_offset=chunk_offset,
+                chunk_length=chunk_length,
+                message_index_offsets=offsets,
+                message_index_length=index_length,
+                compression=self._compression,
+                compressed_size=len(payload),
+                uncompressed_size=len(records),
+            )
+        )
+        counts = self._message_counts
+        for channel_id, entries in indexes.items():
+            counts[channel_id] = counts.get(channel_id, 0) + len(entries) // _INDEX_ENTRY.size
+        self._start_ns = start if self._start_ns is None else min(self._start_ns, start)
+        self._end_ns = max(self._end_ns, end)
+        return self.offset - before
+
+    def _chunk(
+        self,
+        records: bytearray,
+        payload: bytes,
+        indexes: dict[int, bytearray],
+        start: int,
+        end: int,
+    ) -> tuple[bytearray, int, dict[int, int]]:
+        """The chunk record of one batch followed by its message indexes, the chunk's length,
+        and where each channel's message index will sit in the file."""
         chunk_offset = self.offset + len(self._pending)  # where this batch's chunk will start
         compression = self._compression.encode()
         body_len = 8 + 8 + 8 + 4 + 4 + len(compression) + 8 + len(payload)
@@ -248,28 +289,7 @@ class SegmentWriter:
                 _OPCODE_MESSAGE_INDEX, 2 + 4 + len(entries), channel_id, len(entries)
             )
             out += entries
-        index_length = len(out) - chunk_length
-        self._write_now(bytes(out))
-
-        self._chunk_indexes.append(
-            ChunkIndex(
-                message_start_time=start,
-                message_end_time=end,
-                chunk_start_offset=chunk_offset,
-                chunk_length=chunk_length,
-                message_index_offsets=offsets,
-                message_index_length=index_length,
-                compression=self._compression,
-                compressed_size=len(payload),
-                uncompressed_size=len(records),
-            )
-        )
-        counts = self._message_counts
-        for channel_id, entries in indexes.items():
-            counts[channel_id] = counts.get(channel_id, 0) + len(entries) // _INDEX_ENTRY.size
-        self._start_ns = start if self._start_ns is None else min(self._start_ns, start)
-        self._end_ns = max(self._end_ns, end)
-        return self.offset - before
+        return out, chunk_length, offsets
 
     def sync(self) -> None:
         """fsync the file, when the stream has a file descriptor."""
@@ -303,6 +323,31 @@ class SegmentWriter:
         if self.finished or self.broken:
             return
         out = _RecordBuilder()
+        attachment_index = self._chunk_table(out)
+        DataEnd(data_section_crc=0).write(out)
+        summary_start = self.offset + len(self._pending) + out.count
+        summary_bytes, groups = self._summary(summary_start, attachment_index)
+        offsets = _RecordBuilder()
+        for opcode, begin, length in groups:
+            SummaryOffset(group_opcode=opcode, group_start=begin, group_length=length).write(
+                offsets
+            )
+        offset_bytes = _end(offsets)
+        summary_offset_start = summary_start + len(summary_bytes)
+        footer_prefix = struct.pack("<BQQQ", 0x02, 20, summary_start, summary_offset_start)
+        crc = zlib.crc32(summary_bytes + offset_bytes + footer_prefix)
+        tail = _RecordBuilder()
+        Footer(
+            summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=crc
+        ).write(tail)
+        self._write_now(_end(out) + summary_bytes + offset_bytes + _end(tail) + MAGIC)
+        self.finished = True
+        self.sync()
+
+    def _chunk_table(self, out: _RecordBuilder) -> AttachmentIndex | None:
+        """Write the chunk table attachment (every chunk's first and last time and offset, in
+        columns, for a reader's seek) into ``out`` when the chunks are in time order, and
+        return its index entry; None when they are not."""
         starts = array.array("Q", [c.message_start_time for c in self._chunk_indexes])
         ends = array.array("Q", [c.message_end_time for c in self._chunk_indexes])
         attachment_index: AttachmentIndex | None = None
@@ -330,8 +375,13 @@ class SegmentWriter:
                 name=CHUNK_TABLE_ATTACHMENT,
                 media_type="application/x-trace-chunk-columns",
             )
-        DataEnd(data_section_crc=0).write(out)
-        summary_start = self.offset + len(self._pending) + out.count
+        return attachment_index
+
+    def _summary(
+        self, summary_start: int, attachment_index: AttachmentIndex | None
+    ) -> tuple[bytes, list[tuple[int, int, int]]]:
+        """The summary section (schemas, channels, statistics, chunk, attachment and metadata
+        indexes) starting at ``summary_start``, and its groups (opcode, start, length)."""
         summary = _RecordBuilder()
         groups: list[tuple[int, int, int]] = []
 
@@ -376,23 +426,7 @@ class SegmentWriter:
         group(0x08, self._chunk_indexes)
         group(0x0A, [] if attachment_index is None else [attachment_index])
         group(_OPCODE_METADATA + 1, self._metadata_indexes)
-        summary_bytes = _end(summary)
-        offsets = _RecordBuilder()
-        for opcode, begin, length in groups:
-            SummaryOffset(group_opcode=opcode, group_start=begin, group_length=length).write(
-                offsets
-            )
-        offset_bytes = _end(offsets)
-        summary_offset_start = summary_start + len(summary_bytes)
-        footer_prefix = struct.pack("<BQQQ", 0x02, 20, summary_start, summary_offset_start)
-        crc = zlib.crc32(summary_bytes + offset_bytes + footer_prefix)
-        tail = _RecordBuilder()
-        Footer(
-            summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=crc
-        ).write(tail)
-        self._write_now(_end(out) + summary_bytes + offset_bytes + _end(tail) + MAGIC)
-        self.finished = True
-        self.sync()
+        return _end(summary), groups
 
     def close(self) -> None:
         """Finish (if still healthy) and close the underlying stream."""
