@@ -25,8 +25,8 @@ from trace_runtime.errors import LogReadError, NotTraceLogError
 from trace_runtime.mcap_file import DEFAULT_LIMITS, McapFile, ReadLimits
 from trace_runtime.records import PROFILE, TOPIC_SEAL, Seal
 from trace_runtime.session import SESSION_METADATA, SessionInfo
-from trace_runtime.tiers.cold import ColdAssembler
-from trace_runtime.tiers.warm import WarmAssembler
+from trace_runtime.tier_formats.cold import ColdAssembler
+from trace_runtime.tier_formats.warm import WarmAssembler
 
 log = logging.getLogger("trace_runtime")
 

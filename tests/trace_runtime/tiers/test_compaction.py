@@ -16,24 +16,25 @@ from typing import Any
 import orjson
 import pytest
 
+from tests.trace_runtime.tier_logs import T0_NS, cycle_key, make_root
 from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
 from trace_runtime.cycles import RawMessage
 from trace_runtime.testing import synthetic_cycle
+from trace_runtime.tier_formats.cold import BlockEncoder
 from trace_runtime.tiers import (
     CATALOG_NAME,
     ColdOptions,
+    _files,
     compact,
     load_catalog,
     parse_duration,
     refresh_catalog,
 )
-from trace_runtime.tiers import compaction as compact_module
-from trace_runtime.tiers.cold import BlockEncoder
-from trace_runtime.tiers.compaction import DAY_NS, RETENTION_LOG
+from trace_runtime.tiers import write as write_module
+from trace_runtime.tiers.durations import DAY_NS
+from trace_runtime.tiers.retention import RETENTION_LOG
 
-from .test_tiers import T0_NS, cycle_key, make_root
-
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 SMALL_BLOCKS = ColdOptions(block_cycles=16)
 
 
@@ -184,13 +185,13 @@ def test_a_replacement_that_does_not_verify_leaves_the_source(
 
         monkeypatch.setattr(BlockEncoder, "_encode", lossy)
     else:
-        real_split = compact_module.split_plain
+        real_split = write_module.split_plain
 
         def dropping(block: Any) -> Any:
             kept, plain, positions = real_split(block)
             return _lose_one_message(kept), plain, positions
 
-        monkeypatch.setattr(compact_module, "split_plain", dropping)
+        monkeypatch.setattr(write_module, "split_plain", dropping)
     report = compact(root, "cold", older_than_ns=0)
     assert [s.status for s in report.segments] == ["failed"]
     detail = report.segments[0].detail
@@ -261,7 +262,7 @@ import os, signal, sys
 from pathlib import Path
 sys.path.insert(0, {repo!r})
 from trace_runtime.tiers import ColdOptions, compact
-from trace_runtime.tiers import compaction as module
+from trace_runtime.tiers import replace as module
 
 target, when, nth = {kill!r}
 calls = [0]
@@ -474,5 +475,5 @@ def test_one_compaction_per_root(tmp_path: Path) -> None:
     root = make_root(tmp_path / "log", cycles=5)
     from trace_runtime.errors import UsageError
 
-    with compact_module.root_lock(root), pytest.raises(UsageError, match="another compaction"):
+    with _files.root_lock(root), pytest.raises(UsageError, match="another compaction"):
         compact(root, "cold", older_than_ns=0)

@@ -5,7 +5,8 @@ than the informational ``scenario:*`` ones), a failed compliance check, a change
 command, a gap (dropped cycles, a skipped cycle number, more than 1.5 periods of silence),
 or a documentation gap (a layer or the seal missing, a truncated rationale, no
 counterfactuals and no "none applicable", a factor that does not reach an entity with an
-evidence ref). Flagged cycles and ``context_s`` seconds around each are copied byte for byte.
+evidence ref). Flagged cycles and the cycles within ``context_ns`` of each are copied byte for
+byte.
 
 Every other cycle keeps its seal in full (so the hash chain of seals still verifies) and a
 summary on ``/trace/summary``: the layer messages pruned to what explains the decision,
@@ -24,6 +25,7 @@ from typing import Any
 import orjson
 
 from trace_runtime.cycles import Cycle, RawMessage
+from trace_runtime.flags import SCENARIO_FLAG
 from trace_runtime.records import (
     LAYER_TOPICS,
     TOPIC_ACTION,
@@ -43,37 +45,44 @@ SUMMARY_SCHEMA = (
     b'"required":["cycle","t_ns","layers"],"properties":{"cycle":{"type":"integer"},'
     b'"t_ns":{"type":"integer"},"layers":{"type":"object"}}}',
 )
-DEFAULT_CONTEXT_S = 2.0
+DEFAULT_CONTEXT_NS = 2_000_000_000
 _MAX_PENDING = 100_000  # bounds memory if log times ever run backwards
-INFORMATIONAL_PREFIXES = ("scenario:",)
+INFORMATIONAL_PREFIXES = (SCENARIO_FLAG,)
 
 
 @dataclass(frozen=True, slots=True)
 class WarmPolicy:
     """What the warm tier keeps in full."""
 
-    context_s: float = DEFAULT_CONTEXT_S
-    """Seconds of cycles kept in full before and after each flagged cycle."""
+    context_ns: int = DEFAULT_CONTEXT_NS
+    """Log time (ns) of cycles kept in full before and after each flagged cycle."""
     keep_readings: bool = False
     """Keep the sensor readings that a summary's evidence refs point at (same cycle)."""
     informational_prefixes: tuple[str, ...] = INFORMATIONAL_PREFIXES
     """Execution flags with these prefixes do not flag a cycle."""
 
     def to_metadata(self) -> dict[str, str]:
+        """The policy as a warm segment's ``trace.tier`` record states it (context in seconds)."""
         return {
-            "context_s": repr(self.context_s),
+            "context_s": repr(self.context_ns / 1e9),
             "keep_readings": str(self.keep_readings).lower(),
             "informational_prefixes": ",".join(self.informational_prefixes),
         }
 
     @classmethod
     def from_metadata(cls, data: dict[str, str]) -> WarmPolicy:
+        """The policy a warm segment's ``trace.tier`` record states."""
         prefixes = data.get("informational_prefixes", ",".join(INFORMATIONAL_PREFIXES))
         return cls(
-            context_s=float(data.get("context_s", DEFAULT_CONTEXT_S)),
+            context_ns=_seconds_as_ns(data.get("context_s")),
             keep_readings=data.get("keep_readings", "false") == "true",
             informational_prefixes=tuple(p for p in prefixes.split(",") if p),
         )
+
+
+def _seconds_as_ns(text: str | None) -> int:
+    """The ``context_s`` field of a policy record (seconds, as ``repr`` writes a float) in ns."""
+    return DEFAULT_CONTEXT_NS if text is None else round(float(text) * 1e9)
 
 
 # --- cycles as message groups ----------------------------------------------------------
@@ -346,12 +355,12 @@ def warm_cycles(
 ) -> Iterator[WarmCycle]:
     """Turn a hot message stream into the warm tier's cycles, in order.
 
-    The context window is in log time: every cycle within ``context_s`` of a flagged cycle
+    The context window is in log time: every cycle within ``context_ns`` of a flagged cycle
     (before or after) is kept in full, however many cycles that is around a gap. Memory is
     bounded by the cycles of one window. Deterministic: the same input and policy give the
     same output, which is how a warm segment is verified against its source.
     """
-    window_ns = round(policy.context_s * 1e9)
+    window_ns = policy.context_ns
     flagger = _Flagger(policy, period_ns)
     pending: deque[list[Any]] = deque()  # [cycle, reasons, full], oldest first
     keep_until_ns: int | None = None
