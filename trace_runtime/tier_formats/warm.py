@@ -270,51 +270,14 @@ def summarize(layers: dict[str, Any]) -> dict[str, Any]:
     action = layers.get(TOPIC_ACTION)
     factor_nodes: list[str] = []
     if isinstance(action, dict):
-        summary = _stamp(action)
-        summary.update(_pick(action, ("command", "parameters", "score")))
-        if "alternatives" in action:
-            summary["alternatives"] = [
-                _pick(a, ("command", "score")) for a in _dicts(action["alternatives"])
-            ]
-        rationale = action.get("rationale")
-        if isinstance(rationale, dict):
-            summary["rationale"] = _pick(rationale, ("text", "factors", "truncated"))
-            factor_nodes = [
-                f["node"]
-                for f in _dicts(rationale.get("factors"))
-                if isinstance(f.get("node"), str)
-            ]
-        summary.update(_pick(action, ("counterfactuals", "counterfactuals_none_applicable")))
-        out[TOPIC_ACTION] = summary
+        out[TOPIC_ACTION], factor_nodes = _summarize_action(action)
     belief = layers.get(TOPIC_BELIEF)
     entity_ids: set[str] = set()
     if isinstance(belief, dict):
-        graph = _Graph(belief)
-        keep = graph.ancestors(factor_nodes)
-        nodes = [n for n in _dicts(belief.get("nodes")) if n.get("id") in keep]
-        edges = [e for e in graph.edges if e.get("child") in keep and e.get("parent") in keep]
-        entity_ids = {
-            n["entity"]
-            for n in nodes
-            if n.get("kind") == "entity" and isinstance(n.get("entity"), str)
-        }
-        out[TOPIC_BELIEF] = {**_stamp(belief), "nodes": nodes, "edges": edges}
+        out[TOPIC_BELIEF], entity_ids = _summarize_belief(belief, factor_nodes)
     perception = layers.get(TOPIC_PERCEPTION)
     if isinstance(perception, dict):
-        entities = []
-        for entity in _dicts(perception.get("entities")):
-            if entity.get("id") not in entity_ids:
-                continue
-            kept = _pick(entity, ("id", "class", "pose", "confidence"))
-            kept["evidence"] = [
-                _pick(ev, ("sensor", "weight", "ref")) for ev in _dicts(entity.get("evidence"))
-            ]
-            entities.append(kept)
-        out[TOPIC_PERCEPTION] = {
-            **_stamp(perception),
-            "entities": entities,
-            **_pick(perception, ("sensors_used", "sensors_unavailable", "robot_pose")),
-        }
+        out[TOPIC_PERCEPTION] = _summarize_perception(perception, entity_ids)
     execution = layers.get(TOPIC_EXECUTION)
     if isinstance(execution, dict):
         out[TOPIC_EXECUTION] = {
@@ -322,6 +285,57 @@ def summarize(layers: dict[str, Any]) -> dict[str, Any]:
             **_pick(execution, ("intended", "actual", "deviation", "flags")),
         }
     return out
+
+
+def _summarize_action(action: dict[str, Any]) -> tuple[dict[str, Any], list[str]]:
+    """The action's summary, and the belief nodes its rationale's factors name."""
+    summary = _stamp(action)
+    summary.update(_pick(action, ("command", "parameters", "score")))
+    if "alternatives" in action:
+        summary["alternatives"] = [
+            _pick(a, ("command", "score")) for a in _dicts(action["alternatives"])
+        ]
+    factor_nodes: list[str] = []
+    rationale = action.get("rationale")
+    if isinstance(rationale, dict):
+        summary["rationale"] = _pick(rationale, ("text", "factors", "truncated"))
+        factor_nodes = [
+            f["node"] for f in _dicts(rationale.get("factors")) if isinstance(f.get("node"), str)
+        ]
+    summary.update(_pick(action, ("counterfactuals", "counterfactuals_none_applicable")))
+    return summary, factor_nodes
+
+
+def _summarize_belief(
+    belief: dict[str, Any], factor_nodes: list[str]
+) -> tuple[dict[str, Any], set[str]]:
+    """The belief graph cut to the factor nodes and their ancestors, and the entities named."""
+    graph = _Graph(belief)
+    keep = graph.ancestors(factor_nodes)
+    nodes = [n for n in _dicts(belief.get("nodes")) if n.get("id") in keep]
+    edges = [e for e in graph.edges if e.get("child") in keep and e.get("parent") in keep]
+    entity_ids = {
+        n["entity"] for n in nodes if n.get("kind") == "entity" and isinstance(n.get("entity"), str)
+    }
+    return {**_stamp(belief), "nodes": nodes, "edges": edges}, entity_ids
+
+
+def _summarize_perception(perception: dict[str, Any], entity_ids: set[str]) -> dict[str, Any]:
+    """The perceived entities the belief summary names, with their evidence."""
+    entities = []
+    for entity in _dicts(perception.get("entities")):
+        if entity.get("id") not in entity_ids:
+            continue
+        kept = _pick(entity, ("id", "class", "pose", "confidence"))
+        kept["evidence"] = [
+            _pick(ev, ("sensor", "weight", "ref")) for ev in _dicts(entity.get("evidence"))
+        ]
+        entities.append(kept)
+    return {
+        **_stamp(perception),
+        "entities": entities,
+        **_pick(perception, ("sensors_used", "sensors_unavailable", "robot_pose")),
+    }
 
 
 def _referenced_readings(summary: dict[str, Any], sensors: list[RawMessage]) -> list[RawMessage]:

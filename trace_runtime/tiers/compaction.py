@@ -96,16 +96,7 @@ def compact(
     partial file (a plug point for fault injection). A dry run changes nothing on disk.
     """
     root = Path(root)
-    if not root.is_dir():
-        raise LogReadError(str(root), "not a log root (no such directory)")
-    if tier not in ("warm", "cold"):
-        raise UsageError(f"unknown target tier {tier!r}: use warm or cold")
-    chosen = tuple(sources) if sources is not None else DEFAULT_SOURCES[tier]
-    allowed = TIERS[: TIERS.index(tier)]
-    bad = [s for s in chosen if s not in allowed]
-    if bad or not chosen:
-        what = ", ".join(bad) or "nothing"
-        raise UsageError(f"cannot compact {what} into {tier}: sources are {', '.join(allowed)}")
+    chosen = _check_target(root, tier, sources)
     older = DEFAULT_OLDER_THAN_NS[tier] if older_than_ns is None else older_than_ns
     if older < 0 or (retention_ns is not None and retention_ns < 0):
         raise UsageError("durations must not be negative")
@@ -136,8 +127,25 @@ def compact(
     return report
 
 
+def _check_target(root: Path, tier: str, sources: Iterable[str] | None) -> tuple[str, ...]:
+    """The source tiers to compact from, once ``root`` and ``tier`` are known to be usable."""
+    if not root.is_dir():
+        raise LogReadError(str(root), "not a log root (no such directory)")
+    if tier not in ("warm", "cold"):
+        raise UsageError(f"unknown target tier {tier!r}: use warm or cold")
+    chosen = tuple(sources) if sources is not None else DEFAULT_SOURCES[tier]
+    allowed = TIERS[: TIERS.index(tier)]
+    bad = [s for s in chosen if s not in allowed]
+    if bad or not chosen:
+        what = ", ".join(bad) or "nothing"
+        raise UsageError(f"cannot compact {what} into {tier}: sources are {', '.join(allowed)}")
+    return chosen
+
+
 @dataclass(frozen=True, slots=True)
 class _Settings:
+    """What one run of ``compact`` was asked to do, its arguments checked."""
+
     tier: str
     sources: tuple[str, ...]
     older_than_ns: int
@@ -154,6 +162,7 @@ class _Settings:
 
 
 def _run(root: Path, settings: _Settings, progress: ProgressCallback | None) -> CompactionReport:
+    """Recover, plan, move, retire: one compaction of ``root``, the lock held."""
     leftovers = recover(root, dry_run=settings.dry_run, key=settings.key)
     segments, unreadable = scan(root)
     reference, label = reference_time(
