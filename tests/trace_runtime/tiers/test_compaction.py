@@ -13,7 +13,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import orjson
 import pytest
 
 from tests.trace_runtime.tier_logs import T0_NS, cycle_key, make_root
@@ -31,8 +30,6 @@ from trace_runtime.tiers import (
     refresh_catalog,
 )
 from trace_runtime.tiers import write as write_module
-from trace_runtime.tiers.durations import DAY_NS
-from trace_runtime.tiers.retention import RETENTION_LOG
 
 REPO = Path(__file__).resolve().parents[3]
 SMALL_BLOCKS = ColdOptions(block_cycles=16)
@@ -49,16 +46,6 @@ def _state(root: Path) -> dict[str, bytes]:
 
 def _segment_names(root: Path) -> list[str]:
     return sorted(p.relative_to(root).as_posix() for p in root.glob("*/*.mcap"))
-
-
-def test_parse_duration() -> None:
-    assert parse_duration("24h") == 24 * 3600 * 10**9
-    assert parse_duration("7d") == 7 * DAY_NS
-    assert parse_duration("90s") == parse_duration("1.5m") == 90 * 10**9
-    assert parse_duration("0") == 0
-    for bad in ("", "h", "-1h", "3 days", "1y"):
-        with pytest.raises(Exception, match="bad duration"):
-            parse_duration(bad)
 
 
 def test_compacting_twice_changes_nothing(tmp_path: Path) -> None:
@@ -416,45 +403,6 @@ def test_kill_9_with_worker_processes_leaves_no_orphans(
             alive.append(w)
     assert not alive
     _check_resumed(root, "cold", original, names)
-
-
-# --- retention ----------------------------------------------------------------------------
-
-
-def test_retention_deletes_only_old_cold_segments_that_verify(tmp_path: Path) -> None:
-    root = tmp_path / "log"
-    for days in (0, 10, 300, 400):
-        make_root(root, cycles=20, t0_ns=T0_NS + days * DAY_NS, drop_at=None)
-    # the newest is day 400: days 0 and 10 are past 183 days, 300 is not
-    compact(root, "cold", older_than_ns=0, sources=["hot"], retention_ns=None, cold=SMALL_BLOCKS)
-    segments = sorted((root / "cold").glob("*.mcap"))
-    tampered = segments[1]
-    data = bytearray(tampered.read_bytes())
-    mark = data.find(b"/trace/cold/index")
-    data[data.find(b"TCB\x01") + 100] ^= 0x01  # damage a block
-    assert mark > 0
-    tampered.write_bytes(bytes(data))
-    report = compact(root, "cold", older_than_ns=parse_duration("1000d"))
-    by_path = {r.path: r for r in report.retention}
-    assert by_path[f"cold/{segments[0].name}"].status == "deleted"
-    assert by_path[f"cold/{segments[1].name}"].status == "kept"
-    assert "held: findings (damaged" in by_path[f"cold/{segments[1].name}"].detail
-    assert len(by_path) == 2
-    assert sorted(p.name for p in (root / "cold").glob("*.mcap")) == [s.name for s in segments[1:]]
-    tombstones = [orjson.loads(line) for line in (root / RETENTION_LOG).read_bytes().splitlines()]
-    assert [t["path"] for t in tombstones] == [f"cold/{segments[0].name}"]
-    assert tombstones[0]["last_seal"] and tombstones[0]["sha256"]
-
-
-def test_retention_never_deletes_hot_or_warm(tmp_path: Path) -> None:
-    root = tmp_path / "log"
-    for days in (0, 400):
-        make_root(root, cycles=20, t0_ns=T0_NS + days * DAY_NS, drop_at=None)
-    compact(root, "warm", older_than_ns=parse_duration("300d"))  # day 0 -> warm
-    before = _segment_names(root)
-    report = compact(root, "cold", older_than_ns=parse_duration("1000d"), retention_ns=DAY_NS)
-    assert report.retention == []
-    assert _segment_names(root) == before == ["hot/amr-1_000001.mcap", "warm/amr-1_000000.mcap"]
 
 
 def test_compaction_rejects_bad_arguments(tmp_path: Path) -> None:
