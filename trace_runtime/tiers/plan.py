@@ -19,10 +19,12 @@ from trace_runtime.tiers.report import SegmentResult, Status, file_size, rel_pat
 
 
 def robot_order(segment: Segment) -> tuple[str, int]:
+    """Sort key: robot, then segment number."""
     return segment.session.robot_id, segment.session.segment
 
 
 def scan(root: Path) -> tuple[dict[Path, Segment], list[FileProblem]]:
+    """Every segment file of the root opened (by path), and the files that could not be."""
     segments, problems = open_segments(segment_files(root))
     return {s.path: s for s in segments}, problems
 
@@ -36,6 +38,7 @@ def in_two_tiers(root: Path) -> set[str]:
 
 
 def live_segments(segments: dict[Path, Segment]) -> set[Path]:
+    """Each robot's newest hot segment when it is not finished: its logger may be writing it."""
     newest: dict[str, tuple[int, Path, Segment]] = {}
     for path, segment in segments.items():
         if segment.session.tier != "hot":
@@ -47,6 +50,7 @@ def live_segments(segments: dict[Path, Segment]) -> set[Path]:
 
 
 def cycle_estimate(segment: Segment) -> int:
+    """The cycles a segment holds, from its summary or index when it can tell (for progress)."""
     if segment.info.finished and TOPIC_SEAL in segment.info.channels:
         return segment.info.channels[TOPIC_SEAL]
     if segment.session.tier == "cold":
@@ -62,6 +66,7 @@ def cycle_estimate(segment: Segment) -> int:
 def segment_result(
     root: Path, path: Path, segment: Segment, target: Path | None, *, status: Status, detail: str
 ) -> SegmentResult:
+    """The result of one segment before anything was written (no size after yet)."""
     return SegmentResult(
         source=rel_path(root, path),
         target=rel_path(root, target) if target is not None else None,
