@@ -44,7 +44,7 @@ _CHILD = """
 import os, signal, sys
 sys.path.insert(0, {repo!r})
 from trace_runtime.tiers import ColdOptions, compact
-from trace_runtime.tiers import compaction as module
+from trace_runtime.tiers import replace as module
 
 target, nth = {hook!r}
 calls = [0]

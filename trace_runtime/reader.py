@@ -26,8 +26,8 @@ from trace_runtime.mcap_file import McapFile
 from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import PROFILE, TOPIC_SEAL, Seal
 from trace_runtime.session import SESSION_METADATA, SessionInfo
-from trace_runtime.tiers.cold import ColdAssembler
-from trace_runtime.tiers.warm import WarmAssembler
+from trace_runtime.tier_formats.cold import ColdAssembler
+from trace_runtime.tier_formats.warm import WarmAssembler
 
 log = logging.getLogger("trace_runtime")
 

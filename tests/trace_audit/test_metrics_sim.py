@@ -201,7 +201,9 @@ def test_metrics_across_tiers(tmp_path: Path) -> None:
         roots[tier] = tmp_path / tier
         run(RunConfig(out=roots[tier], total_cycles=400, seed=8, faults=rates))
     compact(roots["cold"], "cold", older_than_ns=0, sources=["hot"], retention_ns=None)
-    compact(roots["warm"], "warm", older_than_ns=0, warm=WarmPolicy(context_s=0), retention_ns=None)
+    compact(
+        roots["warm"], "warm", older_than_ns=0, warm=WarmPolicy(context_ns=0), retention_ns=None
+    )
     assert not list((roots["cold"] / "hot").glob("*.mcap"))
     assert not list((roots["warm"] / "hot").glob("*.mcap"))
     config = MetricsConfig(by="scenario", max_listed=10_000)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from tests.trace_audit.conftest import write_log
 from tests.trace_audit.test_verify_tamper import _write_plain, decode, write_signed_log
-from tests.trace_runtime.test_tiers import make_root
+from tests.trace_runtime.tier_logs import make_root
 from trace_audit.verify import verify_log
 from trace_runtime import open_log
 from trace_runtime.integrity import Ed25519Signer

@@ -154,3 +154,21 @@ def test_the_reader_layers_import_downwards() -> None:
         "trace_runtime.reader",
         "trace_runtime.logset",
     }
+
+
+def test_the_tier_formats_sit_below_the_reader_and_compaction_above_verification() -> None:
+    """The warm and cold formats are read by the reader, so they import nothing that reads
+    segments; writing, recovering and retiring tiers verify, so they sit above it."""
+    graph = _module_imports("trace_runtime")
+    above_the_formats = {
+        "trace_runtime.reader",
+        "trace_runtime.logset",
+        "trace_runtime.verification",
+        "trace_runtime.tiers",
+    }
+    for module, targets in graph.items():
+        if module.startswith("trace_runtime.tier_formats"):
+            upward = {t for t in targets if any(t.startswith(a) for a in above_the_formats)}
+            assert not upward, (module, sorted(upward))
+    for module in ("trace_runtime.reader", "trace_runtime.logset", "trace_runtime.verification"):
+        assert not {t for t in graph[module] if t.startswith("trace_runtime.tiers")}, module

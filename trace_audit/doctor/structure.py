@@ -46,8 +46,8 @@ from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import MESSAGE_MODELS, PROFILE
 from trace_runtime.schemas import schema_name
 from trace_runtime.session import SESSION_METADATA, SessionInfo
-from trace_runtime.tiers.cold import BLOCK_TOPIC, INDEX_TOPIC
-from trace_runtime.tiers.warm import SUMMARY_TOPIC
+from trace_runtime.tier_formats.cold import BLOCK_TOPIC, INDEX_TOPIC
+from trace_runtime.tier_formats.warm import SUMMARY_TOPIC
 
 __all__ = ["check_structure"]
 

@@ -5,7 +5,8 @@ than the informational ``scenario:*`` ones), a failed compliance check, a change
 command, a gap (dropped cycles, a skipped cycle number, more than 1.5 periods of silence),
 or a documentation gap (a layer or the seal missing, a truncated rationale, no
 counterfactuals and no "none applicable", a factor that does not reach an entity with an
-evidence ref). Flagged cycles and ``context_s`` seconds around each are copied byte for byte.
+evidence ref). Flagged cycles and the cycles within ``context_ns`` of each are copied byte for
+byte.
 
 Every other cycle keeps its seal in full (so the hash chain of seals still verifies) and a
 summary on ``/trace/summary``: the layer messages pruned to what explains the decision,
@@ -24,6 +25,7 @@ from typing import Any
 import orjson
 
 from trace_runtime.cycles import Cycle, RawMessage
+from trace_runtime.flags import SCENARIO_FLAG
 from trace_runtime.records import (
     LAYER_TOPICS,
     TOPIC_ACTION,
@@ -43,37 +45,44 @@ SUMMARY_SCHEMA = (
     b'"required":["cycle","t_ns","layers"],"properties":{"cycle":{"type":"integer"},'
     b'"t_ns":{"type":"integer"},"layers":{"type":"object"}}}',
 )
-DEFAULT_CONTEXT_S = 2.0
+DEFAULT_CONTEXT_NS = 2_000_000_000
 _MAX_PENDING = 100_000  # bounds memory if log times ever run backwards
-INFORMATIONAL_PREFIXES = ("scenario:",)
+INFORMATIONAL_PREFIXES = (SCENARIO_FLAG,)
 
 
 @dataclass(frozen=True, slots=True)
 class WarmPolicy:
     """What the warm tier keeps in full."""
 
-    context_s: float = DEFAULT_CONTEXT_S
-    """Seconds of cycles kept in full before and after each flagged cycle."""
+    context_ns: int = DEFAULT_CONTEXT_NS
+    """Log time (ns) of cycles kept in full before and after each flagged cycle."""
     keep_readings: bool = False
     """Keep the sensor readings that a summary's evidence refs point at (same cycle)."""
     informational_prefixes: tuple[str, ...] = INFORMATIONAL_PREFIXES
     """Execution flags with these prefixes do not flag a cycle."""
 
     def to_metadata(self) -> dict[str, str]:
+        """The policy as a warm segment's ``trace.tier`` record states it (context in seconds)."""
         return {
-            "context_s": repr(self.context_s),
+            "context_s": repr(self.context_ns / 1e9),
             "keep_readings": str(self.keep_readings).lower(),
             "informational_prefixes": ",".join(self.informational_prefixes),
         }
 
     @classmethod
     def from_metadata(cls, data: dict[str, str]) -> WarmPolicy:
+        """The policy a warm segment's ``trace.tier`` record states."""
         prefixes = data.get("informational_prefixes", ",".join(INFORMATIONAL_PREFIXES))
         return cls(
-            context_s=float(data.get("context_s", DEFAULT_CONTEXT_S)),
+            context_ns=_seconds_as_ns(data.get("context_s")),
             keep_readings=data.get("keep_readings", "false") == "true",
             informational_prefixes=tuple(p for p in prefixes.split(",") if p),
         )
+
+
+def _seconds_as_ns(text: str | None) -> int:
+    """The ``context_s`` field of a policy record (seconds, as ``repr`` writes a float) in ns."""
+    return DEFAULT_CONTEXT_NS if text is None else round(float(text) * 1e9)
 
 
 # --- cycles as message groups ----------------------------------------------------------
@@ -261,51 +270,14 @@ def summarize(layers: dict[str, Any]) -> dict[str, Any]:
     action = layers.get(TOPIC_ACTION)
     factor_nodes: list[str] = []
     if isinstance(action, dict):
-        summary = _stamp(action)
-        summary.update(_pick(action, ("command", "parameters", "score")))
-        if "alternatives" in action:
-            summary["alternatives"] = [
-                _pick(a, ("command", "score")) for a in _dicts(action["alternatives"])
-            ]
-        rationale = action.get("rationale")
-        if isinstance(rationale, dict):
-            summary["rationale"] = _pick(rationale, ("text", "factors", "truncated"))
-            factor_nodes = [
-                f["node"]
-                for f in _dicts(rationale.get("factors"))
-                if isinstance(f.get("node"), str)
-            ]
-        summary.update(_pick(action, ("counterfactuals", "counterfactuals_none_applicable")))
-        out[TOPIC_ACTION] = summary
+        out[TOPIC_ACTION], factor_nodes = _summarize_action(action)
     belief = layers.get(TOPIC_BELIEF)
     entity_ids: set[str] = set()
     if isinstance(belief, dict):
-        graph = _Graph(belief)
-        keep = graph.ancestors(factor_nodes)
-        nodes = [n for n in _dicts(belief.get("nodes")) if n.get("id") in keep]
-        edges = [e for e in graph.edges if e.get("child") in keep and e.get("parent") in keep]
-        entity_ids = {
-            n["entity"]
-            for n in nodes
-            if n.get("kind") == "entity" and isinstance(n.get("entity"), str)
-        }
-        out[TOPIC_BELIEF] = {**_stamp(belief), "nodes": nodes, "edges": edges}
+        out[TOPIC_BELIEF], entity_ids = _summarize_belief(belief, factor_nodes)
     perception = layers.get(TOPIC_PERCEPTION)
     if isinstance(perception, dict):
-        entities = []
-        for entity in _dicts(perception.get("entities")):
-            if entity.get("id") not in entity_ids:
-                continue
-            kept = _pick(entity, ("id", "class", "pose", "confidence"))
-            kept["evidence"] = [
-                _pick(ev, ("sensor", "weight", "ref")) for ev in _dicts(entity.get("evidence"))
-            ]
-            entities.append(kept)
-        out[TOPIC_PERCEPTION] = {
-            **_stamp(perception),
-            "entities": entities,
-            **_pick(perception, ("sensors_used", "sensors_unavailable", "robot_pose")),
-        }
+        out[TOPIC_PERCEPTION] = _summarize_perception(perception, entity_ids)
     execution = layers.get(TOPIC_EXECUTION)
     if isinstance(execution, dict):
         out[TOPIC_EXECUTION] = {
@@ -313,6 +285,57 @@ def summarize(layers: dict[str, Any]) -> dict[str, Any]:
             **_pick(execution, ("intended", "actual", "deviation", "flags")),
         }
     return out
+
+
+def _summarize_action(action: dict[str, Any]) -> tuple[dict[str, Any], list[str]]:
+    """The action's summary, and the belief nodes its rationale's factors name."""
+    summary = _stamp(action)
+    summary.update(_pick(action, ("command", "parameters", "score")))
+    if "alternatives" in action:
+        summary["alternatives"] = [
+            _pick(a, ("command", "score")) for a in _dicts(action["alternatives"])
+        ]
+    factor_nodes: list[str] = []
+    rationale = action.get("rationale")
+    if isinstance(rationale, dict):
+        summary["rationale"] = _pick(rationale, ("text", "factors", "truncated"))
+        factor_nodes = [
+            f["node"] for f in _dicts(rationale.get("factors")) if isinstance(f.get("node"), str)
+        ]
+    summary.update(_pick(action, ("counterfactuals", "counterfactuals_none_applicable")))
+    return summary, factor_nodes
+
+
+def _summarize_belief(
+    belief: dict[str, Any], factor_nodes: list[str]
+) -> tuple[dict[str, Any], set[str]]:
+    """The belief graph cut to the factor nodes and their ancestors, and the entities named."""
+    graph = _Graph(belief)
+    keep = graph.ancestors(factor_nodes)
+    nodes = [n for n in _dicts(belief.get("nodes")) if n.get("id") in keep]
+    edges = [e for e in graph.edges if e.get("child") in keep and e.get("parent") in keep]
+    entity_ids = {
+        n["entity"] for n in nodes if n.get("kind") == "entity" and isinstance(n.get("entity"), str)
+    }
+    return {**_stamp(belief), "nodes": nodes, "edges": edges}, entity_ids
+
+
+def _summarize_perception(perception: dict[str, Any], entity_ids: set[str]) -> dict[str, Any]:
+    """The perceived entities the belief summary names, with their evidence."""
+    entities = []
+    for entity in _dicts(perception.get("entities")):
+        if entity.get("id") not in entity_ids:
+            continue
+        kept = _pick(entity, ("id", "class", "pose", "confidence"))
+        kept["evidence"] = [
+            _pick(ev, ("sensor", "weight", "ref")) for ev in _dicts(entity.get("evidence"))
+        ]
+        entities.append(kept)
+    return {
+        **_stamp(perception),
+        "entities": entities,
+        **_pick(perception, ("sensors_used", "sensors_unavailable", "robot_pose")),
+    }
 
 
 def _referenced_readings(summary: dict[str, Any], sensors: list[RawMessage]) -> list[RawMessage]:
@@ -346,12 +369,12 @@ def warm_cycles(
 ) -> Iterator[WarmCycle]:
     """Turn a hot message stream into the warm tier's cycles, in order.
 
-    The context window is in log time: every cycle within ``context_s`` of a flagged cycle
+    The context window is in log time: every cycle within ``context_ns`` of a flagged cycle
     (before or after) is kept in full, however many cycles that is around a gap. Memory is
     bounded by the cycles of one window. Deterministic: the same input and policy give the
     same output, which is how a warm segment is verified against its source.
     """
-    window_ns = round(policy.context_s * 1e9)
+    window_ns = policy.context_ns
     flagger = _Flagger(policy, period_ns)
     pending: deque[list[Any]] = deque()  # [cycle, reasons, full], oldest first
     keep_until_ns: int | None = None

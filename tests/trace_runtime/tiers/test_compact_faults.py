@@ -19,13 +19,13 @@ from typing import Any, BinaryIO, cast
 
 import pytest
 
-from tests.trace_runtime.test_tiers import cycle_key, make_root
+from tests.trace_runtime.tier_logs import cycle_key, make_root
 from trace_audit.verify import verify_log
 from trace_runtime import open_log, open_segment
 from trace_runtime.tiers import ColdOptions, compact
 from trace_runtime.tiers._files import open_partial
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 SMALL_BLOCKS = ColdOptions(block_cycles=8)
 
 _CHILD = """
@@ -33,7 +33,7 @@ import os, signal, sys
 from pathlib import Path
 sys.path.insert(0, {repo!r})
 from trace_runtime.tiers import ColdOptions, compact
-from trace_runtime.tiers import compaction as module
+from trace_runtime.tiers import replace as module
 
 target, nth = {hook!r}
 calls = [0]

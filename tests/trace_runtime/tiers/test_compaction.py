@@ -13,27 +13,25 @@ import time
 from pathlib import Path
 from typing import Any
 
-import orjson
 import pytest
 
+from tests.trace_runtime.tier_logs import T0_NS, cycle_key, make_root
 from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
 from trace_runtime.cycles import RawMessage
 from trace_runtime.testing import synthetic_cycle
+from trace_runtime.tier_formats.cold import BlockEncoder
 from trace_runtime.tiers import (
     CATALOG_NAME,
     ColdOptions,
+    _files,
     compact,
     load_catalog,
     parse_duration,
     refresh_catalog,
 )
-from trace_runtime.tiers import compaction as compact_module
-from trace_runtime.tiers.cold import BlockEncoder
-from trace_runtime.tiers.compaction import DAY_NS, RETENTION_LOG
+from trace_runtime.tiers import write as write_module
 
-from .test_tiers import T0_NS, cycle_key, make_root
-
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 SMALL_BLOCKS = ColdOptions(block_cycles=16)
 
 
@@ -48,16 +46,6 @@ def _state(root: Path) -> dict[str, bytes]:
 
 def _segment_names(root: Path) -> list[str]:
     return sorted(p.relative_to(root).as_posix() for p in root.glob("*/*.mcap"))
-
-
-def test_parse_duration() -> None:
-    assert parse_duration("24h") == 24 * 3600 * 10**9
-    assert parse_duration("7d") == 7 * DAY_NS
-    assert parse_duration("90s") == parse_duration("1.5m") == 90 * 10**9
-    assert parse_duration("0") == 0
-    for bad in ("", "h", "-1h", "3 days", "1y"):
-        with pytest.raises(Exception, match="bad duration"):
-            parse_duration(bad)
 
 
 def test_compacting_twice_changes_nothing(tmp_path: Path) -> None:
@@ -184,13 +172,13 @@ def test_a_replacement_that_does_not_verify_leaves_the_source(
 
         monkeypatch.setattr(BlockEncoder, "_encode", lossy)
     else:
-        real_split = compact_module.split_plain
+        real_split = write_module.split_plain
 
         def dropping(block: Any) -> Any:
             kept, plain, positions = real_split(block)
             return _lose_one_message(kept), plain, positions
 
-        monkeypatch.setattr(compact_module, "split_plain", dropping)
+        monkeypatch.setattr(write_module, "split_plain", dropping)
     report = compact(root, "cold", older_than_ns=0)
     assert [s.status for s in report.segments] == ["failed"]
     detail = report.segments[0].detail
@@ -261,7 +249,7 @@ import os, signal, sys
 from pathlib import Path
 sys.path.insert(0, {repo!r})
 from trace_runtime.tiers import ColdOptions, compact
-from trace_runtime.tiers import compaction as module
+from trace_runtime.tiers import replace as module
 
 target, when, nth = {kill!r}
 calls = [0]
@@ -417,45 +405,6 @@ def test_kill_9_with_worker_processes_leaves_no_orphans(
     _check_resumed(root, "cold", original, names)
 
 
-# --- retention ----------------------------------------------------------------------------
-
-
-def test_retention_deletes_only_old_cold_segments_that_verify(tmp_path: Path) -> None:
-    root = tmp_path / "log"
-    for days in (0, 10, 300, 400):
-        make_root(root, cycles=20, t0_ns=T0_NS + days * DAY_NS, drop_at=None)
-    # the newest is day 400: days 0 and 10 are past 183 days, 300 is not
-    compact(root, "cold", older_than_ns=0, sources=["hot"], retention_ns=None, cold=SMALL_BLOCKS)
-    segments = sorted((root / "cold").glob("*.mcap"))
-    tampered = segments[1]
-    data = bytearray(tampered.read_bytes())
-    mark = data.find(b"/trace/cold/index")
-    data[data.find(b"TCB\x01") + 100] ^= 0x01  # damage a block
-    assert mark > 0
-    tampered.write_bytes(bytes(data))
-    report = compact(root, "cold", older_than_ns=parse_duration("1000d"))
-    by_path = {r.path: r for r in report.retention}
-    assert by_path[f"cold/{segments[0].name}"].status == "deleted"
-    assert by_path[f"cold/{segments[1].name}"].status == "kept"
-    assert "held: findings (damaged" in by_path[f"cold/{segments[1].name}"].detail
-    assert len(by_path) == 2
-    assert sorted(p.name for p in (root / "cold").glob("*.mcap")) == [s.name for s in segments[1:]]
-    tombstones = [orjson.loads(line) for line in (root / RETENTION_LOG).read_bytes().splitlines()]
-    assert [t["path"] for t in tombstones] == [f"cold/{segments[0].name}"]
-    assert tombstones[0]["last_seal"] and tombstones[0]["sha256"]
-
-
-def test_retention_never_deletes_hot_or_warm(tmp_path: Path) -> None:
-    root = tmp_path / "log"
-    for days in (0, 400):
-        make_root(root, cycles=20, t0_ns=T0_NS + days * DAY_NS, drop_at=None)
-    compact(root, "warm", older_than_ns=parse_duration("300d"))  # day 0 -> warm
-    before = _segment_names(root)
-    report = compact(root, "cold", older_than_ns=parse_duration("1000d"), retention_ns=DAY_NS)
-    assert report.retention == []
-    assert _segment_names(root) == before == ["hot/amr-1_000001.mcap", "warm/amr-1_000000.mcap"]
-
-
 def test_compaction_rejects_bad_arguments(tmp_path: Path) -> None:
     root = make_root(tmp_path / "log", cycles=5)
     from trace_runtime.errors import LogReadError, UsageError
@@ -474,5 +423,5 @@ def test_one_compaction_per_root(tmp_path: Path) -> None:
     root = make_root(tmp_path / "log", cycles=5)
     from trace_runtime.errors import UsageError
 
-    with compact_module.root_lock(root), pytest.raises(UsageError, match="another compaction"):
+    with _files.root_lock(root), pytest.raises(UsageError, match="another compaction"):
         compact(root, "cold", older_than_ns=0)

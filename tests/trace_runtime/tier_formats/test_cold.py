@@ -15,21 +15,24 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from tests.trace_runtime.tier_logs import make_root
 from trace_runtime import open_log, open_segment
 from trace_runtime.chain import digest
 from trace_runtime.cycles import RawMessage
 from trace_runtime.records import TOPIC_CHECKPOINT, TOPIC_SEAL
-from trace_runtime.tiers import ColdOptions, WarmPolicy, chain_problems, compact, decode_block
-from trace_runtime.tiers import cold as cold_module
-from trace_runtime.tiers.cold import (
+from trace_runtime.tier_formats import cold as cold_module
+from trace_runtime.tier_formats.cold import (
+    BlockCache,
     BlockEncoder,
     ColdFormatError,
     PartialBlock,
+    decode_block,
     iter_blocks,
     split_plain,
 )
-
-from .test_tiers import make_root
+from trace_runtime.tier_formats.cold import encode as encode_module
+from trace_runtime.tier_formats.warm import WarmPolicy
+from trace_runtime.tiers import ColdOptions, chain_problems, compact
 
 # --- the codec on arbitrary input ---------------------------------------------------------------
 
@@ -84,6 +87,12 @@ def _streams(draw: st.DrawFn) -> list[RawMessage]:
             )
         )
     return messages
+
+
+def _open_partial(block: bytes) -> PartialBlock:
+    """A block opened for a partial decode, as a seek opens it."""
+    cache = BlockCache(0)
+    return PartialBlock(cache.body(block), cache.shapes)
 
 
 def _round_trip(encoder: BlockEncoder, block: list[RawMessage]) -> list[RawMessage]:
@@ -174,13 +183,13 @@ def test_seek_into_a_cold_segment_decodes_one_block(
 ) -> None:
     hot, cold = (open_log(p) for p in hot_and_cold)
     calls = []
-    real = cold_module._block_body  # where every decode, whole or partial, starts
+    real = BlockCache.body  # where every decode, whole or partial, starts
 
-    def counting(block: bytes) -> Any:
+    def counting(self: BlockCache, block: bytes) -> Any:
         calls.append(1)
-        return real(block)
+        return real(self, block)
 
-    monkeypatch.setattr(cold_module, "_block_body", counting)
+    monkeypatch.setattr(BlockCache, "body", counting)
     rng = random.Random(3)
     for t_ns in [
         hot.start_ns,
@@ -234,7 +243,7 @@ def test_cold_keeps_checkpoints_readable_without_decoding(hot_and_cold: tuple[Pa
 
 def test_cold_from_warm_keeps_the_summaries(tmp_path: Path) -> None:
     root = make_root(tmp_path / "log", cycles=120)
-    compact(root, "warm", older_than_ns=0, warm=WarmPolicy(context_s=0.5))
+    compact(root, "warm", older_than_ns=0, warm=WarmPolicy(context_ns=500_000_000))
     warm = list(open_log(root).iter_cycles())
     assert any(c.is_summary for c in warm)
     report = compact(root, "cold", older_than_ns=0, cold=ColdOptions(block_cycles=32))
@@ -298,7 +307,7 @@ def test_the_check_decode_uses_the_digests_it_is_given() -> None:
     assert checked.messages == chain
     wrong = [hashlib.sha256(m.data).hexdigest() for m in chain]
     wrong[10] = "0" * 64
-    decoded = cold_module._check_decode(data, wrong).messages
+    decoded = BlockCache(0).decode_checked(data, wrong).messages
     assert decoded[:11] == chain[:11]
     assert decoded[11] != chain[11]
 
@@ -314,7 +323,7 @@ def test_a_partial_decode_gives_the_bytes_of_a_whole_one(
     whole = decode_block(block).messages
     first = data.draw(st.integers(0, len(kept) - 1))
     last = data.draw(st.integers(first, len(kept) - 1))
-    partial = PartialBlock(cold_module._block_body(block))
+    partial = _open_partial(block)
     assert partial.messages(first, last) == whole[first : last + 1]
     assert partial.messages(0, len(kept) - 1) == whole  # and the rest, after a first part
 
@@ -338,7 +347,7 @@ def test_a_partial_decode_reads_columns_that_vectors_and_scalars_share() -> None
     assert whole == stream
     for first in range(len(stream)):
         for last in range(first, len(stream)):
-            partial = PartialBlock(cold_module._block_body(block))
+            partial = _open_partial(block)
             assert partial.messages(first, last) == stream[first : last + 1]
 
 
@@ -348,14 +357,14 @@ def test_seal_anchors_bound_what_a_seek_builds(
     hot = make_root(tmp_path / "hot", cycles=150)
     cold = tmp_path / "cold"
     shutil.copytree(hot, cold)
-    monkeypatch.setattr(cold_module, "SEAL_ANCHOR_CYCLES", 8)
+    monkeypatch.setattr(encode_module, "SEAL_ANCHOR_CYCLES", 8)
     compact(cold, "cold", older_than_ns=0, cold=ColdOptions(block_cycles=64))
     hot_log, cold_log = open_log(hot), open_log(cold)
     segment = cold_log.segments[0]
     blocks = [m.data for m in segment.iter_messages() if m.topic == cold_module.BLOCK_TOPIC]
     assert len(blocks) == 3
     for data in blocks:
-        partial = PartialBlock(cold_module._block_body(data))
+        partial = _open_partial(data)
         whole = decode_block(data).messages
         seals = [i for i, m in enumerate(whole) if m.topic == TOPIC_SEAL]
         last_span = (seals[-2] + 1, seals[-1])

@@ -18,8 +18,11 @@ values, and shapes read from a file are validated before they are compiled.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Iterator
 from typing import Any
+
+import orjson
 
 from trace_runtime.errors import TraceError
 
@@ -191,6 +194,42 @@ def check_descriptor(descriptor: Any) -> None:
 def compile_shape(descriptor: Descriptor, key: bytes) -> Shape:
     """The shape of a (checked) descriptor; its code is generated and compiled on first use."""
     return Shape(descriptor, key)
+
+
+SHAPE_CACHE_LIMIT = 4096
+"""Shapes a ``ShapeCache`` keeps before it starts again from empty (a bound on memory for a
+stream whose messages never settle into shapes)."""
+
+
+class ShapeCache:
+    """Shapes by descriptor bytes, so that the blocks one owner encodes or decodes share each
+    shape's compiled code. Owned by a ``BlockCache`` (and through it by an encoder); safe to
+    use from several threads."""
+
+    def __init__(self, limit: int = SHAPE_CACHE_LIMIT) -> None:
+        self._limit = limit
+        self._shapes: dict[bytes, Shape] = {}
+        self._lock = threading.Lock()
+
+    def __len__(self) -> int:
+        return len(self._shapes)
+
+    def shape(self, descriptor: Descriptor, key: bytes) -> Shape:
+        """The shape of ``descriptor`` (whose JSON bytes are ``key``), made on first ask."""
+        shape = self._shapes.get(key)
+        if shape is None:
+            shape = compile_shape(descriptor, key)
+            with self._lock:
+                if len(self._shapes) >= self._limit:
+                    self._shapes.clear()
+                shape = self._shapes.setdefault(key, shape)
+        return shape
+
+    def shape_of(self, key: bytes) -> Shape:
+        """The shape whose descriptor is the JSON text ``key`` (read from a block header);
+        a descriptor not seen before is parsed and checked."""
+        shape = self._shapes.get(key)
+        return shape if shape is not None else self.shape(orjson.loads(key), key)
 
 
 class _Generator:
