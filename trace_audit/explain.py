@@ -23,16 +23,11 @@ from typing import Any, Literal
 
 from trace_audit.causal import Decision, causal_graph_data, read_decision, tree_graph_data
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, DecisionChains, SensorWindow, trace_cycle
+from trace_audit.cycle_fields import command_of
 from trace_audit.evidence import ExternalEvidence, describe_refs, open_recordings
+from trace_audit.log_source import LogSource, as_log, require_cycles
+from trace_audit.log_time import TimeArg, resolve_time
 from trace_audit.metrics import MetricsConfig, dr_problems, trust_score
-from trace_audit.timeline import (
-    LogSource,
-    TimeArg,
-    as_log,
-    command_of,
-    require_cycles,
-    resolve_time,
-)
 from trace_runtime.chain import GENESIS, digest
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import TimeOutOfRangeError, UsageError

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 from typing import Any, Literal, get_args
 
 from trace_audit.explain import Explanation, explain
-from trace_audit.timeline import LogSource, TimeArg
+from trace_audit.log_source import LogSource
+from trace_audit.log_time import TimeArg
 from trace_runtime.errors import UsageError
 
 __all__ = ["FORMATS", "Export", "ExportFormat", "export_decision", "render_export"]

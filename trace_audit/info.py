@@ -10,7 +10,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from trace_audit.timeline import LogSource, as_log, gap_stepper, require_cycles, seal_dropped
+from trace_audit.cycle_fields import seal_dropped
+from trace_audit.log_gaps import gap_stepper
+from trace_audit.log_source import LogSource, as_log, require_cycles
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, CycleRange, Gap
 from trace_runtime.logger import CLOSE_METADATA
 from trace_runtime.reader import Segment

@@ -9,8 +9,10 @@ from typer.testing import CliRunner
 
 from tests.trace_audit.conftest import PERIOD_NS, T0_NS, stretch, t_ns, write_log
 from trace_audit.cli import app
+from trace_audit.cycle_fields import command_of
 from trace_audit.jsonout import to_jsonable
-from trace_audit.timeline import TimePoint, command_of, timeline
+from trace_audit.log_time import TimePoint
+from trace_audit.timeline import timeline
 from trace_runtime import open_log
 from trace_runtime.errors import UsageError
 
