@@ -204,14 +204,7 @@ def explain(
         raise UsageError(f"lookback must be >= 0 s, got {lookback_s}")
     log = as_log(source, lazy=True)
     require_cycles(log)
-    t_ns = resolve_time(t, log)
-    if t_ns is not None:
-        target = log.cycle_at(t_ns)
-        offset = t_ns - target.t_ns
-    else:
-        assert cycle is not None
-        target = find_cycle(log, cycle)
-        offset = 0
+    t_ns, target, offset = _find_target(log, t, cycle)
     whole, log = log, log.clock_run(target.segment)
     decision = read_decision(target)
     recordings = open_recordings(evidence)
@@ -235,11 +228,7 @@ def explain(
         period_ns=period,
     )
     if needs_window:
-        window = SensorWindow(sensor_window, recordings)
-        for earlier in reversed(back.window):
-            window.push(earlier.sensors)
-        window.push(target.sensors)
-        chains = trace_cycle(target, window)
+        chains = _trace_in_window(target, back.window, SensorWindow(sensor_window, recordings))
     seal = _check_seal(log, target, back.prev_sealed)
     scores = _scores(target, chains, seal, prev_sealed=back.prev_sealed, period_ns=period)
     graph = causal_graph_data(target, chains, decision)
@@ -266,6 +255,26 @@ def explain(
         external_evidence=tuple(describe_refs(target.layer(TOPIC_PERCEPTION), recordings)),
         clock_run=() if log is whole else tuple(s.path.name for s in log.segments),
     )
+
+
+def _find_target(log: Log, t: TimeArg, cycle: int | None) -> tuple[int | None, Cycle, int]:
+    """(the query time in ns or None, the decision in force then or with that number, the
+    query time - decision time)."""
+    t_ns = resolve_time(t, log)
+    if t_ns is not None:
+        target = log.cycle_at(t_ns)
+        return t_ns, target, t_ns - target.t_ns
+    assert cycle is not None
+    return None, find_cycle(log, cycle), 0
+
+
+def _trace_in_window(target: Cycle, earlier: list[Cycle], window: SensorWindow) -> DecisionChains:
+    """The decision's chains with refs resolved against the cycles before it (newest first
+    in ``earlier``) and its own."""
+    for cycle in reversed(earlier):
+        window.push(cycle.sensors)
+    window.push(target.sensors)
+    return trace_cycle(target, window)
 
 
 # --- looking back ----------------------------------------------------------------------------
