@@ -12,16 +12,8 @@ from html import escape
 
 from trace_audit.causal import format_value
 from trace_audit.report.data import ReportData, execution_channels
-from trace_audit.report.figures import (
-    MAX_ENTITIES,
-    MAX_FACTORS,
-    MAX_GRAPH_NODES,
-    causal_figure,
-    execution_figure,
-    factors_figure,
-    scene_figure,
-    tree_figure,
-)
+from trace_audit.report.drawing import MAX_ENTITIES, MAX_FACTORS, MAX_GRAPH_NODES
+from trace_audit.report.graph_figures import causal_figure, tree_figure
 from trace_audit.report.markup import (
     command_badge,
     html_fields,
@@ -30,6 +22,8 @@ from trace_audit.report.markup import (
     html_table,
     seconds,
 )
+from trace_audit.report.scene import scene_figure
+from trace_audit.report.time_figures import execution_figure, factors_figure
 
 __all__ = [
     "causal_section",
