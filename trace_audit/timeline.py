@@ -135,7 +135,7 @@ def timeline(
     lo, hi = _window(log, start, end)
     runs = log.clock_runs()
     if len({run.first_robot for run in runs}) > 1:
-        runs = [log]  # several robots: one sequence, as before
+        runs = [log]  # several robots' runs do not line up: the log is one sequence
     rows: list[TimelineRow] = []
     gaps: list[Gap] = []
     counts: list[tuple[int, int, int | None, int | None]] = []
@@ -227,7 +227,7 @@ def _rows(
         current.cycles += 1
         current.end_cycle, current.end_t_ns = cycle.cycle, cycle.t_ns
         # Only where the writer names the unit (profile 1.1): a number without one cannot
-        # be read, and the rows of 1.0 logs stay as they were.
+        # be read, and a profile 1.0 record names none.
         if (
             unit is not None
             and deviation is not None

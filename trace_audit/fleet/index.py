@@ -247,12 +247,13 @@ def _listed_files(manifest: dict[str, Any]) -> list[str]:
 def _files_intact(out: Path, entry: dict[str, Any]) -> bool:
     """Whether every file the manifest lists for a position is there and has a readable
     Parquet footer (a deleted or half-written file is indexed again)."""
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
     for rel in entry.get("files") or ():
         try:
             pq.read_metadata(out / rel)
-        except Exception:  # missing, truncated or not Parquet: all mean re-index
+        except (OSError, pa.ArrowException):  # missing, truncated or not Parquet: re-index
             return False
     return True
 
