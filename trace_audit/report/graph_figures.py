@@ -112,24 +112,43 @@ def _draw_causal(ax: Axes, g: Any, pos: Mapping[str, Any]) -> None:
             min_source_margin=_half_width_pt(str(g.nodes[u].get("label", u))),
             min_target_margin=_half_width_pt(str(g.nodes[v].get("label", v))),
         )
-        if d["documented"]:
-            continue
-        # The reason goes under the broken link (the nodes leave no room beside it), joined
-        # to it by a thin red leader.
-        (x1, y1), (x2, y2) = pos[u], pos[v]
-        lift = _ARC * abs(x2 - x1) / 2 if long else 0.0
-        mid = ((x1 + x2) / 2, (y1 + y2) / 2 + lift)
-        ax.annotate(
-            wrap_label("BROKEN: " + d["detail"], 20, 4),
-            mid,
-            xytext=(mid[0], min(y1, y2) - _BELOW),
-            fontsize=6.5,
-            color=BROKEN,
-            ha="center",
-            va="top",
-            bbox={"boxstyle": "round,pad=0.25", "fc": "white", "ec": BROKEN, "lw": 0.6},
-            arrowprops={"arrowstyle": "-", "color": BROKEN, "lw": 0.6},
-        )
+        if not d["documented"]:
+            _broken_reason(ax, pos[u], pos[v], d["detail"], arcs=long)
+    _draw_causal_nodes(ax, g, pos)
+    xs = [p[0] for p in pos.values()]
+    ys = [p[1] for p in pos.values()]
+    arcs = [_ARC * abs(pos[v][0] - pos[u][0]) / 2 for u, v in g.edges() if layer[v] - layer[u] > 1]
+    broken = any(not d["documented"] for _, _, d in g.edges(data=True))
+    ax.set_xlim(min(xs) - 0.12, max(xs) + 0.12)
+    ax.set_ylim(
+        min(ys) - (0.12 + 3 * _BELOW if broken else 0.12),
+        max(ys) + 0.12 + max(arcs, default=0.0),
+    )
+
+
+def _broken_reason(
+    ax: Axes, start: tuple[float, float], end: tuple[float, float], detail: str, *, arcs: bool
+) -> None:
+    """The reason a link is broken, under it (the nodes leave no room beside it), joined to
+    it by a thin red leader."""
+    (x1, y1), (x2, y2) = start, end
+    lift = _ARC * abs(x2 - x1) / 2 if arcs else 0.0
+    mid = ((x1 + x2) / 2, (y1 + y2) / 2 + lift)
+    ax.annotate(
+        wrap_label("BROKEN: " + detail, 20, 4),
+        mid,
+        xytext=(mid[0], min(y1, y2) - _BELOW),
+        fontsize=6.5,
+        color=BROKEN,
+        ha="center",
+        va="top",
+        bbox={"boxstyle": "round,pad=0.25", "fc": "white", "ec": BROKEN, "lw": 0.6},
+        arrowprops={"arrowstyle": "-", "color": BROKEN, "lw": 0.6},
+    )
+
+
+def _draw_causal_nodes(ax: Axes, g: Any, pos: Mapping[str, Any]) -> None:
+    """Each node as a labelled box in its kind's colour; a placeholder dashed and red."""
     for node, (x, y) in pos.items():
         attrs = g.nodes[node]
         kind = "missing" if attrs.get("missing") else str(attrs.get("kind", "belief"))
@@ -148,15 +167,6 @@ def _draw_causal(ax: Axes, g: Any, pos: Mapping[str, Any]) -> None:
                 "lw": 0.8,
             },
         )
-    xs = [p[0] for p in pos.values()]
-    ys = [p[1] for p in pos.values()]
-    arcs = [_ARC * abs(pos[v][0] - pos[u][0]) / 2 for u, v in g.edges() if layer[v] - layer[u] > 1]
-    broken = any(not d["documented"] for _, _, d in g.edges(data=True))
-    ax.set_xlim(min(xs) - 0.12, max(xs) + 0.12)
-    ax.set_ylim(
-        min(ys) - (0.12 + 3 * _BELOW if broken else 0.12),
-        max(ys) + 0.12 + max(arcs, default=0.0),
-    )
 
 
 # --- the counterfactual tree -------------------------------------------------------------
