@@ -34,6 +34,7 @@ from trace_runtime.errors import TimeOutOfRangeError, UsageError
 from trace_runtime.gaps import continuity, gap_limit_ns
 from trace_runtime.integrity import verify_cycle
 from trace_runtime.logset import Log
+from trace_runtime.recordings import Recordings
 from trace_runtime.records import TOPIC_ACTION, TOPIC_PERCEPTION, TOPIC_SEAL
 
 __all__ = [
@@ -208,27 +209,19 @@ def explain(
     whole, log = log, log.clock_run(target.segment)
     decision = read_decision(target)
     recordings = open_recordings(evidence)
-    # Refs usually point into the decision's own cycle; the earlier cycles of the sensor
-    # window are read only when a chain stops at an unresolved reading (same result as
-    # resolving against the whole window, as the metrics do).
-    chains = trace_cycle(target, recordings=recordings)
-    needs_window = sensor_window > 0 and any(
-        c.missing is not None and c.missing.level == "sensor_reading" for c in chains.factors
-    )
     # The cadence the robot kept when it decided: the period of the segment holding the
     # decision (the walk back, the gap to the previous seal and the output use it).
     holder = log.segment_named(target.segment)
     period = holder.session.period_ns if holder is not None else log.period_ns
-    back = _look_back(
+    chains, back = _chains_and_back(
         log,
         target,
         decision.command,
-        int(lookback_s * 1e9),
-        sensor_window if needs_window else 0,
+        recordings,
+        lookback_ns=int(lookback_s * 1e9),
+        sensor_window=sensor_window,
         period_ns=period,
     )
-    if needs_window:
-        chains = _trace_in_window(target, back.window, SensorWindow(sensor_window, recordings))
     seal = _check_seal(log, target, back.prev_sealed)
     scores = _scores(target, chains, seal, prev_sealed=back.prev_sealed, period_ns=period)
     graph = causal_graph_data(target, chains, decision)
@@ -266,6 +259,38 @@ def _find_target(log: Log, t: TimeArg, cycle: int | None) -> tuple[int | None, C
         return t_ns, target, t_ns - target.t_ns
     assert cycle is not None
     return None, find_cycle(log, cycle), 0
+
+
+def _chains_and_back(
+    log: Log,
+    target: Cycle,
+    command: str | None,
+    recordings: Recordings | None,
+    *,
+    lookback_ns: int,
+    sensor_window: int,
+    period_ns: int,
+) -> tuple[DecisionChains, _Back]:
+    """The decision's chains, and what one walk back from it found.
+
+    Refs usually point into the decision's own cycle; the earlier cycles of the sensor
+    window are read only when a chain stops at an unresolved reading (same result as
+    resolving against the whole window, as the metrics do)."""
+    chains = trace_cycle(target, recordings=recordings)
+    needs_window = sensor_window > 0 and any(
+        c.missing is not None and c.missing.level == "sensor_reading" for c in chains.factors
+    )
+    back = _look_back(
+        log,
+        target,
+        command,
+        lookback_ns,
+        sensor_window if needs_window else 0,
+        period_ns=period_ns,
+    )
+    if needs_window:
+        chains = _trace_in_window(target, back.window, SensorWindow(sensor_window, recordings))
+    return chains, back
 
 
 def _trace_in_window(target: Cycle, earlier: list[Cycle], window: SensorWindow) -> DecisionChains:

@@ -60,6 +60,24 @@ def _expected_cycles(segment: Segment) -> int:
     return segment.info.channels.get(TOPIC_SEAL, 0)
 
 
+def _tasks(
+    plan: list[tuple[str, list[Segment]]], cfg: MetricsConfig, *, absolute: bool
+) -> list[_Task]:
+    """One task per segment of the plan, naming the robot's segment before it (if any).
+
+    A cluster's worker resolves a relative path in its own directory: with ``absolute`` the
+    files are named by absolute path (the report still names them as given)."""
+
+    def where(path: Path) -> str:
+        return str(path.absolute()) if absolute else str(path)
+
+    return [
+        _Task(where(seg.path), where(segs[i - 1].path) if i else None, cfg)
+        for _robot, segs in plan
+        for i, seg in enumerate(segs)
+    ]
+
+
 def compute_metrics(
     paths: Sequence[str | Path],
     config: MetricsConfig | None = None,
@@ -88,16 +106,7 @@ def compute_metrics(
         if progress is not None:
             progress(done, expected)
 
-    # A cluster's worker resolves a relative path in its own directory: name files by
-    # absolute path there (the report still names them as given).
-    def where(path: Path) -> str:
-        return str(path.absolute()) if executor is not None else str(path)
-
-    tasks = [
-        _Task(where(seg.path), where(segs[i - 1].path) if i else None, cfg)
-        for _robot, segs in plan
-        for i, seg in enumerate(segs)
-    ]
+    tasks = _tasks(plan, cfg, absolute=executor is not None)
     workers = min(cfg.workers, len(tasks), _usable_cpus())
     if executor is not None:
         _fan_out(executor, tasks, plan=plan, total=total, advance=advance, limit=cfg.max_listed)
