@@ -247,12 +247,13 @@ def _listed_files(manifest: dict[str, Any]) -> list[str]:
 def _files_intact(out: Path, entry: dict[str, Any]) -> bool:
     """Whether every file the manifest lists for a position is there and has a readable
     Parquet footer (a deleted or half-written file is indexed again)."""
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
     for rel in entry.get("files") or ():
         try:
             pq.read_metadata(out / rel)
-        except Exception:  # missing, truncated or not Parquet: all mean re-index
+        except (OSError, pa.ArrowException):  # missing, truncated or not Parquet: re-index
             return False
     return True
 
@@ -421,29 +422,6 @@ def _select(
     return kept, todo
 
 
-def _store(
-    target: Path,
-    done: list[IndexedSegment],
-    known: dict[str, Any],
-    stale: set[str],
-    *,
-    settings: dict[str, Any],
-    cache: dict[str, Any],
-) -> None:
-    """Record the indexed segments in ``known`` and the manifest, then delete the files no
-    entry lists any more (an older copy of a segment's rows, or an older index's)."""
-    for result in done:
-        old = known.get(result.key)
-        if old is not None:
-            stale.update(set(old["files"]) - set(result.files))
-        known[result.key] = asdict(result)
-    _write_manifest(target, known, settings, cache)
-    live = {rel for entry in known.values() for rel in entry["files"]}
-    for rel in sorted(stale - live):
-        with contextlib.suppress(FileNotFoundError):
-            (target / rel).unlink()
-
-
 def build_index(
     paths: Sequence[str | Path],
     out: str | Path,
@@ -474,15 +452,9 @@ def build_index(
     opened = {str(s.path.resolve()): s for s in log.segments}
     expected = sum(opened[t.path].info.channels.get("/trace/seal", 0) for t in todo)
     target.mkdir(parents=True, exist_ok=True)
-    done: list[IndexedSegment] = []
-    cycles = 0
-    for result in _run(todo, executor, workers):
-        done.append(result)
-        cycles += result.decisions
-        if progress is not None:
-            progress(cycles, expected or None)
-    stale = set(manifest.get("stale_files", []))
-    _store(target, done, known, stale, settings=settings, cache=cache)
+    done = _index_segments(todo, executor, workers, progress, expected)
+    cycles = sum(result.decisions for result in done)
+    _record(target, manifest, known, done, settings=settings, digests=cache)
     elapsed = time.perf_counter() - started
     files = [target / rel for entry in known.values() for rel in entry["files"]]
     return IndexReport(
@@ -500,6 +472,49 @@ def build_index(
         bytes=sum(f.stat().st_size for f in files if f.exists()),
         notes=tuple(notes),
     )
+
+
+def _index_segments(
+    todo: list[IndexTask],
+    executor: Executor | None,
+    workers: int,
+    progress: ProgressCallback | None,
+    expected: int,
+) -> list[IndexedSegment]:
+    """Index each task's segment (on ``executor``, else local processes), reporting the
+    decisions written so far against the ``expected`` count."""
+    done: list[IndexedSegment] = []
+    cycles = 0
+    for result in _run(todo, executor, workers):
+        done.append(result)
+        cycles += result.decisions
+        if progress is not None:
+            progress(cycles, expected or None)
+    return done
+
+
+def _record(
+    target: Path,
+    manifest: dict[str, Any],
+    known: dict[str, Any],
+    done: list[IndexedSegment],
+    *,
+    settings: dict[str, Any],
+    digests: dict[str, Any],
+) -> None:
+    """Write the segments just indexed into ``known`` and the manifest, then delete the
+    files no entry names any more."""
+    stale = set(manifest.get("stale_files", []))
+    for result in done:
+        old = known.get(result.key)
+        if old is not None:
+            stale.update(set(old["files"]) - set(result.files))
+        known[result.key] = asdict(result)
+    _write_manifest(target, known, settings, digests)
+    live = {rel for entry in known.values() for rel in entry["files"]}
+    for rel in sorted(stale - live):  # files of an older copy of a segment, or an older index
+        with contextlib.suppress(FileNotFoundError):
+            (target / rel).unlink()
 
 
 def _unchanged(entry: dict[str, Any] | None, task: IndexTask) -> bool:

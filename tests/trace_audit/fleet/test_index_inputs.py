@@ -14,7 +14,7 @@ from pathlib import Path
 from tests.trace_audit.conftest import T0_NS, write_log
 from trace_audit.fleet.index import MANIFEST
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 
 def _cli(*args: str | Path) -> subprocess.CompletedProcess[str]:

@@ -3,7 +3,7 @@ exactly the values recorded in ``data/metrics_golden/golden.json`` (every field 
 
 The golden file was written by the code before the metrics fast path (commit 92ec0c0), so a
 speed-up that changes any value (a float's last bit included) fails here. The logs and the
-runs are in ``metrics_golden.py``; regenerate only when a definition changes on purpose.
+runs are in ``golden.py``; regenerate only when a definition changes on purpose.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.trace_audit.metrics_golden import DATA, GOLDEN, RUNS, metrics_json
+from tests.trace_audit.metrics.golden import DATA, GOLDEN, RUNS, metrics_json
 
 _GOLDEN = json.loads(GOLDEN.read_text())
 

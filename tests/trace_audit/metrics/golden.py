@@ -1,6 +1,6 @@
-"""The golden metric values of ``test_metrics_golden.py``: the logs, the runs, regeneration.
+"""The golden metric values of ``test_golden.py``: the logs, the runs, regeneration.
 
-    PYTHONPATH=. python -m tests.trace_audit.metrics_golden   # rewrite logs and golden.json
+    PYTHONPATH=. python -m tests.trace_audit.metrics.golden   # rewrite logs and golden.json
 
 The logs are small honest sim runs (fault injection on, nothing tampered), stored as files
 so the golden values pin the reader and the metrics, not the simulator's random draws:
@@ -18,7 +18,7 @@ from typing import Any
 
 from typer.testing import CliRunner
 
-DATA = Path(__file__).parent / "data" / "metrics_golden"
+DATA = Path(__file__).parents[1] / "data" / "metrics_golden"
 GOLDEN = DATA / "golden.json"
 
 RUNS: dict[str, tuple[str, ...]] = {

@@ -10,7 +10,7 @@ import orjson
 from hypothesis import given
 from hypothesis import strategies as st
 
-from trace_audit.metrics import _may_cite_recording
+from trace_audit.metrics.scan import _may_cite_recording
 
 _KEYS = st.sampled_from(["recording", "ref", "entities", "evidence", "topic", "record", "x"])
 _JSON = st.recursive(

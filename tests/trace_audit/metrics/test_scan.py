@@ -26,7 +26,7 @@ from trace_audit.metrics import (
 from trace_runtime.errors import UsageError
 from trace_runtime.tiers import compact
 
-SCHEMAS = Path(__file__).resolve().parents[2] / "schemas"
+SCHEMAS = Path(__file__).resolve().parents[3] / "schemas"
 GENESIS = "0" * 64
 PERIOD = 100_000_000
 T0 = 5_000_000_000
@@ -597,3 +597,34 @@ def test_a_clock_restart_between_segments_is_not_an_anomaly(tmp_path: Path, jobs
     stepped = write_profile_log(tmp_path / "p.mcap", faults=Faults(clock_step_back_at=12))
     inside = compute_metrics([stepped]).overall
     assert (inside.clock_anomalies, inside.clock_restarts) == (1, None)
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_segment_starting_at_the_instant_the_last_ended_is_one_run(
+    tmp_path: Path, jobs: int
+) -> None:
+    """Equal times across segments are one run of the clock (``trace_runtime.clock``, the rule
+    verify and ``Log.clock_runs`` use): no restart and no new window; the time that does
+    not move on is a clock anomaly, as inside a segment. A time before it is a restart."""
+    for name, first_t in (("equal", t(3)), ("earlier", t(2))):
+        root = tmp_path / name
+        root.mkdir()
+        seg0 = HandLog(root / "amr-7_000000.mcap")
+        for i in range(4):
+            seg0.cycle(i, t(i), layers(seg0.sensor(t(i), {"i": i})))
+        seg0.close()
+        seg1 = HandLog(
+            root / "amr-7_000001.mcap", segment=1, prev_seal=seg0.prev_seal, first_cycle=4
+        )
+        for i in range(4, 7):
+            when = first_t + (i - 4) * PERIOD
+            seg1.cycle(i, when, layers(seg1.sensor(when, {"i": i})))
+        seg1.close()
+        overall = compute_metrics([root], MetricsConfig(workers=jobs)).overall
+        if name == "equal":
+            assert (overall.clock_anomalies, overall.clock_restarts) == (1, None)
+            assert overall.window_s == pytest.approx(0.6)  # t(0) .. t(5) in one window
+        else:
+            assert (overall.clock_anomalies, overall.clock_restarts) == (0, 1)
+            assert overall.window_s == pytest.approx(0.4 + 0.3)  # two windows
+        assert overall.gaps == 0 and overall.integrity_failed == 0

@@ -22,7 +22,7 @@ from trace_audit.metrics import MetricsConfig, compute_metrics
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.tiers.compaction import compact
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 
 def _fleet(root: Path) -> Path:

@@ -17,13 +17,13 @@ from pathlib import Path
 import pytest
 
 from tests.trace_audit.conftest import rewrite_segment
-from tests.trace_audit.test_fleet_index import _fleet
+from tests.trace_audit.fleet.test_index import _fleet
 from trace_audit.fleet.local import LocalDask, free_port
 from trace_runtime.cycles import RawMessage
 
 pytest.importorskip("distributed")
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 TIMING = ("elapsed_s", "cycles_per_s")
 
 

@@ -18,7 +18,7 @@ from trace_audit.doctor import RULES, DoctorReport, doctor_log
 from trace_runtime.cycles import RawMessage
 from trace_runtime.errors import LogReadError
 
-V1_FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "v1" / "amr-fixture_000000.mcap"
+V1_FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "v1" / "amr-fixture_000000.mcap"
 
 
 def _broken(report: DoctorReport) -> set[str]:
