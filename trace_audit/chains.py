@@ -32,6 +32,9 @@ reading older than that or to a later cycle does not resolve. A ref into an exte
 recording (PROFILE.md section 11, e.g. a rosbag2 MCAP) resolves when the window was given
 that recording and the message there matches the ref; without the recording it stays
 undocumented, with a reason that says it was not checked rather than broken.
+
+``label_chain`` names a chain's nodes and links in the labels of its decision's causal graph
+(``trace_audit.causal``), the words ``trace-audit explain`` draws it with.
 """
 
 from __future__ import annotations
