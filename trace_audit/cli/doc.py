@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 __all__ = [
+    "Block",
     "BoxColumn",
     "BoxTable",
     "Column",
@@ -29,6 +30,8 @@ __all__ = [
     "fmt_duration",
     "fmt_t",
     "fmt_value",
+    "plain_text",
+    "segs",
 ]
 
 
@@ -125,10 +128,6 @@ class ConsoleLine:
 
     text: str
     markup: bool = True
-
-    @property
-    def soft_wrap(self) -> bool:
-        return not self.markup
 
 
 @dataclass(frozen=True, slots=True)
