@@ -32,18 +32,22 @@ reading older than that or to a later cycle does not resolve. A ref into an exte
 recording (PROFILE.md section 11, e.g. a rosbag2 MCAP) resolves when the window was given
 that recording and the message there matches the ref; without the recording it stays
 undocumented, with a reason that says it was not checked rather than broken.
+
+``label_chain`` names a chain's nodes and links in the labels of its decision's causal graph
+(``trace_audit.causal``), the words ``trace-audit explain`` draws it with.
 """
 
 from __future__ import annotations
 
-import hashlib
-from collections import OrderedDict, deque
-from collections.abc import Iterable, Sequence
+from collections import deque
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 from typing import Any, NamedTuple
 
-from trace_runtime.cycles import Cycle, RawMessage
-from trace_runtime.recordings import ExternalCheck, ExternalState, Recordings
+from trace_audit.sensor_window import DEFAULT_SENSOR_WINDOW, SensorWindow
+from trace_runtime.cycles import Cycle
+from trace_runtime.recordings import Recordings
 from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF, TOPIC_PERCEPTION
 
 __all__ = [
@@ -54,8 +58,11 @@ __all__ = [
     "DecisionChains",
     "DecisionScore",
     "FactorChain",
+    "LabelledChain",
+    "LabelledLink",
     "Link",
     "SensorWindow",
+    "label_chain",
     "score_layers",
     "trace_cycle",
     "trace_layers",
@@ -64,10 +71,8 @@ __all__ = [
 LEVELS = ("factor_node", "belief_path", "entity", "evidence_ref", "sensor_reading")
 EXPECTED_DEPTH_STATE = 5
 EXPECTED_DEPTH_ENTITY = 4
-DEFAULT_SENSOR_WINDOW = 50
 
 _NOT_REACHED = "not reached: the chain is broken above"
-_EXTERNAL_REMEMBERED = 4096
 
 
 @dataclass(frozen=True, slots=True)
@@ -125,125 +130,6 @@ class DecisionChains:
     @property
     def fully_traceable(self) -> bool:
         return bool(self.factors) and all(f.traceable for f in self.factors)
-
-
-class SensorWindow:
-    """The sensor messages of the current cycle and of a bounded number of cycles before it.
-
-    ``push`` once per cycle, oldest cycle first, before resolving that cycle's refs.
-    Memory is bounded by ``cycles`` cycles of sensor messages (and their digests, each
-    computed at most once while the message is in the window: a reading is cited by several
-    entities and, for tracked entities, by the cycles after its own).
-    """
-
-    __slots__ = ("_batches", "_digests", "_external", "_index", "cycles", "recordings")
-
-    def __init__(
-        self, cycles: int = DEFAULT_SENSOR_WINDOW, recordings: Recordings | None = None
-    ) -> None:
-        if cycles < 0:
-            raise ValueError(f"sensor window must be >= 0 cycles, got {cycles}")
-        self.cycles = cycles
-        self.recordings = recordings
-        """External recordings refs may name (None: such refs are unresolved, unchecked)."""
-        # (recording, topic, log time, sequence, digest) -> its check, most recent last:
-        # tracked entities cite the same reading cycle after cycle
-        self._external: OrderedDict[tuple[Any, ...], ExternalCheck] = OrderedDict()
-        # (topic, log_time_ns) -> the messages logged under it, oldest first
-        self._index: dict[tuple[str, int], list[RawMessage]] = {}
-        self._batches: deque[Sequence[RawMessage]] = deque()
-        # id() of a message in the window -> SHA-256 hex of its data; dropped with the message
-        self._digests: dict[int, str] = {}
-
-    def push(self, sensors: Sequence[RawMessage]) -> None:
-        """Add one cycle's sensor messages; forget the cycle that falls out of the window."""
-        index = self._index
-        for msg in sensors:
-            key = (msg.topic, msg.log_time_ns)
-            entries = index.get(key)
-            if entries is None:
-                index[key] = [msg]
-            else:
-                entries.append(msg)
-        batches = self._batches
-        batches.append(sensors)
-        if len(batches) > self.cycles + 1:
-            digests = self._digests
-            for msg in batches.popleft():
-                if digests:
-                    digests.pop(id(msg), None)
-                key = (msg.topic, msg.log_time_ns)
-                entries = index.get(key)
-                if entries is not None:
-                    del entries[0]
-                    if not entries:
-                        del index[key]
-
-    def clear(self) -> None:
-        self._index.clear()
-        self._batches.clear()
-        self._digests.clear()
-
-    def resolve(self, ref: dict[str, Any]) -> str:
-        """'' when the ref resolves to a message in the window, else why it does not."""
-        if type(ref.get("recording")) is str:
-            return self.check_external(ref).detail
-        topic = ref.get("topic")
-        t_ns = ref.get("log_time_ns")
-        if type(topic) is not str or type(t_ns) is not int:
-            return "malformed ref (topic or log_time_ns missing)"
-        entries = self._index.get((topic, t_ns))
-        if not entries:
-            return f"no {topic} message at log_time_ns={t_ns} in the sensor window"
-        sequence = ref.get("sequence")
-        want = ref.get("digest")
-        why = ""
-        for msg in entries:
-            if sequence is not None and msg.sequence != sequence:
-                why = why or f"sequence {sequence} does not match the logged {msg.sequence}"
-                continue
-            if want is not None and self.digest_of(msg) != want:
-                why = "digest does not match the logged message data"
-                continue
-            return ""
-        return why
-
-    def check_external(self, ref: dict[str, Any]) -> ExternalCheck:
-        """The check of a ref into an external recording (remembered for the last few
-        thousand refs); ``detail`` is '' when it resolved."""
-        key = tuple(ref.get(k) for k in ("recording", "topic", "log_time_ns", "sequence", "digest"))
-        found = self._external.get(key)
-        if found is not None:
-            self._external.move_to_end(key)
-            return found
-        name = str(ref.get("recording"))
-        if self.recordings is None:
-            found = ExternalCheck(
-                "unresolved", name, f"in external recording {name}, not given (--evidence)"
-            )
-        else:
-            found = self.recordings.check(ref)
-            if found.state == "unresolved":
-                found = ExternalCheck(
-                    "unresolved", name, f"in external recording {name}, not among those given"
-                )
-        self._external[key] = found
-        if len(self._external) > _EXTERNAL_REMEMBERED:
-            self._external.popitem(last=False)
-        return found
-
-    def external_state(self, ref: dict[str, Any]) -> ExternalState:
-        """resolved, broken or unresolved: what became of a ref into an external recording."""
-        return self.check_external(ref).state
-
-    def digest_of(self, msg: RawMessage) -> str:
-        """SHA-256 hex of the data of ``msg``, a message in the window (pushed and not yet
-        fallen out): computed once while it stays, so the seal check's evidence step reuses
-        what resolving refs hashed."""
-        found = self._digests.get(id(msg))
-        if found is None:
-            found = self._digests[id(msg)] = hashlib.sha256(msg.data).hexdigest()
-        return found
 
 
 def trace_cycle(
@@ -332,6 +218,95 @@ def score_layers(
     if not n:
         return DecisionScore(0.0, 0.0, 0, 0, "action names no factors")
     return DecisionScore(traceable / n, partial / n, n, traceable, "")
+
+
+# --- a chain in the causal graph's words ---------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class LabelledLink:
+    """One link of a factor's chain, named by the labels of the decision's causal graph."""
+
+    link: Link
+    what: str
+    """What it points at: a node's label, the belief path with its rules, or the ref."""
+
+    @property
+    def reached(self) -> bool:
+        """False below the first missing link: nothing logged says where it would go on."""
+        return self.link.documented or not self.link.detail.startswith("not reached")
+
+    @property
+    def placeholder(self) -> bool:
+        """``what`` is the graph's stand-in for an undocumented node ("? ..."), which says
+        nothing the link's detail does not."""
+        return self.what.startswith("? ")
+
+
+@dataclass(frozen=True, slots=True)
+class LabelledChain:
+    """A factor's chain as the causal graph draws it, bottom (sensor reading) up."""
+
+    chain: FactorChain
+    path: tuple[str, ...]
+    """The labels of the chain's nodes from the bottom (a sensor reading or a placeholder)
+    up to the action; the belief graph's entity node is left out (it mirrors the perception
+    entity). Empty when the chain's edges do not form one path."""
+    links: tuple[LabelledLink, ...]
+    """The links bottom-up: sensor reading first, factor node last."""
+
+
+def label_chain(chain: FactorChain, graph: Mapping[str, Any], command: str | None) -> LabelledChain:
+    """``chain`` named by ``graph``, the node-link JSON of its decision's causal graph
+    (``trace_audit.causal.causal_graph_data``), whose action is ``command``."""
+    nodes = graph["nodes"]
+    labels = {n["id"]: str(n.get("label", n["id"])) for n in nodes}
+    kinds = {n["id"]: n.get("belief_kind") for n in nodes}
+    mine = [e for e in graph["edges"] if chain.node in e.get("factors", ())]
+    by_level: dict[str, list[Mapping[str, Any]]] = {}
+    for edge in mine:
+        by_level.setdefault(str(edge.get("level")), []).append(edge)
+    path = tuple(labels.get(p, p) for p in _edge_path(mine) if kinds.get(p) != "entity")
+    links = []
+    for link in reversed(chain.links):
+        edges = by_level.get(link.level, [])
+        if link.level == "belief_path" and link.documented:
+            what = _belief_path_text(graph, link.ref)
+        elif link.level == "factor_node":
+            what = f"{labels.get('belief:' + chain.node, chain.node)} -> {command}"
+        elif edges:
+            what = labels.get(edges[0]["source"], link.ref)
+        else:
+            what = link.ref
+        links.append(LabelledLink(link, what))
+    return LabelledChain(chain, path, tuple(links))
+
+
+def _belief_path_text(graph: Mapping[str, Any], ref: str) -> str:
+    """``ped_1 -> ped_1.distance -> collision_risk (rules: a, b)``, bottom-up."""
+    rules = {(e["source"], e["target"]): e.get("rule") for e in graph["edges"] if e.get("rule")}
+    path = list(reversed(ref.split(" <- ")))
+    used = [
+        str(rules[key])
+        for key in ((f"belief:{a}", f"belief:{b}") for a, b in pairwise(path))
+        if key in rules
+    ]
+    text = " -> ".join(path)
+    return f"{text} (rules: {', '.join(used)})" if used else text
+
+
+def _edge_path(edges: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The nodes of a chain's edges from the bottom up to the action; [] unless they form
+    one path."""
+    succ = {e["source"]: e["target"] for e in edges}
+    targets = set(succ.values())
+    starts = [s for s in succ if s not in targets]
+    if len(starts) != 1:
+        return []
+    path = [starts[0]]
+    while path[-1] in succ and len(path) <= len(edges):
+        path.append(succ[path[-1]])
+    return path
 
 
 # --- the walk ----------------------------------------------------------------------------

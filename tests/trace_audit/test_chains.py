@@ -14,7 +14,10 @@ from hypothesis import strategies as st
 from trace_audit.chains import (
     EXPECTED_DEPTH_ENTITY,
     EXPECTED_DEPTH_STATE,
+    FactorChain,
+    Link,
     SensorWindow,
+    label_chain,
     score_layers,
     trace_cycle,
     trace_layers,
@@ -321,3 +324,61 @@ def test_malformed_layers_never_raise(action: Any, belief: Any, perception: Any)
     full = trace_layers(0, 0, action, belief, perception, window=window)
     fast = score_layers(action, belief, perception, window=window)
     assert (fast.et, fast.et_partial) == pytest.approx((full.et, full.et_partial))
+
+
+def test_a_chain_is_labelled_bottom_up_in_its_causal_graphs_words() -> None:
+    """label_chain: the path of node labels (the belief entity node left out), each link's
+    label, the belief path with its rules, and which links are placeholders or unreached."""
+    unreached = "not reached: the chain is broken above"
+    chain = FactorChain(
+        "risk",
+        "risk",
+        (
+            Link("factor_node", True, "risk"),
+            Link("belief_path", True, "risk <- ped"),
+            Link("entity", True, "ped_1"),
+            Link("evidence_ref", False, "ped_1", "entity 'ped_1' has no evidence"),
+            Link("sensor_reading", False, "", unreached),
+        ),
+        3,
+        EXPECTED_DEPTH_STATE,
+    )
+    placeholder = "missing:evidence_ref:entity:ped_1"
+    graph = {
+        "nodes": [
+            {"id": "action", "label": "STOP"},
+            {"id": "belief:risk", "label": "risk = 0.9"},
+            {"id": "belief:ped", "label": "ped [ped_1]", "belief_kind": "entity"},
+            {"id": "entity:ped_1", "label": "person ped_1"},
+            {"id": placeholder, "label": "? evidence (not documented)"},
+        ],
+        "edges": [
+            {"source": "belief:risk", "target": "action", "level": "factor_node"},
+            {"source": "belief:ped", "target": "belief:risk", "level": "belief_path"},
+            {"source": "entity:ped_1", "target": "belief:ped", "level": "entity"},
+            {"source": placeholder, "target": "entity:ped_1", "level": "evidence_ref"},
+        ],
+    }
+    for edge in graph["edges"]:
+        edge["factors"] = ["risk"]
+    graph["edges"][1]["rule"] = "near"
+
+    labelled = label_chain(chain, graph, "STOP")
+
+    assert labelled.path == ("? evidence (not documented)", "person ped_1", "risk = 0.9", "STOP")
+    assert [link.link.level for link in labelled.links] == [
+        "sensor_reading",
+        "evidence_ref",
+        "entity",
+        "belief_path",
+        "factor_node",
+    ]
+    assert [link.what for link in labelled.links] == [
+        "",
+        "? evidence (not documented)",
+        "person ped_1",
+        "ped -> risk (rules: near)",
+        "risk = 0.9 -> STOP",
+    ]
+    assert [link.reached for link in labelled.links] == [False, True, True, True, True]
+    assert [link.placeholder for link in labelled.links] == [False, True, False, False, False]

@@ -72,9 +72,9 @@ def test_a_command_registered_the_usual_way_gets_the_plain_help() -> None:
     its rich markup and the command list shows its whole first paragraph."""
     from typer.testing import CliRunner
 
-    from trace_audit.cli.app import _App, _Group
+    from trace_audit.cli.typer_compat import App, Group
 
-    demo = _App(cls=_Group, rich_markup_mode=None, add_completion=False)
+    demo = App(cls=Group, rich_markup_mode=None, add_completion=False)
     long = "Write a [bold]long[/bold] first paragraph that click would otherwise cut short."
 
     @demo.command("report", help=f"{long}\n\n[bold]Examples[/bold]:\n\n  demo report x")

@@ -7,8 +7,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from tests.trace_audit.metrics.test_scan import HandLog, layers, t
-from trace_audit.cli.investigate import explain_doc, timeline_doc, why_doc
+from trace_audit.cli.explain import explain_doc
 from trace_audit.cli.render import render_plain
+from trace_audit.cli.timeline import timeline_doc
+from trace_audit.cli.why import why_doc
 from trace_audit.explain import explain
 from trace_audit.export import export_decision
 from trace_audit.timeline import timeline, why

@@ -5,20 +5,34 @@ from __future__ import annotations
 import sys
 
 import typer
-from typer.exceptions import TyperException
 
 from trace_audit.cli import (  # noqa: F401 - each module registers its commands
     doctor,
+    explain,
+    export,
     fleet,
+    info,
     integrity,
-    investigate,
     metrics,
     report,
     storage,
+    timeline,
+    why,
 )
 from trace_audit.cli.app import EXIT_USAGE, app
+from trace_audit.cli.typer_compat import TyperException, usage_error_line
 
 __all__ = ["app", "main"]
+
+_LISTED = (
+    *("doctor", "index", "query", "find", "verify", "keygen"),
+    *("explain", "why", "timeline", "info", "export"),
+    *("metrics", "report", "compact", "catalog"),
+)
+"""The commands in the order ``trace-audit --help`` lists them: checks and the fleet first,
+then one decision's investigation, then measures, reports and storage."""
+
+app.registered_commands.sort(key=lambda command: _LISTED.index(command.name or ""))
 
 
 def main() -> None:
@@ -29,11 +43,9 @@ def main() -> None:
     try:
         code = app.runner_for(sys.argv[1:])(standalone_mode=False)
     except TyperException as err:  # the command line's own errors: unknown option, bad value
-        ctx = getattr(err, "ctx", None)
-        command = ctx.command_path if ctx is not None else "trace-audit"
-        message = err.format_message() if hasattr(err, "format_message") else str(err)
-        if message.strip():  # (no arguments at all: the help was shown instead)
-            sys.stderr.write(f"trace-audit: {message} (see '{command} --help')\n")
+        line = usage_error_line(err, "trace-audit")
+        if line is not None:
+            sys.stderr.write(line)
         sys.exit(EXIT_USAGE)
     except typer.Abort:
         sys.stderr.write("trace-audit: interrupted\n")

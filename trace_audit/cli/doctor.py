@@ -7,13 +7,20 @@ rich on a terminal, plain text with ``--plain`` or in a pipe, JSON with ``--json
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from trace_audit.cli.app import EXIT_FINDINGS, JsonOption, PlainOption, app, guarded, help_text
-from trace_audit.cli.render import Column, Doc, Seg, emit, progress_bar, setup_logging
+from trace_audit.cli.app import EXIT_FINDINGS, app, guarded, help_text
+from trace_audit.cli.doc import Column, Doc, Seg
+from trace_audit.cli.options import (
+    CheckedLogArgument,
+    JsonOption,
+    PlainOption,
+    Recordings,
+    evidence_option,
+)
+from trace_audit.cli.output import emit, progress_bar, setup_logging
 
 if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
     from trace_audit.doctor import DoctorReport, Problem
@@ -47,23 +54,9 @@ _MAX_LISTED = 100
 
 @app.command("doctor", help=help_text(_HELP))
 def doctor_command(
-    log: Annotated[
-        Path,
-        typer.Argument(
-            help="A TRACE segment (.mcap), a directory of segments, or a log root.",
-            show_default=False,
-        ),
-    ],
+    log: CheckedLogArgument,
     *,
-    evidence: Annotated[
-        list[Path] | None,
-        typer.Option(
-            "--evidence",
-            help="An external recording (MCAP file or rosbag2 directory) that evidence refs "
-            "name; repeat for several.",
-            show_default=False,
-        ),
-    ] = None,
+    evidence: Annotated[Recordings, evidence_option("that evidence refs")] = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:

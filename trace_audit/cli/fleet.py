@@ -2,54 +2,31 @@
 
 from __future__ import annotations
 
-import contextlib
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from trace_audit.cli.app import (
-    EXIT_USAGE,
+from trace_audit.cli.app import EXIT_USAGE, app, fail, guarded, help_text
+from trace_audit.cli.doc import Column, Doc
+from trace_audit.cli.options import (
+    CsvOption,
+    IndexArgument,
     JsonOption,
     PlainOption,
-    app,
-    fail,
-    guarded,
-    help_text,
-    print_json,
+    SchedulerOption,
+    action_option,
+    cluster,
+    jobs_option,
+    limit_option,
+    robot_option,
 )
-from trace_audit.cli.render import Column, Doc, emit, progress_bar, show
+from trace_audit.cli.output import emit, print_json, progress_bar
 
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
-    from concurrent.futures import Executor
-
     from trace_audit.fleet.index import IndexReport
     from trace_audit.fleet.query import QueryResult
-
-SchedulerOption = Annotated[
-    str | None,
-    typer.Option(
-        "--scheduler",
-        help="Run on the Dask cluster at this address (tcp://host:8786); workers must see "
-        "the same paths (shared storage). Default: local processes.",
-        show_default=False,
-    ),
-]
-
-
-@contextlib.contextmanager
-def cluster(address: str | None) -> Iterator[Executor | None]:
-    """The Dask cluster's executor for ``--scheduler``, or None (local processes)."""
-    if address is None:
-        yield None
-        return
-    from trace_audit.fleet.cluster import dask_executor
-
-    with dask_executor(address) as executor:
-        yield executor
-
 
 _INDEX_HELP = help_text("""
 Build or update the fleet index: Parquet tables of every decision (decisions, entities,
@@ -78,9 +55,7 @@ def index_command(
     out: Annotated[
         Path, typer.Option("--out", "-o", help="The index directory.", show_default=False)
     ],
-    jobs: Annotated[
-        int, typer.Option("--jobs", "-j", help="Local processes to spread segments over.", min=1)
-    ] = 1,
+    jobs: Annotated[int, jobs_option("Local processes to spread segments over.")] = 1,
     scheduler: SchedulerOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
@@ -147,13 +122,11 @@ after a lone --.
 
 @app.command("query", help=_QUERY_HELP)
 def query_command(
-    index: Annotated[Path, typer.Argument(help="The index directory.", show_default=False)],
+    index: IndexArgument,
     sql: Annotated[str, typer.Argument(help="One SQL statement.", show_default=False)],
     *,
-    csv_out: Annotated[bool, typer.Option("--csv", help="Print CSV on stdout.")] = False,
-    limit: Annotated[
-        int | None, typer.Option("--limit", help="Print at most this many rows.", min=0)
-    ] = None,
+    csv_out: CsvOption = False,
+    limit: Annotated[int | None, limit_option("Print at most this many rows.", least=0)] = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
@@ -178,11 +151,9 @@ the decisions table; each row ends with the explain command that reconstructs it
 
 @app.command("find", help=_FIND_HELP)
 def find_command(
-    index: Annotated[Path, typer.Argument(help="The index directory.", show_default=False)],
+    index: IndexArgument,
     *,
-    action: Annotated[
-        str | None, typer.Option("--action", help="The command, e.g. STOP.", show_default=False)
-    ] = None,
+    action: Annotated[str | None, action_option("The command, e.g. STOP.")] = None,
     near: Annotated[
         str | None,
         typer.Option(
@@ -201,13 +172,9 @@ def find_command(
         str | None,
         typer.Option("--where", help="SQL condition on decisions (alias d).", show_default=False),
     ] = None,
-    robot: Annotated[
-        str | None, typer.Option("--robot", help="Only this robot.", show_default=False)
-    ] = None,
-    limit: Annotated[
-        int, typer.Option("--limit", help="At most this many rows, oldest first.", min=1)
-    ] = 1000,
-    csv_out: Annotated[bool, typer.Option("--csv", help="Print CSV on stdout.")] = False,
+    robot: Annotated[str | None, robot_option("Only this robot.")] = None,
+    limit: Annotated[int, limit_option("At most this many rows, oldest first.", least=1)] = 1000,
+    csv_out: CsvOption = False,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
@@ -287,4 +254,4 @@ def _cell(value: Any) -> str:
     return str(value)
 
 
-__all__ = ["cluster", "find_command", "index_command", "query_command", "show"]
+__all__ = ["find_command", "index_command", "query_command"]

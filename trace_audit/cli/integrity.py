@@ -12,16 +12,19 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from trace_audit.cli.app import (
-    EXIT_FINDINGS,
+from trace_audit.cli.app import EXIT_FINDINGS, app, guarded, help_text
+from trace_audit.cli.doc import Column, Doc, Seg, fmt_duration, fmt_t
+from trace_audit.cli.options import (
+    CheckedLogArgument,
     JsonOption,
     PlainOption,
-    app,
-    guarded,
-    help_text,
+    Recordings,
+    SchedulerOption,
+    cluster,
+    evidence_option,
+    key_option,
 )
-from trace_audit.cli.fleet import SchedulerOption
-from trace_audit.cli.render import Column, Doc, Seg, emit, fmt_duration, fmt_t, setup_logging
+from trace_audit.cli.output import emit, setup_logging
 
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
     from trace_audit.verify import Finding, RobotSummary, VerifyReport
@@ -79,36 +82,19 @@ _MAX_LISTED = 200
 
 @app.command("verify", help=help_text(_VERIFY_HELP))
 def verify_command(
-    log: Annotated[
-        Path,
-        typer.Argument(
-            help="A TRACE segment (.mcap), a directory of segments, or a log root.",
-            show_default=False,
-        ),
-    ],
+    log: CheckedLogArgument,
     *,
     key: Annotated[
-        Path | None,
-        typer.Option(
-            "--key",
-            help="The robot's Ed25519 public key (PEM, OpenSSH or 32 raw bytes).",
-            show_default=False,
-        ),
+        Path | None, key_option("The robot's Ed25519 public key (PEM, OpenSSH or 32 raw bytes).")
     ] = None,
     evidence: Annotated[
-        list[Path] | None,
-        typer.Option(
-            "--evidence",
-            help="An external recording (MCAP file or rosbag2 directory) the log's evidence "
-            "refs name: their digests are checked there. Repeat for several.",
-            show_default=False,
-        ),
+        Recordings,
+        evidence_option(then=": their digests are checked there. Repeat for several."),
     ] = None,
     scheduler: SchedulerOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
-    from trace_audit.cli.fleet import cluster
     from trace_audit.verify import verify_log
     from trace_runtime.integrity import load_public_key
 

@@ -1,4 +1,10 @@
-"""``trace-audit metrics``: the paper's auditability tables (ET, ET_partial, TC, DR, TCS)."""
+"""``trace-audit metrics``: the paper's auditability tables (ET, ET_partial, TC, DR, TCS).
+
+Parses its arguments into a ``MetricsConfig``, calls ``trace_audit.metrics.compute_metrics``
+(or ``index_metrics`` with ``--index``) and renders the typed report: the tables and their
+notes as a ``Printout`` for people, or JSON (the report with Table II and III as the paper
+names their columns) for scripts. A metric under its ``--fail-under`` threshold exits 1.
+"""
 
 from __future__ import annotations
 
@@ -8,23 +14,26 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from trace_audit.cli.app import (
-    EXIT_FINDINGS,
+from trace_audit.cli.app import EXIT_FINDINGS, app, guarded
+from trace_audit.cli.doc import BoxColumn, BoxTable, Printout
+from trace_audit.cli.options import (
     JsonOption,
     PlainOption,
-    app,
-    console,
-    guarded,
-    print_json,
+    Recordings,
+    SchedulerOption,
+    cluster,
+    evidence_option,
+    jobs_option,
 )
-from trace_audit.cli.fleet import SchedulerOption, cluster
-from trace_audit.cli.render import progress_bar
+from trace_audit.cli.output import console_width, emit, progress_bar
 from trace_runtime.errors import UsageError
 
 if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
     from concurrent.futures import Executor
 
     from trace_audit.metrics import MetricsConfig, MetricsReport, Stat
+
+__all__ = ["metrics_command", "metrics_doc"]
 
 _PROGRESS_MIN_CYCLES = 20_000
 
@@ -79,96 +88,89 @@ _HELP = "\n\n".join(
 )
 
 
-def _parse_by(value: str | None) -> Any:
-    from trace_audit.metrics import GROUP_BYS
+# --- the command ----------------------------------------------------------------------------
 
-    if value is not None and value not in GROUP_BYS:
-        raise UsageError(f"--by must be one of {', '.join(GROUP_BYS)}, got {value!r}")
-    return value
+_Logs = Annotated[
+    list[Path] | None,
+    typer.Argument(help="Log files, directories of segments, or log roots.", show_default=False),
+]
+_By = Annotated[
+    str | None,
+    typer.Option(
+        "--by",
+        help="Group decisions: scenario, segment, robot or hour (UTC); with --index also "
+        "day, software_version, policy_version, tier, command, several comma-separated.",
+    ),
+]
+_Index = Annotated[
+    Path | None,
+    typer.Option(
+        "--index",
+        help="Compute from a fleet index (trace-audit index) instead of the logs.",
+        show_default=False,
+    ),
+]
+_Failures = Annotated[
+    bool,
+    typer.Option("--failures", help="List each failing decision and gap, and what is missing."),
+]
+_FailUnder = Annotated[
+    str | None,
+    typer.Option(
+        "--fail-under",
+        help="Exit 1 when a metric is below its threshold, e.g. ET=0.95,DR=95%. "
+        "Metrics: ET, ET_full, ET_partial, TC, DR, TCS.",
+    ),
+]
+_GapTolerance = Annotated[
+    float,
+    typer.Option(
+        "--gap-tolerance",
+        help="Periods of lateness tolerated before an interval counts as a gap.",
+        min=0.0,
+    ),
+]
+_SensorWindow = Annotated[
+    int,
+    typer.Option(
+        "--sensor-window",
+        help="Cycles before a decision whose sensor messages its refs may resolve to.",
+        min=0,
+    ),
+]
+_Start = Annotated[
+    float | None,
+    typer.Option("--start", help="Analysis window start, log time in seconds (t1)."),
+]
+_End = Annotated[
+    float | None, typer.Option("--end", help="Analysis window end, log time in seconds (t2).")
+]
+_TcsWeights = Annotated[
+    str | None,
+    typer.Option(
+        "--tcs-weights",
+        help="TCS weights and gate, e.g. et=0.4,dr=0.4,gate=off (keys: et, et_partial, "
+        "dr, continuity, integrity, gate).",
+    ),
+]
 
 
 @app.command("metrics", help=_HELP)
 def metrics_command(
-    logs: Annotated[
-        list[Path] | None,
-        typer.Argument(
-            help="Log files, directories of segments, or log roots.", show_default=False
-        ),
-    ] = None,
+    logs: _Logs = None,
     *,
-    by: Annotated[
-        str | None,
-        typer.Option(
-            "--by",
-            help="Group decisions: scenario, segment, robot or hour (UTC); with --index also "
-            "day, software_version, policy_version, tier, command, several comma-separated.",
-        ),
-    ] = None,
-    index: Annotated[
-        Path | None,
-        typer.Option(
-            "--index",
-            help="Compute from a fleet index (trace-audit index) instead of the logs.",
-            show_default=False,
-        ),
-    ] = None,
+    by: _By = None,
+    index: _Index = None,
     scheduler: SchedulerOption = None,
-    failures: Annotated[
-        bool,
-        typer.Option("--failures", help="List each failing decision and gap, and what is missing."),
-    ] = False,
-    fail_under: Annotated[
-        str | None,
-        typer.Option(
-            "--fail-under",
-            help="Exit 1 when a metric is below its threshold, e.g. ET=0.95,DR=95%. "
-            "Metrics: ET, ET_full, ET_partial, TC, DR, TCS.",
-        ),
-    ] = None,
-    jobs: Annotated[
-        int, typer.Option("--jobs", "-j", help="Processes to spread segments over.", min=1)
-    ] = 1,
-    gap_tolerance: Annotated[
-        float,
-        typer.Option(
-            "--gap-tolerance",
-            help="Periods of lateness tolerated before an interval counts as a gap.",
-            min=0.0,
-        ),
-    ] = 0.5,
-    sensor_window: Annotated[
-        int,
-        typer.Option(
-            "--sensor-window",
-            help="Cycles before a decision whose sensor messages its refs may resolve to.",
-            min=0,
-        ),
-    ] = 50,
-    start: Annotated[
-        float | None,
-        typer.Option("--start", help="Analysis window start, log time in seconds (t1)."),
-    ] = None,
-    end: Annotated[
-        float | None,
-        typer.Option("--end", help="Analysis window end, log time in seconds (t2)."),
-    ] = None,
-    tcs_weights: Annotated[
-        str | None,
-        typer.Option(
-            "--tcs-weights",
-            help="TCS weights and gate, e.g. et=0.4,dr=0.4,gate=off (keys: et, et_partial, "
-            "dr, continuity, integrity, gate).",
-        ),
-    ] = None,
-    evidence: Annotated[
-        list[Path] | None,
-        typer.Option(
-            "--evidence",
-            help="An external recording (MCAP file or rosbag2 directory) the logs' evidence "
-            "refs name; repeat for several.",
-            show_default=False,
-        ),
-    ] = None,
+    failures: _Failures = False,
+    fail_under: _FailUnder = None,
+    jobs: Annotated[int, jobs_option("Processes to spread segments over.")] = 1,
+    gap_tolerance: _GapTolerance = 0.5,
+    sensor_window: _SensorWindow = 50,
+    start: _Start = None,
+    end: _End = None,
+    tcs_weights: _TcsWeights = None,
+    evidence: Annotated[Recordings, evidence_option("the logs' evidence refs")] = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
@@ -190,23 +192,18 @@ def metrics_command(
             evidence=tuple(str(p) for p in evidence or ()),
         )
         if index is not None:
-            from trace_audit.fleet.query import index_metrics, parse_index_by
-
-            if failures:  # the index counts them; what each one misses is in the logs
-                raise UsageError(
-                    "--failures is not supported with --index (run metrics on the logs, or "
-                    "trace-audit find INDEX --where 'NOT d.dr' for the rows)"
-                )
-
-            return index_metrics(index, parse_index_by(by), config)
+            return _from_index(index, by, config, failures=failures)
         with cluster(scheduler) as executor:
             return _with_progress(logs or [], config, quiet=json_out or plain, executor=executor)
 
     report = guarded(run)
-    if json_out:
-        print_json(_json(report, failures))
-    else:
-        _render(report, console(plain), failures=failures)
+    emit(
+        report,
+        lambda r: metrics_doc(r, failures=failures, width=console_width(plain)),
+        json_out=json_out,
+        plain=plain,
+        to_json=lambda r: _json(r, failures),
+    )
     if not report.passed:
         below = ", ".join(
             f"{c.metric} {_pct(c.value)} < {c.threshold * 100:.1f}%"
@@ -215,6 +212,27 @@ def metrics_command(
         )
         sys.stderr.write(f"trace-audit: below threshold: {below}\n")
         raise typer.Exit(EXIT_FINDINGS)
+
+
+def _parse_by(value: str | None) -> Any:
+    from trace_audit.metrics import GROUP_BYS
+
+    if value is not None and value not in GROUP_BYS:
+        raise UsageError(f"--by must be one of {', '.join(GROUP_BYS)}, got {value!r}")
+    return value
+
+
+def _from_index(
+    index: Path, by: str | None, config: MetricsConfig, *, failures: bool
+) -> MetricsReport:
+    from trace_audit.fleet.query import index_metrics, parse_index_by
+
+    if failures:  # the index counts them; what each one misses is in the logs
+        raise UsageError(
+            "--failures is not supported with --index (run metrics on the logs, or "
+            "trace-audit find INDEX --where 'NOT d.dr' for the rows)"
+        )
+    return index_metrics(index, parse_index_by(by), config)
 
 
 def _with_progress(
@@ -234,7 +252,7 @@ def _with_progress(
         return compute_metrics(logs, config, progress=progress, executor=executor)
 
 
-# --- rendering ----------------------------------------------------------------------------
+# --- the document -------------------------------------------------------------------------
 
 
 def _pct(value: float | None, digits: int = 1, *, unit: bool = True) -> str:
@@ -251,53 +269,49 @@ def _share(count: int, total: int) -> str:
     return f"{count}/{total}"
 
 
-def _render_channels(report: MetricsReport, out: Any, boxes: Any) -> None:
-    """Execution deviation per actuator channel, in each channel's own unit."""
-    from rich.table import Table
-
-    table = Table(
-        title="Execution deviation per channel",
-        box=boxes,
-        title_justify="left",
-        show_edge=False,
-        pad_edge=False,
-    )
-    for name in ("channel", "unit", "cycles", "mean", "max"):
-        table.add_column(name, justify="left" if name in ("channel", "unit") else "right")
-    for c in report.channel_deviation:
-        table.add_row(
-            c.name,
-            c.unit,
-            str(c.cycles) if c.logged == c.cycles else f"{c.cycles} ({c.logged} with deviation)",
-            "-" if c.mean is None else f"{c.mean:.4g}",
-            "-" if c.max is None else f"{c.max:.4g}",
-        )
-    out.print(table)
+_WIDE = 90
+"""Console columns from which Table III shows TCS too."""
 
 
-def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
-    from rich import box
-    from rich.table import Table
-
+def metrics_doc(report: MetricsReport, *, failures: bool, width: int) -> Printout:
+    """The metrics report for people: Table II and its notes, the execution deviation per
+    channel, Table III, what was not read, the failures (``--failures``), the thresholds."""
+    out = Printout()
     overall = report.overall
-    boxes = box.ASCII if out.no_color else box.SIMPLE_HEAVY
     segs = len(report.segments)
     out.print(
         f"[bold]Auditability[/bold] of {overall.decisions} decisions in {segs} "
         f"segment{'s' if segs != 1 else ''} ({', '.join(report.logs)})"
     )
+    out.table(_table_ii(report))
+    _table_ii_notes(out, report)
+    if report.channel_deviation:
+        out.table(_channels(report))
+    if report.groups:
+        wide = width >= _WIDE
+        out.table(_table_iii(report, wide=wide))
+        out.print(
+            "  ET std in each row is across that group's decisions; ET_p = ET_partial mean"
+            + ("." if wide else "; TCS per group in --json (the terminal is too narrow).")
+        )
+    _reading_notes(out, report)
+    if failures:
+        _failures(out, report)
+    for check in report.thresholds:
+        verdict = "ok" if check.passed else "BELOW"
+        out.print(
+            f"  threshold {check.metric} >= {check.threshold * 100:.1f}%: "
+            f"{_pct(check.value, 2)} {verdict}"
+        )
+    return out
 
-    t2 = Table(
-        title="Table II: auditability metrics",
-        box=boxes,
-        title_justify="left",
-        show_edge=False,
-        collapse_padding=not out.no_color,
-        pad_edge=False,
-    )
-    for name in ("Method", "ET%", "fully tr.", "TC%", "gaps", "DR%", "not rec.", "Time"):
-        t2.add_column(name, justify="left" if name == "Method" else "right")
-    t2.add_row(
+
+def _table_ii(report: MetricsReport) -> BoxTable:
+    overall = report.overall
+    names = ("Method", "ET%", "fully tr.", "TC%", "gaps", "DR%", "not rec.", "Time")
+    columns = [BoxColumn(name, "left" if name == "Method" else "right") for name in names]
+    columns[1] = BoxColumn("ET%", "right", min_width=len(_pm(overall.et)))
+    row = (
         "TRACE (this log)",
         _pm(overall.et),
         _share(overall.fully_traceable, overall.decisions),
@@ -307,8 +321,18 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
         _share(overall.not_reconstructable, overall.decisions),
         report.logging_time,
     )
-    t2.columns[1].min_width = len(_pm(overall.et))
-    out.print(t2)
+    return BoxTable(
+        tuple(columns),
+        (row,),
+        title="Table II: auditability metrics",
+        flush=True,
+        collapse_plain=True,
+    )
+
+
+def _table_ii_notes(out: Printout, report: MetricsReport) -> None:
+    """What Table II's columns mean, the spread across groups, and what ET leaves out."""
+    overall = report.overall
     out.print(
         "  ET: mean ± std across decisions; fully tr.: fully traceable decisions; "
         f"gaps: count (gap time) in a {overall.window_s:.1f} s window; not rec.: not "
@@ -343,6 +367,12 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
             f"truncated away): ET(d) = 0 by definition; over the {named} that name factors, "
             f"ET {_pct(et_named)}."
         )
+    _seal_note(out, report)
+
+
+def _seal_note(out: Printout, report: MetricsReport) -> None:
+    """Seals, integrity failures, missing and declared-dropped cycles, clock restarts."""
+    overall = report.overall
     out.print(
         f"  Sealed {overall.sealed}, unsealed {overall.unsealed}, integrity failed "
         f"{overall.integrity_failed}; the gaps hold ~{overall.missing_cycles} missing cycles, "
@@ -356,107 +386,100 @@ def _render(report: MetricsReport, out: Any, *, failures: bool) -> None:
         )
     )
 
-    if report.channel_deviation:
-        _render_channels(report, out, boxes)
 
-    if report.groups:
-        wide = out.width >= 90
-        t3 = Table(
-            title=f"Table III: per {report.by}",
-            box=boxes,
-            title_justify="left",
-            show_edge=False,
-            collapse_padding=not out.no_color,
-            pad_edge=False,
+def _channels(report: MetricsReport) -> BoxTable:
+    """Execution deviation per actuator channel, in each channel's own unit."""
+    names = ("channel", "unit", "cycles", "mean", "max")
+    columns = tuple(
+        BoxColumn(name, "left" if name in ("channel", "unit") else "right") for name in names
+    )
+    rows = tuple(
+        (
+            c.name,
+            c.unit,
+            str(c.cycles) if c.logged == c.cycles else f"{c.cycles} ({c.logged} with deviation)",
+            "-" if c.mean is None else f"{c.mean:.4g}",
+            "-" if c.max is None else f"{c.max:.4g}",
         )
-        for name in (
-            report.by or "group",
-            "cycles",
-            "ET%",
-            "fully tr.",
-            "ET_p",
-            "TC%",
-            "gaps",
-            "DR%",
-            "not rec.",
-            *(("TCS",) if wide else ()),
-        ):
-            t3.add_column(name, justify="left" if name == report.by else "right")
-        # The name and ET columns must not be cut; the count columns may wrap their headers.
-        t3.columns[0].min_width = max(len(g.name) for g in report.groups)
-        t3.columns[2].min_width = max(len(_pm(g.et)) for g in report.groups)
-        for g in report.groups:
-            t3.add_row(
-                g.name,
-                str(g.decisions),
-                _pm(g.et),
-                _share(g.fully_traceable, g.decisions),
-                f"{g.et_partial.mean:.3f}",
-                _pct(g.tc, unit=False),
-                str(g.gaps),
-                _pct(g.dr, unit=False),
-                str(g.not_reconstructable),
-                *((f"{g.tcs.mean:.3f}",) if wide else ()),
-            )
-        out.print(t3)
-        out.print(
-            "  ET std in each row is across that group's decisions; ET_p = ET_partial mean"
-            + ("." if wide else "; TCS per group in --json (the terminal is too narrow).")
-        )
+        for c in report.channel_deviation
+    )
+    return BoxTable(columns, rows, title="Execution deviation per channel", flush=True)
 
+
+def _table_iii(report: MetricsReport, *, wide: bool) -> BoxTable:
+    """A row per group; TCS only when the console is wide enough."""
+    names = (
+        *(report.by or "group", "cycles", "ET%", "fully tr.", "ET_p", "TC%", "gaps", "DR%"),
+        *("not rec.", *(("TCS",) if wide else ())),
+    )
+    columns = [BoxColumn(name, "left" if name == report.by else "right") for name in names]
+    # The name and ET columns must not be cut; the count columns may wrap their headers.
+    columns[0] = BoxColumn(
+        columns[0].header, columns[0].justify, min_width=max(len(g.name) for g in report.groups)
+    )
+    columns[2] = BoxColumn("ET%", "right", min_width=max(len(_pm(g.et)) for g in report.groups))
+    rows = tuple(
+        (
+            g.name,
+            str(g.decisions),
+            _pm(g.et),
+            _share(g.fully_traceable, g.decisions),
+            f"{g.et_partial.mean:.3f}",
+            _pct(g.tc, unit=False),
+            str(g.gaps),
+            _pct(g.dr, unit=False),
+            str(g.not_reconstructable),
+            *((f"{g.tcs.mean:.3f}",) if wide else ()),
+        )
+        for g in report.groups
+    )
+    return BoxTable(
+        tuple(columns), rows, title=f"Table III: per {report.by}", flush=True, collapse_plain=True
+    )
+
+
+def _reading_notes(out: Printout, report: MetricsReport) -> None:
+    """What was not read or not scored, what an index does not hold, external refs."""
     for skipped in report.skipped_segments:
-        out.print(f"  not read: {skipped}", markup=False, soft_wrap=True)
+        out.verbatim(f"  not read: {skipped}")
     for problem in report.unreadable:
-        out.print(f"  unreadable file, not scored: {problem}", markup=False, soft_wrap=True)
+        out.verbatim(f"  unreadable file, not scored: {problem}")
     if report.not_in_index:
-        out.print(
+        out.verbatim(
             "  not in the index: logging time, execution deviation per channel, evidence "
             "refs into external recordings, the failing decisions and gaps themselves "
-            "(run metrics on the logs for them)",
-            markup=False,
-            soft_wrap=True,
+            "(run metrics on the logs for them)"
         )
     if report.external_refs:
         ext = report.external_refs
-        out.print(
+        out.verbatim(
             f"  evidence refs into external recordings: {ext.get('resolved', 0)} resolved, "
             f"{ext.get('broken', 0)} broken, {ext.get('unresolved', 0)} unresolved"
-            + (" (recording not given: --evidence)" if ext.get("unresolved") else ""),
-            markup=False,
-            soft_wrap=True,
+            + (" (recording not given: --evidence)" if ext.get("unresolved") else "")
         )
 
-    if failures:
-        listed = len(report.failures)
-        out.print(
-            f"\n[bold]Failing decisions[/bold]: {report.failures_total}"
-            + (f" (first {listed} listed)" if listed < report.failures_total else "")
-        )
-        for f in report.failures:
-            out.print(
-                f"  cycle {f.cycle}  t={f.t_ns / 1e9:.3f} s  [{f.group}]  "
-                f"ET {f.et:.2f}, ET_partial {f.et_partial:.2f}",
-                markup=False,
-                soft_wrap=True,
-            )
-            for problem in f.problems:
-                out.print(f"      {problem}", markup=False, soft_wrap=True)
-        out.print(f"\n[bold]Gaps[/bold]: {report.gaps_total}")
-        for gap in report.gaps:
-            out.print(
-                f"  {gap.robot}: after cycle {gap.after_cycle} (t={gap.after_t_ns / 1e9:.3f} s) "
-                f"until cycle {gap.before_cycle} (t={gap.before_t_ns / 1e9:.3f} s): "
-                f"{gap.gap_ns / 1e9:.3f} s, ~{gap.missing_cycles} missing, "
-                f"{gap.declared_dropped} declared dropped",
-                markup=False,
-                soft_wrap=True,
-            )
 
-    for check in report.thresholds:
-        verdict = "ok" if check.passed else "BELOW"
-        out.print(
-            f"  threshold {check.metric} >= {check.threshold * 100:.1f}%: "
-            f"{_pct(check.value, 2)} {verdict}"
+def _failures(out: Printout, report: MetricsReport) -> None:
+    """Each failing decision with what it misses, then each gap."""
+    listed = len(report.failures)
+    out.print(
+        f"\n[bold]Failing decisions[/bold]: {report.failures_total}"
+        + (f" (first {listed} listed)" if listed < report.failures_total else "")
+    )
+    for f in report.failures:
+        out.verbatim(
+            f"  cycle {f.cycle}  t={f.t_ns / 1e9:.3f} s  [{f.group}]  "
+            f"ET {f.et:.2f}, ET_partial {f.et_partial:.2f}"
+        )
+        for problem in f.problems:
+            out.verbatim(f"      {problem}")
+    out.print(f"\n[bold]Gaps[/bold]: {report.gaps_total}")
+    for gap in report.gaps:
+        out.verbatim(
+            f"  {gap.robot}: after cycle {gap.after_cycle} (t={gap.after_t_ns / 1e9:.3f} s) "
+            f"until cycle {gap.before_cycle} (t={gap.before_t_ns / 1e9:.3f} s): "
+            f"{gap.gap_ns / 1e9:.3f} s, ~{gap.missing_cycles} missing, "
+            f"{gap.declared_dropped} declared dropped"
         )
 
 

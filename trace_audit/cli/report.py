@@ -8,9 +8,18 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from trace_audit.cli.app import JsonOption, PlainOption, app, guarded, help_text
-from trace_audit.cli.investigate import EvidenceOption, LogArgument, TimeOption
-from trace_audit.cli.render import Doc, Seg, emit
+from trace_audit.cli.app import app, guarded, help_text
+from trace_audit.cli.doc import Doc, Seg
+from trace_audit.cli.options import (
+    EvidenceOption,
+    JsonOption,
+    LogArgument,
+    PlainOption,
+    TimeOption,
+    cycle_option,
+    key_option,
+)
+from trace_audit.cli.output import emit
 
 if TYPE_CHECKING:
     from trace_audit.report import IncidentReport
@@ -44,12 +53,7 @@ findings are shown in the report and do not change the exit code (use verify for
 def report_command(  # noqa: PLR0917 - typer maps each parameter to an option
     log: LogArgument,
     t: TimeOption = None,
-    cycle: Annotated[
-        int | None,
-        typer.Option(
-            "--cycle", help="Report on this cycle number instead of a time.", show_default=False
-        ),
-    ] = None,
+    cycle: Annotated[int | None, cycle_option("Report on")] = None,
     window: Annotated[
         str,
         typer.Option(
@@ -60,12 +64,7 @@ def report_command(  # noqa: PLR0917 - typer maps each parameter to an option
         "incident.html"
     ),
     key: Annotated[
-        Path | None,
-        typer.Option(
-            "--key",
-            help="The robot's Ed25519 public key, to check checkpoint signatures.",
-            show_default=False,
-        ),
+        Path | None, key_option("The robot's Ed25519 public key, to check checkpoint signatures.")
     ] = None,
     evidence: EvidenceOption = None,
     json_out: JsonOption = False,

@@ -1,4 +1,9 @@
-"""``trace-audit compact`` and ``trace-audit catalog``: storage tiers of a log root."""
+"""``trace-audit compact`` and ``trace-audit catalog``: storage tiers of a log root.
+
+Each parses its arguments, calls one library function (``trace_runtime.tiers.compact``,
+``refresh_catalog``) and renders the typed result: a ``Printout`` (a table and its notes)
+for people, JSON for scripts.
+"""
 
 from __future__ import annotations
 
@@ -9,16 +14,17 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from trace_audit.cli.app import (
-    EXIT_FINDINGS,
+from trace_audit.cli.app import EXIT_FINDINGS, app, guarded
+from trace_audit.cli.doc import BoxColumn, BoxTable, Printout
+from trace_audit.cli.options import (
     JsonOption,
     PlainOption,
-    app,
-    console,
-    guarded,
-    print_json,
+    RootArgument,
+    jobs_option,
+    key_option,
+    robot_option,
 )
-from trace_audit.cli.render import progress_bar
+from trace_audit.cli.output import emit, progress_bar
 from trace_runtime.errors import UsageError
 
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
@@ -86,84 +92,86 @@ def _duration(text: str | None, name: str) -> int | None:
     return parse_duration(text)
 
 
+_Tier = Annotated[str, typer.Option("--tier", help="Target tier: warm or cold.")]
+_OlderThan = Annotated[
+    str | None,
+    typer.Option(
+        "--older-than",
+        help="Age a segment must have, e.g. 24h, 7d, 0 (default 24h warm, 7d cold).",
+    ),
+]
+_Sources = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--from",
+        help="Source tier(s): hot for warm; hot and/or warm for cold (default both).",
+    ),
+]
+_DryRun = Annotated[bool, typer.Option("--dry-run", help="Show what would move; change nothing.")]
+_Now = Annotated[
+    bool,
+    typer.Option("--now", help="Measure age against the wall clock, not the newest log time."),
+]
+_Retention = Annotated[
+    str,
+    typer.Option("--retention", help="Delete verified cold segments older than this (or 'off')."),
+]
+_Context = Annotated[
+    str, typer.Option("--context", help="Warm: time kept in full around each flagged cycle.")
+]
+_KeepReadings = Annotated[
+    bool,
+    typer.Option(
+        "--keep-readings",
+        help="Warm: keep the sensor readings a summary's evidence refs point at.",
+    ),
+]
+_Informational = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--informational",
+        help="Warm: execution flags starting with this do not flag a cycle "
+        "(repeatable; scenario: always).",
+    ),
+]
+_BlockCycles = Annotated[
+    int,
+    typer.Option("--block-cycles", min=1, help="Cold: cycles per block (a seek decodes one)."),
+]
+_IncludeUnfinished = Annotated[
+    bool,
+    typer.Option(
+        "--include-unfinished",
+        help="Also compact a robot's newest unfinished hot segment (a crashed robot's).",
+    ),
+]
+_CompactKey = Annotated[
+    Path | None,
+    key_option(
+        "The robots' Ed25519 public key: retention then also checks checkpoint "
+        "signatures, and keeps what does not verify."
+    ),
+]
+
+
 @app.command("compact", help=_COMPACT_HELP)
 def compact_command(
-    root: Annotated[Path, typer.Argument(help="A log root (with hot/ warm/ cold/).")],
+    root: RootArgument,
     *,
-    tier: Annotated[str, typer.Option("--tier", help="Target tier: warm or cold.")],
-    older_than: Annotated[
-        str | None,
-        typer.Option(
-            "--older-than",
-            help="Age a segment must have, e.g. 24h, 7d, 0 (default 24h warm, 7d cold).",
-        ),
-    ] = None,
-    robot: Annotated[
-        str | None, typer.Option("--robot", help="Only this robot's segments.")
-    ] = None,
-    source: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--from",
-            help="Source tier(s): hot for warm; hot and/or warm for cold (default both).",
-        ),
-    ] = None,
-    dry_run: Annotated[
-        bool, typer.Option("--dry-run", help="Show what would move; change nothing.")
-    ] = False,
-    now: Annotated[
-        bool,
-        typer.Option("--now", help="Measure age against the wall clock, not the newest log time."),
-    ] = False,
-    retention: Annotated[
-        str,
-        typer.Option(
-            "--retention", help="Delete verified cold segments older than this (or 'off')."
-        ),
-    ] = _DEFAULT_RETENTION,
-    context: Annotated[
-        str,
-        typer.Option("--context", help="Warm: time kept in full around each flagged cycle."),
-    ] = "2s",
-    keep_readings: Annotated[
-        bool,
-        typer.Option(
-            "--keep-readings",
-            help="Warm: keep the sensor readings a summary's evidence refs point at.",
-        ),
-    ] = False,
-    informational: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--informational",
-            help="Warm: execution flags starting with this do not flag a cycle "
-            "(repeatable; scenario: always).",
-        ),
-    ] = None,
-    block_cycles: Annotated[
-        int,
-        typer.Option("--block-cycles", min=1, help="Cold: cycles per block (a seek decodes one)."),
-    ] = _DEFAULT_BLOCK_CYCLES,
-    jobs: Annotated[
-        int,
-        typer.Option("--jobs", "-j", min=1, help="Cold: processes encoding blocks in parallel."),
-    ] = 1,
-    include_unfinished: Annotated[
-        bool,
-        typer.Option(
-            "--include-unfinished",
-            help="Also compact a robot's newest unfinished hot segment (a crashed robot's).",
-        ),
-    ] = False,
-    key: Annotated[
-        Path | None,
-        typer.Option(
-            "--key",
-            help="The robots' Ed25519 public key: retention then also checks checkpoint "
-            "signatures, and keeps what does not verify.",
-            show_default=False,
-        ),
-    ] = None,
+    tier: _Tier,
+    older_than: _OlderThan = None,
+    robot: Annotated[str | None, robot_option("Only this robot's segments.")] = None,
+    source: _Sources = None,
+    dry_run: _DryRun = False,
+    now: _Now = False,
+    retention: _Retention = _DEFAULT_RETENTION,
+    context: _Context = "2s",
+    keep_readings: _KeepReadings = False,
+    informational: _Informational = None,
+    block_cycles: _BlockCycles = _DEFAULT_BLOCK_CYCLES,
+    jobs: Annotated[int, jobs_option("Cold: processes encoding blocks in parallel.")] = 1,
+    include_unfinished: _IncludeUnfinished = False,
+    key: _CompactKey = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
@@ -198,10 +206,7 @@ def compact_command(
         )
 
     report = guarded(run)
-    if json_out:
-        print_json(_report_json(report))
-    else:
-        _render_report(report, console(plain))
+    emit(report, compact_doc, json_out=json_out, plain=plain, to_json=_report_json)
     if report.failed:
         names = ", ".join(s.source for s in report.failed)
         sys.stderr.write(f"trace-audit: compaction failed for {names}; sources kept\n")
@@ -284,12 +289,9 @@ def _when(t_ns: int | None) -> str:
     return datetime.fromtimestamp(t_ns / 1e9, tz=UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
 
 
-def _render_report(report: CompactionReport, out: Any) -> None:
-    from rich import box
-    from rich.table import Table
-
-    boxes = box.ASCII if out.no_color else box.SIMPLE_HEAVY
-    verb = "would move" if report.dry_run else "moved"
+def compact_doc(report: CompactionReport) -> Printout:
+    """What compaction moved (or would move), a row per segment, what it left and deleted."""
+    out = Printout()
     out.print(
         f"[bold]compact[/bold] {report.root} -> {report.tier} (from {', '.join(report.sources)})"
     )
@@ -300,37 +302,8 @@ def _render_report(report: CompactionReport, out: Any) -> None:
     for leftover in report.leftovers:
         out.print(f"  leftover {leftover.path}: {leftover.action}")
     if report.segments:
-        table = Table(box=boxes, show_edge=False)
-        for name in ("segment", "from", "cycles", "before", "after", "ratio", "status"):
-            table.add_column(name, justify="left" if name in ("segment", "status") else "right")
-        for s in report.segments:
-            ratio = f"{s.bytes_before / s.bytes_after:.1f}x" if s.bytes_after else "-"
-            status = s.status + (f": {s.detail}" if s.detail else "")
-            if s.full_cycles is not None:
-                status += f" ({s.full_cycles} full, {s.cycles - s.full_cycles} summarised)"
-            table.add_row(
-                s.source.rsplit("/", 1)[-1],
-                s.source_tier,
-                str(s.cycles),
-                _size(s.bytes_before),
-                _size(s.bytes_after),
-                ratio,
-                status,
-            )
-        out.print(table)
-    compacted = report.compacted
-    if compacted:
-        rate = report.cycles / report.seconds if report.seconds > 0 else 0.0
-        out.print(
-            f"  {verb} {len(compacted)} segment(s), {report.cycles} cycles: "
-            f"{_size(report.bytes_before)} -> {_size(report.bytes_after)} "
-            f"({report.bytes_before / max(1, report.bytes_after):.1f}x) in {report.seconds:.1f} s "
-            f"({rate:,.0f} cycles/s)"
-        )
-    elif report.dry_run and report.segments:
-        out.print(f"  {verb} {len(report.segments)} segment(s), {report.cycles} cycles")
-    else:
-        out.print("  nothing to move")
+        out.table(_segment_table(report))
+    out.print(_moved_line(report))
     reasons: dict[str, int] = {}
     for s in report.skipped:
         reasons[s.detail] = reasons.get(s.detail, 0) + 1
@@ -339,11 +312,54 @@ def _render_report(report: CompactionReport, out: Any) -> None:
     for r in report.retention:
         detail = f" ({r.detail})" if r.detail else ""
         out.print(f"  retention: {r.path} {r.status}{detail}")
+    return out
+
+
+def _segment_table(report: CompactionReport) -> BoxTable:
+    names = ("segment", "from", "cycles", "before", "after", "ratio", "status")
+    columns = tuple(
+        BoxColumn(name, "left" if name in ("segment", "status") else "right") for name in names
+    )
+    rows = []
+    for s in report.segments:
+        ratio = f"{s.bytes_before / s.bytes_after:.1f}x" if s.bytes_after else "-"
+        status = s.status + (f": {s.detail}" if s.detail else "")
+        if s.full_cycles is not None:
+            status += f" ({s.full_cycles} full, {s.cycles - s.full_cycles} summarised)"
+        rows.append(
+            (
+                s.source.rsplit("/", 1)[-1],
+                s.source_tier,
+                str(s.cycles),
+                _size(s.bytes_before),
+                _size(s.bytes_after),
+                ratio,
+                status,
+            )
+        )
+    return BoxTable(columns, tuple(rows))
+
+
+def _moved_line(report: CompactionReport) -> str:
+    """How much moved, at what ratio and speed; or what would move; or nothing."""
+    verb = "would move" if report.dry_run else "moved"
+    compacted = report.compacted
+    if compacted:
+        rate = report.cycles / report.seconds if report.seconds > 0 else 0.0
+        return (
+            f"  {verb} {len(compacted)} segment(s), {report.cycles} cycles: "
+            f"{_size(report.bytes_before)} -> {_size(report.bytes_after)} "
+            f"({report.bytes_before / max(1, report.bytes_after):.1f}x) in {report.seconds:.1f} s "
+            f"({rate:,.0f} cycles/s)"
+        )
+    if report.dry_run and report.segments:
+        return f"  {verb} {len(report.segments)} segment(s), {report.cycles} cycles"
+    return "  nothing to move"
 
 
 @app.command("catalog", help=_CATALOG_HELP)
 def catalog_command(
-    root: Annotated[Path, typer.Argument(help="A log root (with hot/ warm/ cold/).")],
+    root: RootArgument,
     *,
     refresh: Annotated[
         bool, typer.Option("--refresh", help="Write the rebuilt catalog to catalog.json.")
@@ -354,34 +370,36 @@ def catalog_command(
     from trace_runtime.tiers import refresh_catalog
 
     catalog = guarded(lambda: refresh_catalog(root, write=refresh))
-    if json_out:
-        print_json({"root": str(root), "segments": catalog.entries, "problems": catalog.problems})
-        return
-    _render_catalog(catalog, console(plain))
+    emit(
+        catalog,
+        catalog_doc,
+        json_out=json_out,
+        plain=plain,
+        to_json=lambda c: {"root": str(root), "segments": c.entries, "problems": c.problems},
+    )
 
 
-def _render_catalog(catalog: Catalog, out: Any) -> None:
-    from rich import box
-    from rich.table import Table
-
-    boxes = box.ASCII if out.no_color else box.SIMPLE_HEAVY
-    table = Table(box=boxes, show_edge=False, title=f"catalog of {catalog.root}")
-    for name in ("robot", "seg", "tier", "start", "end", "cycles", "size"):
-        table.add_column(
-            name, justify="right" if name in ("seg", "cycles", "size") else "left", no_wrap=True
-        )
-    for e in catalog.entries:
-        tier = e.tier + ("*" if e.lossy else "") + ("" if e.finished else " (unfinished)")
-        table.add_row(
+def catalog_doc(catalog: Catalog) -> Printout:
+    """A row per segment of the catalog, the total, and what could not be read."""
+    names = ("robot", "seg", "tier", "start", "end", "cycles", "size")
+    columns = tuple(
+        BoxColumn(name, "right" if name in ("seg", "cycles", "size") else "left", no_wrap=True)
+        for name in names
+    )
+    rows = tuple(
+        (
             e.robot,
             str(e.segment),
-            tier,
+            e.tier + ("*" if e.lossy else "") + ("" if e.finished else " (unfinished)"),
             _when(e.start_ns),
             _when(e.end_ns),
             str(e.cycles),
             _size(e.bytes),
         )
-    out.print(table)
+        for e in catalog.entries
+    )
+    out = Printout()
+    out.table(BoxTable(columns, rows, title=f"catalog of {catalog.root}"))
     total = sum(e.bytes for e in catalog.entries)
     lossy = any(e.lossy for e in catalog.entries)
     out.print(
@@ -391,3 +409,4 @@ def _render_catalog(catalog: Catalog, out: Any) -> None:
     )
     for problem in catalog.problems:
         out.print(f"  unreadable: {problem}")
+    return out

@@ -1,4 +1,4 @@
-"""``trace-audit COMMAND ...`` runs a group holding that command alone (``_App.runner_for``):
+"""``trace-audit COMMAND ...`` runs a group holding that command alone (``App.runner_for``):
 typer would otherwise build all fifteen commands first. What it prints must not change."""
 
 from __future__ import annotations

@@ -1,0 +1,197 @@
+"""What a command prints for people, as data: the document models and the formats of times.
+
+``Doc`` is a flow of titles, headings, label/value fields, tables, trees and lines, laid out
+by ``trace_audit.cli.render`` with rich on a terminal or as plain ASCII text. Meaning never
+rests on colour alone: every styled span carries its own words or markers (``[ok]``,
+``MISSING``, ``=>``), and the plain layout may swap in an ASCII form.
+
+``Printout`` is a list of console lines (rich markup) and boxed tables that rich draws in
+both modes, with ASCII boxes when colour is off: the layout of ``metrics``, ``compact`` and
+``catalog``. Building either imports nothing heavy; only drawing them imports rich.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+__all__ = [
+    "Block",
+    "BoxColumn",
+    "BoxTable",
+    "Column",
+    "ConsoleLine",
+    "Doc",
+    "Item",
+    "Line",
+    "Printout",
+    "Seg",
+    "fmt_duration",
+    "fmt_t",
+    "fmt_value",
+    "plain_text",
+    "segs",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class Seg:
+    """A span of text with a rich style; ``ascii`` replaces it in plain output."""
+
+    text: str
+    style: str = ""
+    ascii: str | None = None
+
+    def plain(self) -> str:
+        return self.text if self.ascii is None else self.ascii
+
+
+Line = str | Seg | Sequence["str | Seg"]
+
+
+def segs(line: Line) -> list[Seg]:
+    """The spans of a line, each a ``Seg``."""
+    if isinstance(line, str):
+        return [Seg(line)]
+    if isinstance(line, Seg):
+        return [line]
+    return [Seg(s) if isinstance(s, str) else s for s in line]
+
+
+def plain_text(line: Line) -> str:
+    """A line as plain text: each span's ASCII form where it has one."""
+    return "".join(s.plain() for s in segs(line))
+
+
+@dataclass(frozen=True, slots=True)
+class Column:
+    header: str
+    justify: Literal["left", "right"] = "left"
+    wrap: bool = False
+    """This column takes the width left over and wraps (at most one per table)."""
+
+
+@dataclass(slots=True)
+class Item:
+    """A node of a tree: its line and its children."""
+
+    line: Line
+    children: list[Item] = field(default_factory=list)
+
+    def add(self, line: Line) -> Item:
+        child = Item(line)
+        self.children.append(child)
+        return child
+
+
+BlockKind = Literal["title", "heading", "fields", "table", "tree", "line"]
+
+
+@dataclass(slots=True)
+class Block:
+    kind: BlockKind
+    data: Any
+
+
+@dataclass(slots=True)
+class Doc:
+    """What a command prints, in order."""
+
+    blocks: list[Block] = field(default_factory=list)
+
+    def title(self, line: Line) -> None:
+        self.blocks.append(Block("title", line))
+
+    def heading(self, text: str) -> None:
+        self.blocks.append(Block("heading", text))
+
+    def fields(self, rows: Iterable[tuple[str, Line]]) -> None:
+        self.blocks.append(Block("fields", list(rows)))
+
+    def table(self, columns: Sequence[Column], rows: Iterable[Sequence[Line]]) -> None:
+        self.blocks.append(Block("table", (list(columns), [list(r) for r in rows])))
+
+    def tree(self, root: Item) -> None:
+        self.blocks.append(Block("tree", root))
+
+    def line(self, line: Line, indent: int = 0) -> None:
+        self.blocks.append(Block("line", (line, indent)))
+
+
+# --- the printout: rich draws it in both modes ----------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class ConsoleLine:
+    """One ``console.print``: rich markup, or verbatim text that may run past the width."""
+
+    text: str
+    markup: bool = True
+
+
+@dataclass(frozen=True, slots=True)
+class BoxColumn:
+    header: str
+    justify: Literal["left", "right"] = "left"
+    min_width: int | None = None
+    no_wrap: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class BoxTable:
+    """A boxed table: heavy lines on a colour terminal, ASCII ones when colour is off."""
+
+    columns: tuple[BoxColumn, ...]
+    rows: tuple[tuple[str, ...], ...]
+    title: str | None = None
+    flush: bool = False
+    """A left-aligned title and no padding at the table's left and right edges."""
+    collapse_plain: bool = False
+    """The padding between columns collapses when colour is off."""
+
+
+@dataclass(slots=True)
+class Printout:
+    """Console lines and boxed tables, in order."""
+
+    parts: list[ConsoleLine | BoxTable] = field(default_factory=list)
+
+    def print(self, text: str) -> None:
+        """A line of rich markup."""
+        self.parts.append(ConsoleLine(text))
+
+    def verbatim(self, text: str) -> None:
+        """A line printed as it is (no markup), not wrapped at the width."""
+        self.parts.append(ConsoleLine(text, markup=False))
+
+    def table(self, table: BoxTable) -> None:
+        self.parts.append(table)
+
+
+# --- formats ---------------------------------------------------------------------------------
+
+
+def fmt_t(t_ns: int) -> str:
+    """A log time in seconds with millisecond precision."""
+    return f"{t_ns / 1e9:.3f} s"
+
+
+def fmt_duration(ns: int) -> str:
+    """A duration as people say it: 850 ms, 12.3 s, 4 min 10 s, 2 h 05 min."""
+    ns = abs(ns)
+    if ns < 1_000_000_000:
+        return f"{ns / 1e6:.0f} ms"
+    s = ns / 1e9
+    if s < 60:
+        return f"{s:.1f} s"
+    if s < 3600:
+        return f"{int(s // 60)} min {int(s % 60):02d} s"
+    return f"{int(s // 3600)} h {int(s % 3600 // 60):02d} min"
+
+
+def fmt_value(value: Any, unit: str | None = None) -> str:
+    """A logged value as the investigator writes it everywhere (``trace_audit.causal``)."""
+    from trace_audit.causal import format_value  # the library: not needed for ``--help``
+
+    return format_value(value, unit)

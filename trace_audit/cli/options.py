@@ -1,0 +1,158 @@
+"""The options and arguments more than one command takes, each defined once.
+
+An option shared with the same words is an ``Annotated`` alias (``JsonOption``); one whose
+help names what it does for the command at hand is made by a function (``cycle_option``,
+``evidence_option``), so the flag, its type and its settings still live here alone. A
+command's own options stay beside the command.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
+
+import typer
+
+if TYPE_CHECKING:
+    from concurrent.futures import Executor
+
+__all__ = [
+    "CheckedLogArgument",
+    "CsvOption",
+    "EvidenceOption",
+    "IndexArgument",
+    "JsonOption",
+    "LogArgument",
+    "PlainOption",
+    "Recordings",
+    "RootArgument",
+    "SchedulerOption",
+    "TimeOption",
+    "action_option",
+    "cluster",
+    "cycle_option",
+    "evidence_option",
+    "jobs_option",
+    "key_option",
+    "limit_option",
+    "robot_option",
+]
+
+# --- output ----------------------------------------------------------------------------------
+
+JsonOption = Annotated[bool, typer.Option("--json", help="Print machine-readable JSON on stdout.")]
+PlainOption = Annotated[
+    bool, typer.Option("--plain", help="No colour or box drawing (for logs and CI).")
+]
+CsvOption = Annotated[bool, typer.Option("--csv", help="Print CSV on stdout.")]
+
+# --- what is read ----------------------------------------------------------------------------
+
+LogArgument = Annotated[
+    Path,
+    typer.Argument(
+        help="A TRACE segment (.mcap), a directory of segments, or a log root (hot/ warm/ cold/).",
+        show_default=False,
+    ),
+]
+"""The log an investigating command reads."""
+
+CheckedLogArgument = Annotated[
+    Path,
+    typer.Argument(
+        help="A TRACE segment (.mcap), a directory of segments, or a log root.",
+        show_default=False,
+    ),
+]
+"""The log a checking command (verify, doctor) reads."""
+
+RootArgument = Annotated[Path, typer.Argument(help="A log root (with hot/ warm/ cold/).")]
+IndexArgument = Annotated[Path, typer.Argument(help="The index directory.", show_default=False)]
+
+Recordings = list[Path] | None
+"""External recordings (``--evidence``), as typer hands them over."""
+
+
+def evidence_option(
+    named_by: str = "the log's evidence refs", then: str = "; repeat for several."
+) -> Any:
+    """``--evidence``: the external recordings that evidence refs (``named_by``) name."""
+    return typer.Option(
+        "--evidence",
+        help=f"An external recording (MCAP file or rosbag2 directory) {named_by} name{then}",
+        show_default=False,
+    )
+
+
+EvidenceOption = Annotated[Recordings, evidence_option()]
+
+# --- which decision --------------------------------------------------------------------------
+
+TimeOption = Annotated[
+    str | None,
+    typer.Option(
+        "--t",
+        help="Seconds in the log's clock (12.3), or seconds after the log start (+12.3).",
+        show_default=False,
+    ),
+]
+
+
+def cycle_option(verb: str) -> Any:
+    """``--cycle N``, the other way to name a decision than ``--t``: "``verb`` this cycle"."""
+    return typer.Option(
+        "--cycle", help=f"{verb} this cycle number instead of a time.", show_default=False
+    )
+
+
+def action_option(help: str) -> Any:
+    """``--action``: a command the robot logged, e.g. STOP."""
+    return typer.Option("--action", help=help, show_default=False)
+
+
+def robot_option(help: str) -> Any:
+    """``--robot``: one robot of a fleet."""
+    return typer.Option("--robot", help=help, show_default=False)
+
+
+def limit_option(help: str, *, least: int) -> Any:
+    """``--limit``: at most this many rows."""
+    return typer.Option("--limit", help=help, min=least)
+
+
+# --- how it runs -----------------------------------------------------------------------------
+
+
+def jobs_option(help: str) -> Any:
+    """``--jobs`` / ``-j``: local processes."""
+    return typer.Option("--jobs", "-j", help=help, min=1)
+
+
+SchedulerOption = Annotated[
+    str | None,
+    typer.Option(
+        "--scheduler",
+        help="Run on the Dask cluster at this address (tcp://host:8786); workers must see "
+        "the same paths (shared storage). Default: local processes.",
+        show_default=False,
+    ),
+]
+
+
+@contextlib.contextmanager
+def cluster(address: str | None) -> Iterator[Executor | None]:
+    """The Dask cluster's executor for ``--scheduler``, or None (local processes)."""
+    if address is None:
+        yield None
+        return
+    from trace_audit.fleet.cluster import dask_executor
+
+    with dask_executor(address) as executor:
+        yield executor
+
+
+def key_option(help: str) -> Any:
+    """``--key``: the robots' Ed25519 public key."""
+    return typer.Option("--key", help=help, show_default=False)

@@ -1,0 +1,158 @@
+"""Where a command's output goes: stdout as JSON or as a document, stderr for warnings and
+progress.
+
+``emit`` is the one choice between "JSON for scripts" and "a document for people" (rich on
+a terminal, plain text with ``--plain`` or when stdout is not a terminal); ``console``
+makes the rich console every document is drawn on; ``setup_logging`` turns library
+warnings into one stderr line each. The heavy imports (rich, json, logging) happen inside
+the functions: ``--help`` needs none of them.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any, TypeVar
+
+from trace_audit.cli.doc import Doc, Printout
+from trace_audit.cli.render import draw_printout, draw_rich, render_plain
+
+__all__ = [
+    "console",
+    "console_width",
+    "emit",
+    "print_json",
+    "progress_bar",
+    "setup_logging",
+    "show",
+    "use_plain",
+]
+
+R = TypeVar("R")
+
+
+def print_json(value: Any) -> None:
+    """Write ``value`` (pydantic model, dataclass tree or plain data) as JSON on stdout."""
+    import json  # here, not at the top: start-up (``--help``) does not need it
+
+    from trace_audit.jsonout import to_jsonable
+
+    sys.stdout.write(json.dumps(to_jsonable(value), indent=2, ensure_ascii=False) + "\n")
+
+
+def console(plain: bool = False) -> Any:
+    """A rich console; plain (no colour, ASCII boxes) when asked or when stdout is not a tty."""
+    from rich.console import Console
+
+    if plain:
+        # No escape codes at all (colour or bold): logs, CI and files read it as text.
+        return Console(
+            color_system=None,
+            no_color=True,  # renderers read this to choose ASCII boxes
+            highlight=False,
+            emoji=False,
+            soft_wrap=False,
+            width=100,
+        )
+    return Console(highlight=False)
+
+
+def console_width(plain: bool) -> int:
+    """The width a ``Printout`` is drawn at: what ``console(plain)`` has."""
+    width: int = console(plain).width
+    return width
+
+
+def use_plain(plain: bool) -> bool:
+    """Plain text when asked, or when stdout is not a terminal."""
+    return plain or not sys.stdout.isatty()
+
+
+def _width() -> int:
+    columns = os.environ.get("COLUMNS", "")
+    if columns.isdigit() and int(columns) >= 40:
+        return int(columns)
+    return max(40, shutil.get_terminal_size((80, 24)).columns)
+
+
+def show(doc: Doc | Printout, *, plain: bool) -> None:
+    """Print a document on stdout.
+
+    A ``Doc``: rich on a terminal, plain text otherwise (or when asked), at the terminal's
+    width (80 columns when it is unknown). A ``Printout``: rich either way, without colour
+    and with ASCII boxes when plain."""
+    if isinstance(doc, Printout):
+        draw_printout(doc, console(plain))
+    elif use_plain(plain):
+        sys.stdout.write(render_plain(doc, _width()))
+    else:
+        from rich.console import Console
+
+        draw_rich(doc, Console(highlight=False, emoji=False))
+
+
+def emit(
+    result: R,
+    to_doc: Callable[[R], Doc | Printout],
+    *,
+    json_out: bool,
+    plain: bool,
+    to_json: Callable[[R], Any] | None = None,
+) -> None:
+    """A command's output: ``result`` as JSON for scripts (``to_json(result)`` when the JSON
+    is not the result itself), or its document for people."""
+    if json_out:
+        print_json(result if to_json is None else to_json(result))
+    else:
+        show(to_doc(result), plain=plain)
+
+
+_HANDLER_NAME = "trace-audit stderr line"
+
+
+def setup_logging() -> None:
+    """Library warnings (e.g. a recovered segment) as one ``trace-audit: warning:`` line."""
+    import logging  # here, not at the top: ``--help`` never logs (start-up budget)
+
+    class StderrLine(logging.Handler):
+        """One ``trace-audit: warning: ...`` line on whatever ``sys.stderr`` is at the time."""
+
+        def emit(self, record: logging.LogRecord) -> None:
+            try:
+                sys.stderr.write(
+                    f"trace-audit: {record.levelname.lower()}: {record.getMessage()}\n"
+                )
+            except (OSError, ValueError):  # stderr closed or unable to encode the message
+                self.handleError(record)
+
+    logger = logging.getLogger("trace_runtime")
+    # With a handler here Python's last-resort printer stays quiet; propagation is left on
+    # so an application (or pytest) that configured the root logger still sees the record.
+    if not any(h.get_name() == _HANDLER_NAME for h in logger.handlers):
+        handler = StderrLine(logging.WARNING)
+        handler.set_name(_HANDLER_NAME)
+        logger.addHandler(handler)
+    if logger.level == logging.NOTSET:
+        logger.setLevel(logging.WARNING)
+
+
+@contextmanager
+def progress_bar(description: str, *, visible: bool = True) -> Iterator[Any]:
+    """A transient rich progress bar on stderr (counts, bar, time left), for long library
+    calls that report progress; the caller decides whether to show one at all."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    with Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    ) as bar:
+        bar.add_task(description, total=None, visible=visible)
+        yield bar

@@ -1,0 +1,166 @@
+"""``trace-audit timeline``: the decisions over time, a row per change, and the gaps.
+
+Parses its arguments, calls ``trace_audit.timeline.timeline`` and renders the typed result:
+rich on a terminal, plain text with ``--plain`` or in a pipe, JSON with ``--json``.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Annotated, Any
+
+import typer
+
+from trace_audit.cli.app import app, guarded, help_text
+from trace_audit.cli.doc import Column, Doc, Seg, fmt_duration, fmt_t, fmt_value
+from trace_audit.cli.options import JsonOption, LogArgument, PlainOption
+from trace_audit.cli.output import emit
+
+if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
+    from trace_audit.timeline import ClockRun, Timeline
+    from trace_runtime.gaps import Gap
+
+__all__ = ["timeline_command", "timeline_doc"]
+
+_TIMELINE_HELP = """The decisions over time: a row per decision change, with the leading
+factor and execution flags, and the gaps where no cycle was logged.
+
+Each row is a stretch of cycles with one command: when it began, how long it held, the
+leading factor (the first the rationale names) and the flags raised while it held.
+--every gives a row per cycle instead.
+
+[bold]Examples[/bold]:
+
+  trace-audit timeline run.mcap
+
+  trace-audit timeline run.mcap --from 10 --to 20 --every
+
+  trace-audit timeline logs/amr-7/ --from +3600 --to +3900 --json
+"""
+
+
+@app.command("timeline", help=help_text(_TIMELINE_HELP))
+def timeline_command(  # noqa: PLR0917 - typer maps each parameter to an option
+    log: LogArgument,
+    start: Annotated[
+        str | None,
+        typer.Option(
+            "--from",
+            help="Start of the window (seconds, or +seconds after the log "
+            "start). Default: the log start.",
+            show_default=False,
+        ),
+    ] = None,
+    end: Annotated[
+        str | None,
+        typer.Option(
+            "--to", help="End of the window (same forms). Default: the log end.", show_default=False
+        ),
+    ] = None,
+    every: Annotated[bool, typer.Option("--every", help="A row per cycle.")] = False,
+    json_out: JsonOption = False,
+    plain: PlainOption = False,
+) -> None:
+    from trace_audit.timeline import timeline
+
+    result = guarded(lambda: timeline(log, start=start, end=end, every=every))
+    emit(result, timeline_doc, json_out=json_out, plain=plain)
+
+
+def timeline_doc(r: Timeline) -> Doc:
+    """The timeline as a document: one table, or one per run of the robot's clock."""
+    doc = Doc()
+    doc.title(f"{r.robot}: {fmt_t(r.start_ns)} .. {fmt_t(r.end_ns)}")
+    changes = r.changes
+    doc.line(
+        f"{r.cycles} cycles, {changes} decision change{'s' if changes != 1 else ''}, "
+        f"{len(r.gaps)} gap{'s' if len(r.gaps) != 1 else ''}"
+        + ("; recovered from an unfinished segment" if r.recovered else "")
+    )
+    if not r.clock_runs:
+        _timeline_table(doc, r, list(r.rows), list(r.gaps))
+        return doc
+    # The clock restarted: each run is its own sequence (times start again lower), so the
+    # runs are shown one after the other, never merged by time.
+    doc.line(
+        Seg(
+            f"The robot's clock restarted {len(r.clock_runs) - 1} time(s) in this log: each "
+            "run of its clock is shown on its own.",
+            "yellow",
+        )
+    )
+    for number, run in enumerate(r.clock_runs):
+        cycles = (
+            f"cycles {run.first_cycle}..{run.last_cycle}"
+            if run.first_cycle is not None
+            else "no cycle in the window"
+        )
+        shown = run.segments[0] if len(run.segments) == 1 else f"{run.segments[0]}.."
+        doc.line(f"clock run {number + 1} of {len(r.clock_runs)}: {cycles} ({shown})")
+        in_run = [g for g in r.gaps if _in_run(g.after_cycle, run)]
+        _timeline_table(doc, r, [row for row in r.rows if row.run == number], in_run)
+    return doc
+
+
+def _in_run(cycle: int, run: ClockRun) -> bool:
+    first, last = run.first_cycle, run.last_cycle
+    return first is not None and last is not None and first <= cycle <= last
+
+
+def _timeline_table(doc: Doc, r: Timeline, rows: list[Any], gaps: list[Gap]) -> None:
+    events: list[tuple[int, int, list[Any]]] = []
+    for row in rows:
+        lead = f"{row.leading.label} = {row.leading.shown}" if row.leading else "-"
+        flags = ", ".join(f"{k} x{v}" if v > 1 else k for k, v in row.flag_counts.items())
+        what: list[Any] = [lead]
+        if row.max_deviation is not None:
+            what.append(f"; max deviation {fmt_value(row.max_deviation)} {row.deviation_unit}")
+        if flags:
+            what.append(Seg(f"; flags: {flags}", "bold red"))
+        if row.scenario:
+            what.append(Seg(f" [{row.scenario}]", "dim"))
+        command = row.command or "?"
+        held = fmt_duration(row.held_ns)
+        events.append(
+            (
+                row.t_ns,
+                0,
+                [
+                    f"{row.t_ns / 1e9:.3f}",
+                    str(row.cycle),
+                    Seg(command, "bold yellow" if row.previous != row.command else ""),
+                    f"{held} / {row.cycles}" if not r.every else held,
+                    what,
+                ],
+            )
+        )
+    for gap in gaps:
+        events.append((gap.after_t_ns, 1, _gap_row(gap)))
+    events.sort(key=lambda e: (e[0], e[1]))
+    doc.table(
+        [
+            Column("t (s)", "right"),
+            Column("cycle", "right"),
+            Column("decision"),
+            Column("held / cycles" if not r.every else "held", "right"),
+            Column("leading factor, flags", wrap=True),
+        ],
+        [e[2] for e in events],
+    )
+
+
+def _gap_row(gap: Gap) -> list[Any]:
+    """A timeline row for a gap: how long beyond the period, the cycles it would have held,
+    and what the seal after it declares."""
+    declared = gap.declared_dropped
+    said = "" if declared is None else f", {declared} declared dropped by the seal after it"
+    return [
+        f"{gap.after_t_ns / 1e9:.3f}",
+        "",
+        Seg("GAP", "bold red"),
+        fmt_duration(gap.gap_ns),
+        Seg(
+            f"no cycle between {gap.after_cycle} and {gap.before_cycle} "
+            f"(~{gap.missing_cycles} missing{said})",
+            "red",
+        ),
+    ]

@@ -1,0 +1,181 @@
+"""Where the CLI reaches into typer's internals: every subclass or override of a typer (and
+its bundled click) class that shapes help, usage lines or usage errors.
+
+Written against typer 0.29 (the range pinned in ``pyproject.toml``); each override names the
+behaviour of that version it replaces. Nothing else in ``trace_audit/cli`` imports
+``typer.core``, ``typer.main``, ``typer.models`` or ``typer.exceptions``.
+"""
+
+from __future__ import annotations
+
+import copy
+import re
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import typer
+from typer.core import TyperCommand, TyperGroup
+from typer.exceptions import TyperException
+from typer.main import get_group
+from typer.models import CommandFunctionType, CommandInfo
+
+__all__ = ["App", "Command", "Group", "TyperException", "usage_error_line"]
+
+# Rich markup written in help texts ("[bold]Examples[/bold]:"): the help is drawn by click's
+# plain formatter (below), so the tags are taken out rather than printed. Only style tags:
+# "[0, 1]" or "[default: 600]" are text.
+_MARKUP_TAG = re.compile(r"\[/?(?:bold|italic|dim|underline|b|i|u)\]|\[/\]")
+
+
+def _plain(text: str | None) -> str | None:
+    return None if text is None else _MARKUP_TAG.sub("", text)
+
+
+class Group(TyperGroup):
+    """typer's group, with a ``--help`` flag that starts as ``False`` rather than unset.
+
+    typer (0.29) builds a pydantic ``TypeAdapter`` to coerce every parameter that has no
+    value yet, the group's own ``--help`` among them, so ``trace-audit COMMAND --help``
+    would import pydantic (~60 ms) before it printed a word; a ``bool`` is left alone."""
+
+    def __init__(self, *args: Any, help: str | None = None, **kwargs: Any) -> None:
+        super().__init__(*args, help=_plain(help), **kwargs)
+
+    def get_help_option(self, ctx: Any) -> Any:
+        option = super().get_help_option(ctx)
+        if option is not None and option.default is None:
+            option.default = False
+        return option
+
+
+class Command(TyperCommand):
+    """A command whose help text may carry rich markup; click's formatter prints it plain.
+
+    The command list shows a command's whole first paragraph (click would cut it at ~45
+    characters with "..."), as typer's rich help does."""
+
+    def __init__(
+        self,
+        *args: Any,
+        help: str | None = None,
+        short_help: str | None = None,
+        **kwargs: Any,
+    ) -> None:
+        help = _plain(help)
+        if short_help is None and help:
+            short_help = " ".join(help.strip().split("\n\n")[0].split())
+        super().__init__(*args, help=help, short_help=short_help, **kwargs)
+
+    def collect_usage_pieces(self, ctx: Any) -> list[str]:
+        # "explain [OPTIONS] LOG", as click and every Unix tool write it; typer 0.29 writes
+        # a required argument as "{log}", which reads like a template placeholder.
+        pieces = [self.options_metavar] if self.options_metavar else []
+        for param in self.get_params(ctx):
+            if param.param_type_name == "argument":
+                name = _argument_name(param)
+                pieces.append(name if param.required else f"[{name}]")
+        return pieces
+
+    def format_options(self, ctx: Any, formatter: Any) -> None:
+        # typer 0.29 names a value by its Python type ("--evidence <list[Path]>", "log
+        # <path>"); the usage line's names ("LOG", "--evidence PATH") read as click's do.
+        sections: dict[str, list[tuple[str, str]]] = {"argument": [], "option": []}
+        for param in self.get_params(ctx):
+            record = param.get_help_record(ctx)
+            if record is None or param.param_type_name not in sections:
+                continue
+            first, text = record
+            if param.param_type_name == "argument":
+                first = _argument_name(param)
+            else:
+                first = _VALUE_TYPE.sub(lambda m: _VALUE_WORDS.get(m[1], m[1].upper()), first)
+            sections[param.param_type_name].append((first, text))
+        for title, kind in (("Arguments", "argument"), ("Options", "option")):
+            if sections[kind]:
+                with formatter.section(title):
+                    formatter.write_dl(sections[kind])
+
+
+_VALUE_TYPE = re.compile(r"<([^<>]+)>")
+_VALUE_WORDS = {
+    "str": "TEXT",
+    "list[str]": "TEXT",
+    "path": "PATH",
+    "list[Path]": "PATH",
+    "int": "INTEGER",
+    "int range": "INTEGER",
+    "float": "NUMBER",
+    "float range": "NUMBER",
+}
+"""How an option's value is named in help, by the type name typer gives it."""
+
+
+def _argument_name(param: Any) -> str:
+    name = str(param.metavar or param.name or "ARG").upper()
+    return name + "..." if param.nargs != 1 else name
+
+
+class App(typer.Typer):
+    """The typer app, whose commands are ``Command`` unless one asks for another class.
+
+    A command module needs nothing beyond ``@app.command("name", help=...)`` in a module
+    imported by ``trace_audit/cli/__init__.py``."""
+
+    def command(
+        self, name: str | None = None, *, cls: type[TyperCommand] | None = None, **kwargs: Any
+    ) -> Callable[[CommandFunctionType], CommandFunctionType]:
+        return super().command(name, cls=cls or Command, **kwargs)
+
+    def runner_for(self, args: Sequence[str]) -> Callable[..., Any]:
+        """What runs this command line: when it names a command first, a group holding that
+        command alone; else the whole app.
+
+        typer builds every registered command (the signature and type hints of its function,
+        ~1.3 ms each, ~20 ms for all) before it reads the arguments, though one runs. A
+        command's parsing, errors and help name no other command, so they come out the same;
+        anything else (no command, ``--help``, an unknown or misspelt name) meets them all."""
+        name = args[0] if args else None
+        if self.registered_groups or self.registered_callback:
+            return self
+        if list(args) in ([], ["--help"]):
+            return get_group(self._listing())
+        chosen = [info for info in self.registered_commands if info.name == name]
+        if len(chosen) != 1:
+            return self
+        alone = copy.copy(self)
+        alone.registered_commands = chosen
+        # As a group, as the whole app is: typer would run an app of one command as that
+        # command (its usage line would lose the command's name).
+        return get_group(alone)
+
+    def _listing(self) -> App:
+        """The app as its own help lists it: each command's name and help, none of its
+        parameters (the list shows no parameter; building them all is most of the time
+        ``trace-audit --help`` takes)."""
+        listing = copy.copy(self)
+        listing.registered_commands = [_without_parameters(i) for i in self.registered_commands]
+        return listing
+
+
+def _without_parameters(info: CommandInfo) -> CommandInfo:
+    shown = copy.copy(info)
+    # typer takes a command's help from its function's docstring when none was given
+    shown.help = info.help if info.help is not None else getattr(info.callback, "__doc__", None)
+    shown.callback = _no_parameters
+    return shown
+
+
+def _no_parameters() -> None:
+    pass
+
+
+def usage_error_line(err: TyperException, program: str) -> str | None:
+    """The one stderr line for a command line's own error (an unknown option, a bad value),
+    naming the command's ``--help``; None when there is nothing to say (no arguments at
+    all: the help was shown instead)."""
+    ctx = getattr(err, "ctx", None)
+    command = ctx.command_path if ctx is not None else program
+    message = err.format_message() if hasattr(err, "format_message") else str(err)
+    if not message.strip():
+        return None
+    return f"{program}: {message} (see '{command} --help')\n"
