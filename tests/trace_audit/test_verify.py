@@ -43,8 +43,11 @@ def _kinds(items: list) -> list[str]:  # type: ignore[type-arg]
 def test_a_clean_log_reports_its_validated_range(sample_log: Path) -> None:
     report = verify_log(sample_log)
     assert report.ok and report.findings == []
-    assert (report.first_cycle, report.last_cycle) == (0, 99)
-    assert (report.start_ns, report.end_ns) == (T0_NS, T0_NS + 99 * PERIOD_NS)
+    assert (report.cycle_range.first_cycle, report.cycle_range.last_cycle) == (0, 99)
+    assert (report.cycle_range.start_ns, report.cycle_range.end_ns) == (
+        T0_NS,
+        T0_NS + 99 * PERIOD_NS,
+    )
     assert report.cycles == report.cycles_valid == 100
     assert report.checkpoints == report.checkpoints_valid == 1  # the closing one
     (robot,) = report.robots
@@ -60,7 +63,7 @@ def test_declared_drops_are_gaps_not_tampering(tmp_path: Path) -> None:
     report = verify_log(path)
     assert report.ok, report.findings
     gaps = [n for n in report.notes if n.kind == "declared_gap"]
-    assert [(g.first_cycle, g.last_cycle) for g in gaps] == [(5, 6), (40, 40)]
+    assert [(g.where.first_cycle, g.where.last_cycle) for g in gaps] == [(5, 6), (40, 40)]
     assert report.declared_dropped == 3 and report.cycles_valid == 97
 
 
@@ -90,7 +93,7 @@ def test_a_clock_stepping_back_within_a_segment_is_a_note_that_names_the_cycle(
     report = verify_log(log)
     assert report.ok and report.findings == []
     (note,) = [n for n in report.notes if n.kind == "clock_backwards"]
-    assert (note.first_cycle, note.last_cycle) == (12, 12)
+    assert (note.where.first_cycle, note.where.last_cycle) == (12, 12)
     assert "0.150 s earlier than cycle 11" in note.message
     assert "section 4" in note.message
     plain = CliRunner().invoke(app, ["verify", str(log), "--plain"])
@@ -103,7 +106,7 @@ def test_a_clock_restart_between_segments_is_a_note_not_a_finding(tmp_path: Path
     report = verify_log(root)
     assert report.ok and report.findings == []
     (note,) = [n for n in report.notes if n.kind == "clock_restart"]
-    assert (note.segment_no, note.first_cycle) == (1, 100)
+    assert (note.segment_no, note.where.first_cycle) == (1, 100)
     assert "not after cycle 99" in note.message
     assert "clock_restart" not in _kinds(verify_log(write_log(tmp_path / "one")).notes)
 
@@ -136,7 +139,9 @@ def test_simulator_log_is_clean_and_its_drops_are_the_injected_ones(tmp_path: Pa
     assert report.ok, report.findings
     truth = sim.read_truth(result.truth)
     dropped = sorted(f["cycle"] for f in truth if f["kind"] == "audit_write_timeout")
-    gaps = [(n.first_cycle, n.last_cycle) for n in report.notes if n.kind == "declared_gap"]
+    gaps = [
+        (n.where.first_cycle, n.where.last_cycle) for n in report.notes if n.kind == "declared_gap"
+    ]
     declared = sorted(
         c for a, b in gaps if a is not None and b is not None for c in range(a, b + 1)
     )
@@ -187,15 +192,15 @@ def test_a_robot_killed_mid_run_and_restarted_verifies_clean(tmp_path: Path) -> 
     assert crashed.ok, crashed.findings
     assert "recovered" in _kinds(crashed.notes)
     (robot,) = crashed.robots
-    assert robot.last_cycle is not None and robot.last_cycle >= 44
+    assert robot.cycle_range.last_cycle is not None and robot.cycle_range.last_cycle >= 44
 
     _robot(root, keys.private_path, 30, kill_after=None)  # restarts, continues, closes
     report = verify_log(root, key=public)
     assert report.ok, report.findings
     (robot,) = report.robots
-    assert len(report.segments) == 2 and robot.first_cycle == 0
+    assert len(report.segments) == 2 and robot.cycle_range.first_cycle == 0
     # The restarted robot's checkpoints vouch for the crashed tail too: the chain goes on.
-    assert robot.unanchored_cycles == 0 and robot.anchored_cycle == robot.last_cycle
+    assert robot.unanchored_cycles == 0 and robot.anchored_cycle == robot.cycle_range.last_cycle
     numbers = [c.cycle for c in open_log(root).iter_cycles()]
     assert numbers == list(range(len(numbers)))
 

@@ -107,7 +107,7 @@ def test_a_missing_final_checkpoint_is_still_truncation_when_others_exist(tmp_pa
     _write_plain(decoded, path)
     report = verify_log(path, key=signer.public_key)
     assert _kinds(report.findings) == ["truncated"]
-    assert report.findings[0].first_cycle == 30
+    assert report.findings[0].where.first_cycle == 30
 
 
 def test_a_half_copied_segment_beside_its_original_is_read_once_and_accuses_nothing(

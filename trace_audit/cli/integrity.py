@@ -187,7 +187,9 @@ def verify_doc(r: VerifyReport) -> Doc:
                     Path(s.path).name,
                     s.tier + (" (recovered)" if s.recovered else ""),
                     str(s.cycles),
-                    f"{s.first_cycle}..{s.last_cycle}" if s.first_cycle is not None else "-",
+                    f"{s.cycle_range.first_cycle}..{s.cycle_range.last_cycle}"
+                    if s.cycle_range.first_cycle is not None
+                    else "-",
                     f"{s.checkpoints_valid}/{s.checkpoints}",
                     Seg("ok", "green") if s.ok else Seg(f"{s.findings} finding(s)", "red"),
                 ]
@@ -198,14 +200,15 @@ def verify_doc(r: VerifyReport) -> Doc:
 
 
 def _robot_rows(robot: RobotSummary, prefix: str) -> list[tuple[str, str | Seg]]:
-    if robot.first_cycle is None or robot.start_ns is None or robot.end_ns is None:
+    r = robot.cycle_range
+    if r.first_cycle is None or r.start_ns is None or r.end_ns is None:
         return [(f"{prefix}range", "no sealed cycles")]
-    span = fmt_duration(robot.end_ns - robot.start_ns)
+    span = fmt_duration(r.end_ns - r.start_ns)
     rows: list[tuple[str, str | Seg]] = [
         (
             f"{prefix}validated range",
-            f"cycles {robot.first_cycle}..{robot.last_cycle}, t = {fmt_t(robot.start_ns)} .. "
-            f"{fmt_t(robot.end_ns)} ({span}, {robot.segments} segment(s))",
+            f"cycles {r.first_cycle}..{r.last_cycle}, t = {fmt_t(r.start_ns)} .. "
+            f"{fmt_t(r.end_ns)} ({span}, {robot.segments} segment(s))",
         )
     ]
     if robot.anchored_cycle is None or robot.anchored_ns is None:
@@ -228,13 +231,14 @@ def _robot_rows(robot: RobotSummary, prefix: str) -> list[tuple[str, str | Seg]]
 def _finding_table(doc: Doc, findings: list[Finding]) -> None:
     rows = []
     for f in findings[:_MAX_LISTED]:
-        if f.first_cycle is None:
+        at = f.where
+        if at.first_cycle is None:
             cycles = ""
-        elif f.last_cycle is None or f.last_cycle == f.first_cycle:
-            cycles = str(f.first_cycle)
+        elif at.last_cycle is None or at.last_cycle == at.first_cycle:
+            cycles = str(at.first_cycle)
         else:
-            cycles = f"{f.first_cycle}..{f.last_cycle}"
-        when = fmt_t(f.start_ns) if f.start_ns is not None else ""
+            cycles = f"{at.first_cycle}..{at.last_cycle}"
+        when = fmt_t(at.start_ns) if at.start_ns is not None else ""
         rows.append([f.kind, f.segment or f.robot_id, cycles, when, f.message])
     doc.table(
         [Column("kind"), Column("where"), Column("cycles"), Column("t"), Column("what", wrap=True)],
