@@ -14,8 +14,8 @@ from typing import Any
 import pytest
 from typer.testing import CliRunner
 
-from tests.trace_audit.test_verify_tamper import _write_plain, decode
 from tests.trace_runtime.test_tiers import cycle_key, make_root
+from tests.trace_runtime.verification.test_tamper import _write_plain, decode
 from trace_audit.cli import app
 from trace_audit.verify import verify_log
 from trace_runtime import open_log, open_segment

@@ -1,7 +1,8 @@
 """``verify_log``, ``trace-audit verify`` and ``keygen`` on clean, crashed, gapped, damaged logs.
 
-The tamper campaign lives in test_verify_tamper.py; this file pins what a clean log looks
-like (zero findings, the validated range, what is anchored) and what the CLI prints and exits.
+The tamper campaign lives in tests/trace_runtime/verification/test_tamper.py; this file pins
+what a clean log looks like (zero findings, the validated range, what is anchored) and what
+the CLI prints and exits.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from typer.testing import CliRunner
 
 from tests.trace_audit.conftest import PERIOD_NS, T0_NS, fill_cycle, write_log
 from tests.trace_audit.profile_writer import Faults, write_profile_log
-from tests.trace_audit.test_verify_tamper import decode, flip_byte, write, write_signed_log
+from tests.trace_runtime.verification.test_tamper import decode, flip_byte, write, write_signed_log
 from trace_audit.cli import app
 from trace_audit.verify import verify_log
 from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
