@@ -54,12 +54,11 @@ from trace_audit.chains import (
 )
 from trace_audit.evidence import open_recordings
 from trace_audit.jsonout import OMIT_EMPTY
-from trace_runtime.chain import digest
+from trace_runtime.chain import SealStatus, digest, verify_cycle
 from trace_runtime.costs import TIMING_METADATA, CostHistogram
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap, continuity, find_gap
-from trace_runtime.integrity import SealStatus, verify_cycle
 from trace_runtime.logset import Log, open_logs
 from trace_runtime.reader import Segment, open_segment
 from trace_runtime.records import (

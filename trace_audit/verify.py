@@ -4,7 +4,7 @@ The investigator's face of ``trace_runtime.verification``: open the log through 
 owner of multi-file logs (``trace_runtime.logset.open_log``: which copy of a segment is read,
 which files could not be read) and verify it there. Retention in the runtime deletes only
 what that same verification finds clean. For one decision (``explain``) the check is
-``trace_runtime.integrity.verify_cycle``. See docs/integrity.md.
+``trace_runtime.chain.verify_cycle``. See docs/integrity.md.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from concurrent.futures import Executor
 from pathlib import Path
 
 from trace_audit.evidence import open_recordings
-from trace_runtime.integrity import PublicKey
+from trace_runtime.keys import PublicKey
 from trace_runtime.logset import open_log
 from trace_runtime.verification import (
     Finding,

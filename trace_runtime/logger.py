@@ -41,6 +41,7 @@ from typing import Any, BinaryIO, Literal, Protocol
 from pydantic import ValidationError
 
 from trace_runtime.chain import digest
+from trace_runtime.checkpoints import encode_checkpoint, make_checkpoint
 from trace_runtime.codec import (
     EncodedLayer,
     LayerValue,
@@ -52,7 +53,7 @@ from trace_runtime.codec import (
 )
 from trace_runtime.costs import TIMING_METADATA, CostHistogram
 from trace_runtime.errors import LogLockedError, RecordError, UsageError
-from trace_runtime.integrity import Signer, encode_checkpoint, load_signer, make_checkpoint
+from trace_runtime.keys import Signer, load_signer
 from trace_runtime.records import (
     GENESIS,
     LAYER_MODELS,

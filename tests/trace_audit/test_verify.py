@@ -28,7 +28,7 @@ from trace_audit.cli import app
 from trace_audit.verify import verify_log
 from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
 from trace_runtime.errors import LogReadError
-from trace_runtime.integrity import Ed25519Signer, generate_keypair, load_public_key, load_signer
+from trace_runtime.keys import Ed25519Signer, generate_keypair, load_public_key, load_signer
 from trace_runtime.testing import simulate_crash
 
 REPO = Path(__file__).resolve().parents[2]

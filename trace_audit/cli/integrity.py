@@ -1,7 +1,7 @@
 """trace-audit commands for integrity: ``verify`` a log, ``keygen`` a checkpoint signing key.
 
 Each parses its arguments, calls one library function (``trace_audit.verify.verify_log``,
-``trace_runtime.integrity.generate_keypair``) and renders the typed result: rich on a
+``trace_runtime.keys.generate_keypair``) and renders the typed result: rich on a
 terminal, plain text with ``--plain`` or in a pipe, JSON with ``--json``.
 """
 
@@ -25,7 +25,7 @@ from trace_audit.cli.render import Column, Doc, Seg, emit, fmt_duration, fmt_t, 
 
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
     from trace_audit.verify import Finding, RobotSummary, VerifyReport
-    from trace_runtime.integrity import KeyPair
+    from trace_runtime.keys import KeyPair
 
 _VERIFY_HELP = """Verify that a log is what the robot wrote: all of it, unaltered, in order.
 
@@ -110,7 +110,7 @@ def verify_command(
 ) -> None:
     from trace_audit.cli.fleet import cluster
     from trace_audit.verify import verify_log
-    from trace_runtime.integrity import load_public_key
+    from trace_runtime.keys import load_public_key
 
     setup_logging()
 
@@ -262,7 +262,7 @@ def keygen_command(
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
-    from trace_runtime.integrity import generate_keypair
+    from trace_runtime.keys import generate_keypair
 
     pair = guarded(lambda: generate_keypair(out, name=name, overwrite=force))
     emit(pair, keygen_doc, json_out=json_out, plain=plain)

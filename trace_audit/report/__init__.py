@@ -29,7 +29,7 @@ from trace_audit.report.data import (
 )
 from trace_audit.timeline import TimeArg
 from trace_runtime.errors import UsageError
-from trace_runtime.integrity import PublicKey
+from trace_runtime.keys import PublicKey
 
 __all__ = [
     "DEFAULT_WINDOW_S",

@@ -37,7 +37,7 @@ from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
 from trace_audit.timeline import TimeArg, Timeline, as_log, timeline
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import UsageError
-from trace_runtime.integrity import PublicKey
+from trace_runtime.keys import PublicKey
 from trace_runtime.logset import Log
 from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_BELIEF, TOPIC_PERCEPTION

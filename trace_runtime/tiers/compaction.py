@@ -45,7 +45,7 @@ import orjson
 from trace_runtime.costs import TIMING_METADATA
 from trace_runtime.cycles import RawMessage
 from trace_runtime.errors import LogReadError, UsageError, VerificationError
-from trace_runtime.integrity import PublicKey
+from trace_runtime.keys import PublicKey
 from trace_runtime.logset import FileProblem, Log, open_segments
 from trace_runtime.reader import Segment
 from trace_runtime.records import MESSAGE_MODELS, TOPIC_SEAL

@@ -11,8 +11,9 @@ from __future__ import annotations
 import bisect
 from dataclasses import dataclass
 
+from trace_runtime.checkpoints import CheckpointState, check_checkpoint
 from trace_runtime.gaps import CycleRange
-from trace_runtime.integrity import CheckpointState, PublicKey, check_checkpoint
+from trace_runtime.keys import PublicKey
 from trace_runtime.reader import Segment
 from trace_runtime.records import Checkpoint
 from trace_runtime.session import TIER_METADATA

@@ -17,7 +17,7 @@ from pathlib import Path
 from trace_runtime.clock import clock_restarted
 from trace_runtime.errors import LogReadError
 from trace_runtime.gaps import CycleRange
-from trace_runtime.integrity import PublicKey
+from trace_runtime.keys import PublicKey
 from trace_runtime.logset import FileProblem, Log, copy_rank, cut_short_copy
 from trace_runtime.reader import Segment
 from trace_runtime.recordings import Recordings

@@ -9,16 +9,12 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 
+from trace_runtime.chain import SealStatus, verify_cycle
+from trace_runtime.checkpoints import decode_checkpoint, iter_checkpoints
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, RecordError
 from trace_runtime.gaps import CycleRange
-from trace_runtime.integrity import (
-    PublicKey,
-    SealStatus,
-    decode_checkpoint,
-    iter_checkpoints,
-    verify_cycle,
-)
+from trace_runtime.keys import PublicKey
 from trace_runtime.reader import Segment
 from trace_runtime.recordings import ExternalCheck, Recordings
 from trace_runtime.records import Checkpoint

@@ -13,7 +13,7 @@ from tests.trace_runtime.test_tiers import make_root
 from tests.trace_runtime.verification.test_tamper import _write_plain, decode, write_signed_log
 from trace_audit.verify import verify_log
 from trace_runtime import open_log
-from trace_runtime.integrity import Ed25519Signer
+from trace_runtime.keys import Ed25519Signer
 from trace_runtime.tiers import compact
 
 

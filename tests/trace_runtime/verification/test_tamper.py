@@ -25,16 +25,15 @@ from tests.trace_audit.conftest import fill_cycle
 from trace_audit.verify import VerifyReport, verify_log
 from trace_runtime import AuditLogger, LoggerConfig, open_segment
 from trace_runtime.chain import digest
-from trace_runtime.codec import encode_seal
-from trace_runtime.cycles import RawMessage
-from trace_runtime.integrity import (
-    Ed25519Signer,
-    Signer,
+from trace_runtime.checkpoints import (
     decode_checkpoint,
     encode_checkpoint,
     make_checkpoint,
     signing_bytes,
 )
+from trace_runtime.codec import encode_seal
+from trace_runtime.cycles import RawMessage
+from trace_runtime.keys import Ed25519Signer, Signer
 from trace_runtime.records import (
     LAYER_TOPICS,
     TOPIC_ACTION,
