@@ -103,15 +103,15 @@ def find_gap(
         return None
     gap = interval - period_ns
     return Gap(
-        robot,
-        after_cycle,
-        after_t_ns,
-        before_cycle,
-        before_t_ns,
-        period_ns,
-        gap,
-        round(gap / period_ns),
-        declared_dropped,
+        robot=robot,
+        after_cycle=after_cycle,
+        after_t_ns=after_t_ns,
+        before_cycle=before_cycle,
+        before_t_ns=before_t_ns,
+        period_ns=period_ns,
+        gap_ns=gap,
+        missing_cycles=round(gap / period_ns),
+        declared_dropped=declared_dropped,
     )
 
 
