@@ -54,7 +54,7 @@ from trace_audit.chains import (
 )
 from trace_audit.evidence import open_recordings
 from trace_audit.jsonout import OMIT_EMPTY
-from trace_runtime.chain import SealStatus, digest, verify_cycle
+from trace_runtime.chain import digest
 from trace_runtime.costs import TIMING_METADATA, CostHistogram
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, UsageError
@@ -68,6 +68,7 @@ from trace_runtime.records import (
     TOPIC_PERCEPTION,
     TOPIC_SEAL,
 )
+from trace_runtime.seal_check import SealStatus, verify_cycle
 
 __all__ = [
     "GROUP_BYS",

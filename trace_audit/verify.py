@@ -7,7 +7,7 @@ logs (``trace_runtime.logset.open_log``: which copy of a segment is read, which 
 not be read) and the recordings (``trace_audit.evidence``), and hands both to
 ``trace_runtime.verification.verify``. Retention in the runtime deletes only what that
 same verification finds clean. For one decision (``explain``) the check is
-``trace_runtime.chain.verify_cycle``. See docs/integrity.md.
+``trace_runtime.seal_check.verify_cycle``. See docs/integrity.md.
 """
 
 from __future__ import annotations

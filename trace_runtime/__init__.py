@@ -22,8 +22,8 @@ _EXPORTS = {
     "TimeOutOfRangeError": "trace_runtime.errors",
     "TraceError": "trace_runtime.errors",
     "UsageError": "trace_runtime.errors",
-    "SealStatus": "trace_runtime.chain",
-    "verify_cycle": "trace_runtime.chain",
+    "SealStatus": "trace_runtime.seal_check",
+    "verify_cycle": "trace_runtime.seal_check",
     "Ed25519Signer": "trace_runtime.keys",
     "PublicKey": "trace_runtime.keys",
     "Signer": "trace_runtime.keys",
@@ -124,7 +124,6 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
-    from trace_runtime.chain import SealStatus, verify_cycle
     from trace_runtime.cycles import Cycle, RawMessage
     from trace_runtime.errors import (
         LogLimitError,
@@ -173,6 +172,7 @@ if TYPE_CHECKING:
         TreeEdge,
         TreeNode,
     )
+    from trace_runtime.seal_check import SealStatus, verify_cycle
     from trace_runtime.session import SessionInfo
 
 

@@ -24,12 +24,12 @@ from typing import Any
 
 import orjson
 
-from trace_runtime.chain import SealStatus, verify_cycle
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeError, UsageError
 from trace_runtime.mcap_file import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
+from trace_runtime.seal_check import SealStatus, verify_cycle
 from trace_runtime.session import TIER_METADATA, TIERS
 
 log = logging.getLogger("trace_runtime")

@@ -1,6 +1,6 @@
 """Checkpoints: the signed bytes, signature states, and the logger's checkpoint hook.
 
-Key files are tested in test_keys.py, the per-cycle seal check in test_chain.py."""
+Key files are tested in test_keys.py, the per-cycle seal check in test_seal_check.py."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 
 from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
-from trace_runtime.chain import digest, verify_cycle
+from trace_runtime.chain import digest
 from trace_runtime.checkpoints import (
     check_checkpoint,
     decode_checkpoint,
@@ -22,6 +22,7 @@ from trace_runtime.checkpoints import (
 from trace_runtime.errors import UsageError
 from trace_runtime.keys import Ed25519Signer, generate_keypair, load_public_key
 from trace_runtime.records import GENESIS, TOPIC_SEAL, Checkpoint
+from trace_runtime.seal_check import verify_cycle
 from trace_runtime.testing import simulate_crash, synthetic_cycle
 
 PERIOD_NS = 100_000_000

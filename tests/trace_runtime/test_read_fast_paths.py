@@ -17,8 +17,9 @@ from hypothesis import strategies as st
 
 from tests.trace_runtime.test_checkpoints import _write
 from trace_runtime import LoggerConfig, open_log
-from trace_runtime.chain import SealStatus, _seal_status, digest, verify_cycle
+from trace_runtime.chain import digest
 from trace_runtime.cycles import Cycle, RawMessage, raw_message
+from trace_runtime.seal_check import SealStatus, _seal_status, verify_cycle
 
 _U64 = st.integers(min_value=0, max_value=2**64 - 1)
 

@@ -1,7 +1,7 @@
 """Is this log what the robot wrote, all of it, in order? The one verification of a log.
 
 In the spirit of CloudTrail's ``validate-logs``: every cycle is checked against its seal
-(``chain.verify_cycle``), every seal against the previous one (across segments and
+(``seal_check.verify_cycle``), every seal against the previous one (across segments and
 restarts), every checkpoint's head against the chain and its signature against the robot's
 public key. Problems are located (robot, segment, cycle range, time range) and classified:
 

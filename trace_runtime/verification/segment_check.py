@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 
-from trace_runtime.chain import SealStatus, verify_cycle
 from trace_runtime.checkpoints import decode_checkpoint, iter_checkpoints
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, RecordError
@@ -18,6 +17,7 @@ from trace_runtime.keys import PublicKey
 from trace_runtime.reader import Segment
 from trace_runtime.recordings import ExternalCheck, Recordings
 from trace_runtime.records import Checkpoint
+from trace_runtime.seal_check import SealStatus, verify_cycle
 from trace_runtime.verification.checkpoint_check import CheckpointCheck, ReadCheckpoint
 from trace_runtime.verification.numbering import Numbering
 from trace_runtime.verification.reorder import ChainOrder

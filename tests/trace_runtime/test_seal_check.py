@@ -1,4 +1,4 @@
-"""The per-cycle seal check (``chain.verify_cycle``): intact cycles, what differs, a broken
+"""The per-cycle seal check (``seal_check.verify_cycle``): intact cycles, what differs, a broken
 link, an unsealed cycle, a warm summary cycle."""
 
 from __future__ import annotations
@@ -10,9 +10,10 @@ import pytest
 
 from tests.trace_runtime.test_checkpoints import _sync, _write
 from trace_runtime import open_log
-from trace_runtime.chain import digest, verify_cycle
+from trace_runtime.chain import digest
 from trace_runtime.cycles import Cycle, RawMessage
 from trace_runtime.records import GENESIS, TOPIC_ACTION, TOPIC_PERCEPTION, TOPIC_SEAL
+from trace_runtime.seal_check import verify_cycle
 
 # --- verify_cycle ---------------------------------------------------------------------------------
 
