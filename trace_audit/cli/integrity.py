@@ -24,7 +24,7 @@ from trace_audit.cli.fleet import SchedulerOption
 from trace_audit.cli.render import Column, Doc, Seg, emit, fmt_duration, fmt_t, setup_logging
 
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
-    from trace_audit.verify import Finding, RobotSummary, VerifyReport
+    from trace_audit.verify import Finding, RobotSummary, SegmentSummary, VerifyReport
     from trace_runtime.keys import KeyPair
 
 _VERIFY_HELP = """Verify that a log is what the robot wrote: all of it, unaltered, in order.
@@ -172,31 +172,35 @@ def verify_doc(r: VerifyReport) -> Doc:
         doc.heading("Notes (not tampering)")
         _finding_table(doc, r.notes)
     if len(r.segments) > 1:
-        doc.heading("Segments")
-        doc.table(
-            [
-                Column("segment"),
-                Column("tier"),
-                Column("cycles", "right"),
-                Column("range"),
-                Column("checkpoints", "right"),
-                Column("status"),
-            ],
-            [
-                [
-                    Path(s.path).name,
-                    s.tier + (" (recovered)" if s.recovered else ""),
-                    str(s.cycles),
-                    f"{s.cycle_range.first_cycle}..{s.cycle_range.last_cycle}"
-                    if s.cycle_range.first_cycle is not None
-                    else "-",
-                    f"{s.checkpoints_valid}/{s.checkpoints}",
-                    Seg("ok", "green") if s.ok else Seg(f"{s.findings} finding(s)", "red"),
-                ]
-                for s in r.segments
-            ],
-        )
+        _segment_table(doc, r.segments)
     return doc
+
+
+def _segment_table(doc: Doc, segments: list[SegmentSummary]) -> None:
+    doc.heading("Segments")
+    doc.table(
+        [
+            Column("segment"),
+            Column("tier"),
+            Column("cycles", "right"),
+            Column("range"),
+            Column("checkpoints", "right"),
+            Column("status"),
+        ],
+        [
+            [
+                Path(s.path).name,
+                s.tier + (" (recovered)" if s.recovered else ""),
+                str(s.cycles),
+                f"{s.cycle_range.first_cycle}..{s.cycle_range.last_cycle}"
+                if s.cycle_range.first_cycle is not None
+                else "-",
+                f"{s.checkpoints_valid}/{s.checkpoints}",
+                Seg("ok", "green") if s.ok else Seg(f"{s.findings} finding(s)", "red"),
+            ]
+            for s in segments
+        ],
+    )
 
 
 def _robot_rows(robot: RobotSummary, prefix: str) -> list[tuple[str, str | Seg]]:

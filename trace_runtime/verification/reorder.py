@@ -277,6 +277,14 @@ class ChainOrder:
                 CycleRange(first, last, before_t, t),
             )
             return
+        self._altered(i, q, before, before_t, explained)
+
+    def _altered(
+        self, i: int, q: int, before: int, before_t: int | None, explained: set[int]
+    ) -> None:
+        """No cycle is missing before cycle ``i``: say which seal was altered."""
+        report, scan = self.report, self.scan
+        number, t = scan.num[i], scan.t[i]
         nxt = i + 1 if i + 1 < self.n else None
         if nxt is not None and self.pred[nxt] == self.NONE and not scan.link_ok[nxt]:
             explained.add(nxt)
