@@ -492,7 +492,7 @@ class Checkpoint(_Stamp):
 
     ``cycle``/``t_ns`` are those of the head seal; ``head`` is the SHA-256 of that seal's data,
     so the checkpoint vouches for every cycle the chain reaches back to. A checkpoint is not
-    part of any cycle. The signature is Ed25519 over ``trace_runtime.checkpoints.signing_bytes``
+    part of any cycle. The signature is Ed25519 over ``trace_runtime.integrity.signing_bytes``
     (see docs/integrity.md); both it and ``key_id`` are null when the logger has no key.
     """
 
