@@ -60,7 +60,7 @@ def _commands(env: dict[str, str]) -> list[str]:
 def _ensure_log(path: Path, env: dict[str, str]) -> Path:
     if not path.exists():
         print(f"generating {path} with trace-sim run --duration 1m ...", file=sys.stderr)
-        code = "from sim.cli import main; main()"
+        code = "from evaluation.cli import main; main()"
         run = ["run", "--duration", "1m", "--seed", "1", "--out", str(path)]
         subprocess.run(
             [sys.executable, "-c", code, *run],

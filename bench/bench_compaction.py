@@ -61,8 +61,8 @@ from sim import RunConfig, run
 from trace_runtime import open_log
 from trace_runtime.reader import open_segment
 from trace_runtime.records import TOPIC_SEAL
-from trace_runtime.tiers import cold as cold_codec
-from trace_runtime.tiers.cold import ColdAssembler
+from trace_runtime.tier_formats import cold as cold_codec
+from trace_runtime.tier_formats.cold import ColdAssembler
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -239,9 +239,11 @@ def paired_fast_paths(segment: Path, blocks: int, passes: int = 5) -> dict[str, 
     def encode(fast: bool, item: tuple[Any, ...]) -> bytes:  # the same either way: for scale
         return encoder._encode(item[1], opened.session.tier, item[3], verbatim=False)
 
+    checker = cold_codec.BlockCache(0)
+
     def check(fast: bool, item: tuple[Any, ...]) -> Any:
         data, digests = item[4], item[5]
-        return cold_codec._check_decode(data, digests) if fast else cold_codec.decode_block(data)
+        return checker.decode_checked(data, digests) if fast else checker.decode(data)
 
     def compare(fast: bool, item: tuple[Any, ...]) -> bool:
         block, kept, plain, positions, _data, _digests, decoded = item

@@ -44,7 +44,7 @@ _CHILD = """
 import os, signal, sys
 sys.path.insert(0, {repo!r})
 from trace_runtime.tiers import ColdOptions, compact
-from trace_runtime.tiers import compaction as module
+from trace_runtime.tiers import replace as module
 
 target, nth = {hook!r}
 calls = [0]
@@ -73,7 +73,7 @@ elif target == "unlink":
         return real_unlink(self, *args, **kwargs)
     Path.unlink = unlink
 elif target == "write_batch":
-    from trace_runtime.segment import SegmentWriter
+    from trace_runtime.segment_writer import SegmentWriter
     kill_after(SegmentWriter, "write_batch")
 print("start", flush=True)
 compact({root!r}, "cold", older_than_ns=0, cold=ColdOptions(block_cycles={block}),

@@ -28,7 +28,16 @@ def _log(duration: str, where: Path) -> Path:
     out = where / f"doctor-{duration}.mcap"
     if not out.exists():
         subprocess.run(
-            [sys.executable, "-m", "sim.cli", "run", "--duration", duration, "--out", str(out)],
+            [
+                sys.executable,
+                "-m",
+                "evaluation.cli",
+                "run",
+                "--duration",
+                duration,
+                "--out",
+                str(out),
+            ],
             check=True,
             capture_output=True,
         )

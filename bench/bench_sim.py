@@ -52,7 +52,7 @@ from trace_runtime import AuditLogger, CycleBuilder, LoggerConfig, LoggerStats, 
 from trace_runtime.chain import digest
 from trace_runtime.codec import encode_json, encode_layer, encode_seal_fields
 from trace_runtime.records import GENESIS, LAYER_MODELS, EvidenceRef, validate_record
-from trace_runtime.segment import OutMessage, SegmentWriter
+from trace_runtime.segment_writer import OutMessage, SegmentWriter
 
 BUDGET = 5_000
 DAY = 864_000

@@ -25,10 +25,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from evaluation.baselines import BaselinesReport, MethodResult
+from evaluation.baselines.cost import WARM_UP_CYCLES
+from evaluation.baselines.evaluate import Spread
 from sim import SCENARIOS, FaultRates, RunConfig, RunResult, read_truth, run
-from sim.baselines import BaselinesReport, MethodResult
-from sim.baselines.cost import WARM_UP_CYCLES
-from sim.baselines.evaluate import Spread
 from sim.replay import check_counterfactuals
 from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
 from trace_runtime.logset import open_log
@@ -479,7 +479,7 @@ BASELINES_TITLE = "## Table II measured: TRACE against LIME, SHAP and attention"
 
 def measure_baselines(seed: int, seeds: int) -> BaselinesReport:
     """``trace-sim baselines`` with more repeats for the timings than its defaults."""
-    from sim.baselines import BaselinesConfig, run_baselines
+    from evaluation.baselines import BaselinesConfig, run_baselines
 
     config = BaselinesConfig(
         seed=seed,
@@ -506,8 +506,8 @@ def render_baselines(report: BaselinesReport) -> str:
     add(BASELINES_TITLE)
     add("")
     add(
-        f"Measured by `trace-sim baselines` (`sim/baselines/`, commit `{git_revision()}`) over "
-        f"{len(seeds)} seeds "
+        f"Measured by `trace-sim baselines` (`evaluation/baselines/`, commit `{git_revision()}`) "
+        f"over {len(seeds)} seeds "
         f"({seeds[0]}..{seeds[-1]}), each one run of the paper's evaluation (5 scenarios x "
         f"{cfg.cycles} cycles, faults at the paper's rates). The learned policy (random forest) "
         f"and the attention model were trained on {report.train_decisions} decisions from "
@@ -569,8 +569,8 @@ def render_baselines(report: BaselinesReport) -> str:
     add("### How the overhead grows with entities n and candidate actions k")
     add("")
     add(
-        f"A synthetic decision loop (`sim/baselines/cost.py`: n pedestrians with one evidence "
-        f"item each, 2 belief nodes per entity, n factors, k-1 alternatives, n x (k-1) "
+        f"A synthetic decision loop (`evaluation/baselines/cost.py`: n pedestrians with one "
+        f"evidence item each, 2 belief nodes per entity, n factors, k-1 alternatives, n x (k-1) "
         f"counterfactuals), {cfg.scaling_cycles} cycles per run, median of "
         f"{cfg.scaling_repeats} back-to-back on/off runs, after {WARM_UP_CYCLES} untimed "
         "cycles; logging overhead in CPU us per cycle, wall-clock after the slash "

@@ -6,5 +6,5 @@ bash scripts/bootstrap.sh
 bash scripts/install-browser.sh
 .venv/bin/ruff check .
 .venv/bin/ruff format --check .
-.venv/bin/mypy trace_runtime trace_audit sim
+.venv/bin/mypy trace_runtime trace_audit sim evaluation
 .venv/bin/python -m pytest "$@"

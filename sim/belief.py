@@ -271,6 +271,18 @@ def _lateral_conflict(rx: float, ry: float, vy: float, horizon: float) -> float:
     return g * (0.2 if rx < -0.3 else 1.0)
 
 
+@dataclass(frozen=True, slots=True)
+class _Relative:
+    """An entity as the robot sees it: position and velocity in the robot frame, and the
+    distance as logged (rounded, so that a replay derives the same values)."""
+
+    rx: float
+    ry: float
+    vx: float
+    vy: float
+    d: float
+
+
 def build_belief(
     perception: PerceptionOutput, pose: tuple[float, float, float], speed: float
 ) -> BeliefGraph:
@@ -297,57 +309,94 @@ def build_belief(
         d = round(d, 3)  # derived values follow from the logged value, so a replay agrees
         nodes.append(Node(did, "state", "distance", p_d, d, "m"))
         edges.append(Edge(e.id, did, p_d, RULE_RANGE))
+        seen = _Relative(rx, ry, vx, vy, d)
         if e.cls == "person":
-            speed_e = math.hypot(vx, vy)
-            if speed_e < 0.25:
-                intent, p_i = "standing", 0.9
-            elif abs(vy) > abs(vx):
-                intent, p_i = "crossing", min(0.95, 0.5 + speed_e / 2)
-            elif vx < 0:
-                intent, p_i = "approaching", min(0.95, 0.5 + speed_e / 2)
-            else:
-                intent, p_i = "leaving", min(0.95, 0.5 + speed_e / 2)
-            p_i = round(p_i, 3)
-            iid, rid = f"{e.id}.intent", f"{e.id}.collision_risk"
-            nodes.append(Node(iid, "state", "pedestrian intent", p_i, intent))
-            edges.append(Edge(e.id, iid, p_i, RULE_INTENT))
-            cid = f"{e.id}.conflict"
-            g = round(_lateral_conflict(rx, ry, vy, 6.0), 3)
-            nodes.append(Node(cid, "state", "path conflict", p_d, g))
-            edges.append(Edge(e.id, cid, p_d, RULE_PED_CONFLICT))
-            risk = ped_risk(d, intent, g)
-            p_r = round(conf * p_d, 3)
-            nodes.append(Node(rid, "state", "collision risk", p_r, risk))
-            edges.append(Edge(did, rid, p_d, RULE_PED_RISK))
-            edges.append(Edge(iid, rid, p_i, RULE_PED_RISK))
-            edges.append(Edge(cid, rid, p_d, RULE_PED_RISK))
+            _person_beliefs(e.id, seen, conf=conf, p_d=p_d, nodes=nodes, edges=edges)
         elif e.cls == "forklift":
-            rel_vx = vx - speed
-            closing = round(-(rel_vx * rx + vy * ry) / max(d, 1e-6), 3)
-            kid, tid = f"{e.id}.closing", f"{e.id}.ttc"
-            cid, rid = f"{e.id}.conflict", f"{e.id}.collision_risk"
-            nodes.append(Node(kid, "state", "closing speed", p_d, closing, "m/s"))
-            edges.append(Edge(e.id, kid, p_d, RULE_CLOSING))
-            ttc = time_to_collision(d, closing)
-            nodes.append(Node(tid, "state", "time to collision", p_d, ttc, "s"))
-            edges.append(Edge(did, tid, p_d, RULE_TTC))
-            edges.append(Edge(kid, tid, p_d, RULE_TTC))
-            y_pred = ry + vy * min(ttc, 5.0)
-            # Miss distance beyond the robot's half width (the track is the near face).
-            miss = max(0.0, min(abs(ry), abs(y_pred)) - 0.35)
-            # A vehicle standing still is an obstacle (see aisle_blocked), not on a course.
-            # Perception reports zero velocity until a track's motion is confirmed, so a
-            # vehicle whose motion is unknown is never taken to be moving.
-            moving = 1.0 if math.hypot(vx, vy) >= VEHICLE_MOVING_MPS else 0.0
-            g = round(moving * math.exp(-((miss / 0.5) ** 2)), 3)
-            nodes.append(Node(cid, "state", "path conflict", p_d, g))
-            edges.append(Edge(e.id, cid, p_d, RULE_VEH_CONFLICT))
-            risk = vehicle_risk(ttc, g)
-            p_r = round(conf * p_d, 3)
-            nodes.append(Node(rid, "state", "collision risk", p_r, risk))
-            edges.append(Edge(tid, rid, p_d, RULE_VEH_RISK))
-            edges.append(Edge(cid, rid, p_d, RULE_VEH_RISK))
+            _vehicle_beliefs(e.id, seen, speed, conf=conf, p_d=p_d, nodes=nodes, edges=edges)
+    _corridor_beliefs(perception, distance_ids, nodes, edges)
+    return BeliefGraph(tuple(nodes), tuple(edges))
 
+
+def _intent(vx: float, vy: float) -> tuple[str, float]:
+    """A pedestrian's intent from its velocity in the robot frame, and how sure it is."""
+    speed_e = math.hypot(vx, vy)
+    if speed_e < 0.25:
+        intent, p_i = "standing", 0.9
+    elif abs(vy) > abs(vx):
+        intent, p_i = "crossing", min(0.95, 0.5 + speed_e / 2)
+    elif vx < 0:
+        intent, p_i = "approaching", min(0.95, 0.5 + speed_e / 2)
+    else:
+        intent, p_i = "leaving", min(0.95, 0.5 + speed_e / 2)
+    return intent, round(p_i, 3)
+
+
+def _person_beliefs(
+    eid: str, seen: _Relative, *, conf: float, p_d: float, nodes: list[Node], edges: list[Edge]
+) -> None:
+    """A person's intent, path conflict and collision risk, appended to the graph."""
+    did = f"{eid}.distance"
+    intent, p_i = _intent(seen.vx, seen.vy)
+    iid, rid = f"{eid}.intent", f"{eid}.collision_risk"
+    nodes.append(Node(iid, "state", "pedestrian intent", p_i, intent))
+    edges.append(Edge(eid, iid, p_i, RULE_INTENT))
+    cid = f"{eid}.conflict"
+    g = round(_lateral_conflict(seen.rx, seen.ry, seen.vy, 6.0), 3)
+    nodes.append(Node(cid, "state", "path conflict", p_d, g))
+    edges.append(Edge(eid, cid, p_d, RULE_PED_CONFLICT))
+    risk = ped_risk(seen.d, intent, g)
+    p_r = round(conf * p_d, 3)
+    nodes.append(Node(rid, "state", "collision risk", p_r, risk))
+    edges.append(Edge(did, rid, p_d, RULE_PED_RISK))
+    edges.append(Edge(iid, rid, p_i, RULE_PED_RISK))
+    edges.append(Edge(cid, rid, p_d, RULE_PED_RISK))
+
+
+def _vehicle_beliefs(
+    eid: str,
+    seen: _Relative,
+    speed: float,
+    *,
+    conf: float,
+    p_d: float,
+    nodes: list[Node],
+    edges: list[Edge],
+) -> None:
+    """A vehicle's closing speed, time to collision, path conflict and collision risk."""
+    rx, ry, vx, vy, d = seen.rx, seen.ry, seen.vx, seen.vy, seen.d
+    did = f"{eid}.distance"
+    rel_vx = vx - speed
+    closing = round(-(rel_vx * rx + vy * ry) / max(d, 1e-6), 3)
+    kid, tid = f"{eid}.closing", f"{eid}.ttc"
+    cid, rid = f"{eid}.conflict", f"{eid}.collision_risk"
+    nodes.append(Node(kid, "state", "closing speed", p_d, closing, "m/s"))
+    edges.append(Edge(eid, kid, p_d, RULE_CLOSING))
+    ttc = time_to_collision(d, closing)
+    nodes.append(Node(tid, "state", "time to collision", p_d, ttc, "s"))
+    edges.append(Edge(did, tid, p_d, RULE_TTC))
+    edges.append(Edge(kid, tid, p_d, RULE_TTC))
+    y_pred = ry + vy * min(ttc, 5.0)
+    # Miss distance beyond the robot's half width (the track is the near face).
+    miss = max(0.0, min(abs(ry), abs(y_pred)) - 0.35)
+    # A vehicle standing still is an obstacle (see aisle_blocked), not on a course.
+    # Perception reports zero velocity until a track's motion is confirmed, so a
+    # vehicle whose motion is unknown is never taken to be moving.
+    moving = 1.0 if math.hypot(vx, vy) >= VEHICLE_MOVING_MPS else 0.0
+    g = round(moving * math.exp(-((miss / 0.5) ** 2)), 3)
+    nodes.append(Node(cid, "state", "path conflict", p_d, g))
+    edges.append(Edge(eid, cid, p_d, RULE_VEH_CONFLICT))
+    risk = vehicle_risk(ttc, g)
+    p_r = round(conf * p_d, 3)
+    nodes.append(Node(rid, "state", "collision risk", p_r, risk))
+    edges.append(Edge(tid, rid, p_d, RULE_VEH_RISK))
+    edges.append(Edge(cid, rid, p_d, RULE_VEH_RISK))
+
+
+def _corridor_beliefs(
+    perception: PerceptionOutput, distance_ids: set[str], nodes: list[Node], edges: list[Edge]
+) -> None:
+    """The corridor's clearance and whether the aisle is blocked (and by whom)."""
     corridor = perception.corridor
     lidar_seen = any(ev.sensor == "lidar" and ev.weight >= 0.5 for ev in corridor.evidence)
     p_c = 0.97 if lidar_seen else 0.8
@@ -360,7 +409,6 @@ def build_belief(
     edges.append(Edge("corridor.clearance", "aisle_blocked", p_c, RULE_BLOCKED))
     if corridor.blocker is not None and f"{corridor.blocker}.distance" in distance_ids:
         edges.append(Edge(f"{corridor.blocker}.distance", "aisle_blocked", p_c, RULE_OBSTACLE))
-    return BeliefGraph(tuple(nodes), tuple(edges))
 
 
 def _distance_confidence(e: PerceivedEntity) -> float:

@@ -1,4 +1,7 @@
-"""``trace-sim``: parse, call ``sim.run`` (or ``sim.replay``), render.
+"""The simulator's ``trace-sim`` commands: parse, call ``sim.run`` (or ``sim.replay``), render.
+
+``run``, ``scenarios`` and ``check-counterfactuals`` live here; the ``trace-sim`` program,
+with the evaluation's ``baselines`` command among them, is assembled in ``evaluation/cli.py``.
 
 Exit codes: 0 ok, 1 findings (``check-counterfactuals``), 2 usage, 3 unwritable output or
 unreadable log.
@@ -10,7 +13,7 @@ import json
 import logging
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import typer
 
@@ -26,37 +29,56 @@ from sim.runner import (
 )
 from sim.scenarios import EPISODE_CYCLES, SCENARIOS
 
+__all__ = [
+    "EXIT_FINDINGS",
+    "EXIT_OUTPUT",
+    "EXIT_USAGE",
+    "app",
+    "fail",
+    "help_text",
+    "new_app",
+    "summary",
+]
+
 EXIT_FINDINGS = 1
 EXIT_USAGE = 2
 EXIT_OUTPUT = 3
 
-app = typer.Typer(
-    name="trace-sim",
-    help="Warehouse robot simulator that writes TRACE audit logs (the paper's evaluation).",
-    add_completion=False,
-    no_args_is_help=True,
-    pretty_exceptions_enable=False,
-    # click's plain help, as trace-audit's: typer's rich panels import rich and pygments for
-    # every --help, and print values as Python types ("<int>", "<bool>"). trace-audit's
-    # command class that renames them is not imported here: sim/cli.py stays free of
-    # trace_audit (tests/trace_runtime/test_layering.py), so each value is named by metavar.
-    rich_markup_mode=None,
-    context_settings={"max_content_width": 100},
-)
+
+def new_app() -> typer.Typer:
+    """A ``trace-sim`` app without commands: the program's name, help and click's plain help."""
+    return typer.Typer(
+        name="trace-sim",
+        help="Warehouse robot simulator that writes TRACE audit logs (the paper's evaluation).",
+        add_completion=False,
+        no_args_is_help=True,
+        pretty_exceptions_enable=False,
+        # click's plain help, as trace-audit's: typer's rich panels import rich and pygments for
+        # every --help, and print values as Python types ("<int>", "<bool>"). trace-audit's
+        # command class that renames them is not imported here: sim/cli.py stays free of
+        # trace_audit (tests/trace_runtime/test_layering.py), so each value is named by metavar.
+        rich_markup_mode=None,
+        context_settings={"max_content_width": 100},
+    )
 
 
-def _fail(message: str, code: int) -> None:
+app = new_app()
+"""The simulator's own commands, in the order ``trace-sim --help`` lists them."""
+
+
+def fail(message: str, code: int) -> None:
+    """Say ``trace-sim: message`` on stderr and exit with ``code``."""
     sys.stderr.write(f"trace-sim: {message}\n")
     raise typer.Exit(code)
 
 
-def _summary(text: str) -> str:
+def summary(text: str) -> str:
     """The first paragraph, for the command list (click cuts a derived one at ~45 characters
     with "...")."""
     return " ".join(text.strip().split("\n\n")[0].split())
 
 
-def _help(text: str) -> str:
+def help_text(text: str) -> str:
     """Each prose paragraph on one line, so typer re-wraps it; indented examples keep theirs."""
     paras = text.strip().split("\n\n")
     return "\n\n".join(
@@ -88,7 +110,7 @@ Examples:
 """
 
 
-@app.command("run", help=_help(_RUN_HELP), short_help=_summary(_RUN_HELP))
+@app.command("run", help=help_text(_RUN_HELP), short_help=summary(_RUN_HELP))
 def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
     out: Annotated[
         Path,
@@ -146,10 +168,10 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
         )
         result = run(config) if as_json else _run_with_progress(config)
     except SimUsageError as err:
-        _fail(str(err), EXIT_USAGE)
+        fail(str(err), EXIT_USAGE)
         return
     except SimOutputError as err:
-        _fail(str(err), EXIT_OUTPUT)
+        fail(str(err), EXIT_OUTPUT)
         return
     finally:
         runtime_log.setLevel(level)  # the caller's logging is theirs (e.g. a test session)
@@ -249,152 +271,6 @@ def scenarios_cmd(
     Console().print(table)
 
 
-_BASELINES_HELP = """Measure TRACE against LIME, SHAP and attention on the paper's runs.
-
-Trains a learned policy (random forest) and a one-layer attention model on runs with other
-seeds, explains their decisions on --seeds evaluation runs (5 scenarios x --cycles each,
-faults at the paper's rates), and scores every method's output with the metrics TRACE is
-scored with (docs/metrics.md, "Explanation baselines"). Then TRACE's cost per cycle with
-the audit logger on and off (same runs), and its growth with entities n and actions k.
-Needs the [baselines] extra. Figures: mean over seeds (std across seeds with --json).
-
-Examples:
-
-  trace-sim baselines
-
-  trace-sim baselines --seed 7 --seeds 10 --json > baselines.json
-"""
-
-
-@app.command("baselines", help=_help(_BASELINES_HELP), short_help=_summary(_BASELINES_HELP))
-def baselines_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
-    cycles: Annotated[
-        int, typer.Option(metavar="INTEGER", help="decision cycles per scenario and run")
-    ] = 100,
-    seed: Annotated[
-        int, typer.Option(metavar="INTEGER", help="first evaluation seed (the others follow)")
-    ] = 1,
-    seeds: Annotated[
-        int, typer.Option(metavar="INTEGER", help="evaluation runs, one per seed")
-    ] = 5,
-    explain: Annotated[
-        int,
-        typer.Option(
-            metavar="INTEGER", help="decisions explained per run by each method (a random sample)"
-        ),
-    ] = 100,
-    as_json: Annotated[bool, typer.Option("--json", help="print the report as JSON")] = False,
-    plain: Annotated[
-        bool, typer.Option("--plain", help="tab-separated lines, no colour or progress")
-    ] = False,
-) -> None:
-    """Measure TRACE against LIME, SHAP and attention on the paper's runs."""
-    runtime_log = logging.getLogger("trace_runtime")
-    level = runtime_log.level
-    runtime_log.setLevel(logging.ERROR)  # injected write timeouts are part of the runs
-    try:
-        from sim.baselines import BaselinesConfig, run_baselines
-
-        config = BaselinesConfig(seed=seed, seeds=seeds, cycles=cycles, explain_per_seed=explain)
-        if as_json or plain or not sys.stderr.isatty():
-            report = run_baselines(config)
-        else:
-            from rich.console import Console
-
-            with Console(stderr=True).status("baselines") as status:
-                report = run_baselines(config, progress=status.update)
-    except ImportError as err:
-        _fail(f"needs the [baselines] extra ({err.name} is not installed)", EXIT_USAGE)
-        return
-    except SimUsageError as err:
-        _fail(str(err), EXIT_USAGE)
-        return
-    finally:
-        runtime_log.setLevel(level)
-    data = report.as_dict()
-    if as_json:
-        sys.stdout.write(json.dumps(data, indent=2) + "\n")
-    elif plain:
-        _render_baselines_plain(data)
-    else:
-        _render_baselines(data)
-
-
-def _render_baselines_plain(data: dict[str, Any]) -> None:
-    out = ["method\tET\tET_partial\tDR\tms_per_decision\tbytes_per_decision\tdecisions"]
-    for name, m in data["methods"].items():
-        out.append(
-            f"{name}\t{m['ET']}\t{m['ET_partial']}\t{m['DR']}\t{m['ms_per_decision']}\t"
-            f"{m['bytes_per_decision']}\t{m['decisions']}"
-        )
-    o = data["overhead"]
-    out.append(f"overhead_us\ton {o['on_us']}\toff {o['off_us']}\tdiff {o['overhead_us']}")
-    cpu = f"on {o['on_cpu_us']}\toff {o['off_cpu_us']}\tdiff {o['overhead_cpu_us']}"
-    out.append(f"overhead_cpu_us\t{cpu}")
-    out.append(f"policy_accuracy\t{data['policy_accuracy']}")
-    out.append(f"attention_accuracy\t{data['attention_accuracy']}")
-    for p in data["scaling"]:
-        out.append(
-            f"scaling\tn={p['entities']}\tk={p['actions']}\ton {p['on_us']}\t"
-            f"off {p['off_us']}\tdiff {p['overhead_us']}\tcpu_diff {p['overhead_cpu_us']}"
-        )
-    sys.stdout.write("\n".join(out) + "\n")
-
-
-def _render_baselines(data: dict[str, Any]) -> None:
-    from rich.console import Console
-    from rich.table import Table
-
-    several = len(data["seeds"]) > 1
-
-    def pm(m: dict[str, Any], key: str) -> str:
-        s = m["spread_over_seeds"][key]
-        # one seed has no spread to show: "± 0.0" would read as a measured std
-        return (
-            f"{s['mean'] * 100:.1f} ± {s['std'] * 100:.1f}" if several else f"{s['mean'] * 100:.1f}"
-        )
-
-    o = data["overhead"]
-    title = (
-        f"TRACE vs post-hoc explanations: {len(data['seeds'])} seed(s), "
-        f"{data['methods']['TRACE']['decisions']} logged decisions ("
-        + ("mean ± std across seeds" if several else "one seed: no spread")
-        + "; CPU time)"
-    )
-    table = Table(title=title)
-    for col in ("method", "ET %", "ET_partial %", "DR %", "ms / decision", "bytes / decision"):
-        table.add_column(col, justify="left" if col == "method" else "right")
-    for name, m in data["methods"].items():
-        table.add_row(
-            name,
-            pm(m, "ET"),
-            pm(m, "ET_partial"),
-            pm(m, "DR"),
-            f"{m['ms_per_decision']:.3f}",
-            f"{m['bytes_per_decision']:,.0f}",
-        )
-    console = Console()
-    console.print(table)
-    console.print(
-        f"TRACE per cycle (CPU): {o['on_cpu_us']:.0f} us logged, {o['off_cpu_us']:.0f} us with "
-        f"a null logger -> {o['overhead_cpu_us']:.0f} us overhead (paper: 120 us); "
-        f"wall-clock {o['overhead_us']:.0f} us"
-    )
-    console.print(
-        f"learned policy agrees with the rule policy on {data['policy_accuracy'] * 100:.1f}% "
-        f"of decisions; attention model on {data['attention_accuracy'] * 100:.1f}%"
-    )
-    scaling = Table(title="logging overhead per cycle (CPU us) by entities n and actions k")
-    actions = sorted({p["actions"] for p in data["scaling"]})
-    scaling.add_column("n", justify="right")
-    for k in actions:
-        scaling.add_column(f"k={k}", justify="right")
-    for n in sorted({p["entities"] for p in data["scaling"]}):
-        row = {p["actions"]: p["overhead_cpu_us"] for p in data["scaling"] if p["entities"] == n}
-        scaling.add_row(str(n), *(f"{row[k]:.0f}" for k in actions))
-    console.print(scaling)
-
-
 _CHECK_HELP = """Re-run every logged decision and counterfactual against the policy.
 
 For each cycle the policy input is rebuilt from the logged belief graph and the previous
@@ -412,7 +288,7 @@ Example:
 """
 
 
-@app.command("check-counterfactuals", help=_help(_CHECK_HELP), short_help=_summary(_CHECK_HELP))
+@app.command("check-counterfactuals", help=help_text(_CHECK_HELP), short_help=summary(_CHECK_HELP))
 def check_counterfactuals_cmd(
     log: Annotated[
         Path, typer.Argument(metavar="LOG", help="a .mcap file or a log root directory")
@@ -427,10 +303,10 @@ def check_counterfactuals_cmd(
     try:
         report = check_counterfactuals(log)
     except SimUsageError as err:
-        _fail(str(err), EXIT_USAGE)
+        fail(str(err), EXIT_USAGE)
         return
     except TraceError as err:
-        _fail(f"cannot read {log}: {err}", EXIT_OUTPUT)
+        fail(f"cannot read {log}: {err}", EXIT_OUTPUT)
         return
     if as_json:
         sys.stdout.write(json.dumps(report.as_dict(), indent=2) + "\n")
@@ -456,12 +332,3 @@ def check_counterfactuals_cmd(
             Console(highlight=False).print("\n".join(lines), markup=False)
     if not report.ok:
         raise typer.Exit(EXIT_FINDINGS)
-
-
-def main() -> None:
-    """Entry point of ``trace-sim``."""
-    app()
-
-
-if __name__ == "__main__":
-    main()

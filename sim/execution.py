@@ -22,8 +22,8 @@ import numpy as np
 
 from sim.belief import BeliefGraph
 from sim.policy import CONTINUE, REROUTE, SLOW, STOP
+from sim.world import PERIOD_S
 
-PERIOD_S = 0.1
 MOTION = {CONTINUE: (1.2, 0.0), SLOW: (0.3, 0.0), STOP: (0.0, 0.0), REROUTE: (0.3, 0.6)}
 TAU_S = 0.25
 NOISE_LINEAR = 0.02
@@ -86,6 +86,8 @@ class Steering:
 
 @dataclass(slots=True)  # not frozen: ~4x cheaper to create
 class Check:
+    """One compliance rule's verdict on this cycle's motion."""
+
     rule: str
     passed: bool
     value: float | None
@@ -95,6 +97,8 @@ class Check:
 
 @dataclass(slots=True)  # not frozen: ~4x cheaper to create
 class Executed:
+    """Layer 4 for one cycle: the motion wanted, the motion measured, and the checks."""
+
     intended: tuple[float, float]
     actual: tuple[float, float]
     deviation: float
@@ -123,20 +127,8 @@ class Actuator:
         want_v, want_w = MOTION[command] if want is None else want
         prev_v = self.linear
         prev_err = abs(want_v - self.linear)
-        noise = self.rng.normal(0.0, 1.0, 2)
-        v = self.linear + self._alpha * (want_v - self.linear) + NOISE_LINEAR * float(noise[0])
-        # Turning noise comes from the wheels' speed control: a robot held still on its
-        # brakes does not turn (else it would drift in heading through a long STOP).
-        moving = min(1.0, (abs(self.linear) + abs(want_v) + abs(want_w)) / TURN_NOISE_FULL)
-        w = (
-            self.angular
-            + self._alpha * (want_w - self.angular)
-            + NOISE_ANGULAR * moving * float(noise[1])
-        )
-        v = max(0.0, v)
-        self.linear, self.angular = v, w
+        v, w = self._move(want_v, want_w)
         dev = math.hypot(want_v - v, HALF_TRACK_M * (want_w - w))
-
         if command == STOP:
             if self._stop_since is None:
                 self._stop_since = t
@@ -150,47 +142,8 @@ class Actuator:
                 MAX_SPEED,
                 f"actual linear speed {v:.2f} m/s",
             ),
+            self._person_check(v, prev_v, want_v, _nearest_person(belief)),
         ]
-        nearest: tuple[float, str] | None = None
-        people = [n.id for n in belief.nodes if n.kind == "entity" and n.value == "person"]
-        if people:
-            by_id = {m.id: m for m in belief.nodes}  # node ids are unique
-            for pid in people:
-                m = by_id.get(f"{pid}.distance")
-                if (
-                    m is not None
-                    and isinstance(m.value, float)
-                    and (nearest is None or m.value < nearest[0])
-                ):
-                    nearest = (m.value, pid)
-        if nearest is not None and nearest[0] < PERSON_ZONE_M:
-            # Braking towards a speed within the limit, at the actuator's rate, complies: the
-            # limit cannot be met faster than the robot can brake.
-            braking = want_v <= PERSON_SPEED and v <= (
-                prev_v + self._alpha * (want_v - prev_v) + BRAKING_SLACK
-            )
-            detail = f"{nearest[1]} at {nearest[0]:.2f} m (< {PERSON_ZONE_M} m)"
-            if v > PERSON_SPEED and braking:
-                detail += f"; braking towards {want_v:.1f} m/s at the actuator's rate"
-            checks.append(
-                Check(
-                    "person_speed_limit",
-                    v <= PERSON_SPEED or braking,
-                    round(v, 3),
-                    PERSON_SPEED,
-                    detail,
-                )
-            )
-        else:
-            checks.append(
-                Check(
-                    "person_speed_limit",
-                    True,
-                    None,
-                    PERSON_SPEED,
-                    f"no person within {PERSON_ZONE_M} m",
-                )
-            )
         if self._stop_since is not None and t - self._stop_since >= STOP_GRACE_S:
             checks.append(
                 Check(
@@ -212,3 +165,64 @@ class Actuator:
             )
         )
         return Executed((want_v, want_w), (round(v, 4), round(w, 4)), round(dev, 4), tuple(checks))
+
+    def _move(self, want_v: float, want_w: float) -> tuple[float, float]:
+        """One period of lag and noise towards (``want_v``, ``want_w``): the new (v, w)."""
+        noise = self.rng.normal(0.0, 1.0, 2)
+        v = self.linear + self._alpha * (want_v - self.linear) + NOISE_LINEAR * float(noise[0])
+        # Turning noise comes from the wheels' speed control: a robot held still on its
+        # brakes does not turn (else it would drift in heading through a long STOP).
+        moving = min(1.0, (abs(self.linear) + abs(want_v) + abs(want_w)) / TURN_NOISE_FULL)
+        w = (
+            self.angular
+            + self._alpha * (want_w - self.angular)
+            + NOISE_ANGULAR * moving * float(noise[1])
+        )
+        v = max(0.0, v)
+        self.linear, self.angular = v, w
+        return v, w
+
+    def _person_check(
+        self, v: float, prev_v: float, want_v: float, nearest: tuple[float, str] | None
+    ) -> Check:
+        """The speed limit near people, given the nearest person (distance, id) believed."""
+        if nearest is None or not nearest[0] < PERSON_ZONE_M:
+            return Check(
+                "person_speed_limit",
+                True,
+                None,
+                PERSON_SPEED,
+                f"no person within {PERSON_ZONE_M} m",
+            )
+        # Braking towards a speed within the limit, at the actuator's rate, complies: the
+        # limit cannot be met faster than the robot can brake.
+        braking = want_v <= PERSON_SPEED and v <= (
+            prev_v + self._alpha * (want_v - prev_v) + BRAKING_SLACK
+        )
+        detail = f"{nearest[1]} at {nearest[0]:.2f} m (< {PERSON_ZONE_M} m)"
+        if v > PERSON_SPEED and braking:
+            detail += f"; braking towards {want_v:.1f} m/s at the actuator's rate"
+        return Check(
+            "person_speed_limit",
+            v <= PERSON_SPEED or braking,
+            round(v, 3),
+            PERSON_SPEED,
+            detail,
+        )
+
+
+def _nearest_person(belief: BeliefGraph) -> tuple[float, str] | None:
+    """(distance, id) of the nearest person the belief graph holds a distance for."""
+    nearest: tuple[float, str] | None = None
+    people = [n.id for n in belief.nodes if n.kind == "entity" and n.value == "person"]
+    if people:
+        by_id = {m.id: m for m in belief.nodes}  # node ids are unique
+        for pid in people:
+            m = by_id.get(f"{pid}.distance")
+            if (
+                m is not None
+                and isinstance(m.value, float)
+                and (nearest is None or m.value < nearest[0])
+            ):
+                nearest = (m.value, pid)
+    return nearest

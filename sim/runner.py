@@ -18,7 +18,7 @@ import numpy as np
 from sim.belief import BeliefGraph, Edge, build_belief
 from sim.counterfactual import BudgetExhaustedError, probe
 from sim.decision import Decider, Decision, graph_edges
-from sim.execution import Actuator, Steering
+from sim.execution import Actuator, Executed, Steering
 from sim.faults import (
     CycleFaults,
     FailingOpener,
@@ -47,6 +47,7 @@ from sim.scenarios import EPISODE_CYCLES, SCENARIOS
 from sim.sensors import detect_camera, range_ultrasonic, scan_lidar
 from sim.world import PERIOD_S, World
 from trace_runtime import AuditLogger, LoggerConfig, TraceError
+from trace_runtime.flags import SCENARIO_FLAG
 
 PERIOD_NS = 100_000_000
 CYCLES_PER_DAY = 864_000
@@ -194,35 +195,7 @@ def run(config: RunConfig, progress: Callable[[int, int], None] | None = None) -
     out = Path(config.out)
     truth_path = truth_path_for(out)
     opener = FailingOpener()
-    try:
-        if out.suffix == ".mcap":
-            out.parent.mkdir(parents=True, exist_ok=True)
-        else:
-            out.mkdir(parents=True, exist_ok=True)
-        truth = TruthLog(truth_path, keep=out.suffix != ".mcap")
-        logger: AuditLogger | NullLogger = (
-            NullLogger()
-            if not config.audit
-            else AuditLogger(
-                out,
-                robot_id=config.robot_id,
-                period_s=PERIOD_S,
-                software_version=SOFTWARE_VERSION,
-                policy_version=POLICY_VERSION,
-                clock="sim",
-                config=LoggerConfig(
-                    threaded=False,
-                    fsync_interval_s=None,
-                    opener=opener,
-                    batch_cycles=config.batch_cycles,
-                ),
-            )
-        )
-    except OSError as err:
-        raise SimOutputError(f"cannot write {out}: {err.strerror or err}") from err
-    except TraceError as err:
-        raise SimOutputError(f"cannot write {out}: {err}") from err
-
+    truth, logger = _open_outputs(config, out, truth_path, opener)
     sim = _Pipeline(config, logger, opener, truth)
     commands: dict[str, int] = {}
     per_scenario: dict[str, int] = {}
@@ -269,6 +242,41 @@ def run(config: RunConfig, progress: Callable[[int, int], None] | None = None) -
     )
 
 
+def _open_outputs(
+    config: RunConfig, out: Path, truth_path: Path, opener: FailingOpener
+) -> tuple[TruthLog, AuditLogger | NullLogger]:
+    """The ground-truth sidecar and the logger (a null one when ``config.audit`` is off)."""
+    try:
+        if out.suffix == ".mcap":
+            out.parent.mkdir(parents=True, exist_ok=True)
+        else:
+            out.mkdir(parents=True, exist_ok=True)
+        truth = TruthLog(truth_path, keep=out.suffix != ".mcap")
+        logger: AuditLogger | NullLogger = (
+            NullLogger()
+            if not config.audit
+            else AuditLogger(
+                out,
+                robot_id=config.robot_id,
+                period_s=PERIOD_S,
+                software_version=SOFTWARE_VERSION,
+                policy_version=POLICY_VERSION,
+                clock="sim",
+                config=LoggerConfig(
+                    threaded=False,
+                    fsync_interval_s=None,
+                    opener=opener,
+                    batch_cycles=config.batch_cycles,
+                ),
+            )
+        )
+    except OSError as err:
+        raise SimOutputError(f"cannot write {out}: {err.strerror or err}") from err
+    except TraceError as err:
+        raise SimOutputError(f"cannot write {out}: {err}") from err
+    return truth, logger
+
+
 @contextmanager
 def few_collections() -> Iterator[None]:
     """Keep the cyclic garbage collector from re-scanning the same objects over and over.
@@ -289,6 +297,22 @@ def few_collections() -> Iterator[None]:
 
 
 Pending = list[tuple[str, dict[str, Any]]]
+
+
+def _execution_flags(
+    scenario: str, executed: Executed, seen: PerceptionOutput, steering: Steering
+) -> list[str]:
+    """The execution record's flags: the scenario label, then what went wrong or is special."""
+    flags = [SCENARIO_FLAG + scenario]
+    if any(not ch.passed for ch in executed.checks):
+        flags.append("compliance_violation")
+    if seen.sensors_unavailable:
+        flags.append("sensor_degraded")
+    if steering.turning_from is not None:
+        # The executive is completing a U-turn that a REROUTE began, whatever
+        # this cycle's command: the intended motion above is that turn.
+        flags.append("u_turn")
+    return flags
 
 
 @dataclass(slots=True)
@@ -370,23 +394,8 @@ class _Pipeline:
                 decision, action = self._decide(graph, faults, pending)
                 outcome = decision.outcome
                 # Layer 4
-                heading_error, lateral = world.robot.offsets()
-                want = self.steering.steer(
-                    outcome.command,
-                    heading_error=heading_error,
-                    lateral=lateral,
-                    direction=world.robot.direction,
-                )
-                executed = actuator.step(outcome.command, world.t, graph, want)
-                flags = [f"scenario:{scenario}"]
-                if any(not ch.passed for ch in executed.checks):
-                    flags.append("compliance_violation")
-                if seen.sensors_unavailable:
-                    flags.append("sensor_degraded")
-                if self.steering.turning_from is not None:
-                    # The executive is completing a U-turn that a REROUTE began, whatever
-                    # this cycle's command: the intended motion above is that turn.
-                    flags.append("u_turn")
+                executed = self._act(outcome.command, graph)
+                flags = _execution_flags(scenario, executed, seen, self.steering)
                 logged_factors = [f["node"] for f in action["rationale"]["factors"]]
                 corrupt, skip = self._audit_faults(
                     seen, graph, decision.factors, logged_factors, faults, pending
@@ -408,6 +417,18 @@ class _Pipeline:
         world.apply_motion(actuator.linear, actuator.angular)
         world.step_actors()
         return outcome.command
+
+    def _act(self, command: str, graph: BeliefGraph) -> Executed:
+        """Layer 4: steer ``command`` along the route and drive the actuator one period."""
+        world = self.world
+        heading_error, lateral = world.robot.offsets()
+        want = self.steering.steer(
+            command,
+            heading_error=heading_error,
+            lateral=lateral,
+            direction=world.robot.direction,
+        )
+        return self.actuator.step(command, world.t, graph, want)
 
     def settle(self) -> None:
         """Record the ground truth of cycles whose write has happened (written or lost)."""

@@ -23,21 +23,17 @@ from typing import Any, Literal
 
 from trace_audit.causal import Decision, causal_graph_data, read_decision, tree_graph_data
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, DecisionChains, SensorWindow, trace_cycle
+from trace_audit.cycle_fields import command_of
 from trace_audit.evidence import ExternalEvidence, describe_refs, open_recordings
+from trace_audit.log_source import LogSource, as_log, require_cycles
+from trace_audit.log_time import TimeArg, resolve_time
 from trace_audit.metrics import MetricsConfig, dr_problems, trust_score
-from trace_audit.timeline import (
-    LogSource,
-    TimeArg,
-    as_log,
-    command_of,
-    require_cycles,
-    resolve_time,
-)
 from trace_runtime.chain import GENESIS, digest
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
 from trace_runtime.gaps import continuity, gap_limit_ns
 from trace_runtime.logset import Log
+from trace_runtime.recordings import Recordings
 from trace_runtime.records import TOPIC_ACTION, TOPIC_PERCEPTION, TOPIC_SEAL
 from trace_runtime.seal_check import verify_cycle
 
@@ -209,42 +205,23 @@ def explain(
         raise UsageError(f"lookback must be >= 0 s, got {lookback_s}")
     log = as_log(source, lazy=True)
     require_cycles(log)
-    t_ns = resolve_time(t, log)
-    if t_ns is not None:
-        target = log.cycle_at(t_ns)
-        offset = t_ns - target.t_ns
-    else:
-        assert cycle is not None
-        target = find_cycle(log, cycle)
-        offset = 0
+    t_ns, target, offset = _find_target(log, t, cycle)
     whole, log = log, log.clock_run(target.segment)
     decision = read_decision(target)
     recordings = open_recordings(evidence)
-    # Refs usually point into the decision's own cycle; the earlier cycles of the sensor
-    # window are read only when a chain stops at an unresolved reading (same result as
-    # resolving against the whole window, as the metrics do).
-    chains = trace_cycle(target, recordings=recordings)
-    needs_window = sensor_window > 0 and any(
-        c.missing is not None and c.missing.level == "sensor_reading" for c in chains.factors
-    )
     # The cadence the robot kept when it decided: the period of the segment holding the
     # decision (the walk back, the gap to the previous seal and the output use it).
     holder = log.segment_named(target.segment)
     period = holder.session.period_ns if holder is not None else log.period_ns
-    back = _look_back(
+    chains, back = _chains_and_back(
         log,
         target,
         decision.command,
-        int(lookback_s * 1e9),
-        sensor_window if needs_window else 0,
+        recordings,
+        lookback_ns=int(lookback_s * 1e9),
+        sensor_window=sensor_window,
         period_ns=period,
     )
-    if needs_window:
-        window = SensorWindow(sensor_window, recordings)
-        for earlier in reversed(back.window):
-            window.push(earlier.sensors)
-        window.push(target.sensors)
-        chains = trace_cycle(target, window)
     seal = _check_seal(log, target, back.prev_sealed)
     scores = _scores(target, chains, seal, prev_sealed=back.prev_sealed, period_ns=period)
     graph = causal_graph_data(target, chains, decision)
@@ -271,6 +248,58 @@ def explain(
         external_evidence=tuple(describe_refs(target.layer(TOPIC_PERCEPTION), recordings)),
         clock_run=() if log is whole else tuple(s.path.name for s in log.segments),
     )
+
+
+def _find_target(log: Log, t: TimeArg, cycle: int | None) -> tuple[int | None, Cycle, int]:
+    """(the query time in ns or None, the decision in force then or with that number, the
+    query time - decision time)."""
+    t_ns = resolve_time(t, log)
+    if t_ns is not None:
+        target = log.cycle_at(t_ns)
+        return t_ns, target, t_ns - target.t_ns
+    assert cycle is not None
+    return None, find_cycle(log, cycle), 0
+
+
+def _chains_and_back(
+    log: Log,
+    target: Cycle,
+    command: str | None,
+    recordings: Recordings | None,
+    *,
+    lookback_ns: int,
+    sensor_window: int,
+    period_ns: int,
+) -> tuple[DecisionChains, _Back]:
+    """The decision's chains, and what one walk back from it found.
+
+    Refs usually point into the decision's own cycle; the earlier cycles of the sensor
+    window are read only when a chain stops at an unresolved reading (same result as
+    resolving against the whole window, as the metrics do)."""
+    chains = trace_cycle(target, recordings=recordings)
+    needs_window = sensor_window > 0 and any(
+        c.missing is not None and c.missing.level == "sensor_reading" for c in chains.factors
+    )
+    back = _look_back(
+        log,
+        target,
+        command,
+        lookback_ns,
+        sensor_window if needs_window else 0,
+        period_ns=period_ns,
+    )
+    if needs_window:
+        chains = _trace_in_window(target, back.window, SensorWindow(sensor_window, recordings))
+    return chains, back
+
+
+def _trace_in_window(target: Cycle, earlier: list[Cycle], window: SensorWindow) -> DecisionChains:
+    """The decision's chains with refs resolved against the cycles before it (newest first
+    in ``earlier``) and its own."""
+    for cycle in reversed(earlier):
+        window.push(cycle.sensors)
+    window.push(target.sensors)
+    return trace_cycle(target, window)
 
 
 # --- looking back ----------------------------------------------------------------------------

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 from typing import Any, Literal, get_args
 
 from trace_audit.explain import Explanation, explain
-from trace_audit.timeline import LogSource, TimeArg
+from trace_audit.log_source import LogSource
+from trace_audit.log_time import TimeArg
 from trace_runtime.errors import UsageError
 
 __all__ = ["FORMATS", "Export", "ExportFormat", "export_decision", "render_export"]
@@ -189,19 +190,39 @@ def _mm_text(text: str) -> str:
     return re.sub(r"\s+", " ", text)
 
 
-def _mermaid(result: Explanation) -> str:
-    ids: dict[str, str] = {}
+class _MermaidIds:
+    """Short Mermaid node ids (``c0``, ``t5``), one per (prefix, graph node id)."""
 
-    def nid(prefix: str, key: str) -> str:
+    def __init__(self) -> None:
+        self.ids: dict[str, str] = {}
+
+    def __call__(self, prefix: str, key: str) -> str:
         full = f"{prefix}:{key}"
-        if full not in ids:
-            ids[full] = f"{prefix}{len(ids)}"
-        return ids[full]
+        if full not in self.ids:
+            self.ids[full] = f"{prefix}{len(self.ids)}"
+        return self.ids[full]
 
-    lines = [
-        "flowchart BT",
-        f'  subgraph causal["{_mm_text(_title(result))}: causal graph"]',
-    ]
+
+def _mermaid(result: Explanation) -> str:
+    nid = _MermaidIds()
+    lines = ["flowchart BT"]
+    missing_nodes, undocumented = _mm_causal(result, nid, lines)
+    if result.tree is not None:
+        _mm_tree(result.tree, nid, lines)
+    lines.append("  classDef missing stroke:#c00,stroke-dasharray:4 3,color:#c00;")
+    if missing_nodes:
+        lines.append(f"  class {','.join(missing_nodes)} missing;")
+    if undocumented:
+        lines.append(f"  linkStyle {','.join(map(str, undocumented))} stroke:#c00,color:#c00;")
+    return "\n".join(lines) + "\n"
+
+
+def _mm_causal(
+    result: Explanation, nid: _MermaidIds, lines: list[str]
+) -> tuple[list[str], list[int]]:
+    """The causal graph's subgraph into ``lines``; (placeholder node ids, indexes of the
+    undocumented edges), which are styled after every edge is drawn."""
+    lines.append(f'  subgraph causal["{_mm_text(_title(result))}: causal graph"]')
     missing_nodes: list[str] = []
     for node in result.graph["nodes"]:
         ident = nid("c", node["id"])
@@ -227,28 +248,24 @@ def _mermaid(result: Explanation) -> str:
             f"{nid('c', edge['target'])}"
         )
     lines.append("  end")
-    if result.tree is not None:
-        lines.append('  subgraph tree["counterfactual decision tree (taken path thick)"]')
-        lines.append("    direction TB")
-        for node in result.tree["nodes"]:
-            ident = nid("t", node["id"])
-            label = _mm_text(str(node.get("label") or node["id"]))
-            mark = "✔ " if node.get("taken") and node.get("command") else ""
-            if node.get("command") is not None:
-                lines.append(f'    {ident}["{mark}{label}"]')
-            else:
-                lines.append(f'    {ident}{{"{label}"}}')
-        for edge in result.tree["edges"]:
-            arrow = "==>" if edge.get("taken") else "-->"
-            label = _mm_text(str(edge.get("label") or ""))
-            middle = f'|"{label}"|' if label else ""
-            lines.append(
-                f"    {nid('t', edge['source'])} {arrow}{middle} {nid('t', edge['target'])}"
-            )
-        lines.append("  end")
-    lines.append("  classDef missing stroke:#c00,stroke-dasharray:4 3,color:#c00;")
-    if missing_nodes:
-        lines.append(f"  class {','.join(missing_nodes)} missing;")
-    if undocumented:
-        lines.append(f"  linkStyle {','.join(map(str, undocumented))} stroke:#c00,color:#c00;")
-    return "\n".join(lines) + "\n"
+    return missing_nodes, undocumented
+
+
+def _mm_tree(tree: dict[str, Any], nid: _MermaidIds, lines: list[str]) -> None:
+    """The counterfactual tree's subgraph into ``lines``, the taken path thick."""
+    lines.append('  subgraph tree["counterfactual decision tree (taken path thick)"]')
+    lines.append("    direction TB")
+    for node in tree["nodes"]:
+        ident = nid("t", node["id"])
+        label = _mm_text(str(node.get("label") or node["id"]))
+        mark = "✔ " if node.get("taken") and node.get("command") else ""
+        if node.get("command") is not None:
+            lines.append(f'    {ident}["{mark}{label}"]')
+        else:
+            lines.append(f'    {ident}{{"{label}"}}')
+    for edge in tree["edges"]:
+        arrow = "==>" if edge.get("taken") else "-->"
+        label = _mm_text(str(edge.get("label") or ""))
+        middle = f'|"{label}"|' if label else ""
+        lines.append(f"    {nid('t', edge['source'])} {arrow}{middle} {nid('t', edge['target'])}")
+    lines.append("  end")

@@ -10,9 +10,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from trace_audit.timeline import LogSource, as_log, gap_stepper, require_cycles, seal_dropped
+from trace_audit.cycle_fields import seal_dropped
+from trace_audit.log_gaps import gap_stepper
+from trace_audit.log_source import LogSource, as_log, require_cycles
+from trace_runtime.chain_writer import CLOSE_METADATA
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, CycleRange, Gap
-from trace_runtime.logger import CLOSE_METADATA
+from trace_runtime.logset import Log
 from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
 
@@ -77,60 +80,19 @@ def log_info(
     log = as_log(source)
     require_cycles(log)
     period = max((s.session.period_ns for s in log.segments), default=0)
-    counts: dict[str, int] = {}
-    ranges: dict[str, CycleRange] = {}
-    dropped: int | None = None
-    gaps: list[Gap] = []
-    if scan:
-        dropped = 0
-        gap_of = gap_stepper(log, gap_tolerance)
-        for cycle in log.iter_cycles():
-            name = cycle.segment
-            counts[name] = counts.get(name, 0) + 1
-            ranges[name] = CycleRange.of(cycle.cycle, cycle.t_ns).merge(ranges.get(name))
-            dropped += seal_dropped(cycle)
-            gap = gap_of(cycle)
-            if gap is not None:
-                gaps.append(gap)
-    if dropped is not None:
-        # Drops after a segment's last seal are declared at close, not by a seal.
-        dropped += sum(_dropped_at_close(s) for s in log.segments)
+    seen = _scan_seals(log, gap_tolerance) if scan else _Scanned({}, {}, None, [])
     rows: list[SegmentRow] = []
     channels: dict[str, int] = {}
     tiers: dict[str, int] = {}
     for segment in log.segments:
         info = segment.info
-        name = segment.path.name
         if not scan:
-            counts[name] = info.channels.get(TOPIC_SEAL, 0)
-            newest = next(segment.iter_cycles(reverse=True), None)
-            if newest is not None:
-                ranges[name] = CycleRange(
-                    segment.session.first_cycle, newest.cycle, info.start_ns, newest.t_ns
-                )
-        cycles = ranges.get(name)
+            _from_summary(segment, seen)
         for topic, n in info.channels.items():
             channels[topic] = channels.get(topic, 0) + n
         tiers[info.tier] = tiers.get(info.tier, 0) + 1
-        rows.append(
-            SegmentRow(
-                path=str(segment.path),
-                tier=info.tier,
-                robot=segment.session.robot_id,
-                segment=segment.session.segment,
-                start_ns=info.start_ns,
-                end_ns=info.end_ns,
-                first_cycle=None if cycles is None else cycles.first_cycle,
-                last_cycle=None if cycles is None else cycles.last_cycle,
-                cycles=counts.get(name, 0),
-                bytes=info.bytes,
-                chunks=info.chunk_count,
-                finished=info.finished,
-                recovered=info.recovered,
-                software_version=segment.session.software_version,
-                policy_version=segment.session.policy_version,
-            )
-        )
+        name = segment.path.name
+        rows.append(_segment_row(segment, seen.ranges.get(name), seen.counts.get(name, 0)))
     return LogInfo(
         path=str(log.root),
         robots=tuple(dict.fromkeys(s.session.robot_id for s in log.segments)),
@@ -144,8 +106,69 @@ def log_info(
         finished=all(r.finished for r in rows),
         recovered=log.recovered,
         scanned=scan,
-        dropped=dropped,
-        gaps=tuple(gaps),
+        dropped=seen.dropped,
+        gaps=tuple(seen.gaps),
+    )
+
+
+@dataclass(slots=True)
+class _Scanned:
+    """Per segment file: cycles and their range; for the log: drops (None unscanned), gaps."""
+
+    counts: dict[str, int]
+    ranges: dict[str, CycleRange]
+    dropped: int | None
+    gaps: list[Gap]
+
+
+def _scan_seals(log: Log, gap_tolerance: float) -> _Scanned:
+    """Every cycle read once: each segment's cycles and range, the drops, the gaps."""
+    out = _Scanned({}, {}, 0, [])
+    dropped = 0
+    gap_of = gap_stepper(log, gap_tolerance)
+    for cycle in log.iter_cycles():
+        name = cycle.segment
+        out.counts[name] = out.counts.get(name, 0) + 1
+        out.ranges[name] = CycleRange.of(cycle.cycle, cycle.t_ns).merge(out.ranges.get(name))
+        dropped += seal_dropped(cycle)
+        gap = gap_of(cycle)
+        if gap is not None:
+            out.gaps.append(gap)
+    # Drops after a segment's last seal are declared at close, not by a seal.
+    out.dropped = dropped + sum(_dropped_at_close(s) for s in log.segments)
+    return out
+
+
+def _from_summary(segment: Segment, into: _Scanned) -> None:
+    """A segment's cycles from its summary, and its range up to its newest cycle."""
+    info = segment.info
+    name = segment.path.name
+    into.counts[name] = info.channels.get(TOPIC_SEAL, 0)
+    newest = next(segment.iter_cycles(reverse=True), None)
+    if newest is not None:
+        into.ranges[name] = CycleRange(
+            segment.session.first_cycle, newest.cycle, info.start_ns, newest.t_ns
+        )
+
+
+def _segment_row(segment: Segment, cycles: CycleRange | None, count: int) -> SegmentRow:
+    info = segment.info
+    return SegmentRow(
+        path=str(segment.path),
+        tier=info.tier,
+        robot=segment.session.robot_id,
+        segment=segment.session.segment,
+        start_ns=info.start_ns,
+        end_ns=info.end_ns,
+        first_cycle=None if cycles is None else cycles.first_cycle,
+        last_cycle=None if cycles is None else cycles.last_cycle,
+        cycles=count,
+        bytes=info.bytes,
+        chunks=info.chunk_count,
+        finished=info.finished,
+        recovered=info.recovered,
+        software_version=segment.session.software_version,
+        policy_version=segment.session.policy_version,
     )
 
 

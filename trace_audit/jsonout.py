@@ -12,8 +12,8 @@ from pydantic import BaseModel
 from trace_runtime.gaps import JSON_INLINE
 
 OMIT_EMPTY = "json_omit_empty"
-"""Dataclass field metadata key: leave the field out of JSON while it is empty or None (for
-fields added later, so the JSON of what had none stays as it was)."""
+"""Dataclass field metadata key: leave the field out of JSON while it is empty or None (a
+field only some logs fill, e.g. profile 1.1's channels, is absent from the others' JSON)."""
 
 
 def to_jsonable(value: Any) -> Any:

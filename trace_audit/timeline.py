@@ -1,9 +1,6 @@
 """Decisions over time: the timeline of decision changes, and why the robot took an action.
 
-Times: the library takes integer nanoseconds in the log's own clock (``t_ns``). At the CLI a
-time is seconds in that clock (``12.3`` means t_ns = 12_300_000_000); ``+12.3`` means 12.3 s
-after the log's first record. ``TimePoint.parse`` reads both and ``TimePoint.resolve`` turns
-them into ``t_ns`` for a given log, so every command reads times the same way.
+Times are read as ``trace_audit.log_time`` says (int ns in the log's clock, or CLI text).
 
 A *decision change* is a cycle whose command differs from the previous logged cycle's. The
 first cycle of a window always opens a row. Cycles that were never logged (dropped, a gap in
@@ -13,171 +10,30 @@ time) are reported as gaps between rows, not papered over.
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from decimal import Decimal, InvalidOperation
-from pathlib import Path
 
-import orjson
-
-from trace_audit.causal import CounterfactualView, FactorValue, read_decision, split_flags
+from trace_audit.causal import CounterfactualView, FactorValue, read_decision
+from trace_audit.cycle_fields import command_of, execution_fields
 from trace_audit.jsonout import OMIT_EMPTY
+from trace_audit.log_gaps import gap_stepper
+from trace_audit.log_source import LogSource, as_log, require_cycles
+from trace_audit.log_time import TimeArg, resolve_time
 from trace_runtime.cycles import Cycle
-from trace_runtime.errors import LogReadError, UsageError
-from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap, GapFinder, SealedStamp
-from trace_runtime.logset import Log, open_log
-from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION, TOPIC_SEAL
+from trace_runtime.errors import UsageError
+from trace_runtime.flags import split_flags
+from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap
+from trace_runtime.logset import Log
 
 __all__ = [
     "ClockRun",
     "Gap",
-    "LogSource",
-    "Span",
-    "TimePoint",
     "Timeline",
+    "TimelineRow",
     "Transition",
     "WhyResult",
-    "as_log",
-    "command_of",
-    "gap_stepper",
-    "require_cycles",
     "timeline",
     "why",
 ]
-
-LogSource = Log | str | Path
-
-
-@dataclass(frozen=True, slots=True)
-class TimePoint:
-    """A time as given at the CLI: seconds in the log's clock, or ``+S`` after its start."""
-
-    ns: int
-    relative: bool = False
-
-    @classmethod
-    def parse(cls, text: str) -> TimePoint:
-        """Read ``12.3``, ``12.3s`` or ``+12.3`` (relative to the log start); UsageError else."""
-        raw = text.strip()
-        relative = raw.startswith("+")
-        number = raw[1:] if relative else raw
-        number = number[:-1] if number.endswith("s") else number
-        try:
-            seconds = Decimal(number)
-        except InvalidOperation:
-            seconds = Decimal("NaN")
-        if not seconds.is_finite() or seconds < 0 or number.strip() != number or not number:
-            raise UsageError(
-                f"invalid time {text!r}: give seconds in the log's clock (e.g. 12.3) "
-                "or +seconds after the log start (e.g. +5)"
-            )
-        return cls(int(seconds * 1_000_000_000), relative)
-
-    def resolve(self, log: Log) -> int:
-        """This time as ``t_ns`` in ``log``'s clock."""
-        return log.start_ns + self.ns if self.relative else self.ns
-
-
-TimeArg = TimePoint | int | str | None
-
-
-def resolve_time(value: TimeArg, log: Log) -> int | None:
-    """``t_ns`` for a time given as TimePoint, int nanoseconds or CLI text (None stays None)."""
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, int | str | TimePoint):
-        raise TypeError(f"a time is int ns, CLI text or a TimePoint, not {type(value).__name__}")
-    if isinstance(value, int):
-        return value
-    if isinstance(value, str):
-        value = TimePoint.parse(value)
-    return value.resolve(log)
-
-
-def as_log(source: LogSource, *, lazy: bool = False) -> Log:
-    """An open ``Log`` for a path (file, directory or log root) or an already open one.
-
-    ``lazy``: the caller asks about one moment, so a catalogued root's segments are opened
-    only when a query reaches them (``open_log``)."""
-    return source if isinstance(source, Log) else open_log(source, lazy=lazy)
-
-
-def require_cycles(log: Log) -> None:
-    """Raise ``LogReadError`` when the log holds no decision cycle at all (an empty log)."""
-    if log.holds_trace_messages():
-        return
-    if next(log.iter_cycles(), None) is None:
-        recovered = " (recovered from an unfinished segment)" if log.recovered else ""
-        raise LogReadError(str(log.root), f"the log holds no decision cycles{recovered}")
-
-
-def command_of(cycle: Cycle) -> str | None:
-    """The command of a cycle's action, read without parsing the whole record."""
-    data = cycle.payloads.get(TOPIC_ACTION)
-    if data is not None:
-        # Canonical bytes put the action's own "command" first after the stamp; anything
-        # else (another writer's key order, escapes) takes the full parse below.
-        at = data.find(b'"command":"')
-        if at > 0 and data.count(b"{", 0, at) == 1:
-            end = data.find(b'"', at + 11)
-            value = data[at + 11 : end]
-            if end > 0 and b"\\" not in value:
-                return value.decode()
-    layer = cycle.layer(TOPIC_ACTION)
-    if isinstance(layer, dict):
-        command = layer.get("command")
-        return command if isinstance(command, str) else None
-    return None
-
-
-def _execution_of(cycle: Cycle) -> tuple[tuple[str, ...], float | None, str | None]:
-    """The execution record's flags, overall deviation and its unit (one parse a cycle)."""
-    data = cycle.payloads.get(TOPIC_EXECUTION)
-    layer = orjson.loads(data) if data is not None else cycle.layer(TOPIC_EXECUTION)
-    if not isinstance(layer, dict):
-        return (), None, None
-    flags = tuple(f for f in layer.get("flags") or () if isinstance(f, str))
-    deviation = layer.get("deviation")
-    unit = layer.get("deviation_unit")
-    return (
-        flags,
-        float(deviation) if isinstance(deviation, int | float) else None,
-        unit if isinstance(unit, str) and unit else None,
-    )
-
-
-def seal_dropped(cycle: Cycle) -> int:
-    data = cycle.payloads.get(TOPIC_SEAL)
-    if data is None:
-        return 0
-    at = data.rfind(b'"dropped":')
-    if at < 0:
-        return 0
-    digits = bytearray()
-    for byte in data[at + 10 :]:
-        if 48 <= byte <= 57:
-            digits.append(byte)
-        else:
-            break
-    return int(digits) if digits else 0
-
-
-def gap_stepper(
-    log: Log, tolerance: float = DEFAULT_GAP_TOLERANCE
-) -> Callable[[Cycle], Gap | None]:
-    """Feed a log's cycles in reading order; get the gap each sealed one ends, by the one
-    rule (``trace_runtime.gaps``): per robot, with the period of the cycle's own segment."""
-    sessions = {s.path.name: s.session for s in log.segments}
-    finder = GapFinder(tolerance)
-
-    def step(cycle: Cycle) -> Gap | None:
-        session = sessions.get(cycle.segment)
-        if session is None or not cycle.sealed:
-            return None
-        stamp = SealedStamp(cycle.cycle, cycle.t_ns, session.period_ns, seal_dropped(cycle))
-        return finder.step(session.robot_id, stamp)
-
-    return step
 
 
 def _period_ns(log: Log) -> int:
@@ -188,7 +44,7 @@ def _period_ns(log: Log) -> int:
 
 
 @dataclass(slots=True)
-class Span:
+class TimelineRow:
     """A stretch of cycles with one command: the cycle that began it and what it held.
 
     ``held_ns`` runs from this cycle to the next row's (or one period past the last cycle
@@ -242,7 +98,7 @@ class Timeline:
     every: bool
     cycles: int
     changes: int
-    rows: tuple[Span, ...]
+    rows: tuple[TimelineRow, ...]
     gaps: tuple[Gap, ...]
     recovered: bool
     clock_runs: tuple[ClockRun, ...] = field(default=(), metadata={OMIT_EMPTY: True})
@@ -279,8 +135,8 @@ def timeline(
     lo, hi = _window(log, start, end)
     runs = log.clock_runs()
     if len({run.first_robot for run in runs}) > 1:
-        runs = [log]  # several robots: one sequence, as before
-    rows: list[Span] = []
+        runs = [log]  # several robots' runs do not line up: the log is one sequence
+    rows: list[TimelineRow] = []
     gaps: list[Gap] = []
     counts: list[tuple[int, int, int | None, int | None]] = []
     for number, run in enumerate(runs):
@@ -321,7 +177,7 @@ def timeline(
 
 @dataclass(slots=True)
 class _RunRows:
-    rows: list[Span]
+    rows: list[TimelineRow]
     gaps: list[Gap]
     cycles: int = 0
     changes: int = 0
@@ -336,14 +192,14 @@ def _rows(
     period = _period_ns(log)
     gap_of = gap_stepper(log, gap_tolerance)
     out = _RunRows([], [])
-    current: Span | None = None
+    current: TimelineRow | None = None
     for cycle in log.iter_cycles(lo, hi):
         out.cycles += 1
         if out.first_cycle is None:
             out.first_cycle = cycle.cycle
         out.last_cycle = cycle.cycle
         command = command_of(cycle)
-        raw_flags, deviation, unit = _execution_of(cycle)
+        raw_flags, deviation, unit = execution_fields(cycle)
         flags, scenario = split_flags(raw_flags)
         gap = gap_of(cycle)
         if gap is not None:
@@ -354,7 +210,7 @@ def _rows(
             if current is not None:
                 current.held_ns = cycle.t_ns - current.t_ns
             decision = read_decision(cycle)
-            current = Span(
+            current = TimelineRow(
                 cycle=cycle.cycle,
                 t_ns=cycle.t_ns,
                 command=command,
@@ -371,7 +227,7 @@ def _rows(
         current.cycles += 1
         current.end_cycle, current.end_t_ns = cycle.cycle, cycle.t_ns
         # Only where the writer names the unit (profile 1.1): a number without one cannot
-        # be read, and the rows of 1.0 logs stay as they were.
+        # be read, and a profile 1.0 record names none.
         if (
             unit is not None
             and deviation is not None

@@ -31,9 +31,9 @@ _EXPORTS = {
     "load_public_key": "trace_runtime.keys",
     "load_signer": "trace_runtime.keys",
     "AuditLogger": "trace_runtime.logger",
-    "CycleBuilder": "trace_runtime.logger",
-    "LoggerConfig": "trace_runtime.logger",
-    "LoggerStats": "trace_runtime.logger",
+    "CycleBuilder": "trace_runtime.cycle_builder",
+    "LoggerConfig": "trace_runtime.logger_config",
+    "LoggerStats": "trace_runtime.logger_config",
     "Log": "trace_runtime.logset",
     "open_log": "trace_runtime.logset",
     "Segment": "trace_runtime.reader",
@@ -124,6 +124,7 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
+    from trace_runtime.cycle_builder import CycleBuilder
     from trace_runtime.cycles import Cycle, RawMessage
     from trace_runtime.errors import (
         LogLimitError,
@@ -143,7 +144,8 @@ if TYPE_CHECKING:
         load_public_key,
         load_signer,
     )
-    from trace_runtime.logger import AuditLogger, CycleBuilder, LoggerConfig, LoggerStats
+    from trace_runtime.logger import AuditLogger
+    from trace_runtime.logger_config import LoggerConfig, LoggerStats
     from trace_runtime.logset import Log, open_log
     from trace_runtime.reader import Segment, SegmentInfo, open_segment
     from trace_runtime.recordings import Recordings, external_ref

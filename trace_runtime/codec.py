@@ -69,17 +69,15 @@ def encode_layer(
 
 
 _FastEncoder = tuple[Callable[[Any], dict[str, Any]], dict[type, int]]
-_fast: _FastEncoder | None = None
 
 
+@functools.cache
 def _fast_encoder() -> _FastEncoder:
     """orjson's ``default`` for the records of ``trace_runtime.records``, and the number of
     fields of each layer model (all named in JSON as in Python, none named ``cycle`` or
-    ``t_ns``: their fields can follow the stamp as they are). Built on first use."""
-    global _fast
-    if _fast is None:
-        _fast = _build_fast_encoder()
-    return _fast
+    ``t_ns``: their fields can follow the stamp as they are). Built on first use, once: the
+    cache is its one owner."""
+    return _build_fast_encoder()
 
 
 def _build_fast_encoder() -> _FastEncoder:

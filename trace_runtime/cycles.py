@@ -3,8 +3,8 @@ messages of the hot tier group into cycles.
 
 This is the middle layer of the reader: below it, ``mcap_file`` turns bytes into messages;
 above it, ``reader`` (one segment) and ``logset`` (many segments, tiers, robots) build on
-these values. Tier codecs (``tiers.warm``, ``tiers.cold``) assemble their own cycles from
-the same values.
+these values. Tier codecs (``tier_formats.warm``, ``tier_formats.cold``) assemble their own
+cycles from the same values.
 """
 
 from __future__ import annotations

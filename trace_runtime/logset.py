@@ -24,12 +24,14 @@ from typing import Any
 
 import orjson
 
+from trace_runtime.clock import clock_restarted
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeError, UsageError
-from trace_runtime.mcap_file import DEFAULT_LIMITS, ReadLimits
+from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.seal_check import SealStatus, verify_cycle
+from trace_runtime.segment_names import parse_segment_name
 from trace_runtime.session import TIER_METADATA, TIERS
 
 log = logging.getLogger("trace_runtime")
@@ -52,18 +54,24 @@ class FileProblem:
     """The file is MCAP (or something else) that is not a TRACE segment: not damage."""
 
 
-def copy_rank(segment: Segment) -> tuple[int, int]:
+def copy_rank(segment: Segment) -> tuple[int, int, int]:
     """How much of the robot's record a copy of a segment holds; lower is read first.
 
     A hot segment is the original. A cold copy is a lossless re-encoding of its source, so
     a cold copy of a hot segment holds everything; a warm copy (and a cold copy of a warm
-    one) holds summaries. Among equals the less re-encoded copy wins.
+    one) holds summaries. Among lossless (or among lossy) copies a finished file comes
+    before a recovered one (a crash or an interrupted copy may have cut it), then the less
+    re-encoded copy wins.
     """
     tier = segment.session.tier
     lossy = tier == "warm" or (
         tier == "cold" and segment.metadata.get(TIER_METADATA, {}).get("lossy") == "true"
     )
-    return (1 if lossy else 0, TIERS.index(tier) if tier in TIERS else 9)
+    return (
+        1 if lossy else 0,
+        0 if segment.finished else 1,
+        TIERS.index(tier) if tier in TIERS else 9,
+    )
 
 
 def preferred_copies(segments: Sequence[Segment]) -> tuple[list[Segment], list[Segment]]:
@@ -71,10 +79,10 @@ def preferred_copies(segments: Sequence[Segment]) -> tuple[list[Segment], list[S
 
     While a compaction runs (or after one was interrupted) a segment sits in two tiers of a
     root; a segment copied by hand may sit beside its original, whole or cut short. Exactly
-    one copy of each chain position is read, so no decision is counted twice: the lossless
-    one before a lossy one, a finished file before a recovered one, then the lower tier
-    (``copy_rank``), and a copy proven to be another cut short (``cut_short_copy``) always
-    gives way to the longer. The others are listed as shadowed (``verify`` checks each).
+    one copy of each chain position is read, so no decision is counted twice: the first by
+    ``copy_rank`` (lossless, then finished, then the lower tier), and a copy proven to be
+    another cut short (``cut_short_copy``) always gives way to the longer. The others are
+    listed as shadowed (``verify`` checks each).
     Only copies that opened are compared, so a damaged copy never shadows a readable one.
     Two files of one tier at one position that are neither the same bytes nor one cut from
     the other are two recordings (a fork): one is read, a warning names both, and
@@ -97,7 +105,7 @@ def preferred_copies(segments: Sequence[Segment]) -> tuple[list[Segment], list[S
 def _best_copy_first(copies: list[Segment]) -> list[Segment]:
     if len(copies) == 1:
         return copies
-    ranked = sorted(copies, key=lambda s: (copy_rank(s)[0], not s.finished, *copy_rank(s)[1:]))
+    ranked = sorted(copies, key=copy_rank)
     best = ranked[0]
     for other in ranked[1:]:
         if cut_short_copy(best, other):
@@ -170,6 +178,17 @@ def find_segment_files(path: Path) -> list[Path]:
     if path.is_dir():
         return sorted(p for p in path.rglob("*.mcap") if p.is_file() and PARTIAL_MARK not in p.name)
     return [path]
+
+
+def robot_segment_files(root: Path, robot_id: str) -> dict[int, list[Path]]:
+    """``robot_id``'s segment files among a log root's (``find_segment_files``), by segment
+    number, known by their names (``parse_segment_name``): nothing is opened."""
+    numbered: dict[int, list[Path]] = {}
+    for path in find_segment_files(root):
+        parsed = parse_segment_name(path.name)
+        if parsed is not None and parsed[0] == robot_id:
+            numbered.setdefault(parsed[1], []).append(path)
+    return numbered
 
 
 @dataclass(slots=True)
@@ -272,8 +291,8 @@ class Log:
         return [self] if len(runs) == 1 else [self._of_run(run) for run in runs]
 
     def _clock_runs(self) -> list[list[_Slot]]:
-        """Each robot's segments in chain order, split where a segment ends after the next
-        one starts."""
+        """Each robot's segments in chain order, split where the clock restarted between two
+        (``clock_restarted``: a segment ends after the next one starts)."""
         by_robot: dict[str, list[_Slot]] = {}
         for slot in self._slots:
             by_robot.setdefault(_robot_of(slot), []).append(slot)
@@ -282,7 +301,7 @@ class Log:
             chain = sorted(by_robot[robot], key=_chain_key)
             run = [chain[0]]
             for before, after in itertools.pairwise(chain):
-                if before.end_ns > after.start_ns:
+                if clock_restarted(before.end_ns, after.start_ns):
                     runs.append(run)
                     run = []
                 run.append(after)

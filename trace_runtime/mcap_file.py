@@ -5,7 +5,8 @@ writer left none), metadata records, the chunk table, and decoding a chunk into 
 Every read is bounded, because an investigator opens files an attacker may have prepared:
 ``ReadLimits`` caps a chunk's decompressed size (declared and real), the records a chunk may
 hold for its compressed size, record lengths and string lengths; a limit hit is a
-``LogLimitError`` (a ``LogReadError``), never a ``MemoryError`` or a hang.
+``LogLimitError`` (a ``LogReadError``), never a ``MemoryError`` or a hang. The record framing
+is ``mcap_records``, one chunk's decoding ``mcap_chunks``, the bounds ``read_limits``.
 """
 
 from __future__ import annotations
@@ -15,95 +16,46 @@ import bisect
 import contextlib
 import itertools
 import logging
-import mmap
-import os
-import stat
 import struct
 import sys
-import zlib
 from collections import OrderedDict
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import lz4.frame
-import zstandard
-
-from trace_runtime.cycles import RawMessage, raw_message
+from trace_runtime.cycles import RawMessage
 from trace_runtime.errors import LogLimitError, LogReadError
+from trace_runtime.mcap_chunks import ChunkDecoder
+from trace_runtime.mcap_records import (
+    CHUNK_TABLE_ATTACHMENT,
+    DAMAGE,
+    FOOTER_SIZE,
+    MAGIC,
+    MESSAGE_FIXED,
+    OP_ATTACHMENT_INDEX,
+    OP_CHANNEL,
+    OP_CHUNK,
+    OP_CHUNK_INDEX,
+    OP_DATA_END,
+    OP_FOOTER,
+    OP_HEADER,
+    OP_MESSAGE,
+    OP_METADATA,
+    OP_METADATA_INDEX,
+    OP_SCHEMA,
+    OP_STATISTICS,
+    OP_SUMMARY_OFFSET,
+    RECORD_HEADER,
+    check_fits,
+    damage_reason,
+    map_file,
+    read_str,
+)
+from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 
 log = logging.getLogger("trace_runtime")
 
-MAGIC = b"\x89MCAP0\r\n"
-# Defined here, not by the writer (segment.py), so that reading does not import the `mcap`
-# library the writer builds records with (~30 ms of start-up).
-CHUNK_TABLE_ATTACHMENT = "trace.chunk_columns"
-"""An attachment holding every chunk's start times, then end times, then file offsets, each
-a column of little-endian uint64, in time order (written only when the chunks are in time
-order, which the logger guarantees unless the robot's clock runs backwards). Readers map it
-and bisect it in place instead of parsing one Chunk Index record per chunk (36,000 an hour
-at 10 Hz). The Chunk Indexes stay, for every other MCAP tool."""
-
-_RECORD_HEADER = struct.Struct("<BQ")
-_MESSAGE_FIXED = struct.Struct("<HIQQ")
-_CHUNK_FIXED = struct.Struct("<QQQI")
-_FOOTER_SIZE = 9 + 20
-_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
-_OP_CHUNK_INDEX, _OP_METADATA, _OP_DATA_END = 8, 12, 15
-_OP_ATTACHMENT_INDEX, _OP_STATISTICS, _OP_METADATA_INDEX, _OP_SUMMARY_OFFSET = 10, 11, 13, 14
 _RECENT_CHUNKS = 4
-
-
-@dataclass(frozen=True, slots=True)
-class ReadLimits:
-    """Bounds on what one file may make the reader do, so that reading costs about what an
-    honest file of the same size would (within a constant factor), never a bomb's worth.
-
-    The defaults are far above what an honest log needs: a TRACE chunk is a few MB at most
-    (a camera frame a few tens of MB); zstd shrinks TRACE chunks about 4-16x and an honest
-    chunk holds about 0.03 records per compressed byte (measured on simulator logs)."""
-
-    max_chunk_bytes: int = 512 << 20
-    """A chunk's decompressed size, as declared and as really produced, whatever its
-    compressed size. (A stock MCAP writer cutting chunks by size writes chunks of its chunk
-    size or of its largest message; tools re-chunk at up to a few hundred MB.)"""
-    max_inflation: int = 1024
-    """A chunk may declare at most this many times its compressed size (plus
-    ``small_chunk_bytes``). Zeros compress ~30,000:1; without this bound an 80 KB file of
-    40 chunks would make the reader inflate 2.5 GB."""
-    small_chunk_bytes: int = 64 << 10
-    """What any chunk may inflate to, whatever its compressed size."""
-    records_per_compressed_byte: int = 1
-    """Records a chunk may hold per byte of its compressed data (plus ``min_chunk_records``).
-    Honest chunks hold well under one: every message carries a time and sequence that do not
-    compress to nothing. A flood of empty messages that inflates from a few KB is refused."""
-    min_chunk_records: int = 16
-    """What any chunk may hold; small, so that a flood spread over many tiny chunks is
-    bounded by the file's size too (about 1.3 records per file byte at worst)."""
-    max_record_bytes: int = 1 << 32
-    """A record in the file (outside chunks)."""
-
-    def __post_init__(self) -> None:
-        for name in (
-            "max_chunk_bytes",
-            "max_inflation",
-            "small_chunk_bytes",
-            "records_per_compressed_byte",
-            "min_chunk_records",
-        ):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"ReadLimits.{name} must be positive")
-
-    def chunk_bytes(self, compressed: int) -> int:
-        """The most a chunk of ``compressed`` bytes may inflate to."""
-        return min(self.max_chunk_bytes, self.small_chunk_bytes + self.max_inflation * compressed)
-
-    def chunk_records(self, compressed: int) -> int:
-        """The most records a chunk of ``compressed`` bytes may hold."""
-        return self.min_chunk_records + self.records_per_compressed_byte * compressed
-
-
-DEFAULT_LIMITS = ReadLimits()
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,17 +68,13 @@ class ChunkInfo:
     end_ns: int
 
 
-_DAMAGE = (struct.error, ValueError, KeyError, IndexError, OverflowError, zstandard.ZstdError)
-"""What parsing a damaged record raises; never a bug of ours to show as a traceback."""
-
-
 class McapFile:
     """An MCAP file opened for reading: records, metadata, chunk table, messages."""
 
     def __init__(self, path: str | Path, limits: ReadLimits = DEFAULT_LIMITS) -> None:
         self.path = Path(path)
         self.limits = limits
-        self._data = _map_file(self.path)
+        self._data = map_file(self.path)
         if self._data[:8] != MAGIC:
             raise LogReadError(str(path), "not an MCAP file (bad magic)")
         self.profile = ""
@@ -153,10 +101,10 @@ class McapFile:
         """Damaged chunks stepped over, by a scan or when read: (file offset, why)."""
         self._damaged: set[int] = set()
         self._recent_chunks: OrderedDict[int, list[RawMessage]] = OrderedDict()
-        self._zstd_context: zstandard.ZstdDecompressor | None = None
+        self._chunks = ChunkDecoder(self.path, limits)
         try:
             finished = self._read_summary()
-        except _DAMAGE as err:
+        except DAMAGE as err:
             # A damaged summary does not make the data unreadable: scan the data instead.
             log.warning("%s: damaged MCAP summary (%s); reading the data by scan", path, err)
             self._reset_index()
@@ -169,14 +117,6 @@ class McapFile:
     @property
     def size(self) -> int:
         return len(self._data)
-
-    @property
-    def _zstd(self) -> zstandard.ZstdDecompressor:
-        # Made on first use (~25 us): a log of many segments is opened whole, and a seek
-        # decodes chunks of one or two of them.
-        if self._zstd_context is None:
-            self._zstd_context = zstandard.ZstdDecompressor()
-        return self._zstd_context
 
     @property
     def holds_messages(self) -> bool:
@@ -200,8 +140,8 @@ class McapFile:
         """Turn what parsing damaged bytes raises into one ``LogReadError`` naming the file."""
         try:
             yield
-        except _DAMAGE as err:
-            raise LogReadError(str(self.path), _damage_reason(err)) from err
+        except DAMAGE as err:
+            raise LogReadError(str(self.path), damage_reason(err)) from err
 
     # --- metadata --------------------------------------------------------------------------
 
@@ -237,11 +177,11 @@ class McapFile:
         header = self._parse_header(8)
         if header is None:
             raise LogReadError(str(self.path), "truncated before the MCAP header ended")
-        if len(data) < 8 + _FOOTER_SIZE + 8 or data[-8:] != MAGIC:
+        if len(data) < 8 + FOOTER_SIZE + 8 or data[-8:] != MAGIC:
             return False
-        footer_at = len(data) - 8 - _FOOTER_SIZE
-        opcode, length = _RECORD_HEADER.unpack_from(data, footer_at)
-        if opcode != _OP_FOOTER or length != 20:
+        footer_at = len(data) - 8 - FOOTER_SIZE
+        opcode, length = RECORD_HEADER.unpack_from(data, footer_at)
+        if opcode != OP_FOOTER or length != 20:
             return False
         summary_start, offsets_start, _crc = struct.unpack_from("<QQI", data, footer_at + 9)
         if summary_start == 0:
@@ -250,10 +190,10 @@ class McapFile:
         if not ranges:  # no summary offsets: walk the whole summary section once
             ranges = {0: [(summary_start, offsets_start or footer_at)]}
         for opcode, spans in ranges.items():
-            if opcode == _OP_CHUNK_INDEX:
+            if opcode == OP_CHUNK_INDEX:
                 self._table_source = ("chunk_index", spans[0][0], spans[-1][1])
                 continue
-            if opcode in (_OP_SCHEMA, _OP_CHANNEL):
+            if opcode in (OP_SCHEMA, OP_CHANNEL):
                 self._deferred_summary += spans
                 continue
             for begin, end in spans:
@@ -273,11 +213,11 @@ class McapFile:
         groups: dict[int, list[tuple[int, int]]] = {}
         pos = begin
         while pos + 9 <= end:
-            opcode, length = _RECORD_HEADER.unpack_from(self._data, pos)
-            _check_fits(pos + 9, length, end)
-            if opcode == _OP_SUMMARY_OFFSET:
+            opcode, length = RECORD_HEADER.unpack_from(self._data, pos)
+            check_fits(pos + 9, length, end)
+            if opcode == OP_SUMMARY_OFFSET:
                 group, start, size = struct.unpack_from("<BQQ", self._data, pos + 9)
-                _check_fits(start, size, len(self._data))
+                check_fits(start, size, len(self._data))
                 groups.setdefault(group, []).append((start, start + size))
             pos += 9 + length
         return groups
@@ -286,22 +226,22 @@ class McapFile:
         data = self._data
         pos = begin
         while pos + 9 <= end:
-            opcode, length = _RECORD_HEADER.unpack_from(data, pos)
+            opcode, length = RECORD_HEADER.unpack_from(data, pos)
             body = pos + 9
-            _check_fits(body, length, end)
-            if opcode == _OP_SCHEMA:
+            check_fits(body, length, end)
+            if opcode == OP_SCHEMA:
                 self._parse_schema(body)
-            elif opcode == _OP_CHANNEL:
+            elif opcode == OP_CHANNEL:
                 self._parse_channel(body)
-            elif opcode == _OP_STATISTICS:
+            elif opcode == OP_STATISTICS:
                 self._parse_statistics(body)
-            elif opcode == _OP_METADATA_INDEX:
+            elif opcode == OP_METADATA_INDEX:
                 offset, _len = struct.unpack_from("<QQ", data, body)
-                name, _ = _read_str(data, body + 16)
+                name, _ = read_str(data, body + 16)
                 self._metadata_at.setdefault(name, []).append(offset)
-            elif opcode == _OP_ATTACHMENT_INDEX:
+            elif opcode == OP_ATTACHMENT_INDEX:
                 offset, _len, _log, _create, size = struct.unpack_from("<QQQQQ", data, body)
-                name, _ = _read_str(data, body + 40)
+                name, _ = read_str(data, body + 40)
                 if name == CHUNK_TABLE_ATTACHMENT:
                     self._table_source = ("attachment", offset, size)
             pos = body + length
@@ -313,7 +253,7 @@ class McapFile:
         (map_len,) = struct.unpack_from("<I", data, body + 42)
         counts: dict[int, int] = {}
         pos = body + 46
-        _check_fits(pos, map_len, len(data))
+        check_fits(pos, map_len, len(data))
         while pos < body + 46 + map_len:
             channel_id, n = struct.unpack_from("<HQ", data, pos)
             counts[channel_id] = n
@@ -324,10 +264,10 @@ class McapFile:
         data = self._data
         if pos + 9 > len(data):
             return None
-        opcode, length = _RECORD_HEADER.unpack_from(data, pos)
-        if opcode != _OP_HEADER or pos + 9 + length > len(data):
+        opcode, length = RECORD_HEADER.unpack_from(data, pos)
+        if opcode != OP_HEADER or pos + 9 + length > len(data):
             return None
-        profile, _ = _read_str(data, pos + 9)
+        profile, _ = read_str(data, pos + 9)
         self.profile = profile
         return int(pos + 9 + length)
 
@@ -338,17 +278,17 @@ class McapFile:
         pos = self._parse_header(8) or len(data)
         end = len(data)
         while pos + 9 <= end:
-            opcode, length = _RECORD_HEADER.unpack_from(data, pos)
+            opcode, length = RECORD_HEADER.unpack_from(data, pos)
             body = pos + 9
             if length > self.limits.max_record_bytes or body + length > end:
                 break  # a record cut short by the crash: everything before it is kept
-            if opcode == _OP_SCHEMA:
+            if opcode == OP_SCHEMA:
                 self._parse_schema(body)
-            elif opcode == _OP_CHANNEL:
+            elif opcode == OP_CHANNEL:
                 self._parse_channel(body)
-            elif opcode == _OP_METADATA:
+            elif opcode == OP_METADATA:
                 self._parse_metadata(body)
-            elif opcode == _OP_CHUNK:
+            elif opcode == OP_CHUNK:
                 start, stop = struct.unpack_from("<QQ", data, body)
                 damage = self._chunk_damage(pos)
                 if damage is None:
@@ -358,9 +298,9 @@ class McapFile:
                     # read as empty; the scan goes on to the next complete record.
                     rows.append((start, stop, pos))
                     self._skip_chunk(pos, damage)
-            elif opcode == _OP_MESSAGE:
+            elif opcode == OP_MESSAGE:
                 self.loose.append(self._parse_message(body, length, data))
-            elif opcode in (_OP_DATA_END, _OP_FOOTER):
+            elif opcode in (OP_DATA_END, OP_FOOTER):
                 break
             pos = body + length
         self._set_table(rows)
@@ -370,12 +310,12 @@ class McapFile:
         data = self._data
         pos = self._parse_header(8) or len(data)
         while pos + 9 <= len(data):
-            opcode, length = _RECORD_HEADER.unpack_from(data, pos)
+            opcode, length = RECORD_HEADER.unpack_from(data, pos)
             if length > self.limits.max_record_bytes or pos + 9 + length > len(data):
                 break
-            if opcode == _OP_MESSAGE:
+            if opcode == OP_MESSAGE:
                 self.loose.append(self._parse_message(pos + 9, length, data))
-            elif opcode in (_OP_DATA_END, _OP_FOOTER):
+            elif opcode in (OP_DATA_END, OP_FOOTER):
                 break
             pos += 9 + length
 
@@ -388,41 +328,41 @@ class McapFile:
             raise
         except LogReadError as err:
             return err.reason
-        except _DAMAGE as err:
+        except DAMAGE as err:
             return f"chunk at offset {pos} is damaged ({type(err).__name__}: {err})"
         return None
 
     def _parse_schema(self, body: int) -> None:
         (schema_id,) = struct.unpack_from("<H", self._data, body)
-        name, _ = _read_str(self._data, body + 2)
+        name, _ = read_str(self._data, body + 2)
         self._schemas[schema_id] = name
 
     def _parse_channel(self, body: int) -> None:
         channel_id, _schema_id = struct.unpack_from("<HH", self._data, body)
-        topic, _ = _read_str(self._data, body + 4)
+        topic, _ = read_str(self._data, body + 4)
         self._topic_map[channel_id] = topic
 
     def _parse_metadata_at(self, offset: int) -> None:
-        opcode, length = _RECORD_HEADER.unpack_from(self._data, offset)
-        _check_fits(offset + 9, length, len(self._data))
-        if opcode == _OP_METADATA:
+        opcode, length = RECORD_HEADER.unpack_from(self._data, offset)
+        check_fits(offset + 9, length, len(self._data))
+        if opcode == OP_METADATA:
             self._parse_metadata(offset + 9)
 
     def _parse_metadata(self, body: int) -> None:
-        name, pos = _read_str(self._data, body)
+        name, pos = read_str(self._data, body)
         (map_len,) = struct.unpack_from("<I", self._data, pos)
         pos += 4
         stop = pos + map_len
-        _check_fits(pos, map_len, len(self._data))
+        check_fits(pos, map_len, len(self._data))
         values: dict[str, str] = {}
         while pos < stop:
-            key, pos = _read_str(self._data, pos)
-            value, pos = _read_str(self._data, pos)
+            key, pos = read_str(self._data, pos)
+            value, pos = read_str(self._data, pos)
             values[key] = value
         self._metadata.setdefault(name, []).append(values)
 
     def _parse_message(self, body: int, length: int, data: bytes) -> RawMessage:
-        channel_id, sequence, log_time, _publish = _MESSAGE_FIXED.unpack_from(data, body)
+        channel_id, sequence, log_time, _publish = MESSAGE_FIXED.unpack_from(data, body)
         topic = self.topics.get(channel_id, f"<channel {channel_id}>")
         return RawMessage(topic, sequence, log_time, data[body + 22 : body + length])
 
@@ -457,10 +397,10 @@ class McapFile:
         """Map the writer's chunk columns in place: no copy, no parse, already in order."""
         data = self._data
         pos = offset + 9 + 16
-        _name, pos = _read_str(data, pos)
-        _media, pos = _read_str(data, pos)
+        _name, pos = read_str(data, pos)
+        _media, pos = read_str(data, pos)
         (size,) = struct.unpack_from("<Q", data, pos)
-        _check_fits(pos + 8, size, len(data))
+        check_fits(pos + 8, size, len(data))
         count = size // 24
         raw = memoryview(data)[pos + 8 : pos + 8 + 24 * count]
         if sys.byteorder == "big":
@@ -488,8 +428,8 @@ class McapFile:
         rows = []
         pos = begin
         while pos + 9 <= end:
-            opcode, length = _RECORD_HEADER.unpack_from(data, pos)
-            if opcode == _OP_CHUNK_INDEX:
+            opcode, length = RECORD_HEADER.unpack_from(data, pos)
+            if opcode == OP_CHUNK_INDEX:
                 start, stop, offset = struct.unpack_from("<QQQ", data, pos + 9)
                 rows.append((start, stop, offset))
             pos += 9 + length
@@ -558,10 +498,10 @@ class McapFile:
         except LogReadError as err:
             self._skip_chunk(offset, err.reason)
             return []
-        except _DAMAGE as err:
+        except DAMAGE as err:
             # What ``damage_as_read_error`` would say, without entering a context manager
             # for every chunk read (a chunk a cycle).
-            self._skip_chunk(offset, _damage_reason(err))
+            self._skip_chunk(offset, damage_reason(err))
             return []
         self._recent_chunks[offset] = messages
         if len(self._recent_chunks) > _RECENT_CHUNKS:
@@ -592,112 +532,7 @@ class McapFile:
         return None
 
     def _decode_chunk_uncached(self, offset: int) -> list[RawMessage]:
-        data = self._data
-        opcode, length = _RECORD_HEADER.unpack_from(data, offset)
-        if opcode != _OP_CHUNK:
-            raise LogReadError(str(self.path), f"no chunk record at offset {offset}")
-        _check_fits(offset + 9, length, len(data))
-        body = offset + 9
-        _start, _end, size, crc = _CHUNK_FIXED.unpack_from(data, body)
-        compression, pos = _read_str(data, body + 28)
-        (records_len,) = struct.unpack_from("<Q", data, pos)
-        pos += 8
-        _check_fits(pos, records_len, body + length)
-        raw = self._decompress(compression, data[pos : pos + records_len], size, offset)
-        if crc and zlib.crc32(raw) != crc:
-            raise LogReadError(str(self.path), f"chunk at offset {offset} fails its CRC")
-        return self._chunk_records(raw, offset, self.limits.chunk_records(records_len))
-
-    def _decompress(self, compression: str, compressed: bytes, size: int, offset: int) -> bytes:
-        """A chunk's records, never more than its declared size nor the limits."""
-        cap = self.limits.chunk_bytes(len(compressed))
-        if size > cap:
-            raise LogLimitError(
-                str(self.path),
-                f"chunk at offset {offset} declares {size} bytes decompressed from "
-                f"{len(compressed)}, over the limit of {cap} bytes",
-            )
-        if compression == "":
-            raw = bytes(compressed)
-        elif compression == "zstd":
-            raw = self._unzstd(compressed, size, offset)
-        elif compression == "lz4":
-            try:
-                raw = lz4.frame.LZ4FrameDecompressor().decompress(compressed, max_length=size + 1)
-            except RuntimeError as err:
-                raise LogReadError(str(self.path), f"chunk at offset {offset}: {err}") from err
-        else:
-            raise LogReadError(
-                str(self.path), f"chunk at offset {offset}: unknown compression {compression!r}"
-            )
-        if len(raw) > size:
-            raise self._inflates_past(offset, size)
-        if len(raw) != size:
-            raise LogReadError(
-                str(self.path),
-                f"chunk at offset {offset} decompresses to {len(raw)} bytes, not the "
-                f"{size} it declares",
-            )
-        return raw
-
-    def _unzstd(self, compressed: bytes, size: int, offset: int) -> bytes:
-        """Decompress a zstd chunk, producing at most one byte more than it declares."""
-        content = zstandard.frame_content_size(compressed)
-        if content > size:  # the frame's own claim; -1 when it makes none
-            raise self._inflates_past(offset, size)
-        if content == size:
-            return self._zstd.decompress(compressed, max_output_size=size)
-        # No size in the frame: stream, so that "more than declared" is told from damage.
-        reader = self._zstd.stream_reader(compressed)
-        parts, got = [], 0
-        while got <= size:
-            part = reader.read(size + 1 - got)
-            if not part:
-                break
-            parts.append(part)
-            got += len(part)
-        return b"".join(parts)
-
-    def _inflates_past(self, offset: int, size: int) -> LogLimitError:
-        return LogLimitError(
-            str(self.path), f"chunk at offset {offset} inflates past its declared {size} bytes"
-        )
-
-    def _chunk_records(self, raw: bytes, offset: int, most: int) -> list[RawMessage]:
-        # The innermost loop of every read (8-10 records a decision cycle): locals only,
-        # the bounds checks written out, messages built by ``raw_message``.
-        messages: list[RawMessage] = []
-        append = messages.append
-        topics = self.topics
-        header = _RECORD_HEADER.unpack_from
-        fixed = _MESSAGE_FIXED.unpack_from
-        pos, end, count = 0, len(raw), 0
-        while pos + 9 <= end:
-            opcode, length = header(raw, pos)
-            body = pos + 9
-            pos = body + length
-            if pos > end:
-                _check_fits(body, length, end)
-            count += 1
-            if count > most:
-                raise LogLimitError(
-                    str(self.path),
-                    f"chunk at offset {offset} holds more than {most} records for its "
-                    "compressed size (a flood, not a log)",
-                )
-            if opcode == _OP_MESSAGE:
-                channel_id, sequence, log_time, _publish = fixed(raw, body)
-                topic = topics.get(channel_id)
-                if topic is None:
-                    raise LogReadError(
-                        str(self.path), f"chunk at offset {offset}: message on unknown channel"
-                    )
-                append(raw_message(topic, sequence, log_time, raw[body + 22 : pos]))
-            elif opcode == _OP_CHANNEL:
-                channel_id, _schema = struct.unpack_from("<HH", raw, body)
-                topic_name, _ = _read_str(raw, body + 4)
-                self._topic_map[channel_id] = topic_name
-        return messages
+        return self._chunks.decode(self._data, offset, self.topics)
 
     def iter_chunk_messages(
         self, start_ns: int | None, end_ns: int | None, *, reverse: bool
@@ -740,50 +575,3 @@ class McapFile:
             start = min(times) if not channels else min(start, *times)
             end = max(end, *times)
         return start, end, chunk_count, channels
-
-
-def _damage_reason(err: Exception) -> str:
-    return f"damaged MCAP record ({type(err).__name__}: {err})"
-
-
-def _check_fits(body: int, length: int, end: int) -> None:
-    """A record whose length runs past its section is damage, not a record."""
-    if body + length > end:
-        raise struct.error(
-            f"record at {body - 9} runs {body + length - end} bytes past its section"
-        )
-
-
-def _map_file(path: Path) -> bytes:
-    """Map a file read-only: seeks touch only the pages they read, however big the file."""
-    try:
-        # os.open, not open(): no buffered file object is built for a descriptor that only
-        # lives until the mapping is made (a log root opens every segment).
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
-    except FileNotFoundError as err:
-        raise LogReadError(str(path), "no such file") from err
-    except IsADirectoryError as err:
-        raise LogReadError(str(path), "is a directory, not a segment") from err
-    except PermissionError as err:
-        raise LogReadError(str(path), "permission denied") from err
-    except OSError as err:
-        raise LogReadError(str(path), f"cannot read ({err.strerror or err})") from err
-    try:
-        status = os.fstat(fd)
-        if stat.S_ISDIR(status.st_mode):  # os.open opens a directory; open() refused it
-            raise LogReadError(str(path), "is a directory, not a segment")
-        if status.st_size == 0:
-            raise LogReadError(str(path), "empty file")
-        return mmap.mmap(fd, 0, access=mmap.ACCESS_READ)  # type: ignore[return-value]
-    except OSError as err:
-        raise LogReadError(str(path), f"cannot read ({err.strerror or err})") from err
-    finally:
-        os.close(fd)
-
-
-def _read_str(data: bytes, pos: int) -> tuple[str, int]:
-    (length,) = struct.unpack_from("<I", data, pos)
-    start = pos + 4
-    if start + length > len(data):
-        raise struct.error("string runs past the end of the record")
-    return data[start : start + length].decode("utf-8", errors="replace"), start + length

@@ -22,11 +22,12 @@ from pydantic import ValidationError
 from trace_runtime.chain import digest
 from trace_runtime.cycles import Assembler, Cycle, HotAssembler, RawMessage
 from trace_runtime.errors import LogReadError, NotTraceLogError
-from trace_runtime.mcap_file import DEFAULT_LIMITS, McapFile, ReadLimits
+from trace_runtime.mcap_file import McapFile
+from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import PROFILE, TOPIC_SEAL, Seal
 from trace_runtime.session import SESSION_METADATA, SessionInfo
-from trace_runtime.tiers.cold import ColdAssembler
-from trace_runtime.tiers.warm import WarmAssembler
+from trace_runtime.tier_formats.cold import ColdAssembler
+from trace_runtime.tier_formats.warm import WarmAssembler
 
 log = logging.getLogger("trace_runtime")
 
@@ -260,13 +261,13 @@ def open_segment(path: str | Path, limits: ReadLimits = DEFAULT_LIMITS) -> Segme
     return Segment(path, limits)
 
 
-def last_seal(path: Path) -> tuple[Seal, str] | None:
-    """The last readable seal in a segment and its digest (to continue a chain after a
-    restart). Damage never stops a robot from logging: a damaged seal is passed over, and a
-    segment that cannot be read gives None (the caller then tries an older one; `verify`
-    reports the resulting break)."""
+def last_seal(source: Path | Segment) -> tuple[Seal, str] | None:
+    """The last readable seal in a segment (a file, or one already open) and its digest (to
+    continue a chain after a restart). Damage never stops a robot from logging: a damaged
+    seal is passed over, and a segment that cannot be read gives None (the caller then tries
+    an older one; `verify` reports the resulting break)."""
     try:
-        segment = Segment(path)
+        segment = source if isinstance(source, Segment) else Segment(source)
         for cycle in segment.iter_cycles(reverse=True):
             data = cycle.payloads.get(TOPIC_SEAL)
             if data is None:

@@ -27,7 +27,8 @@ from typing import Any, Literal
 
 from trace_runtime.cycles import RawMessage
 from trace_runtime.errors import LogReadError, UsageError
-from trace_runtime.mcap_file import DEFAULT_LIMITS, McapFile, ReadLimits
+from trace_runtime.mcap_file import McapFile
+from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import EvidenceRef
 
 __all__ = ["ExternalCheck", "ExternalState", "Recordings", "external_ref", "is_external"]

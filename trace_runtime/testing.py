@@ -15,7 +15,6 @@ encoding and sealing, so what a test sees is exactly what would have been writte
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
@@ -23,8 +22,9 @@ import orjson
 
 from trace_runtime.chain import digest
 from trace_runtime.codec import EncodedLayer, LayerValue, encode_checked, encode_seal
+from trace_runtime.cycle_builder import CycleBuilder, next_cycle_time
 from trace_runtime.errors import UsageError
-from trace_runtime.logger import AuditLogger, CycleBuilder, LoggerStats, next_cycle_time
+from trace_runtime.logger import AuditLogger, LoggerStats
 from trace_runtime.records import (
     GENESIS,
     LAYER_MODELS,
@@ -33,10 +33,26 @@ from trace_runtime.records import (
     TOPIC_EXECUTION,
     TOPIC_PERCEPTION,
     Action,
+    Alternative,
     Belief,
+    BeliefEdge,
+    BeliefNode,
+    ComplianceCheck,
+    Counterfactual,
+    DecisionTree,
+    Entity,
+    Evidence,
+    EvidenceRef,
     Execution,
+    Factor,
+    Motion,
     Perception,
+    Pose,
+    Rationale,
+    Region,
     Seal,
+    TreeEdge,
+    TreeNode,
 )
 
 
@@ -185,56 +201,18 @@ def synthetic_cycle(
     ``pedestrians`` entities with evidence, a belief graph of distance and risk states, a
     STOP/SLOW/CONTINUE choice with alternatives, counterfactuals and a decision tree.
     """
-    from trace_runtime.records import (
-        Alternative,
-        BeliefEdge,
-        BeliefNode,
-        ComplianceCheck,
-        Counterfactual,
-        DecisionTree,
-        Entity,
-        Evidence,
-        EvidenceRef,
-        Factor,
-        Motion,
-        Pose,
-        Rationale,
-        Region,
-        TreeEdge,
-        TreeNode,
-    )
-
     t_ns = index * 100_000_000
-    entities, nodes, edges, factors = [], [], [], []
+    entities: list[Entity] = []
+    nodes: list[BeliefNode] = []
+    edges: list[BeliefEdge] = []
+    factors: list[Factor] = []
     nearest = 99.0
     for k in range(pedestrians):
         distance = round(1.2 + k * 1.7 + 0.8 * ((index * (k + 1)) % 50) / 50, 3)
         nearest = min(nearest, distance)
         eid = f"ped_{k + 1}"
         ref = EvidenceRef(topic=ref_topic, log_time_ns=t_ns, sequence=index)  # no reading logged
-        entities.append(
-            Entity(
-                id=eid,
-                cls="person",
-                pose=Pose(position=(distance, 0.3 * k, 0.0), orientation=(0.0, 0.0, 0.1, 0.995)),
-                velocity=(0.1, -0.4, 0.0),
-                confidence={"person": 0.91, "forklift": 0.04, "shelf": 0.05},
-                evidence=[
-                    Evidence(
-                        sensor="lidar",
-                        weight=0.7,
-                        region=Region(kind="beams", values=[100.0 + k, 112.0 + k]),
-                        ref=ref,
-                    ),
-                    Evidence(
-                        sensor="camera",
-                        weight=0.3,
-                        region=Region(kind="pixels", values=[320.0, 200.0, 380.0, 420.0]),
-                        ref=ref.model_copy(update={"topic": "/sensors/camera"}),
-                    ),
-                ],
-            )
-        )
+        entities.append(_synthetic_person(eid, k, distance, ref))
         risk = round(max(0.0, min(1.0, 1.4 / distance - 0.2)), 4)
         nodes += [
             BeliefNode(id=eid, kind="entity", label="pedestrian", p=0.91, entity=eid),
@@ -249,7 +227,42 @@ def synthetic_cycle(
         ]
         factors.append(Factor(node=f"{eid}.distance", name="distance", value=distance, unit="m"))
     command = "STOP" if nearest < 2.0 else "SLOW"
-    action = Action(
+    perception = Perception(
+        entities=entities, sensors_used=["lidar", "camera"], sensors_unavailable=[]
+    )
+    belief = Belief(nodes=nodes, edges=edges)
+    action = _synthetic_action(command, nearest, factors)
+    return perception, belief, action, _synthetic_execution(index, command)
+
+
+def _synthetic_person(eid: str, k: int, distance: float, ref: EvidenceRef) -> Entity:
+    """The ``k``-th pedestrian of a synthetic cycle, seen by lidar and camera."""
+    return Entity(
+        id=eid,
+        cls="person",
+        pose=Pose(position=(distance, 0.3 * k, 0.0), orientation=(0.0, 0.0, 0.1, 0.995)),
+        velocity=(0.1, -0.4, 0.0),
+        confidence={"person": 0.91, "forklift": 0.04, "shelf": 0.05},
+        evidence=[
+            Evidence(
+                sensor="lidar",
+                weight=0.7,
+                region=Region(kind="beams", values=[100.0 + k, 112.0 + k]),
+                ref=ref,
+            ),
+            Evidence(
+                sensor="camera",
+                weight=0.3,
+                region=Region(kind="pixels", values=[320.0, 200.0, 380.0, 420.0]),
+                ref=ref.model_copy(update={"topic": "/sensors/camera"}),
+            ),
+        ],
+    )
+
+
+def _synthetic_action(command: str, nearest: float, factors: list[Factor]) -> Action:
+    """The synthetic cycle's choice, with its alternatives, counterfactuals and tree."""
+    return Action(
         command=command,
         parameters={"target_speed": 0.0 if command == "STOP" else 0.5},
         score=0.82,
@@ -277,29 +290,36 @@ def synthetic_cycle(
                 would_select="CONTINUE",
             ),
         ],
-        tree=DecisionTree(
-            nodes=[
-                TreeNode(id="root", label="Decision point"),
-                TreeNode(id="ped", label="pedestrian detected", test="d_ped < 2.0"),
-                TreeNode(id="path", label="path clear?", test="aisle_blocked"),
-                TreeNode(id="stop", label="STOP", command="STOP"),
-                TreeNode(id="slow", label="SLOW", command="SLOW"),
-                TreeNode(id="reroute", label="REROUTE", command="REROUTE"),
-                TreeNode(id="continue", label="CONTINUE", command="CONTINUE"),
-            ],
-            edges=[
-                TreeEdge(parent="root", child="ped", label="ped detected"),
-                TreeEdge(parent="root", child="path", label="no ped"),
-                TreeEdge(parent="ped", child="stop", label="yes"),
-                TreeEdge(parent="ped", child="slow", label="no"),
-                TreeEdge(parent="path", child="reroute", label="no"),
-                TreeEdge(parent="path", child="continue", label="yes"),
-            ],
-            taken_path=["root", "ped", "stop" if command == "STOP" else "slow"],
-        ),
+        tree=_synthetic_tree(command),
     )
+
+
+def _synthetic_tree(command: str) -> DecisionTree:
+    return DecisionTree(
+        nodes=[
+            TreeNode(id="root", label="Decision point"),
+            TreeNode(id="ped", label="pedestrian detected", test="d_ped < 2.0"),
+            TreeNode(id="path", label="path clear?", test="aisle_blocked"),
+            TreeNode(id="stop", label="STOP", command="STOP"),
+            TreeNode(id="slow", label="SLOW", command="SLOW"),
+            TreeNode(id="reroute", label="REROUTE", command="REROUTE"),
+            TreeNode(id="continue", label="CONTINUE", command="CONTINUE"),
+        ],
+        edges=[
+            TreeEdge(parent="root", child="ped", label="ped detected"),
+            TreeEdge(parent="root", child="path", label="no ped"),
+            TreeEdge(parent="ped", child="stop", label="yes"),
+            TreeEdge(parent="ped", child="slow", label="no"),
+            TreeEdge(parent="path", child="reroute", label="no"),
+            TreeEdge(parent="path", child="continue", label="yes"),
+        ],
+        taken_path=["root", "ped", "stop" if command == "STOP" else "slow"],
+    )
+
+
+def _synthetic_execution(index: int, command: str) -> Execution:
     speed = 0.0 if command == "STOP" else 0.5
-    execution = Execution(
+    return Execution(
         intended=Motion(linear=speed, angular=0.0),
         actual=Motion(linear=round(speed + 0.01 * (index % 7) / 7, 4), angular=0.0),
         deviation=round(0.01 * (index % 7) / 7, 4),
@@ -314,23 +334,11 @@ def synthetic_cycle(
         ],
         flags=[],
     )
-    perception = Perception(
-        entities=entities, sensors_used=["lidar", "camera"], sensors_unavailable=[]
-    )
-    belief = Belief(nodes=nodes, edges=edges)
-    return perception, belief, action, execution
 
 
 def simulate_crash(logger: AuditLogger) -> None:
     """Leave a (synchronous) logger as a killed process would: every written batch stays on
     disk, the open segment never gets its summary or closing checkpoint, and the writer lock
     is gone (the kernel drops it with the process). For tests of crash recovery."""
-    segment = logger._segment
-    if segment is not None:
-        segment._stream.flush()
-        os.fsync(segment._stream.fileno())
-        segment._stream.close()
-    logger._segment = None
+    logger._chain.crash()
     logger._closed = True
-    if logger._writer_lock is not None:
-        logger._writer_lock.release()

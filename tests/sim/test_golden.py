@@ -1,5 +1,5 @@
-"""Same seed, same log content: the simulator's output pinned to digests recorded before the
-performance work, so that no optimisation changes a single value (down to the float's bits).
+"""Same seed, same log content: the simulator's output pinned to digests, so that no
+optimisation or restructuring changes a single value (down to the float's bits).
 
 What is pinned is everything the simulator hands to the logger, in call order: each sensor
 payload and each layer record, serialised the moment it is handed over, plus the ground-truth

@@ -232,7 +232,7 @@ def test_exit_codes_come_from_the_error_type_alone() -> None:
         TimeOutOfRangeError,
         UsageError,
     )
-    from trace_runtime.tiers.cold import ColdFormatError
+    from trace_runtime.tier_formats.cold import ColdFormatError
 
     assert exit_code_for(UsageError("x")) == 2
     assert exit_code_for(TimeOutOfRangeError(1, 2, 3)) == 2

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tests.trace_audit.test_metrics import HandLog, layers, t
+from tests.trace_audit.metrics.test_scan import HandLog, layers, t
 from trace_audit.cli.investigate import explain_doc, timeline_doc, why_doc
 from trace_audit.cli.render import render_plain
 from trace_audit.explain import explain

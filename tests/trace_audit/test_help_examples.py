@@ -13,7 +13,7 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from sim.cli import app as sim_app
+from evaluation.cli import app as sim_app
 from trace_audit.cli import app as audit_app
 
 CASES = [

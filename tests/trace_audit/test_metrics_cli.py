@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from tests.trace_audit.test_metrics import HandLog, layers, t
+from tests.trace_audit.metrics.test_scan import HandLog, layers, t
 from trace_audit.cli import app
 
 

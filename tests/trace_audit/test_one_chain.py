@@ -12,7 +12,7 @@ import orjson
 import pytest
 
 from tests.trace_audit.conftest import write_log
-from tests.trace_audit.test_metrics import PERIOD, HandLog, layers, t
+from tests.trace_audit.metrics.test_scan import PERIOD, HandLog, layers, t
 from trace_audit.explain import explain
 from trace_audit.info import log_info
 from trace_audit.metrics import MetricsConfig, compute_metrics

@@ -1,4 +1,4 @@
-"""timeline: rows per decision change (or per cycle), leading factor, flags, gaps; time parsing."""
+"""timeline: rows per decision change (or per cycle), leading factor, flags, gaps."""
 
 from __future__ import annotations
 
@@ -7,11 +7,10 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from tests.trace_audit.conftest import PERIOD_NS, T0_NS, stretch, t_ns, write_log
+from tests.trace_audit.conftest import PERIOD_NS, stretch, t_ns, write_log
 from trace_audit.cli import app
 from trace_audit.jsonout import to_jsonable
-from trace_audit.timeline import TimePoint, command_of, timeline
-from trace_runtime import open_log
+from trace_audit.timeline import timeline
 from trace_runtime.errors import UsageError
 
 
@@ -73,38 +72,6 @@ def test_window_errors(sample_log: Path) -> None:
         timeline(sample_log, start="+5", end="+2")
     with pytest.raises(UsageError, match="does not overlap"):
         timeline(sample_log, start="500", end="600")
-
-
-@pytest.mark.parametrize(
-    ("text", "ns", "relative"),
-    [
-        ("12.3", 12_300_000_000, False),
-        ("12.3s", 12_300_000_000, False),
-        ("+0.5", 500_000_000, True),
-        ("1700000000.123456789", 1_700_000_000_123_456_789, False),
-        ("0", 0, False),
-    ],
-)
-def test_time_point_parses_seconds_exactly(text: str, ns: int, relative: bool) -> None:
-    assert TimePoint.parse(text) == TimePoint(ns, relative)
-
-
-@pytest.mark.parametrize("text", ["", "abc", "-1", "nan", "inf", "1e400x", "+", "12 s"])
-def test_time_point_rejects_nonsense(text: str) -> None:
-    with pytest.raises(UsageError, match="invalid time"):
-        TimePoint.parse(text)
-
-
-def test_relative_time_resolves_against_the_log_start(sample_log: Path) -> None:
-    log = open_log(sample_log)
-    assert TimePoint.parse("+1.5").resolve(log) == T0_NS + 1_500_000_000
-    assert TimePoint.parse("101.5").resolve(log) == T0_NS + 1_500_000_000
-
-
-def test_command_of_matches_the_full_parse(sample_log: Path) -> None:
-    for cycle in open_log(sample_log).iter_cycles():
-        action = cycle.action
-        assert action is not None and command_of(cycle) == action.command
 
 
 def test_a_restarted_clock_gives_one_sequence_per_run_never_merged_by_time(

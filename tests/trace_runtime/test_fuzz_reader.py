@@ -21,7 +21,7 @@ from tests.trace_runtime import hostile
 from tests.trace_runtime.conftest import write_log
 from trace_runtime.errors import LogReadError
 from trace_runtime.logset import open_log
-from trace_runtime.mcap_file import ReadLimits
+from trace_runtime.read_limits import ReadLimits
 from trace_runtime.reader import Segment
 
 TIGHT = ReadLimits(max_chunk_bytes=1 << 20, small_chunk_bytes=4096, max_record_bytes=1 << 20)

@@ -15,7 +15,7 @@ from tests.trace_runtime import hostile
 from tests.trace_runtime.conftest import write_log
 from trace_runtime.errors import LogLimitError, LogReadError, PayloadError
 from trace_runtime.logset import open_log
-from trace_runtime.mcap_file import ReadLimits
+from trace_runtime.read_limits import ReadLimits
 from trace_runtime.reader import Segment
 from trace_runtime.session import MIN_PERIOD_NS, SessionInfo
 

@@ -29,41 +29,28 @@ def _imports(package: str) -> dict[Path, set[str]]:
 @pytest.mark.parametrize(
     ("package", "banned"),
     [
-        ("trace_runtime", {"trace_audit", "sim", "typer", "rich", "networkx", "numpy"}),
-        ("sim", {"trace_audit"}),
-        ("trace_audit", {"sim"}),
+        (
+            "trace_runtime",
+            {"trace_audit", "sim", "evaluation", "typer", "rich", "networkx", "numpy"},
+        ),
+        ("sim", {"trace_audit", "evaluation"}),
+        ("trace_audit", {"sim", "evaluation"}),
     ],
 )
 def test_package_does_not_import(package: str, banned: set[str]) -> None:
     offenders = {
         str(path.relative_to(ROOT)): sorted(names & banned)
         for path, names in _imports(package).items()
-        if names & banned and not _evaluation_harness(path)
+        if names & banned
     }
     assert not offenders
 
 
-def _evaluation_harness(path: Path) -> bool:
-    """``sim/baselines/`` scores explanation methods with the investigator's own metrics (one
-    definition of ET and DR, not a copy); it is an evaluation of the robot, not part of it."""
-    return path.relative_to(ROOT).as_posix().startswith("sim/baselines/")
-
-
-def test_only_the_evaluation_harness_in_sim_reads_with_the_investigator() -> None:
-    """The robot's own modules (and ``sim/cli.py``) still never import ``trace_audit``."""
-    users = {
-        path.relative_to(ROOT).as_posix()
-        for path, names in _imports("sim").items()
-        if "trace_audit" in names
-    }
-    assert all(u.startswith("sim/baselines/") for u in users), sorted(users)
-
-
 def test_typer_and_rich_live_only_in_cli_modules() -> None:
-    for package in ("trace_audit", "sim"):
+    for package in ("trace_audit", "sim", "evaluation"):
         for path, names in _imports(package).items():
             rel = path.relative_to(ROOT).as_posix()
-            if rel.startswith("trace_audit/cli/") or rel == "sim/cli.py":
+            if rel.startswith("trace_audit/cli/") or rel in {"sim/cli.py", "evaluation/cli.py"}:
                 continue
             assert not names & {"typer", "rich"}, rel
 
@@ -167,3 +154,21 @@ def test_the_reader_layers_import_downwards() -> None:
         "trace_runtime.reader",
         "trace_runtime.logset",
     }
+
+
+def test_the_tier_formats_sit_below_the_reader_and_compaction_above_verification() -> None:
+    """The warm and cold formats are read by the reader, so they import nothing that reads
+    segments; writing, recovering and retiring tiers verify, so they sit above it."""
+    graph = _module_imports("trace_runtime")
+    above_the_formats = {
+        "trace_runtime.reader",
+        "trace_runtime.logset",
+        "trace_runtime.verification",
+        "trace_runtime.tiers",
+    }
+    for module, targets in graph.items():
+        if module.startswith("trace_runtime.tier_formats"):
+            upward = {t for t in targets if any(t.startswith(a) for a in above_the_formats)}
+            assert not upward, (module, sorted(upward))
+    for module in ("trace_runtime.reader", "trace_runtime.logset", "trace_runtime.verification"):
+        assert not {t for t in graph[module] if t.startswith("trace_runtime.tiers")}, module

@@ -26,8 +26,8 @@ from trace_runtime import (
 from trace_runtime.checkpoints import decode_checkpoint, iter_checkpoints
 from trace_runtime.codec import layer_message
 from trace_runtime.costs import TIMING_METADATA, CostHistogram, bucket_bounds, bucket_of
-from trace_runtime.errors import RecordError
-from trace_runtime.logger import COST_SAMPLE_EVERY
+from trace_runtime.cycle_builder import COST_SAMPLE_EVERY
+from trace_runtime.errors import RecordError, UsageError
 from trace_runtime.records import LAYER_MODELS, MESSAGE_MODELS, TOPIC_EXECUTION, _Record
 from trace_runtime.testing import CaptureLogger, synthetic_cycle
 
@@ -254,3 +254,12 @@ def test_planar_motion_written_as_in_v1_still_validates_both_ways() -> None:
     model = LAYER_MODELS[TOPIC_EXECUTION]
     v1_dict = {"intended": {"linear": 1.0}, "actual": {"linear": 0.9}, "deviation": 0.1}
     assert layer_message(model, 1, 2, v1) == layer_message(model, 1, 2, v1_dict)
+
+
+@pytest.mark.parametrize("period_s", [0.0, -1.0, 1e-10, float("nan")])
+def test_a_period_no_reader_accepts_is_refused_at_construction(
+    tmp_path: Path, period_s: float
+) -> None:
+    """Readers refuse a period under 1 us (PROFILE section 2): the logger must not write one."""
+    with pytest.raises(UsageError, match="period_s must be at least"):
+        AuditLogger(tmp_path / "run.mcap", robot_id="r", period_s=period_s)

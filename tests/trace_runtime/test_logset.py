@@ -48,8 +48,8 @@ def test_a_single_unreadable_file_is_still_an_error(tmp_path: Path) -> None:
 def test_a_lossless_cold_copy_is_read_before_a_lossy_warm_one(
     tmp_path: Path, log_writer: Callable[..., AuditLogger]
 ) -> None:
-    """The reader used to rank warm (summaries) before cold (lossless) while metrics ranked
-    cold first: two commands could read two copies of one segment."""
+    """Of a warm copy (summaries) and a cold one (lossless) of the same segments, every
+    reader reads the cold one, so no two commands read two different copies."""
     root = _root(tmp_path, log_writer)
     full = [(c.cycle, c.payloads) for c in open_log(root).iter_cycles()]
     warm_root = tmp_path / "warm_root"
@@ -90,3 +90,20 @@ def test_a_byte_identical_copy_in_another_directory_is_read_once(
     log = open_log(root)
     assert [c.cycle for c in log.iter_cycles()] == cycles
     assert [s.path.name for s in log.shadowed] == [first.name]
+
+
+def test_a_finished_copy_ranks_before_a_recovered_copy_of_the_same_tier(
+    tmp_path: Path, log_writer: Callable[..., AuditLogger]
+) -> None:
+    """``copy_rank`` alone puts the intact file first: every reader that sorts copies by it
+    (the log, verify, the fleet index) prefers the same one."""
+    root = _root(tmp_path, log_writer)
+    original = sorted((root / "hot").glob("*.mcap"))[0]
+    (root / "hot" / "copy").mkdir()
+    half = root / "hot" / "copy" / original.name
+    half.write_bytes(original.read_bytes()[: original.stat().st_size // 2])
+    log = open_log(root)
+    (cut,) = [s for s in log.shadowed if s.path == half]
+    (kept,) = [s for s in log.segments if s.path == original]
+    assert copy_rank(kept) < copy_rank(cut)
+    assert sorted([cut, kept], key=copy_rank) == [kept, cut]

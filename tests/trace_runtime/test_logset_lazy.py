@@ -181,7 +181,7 @@ def test_a_lazy_open_imports_neither_the_writer_nor_mcap(root: Path) -> None:
         "from trace_runtime.logset import open_log\n"
         f"log = open_log({str(root)!r}, lazy=True)\n"
         "log.cycle_at(log.start_ns)\n"
-        "heavy = {'mcap', 'trace_runtime.segment', 'trace_runtime.tiers.catalog'}\n"
+        "heavy = {'mcap', 'trace_runtime.segment_writer', 'trace_runtime.tiers.catalog'}\n"
         "loaded = heavy & set(sys.modules)\n"
         "assert not loaded, loaded\n"
     )

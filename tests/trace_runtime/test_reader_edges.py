@@ -13,7 +13,7 @@ from trace_runtime import AuditLogger, LoggerConfig, LogReadError, TimeOutOfRang
 from trace_runtime.chain import digest
 from trace_runtime.reader import open_segment
 from trace_runtime.records import GENESIS
-from trace_runtime.segment import CHUNK_TABLE_ATTACHMENT
+from trace_runtime.segment_writer import CHUNK_TABLE_ATTACHMENT
 from trace_runtime.session import SessionInfo
 from trace_runtime.testing import synthetic_cycle
 

@@ -13,8 +13,8 @@ from typing import Any
 import pytest
 
 from trace_runtime import load_public_key, open_log, open_segment
+from trace_runtime.tier_formats import cold as cold_module
 from trace_runtime.tiers import ColdOptions, compact
-from trace_runtime.tiers import cold as cold_module
 
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "v1"
 SEGMENT = FIXTURE / "amr-fixture_000000.mcap"

@@ -169,8 +169,8 @@ def compact_command(
 ) -> None:
     def run() -> CompactionReport:
         from trace_runtime.keys import load_public_key
+        from trace_runtime.tier_formats.warm import INFORMATIONAL_PREFIXES
         from trace_runtime.tiers import ColdOptions, WarmPolicy, compact, parse_duration
-        from trace_runtime.tiers.warm import INFORMATIONAL_PREFIXES
 
         public = load_public_key(key) if key is not None else None
         context_ns = parse_duration(context)
@@ -186,7 +186,7 @@ def compact_command(
                 retention_ns=_duration(retention, "--retention"),
                 include_unfinished=include_unfinished,
                 warm=WarmPolicy(
-                    context_s=context_ns / 1e9,
+                    context_ns=context_ns,
                     keep_readings=keep_readings,
                     informational_prefixes=(*INFORMATIONAL_PREFIXES, *(informational or [])),
                 ),

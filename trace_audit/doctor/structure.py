@@ -35,12 +35,19 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 from trace_audit.doctor.content import CycleCheck
 from trace_audit.doctor.rules import SegmentDoctor
 from trace_runtime.errors import LogLimitError, LogReadError
-from trace_runtime.mcap_file import DEFAULT_LIMITS, ReadLimits
+from trace_runtime.mcap_records import (
+    OP_CHANNEL,
+    OP_CHUNK_INDEX,
+    OP_METADATA_INDEX,
+    OP_SCHEMA,
+    OP_STATISTICS,
+)
+from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import MESSAGE_MODELS, PROFILE
 from trace_runtime.schemas import schema_name
 from trace_runtime.session import SESSION_METADATA, SessionInfo
-from trace_runtime.tiers.cold import BLOCK_TOPIC, INDEX_TOPIC
-from trace_runtime.tiers.warm import SUMMARY_TOPIC
+from trace_runtime.tier_formats.cold import BLOCK_TOPIC, INDEX_TOPIC
+from trace_runtime.tier_formats.warm import SUMMARY_TOPIC
 
 __all__ = ["check_structure"]
 
@@ -59,7 +66,6 @@ _SESSION_KEYS = (
 )
 _TIER_TOPICS = {"warm": (SUMMARY_TOPIC,), "cold": (BLOCK_TOPIC, INDEX_TOPIC)}
 """Channels of the compacted tiers (PROFILE section 9), which section 3 does not list."""
-_OP_SCHEMA, _OP_CHANNEL, _OP_CHUNK_INDEX, _OP_STATISTICS, _OP_METADATA_INDEX = 3, 4, 8, 11, 13
 _DAMAGE = (McapError, struct.error, EOFError, ValueError, KeyError, UnicodeDecodeError)
 """What the mcap library raises on a damaged or cut record."""
 
@@ -328,11 +334,11 @@ def _check_summary(seen: _Seen, report: SegmentDoctor) -> None:
         )
     grouped = {r.group_opcode for _, r in seen.summary if isinstance(r, SummaryOffset)}
     present = {
-        _OP_SCHEMA: "Schema",
-        _OP_CHANNEL: "Channel",
-        _OP_STATISTICS: "Statistics",
-        _OP_CHUNK_INDEX: "ChunkIndex",
-        _OP_METADATA_INDEX: "MetadataIndex",
+        OP_SCHEMA: "Schema",
+        OP_CHANNEL: "Channel",
+        OP_STATISTICS: "Statistics",
+        OP_CHUNK_INDEX: "ChunkIndex",
+        OP_METADATA_INDEX: "MetadataIndex",
     }
     for opcode, name in present.items():
         if name in kinds and opcode not in grouped:

@@ -32,7 +32,7 @@ def dask_executor(address: str) -> Iterator[Executor]:
     _check_is_scheduler(address)
     try:
         client = Client(address, timeout=CONNECT_TIMEOUT_S, set_as_default=False)  # type: ignore[no-untyped-call]
-    except Exception as err:  # the probe passed: a scheduler that went away just now
+    except (OSError, ValueError) as err:  # the probe passed: the scheduler went away since
         raise UsageError(
             f"cannot reach the Dask scheduler at {address}: {_first_line(err)}"
         ) from err
@@ -76,7 +76,7 @@ def _check_is_scheduler(address: str) -> None:
         raise UsageError(
             f"cannot reach the Dask scheduler at {address}: {_first_line(err)}"
         ) from err
-    except Exception as err:  # a foreign protocol surfaces as any error, even MemoryError
+    except _foreign_reply_errors() as err:
         raise UsageError(
             f"cannot reach the Dask scheduler at {address}: something else answers there "
             "(is it the scheduler's port, usually 8786?)"
@@ -85,6 +85,17 @@ def _check_is_scheduler(address: str) -> None:
         raise UsageError(
             f"cannot reach the Dask scheduler at {address}: something else answers there"
         )
+
+
+def _foreign_reply_errors() -> tuple[type[BaseException], ...]:
+    """What reading another protocol's bytes as Dask frames raises besides OSError and
+    ValueError: a frame length read from them asks for exabytes (MemoryError), a short frame
+    fails to unpack (struct.error), a body fails to decode (msgpack) or is not a message."""
+    import struct
+
+    from msgpack import UnpackException  # type: ignore[import-untyped]
+
+    return (MemoryError, struct.error, EOFError, KeyError, TypeError, UnpackException)
 
 
 def _first_line(err: BaseException) -> str:

@@ -247,12 +247,13 @@ def _listed_files(manifest: dict[str, Any]) -> list[str]:
 def _files_intact(out: Path, entry: dict[str, Any]) -> bool:
     """Whether every file the manifest lists for a position is there and has a readable
     Parquet footer (a deleted or half-written file is indexed again)."""
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
     for rel in entry.get("files") or ():
         try:
             pq.read_metadata(out / rel)
-        except Exception:  # missing, truncated or not Parquet: all mean re-index
+        except (OSError, pa.ArrowException):  # missing, truncated or not Parquet: re-index
             return False
     return True
 
@@ -261,6 +262,7 @@ def _files_intact(out: Path, entry: dict[str, Any]) -> bool:
 
 
 def _position(segment: Segment) -> str:
+    """The index key of a segment's chain position: ``robot/segment/first cycle``."""
     session = segment.session
     return f"{session.robot_id}/{session.segment:06d}/{session.first_cycle}"
 
@@ -384,11 +386,10 @@ def _plan(
     for robot in log.robots:
         segments = [s for s in log.segments_of(robot) if s.path not in left_out]
         for i, segment in enumerate(segments):
-            session = segment.session
             previous = segments[i - 1] if i else None
             tasks.append(
                 IndexTask(
-                    key=f"{robot}/{session.segment:06d}/{session.first_cycle}",
+                    key=_position(segment),
                     path=str(segment.path.resolve()),
                     previous=str(previous.path.resolve()) if previous else None,
                     sha256=digests[segment.path],
@@ -399,6 +400,26 @@ def _plan(
                 )
             )
     return tasks
+
+
+def _select(
+    tasks: list[IndexTask], known: dict[str, Any], target: Path, notes: list[str]
+) -> tuple[list[IndexTask], list[IndexTask]]:
+    """The tasks the index keeps (a copy of a position it already holds from a better file
+    is dropped, with a note) and, of those, the ones to (re)index."""
+    kept: list[IndexTask] = []
+    for task in tasks:
+        note = _against_manifest(task, known.get(task.key))
+        if note is None:
+            kept.append(task)
+        else:
+            notes.append(note)
+    todo = [
+        t
+        for t in kept
+        if not (_unchanged(known.get(t.key), t) and _files_intact(target, known[t.key]))
+    ]
+    return kept, todo
 
 
 def build_index(
@@ -427,40 +448,13 @@ def build_index(
     cache: dict[str, Any] = dict(manifest.get("digests", {}))
     left_out, notes = _one_copy_each(log)
     tasks = _plan(log, _digests(log, cache), target, cfg, left_out)
-    kept: list[IndexTask] = []
-    for task in tasks:
-        note = _against_manifest(task, known.get(task.key))
-        if note is None:
-            kept.append(task)
-        else:
-            notes.append(note)
-    tasks = kept
-    todo = [
-        t
-        for t in tasks
-        if not (_unchanged(known.get(t.key), t) and _files_intact(target, known[t.key]))
-    ]
+    tasks, todo = _select(tasks, known, target, notes)
     opened = {str(s.path.resolve()): s for s in log.segments}
     expected = sum(opened[t.path].info.channels.get("/trace/seal", 0) for t in todo)
     target.mkdir(parents=True, exist_ok=True)
-    done: list[IndexedSegment] = []
-    cycles = 0
-    for result in _run(todo, executor, workers):
-        done.append(result)
-        cycles += result.decisions
-        if progress is not None:
-            progress(cycles, expected or None)
-    stale = set(manifest.get("stale_files", []))
-    for result in done:
-        old = known.get(result.key)
-        if old is not None:
-            stale.update(set(old["files"]) - set(result.files))
-        known[result.key] = asdict(result)
-    _write_manifest(target, known, settings, cache)
-    live = {rel for entry in known.values() for rel in entry["files"]}
-    for rel in sorted(stale - live):  # files of an older copy of a segment, or an older index
-        with contextlib.suppress(FileNotFoundError):
-            (target / rel).unlink()
+    done = _index_segments(todo, executor, workers, progress, expected)
+    cycles = sum(result.decisions for result in done)
+    _record(target, manifest, known, done, settings=settings, digests=cache)
     elapsed = time.perf_counter() - started
     files = [target / rel for entry in known.values() for rel in entry["files"]]
     return IndexReport(
@@ -478,6 +472,49 @@ def build_index(
         bytes=sum(f.stat().st_size for f in files if f.exists()),
         notes=tuple(notes),
     )
+
+
+def _index_segments(
+    todo: list[IndexTask],
+    executor: Executor | None,
+    workers: int,
+    progress: ProgressCallback | None,
+    expected: int,
+) -> list[IndexedSegment]:
+    """Index each task's segment (on ``executor``, else local processes), reporting the
+    decisions written so far against the ``expected`` count."""
+    done: list[IndexedSegment] = []
+    cycles = 0
+    for result in _run(todo, executor, workers):
+        done.append(result)
+        cycles += result.decisions
+        if progress is not None:
+            progress(cycles, expected or None)
+    return done
+
+
+def _record(
+    target: Path,
+    manifest: dict[str, Any],
+    known: dict[str, Any],
+    done: list[IndexedSegment],
+    *,
+    settings: dict[str, Any],
+    digests: dict[str, Any],
+) -> None:
+    """Write the segments just indexed into ``known`` and the manifest, then delete the
+    files no entry names any more."""
+    stale = set(manifest.get("stale_files", []))
+    for result in done:
+        old = known.get(result.key)
+        if old is not None:
+            stale.update(set(old["files"]) - set(result.files))
+        known[result.key] = asdict(result)
+    _write_manifest(target, known, settings, digests)
+    live = {rel for entry in known.values() for rel in entry["files"]}
+    for rel in sorted(stale - live):  # files of an older copy of a segment, or an older index
+        with contextlib.suppress(FileNotFoundError):
+            (target / rel).unlink()
 
 
 def _unchanged(entry: dict[str, Any] | None, task: IndexTask) -> bool:

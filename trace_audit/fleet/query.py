@@ -21,7 +21,13 @@ from typing import TYPE_CHECKING, Any
 
 from trace_audit.fleet.index import load_manifest
 from trace_audit.fleet.tables import TABLES, schema
-from trace_audit.metrics import NO_SCENARIO, GroupSums, MetricsConfig, MetricsReport
+from trace_audit.metrics import (
+    NO_SCENARIO,
+    GroupSums,
+    MetricsConfig,
+    MetricsReport,
+    report_from_sums,
+)
 from trace_runtime.errors import LogReadError, UsageError
 
 if TYPE_CHECKING:
@@ -295,83 +301,19 @@ def index_metrics(
 ) -> MetricsReport:
     """ET, ET_partial, TC, DR and TCS from the index's decision rows, without reading a log:
     the sums metrics keeps per group, summed again by DuckDB (``report_from_sums``)."""
-    from trace_audit.metrics import report_from_sums
-
     started = time.perf_counter()
     cfg = config or MetricsConfig()
-    manifest = load_manifest(index)
-    if manifest is None:
-        raise LogReadError(str(index), "not a fleet index (run trace-audit index first)")
-    built = manifest.get("config", {})
-    for name in ("gap_tolerance", "sensor_window"):
-        if built.get(name) != getattr(cfg, name):
-            raise UsageError(
-                f"the index was built with {name} {built.get(name)}, not "
-                f"{getattr(cfg, name)}: rebuild it or drop the option"
-            )
-    if cfg.start_ns is not None or cfg.end_ns is not None:
-        raise UsageError("--start/--end are not supported with --index (filter in SQL)")
-    for key in by:
-        if key not in INDEX_GROUP_BYS:
-            raise UsageError(f"cannot group the index by {key!r}")
-    group = " || ', ' || ".join(f"CAST({INDEX_GROUP_BYS[k]} AS VARCHAR)" for k in by) or "'all'"
-    w = cfg.weights
-    total = w.et + w.et_partial + w.dr + w.continuity + w.integrity
-    gate = "NOT seal_verified" if w.integrity_gate else "false"
-    tcs = (
-        f"CASE WHEN {gate} THEN 0.0 ELSE ({w.et!r} * et + {w.et_partial!r} * et_partial + "
-        f"{w.dr!r} * dr::DOUBLE + {w.continuity!r} * continuity + "
-        f"{w.integrity!r} * seal_verified::DOUBLE) / {total!r} END"
-    )
-    sql = f"""
-        WITH d AS (SELECT *, {group} AS g, {tcs} AS tcs_w FROM decisions)
-        SELECT g, count(*), sum(sealed::INT), sum(summarized::INT),
-               fsum(et), fsum(et * et), fsum(et_partial), fsum(et_partial * et_partial),
-               sum((factors_total > 0 AND factors_traceable = factors_total)::INT),
-               sum(factors_total), sum(factors_traceable), sum((factors_total = 0)::INT),
-               sum(dr::INT), sum(seal_verified::INT), fsum(tcs_w), fsum(tcs_w * tcs_w),
-               sum(window_ns), sum(gap_ns), sum((gap_ns > 0)::INT), sum(missing_cycles),
-               sum(dropped), sum(clock_anomaly::INT), list(DISTINCT segment),
-               count(*) FILTER (WHERE NOT (factors_total > 0
-                   AND factors_traceable = factors_total AND dr AND seal_verified))
-        FROM d GROUP BY g ORDER BY g
-    """
-    if cfg.evidence:
-        raise UsageError("--evidence is not supported with --index (run metrics on the logs)")
-    result = run_query(index, sql)
+    _check_index_config(index, cfg, by)
+    result = run_query(index, _sums_sql(cfg, by))
     groups: dict[str, GroupSums] = {}
     segments: set[str] = set()
     cycles = failures_total = 0
     for row in result.rows:
-        (name, n, sealed, summarized, et, et2, etp, etp2, full, factors, traceable) = row[:11]
-        (no_factors, dr, intact, tcs_sum, tcs2, window, gap, gaps, missing) = row[11:20]
-        (dropped, anomalies, names, failing) = row[20:]
+        name, sums, names, failing = _group_sums(row)
         failures_total += failing
-        groups[str(name)] = GroupSums(
-            decisions=n,
-            sealed=sealed,
-            summarized=summarized,
-            et_sum=et,
-            et_sq=et2,
-            etp_sum=etp,
-            etp_sq=etp2,
-            full=full,
-            factors=factors,
-            factors_traceable=traceable,
-            no_factors=no_factors,
-            dr_ok=dr,
-            integrity_ok=intact,
-            tcs_sum=tcs_sum,
-            tcs_sq=tcs2,
-            window_ns=int(window),
-            gap_ns=int(gap),
-            gaps=gaps,
-            missing_cycles=int(missing),
-            dropped=int(dropped),
-            anomalies=anomalies,
-        )
+        groups[name] = sums
         segments.update(names)
-        cycles += n
+        cycles += sums.decisions
     report = report_from_sums(
         [str(index)],
         cfg,
@@ -390,3 +332,83 @@ def index_metrics(
         logging_time="not in the index",
         not_in_index=("logging_cost", "channel_deviation", "external_refs", "failures", "gaps"),
     )
+
+
+def _check_index_config(index: str | Path, cfg: MetricsConfig, by: Sequence[str]) -> None:
+    """``UsageError`` (``LogReadError`` for no index) unless the index can answer with ``cfg``:
+    built with the same gap tolerance and sensor window, no time window, no evidence."""
+    manifest = load_manifest(index)
+    if manifest is None:
+        raise LogReadError(str(index), "not a fleet index (run trace-audit index first)")
+    built = manifest.get("config", {})
+    for name in ("gap_tolerance", "sensor_window"):
+        if built.get(name) != getattr(cfg, name):
+            raise UsageError(
+                f"the index was built with {name} {built.get(name)}, not "
+                f"{getattr(cfg, name)}: rebuild it or drop the option"
+            )
+    if cfg.start_ns is not None or cfg.end_ns is not None:
+        raise UsageError("--start/--end are not supported with --index (filter in SQL)")
+    for key in by:
+        if key not in INDEX_GROUP_BYS:
+            raise UsageError(f"cannot group the index by {key!r}")
+    if cfg.evidence:
+        raise UsageError("--evidence is not supported with --index (run metrics on the logs)")
+
+
+def _sums_sql(cfg: MetricsConfig, by: Sequence[str]) -> str:
+    """The query summing each group's decision rows into the columns of ``GroupSums``; its
+    TCS is recomputed from the rows with ``cfg``'s weights (``trust_score`` as SQL)."""
+    group = " || ', ' || ".join(f"CAST({INDEX_GROUP_BYS[k]} AS VARCHAR)" for k in by) or "'all'"
+    w = cfg.weights
+    total = w.et + w.et_partial + w.dr + w.continuity + w.integrity
+    gate = "NOT seal_verified" if w.integrity_gate else "false"
+    tcs = (
+        f"CASE WHEN {gate} THEN 0.0 ELSE ({w.et!r} * et + {w.et_partial!r} * et_partial + "
+        f"{w.dr!r} * dr::DOUBLE + {w.continuity!r} * continuity + "
+        f"{w.integrity!r} * seal_verified::DOUBLE) / {total!r} END"
+    )
+    return f"""
+        WITH d AS (SELECT *, {group} AS g, {tcs} AS tcs_w FROM decisions)
+        SELECT g, count(*), sum(sealed::INT), sum(summarized::INT),
+               fsum(et), fsum(et * et), fsum(et_partial), fsum(et_partial * et_partial),
+               sum((factors_total > 0 AND factors_traceable = factors_total)::INT),
+               sum(factors_total), sum(factors_traceable), sum((factors_total = 0)::INT),
+               sum(dr::INT), sum(seal_verified::INT), fsum(tcs_w), fsum(tcs_w * tcs_w),
+               sum(window_ns), sum(gap_ns), sum((gap_ns > 0)::INT), sum(missing_cycles),
+               sum(dropped), sum(clock_anomaly::INT), list(DISTINCT segment),
+               count(*) FILTER (WHERE NOT (factors_total > 0
+                   AND factors_traceable = factors_total AND dr AND seal_verified))
+        FROM d GROUP BY g ORDER BY g
+    """
+
+
+def _group_sums(row: Sequence[Any]) -> tuple[str, GroupSums, list[str], int]:
+    """One row of ``_sums_sql``: (group, its sums, its segments, its failing decisions)."""
+    (name, n, sealed, summarized, et, et2, etp, etp2, full, factors, traceable) = row[:11]
+    (no_factors, dr, intact, tcs_sum, tcs2, window, gap, gaps, missing) = row[11:20]
+    (dropped, anomalies, names, failing) = row[20:]
+    sums = GroupSums(
+        decisions=n,
+        sealed=sealed,
+        summarized=summarized,
+        et_sum=et,
+        et_sq=et2,
+        etp_sum=etp,
+        etp_sq=etp2,
+        full=full,
+        factors=factors,
+        factors_traceable=traceable,
+        no_factors=no_factors,
+        dr_ok=dr,
+        integrity_ok=intact,
+        tcs_sum=tcs_sum,
+        tcs_sq=tcs2,
+        window_ns=int(window),
+        gap_ns=int(gap),
+        gaps=gaps,
+        missing_cycles=int(missing),
+        dropped=int(dropped),
+        anomalies=anomalies,
+    )
+    return str(name), sums, names, failing

@@ -52,6 +52,22 @@ def schema(table: str) -> pa.Schema:
     """The Parquet schema of one table (without the partition columns)."""
     import pyarrow as pa
 
+    columns = {
+        "decisions": _decision_columns,
+        "entities": _entity_columns,
+        "gaps": _gap_columns,
+        "segments": _segment_columns,
+    }[table]()
+    return pa.schema(columns, metadata={"trace.index_version": str(INDEX_VERSION)})
+
+
+_Columns = list[tuple[str, "pa.DataType"]]
+
+
+def _decision_columns() -> _Columns:
+    """One row per decision: what it did, why, and how it scores."""
+    import pyarrow as pa
+
     factor = pa.struct(
         [
             ("node", pa.string()),
@@ -62,89 +78,104 @@ def schema(table: str) -> pa.Schema:
         ]
     )
     strings = pa.list_(pa.string())
-    tables = {
-        "decisions": [
-            ("segment", pa.string()),
-            ("segment_path", pa.string()),
-            ("tier", pa.string()),
-            ("cycle", pa.int64()),
-            ("t_ns", pa.int64()),
-            ("hour", pa.string()),
-            ("command", pa.string()),
-            ("previous_command", pa.string()),
-            ("lead_factor", pa.string()),
-            ("lead_value", pa.float64()),
-            ("lead_text", pa.string()),
-            ("lead_unit", pa.string()),
-            ("factors", pa.list_(factor)),
-            ("alternatives", pa.int32()),
-            ("counterfactuals", pa.int32()),
-            ("deviation", pa.float64()),
-            ("failed_checks", strings),
-            ("flags", strings),
-            ("nearest", pa.map_(pa.string(), pa.float64())),
-            ("scenario", pa.string()),
-            ("et", pa.float64()),
-            ("et_partial", pa.float64()),
-            ("factors_total", pa.int32()),
-            ("factors_traceable", pa.int32()),
-            ("dr", pa.bool_()),
-            ("dr_problems", strings),
-            ("sealed", pa.bool_()),
-            ("seal_verified", pa.bool_()),
-            ("integrity_problems", strings),
-            ("summarized", pa.bool_()),
-            ("continuity", pa.float64()),
-            ("tcs", pa.float64()),
-            ("window_ns", pa.int64()),
-            ("gap_ns", pa.int64()),
-            ("missing_cycles", pa.int64()),
-            ("dropped", pa.int64()),
-            ("clock_anomaly", pa.bool_()),
-            ("software_version", pa.string()),
-            ("policy_version", pa.string()),
-        ],
-        "entities": [
-            ("segment", pa.string()),
-            ("cycle", pa.int64()),
-            ("t_ns", pa.int64()),
-            ("entity", pa.string()),
-            ("class", pa.string()),
-            ("confidence", pa.float64()),
-            ("distance", pa.float64()),
-            ("x", pa.float64()),
-            ("y", pa.float64()),
-            ("evidence", pa.int32()),
-        ],
-        "gaps": [
-            ("segment", pa.string()),
-            ("after_cycle", pa.int64()),
-            ("after_t_ns", pa.int64()),
-            ("before_cycle", pa.int64()),
-            ("before_t_ns", pa.int64()),
-            ("period_ns", pa.int64()),
-            ("gap_ns", pa.int64()),
-            ("missing_cycles", pa.int64()),
-            ("declared_dropped", pa.int64()),
-        ],
-        "segments": [
-            ("segment", pa.string()),
-            ("segment_path", pa.string()),
-            ("sha256", pa.string()),
-            ("tier", pa.string()),
-            ("number", pa.int64()),
-            ("start_ns", pa.int64()),
-            ("end_ns", pa.int64()),
-            ("first_cycle", pa.int64()),
-            ("last_cycle", pa.int64()),
-            ("cycles", pa.int64()),
-            ("bytes", pa.int64()),
-            ("finished", pa.bool_()),
-            ("seal_status", pa.string()),
-            ("integrity_failed", pa.int64()),
-            ("software_version", pa.string()),
-            ("policy_version", pa.string()),
-            ("period_ns", pa.int64()),
-        ],
-    }
-    return pa.schema(tables[table], metadata={"trace.index_version": str(INDEX_VERSION)})
+    return [
+        ("segment", pa.string()),
+        ("segment_path", pa.string()),
+        ("tier", pa.string()),
+        ("cycle", pa.int64()),
+        ("t_ns", pa.int64()),
+        ("hour", pa.string()),
+        ("command", pa.string()),
+        ("previous_command", pa.string()),
+        ("lead_factor", pa.string()),
+        ("lead_value", pa.float64()),
+        ("lead_text", pa.string()),
+        ("lead_unit", pa.string()),
+        ("factors", pa.list_(factor)),
+        ("alternatives", pa.int32()),
+        ("counterfactuals", pa.int32()),
+        ("deviation", pa.float64()),
+        ("failed_checks", strings),
+        ("flags", strings),
+        ("nearest", pa.map_(pa.string(), pa.float64())),
+        ("scenario", pa.string()),
+        ("et", pa.float64()),
+        ("et_partial", pa.float64()),
+        ("factors_total", pa.int32()),
+        ("factors_traceable", pa.int32()),
+        ("dr", pa.bool_()),
+        ("dr_problems", strings),
+        ("sealed", pa.bool_()),
+        ("seal_verified", pa.bool_()),
+        ("integrity_problems", strings),
+        ("summarized", pa.bool_()),
+        ("continuity", pa.float64()),
+        ("tcs", pa.float64()),
+        ("window_ns", pa.int64()),
+        ("gap_ns", pa.int64()),
+        ("missing_cycles", pa.int64()),
+        ("dropped", pa.int64()),
+        ("clock_anomaly", pa.bool_()),
+        ("software_version", pa.string()),
+        ("policy_version", pa.string()),
+    ]
+
+
+def _entity_columns() -> _Columns:
+    """One row per perceived entity of a decision."""
+    import pyarrow as pa
+
+    return [
+        ("segment", pa.string()),
+        ("cycle", pa.int64()),
+        ("t_ns", pa.int64()),
+        ("entity", pa.string()),
+        ("class", pa.string()),
+        ("confidence", pa.float64()),
+        ("distance", pa.float64()),
+        ("x", pa.float64()),
+        ("y", pa.float64()),
+        ("evidence", pa.int32()),
+    ]
+
+
+def _gap_columns() -> _Columns:
+    """One row per gap between sealed cycles."""
+    import pyarrow as pa
+
+    return [
+        ("segment", pa.string()),
+        ("after_cycle", pa.int64()),
+        ("after_t_ns", pa.int64()),
+        ("before_cycle", pa.int64()),
+        ("before_t_ns", pa.int64()),
+        ("period_ns", pa.int64()),
+        ("gap_ns", pa.int64()),
+        ("missing_cycles", pa.int64()),
+        ("declared_dropped", pa.int64()),
+    ]
+
+
+def _segment_columns() -> _Columns:
+    """One row per segment file indexed."""
+    import pyarrow as pa
+
+    return [
+        ("segment", pa.string()),
+        ("segment_path", pa.string()),
+        ("sha256", pa.string()),
+        ("tier", pa.string()),
+        ("number", pa.int64()),
+        ("start_ns", pa.int64()),
+        ("end_ns", pa.int64()),
+        ("first_cycle", pa.int64()),
+        ("last_cycle", pa.int64()),
+        ("cycles", pa.int64()),
+        ("bytes", pa.int64()),
+        ("finished", pa.bool_()),
+        ("seal_status", pa.string()),
+        ("integrity_failed", pa.int64()),
+        ("software_version", pa.string()),
+        ("policy_version", pa.string()),
+        ("period_ns", pa.int64()),
+    ]

@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from trace_audit.log_time import TimeArg
 from trace_audit.report.data import (
     DEFAULT_WINDOW_S,
     ReportData,
@@ -27,7 +28,6 @@ from trace_audit.report.data import (
     gather_report,
     parse_window,
 )
-from trace_audit.timeline import TimeArg
 from trace_runtime.errors import UsageError
 from trace_runtime.keys import PublicKey
 

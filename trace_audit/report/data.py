@@ -33,8 +33,10 @@ from trace_audit.causal import (
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, SensorWindow
 from trace_audit.evidence import open_recordings
 from trace_audit.explain import Explanation, explain
+from trace_audit.log_source import as_log
+from trace_audit.log_time import TimeArg
 from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
-from trace_audit.timeline import TimeArg, Timeline, as_log, timeline
+from trace_audit.timeline import Timeline, timeline
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import UsageError
 from trace_runtime.keys import PublicKey

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import re
 import struct
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -21,14 +20,14 @@ from typing import BinaryIO
 
 from trace_runtime.errors import UsageError
 from trace_runtime.records import PROFILE
-from trace_runtime.segment import LIBRARY
+from trace_runtime.segment_names import parse_segment_name
+from trace_runtime.segment_writer import LIBRARY
 
 PARTIAL_SUFFIX = ".partial"
 LOCK_NAME = ".compact.lock"
 PARTIAL_METADATA = "trace.compaction"
 """Metadata record that marks a segment written by compaction; ``partial`` names the file."""
 
-_PARTIAL_NAME = re.compile(r"[A-Za-z0-9_.-]+_\d{6,}\.mcap\.partial")
 _MAGIC = b"\x89MCAP0\r\n"
 _OPCODE_HEADER, _OPCODE_SCHEMA, _OPCODE_CHANNEL, _OPCODE_METADATA = 0x01, 0x03, 0x04, 0x0C
 _HEAD_OPCODES = (_OPCODE_HEADER, _OPCODE_SCHEMA, _OPCODE_CHANNEL, _OPCODE_METADATA)
@@ -124,7 +123,7 @@ def partial_owner(path: Path) -> str | None:
     MCAP header followed by nothing but schema, channel and metadata records, cut short:
     no data. An empty file holds nothing either.
     """
-    if not _PARTIAL_NAME.fullmatch(path.name):
+    if not _named_like_a_partial_segment(path.name):
         return "not named like a compaction write"
     try:
         with open(path, "rb") as f:
@@ -139,6 +138,13 @@ def partial_owner(path: Path) -> str | None:
     if marker is None and cut_before_data:
         return None
     return "it does not carry compaction's trace.compaction marker"
+
+
+def _named_like_a_partial_segment(name: str) -> bool:
+    """``name`` is a segment file name (``segment_names``) with the partial suffix."""
+    return name.endswith(PARTIAL_SUFFIX) and (
+        parse_segment_name(name[: -len(PARTIAL_SUFFIX)]) is not None
+    )
 
 
 def compaction_marker(path: Path) -> str | None:

@@ -25,6 +25,7 @@ from trace_runtime.logset import find_segment_files
 from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.session import TIER_METADATA, TIERS
+from trace_runtime.tier_formats.cold import INDEX_TOPIC
 from trace_runtime.tiers._files import write_atomic
 
 CATALOG_NAME = "catalog.json"
@@ -164,8 +165,6 @@ def describe_segment(root: Path, path: Path, segment: Segment | None = None) -> 
     first_seal = last_seal = None
     cycles = 0
     if session.tier == "cold":
-        from trace_runtime.tiers.cold import INDEX_TOPIC
-
         for msg in opened.iter_messages():
             if msg.topic != INDEX_TOPIC:
                 continue

@@ -9,7 +9,7 @@ import shutil
 from pathlib import Path
 
 from tests.trace_audit.conftest import PERIOD_NS, T0_NS, write_log
-from tests.trace_runtime.test_tiers import make_root
+from tests.trace_runtime.tier_logs import make_root
 from tests.trace_runtime.verification.test_tamper import _write_plain, decode, write_signed_log
 from trace_audit.verify import verify_log
 from trace_runtime import open_log

@@ -43,7 +43,7 @@ from trace_runtime.records import (
     Seal,
 )
 from trace_runtime.schemas import SENSOR_SCHEMA_NAME, schema_bytes, schema_name
-from trace_runtime.segment import OutMessage, SegmentWriter
+from trace_runtime.segment_writer import OutMessage, SegmentWriter
 from trace_runtime.session import SESSION_METADATA, SessionInfo
 
 T0_NS = 100_000_000_000

@@ -1,0 +1,151 @@
+"""The entry point: plan a log's segments, score them here or fanned out, report.
+
+One process scores each robot's segments in one pass; with ``workers`` (or an
+``executor``, e.g. a Dask cluster's) each segment is one task that first reads the tail of
+the robot's previous segment, and the partial results are merged in plan order, so the
+report is the same however the work was spread.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+from trace_audit.metrics.config import MetricsConfig
+from trace_audit.metrics.report import build_report
+from trace_audit.metrics.results import MetricsReport
+from trace_audit.metrics.scan import score_robot, score_segment
+from trace_audit.metrics.sums import ScanResult
+from trace_runtime.errors import LogReadError
+from trace_runtime.logset import Log, open_logs
+from trace_runtime.reader import Segment
+from trace_runtime.records import TOPIC_SEAL
+
+__all__ = ["ProgressCallback", "compute_metrics"]
+
+ProgressCallback = Callable[[int, int | None], None]
+"""Called with (cycles done, cycles expected or None) as the scan advances."""
+
+
+@dataclass(frozen=True, slots=True)
+class _Task:
+    path: str
+    previous: str | None
+    config: MetricsConfig
+
+
+def _plan(log: Log) -> list[tuple[str, list[Segment]]]:
+    """Each robot's segments in chain order, robots in order of their first record."""
+    plan = [(robot, log.segments_of(robot)) for robot in log.robots]
+    plan.sort(key=lambda item: min(s.info.start_ns for s in item[1]))
+    return plan
+
+
+def _run_task(task: _Task) -> ScanResult:
+    return score_segment(task.path, task.previous, task.config)
+
+
+def _usable_cpus() -> int:
+    """CPUs this process may run on (its affinity mask, e.g. a container's share)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0)) or 1
+    return os.cpu_count() or 1
+
+
+def _expected_cycles(segment: Segment) -> int:
+    return segment.info.channels.get(TOPIC_SEAL, 0)
+
+
+def _tasks(
+    plan: list[tuple[str, list[Segment]]], cfg: MetricsConfig, *, absolute: bool
+) -> list[_Task]:
+    """One task per segment of the plan, naming the robot's segment before it (if any).
+
+    A cluster's worker resolves a relative path in its own directory: with ``absolute`` the
+    files are named by absolute path (the report still names them as given)."""
+
+    def where(path: Path) -> str:
+        return str(path.absolute()) if absolute else str(path)
+
+    return [
+        _Task(where(seg.path), where(segs[i - 1].path) if i else None, cfg)
+        for _robot, segs in plan
+        for i, seg in enumerate(segs)
+    ]
+
+
+def compute_metrics(
+    paths: Sequence[str | Path],
+    config: MetricsConfig | None = None,
+    *,
+    progress: ProgressCallback | None = None,
+    executor: Executor | None = None,
+) -> MetricsReport:
+    """Score every decision in the given logs (files, directories or log roots) in one pass.
+
+    Memory is bounded: cycles are streamed, sums accumulated, and at most
+    ``config.max_listed`` failing decisions and gaps kept for listing. Given an
+    ``executor`` (e.g. a Dask cluster's, ``trace_audit.fleet.cluster``), segments are
+    scored there, one task each, instead of in local processes; the report is the same.
+    """
+    cfg = config or MetricsConfig()
+    started = time.perf_counter()
+    log = open_logs(paths)
+    plan = _plan(log)
+    expected = sum(_expected_cycles(s) for _, segs in plan for s in segs) or None
+    total = ScanResult()
+    done = 0
+
+    def advance(n: int) -> None:
+        nonlocal done
+        done += n
+        if progress is not None:
+            progress(done, expected)
+
+    tasks = _tasks(plan, cfg, absolute=executor is not None)
+    workers = min(cfg.workers, len(tasks), _usable_cpus())
+    if executor is not None:
+        _fan_out(executor, tasks, plan=plan, total=total, advance=advance, limit=cfg.max_listed)
+    elif workers <= 1:
+        for _robot, segments in plan:
+            total.merge(score_robot(segments, cfg, advance), cfg.max_listed)
+    else:
+        # Each task scores one segment; it first reads the tail of the robot's previous
+        # segment, so chain links, gaps and refs across the boundary come out as in one pass.
+        # The longest segments start first (a short one left for last keeps both workers
+        # busy to the end); the partials are merged in plan order whatever order they finish
+        # in, so the sums and the listed failures are the same in every run.
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            _fan_out(pool, tasks, plan=plan, total=total, advance=advance, limit=cfg.max_listed)
+    elapsed = time.perf_counter() - started
+    segments_read = tuple(str(s.path) for _, segs in plan for s in segs)
+    report = build_report(
+        paths, cfg, log=log, total=total, segments=segments_read, elapsed=elapsed, by=cfg.by
+    )
+    if report.overall.decisions == 0 and cfg.start_ns is None and cfg.end_ns is None:
+        # As info, explain and verify say it: nothing to score is an empty log, not 0 %.
+        raise LogReadError(str(paths[0]), "the log holds no decision cycles")
+    return report
+
+
+def _fan_out(
+    executor: Executor,
+    tasks: list[_Task],
+    *,
+    plan: list[tuple[str, list[Segment]]],
+    total: ScanResult,
+    advance: Callable[[int], None],
+    limit: int,
+) -> None:
+    """Score each task on ``executor``; merge the partials in plan order."""
+    sizes = [s.info.bytes for _robot, segs in plan for s in segs]
+    order = sorted(range(len(tasks)), key=lambda i: -sizes[i])
+    futures = {i: executor.submit(_run_task, tasks[i]) for i in order}
+    for future in as_completed(futures.values()):
+        advance(future.result().cycles)
+    for i in range(len(tasks)):
+        total.merge(futures[i].result(), limit)

@@ -1,0 +1,407 @@
+"""The scan: one robot's segments read in chain order, each decision scored into its group.
+
+A ``_Scanner`` carries what crosses a segment boundary (the sensor window for evidence refs,
+the last seal for the hash chain, the last sealed time for gaps and the clock's runs), so a
+robot's segments scored one by one (``score_segment``, after ``prefill`` from the tail of
+the previous segment) come out as in one pass (``score_robot``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NamedTuple
+
+from trace_audit.chains import DecisionScore, SensorWindow, score_layers, trace_layers
+from trace_audit.evidence import open_recordings
+from trace_audit.metrics.config import MetricsConfig
+from trace_audit.metrics.decision import (
+    dr_problems,
+    et_problems,
+    integrity_problems,
+    scenario_of,
+    trust_score,
+)
+from trace_audit.metrics.results import DecisionFailure
+from trace_audit.metrics.sums import (
+    HAS_CHANNELS,
+    DecisionSink,
+    GroupSums,
+    ScanResult,
+    ScoredDecision,
+    SealOutcome,
+    add_channels,
+)
+from trace_runtime.chain import digest
+from trace_runtime.clock import clock_restarted
+from trace_runtime.costs import TIMING_METADATA, CostHistogram
+from trace_runtime.cycles import Cycle
+from trace_runtime.gaps import Gap, continuity, find_gap
+from trace_runtime.reader import Segment, open_segment
+from trace_runtime.records import (
+    TOPIC_ACTION,
+    TOPIC_BELIEF,
+    TOPIC_EXECUTION,
+    TOPIC_PERCEPTION,
+    TOPIC_SEAL,
+)
+from trace_runtime.seal_check import verify_cycle
+
+__all__ = ["score_robot", "score_segment"]
+
+_PROGRESS_EVERY = 2048
+
+
+@dataclass(slots=True)
+class _Stream:
+    """Where one robot's sealed sequence stands: the last sealed time and seal digest."""
+
+    prev_t_ns: int | None = None
+    prev_cycle: int = -1
+    prev_seal: str | None = None
+    prev_segment: str = ""
+    """The file the last sealed cycle came from."""
+
+
+class _Interval(NamedTuple):
+    """What the interval a sealed cycle closes adds to TC: continuity, window, gap."""
+
+    continuity: float
+    window_ns: int
+    gap: Gap | None
+    clock_anomaly: bool
+
+
+class _Scanner:
+    """Scores the cycles of one robot's segments in order, carrying chain and window state."""
+
+    def __init__(
+        self, config: MetricsConfig, partial: ScanResult, sink: DecisionSink | None = None
+    ) -> None:
+        self.config = config
+        self.partial = partial
+        self.sink = sink
+        self.window = SensorWindow(config.sensor_window, open_recordings(config.evidence))
+        self.stream = _Stream()
+        self.session_prev: str | None = None
+
+    def scan(self, segment: Segment, progress: Callable[[int], None] | None = None) -> None:
+        cfg = self.config
+        session = segment.session
+        # The first seal read links to the session's prev_seal, unless a start time cut the
+        # segment: then the seal before it was not read and the link cannot be checked here.
+        cut = cfg.start_ns is not None and segment.info.start_ns < cfg.start_ns
+        self.session_prev = None if cut else session.prev_seal
+        group_of = self._grouper(segment)
+        done = 0
+        for cycle in segment.iter_cycles(cfg.start_ns, cfg.end_ns):
+            done += 1
+            if progress is not None and done % _PROGRESS_EVERY == 0:
+                progress(_PROGRESS_EVERY)
+            self._score(cycle, segment, group_of)
+        self.partial.cycles += done
+        if progress is not None:
+            progress(done % _PROGRESS_EVERY)
+        self._add_timing(segment, done)
+
+    def _add_timing(self, segment: Segment, cycles: int) -> None:
+        """Keep the logger's own cost per cycle when the segment's writer measured it."""
+        timing = segment.metadata.get(TIMING_METADATA)
+        if timing:
+            with contextlib.suppress(KeyError, ValueError):  # a malformed record: not timed
+                self.partial.timing.append(
+                    (
+                        float(timing["commit_mean_ns"]),
+                        int(timing.get("cycles", cycles)),
+                        CostHistogram.from_metadata(timing),
+                    )
+                )
+
+    def _grouper(self, segment: Segment) -> Callable[[Cycle], str]:
+        """How this segment's cycles are grouped (``--by``)."""
+        by = self.config.by
+        if by is None:
+            return lambda _cycle: "all"
+        if by == "segment":
+            name = segment.path.name
+            return lambda _cycle: name
+        if by == "robot":
+            robot = segment.session.robot_id
+            return lambda _cycle: robot
+        if by == "scenario":
+            return lambda cycle: scenario_of(cycle.layer(TOPIC_EXECUTION))
+        return lambda cycle: time.strftime(
+            "%Y-%m-%d %H:00", time.gmtime(cycle.t_ns // 1_000_000_000)
+        )
+
+    def _count_external(self, perception: Any) -> None:
+        """Tally the perception's refs into external recordings by resolved / broken /
+        unresolved (a ref's check is remembered by the window, so a reading cited cycle
+        after cycle is read once)."""
+        if not isinstance(perception, dict):
+            return
+        tally = self.partial.external
+        for entity in perception.get("entities") or ():
+            for evidence in (entity.get("evidence") or ()) if isinstance(entity, dict) else ():
+                ref = evidence.get("ref") if isinstance(evidence, dict) else None
+                if isinstance(ref, dict) and type(ref.get("recording")) is str:
+                    state = self.window.external_state(ref)
+                    tally[state] = tally.get(state, 0) + 1
+
+    def _score(self, cycle: Cycle, segment: Segment, group_of: Callable[[Cycle], str]) -> None:
+        """Score one decision into its group's sums; list it when it fails."""
+        window = self.window
+        window.push(cycle.sensors)
+        # Each layer is parsed once: ET, DR and the seal check's evidence step share it.
+        action = cycle.layer(TOPIC_ACTION)
+        belief = cycle.layer(TOPIC_BELIEF)
+        perception = cycle.layer(TOPIC_PERCEPTION)
+        score = score_layers(action, belief, perception, window=window)
+        if perception is not None and _may_cite_recording(cycle.payloads.get(TOPIC_PERCEPTION)):
+            self._count_external(perception)
+        missing_dr = dr_problems(action)
+        execution = cycle.payloads.get(TOPIC_EXECUTION)
+        if execution is not None and HAS_CHANNELS in execution:  # parsed only when it has
+            add_channels(self.partial.channels, cycle.layer(TOPIC_EXECUTION))
+        group = group_of(cycle)
+        partial = self.partial
+        acc = partial.groups.get(group)
+        if acc is None:
+            acc = partial.groups[group] = GroupSums()
+        seal = self._seal_and_gap(cycle, segment, acc, perception)
+        tcs = self._add_scores(acc, cycle, score, dr_ok=not missing_dr, seal=seal)
+        if self.sink is not None:
+            self.sink(
+                ScoredDecision(
+                    cycle,
+                    segment,
+                    group,
+                    action,
+                    belief,
+                    perception,
+                    cycle.layer(TOPIC_EXECUTION),
+                    score,
+                    tuple(missing_dr),
+                    seal,
+                    tcs,
+                )
+            )
+        full = score.factors > 0 and score.traceable == score.factors
+        if full and not missing_dr and not seal.problems:
+            return
+        partial.failures_total += 1
+        if len(partial.failures) < self.config.max_listed:
+            problems = (
+                ()
+                if full
+                else et_problems(
+                    trace_layers(cycle.cycle, cycle.t_ns, action, belief, perception, window=window)
+                )
+            )
+            partial.failures.append(
+                _failure(
+                    cycle,
+                    segment,
+                    group=group,
+                    score=score,
+                    et=tuple(problems),
+                    dr=missing_dr,
+                    integrity=seal.problems,
+                )
+            )
+
+    def _add_scores(
+        self, acc: GroupSums, cycle: Cycle, score: DecisionScore, *, dr_ok: bool, seal: SealOutcome
+    ) -> float:
+        """Add the decision's ET, ET_partial, DR, integrity and TCS(d) to its group's sums;
+        return its TCS(d)."""
+        et, etp = score.et, score.et_partial
+        factors, traceable = score.factors, score.traceable
+        intact = not seal.problems
+        acc.decisions += 1
+        if cycle.summary is not None:
+            acc.summarized += 1
+        acc.et_sum += et
+        acc.et_sq += et * et
+        acc.etp_sum += etp
+        acc.etp_sq += etp * etp
+        acc.full += factors > 0 and traceable == factors
+        acc.factors += factors
+        acc.factors_traceable += traceable
+        acc.no_factors += factors == 0
+        acc.dr_ok += dr_ok
+        acc.integrity_ok += intact
+        tcs = trust_score(
+            self.config.weights,
+            et=et,
+            et_partial=etp,
+            dr_ok=dr_ok,
+            continuity=seal.continuity,
+            intact=intact,
+        )
+        acc.tcs_sum += tcs
+        acc.tcs_sq += tcs * tcs
+        return tcs
+
+    def _seal_and_gap(
+        self, cycle: Cycle, segment: Segment, acc: GroupSums, perception: Any
+    ) -> SealOutcome:
+        """Integrity problems of the cycle (the one seal check, ``verify_cycle``) and its
+        continuity; a sealed cycle closes an interval, which the one gap rule judges."""
+        stream = self.stream
+        expected = stream.prev_seal if stream.prev_seal is not None else self.session_prev
+        parsed = perception if TOPIC_PERCEPTION in cycle.payloads else None
+        status = verify_cycle(
+            cycle, expected, perception_json=parsed, sensor_digest=self.window.digest_of
+        )
+        integrity = [] if status.ok else integrity_problems(status)
+        if status.state == "unsealed":
+            return SealOutcome(integrity, False, 0.0, 0, None, 0, False)
+        acc.sealed += 1
+        stream.prev_seal = status.seal_digest
+        acc.dropped += status.dropped
+        interval = self._close_interval(cycle, segment, acc, status.dropped)
+        stream.prev_t_ns = cycle.t_ns
+        stream.prev_cycle = cycle.cycle
+        stream.prev_segment = segment.path.name
+        return SealOutcome(
+            integrity,
+            True,
+            interval.continuity,
+            interval.window_ns,
+            interval.gap,
+            status.dropped,
+            interval.clock_anomaly,
+        )
+
+    def _close_interval(
+        self, cycle: Cycle, segment: Segment, acc: GroupSums, dropped: int
+    ) -> _Interval:
+        """The interval from the robot's previous sealed cycle to this one, into TC's sums.
+
+        The first sealed cycle, and the first after the clock restarted between segments
+        (``trace_runtime.clock``), opens a window of one period; a time that does not move
+        on within a run is a clock anomaly (no interval); any other interval is judged by
+        the one gap rule."""
+        stream = self.stream
+        period = segment.session.period_ns
+        prev_t, t_ns = stream.prev_t_ns, cycle.t_ns
+        restart = (
+            prev_t is not None
+            and stream.prev_segment not in ("", segment.path.name)
+            and clock_restarted(prev_t, t_ns)
+        )
+        if prev_t is None or restart:
+            acc.window_ns += period
+            acc.restarts += restart
+            return _Interval(1.0, period, None, False)
+        if t_ns <= prev_t:
+            acc.anomalies += 1
+            return _Interval(1.0, 0, None, True)
+        interval = t_ns - prev_t
+        acc.window_ns += interval
+        gap = find_gap(
+            stream.prev_cycle,
+            prev_t,
+            cycle.cycle,
+            t_ns,
+            period,
+            tolerance=self.config.gap_tolerance,
+            declared_dropped=dropped,
+            robot=segment.session.robot_id,
+        )
+        if gap is None:
+            return _Interval(1.0, interval, None, False)
+        acc.gap_ns += gap.gap_ns
+        acc.gaps += 1
+        acc.missing_cycles += gap.missing_cycles
+        self.partial.gaps_total += 1
+        if len(self.partial.gaps) < self.config.max_listed:
+            self.partial.gaps.append(gap)
+        return _Interval(
+            continuity(interval, period, self.config.gap_tolerance), interval, gap, False
+        )
+
+    def prefill(self, segment: Segment) -> None:
+        """Load the chain and window state at the end of ``segment`` (the one before ours)."""
+        cfg = self.config
+        tail: list[Cycle] = []
+        last_sealed: Cycle | None = None
+        for cycle in segment.iter_cycles(cfg.start_ns, cfg.end_ns, reverse=True):
+            if len(tail) <= cfg.sensor_window:
+                tail.append(cycle)
+            if last_sealed is None and TOPIC_SEAL in cycle.payloads:
+                last_sealed = cycle
+            if last_sealed is not None and len(tail) > cfg.sensor_window:
+                break
+        for cycle in reversed(tail):
+            self.window.push(cycle.sensors)
+        if last_sealed is not None:
+            self.stream.prev_t_ns = last_sealed.t_ns
+            self.stream.prev_cycle = last_sealed.cycle
+            self.stream.prev_segment = segment.path.name
+            self.stream.prev_seal = digest(last_sealed.payloads[TOPIC_SEAL])
+
+
+def _failure(
+    cycle: Cycle,
+    segment: Segment,
+    *,
+    group: str,
+    score: DecisionScore,
+    et: tuple[str, ...],
+    dr: Iterable[str],
+    integrity: Iterable[str],
+) -> DecisionFailure:
+    """A failing decision as listed, its problems prefixed by the metric they fail."""
+    return DecisionFailure(
+        cycle.cycle,
+        cycle.t_ns,
+        segment.path.name,
+        group,
+        score.et,
+        score.et_partial,
+        (*et, *(f"DR: {p}" for p in dr), *(f"integrity: {p}" for p in integrity)),
+    )
+
+
+def _may_cite_recording(perception: bytes | None) -> bool:
+    """False only when the stored perception message cannot hold a ``recording`` key: the
+    word is not in its bytes and no escape (a backslash) could spell it otherwise. Most logs
+    cite no external recording, and two byte searches cost a fraction of walking every
+    entity's evidence to find that out. (None: a warm summary cycle, whose parsed layer is
+    walked.) A backslash, not ``\\u``: one byte is found by memchr, a pair is not."""
+    return perception is None or b"recording" in perception or b"\\" in perception
+
+
+def score_segment(
+    path: str | Path,
+    previous: str | Path | None,
+    config: MetricsConfig,
+    sink: DecisionSink | None = None,
+) -> ScanResult:
+    """Score one segment as a run over the whole log would: the tail of the robot's
+    ``previous`` segment is read first, so chain links, gaps and refs across the boundary
+    come out the same. Each decision is also handed to ``sink`` (the fleet index)."""
+    partial = ScanResult()
+    scanner = _Scanner(config, partial, sink)
+    if previous is not None:
+        scanner.prefill(open_segment(previous))
+    scanner.scan(open_segment(path))
+    return partial
+
+
+def score_robot(
+    segments: Iterable[Segment],
+    config: MetricsConfig,
+    progress: Callable[[int], None] | None = None,
+) -> ScanResult:
+    """Score one robot's segments in chain order in this process, in one pass."""
+    partial = ScanResult()
+    scanner = _Scanner(config, partial)
+    for segment in segments:
+        scanner.scan(segment, progress)
+    return partial

@@ -1,0 +1,163 @@
+"""The running sums a scan adds decisions into, and what it hands to a decision sink.
+
+``GroupSums`` are merged by addition across segments and processes (and rebuilt from the
+fleet index's decision rows); ``ScanResult`` is everything scanning some segments produced,
+merged in plan order so the listed failures are the same in every run.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+from trace_audit.chains import DecisionScore
+from trace_audit.metrics.results import DecisionFailure
+from trace_runtime.costs import CostHistogram
+from trace_runtime.cycles import Cycle
+from trace_runtime.gaps import Gap
+from trace_runtime.reader import Segment
+
+__all__ = [
+    "HAS_CHANNELS",
+    "DecisionSink",
+    "GroupSums",
+    "ScanResult",
+    "ScoredDecision",
+    "SealOutcome",
+    "add_channels",
+]
+
+
+@dataclass(slots=True)
+class GroupSums:
+    """Running sums for one group; merged across segments and processes by addition (the
+    fleet index rebuilds them from its decision rows, ``report_from_sums``)."""
+
+    decisions: int = 0
+    sealed: int = 0
+    summarized: int = 0
+    et_sum: float = 0.0
+    et_sq: float = 0.0
+    etp_sum: float = 0.0
+    etp_sq: float = 0.0
+    full: int = 0
+    factors: int = 0
+    factors_traceable: int = 0
+    no_factors: int = 0
+    dr_ok: int = 0
+    integrity_ok: int = 0
+    tcs_sum: float = 0.0
+    tcs_sq: float = 0.0
+    window_ns: int = 0
+    gap_ns: int = 0
+    gaps: int = 0
+    missing_cycles: int = 0
+    dropped: int = 0
+    anomalies: int = 0
+    restarts: int = 0
+
+    def merge(self, other: GroupSums) -> None:
+        for name in self.__slots__:
+            setattr(self, name, getattr(self, name) + getattr(other, name))
+
+
+class SealOutcome(NamedTuple):
+    """What the seal check and the gap rule said about one decision, and what it added to
+    its group's TC sums (a fleet index stores these so it can sum them again)."""
+
+    problems: list[str]
+    """Why integrity fails ([] when it holds), ``integrity_problems``."""
+    sealed: bool
+    continuity: float
+    window_ns: int
+    """Time this decision adds to its robot's TC window (0 unsealed or a clock anomaly)."""
+    gap: Gap | None
+    """The gap its seal closes, if any."""
+    dropped: int
+    clock_anomaly: bool
+
+
+@dataclass(frozen=True, slots=True)
+class ScoredDecision:
+    """One decision as metrics scored it: the parsed layers and every per-decision figure.
+
+    Handed to a ``DecisionSink`` (the fleet index) so nothing is scored a second way."""
+
+    cycle: Cycle
+    segment: Segment
+    group: str
+    action: Any
+    belief: Any
+    perception: Any
+    execution: Any
+    score: DecisionScore
+    dr_problems: tuple[str, ...]
+    seal: SealOutcome
+    tcs: float
+
+
+DecisionSink = Callable[[ScoredDecision], None]
+
+
+@dataclass(slots=True)
+class ScanResult:
+    """What scanning one or more segments produced; merged in segment order."""
+
+    groups: dict[str, GroupSums] = field(default_factory=dict)
+    failures: list[DecisionFailure] = field(default_factory=list)
+    failures_total: int = 0
+    gaps: list[Gap] = field(default_factory=list)
+    gaps_total: int = 0
+    cycles: int = 0
+    timing: list[tuple[float, int, CostHistogram | None]] = field(default_factory=list)
+    """(mean ns, cycles, histogram if recorded) per segment with ``trace.timing``."""
+    channels: dict[tuple[str, str], list[float]] = field(default_factory=dict)
+    """(name, unit) -> [cycles, deviations logged, sum, max] of the execution channels."""
+    external: dict[str, int] = field(default_factory=dict)
+
+    def merge(self, other: ScanResult, limit: int) -> None:
+        for state, count in other.external.items():
+            self.external[state] = self.external.get(state, 0) + count
+        for name, acc in other.groups.items():
+            mine = self.groups.get(name)
+            if mine is None:
+                self.groups[name] = acc
+            else:
+                mine.merge(acc)
+        self.failures.extend(other.failures[: max(0, limit - len(self.failures))])
+        self.failures_total += other.failures_total
+        self.gaps.extend(other.gaps[: max(0, limit - len(self.gaps))])
+        self.gaps_total += other.gaps_total
+        self.cycles += other.cycles
+        self.timing.extend(other.timing)
+        for key, (n, logged, total, top) in other.channels.items():
+            sums = self.channels.setdefault(key, [0, 0, 0.0, -math.inf])
+            sums[0] += n
+            sums[1] += logged
+            sums[2] += total
+            sums[3] = max(sums[3], top)
+
+
+HAS_CHANNELS = b'"channels":[{'
+"""Execution records with channels contain this (compact JSON, PROFILE §6); the others,
+every profile 1.0 record among them, are not parsed again for it."""
+
+
+def add_channels(into: dict[tuple[str, str], list[float]], execution: Any) -> None:
+    """Add an execution record's actuator channels to ``into`` (see ``ScanResult.channels``)."""
+    channels = execution.get("channels") if isinstance(execution, dict) else None
+    for channel in channels if isinstance(channels, list) else ():
+        if not isinstance(channel, dict):
+            continue
+        name, unit = channel.get("name"), channel.get("unit")
+        if not isinstance(name, str) or not isinstance(unit, str):
+            continue
+        sums = into.setdefault((name, unit), [0, 0, 0.0, -math.inf])
+        sums[0] += 1
+        deviation = channel.get("deviation")
+        if isinstance(deviation, int | float) and math.isfinite(deviation):
+            sums[1] += 1
+            sums[2] += deviation
+            sums[3] = max(sums[3], deviation)

@@ -1,0 +1,134 @@
+"""The report's figure of the scene at the decision: the robot and the entities it perceived."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from trace_audit.report.data import EntityView, ReportData
+from trace_audit.report.drawing import (
+    BROKEN,
+    MAX_ENTITIES,
+    figure_style,
+    new_figure,
+    to_svg,
+    wrap_label,
+)
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
+__all__ = ["scene_figure"]
+
+
+# --- the scene at t ----------------------------------------------------------------------
+
+_CLASS_MARKERS = {"person": "o", "forklift": "s", "vehicle": "s", "pallet": "D", "corridor": ">"}
+
+
+def scene_figure(data: ReportData) -> str:
+    """Top-down plot of the robot and the entities it perceived at t; entities whose
+    evidence failed are drawn hollow and red, each entity's logged distance as a line."""
+    placed = [e for e in data.entities[:MAX_ENTITIES] if e.x is not None and e.y is not None]
+    with figure_style():
+        fig = new_figure(7.5, 4.4)
+        ax = fig.add_subplot()
+        ax.set_aspect("equal", adjustable="box")
+        robot = data.robot
+        if robot is not None:
+            _draw_robot(ax, robot.x, robot.y, robot.heading_rad)
+        taken: list[tuple[float, float]] = []
+        for entity in placed:
+            x, y = float(entity.x or 0.0), float(entity.y or 0.0)
+            colour = BROKEN if entity.evidence_failed else _ENTITY
+            if robot is not None and entity.distance and entity.cls != "corridor":
+                ax.plot([robot.x, x], [robot.y, y], ":", color=colour, lw=1)
+            ax.plot(
+                [x],
+                [y],
+                _CLASS_MARKERS.get(entity.cls, "^"),
+                ms=11,
+                ls="none",
+                mfc="none" if entity.evidence_failed else colour,
+                mec=colour,
+                mew=1.6,
+            )
+            # Entities close together get their labels on alternate sides, each with a
+            # leader line, so a label is never read as another entity's.
+            near = sum(1 for px, py in taken if abs(x - px) < 1.5 and abs(y - py) < 1.0)
+            taken.append((x, y))
+            offset = _LABEL_OFFSETS[near % len(_LABEL_OFFSETS)]
+            ax.annotate(
+                _entity_label(entity),
+                (x, y),
+                xytext=offset,
+                textcoords="offset points",
+                fontsize=8,
+                color=colour,
+                va="center",
+                ha="left" if offset[0] > 0 else "right",
+                arrowprops={"arrowstyle": "-", "color": colour, "lw": 0.6, "shrinkB": 6},
+            )
+        frames = sorted({e.frame for e in placed}) or ["map"]
+        ax.set_xlabel(f"x (m, {', '.join(frames)} frame)")
+        ax.set_ylabel("y (m)")
+        ax.grid(True, lw=0.4, alpha=0.5)
+        if not placed and robot is None:
+            ax.text(0.5, 0.5, "no pose logged", ha="center", transform=ax.transAxes)
+        else:
+            points = [(float(e.x or 0.0), float(e.y or 0.0)) for e in placed]
+            if robot is not None:
+                points.append((robot.x, robot.y))
+            _frame(ax, points)
+        return to_svg(fig, "scene", "The robot and the entities it perceived at the decision")
+
+
+_ENTITY = "#1f4e79"
+_MIN_SPAN_M = 4.0
+"""The scene shows at least this many metres each way, so a lone entity is not a dot in a
+blown-up grid of centimetres."""
+
+
+def _frame(ax: Axes, points: list[tuple[float, float]]) -> None:
+    xs, ys = [p[0] for p in points], [p[1] for p in points]
+    cx, cy = (min(xs) + max(xs)) / 2, (min(ys) + max(ys)) / 2
+    half = max(max(xs) - min(xs), max(ys) - min(ys), _MIN_SPAN_M) * 0.65
+    ax.set_xlim(cx - half * 1.6, cx + half * 1.6)  # the plot is wider than tall
+    ax.set_ylim(cy - half, cy + half)
+
+
+_LABEL_OFFSETS = ((28, 26), (28, -30), (-28, 26), (-28, -30))
+
+
+def _entity_label(entity: EntityView) -> str:
+    conf = f" {entity.confidence:.2f}" if entity.confidence is not None else ""
+    lines = [f"{entity.id}: {entity.cls}{conf}"]
+    if entity.distance and entity.cls != "corridor":
+        lines.append(f"{entity.distance} from the robot")
+    sensors = sorted({e.sensor for e in entity.evidence if e.resolved})
+    lines.append("evidence FAILED" if entity.evidence_failed else "seen by " + ", ".join(sensors))
+    return "\n".join(wrap_label(line, 34, 1) for line in lines)
+
+
+def _draw_robot(ax: Axes, x: float, y: float, heading: float) -> None:
+    """The robot as a dark disc with an arrow along its heading."""
+
+    ax.plot([x], [y], "o", ms=14, color="#444444", zorder=3)
+    ax.annotate(
+        "",
+        (x + 0.9 * math.cos(heading), y + 0.9 * math.sin(heading)),
+        (x, y),
+        arrowprops={"arrowstyle": "-|>", "color": "#444444", "lw": 1.6},
+        zorder=3,
+    )
+    ax.annotate(
+        "robot",
+        (x, y),
+        xytext=(0, -16),
+        textcoords="offset points",
+        ha="center",
+        va="top",
+        fontsize=8,
+        fontweight="bold",
+        color="#444444",
+    )

@@ -1,0 +1,164 @@
+"""The report's sections on whether the record can be trusted: its integrity (the one
+verdict of ``verify``) and the auditability of the decision and of the window around it.
+
+Each ``*_section`` takes the ``ReportData`` and returns the section's HTML body; every
+string from the log passes through ``html.escape``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from html import escape
+
+from trace_audit.report.data import ReportData
+from trace_audit.report.markup import html_fields, html_problems, html_table
+from trace_runtime.verification import Finding
+
+__all__ = ["auditability_section", "integrity_section"]
+
+
+def integrity_section(data: ReportData) -> str:
+    seal, report, verdict = data.explanation.seal, data.integrity, data.verdict
+    if seal.verified:
+        decision = '<span class="verdict pass">seal verifies</span>'
+    elif seal.in_flight:  # the normal end of a crashed segment (PROFILE §8), not a failure
+        decision = (
+            '<span class="verdict warn">UNSEALED</span> the robot stopped while writing this '
+            "cycle; its content cannot be verified"
+        )
+    else:
+        decision = '<span class="verdict fail">seal does NOT verify</span>'
+    if not report.ok:
+        window_verdict = f'<span class="verdict fail">{len(report.findings)} FINDING(S)</span>'
+    elif verdict.anchored or seal.in_flight:
+        # the segments are clean; whether this decision is anchored is the Anchored row's
+        window_verdict = '<span class="verdict pass">CLEAN</span>'
+    else:  # chained, but nothing signed or checkpointed vouches for this decision yet
+        window_verdict = '<span class="verdict warn">CLEAN, NOT ANCHORED</span>'
+
+    if data.key_id is not None:
+        signatures = (
+            f"checked against key {escape(data.key_id)}: "
+            f"{report.checkpoints_valid} of {report.checkpoints} checkpoints valid"
+        )
+    else:
+        signatures = (
+            f"not checked (no --key given); {report.checkpoints} checkpoints, "
+            f"{report.checkpoints_valid} match the chain"
+        )
+    link = "matches" if seal.prev_ok else "does NOT match"
+    if seal.sealed:
+        chain = f"prev {link} {seal.prev_source}"
+    elif seal.in_flight:
+        chain = "not chained: the robot stopped before sealing it" + (
+            f"; the chain ends at the seal of cycle {seal.prev_cycle}"
+            if seal.prev_cycle is not None
+            else ""
+        )
+    else:
+        chain = "not sealed"
+    rows = [
+        ("This decision", f"{decision} ({escape(seal.state)})"),
+        ("Hash chain", escape(chain)),
+        ("Anchored", escape(_anchoring(data))),
+        (
+            "Segments holding the window",
+            f"{window_verdict} {escape(', '.join(data.integrity_scope))}: "
+            f"{report.cycles_valid} of {report.cycles} cycles verify",
+        ),
+        ("Signatures", signatures),
+        ("Declared drops", str(report.declared_dropped)),
+    ]
+    findings = [f"{f.kind}: {f.message}" for f in report.findings]
+    # The cycle in flight's one "problem" is the verdict row itself, not a failure to list.
+    problems = [] if seal.in_flight else list(seal.problems)
+    return html_fields(rows) + html_problems([*problems, *findings]) + _notes(report.notes)
+
+
+def _anchoring(data: ReportData) -> str:
+    """Whether a checkpoint in the segments holding the window vouches for this decision."""
+    verdict = data.verdict
+    through = verdict.anchored_through
+    if verdict.anchored:
+        return f"yes: a checkpoint vouches for the chain through cycle {through}"
+    covered = "no checkpoint" if through is None else f"checkpoints reach only cycle {through}"
+    if not data.explanation.seal.sealed:
+        return (
+            f"no: an unsealed cycle is not in the chain, so no checkpoint can vouch for it "
+            f"({covered} in the segments holding the window)"
+        )
+    return (
+        f"not yet: {covered} in the segments holding the window; this decision is chained, "
+        "but nothing vouches for it there (the robot crashed, or the log is cut); a later "
+        "segment's checkpoint may: run trace-audit verify on the whole log"
+    )
+
+
+def _notes(notes: Sequence[Finding]) -> str:
+    """verify's notes (not tampering), one line per kind: the first message and a count."""
+    by_kind: dict[str, list[Finding]] = {}
+    for note in notes:
+        by_kind.setdefault(note.kind, []).append(note)
+    lines = []
+    for kind, items in by_kind.items():
+        more = f" (and {len(items) - 1} more like it)" if len(items) > 1 else ""
+        lines.append(f'<p class="note">{escape(kind)}: {escape(items[0].message)}{more}</p>')
+    return "".join(lines)
+
+
+def auditability_section(data: ReportData) -> str:
+    s, m = data.explanation.scores, data.metrics.overall
+    traced = sum(1 for c in data.explanation.chains.factors if c.traceable)
+    decision = html_fields(
+        [
+            (
+                "ET",
+                f"{s.et:.2f} ({traced} of {len(data.explanation.chains.factors)} factors "
+                "traced to a sensor reading)",
+            ),
+            ("ET_partial", f"{s.et_partial:.2f}"),
+            ("DR", f"{s.dr:.0f}"),
+            ("TCS", f"{s.tcs:.2f}"),
+        ]
+    )
+    tc = "n/a" if m.tc is None else f"{m.tc:.3f}"
+    window = html_fields(
+        [
+            ("TC", f"{tc} ({m.gaps} gaps, {m.gap_s:.2f} s of {m.window_s:.2f} s)"),
+            ("Declared drops", f"{m.declared_dropped} cycles the logger said it could not write"),
+            (
+                "Decisions",
+                f"{m.decisions} ({m.fully_traceable} fully traceable, "
+                f"{m.not_reconstructable} not reconstructable)",
+            ),
+            ("ET (mean)", f"{m.et.mean:.3f} ± {m.et.std:.3f} (std {escape(m.et.across)})"),
+            ("DR", "n/a" if m.dr is None else f"{m.dr:.3f}"),
+            ("TCS (mean)", f"{m.tcs.mean:.3f}"),
+        ]
+    )
+    gaps = (
+        html_table(
+            ["after cycle", "before cycle", "missing time", "declared dropped"],
+            (
+                [
+                    str(g.after_cycle),
+                    str(g.before_cycle),
+                    f"{g.gap_ns / 1e9:.3f} s",
+                    "?" if g.declared_dropped is None else str(g.declared_dropped),
+                ]
+                for g in data.metrics.gaps
+            ),
+            {2, 3},
+        )
+        if data.metrics.gaps
+        else ""
+    )
+    return (
+        "<h3>This decision</h3>"
+        + decision
+        + html_problems(s.problems)
+        + "<h3>The window</h3>"
+        + window
+        + gaps
+        + f'<p class="note">{escape(s.source)}; docs/metrics.md defines each.</p>'
+    )

@@ -1,0 +1,381 @@
+"""The writer side of an ``AuditLogger``: seals committed cycles into the robot's hash chain
+and writes them, a chunk per batch, into segments it rotates, checkpoints and replaces.
+
+Failure policy (schemas/PROFILE.md, "Dropped cycles"): nothing here raises. A failed write,
+a lost disk or permission drops the batch and counts it; the first failure of each kind is
+logged once through ``logging``; the next seal written carries the count in ``dropped``, and
+drops after the last seal are declared in ``trace.close`` when the segment ends. A segment
+deleted under the writer is noticed at the next batch and replaced. The segment opener and
+the checkpoint signer are plug points that may raise anything, so the boundary around them
+catches ``Exception``: a bug there costs cycles (counted and logged), never the robot.
+
+Every method runs on one thread at a time: the writer thread, or the control thread with
+``threaded=False`` (``trace_runtime.writer_thread`` holds the lock).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import logging
+import os
+import time
+from pathlib import Path
+
+from trace_runtime.chain import digest
+from trace_runtime.checkpoints import encode_checkpoint, make_checkpoint
+from trace_runtime.codec import EncodedLayer, digest_keeping_gil, encode_layer, encode_seal_fields
+from trace_runtime.costs import TIMING_METADATA, CostHistogram
+from trace_runtime.cycle_builder import COST_SAMPLE_EVERY
+from trace_runtime.handover import PendingCycle
+from trace_runtime.keys import Signer
+from trace_runtime.logger_config import LoggerConfig, LoggerStats, default_opener
+from trace_runtime.records import LAYER_MODELS, TOPIC_CHECKPOINT, TOPIC_SEAL
+from trace_runtime.segment_names import rotated_segment_name, segment_name
+from trace_runtime.segment_writer import (
+    MessageFields,
+    OutMessage,
+    SegmentWriteError,
+    SegmentWriter,
+)
+from trace_runtime.session import SessionInfo
+from trace_runtime.writer_lock import WriterLock
+
+__all__ = ["CLOSE_METADATA", "ChainWriter"]
+
+log = logging.getLogger("trace_runtime")
+
+CLOSE_METADATA = "trace.close"
+"""Metadata a segment ends with when cycles were dropped after its last seal."""
+
+
+class ChainWriter:
+    """One robot's chain on disk: the open segment, the last seal, what is still undeclared.
+
+    ``path`` is the log's file or root (``is_root``); ``stats`` is the logger's, updated
+    here. ``writer_lock`` is renewed when the storage under it was deleted. The first
+    segment is opened at once, continuing the chain from ``session.prev_seal``: when that
+    fails (bad path, no permission) it raises, a set-up error the integrator must see,
+    unlike every later I/O failure.
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        session: SessionInfo,
+        *,
+        is_root: bool,
+        config: LoggerConfig,
+        stats: LoggerStats,
+        signer: Signer | None,
+        writer_lock: WriterLock | None,
+    ) -> None:
+        self.path = path
+        self.is_root = is_root
+        self.config = config
+        self.stats = stats
+        self._signer = signer
+        self._writer_lock = writer_lock
+        self._opener = config.opener or default_opener
+        self.undeclared = 0
+        """Cycles the writer dropped since the last seal written (failed writes, lost storage)."""
+        self._reported: set[str] = set()
+        self._last_sync = time.monotonic()
+        self._segment: SegmentWriter | None = None
+        self._segment_start_ns: int | None = None
+        self._head: tuple[int, int] | None = None  # (cycle, t_ns) of the segment's last seal
+        self._sealed_in_segment = 0
+        self._checkpoint_due_ns: int | None = None  # log time the next periodic one is due
+        self._costs = CostHistogram()  # this segment's per-cycle control-thread costs
+        self.session = session
+        self.prev_seal = session.prev_seal
+        self.open_segment(session)
+
+    @property
+    def segment(self) -> SegmentWriter | None:
+        """The segment being written (None between a lost one and the next batch)."""
+        return self._segment
+
+    def crash(self) -> None:
+        """Stop as a killed process would: every written batch stays on disk, the open
+        segment gets no summary nor closing checkpoint, and the writer lock is gone (the
+        kernel drops it with the process). For tests of crash recovery."""
+        segment, self._segment = self._segment, None
+        if segment is not None:
+            segment._stream.flush()
+            os.fsync(segment._stream.fileno())
+            segment._stream.close()
+        self.release_lock()
+
+    def release_lock(self) -> None:
+        """Let go of the robot's writer lock (the log is finished)."""
+        if self._writer_lock is not None:
+            self._writer_lock.release()
+
+    def write_batch(self, batch: list[PendingCycle]) -> None:
+        """Seal and write cycles, one caller at a time (``WriterThread`` holds its lock).
+        Swallows every failure."""
+        try:
+            self.check_storage()
+            self._maybe_rotate(batch[0].t_ns)
+            if self._segment is None:
+                self.open_segment(self.session.next_segment(self.prev_seal, batch[0].cycle))
+            segment = self._segment
+            if segment is None:
+                raise SegmentWriteError("no segment could be opened", rolled_back=False)
+            messages, last_seal, checkpoints = self._seal(segment, batch)
+            self.stats.bytes_written += segment.write_batch(messages)
+        except SegmentWriteError as err:
+            self._lose(batch, err, abandon=not err.rolled_back)
+            return
+        except Exception as err:
+            self._lose(batch, err, abandon=True)
+            return
+        self.prev_seal = last_seal
+        self.undeclared = 0
+        self.stats.written += len(batch)
+        self._head = (batch[-1].cycle, batch[-1].t_ns)
+        self._sealed_in_segment += len(batch)
+        self.stats.checkpoints += checkpoints
+        if self._segment_start_ns is None:
+            self._segment_start_ns = batch[0].t_ns
+        for pending in batch:
+            if pending.cost_ns >= 0:  # -1: not a timed cycle
+                self._costs.add(pending.cost_ns)
+        self._maybe_sync()
+
+    def _seal(
+        self, segment: SegmentWriter, batch: list[PendingCycle]
+    ) -> tuple[list[MessageFields], str, int]:
+        """The batch's messages in file order, the last seal's digest, and how many periodic
+        checkpoints are among the messages (each right after the seal it names).
+
+        Messages are plain tuples and the channel ids are looked up once per batch: this
+        loop runs five or more times per cycle on the writer, holding the GIL."""
+        messages: list[MessageFields] = []
+        append = messages.append
+        checkpoints = 0
+        prev = self.prev_seal
+        carried = self.undeclared
+        channel = segment.channel
+        layer_channels = {topic: channel(topic) for topic in LAYER_MODELS}
+        seal_channel = channel(TOPIC_SEAL)
+        for index, pending in enumerate(batch):
+            cycle, t_ns = pending.cycle, pending.t_ns
+            for topic, sequence, log_time, data in pending.sensors:
+                append((channel(topic), sequence, log_time, data))
+            digests: dict[str, str] = {}
+            for topic, record in pending.layers.items():
+                if isinstance(record, EncodedLayer):  # a dict, encoded on the control thread
+                    data, digests[topic] = record
+                else:
+                    data = encode_layer(cycle, t_ns, record, LAYER_MODELS[topic])
+                    digests[topic] = digest_keeping_gil(data)
+                append((layer_channels[topic], cycle, t_ns, data))
+            data = encode_seal_fields(cycle, t_ns, digests, prev, carried + pending.dropped_before)
+            append((seal_channel, cycle, t_ns, data))
+            prev = digest(data)
+            carried = 0
+            if self._checkpoint_due(t_ns):
+                sealed = self._sealed_in_segment + index + 1
+                checkpoint = self._checkpoint_message(
+                    segment, cycle, t_ns, prev, sealed, final=False
+                )
+                if checkpoint is not None:
+                    append(checkpoint)
+                    checkpoints += 1
+        return messages, prev, checkpoints
+
+    def _lose(self, batch: list[PendingCycle], err: Exception, *, abandon: bool) -> None:
+        self.stats.dropped_io += len(batch)
+        self.undeclared += len(batch) + sum(p.dropped_before for p in batch)
+        self.report_once(f"io:{type(err).__name__}", f"audit write failed, dropping cycles: {err}")
+        if abandon and self._segment is not None:
+            # The file cannot be trusted past its last good batch; readers recover up to it.
+            with contextlib.suppress(Exception):  # already failing; nothing more to do
+                self._segment._stream.close()
+            self._segment = None
+
+    def check_storage(self) -> None:
+        """A segment deleted under the writer (its directory removed) is lost with every
+        cycle sealed into it: give it up so the next batch opens a new segment (recreating
+        the directory) that continues the chain from the last seal, and whose first seal
+        declares the lost cycles as dropped (schemas/PROFILE.md §7). One fstat per batch."""
+        segment = self._segment
+        if segment is None or not segment.storage_lost():
+            return
+        lost = self._sealed_in_segment
+        self.stats.written -= lost
+        self.stats.dropped_storage_lost += lost
+        self.undeclared += lost
+        path = self.stats.segments[-1] if self.stats.segments else self.path
+        self.report_once(
+            "storage",
+            f"audit storage lost: {path} was deleted under the writer with {lost} cycle(s); "
+            "going on in a new segment",
+        )
+        with contextlib.suppress(OSError, ValueError):  # nothing to save in an unlinked file
+            segment._stream.close()
+        self._segment = None
+        if self._writer_lock is not None:
+            self._writer_lock.renew(self.report_once)
+
+    def _maybe_rotate(self, t_ns: int) -> None:
+        segment = self._segment
+        if segment is None or not self.is_root or self._segment_start_ns is None:
+            return
+        too_long = t_ns - self._segment_start_ns >= self.config.max_segment_s * 1e9
+        if too_long or segment.offset >= self.config.max_segment_bytes:
+            self.close_segment()
+
+    def open_segment(self, session: SessionInfo) -> None:
+        path = self._segment_path(session)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        stream = self._opener(path)
+        try:
+            segment = SegmentWriter(stream, session, level=self.config.compression_level)
+        except BaseException:
+            with contextlib.suppress(Exception):  # the header failed; the file is given up
+                stream.close()
+            raise
+        self._segment = segment
+        self.session = session
+        self._segment_start_ns = None
+        self._head = None
+        self._sealed_in_segment = 0
+        self._checkpoint_due_ns = None
+        self._costs = CostHistogram()
+        self.stats.segments.append(path)
+
+    def declare_tail(self, undeclared_control: int) -> None:
+        """Drops after the last seal have no next seal to declare them: say so at close in a
+        ``trace.close`` metadata record (schemas/PROFILE.md §7), so the gap is not silent."""
+        tail = undeclared_control + self.undeclared
+        segment = self._segment
+        if tail == 0 or segment is None or segment.broken:
+            return
+        last = self._head[0] if self._head is not None else self.session.first_cycle - 1
+        try:
+            segment.add_metadata(
+                CLOSE_METADATA,
+                {"dropped_after_last_seal": str(tail), "last_sealed_cycle": str(last)},
+            )
+        except Exception as err:
+            self.report_once("close", f"could not record the dropped tail: {err}")
+
+    def close_segment(self) -> None:
+        segment, self._segment = self._segment, None
+        if segment is None:
+            return
+        if self._head is not None and not segment.broken:
+            # The closing checkpoint: a finished segment without one was cut (docs/integrity.md).
+            cycle, t_ns = self._head
+            message = self._checkpoint_message(
+                segment, cycle, t_ns, self.prev_seal, self._sealed_in_segment, final=True
+            )
+            if message is not None:
+                try:
+                    self.stats.bytes_written += segment.write_batch([message])
+                    self.stats.checkpoints += 1
+                except Exception as err:
+                    self.stats.checkpoint_failures += 1
+                    self.report_once("checkpoint", f"could not write a checkpoint: {err}")
+        if self._costs.cycles and not segment.broken:
+            # The logger's own cost per cycle, for Table II of `trace-audit metrics`.
+            try:
+                segment.add_metadata(TIMING_METADATA, self._costs.to_metadata(COST_SAMPLE_EVERY))
+            except Exception as err:
+                self.report_once("timing", f"could not record the logger's cost: {err}")
+        try:
+            segment.close()
+        except Exception as err:
+            self.report_once("close", f"could not finish segment: {err}")
+
+    def _segment_path(self, session: SessionInfo) -> Path:
+        if not self.is_root:
+            if session.segment == 0 or not self.stats.segments:
+                return self.path
+            return self.path.with_name(rotated_segment_name(self.path.stem, session.segment))
+        return self.path / "hot" / segment_name(session.robot_id, session.segment)
+
+    def _checkpoint_due(self, t_ns: int) -> bool:
+        """Whether a periodic checkpoint goes after the seal of the cycle at ``t_ns``.
+
+        They fall on a grid in log time: the first seal at or past each multiple of the
+        interval from the segment's first cycle, so their spacing does not depend on how
+        cycles were batched into chunks. After a pause longer than the interval there is one
+        checkpoint, not one per missed multiple. A checkpoint that could not be built or
+        signed still counts as done: a signer that is down (an HSM that times out) is asked
+        again an interval later, not on every cycle.
+        """
+        interval = self.config.checkpoint_interval_s
+        if interval is None:
+            return False
+        step = max(1, round(interval * 1e9))
+        due = self._checkpoint_due_ns
+        if due is None:
+            start = t_ns if self._segment_start_ns is None else self._segment_start_ns
+            due = self._checkpoint_due_ns = start + step
+        if t_ns < due:
+            return False
+        self._checkpoint_due_ns = due + ((t_ns - due) // step + 1) * step
+        return True
+
+    def _checkpoint_message(
+        self,
+        segment: SegmentWriter,
+        cycle: int,
+        t_ns: int,
+        head: str,
+        sealed: int,
+        *,
+        final: bool,
+    ) -> OutMessage | None:
+        """Build (and sign) a checkpoint message; None if that fails: never raises.
+
+        When signing fails (an HSM gone) the checkpoint is written unsigned: it still
+        anchors the chain head and marks a closed segment, and verify reports it unsigned.
+        """
+        build = functools.partial(
+            make_checkpoint,
+            robot_id=self.session.robot_id,
+            segment=self.session.segment,
+            first_cycle=self.session.first_cycle,
+            cycle=cycle,
+            t_ns=t_ns,
+            sealed=sealed,
+            head=head,
+            final=final,
+        )
+        try:
+            try:
+                checkpoint = build(signer=self._signer)
+            except Exception as err:
+                if self._signer is None:
+                    raise
+                self.stats.checkpoint_failures += 1
+                self.report_once("sign", f"could not sign a checkpoint, wrote it unsigned: {err}")
+                checkpoint = build()
+            data = encode_checkpoint(checkpoint)
+            return OutMessage(segment.channel(TOPIC_CHECKPOINT), cycle, t_ns, data)
+        except Exception as err:  # the audit trail goes on without this checkpoint
+            self.stats.checkpoint_failures += 1
+            self.report_once("checkpoint", f"could not build a checkpoint: {err}")
+            return None
+
+    def _maybe_sync(self) -> None:
+        interval = self.config.fsync_interval_s
+        if interval is None or self._segment is None:
+            return
+        now = time.monotonic()
+        if now - self._last_sync >= interval:
+            self._last_sync = now
+            try:
+                self._segment.sync()
+            except OSError as err:
+                self.report_once("fsync", f"fsync failed: {err}")
+
+    def report_once(self, kind: str, message: str) -> None:
+        if kind not in self._reported:
+            self._reported.add(kind)
+            log.warning("%s (reported once; see AuditLogger.stats)", message)

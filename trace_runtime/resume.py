@@ -1,0 +1,62 @@
+"""Where a robot's chain goes on when its logger starts on a log root that already holds
+some of its segments: the next cycle number, the seal to link to, the next segment number.
+
+The segments are the log's own (``logset.robot_segment_files``), and of a segment found in
+several copies (one mid-compaction in two tiers, a copy cut short beside its original) the
+copy every reader reads comes first (``logset.copy_rank``). It runs at logger start-up, so
+it reads only what it needs: names, then the newest segment's last seal (from its end).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import NamedTuple
+
+from trace_runtime.logset import copy_rank, open_segments, robot_segment_files
+from trace_runtime.reader import Segment, last_seal
+from trace_runtime.records import GENESIS
+
+__all__ = ["ResumePoint", "resume_point"]
+
+
+class ResumePoint(NamedTuple):
+    """Where the robot's chain continues."""
+
+    next_cycle: int
+    prev_seal: str
+    """The digest of the last seal on disk (``GENESIS`` when there is none)."""
+    next_segment: int
+
+
+FRESH = ResumePoint(0, GENESIS, 0)
+"""A robot with no segment in the root yet."""
+
+
+def resume_point(root: Path, robot_id: str) -> ResumePoint:
+    """The resume point after the robot's newest segment in ``root``.
+
+    The highest segment number wins, whatever tier it lives in. The chain continues from the
+    newest seal on disk: a segment a crash left without any seal (killed before its first
+    write), or one that cannot be read, is passed over for an older one, so the chain does
+    not restart.
+    """
+    numbered = robot_segment_files(root, robot_id)
+    if not numbered:
+        return FRESH
+    next_segment = max(numbered) + 1
+    for number in sorted(numbered, reverse=True):
+        for copy in _copies_best_first(numbered[number]):
+            found = last_seal(copy)
+            if found is not None:
+                seal, seal_digest = found
+                return ResumePoint(seal.cycle + 1, seal_digest, next_segment)
+    return ResumePoint(0, GENESIS, next_segment)
+
+
+def _copies_best_first(files: list[Path]) -> list[Path] | list[Segment]:
+    """One segment's files in the order readers prefer them; a single file is not opened
+    here (``last_seal`` opens it), several are opened to be ranked."""
+    if len(files) == 1:
+        return files
+    segments, _unreadable = open_segments(sorted(files))
+    return sorted(segments, key=copy_rank)
