@@ -28,7 +28,7 @@ from pathlib import Path
 
 from trace_audit.verify import verify_log
 from trace_runtime import AuditLogger, LoggerConfig, open_log
-from trace_runtime.integrity import generate_keypair, load_public_key
+from trace_runtime.keys import generate_keypair, load_public_key
 from trace_runtime.records import Evidence, Perception
 from trace_runtime.testing import synthetic_cycle
 

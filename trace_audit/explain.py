@@ -32,10 +32,10 @@ from trace_runtime.chain import GENESIS, digest
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
 from trace_runtime.gaps import continuity, gap_limit_ns
-from trace_runtime.integrity import verify_cycle
 from trace_runtime.logset import Log
 from trace_runtime.recordings import Recordings
 from trace_runtime.records import TOPIC_ACTION, TOPIC_PERCEPTION, TOPIC_SEAL
+from trace_runtime.seal_check import verify_cycle
 
 __all__ = [
     "DEFAULT_LOOKBACK_S",
@@ -54,7 +54,7 @@ DEFAULT_LOOKBACK_S = 600.0
 class SealCheck:
     """Whether the decision's seal verifies: its digests, and its link to the previous seal.
 
-    The check is ``trace_runtime.integrity.verify_cycle`` (``state`` is its verdict: the
+    The check is ``trace_runtime.seal_check.verify_cycle`` (``state`` is its verdict: the
     layer messages and the evidenced sensor readings against the seal). ``prev_source`` says
     what the seal's ``prev`` was compared with: the previous sealed cycle in this log, the
     segment's recorded ``prev_seal`` (the previous segment is not in the log), or genesis.

@@ -9,6 +9,8 @@ from typing import Any
 
 from pydantic import BaseModel
 
+from trace_runtime.gaps import JSON_INLINE
+
 OMIT_EMPTY = "json_omit_empty"
 """Dataclass field metadata key: leave the field out of JSON while it is empty or None (a
 field only some logs fill, e.g. profile 1.1's channels, is absent from the others' JSON)."""
@@ -23,6 +25,9 @@ def to_jsonable(value: Any) -> Any:
         for f in dataclasses.fields(value):
             item = getattr(value, f.name)
             if f.metadata.get(OMIT_EMPTY) and (item is None or item == ()):
+                continue
+            if f.metadata.get(JSON_INLINE):
+                out.update(to_jsonable(item))
                 continue
             out[f.name] = to_jsonable(item)
         return out

@@ -1,10 +1,13 @@
 """``verify``: is this log what the robot wrote, all of it, in order?
 
-The investigator's face of ``trace_runtime.verification``: open the log through the one
-owner of multi-file logs (``trace_runtime.logset.open_log``: which copy of a segment is read,
-which files could not be read) and verify it there. Retention in the runtime deletes only
-what that same verification finds clean. For one decision (``explain``) the check is
-``trace_runtime.integrity.verify_cycle``. See docs/integrity.md.
+The investigator's thin front on ``trace_runtime.verification`` (which owns every rule of
+the verdict): ``verify_log`` takes what an investigator has at hand (a path, external
+recordings to resolve evidence refs in), opens the log through the one owner of multi-file
+logs (``trace_runtime.logset.open_log``: which copy of a segment is read, which files could
+not be read) and the recordings (``trace_audit.evidence``), and hands both to
+``trace_runtime.verification.verify``. Retention in the runtime deletes only what that
+same verification finds clean. For one decision (``explain``) the check is
+``trace_runtime.seal_check.verify_cycle``. See docs/integrity.md.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ from concurrent.futures import Executor
 from pathlib import Path
 
 from trace_audit.evidence import open_recordings
-from trace_runtime.integrity import PublicKey
+from trace_runtime.keys import PublicKey
 from trace_runtime.logset import open_log
 from trace_runtime.verification import (
     Finding,

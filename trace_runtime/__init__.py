@@ -22,14 +22,14 @@ _EXPORTS = {
     "TimeOutOfRangeError": "trace_runtime.errors",
     "TraceError": "trace_runtime.errors",
     "UsageError": "trace_runtime.errors",
-    "Ed25519Signer": "trace_runtime.integrity",
-    "PublicKey": "trace_runtime.integrity",
-    "SealStatus": "trace_runtime.integrity",
-    "Signer": "trace_runtime.integrity",
-    "generate_keypair": "trace_runtime.integrity",
-    "load_public_key": "trace_runtime.integrity",
-    "load_signer": "trace_runtime.integrity",
-    "verify_cycle": "trace_runtime.integrity",
+    "SealStatus": "trace_runtime.seal_check",
+    "verify_cycle": "trace_runtime.seal_check",
+    "Ed25519Signer": "trace_runtime.keys",
+    "PublicKey": "trace_runtime.keys",
+    "Signer": "trace_runtime.keys",
+    "generate_keypair": "trace_runtime.keys",
+    "load_public_key": "trace_runtime.keys",
+    "load_signer": "trace_runtime.keys",
     "AuditLogger": "trace_runtime.logger",
     "CycleBuilder": "trace_runtime.cycle_builder",
     "LoggerConfig": "trace_runtime.logger_config",
@@ -136,15 +136,13 @@ if TYPE_CHECKING:
         TraceError,
         UsageError,
     )
-    from trace_runtime.integrity import (
+    from trace_runtime.keys import (
         Ed25519Signer,
         PublicKey,
-        SealStatus,
         Signer,
         generate_keypair,
         load_public_key,
         load_signer,
-        verify_cycle,
     )
     from trace_runtime.logger import AuditLogger
     from trace_runtime.logger_config import LoggerConfig, LoggerStats
@@ -176,6 +174,7 @@ if TYPE_CHECKING:
         TreeEdge,
         TreeNode,
     )
+    from trace_runtime.seal_check import SealStatus, verify_cycle
     from trace_runtime.session import SessionInfo
 
 

@@ -23,11 +23,12 @@ import time
 from pathlib import Path
 
 from trace_runtime.chain import digest
+from trace_runtime.checkpoints import encode_checkpoint, make_checkpoint
 from trace_runtime.codec import EncodedLayer, digest_keeping_gil, encode_layer, encode_seal_fields
 from trace_runtime.costs import TIMING_METADATA, CostHistogram
 from trace_runtime.cycle_builder import COST_SAMPLE_EVERY
 from trace_runtime.handover import PendingCycle
-from trace_runtime.integrity import Signer, encode_checkpoint, make_checkpoint
+from trace_runtime.keys import Signer
 from trace_runtime.logger_config import LoggerConfig, LoggerStats, default_opener
 from trace_runtime.records import LAYER_MODELS, TOPIC_CHECKPOINT, TOPIC_SEAL
 from trace_runtime.segment_names import rotated_segment_name, segment_name

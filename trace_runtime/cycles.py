@@ -175,7 +175,7 @@ def assemble_hot(messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
         topic = msg.topic
         if topic.startswith("/trace/"):
             if topic == TOPIC_CHECKPOINT:
-                continue  # a chain-head anchor, not part of any cycle (trace_runtime.integrity)
+                continue  # a chain-head anchor, not part of any cycle (trace_runtime.checkpoints)
             payloads[topic] = msg.data
             if topic == TOPIC_SEAL:
                 cycles.append(Cycle(msg.sequence, msg.log_time_ns, payloads, sensors, segment))

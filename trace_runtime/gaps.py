@@ -20,7 +20,7 @@ merged with ``merge()`` instead of hand-kept min/max fields.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -28,6 +28,8 @@ from trace_runtime.errors import UsageError
 
 __all__ = [
     "DEFAULT_GAP_TOLERANCE",
+    "JSON_INLINE",
+    "NOWHERE",
     "CycleRange",
     "Gap",
     "GapFinder",
@@ -101,15 +103,15 @@ def find_gap(
         return None
     gap = interval - period_ns
     return Gap(
-        robot,
-        after_cycle,
-        after_t_ns,
-        before_cycle,
-        before_t_ns,
-        period_ns,
-        gap,
-        round(gap / period_ns),
-        declared_dropped,
+        robot=robot,
+        after_cycle=after_cycle,
+        after_t_ns=after_t_ns,
+        before_cycle=before_cycle,
+        before_t_ns=before_t_ns,
+        period_ns=period_ns,
+        gap_ns=gap,
+        missing_cycles=round(gap / period_ns),
+        declared_dropped=declared_dropped,
     )
 
 
@@ -179,15 +181,20 @@ class GapFinder:
 
 @dataclass(frozen=True, slots=True)
 class CycleRange:
-    """The cycles and times a stretch of log covers: first..last cycle, start..end time."""
+    """The cycles and times a stretch of log covers: first..last cycle, start..end time.
 
-    first_cycle: int
-    last_cycle: int
-    start_ns: int
-    end_ns: int
+    Any end may be unknown (None): a finding located by a cycle but not a time, or a range
+    whose end lies beyond what the log holds. ``CycleRange()`` is "nowhere". ``merge`` keeps,
+    per end, the outermost value known on either side.
+    """
+
+    first_cycle: int | None = None
+    last_cycle: int | None = None
+    start_ns: int | None = None
+    end_ns: int | None = None
 
     @classmethod
-    def of(cls, cycle: int, t_ns: int) -> CycleRange:
+    def of(cls, cycle: int, t_ns: int | None) -> CycleRange:
         """The range of one cycle."""
         return cls(cycle, cycle, t_ns, t_ns)
 
@@ -196,10 +203,10 @@ class CycleRange:
         if other is None:
             return self
         return CycleRange(
-            min(self.first_cycle, other.first_cycle),
-            max(self.last_cycle, other.last_cycle),
-            min(self.start_ns, other.start_ns),
-            max(self.end_ns, other.end_ns),
+            _outer(min, self.first_cycle, other.first_cycle),
+            _outer(max, self.last_cycle, other.last_cycle),
+            _outer(min, self.start_ns, other.start_ns),
+            _outer(max, self.end_ns, other.end_ns),
         )
 
     def extend(self, cycle: int, t_ns: int) -> CycleRange:
@@ -216,8 +223,32 @@ class CycleRange:
         return out
 
     @property
-    def duration_ns(self) -> int:
+    def duration_ns(self) -> int | None:
+        """``end_ns - start_ns``; None when either time is unknown."""
+        if self.start_ns is None or self.end_ns is None:
+            return None
         return self.end_ns - self.start_ns
 
     def __contains__(self, cycle: object) -> bool:
-        return isinstance(cycle, int) and self.first_cycle <= cycle <= self.last_cycle
+        """A cycle from ``first_cycle`` to ``last_cycle`` (only ``first_cycle`` itself when the
+        last is unknown; nothing when the first is)."""
+        if not isinstance(cycle, int) or self.first_cycle is None:
+            return False
+        last = self.first_cycle if self.last_cycle is None else self.last_cycle
+        return self.first_cycle <= cycle <= last
+
+
+NOWHERE = CycleRange()
+"""The range of something that is not located in cycles or time."""
+
+JSON_INLINE = "json_inline"
+"""Dataclass field metadata key: ``trace_audit.jsonout`` writes the field's own fields in its
+place, so a ``CycleRange`` field appears in JSON as its four keys beside the others."""
+
+
+def _outer(pick: Callable[[int, int], int], a: int | None, b: int | None) -> int | None:
+    if a is None:
+        return b
+    if b is None:
+        return a
+    return pick(a, b)

@@ -30,7 +30,7 @@ from trace_runtime.chain_writer import ChainWriter
 from trace_runtime.cycle_builder import UNTIMED, CycleBuilder, TimedCycleBuilder, time_went_back
 from trace_runtime.errors import LogLockedError, UsageError
 from trace_runtime.handover import PendingCycle
-from trace_runtime.integrity import Signer, load_signer
+from trace_runtime.keys import Signer, load_signer
 from trace_runtime.logger_config import LoggerConfig, LoggerStats
 from trace_runtime.records import GENESIS
 from trace_runtime.segment_writer import SegmentWriter

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO, Literal
 
-from trace_runtime.integrity import Signer
+from trace_runtime.keys import Signer
 
 __all__ = ["LoggerConfig", "LoggerStats", "Opener", "default_opener"]
 

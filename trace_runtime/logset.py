@@ -27,10 +27,10 @@ import orjson
 from trace_runtime.clock import clock_restarted
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeError, UsageError
-from trace_runtime.integrity import SealStatus, verify_cycle
 from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
+from trace_runtime.seal_check import SealStatus, verify_cycle
 from trace_runtime.segment_names import parse_segment_name
 from trace_runtime.session import TIER_METADATA, TIERS
 

@@ -14,18 +14,14 @@ from typing import Any
 import pytest
 from typer.testing import CliRunner
 
-from tests.trace_audit.test_verify_tamper import _write_plain, decode
 from tests.trace_runtime.tier_logs import cycle_key, make_root
+from tests.trace_runtime.verification.test_tamper import _write_plain, decode
 from trace_audit.cli import app
 from trace_audit.verify import verify_log
 from trace_runtime import open_log, open_segment
+from trace_runtime.checkpoints import decode_checkpoint, encode_checkpoint, make_checkpoint
 from trace_runtime.errors import TraceError, VerificationError
-from trace_runtime.integrity import (
-    Ed25519Signer,
-    decode_checkpoint,
-    encode_checkpoint,
-    make_checkpoint,
-)
+from trace_runtime.keys import Ed25519Signer
 from trace_runtime.records import TOPIC_ACTION, TOPIC_CHECKPOINT
 from trace_runtime.tiers import ColdOptions, compact
 from trace_runtime.tiers.retention import RETENTION_LOG

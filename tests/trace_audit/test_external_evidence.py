@@ -120,13 +120,13 @@ def test_a_changed_or_missing_message_in_the_recording_is_a_finding(
     report = verify_log(log, evidence=[changed])
     assert not report.ok
     [finding] = report.findings
-    assert finding.kind == "evidence_mismatch" and finding.first_cycle == 10
+    assert finding.kind == "evidence_mismatch" and finding.where.first_cycle == 10
     assert "does not match the ref's digest" in finding.message
     assert report.external_resolved == CYCLES - 1
 
     dropped = _copy_bag(recording, tmp_path / "dropped" / recording.name, drop=7)
     [finding] = verify_log(log, evidence=[dropped]).findings
-    assert finding.first_cycle == 7 and "no /scan message" in finding.message
+    assert finding.where.first_cycle == 7 and "no /scan message" in finding.message
 
 
 def test_a_recording_cut_short_is_one_finding_for_the_run_of_cycles_it_lost(
@@ -138,9 +138,9 @@ def test_a_recording_cut_short_is_one_finding_for_the_run_of_cycles_it_lost(
     [recording] = list(bag.glob("*.mcap"))
     cut = _copy_bag(recording, tmp_path / "cut" / recording.name, stop=25, drop=10)
     report = verify_log(log, evidence=[cut])
-    spans = sorted((f.kind, f.first_cycle, f.last_cycle) for f in report.findings)
+    spans = sorted((f.kind, f.where.first_cycle, f.where.last_cycle) for f in report.findings)
     assert spans == [("evidence_mismatch", 10, 10), ("evidence_mismatch", 25, CYCLES - 1)]
-    run = max(report.findings, key=lambda f: f.last_cycle or 0)
+    run = max(report.findings, key=lambda f: f.where.last_cycle or 0)
     assert f"{CYCLES - 25} evidence refs" in run.message
     assert "no /scan message" in run.message and recording.name in run.message
     assert report.cycles_valid == CYCLES - 1 - (CYCLES - 25)
@@ -153,7 +153,9 @@ def test_one_missing_message_is_said_plainly_and_a_run_as_a_run(
     log, bag = robot
     [recording] = list(bag.glob("*.mcap"))
     cut = _copy_bag(recording, tmp_path / "cut" / recording.name, stop=25, drop=10)
-    one, run = sorted(verify_log(log, evidence=[cut]).findings, key=lambda f: f.first_cycle or 0)
+    one, run = sorted(
+        verify_log(log, evidence=[cut]).findings, key=lambda f: f.where.first_cycle or 0
+    )
     assert one.message.startswith(
         f"cycle 10: an evidence ref names a message that external recording {recording.name} "
         "does not hold: no /scan message"
@@ -204,7 +206,7 @@ def test_verify_on_worker_processes_checks_the_recording_there_too(
     local = verify_log(log, evidence=[changed])
     with ProcessPoolExecutor(max_workers=1) as pool:
         remote = verify_log(log, evidence=[changed], executor=pool)
-    assert [(f.kind, f.first_cycle) for f in remote.findings] == [("evidence_mismatch", 10)]
+    assert [(f.kind, f.where.first_cycle) for f in remote.findings] == [("evidence_mismatch", 10)]
     assert (remote.external_resolved, remote.ok) == (local.external_resolved, local.ok)
     assert [f.message for f in remote.findings] == [f.message for f in local.findings]
 

@@ -23,11 +23,11 @@ from trace_runtime import (
     open_segment,
     records,
 )
+from trace_runtime.checkpoints import decode_checkpoint, iter_checkpoints
 from trace_runtime.codec import layer_message
 from trace_runtime.costs import TIMING_METADATA, CostHistogram, bucket_bounds, bucket_of
 from trace_runtime.cycle_builder import COST_SAMPLE_EVERY
 from trace_runtime.errors import RecordError, UsageError
-from trace_runtime.integrity import decode_checkpoint, iter_checkpoints
 from trace_runtime.records import LAYER_MODELS, MESSAGE_MODELS, TOPIC_EXECUTION, _Record
 from trace_runtime.testing import CaptureLogger, synthetic_cycle
 

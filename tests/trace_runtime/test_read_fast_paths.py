@@ -15,11 +15,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from tests.trace_runtime.test_integrity import _write
+from tests.trace_runtime.test_checkpoints import _write
 from trace_runtime import LoggerConfig, open_log
 from trace_runtime.chain import digest
 from trace_runtime.cycles import Cycle, RawMessage, raw_message
-from trace_runtime.integrity import SealStatus, _seal_status, verify_cycle
+from trace_runtime.seal_check import SealStatus, _seal_status, verify_cycle
 
 _U64 = st.integers(min_value=0, max_value=2**64 - 1)
 

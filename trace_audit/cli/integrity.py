@@ -1,7 +1,7 @@
 """trace-audit commands for integrity: ``verify`` a log, ``keygen`` a checkpoint signing key.
 
 Each parses its arguments, calls one library function (``trace_audit.verify.verify_log``,
-``trace_runtime.integrity.generate_keypair``) and renders the typed result: rich on a
+``trace_runtime.keys.generate_keypair``) and renders the typed result: rich on a
 terminal, plain text with ``--plain`` or in a pipe, JSON with ``--json``.
 """
 
@@ -27,8 +27,8 @@ from trace_audit.cli.options import (
 from trace_audit.cli.output import emit, setup_logging
 
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
-    from trace_audit.verify import Finding, RobotSummary, VerifyReport
-    from trace_runtime.integrity import KeyPair
+    from trace_audit.verify import Finding, RobotSummary, SegmentSummary, VerifyReport
+    from trace_runtime.keys import KeyPair
 
 _VERIFY_HELP = """Verify that a log is what the robot wrote: all of it, unaltered, in order.
 
@@ -96,7 +96,7 @@ def verify_command(
     plain: PlainOption = False,
 ) -> None:
     from trace_audit.verify import verify_log
-    from trace_runtime.integrity import load_public_key
+    from trace_runtime.keys import load_public_key
 
     setup_logging()
 
@@ -158,40 +158,47 @@ def verify_doc(r: VerifyReport) -> Doc:
         doc.heading("Notes (not tampering)")
         _finding_table(doc, r.notes)
     if len(r.segments) > 1:
-        doc.heading("Segments")
-        doc.table(
-            [
-                Column("segment"),
-                Column("tier"),
-                Column("cycles", "right"),
-                Column("range"),
-                Column("checkpoints", "right"),
-                Column("status"),
-            ],
-            [
-                [
-                    Path(s.path).name,
-                    s.tier + (" (recovered)" if s.recovered else ""),
-                    str(s.cycles),
-                    f"{s.first_cycle}..{s.last_cycle}" if s.first_cycle is not None else "-",
-                    f"{s.checkpoints_valid}/{s.checkpoints}",
-                    Seg("ok", "green") if s.ok else Seg(f"{s.findings} finding(s)", "red"),
-                ]
-                for s in r.segments
-            ],
-        )
+        _segment_table(doc, r.segments)
     return doc
 
 
+def _segment_table(doc: Doc, segments: list[SegmentSummary]) -> None:
+    doc.heading("Segments")
+    doc.table(
+        [
+            Column("segment"),
+            Column("tier"),
+            Column("cycles", "right"),
+            Column("range"),
+            Column("checkpoints", "right"),
+            Column("status"),
+        ],
+        [
+            [
+                Path(s.path).name,
+                s.tier + (" (recovered)" if s.recovered else ""),
+                str(s.cycles),
+                f"{s.cycle_range.first_cycle}..{s.cycle_range.last_cycle}"
+                if s.cycle_range.first_cycle is not None
+                else "-",
+                f"{s.checkpoints_valid}/{s.checkpoints}",
+                Seg("ok", "green") if s.ok else Seg(f"{s.findings} finding(s)", "red"),
+            ]
+            for s in segments
+        ],
+    )
+
+
 def _robot_rows(robot: RobotSummary, prefix: str) -> list[tuple[str, str | Seg]]:
-    if robot.first_cycle is None or robot.start_ns is None or robot.end_ns is None:
+    r = robot.cycle_range
+    if r.first_cycle is None or r.start_ns is None or r.end_ns is None:
         return [(f"{prefix}range", "no sealed cycles")]
-    span = fmt_duration(robot.end_ns - robot.start_ns)
+    span = fmt_duration(r.end_ns - r.start_ns)
     rows: list[tuple[str, str | Seg]] = [
         (
             f"{prefix}validated range",
-            f"cycles {robot.first_cycle}..{robot.last_cycle}, t = {fmt_t(robot.start_ns)} .. "
-            f"{fmt_t(robot.end_ns)} ({span}, {robot.segments} segment(s))",
+            f"cycles {r.first_cycle}..{r.last_cycle}, t = {fmt_t(r.start_ns)} .. "
+            f"{fmt_t(r.end_ns)} ({span}, {robot.segments} segment(s))",
         )
     ]
     if robot.anchored_cycle is None or robot.anchored_ns is None:
@@ -214,13 +221,14 @@ def _robot_rows(robot: RobotSummary, prefix: str) -> list[tuple[str, str | Seg]]
 def _finding_table(doc: Doc, findings: list[Finding]) -> None:
     rows = []
     for f in findings[:_MAX_LISTED]:
-        if f.first_cycle is None:
+        at = f.where
+        if at.first_cycle is None:
             cycles = ""
-        elif f.last_cycle is None or f.last_cycle == f.first_cycle:
-            cycles = str(f.first_cycle)
+        elif at.last_cycle is None or at.last_cycle == at.first_cycle:
+            cycles = str(at.first_cycle)
         else:
-            cycles = f"{f.first_cycle}..{f.last_cycle}"
-        when = fmt_t(f.start_ns) if f.start_ns is not None else ""
+            cycles = f"{at.first_cycle}..{at.last_cycle}"
+        when = fmt_t(at.start_ns) if at.start_ns is not None else ""
         rows.append([f.kind, f.segment or f.robot_id, cycles, when, f.message])
     doc.table(
         [Column("kind"), Column("where"), Column("cycles"), Column("t"), Column("what", wrap=True)],
@@ -244,7 +252,7 @@ def keygen_command(
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
-    from trace_runtime.integrity import generate_keypair
+    from trace_runtime.keys import generate_keypair
 
     pair = guarded(lambda: generate_keypair(out, name=name, overwrite=force))
     emit(pair, keygen_doc, json_out=json_out, plain=plain)

@@ -176,7 +176,7 @@ def compact_command(
     plain: PlainOption = False,
 ) -> None:
     def run() -> CompactionReport:
-        from trace_runtime.integrity import load_public_key
+        from trace_runtime.keys import load_public_key
         from trace_runtime.tier_formats.warm import INFORMATIONAL_PREFIXES
         from trace_runtime.tiers import ColdOptions, WarmPolicy, compact, parse_duration
 

@@ -126,4 +126,6 @@ def _file(
 ) -> None:
     name = finding.segment.rsplit("/", 1)[-1]
     segment = by_name.get(name) or report.segments[0]
-    segment.add(rule, finding.message, cycle=finding.first_cycle, last_cycle=finding.last_cycle)
+    segment.add(
+        rule, finding.message, cycle=finding.where.first_cycle, last_cycle=finding.where.last_cycle
+    )

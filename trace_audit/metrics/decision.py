@@ -13,7 +13,7 @@ from typing import Any
 from trace_audit.chains import DecisionChains
 from trace_audit.metrics.config import TCSWeights
 from trace_runtime.flags import split_flags
-from trace_runtime.integrity import SealStatus
+from trace_runtime.seal_check import SealStatus
 
 __all__ = [
     "NO_SCENARIO",

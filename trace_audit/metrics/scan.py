@@ -40,7 +40,6 @@ from trace_runtime.clock import clock_restarted
 from trace_runtime.costs import TIMING_METADATA, CostHistogram
 from trace_runtime.cycles import Cycle
 from trace_runtime.gaps import Gap, continuity, find_gap
-from trace_runtime.integrity import verify_cycle
 from trace_runtime.reader import Segment, open_segment
 from trace_runtime.records import (
     TOPIC_ACTION,
@@ -49,6 +48,7 @@ from trace_runtime.records import (
     TOPIC_PERCEPTION,
     TOPIC_SEAL,
 )
+from trace_runtime.seal_check import verify_cycle
 
 __all__ = ["score_robot", "score_segment"]
 

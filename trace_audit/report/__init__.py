@@ -29,7 +29,7 @@ from trace_audit.report.data import (
     parse_window,
 )
 from trace_runtime.errors import UsageError
-from trace_runtime.integrity import PublicKey
+from trace_runtime.keys import PublicKey
 
 __all__ = [
     "DEFAULT_WINDOW_S",

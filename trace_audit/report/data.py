@@ -39,7 +39,7 @@ from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
 from trace_audit.timeline import Timeline, timeline
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import UsageError
-from trace_runtime.integrity import PublicKey
+from trace_runtime.keys import PublicKey
 from trace_runtime.logset import Log
 from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_BELIEF, TOPIC_PERCEPTION
@@ -221,10 +221,11 @@ class ReportData:
         # An unsealed cycle is not in the chain, so no checkpoint can vouch for it.
         anchored = e.seal.sealed and through is not None and e.cycle <= through
         unanchored = None
-        if robot is not None and robot.last_cycle is not None:
-            first = through + 1 if through is not None else robot.first_cycle
-            if first is not None and first <= robot.last_cycle:
-                unanchored = (first, robot.last_cycle)
+        last = robot.cycle_range.last_cycle if robot is not None else None
+        if robot is not None and last is not None:
+            first = through + 1 if through is not None else robot.cycle_range.first_cycle
+            if first is not None and first <= last:
+                unanchored = (first, last)
         kind: Literal["clean", "not_anchored", "unsealed", "failed"]
         if not report.ok or not (e.seal.verified or e.seal.in_flight):
             kind = "failed"

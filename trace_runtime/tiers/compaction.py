@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trace_runtime.errors import LogReadError, UsageError
-from trace_runtime.integrity import PublicKey
+from trace_runtime.keys import PublicKey
 from trace_runtime.reader import Segment
 from trace_runtime.session import TIERS
 from trace_runtime.tier_formats.warm import WarmPolicy

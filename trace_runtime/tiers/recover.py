@@ -10,7 +10,7 @@ from pathlib import Path
 
 from trace_runtime.cycles import RawMessage
 from trace_runtime.errors import LogReadError, VerificationError
-from trace_runtime.integrity import PublicKey
+from trace_runtime.keys import PublicKey
 from trace_runtime.logset import Log
 from trace_runtime.reader import Segment
 from trace_runtime.session import TIER_METADATA, TIERS

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import orjson
 
-from trace_runtime.integrity import PublicKey
+from trace_runtime.keys import PublicKey
 from trace_runtime.logset import Log, open_segments
 from trace_runtime.reader import Segment
 from trace_runtime.tiers._files import fsync_dir

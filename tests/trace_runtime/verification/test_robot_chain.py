@@ -8,12 +8,12 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from tests.trace_audit.conftest import write_log
-from tests.trace_audit.test_verify_tamper import _write_plain, decode, write_signed_log
+from tests.trace_audit.conftest import PERIOD_NS, T0_NS, write_log
 from tests.trace_runtime.tier_logs import make_root
+from tests.trace_runtime.verification.test_tamper import _write_plain, decode, write_signed_log
 from trace_audit.verify import verify_log
 from trace_runtime import open_log
-from trace_runtime.integrity import Ed25519Signer
+from trace_runtime.keys import Ed25519Signer
 from trace_runtime.tiers import compact
 
 
@@ -107,7 +107,7 @@ def test_a_missing_final_checkpoint_is_still_truncation_when_others_exist(tmp_pa
     _write_plain(decoded, path)
     report = verify_log(path, key=signer.public_key)
     assert _kinds(report.findings) == ["truncated"]
-    assert report.findings[0].first_cycle == 30
+    assert report.findings[0].where.first_cycle == 30
 
 
 def test_a_half_copied_segment_beside_its_original_is_read_once_and_accuses_nothing(
@@ -203,3 +203,22 @@ def test_a_fork_is_read_once_and_still_reported(tmp_path: Path, caplog) -> None:
     report = verify_log(root)
     assert not report.ok and "modified" in _kinds(report.findings)
     assert report.cycles == 100
+
+
+def test_a_segment_starting_at_the_instant_its_predecessor_ended_is_one_clock_run(
+    tmp_path: Path,
+) -> None:
+    """``clock.clock_restarted``: only a time earlier than the chain's last is a restart; a
+    segment whose first cycle has the very time the one before ended on stays one run."""
+    root = write_log(tmp_path / "root")
+    last_ns = T0_NS + 99 * PERIOD_NS
+    write_log(root, t0_ns=last_ns)  # the same robot again, starting on the same instant
+    report = verify_log(root)
+    assert report.ok, report.findings
+    assert "clock_restart" not in _kinds(report.notes)
+    assert [r.cycle_range.end_ns for r in report.robots] == [last_ns + 99 * PERIOD_NS]
+
+    earlier = write_log(tmp_path / "earlier")
+    write_log(earlier, t0_ns=last_ns - 1)  # one nanosecond back: a restart
+    (note,) = [n for n in verify_log(earlier).notes if n.kind == "clock_restart"]
+    assert (note.segment_no, note.where.first_cycle, note.where.start_ns) == (1, 100, last_ns - 1)

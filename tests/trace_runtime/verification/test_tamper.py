@@ -25,16 +25,15 @@ from tests.trace_audit.conftest import fill_cycle
 from trace_audit.verify import VerifyReport, verify_log
 from trace_runtime import AuditLogger, LoggerConfig, open_segment
 from trace_runtime.chain import digest
-from trace_runtime.codec import encode_seal
-from trace_runtime.cycles import RawMessage
-from trace_runtime.integrity import (
-    Ed25519Signer,
-    Signer,
+from trace_runtime.checkpoints import (
     decode_checkpoint,
     encode_checkpoint,
     make_checkpoint,
     signing_bytes,
 )
+from trace_runtime.codec import encode_seal
+from trace_runtime.cycles import RawMessage
+from trace_runtime.keys import Ed25519Signer, Signer
 from trace_runtime.records import (
     LAYER_TOPICS,
     TOPIC_ACTION,
@@ -402,7 +401,10 @@ def test_tamper_campaign_every_mutation_is_detected_and_located(
         report = verify_log(out, key=signer.public_key)
         counts[name] += 1
         if not expect.met_by(report):
-            found = [(f.kind, f.first_cycle, f.last_cycle, f.message) for f in report.findings]
+            found = [
+                (f.kind, f.where.first_cycle, f.where.last_cycle, f.message)
+                for f in report.findings
+            ]
             missed.append(
                 f"#{n} {expect.what}: expected {sorted(expect.kinds)} at cycle "
                 f"{expect.cycle}, got {found}"
@@ -435,7 +437,11 @@ def test_a_clean_root_verifies_across_segments(signed_root: tuple[Path, Ed25519S
     root, signer = signed_root
     report = verify_log(root, key=signer.public_key)
     assert report.ok, report.findings
-    assert (report.first_cycle, report.last_cycle, report.cycles_valid) == (0, 79, 80)
+    assert (report.cycle_range.first_cycle, report.cycle_range.last_cycle, report.cycles_valid) == (
+        0,
+        79,
+        80,
+    )
     assert len(report.segments) == report.segments_valid == 4
     (robot,) = report.robots
     assert robot.anchored_cycle == 79 and robot.unanchored_cycles == 0
@@ -453,7 +459,7 @@ def test_removing_a_middle_segment_is_located(
     gone.unlink()
     report = verify_log(out, key=signer.public_key)
     (finding,) = [f for f in report.findings if f.kind == "missing_segment"]
-    assert finding.segment_no == removed + 1 and finding.first_cycle == tail + 1
+    assert finding.segment_no == removed + 1 and finding.where.first_cycle == tail + 1
     assert f"segment(s) {removed} " in finding.message
 
 
@@ -492,7 +498,7 @@ def test_a_raw_cut_of_the_last_segment_reads_as_a_crash(
     assert {"recovered", "unanchored"} <= kinds
     (robot,) = report.robots
     assert robot.unanchored_cycles > 0 and robot.anchored_cycle is not None
-    assert robot.anchored_cycle < robot.last_cycle  # type: ignore[operator]
+    assert robot.anchored_cycle < robot.cycle_range.last_cycle  # type: ignore[operator]
 
 
 def test_a_raw_cut_of_a_middle_segment_is_tampering(

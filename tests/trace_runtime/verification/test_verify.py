@@ -1,14 +1,14 @@
-"""``verify_log``, ``trace-audit verify`` and ``keygen`` on clean, crashed, gapped, damaged logs.
+"""``verify`` (through the investigator's ``verify_log``) on clean, crashed, gapped, damaged,
+compacted logs: what a clean log looks like (zero findings, the validated range, what is
+anchored) and which notes are not tampering.
 
-The tamper campaign lives in test_verify_tamper.py; this file pins what a clean log looks
-like (zero findings, the validated range, what is anchored) and what the CLI prints and exits.
+The tamper campaign lives in test_tamper.py; what ``trace-audit verify`` and ``keygen``
+print and exit is pinned in tests/trace_audit/test_verify_cli.py.
 """
 
 from __future__ import annotations
 
-import json
 import os
-import random
 import shutil
 import signal
 import struct
@@ -18,19 +18,17 @@ import time
 from pathlib import Path
 
 import pytest
-from typer.testing import CliRunner
 
 from tests.trace_audit.conftest import PERIOD_NS, T0_NS, fill_cycle, write_log
-from tests.trace_audit.profile_writer import Faults, write_profile_log
-from tests.trace_audit.test_verify_tamper import decode, flip_byte, write, write_signed_log
-from trace_audit.cli import app
+from tests.trace_audit.profile_writer import write_profile_log
+from tests.trace_runtime.verification.test_tamper import write_signed_log
 from trace_audit.verify import verify_log
 from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
 from trace_runtime.errors import LogReadError
-from trace_runtime.integrity import Ed25519Signer, generate_keypair, load_public_key, load_signer
+from trace_runtime.keys import Ed25519Signer, generate_keypair, load_public_key
 from trace_runtime.testing import simulate_crash
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 
 def _kinds(items: list) -> list[str]:  # type: ignore[type-arg]
@@ -43,8 +41,11 @@ def _kinds(items: list) -> list[str]:  # type: ignore[type-arg]
 def test_a_clean_log_reports_its_validated_range(sample_log: Path) -> None:
     report = verify_log(sample_log)
     assert report.ok and report.findings == []
-    assert (report.first_cycle, report.last_cycle) == (0, 99)
-    assert (report.start_ns, report.end_ns) == (T0_NS, T0_NS + 99 * PERIOD_NS)
+    assert (report.cycle_range.first_cycle, report.cycle_range.last_cycle) == (0, 99)
+    assert (report.cycle_range.start_ns, report.cycle_range.end_ns) == (
+        T0_NS,
+        T0_NS + 99 * PERIOD_NS,
+    )
     assert report.cycles == report.cycles_valid == 100
     assert report.checkpoints == report.checkpoints_valid == 1  # the closing one
     (robot,) = report.robots
@@ -60,7 +61,7 @@ def test_declared_drops_are_gaps_not_tampering(tmp_path: Path) -> None:
     report = verify_log(path)
     assert report.ok, report.findings
     gaps = [n for n in report.notes if n.kind == "declared_gap"]
-    assert [(g.first_cycle, g.last_cycle) for g in gaps] == [(5, 6), (40, 40)]
+    assert [(g.where.first_cycle, g.where.last_cycle) for g in gaps] == [(5, 6), (40, 40)]
     assert report.declared_dropped == 3 and report.cycles_valid == 97
 
 
@@ -81,29 +82,13 @@ def test_two_robots_in_one_root_are_verified_separately(tmp_path: Path) -> None:
     assert report.cycles_valid == 200
 
 
-def test_a_clock_stepping_back_within_a_segment_is_a_note_that_names_the_cycle(
-    tmp_path: Path,
-) -> None:
-    """The chain is intact, so it is not tampering; but PROFILE section 4 forbids it, and an
-    investigator asking "what happened at t" must know that t is ambiguous in that segment."""
-    log = write_profile_log(tmp_path / "p.mcap", faults=Faults(clock_step_back_at=12))
-    report = verify_log(log)
-    assert report.ok and report.findings == []
-    (note,) = [n for n in report.notes if n.kind == "clock_backwards"]
-    assert (note.first_cycle, note.last_cycle) == (12, 12)
-    assert "0.150 s earlier than cycle 11" in note.message
-    assert "section 4" in note.message
-    plain = CliRunner().invoke(app, ["verify", str(log), "--plain"])
-    assert plain.exit_code == 0 and "backwards" in plain.output
-
-
 def test_a_clock_restart_between_segments_is_a_note_not_a_finding(tmp_path: Path) -> None:
     root = write_log(tmp_path / "root")
     write_log(root)  # the same robot again, its clock from the same time
     report = verify_log(root)
     assert report.ok and report.findings == []
     (note,) = [n for n in report.notes if n.kind == "clock_restart"]
-    assert (note.segment_no, note.first_cycle) == (1, 100)
+    assert (note.segment_no, note.where.first_cycle) == (1, 100)
     assert "not after cycle 99" in note.message
     assert "clock_restart" not in _kinds(verify_log(write_log(tmp_path / "one")).notes)
 
@@ -136,7 +121,9 @@ def test_simulator_log_is_clean_and_its_drops_are_the_injected_ones(tmp_path: Pa
     assert report.ok, report.findings
     truth = sim.read_truth(result.truth)
     dropped = sorted(f["cycle"] for f in truth if f["kind"] == "audit_write_timeout")
-    gaps = [(n.first_cycle, n.last_cycle) for n in report.notes if n.kind == "declared_gap"]
+    gaps = [
+        (n.where.first_cycle, n.where.last_cycle) for n in report.notes if n.kind == "declared_gap"
+    ]
     declared = sorted(
         c for a, b in gaps if a is not None and b is not None for c in range(a, b + 1)
     )
@@ -187,15 +174,15 @@ def test_a_robot_killed_mid_run_and_restarted_verifies_clean(tmp_path: Path) -> 
     assert crashed.ok, crashed.findings
     assert "recovered" in _kinds(crashed.notes)
     (robot,) = crashed.robots
-    assert robot.last_cycle is not None and robot.last_cycle >= 44
+    assert robot.cycle_range.last_cycle is not None and robot.cycle_range.last_cycle >= 44
 
     _robot(root, keys.private_path, 30, kill_after=None)  # restarts, continues, closes
     report = verify_log(root, key=public)
     assert report.ok, report.findings
     (robot,) = report.robots
-    assert len(report.segments) == 2 and robot.first_cycle == 0
+    assert len(report.segments) == 2 and robot.cycle_range.first_cycle == 0
     # The restarted robot's checkpoints vouch for the crashed tail too: the chain goes on.
-    assert robot.unanchored_cycles == 0 and robot.anchored_cycle == robot.last_cycle
+    assert robot.unanchored_cycles == 0 and robot.anchored_cycle == robot.cycle_range.last_cycle
     numbers = [c.cycle for c in open_log(root).iter_cycles()]
     assert numbers == list(range(len(numbers)))
 
@@ -290,69 +277,6 @@ def test_a_damaged_cold_segment_is_a_finding(tmp_path: Path) -> None:
     assert any(f.segment.endswith(victim.name) for f in report.findings), report.findings
 
 
-# --- the command line ---------------------------------------------------------------------
-
-runner = CliRunner()
-
-
-def _run(*args: str) -> tuple[int, str, str]:
-    result = runner.invoke(app, list(args))
-    return result.exit_code, result.stdout, result.stderr
-
-
-def test_cli_verify_clean_prints_the_range_and_exits_0(sample_log: Path) -> None:
-    code, out, err = _run("verify", str(sample_log), "--plain")
-    assert code == 0, err
-    assert "CLEAN" in out and "cycles 0..99" in out and "t = 100.000 s .. 109.900 s" in out
-    assert "anchored" in out and "through cycle 99" in out
-    assert "not checked (no --key)" in out
-
-
-def test_cli_verify_with_a_key_and_json(tmp_path: Path) -> None:
-    keys = generate_keypair(tmp_path / "keys")
-    path = write_signed_log(tmp_path / "run.mcap", load_signer(keys.private_path), 25)
-    code, out, err = _run("verify", str(path), "--key", str(keys.public_path), "--json")
-    assert code == 0, err
-    data = json.loads(out)
-    assert data["ok"] is True and data["findings"] == [] and data["key_id"] == keys.key_id
-    assert data["robots"][0]["anchored_cycle"] == 24 and data["cycles_valid"] == 25
-
-
-def test_cli_verify_findings_exit_1_and_are_located(tmp_path: Path) -> None:
-    signer = Ed25519Signer.generate()
-    path = write_signed_log(tmp_path / "run.mcap", signer, 30)
-    decoded = decode(path)
-    expect = flip_byte(decoded, random.Random(3), signer)
-    write(decoded, path, random.Random(3))
-    (tmp_path / "robot.pub").write_bytes(signer.public_key.raw)
-    code, out, _err = _run("verify", str(path), "--key", str(tmp_path / "robot.pub"), "--plain")
-    assert code == 1
-    assert "FINDING" in out and "Findings" in out and str(expect.cycle) in out
-    code, out, _err = _run("verify", str(path), "--key", str(tmp_path / "robot.pub"), "--json")
-    data = json.loads(out)
-    assert code == 1 and data["ok"] is False
-    assert any(
-        f["first_cycle"] <= expect.cycle <= (f["last_cycle"] or f["first_cycle"])
-        for f in data["findings"]
-        if f["first_cycle"] is not None
-    )
-
-
-def test_cli_verify_unreadable_input_exits_3(tmp_path: Path) -> None:
-    code, _out, err = _run("verify", str(tmp_path / "nope.mcap"))
-    assert code == 3 and err.startswith("trace-audit: ") and len(err.splitlines()) == 1
-    junk = tmp_path / "junk.mcap"
-    junk.write_bytes(b"this is not an mcap file at all")
-    code, _out, err = _run("verify", str(junk))
-    assert code == 3 and "not an MCAP file" in err
-
-
-def test_cli_verify_bad_key_is_a_usage_error(sample_log: Path, tmp_path: Path) -> None:
-    (tmp_path / "bad.pub").write_text("hello\n")
-    code, _out, err = _run("verify", str(sample_log), "--key", str(tmp_path / "bad.pub"))
-    assert code == 2 and "public key" in err and len(err.splitlines()) == 1
-
-
 def test_a_damaged_segment_in_a_root_is_a_finding_not_a_crash(tmp_path: Path) -> None:
     root = tmp_path / "root"
     write_log(root)
@@ -384,24 +308,6 @@ def test_bytes_flipped_anywhere_in_a_segment_never_crash_verify(tmp_path: Path) 
             continue
         if any(a <= at < b for a, b in chunks):
             assert not report.ok, at  # message data is covered
-
-
-def test_cli_keygen_writes_a_key_pair_and_refuses_to_overwrite(tmp_path: Path) -> None:
-    out = tmp_path / "keys"
-    code, stdout, err = _run("keygen", "--out", str(out), "--name", "amr-7", "--plain")
-    assert code == 0, err
-    assert (out / "amr-7.key").exists() and (out / "amr-7.pub").exists()
-    assert "trace-audit verify LOG --key" in stdout
-    code, _stdout, err = _run("keygen", "--out", str(out), "--name", "amr-7")
-    assert code == 2 and "refusing to overwrite" in err
-    code, stdout, err = _run("keygen", "--out", str(out), "--name", "amr-7", "--force", "--json")
-    assert code == 0 and len(json.loads(stdout)["key_id"]) == 64
-
-
-def test_every_integrity_command_has_help_with_an_example() -> None:
-    for command in ("verify", "keygen"):
-        code, out, _err = _run(command, "--help")
-        assert code == 0 and "Examples" in out and f"trace-audit {command}" in out
 
 
 def test_drops_declared_by_the_first_seal_a_log_holds_are_reported(tmp_path: Path) -> None:

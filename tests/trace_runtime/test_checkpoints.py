@@ -1,40 +1,28 @@
-"""Checkpoint keys, signatures and the per-cycle seal check; the logger's checkpoint hook."""
+"""Checkpoints: the signed bytes, signature states, and the logger's checkpoint hook.
+
+Key files are tested in test_keys.py, the per-cycle seal check in test_seal_check.py."""
 
 from __future__ import annotations
 
 import itertools
-import os
-import stat
-from dataclasses import replace
 from pathlib import Path
 
 import pytest
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
-from cryptography.hazmat.primitives.asymmetric.x25519 import X25519PrivateKey
-from cryptography.hazmat.primitives.serialization import (
-    Encoding,
-    NoEncryption,
-    PrivateFormat,
-    PublicFormat,
-)
 
 from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
 from trace_runtime.chain import digest
-from trace_runtime.cycles import Cycle, RawMessage
-from trace_runtime.errors import UsageError
-from trace_runtime.integrity import (
-    Ed25519Signer,
+from trace_runtime.checkpoints import (
     check_checkpoint,
     decode_checkpoint,
-    generate_keypair,
     iter_checkpoints,
-    load_public_key,
-    load_signer,
     make_checkpoint,
     signing_bytes,
-    verify_cycle,
 )
-from trace_runtime.records import GENESIS, TOPIC_ACTION, TOPIC_PERCEPTION, TOPIC_SEAL, Checkpoint
+from trace_runtime.errors import UsageError
+from trace_runtime.keys import Ed25519Signer, generate_keypair, load_public_key
+from trace_runtime.records import GENESIS, TOPIC_SEAL, Checkpoint
+from trace_runtime.seal_check import verify_cycle
 from trace_runtime.testing import simulate_crash, synthetic_cycle
 
 PERIOD_NS = 100_000_000
@@ -70,59 +58,6 @@ def _sync(**kw: object) -> LoggerConfig:
 
 def _checkpoints(path: Path) -> list[Checkpoint]:
     return [decode_checkpoint(m.data) for m in iter_checkpoints(open_segment(path))]
-
-
-# --- keys ------------------------------------------------------------------------------------
-
-
-def test_keygen_writes_a_private_key_only_its_owner_can_read(tmp_path: Path) -> None:
-    pair = generate_keypair(tmp_path / "keys")
-    assert stat.S_IMODE(os.stat(pair.private_path).st_mode) == 0o600
-    assert pair.private_path.read_bytes().startswith(b"-----BEGIN PRIVATE KEY-----")
-    assert pair.public_path.read_bytes().startswith(b"-----BEGIN PUBLIC KEY-----")
-    signer, public = load_signer(pair.private_path), load_public_key(pair.public_path)
-    assert signer.key_id == public.key_id == pair.key_id
-    assert public.verify(signer.sign(b"x"), b"x") and not public.verify(signer.sign(b"x"), b"y")
-
-
-def test_keygen_refuses_to_overwrite_a_key_unless_forced(tmp_path: Path) -> None:
-    first = generate_keypair(tmp_path)
-    with pytest.raises(UsageError, match="refusing to overwrite"):
-        generate_keypair(tmp_path)
-    os.chmod(first.private_path, 0o644)
-    second = generate_keypair(tmp_path, overwrite=True)
-    assert second.key_id != first.key_id
-    assert stat.S_IMODE(os.stat(second.private_path).st_mode) == 0o600
-
-
-def test_raw_and_openssh_key_files_load(tmp_path: Path) -> None:
-    signer = Ed25519Signer.generate()
-    key = signer._key
-    raw_private = key.private_bytes(Encoding.Raw, PrivateFormat.Raw, NoEncryption())
-    (tmp_path / "raw.key").write_bytes(raw_private)
-    public = key.public_key()
-    (tmp_path / "raw.pub").write_bytes(public.public_bytes(Encoding.Raw, PublicFormat.Raw))
-    (tmp_path / "ssh.pub").write_bytes(public.public_bytes(Encoding.OpenSSH, PublicFormat.OpenSSH))
-    assert load_signer(tmp_path / "raw.key").key_id == signer.key_id
-    assert load_public_key(tmp_path / "raw.pub").key_id == signer.key_id
-    assert load_public_key(tmp_path / "ssh.pub").key_id == signer.key_id
-
-
-def test_bad_key_files_are_usage_errors(tmp_path: Path) -> None:
-    pair = generate_keypair(tmp_path)
-    (tmp_path / "junk").write_bytes(b"not a key at all\n")
-    x25519 = X25519PrivateKey.generate().private_bytes(
-        Encoding.PEM, PrivateFormat.PKCS8, NoEncryption()
-    )
-    (tmp_path / "x25519.key").write_bytes(x25519)
-    with pytest.raises(UsageError, match="private key; verify with the public key"):
-        load_public_key(pair.private_path)
-    with pytest.raises(UsageError, match="no such file"):
-        load_public_key(tmp_path / "missing.pub")
-    with pytest.raises(UsageError, match="not a PEM"):
-        load_public_key(tmp_path / "junk")
-    with pytest.raises(UsageError, match="not an Ed25519 key"):
-        load_signer(tmp_path / "x25519.key")
 
 
 # --- checkpoints and signatures ---------------------------------------------------------------
@@ -321,65 +256,3 @@ def test_a_restart_after_a_crash_before_the_first_write_continues_the_chain(
     assert third.session.first_cycle == 10
     last_of_first = list(open_segment(segments[0]).iter_cycles())[-1]
     assert third.session.prev_seal == digest(last_of_first.payloads[TOPIC_SEAL])
-
-
-# --- verify_cycle ---------------------------------------------------------------------------------
-
-
-@pytest.fixture()
-def cycles(tmp_path: Path) -> list[Cycle]:
-    path = tmp_path / "run.mcap"
-    _write(path, 3, _sync())
-    return list(open_log(path).iter_cycles())
-
-
-def test_verify_cycle_on_intact_cycles(cycles: list[Cycle]) -> None:
-    prev = GENESIS
-    for cycle in cycles:
-        status = verify_cycle(cycle, prev)
-        assert status.ok and status.state == "verified" and status.link == "ok"
-        assert status.evidence_checked == 1 and status.sensors_uncited == 0
-        assert status.describe() == "seal verifies"
-        prev = status.seal_digest or ""
-    assert verify_cycle(cycles[1]).link == "unchecked"
-
-
-def test_verify_cycle_names_what_differs(cycles: list[Cycle]) -> None:
-    cycle = cycles[1]
-    action = cycle.payloads[TOPIC_ACTION].replace(b'"command":"', b'"command":"X')
-    altered = replace(cycle, payloads={**cycle.payloads, TOPIC_ACTION: action})
-    status = verify_cycle(altered)
-    assert status.state == "modified" and status.modified == (TOPIC_ACTION,)
-    assert "/trace/action differs from the seal's digest" in status.describe()
-
-    missing = {t: d for t, d in cycle.payloads.items() if t != TOPIC_PERCEPTION}
-    status = verify_cycle(replace(cycle, payloads=missing))
-    assert status.state == "modified" and status.missing == (TOPIC_PERCEPTION,)
-
-    (sensor,) = cycle.sensors
-    forged = RawMessage(sensor.topic, sensor.sequence, sensor.log_time_ns, b'{"ranges":[9]}')
-    status = verify_cycle(replace(cycle, sensors=[forged]))
-    assert status.state == "verified" and not status.ok
-    assert status.evidence_mismatch == ("/sensors/lidar#1",)
-
-    status = verify_cycle(cycle, digest(b"another seal"))
-    assert status.state == "broken_link" and not status.ok
-
-    bad_seal = {**cycle.payloads, TOPIC_SEAL: b'{"cycle":1'}
-    assert verify_cycle(replace(cycle, payloads=bad_seal)).state == "modified"
-
-    unsealed = {t: d for t, d in cycle.payloads.items() if t != TOPIC_SEAL}
-    assert verify_cycle(replace(cycle, payloads=unsealed)).state == "unsealed"
-
-
-def test_a_summary_cycle_verifies_its_seal_not_its_payloads(cycles: list[Cycle]) -> None:
-    """A warm summary keeps the seal; the layer digests cannot be recomputed."""
-    first, second = cycles[0], cycles[1]
-    summary = replace(
-        second, payloads={TOPIC_SEAL: second.payloads[TOPIC_SEAL]}, sensors=[], summary={}
-    )
-    status = verify_cycle(summary, digest(first.payloads[TOPIC_SEAL]))
-    assert status.state == "summarised" and status.ok and status.link == "ok"
-    assert set(status.summarised) == set(second.digests())
-    assert status.describe() == "summarised (chain verified, payloads not retained)"
-    assert verify_cycle(summary, GENESIS).state == "broken_link"

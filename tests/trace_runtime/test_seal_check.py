@@ -1,0 +1,77 @@
+"""The per-cycle seal check (``seal_check.verify_cycle``): intact cycles, what differs, a broken
+link, an unsealed cycle, a warm summary cycle."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from tests.trace_runtime.test_checkpoints import _sync, _write
+from trace_runtime import open_log
+from trace_runtime.chain import digest
+from trace_runtime.cycles import Cycle, RawMessage
+from trace_runtime.records import GENESIS, TOPIC_ACTION, TOPIC_PERCEPTION, TOPIC_SEAL
+from trace_runtime.seal_check import verify_cycle
+
+# --- verify_cycle ---------------------------------------------------------------------------------
+
+
+@pytest.fixture()
+def cycles(tmp_path: Path) -> list[Cycle]:
+    path = tmp_path / "run.mcap"
+    _write(path, 3, _sync())
+    return list(open_log(path).iter_cycles())
+
+
+def test_verify_cycle_on_intact_cycles(cycles: list[Cycle]) -> None:
+    prev = GENESIS
+    for cycle in cycles:
+        status = verify_cycle(cycle, prev)
+        assert status.ok and status.state == "verified" and status.link == "ok"
+        assert status.evidence_checked == 1 and status.sensors_uncited == 0
+        assert status.describe() == "seal verifies"
+        prev = status.seal_digest or ""
+    assert verify_cycle(cycles[1]).link == "unchecked"
+
+
+def test_verify_cycle_names_what_differs(cycles: list[Cycle]) -> None:
+    cycle = cycles[1]
+    action = cycle.payloads[TOPIC_ACTION].replace(b'"command":"', b'"command":"X')
+    altered = replace(cycle, payloads={**cycle.payloads, TOPIC_ACTION: action})
+    status = verify_cycle(altered)
+    assert status.state == "modified" and status.modified == (TOPIC_ACTION,)
+    assert "/trace/action differs from the seal's digest" in status.describe()
+
+    missing = {t: d for t, d in cycle.payloads.items() if t != TOPIC_PERCEPTION}
+    status = verify_cycle(replace(cycle, payloads=missing))
+    assert status.state == "modified" and status.missing == (TOPIC_PERCEPTION,)
+
+    (sensor,) = cycle.sensors
+    forged = RawMessage(sensor.topic, sensor.sequence, sensor.log_time_ns, b'{"ranges":[9]}')
+    status = verify_cycle(replace(cycle, sensors=[forged]))
+    assert status.state == "verified" and not status.ok
+    assert status.evidence_mismatch == ("/sensors/lidar#1",)
+
+    status = verify_cycle(cycle, digest(b"another seal"))
+    assert status.state == "broken_link" and not status.ok
+
+    bad_seal = {**cycle.payloads, TOPIC_SEAL: b'{"cycle":1'}
+    assert verify_cycle(replace(cycle, payloads=bad_seal)).state == "modified"
+
+    unsealed = {t: d for t, d in cycle.payloads.items() if t != TOPIC_SEAL}
+    assert verify_cycle(replace(cycle, payloads=unsealed)).state == "unsealed"
+
+
+def test_a_summary_cycle_verifies_its_seal_not_its_payloads(cycles: list[Cycle]) -> None:
+    """A warm summary keeps the seal; the layer digests cannot be recomputed."""
+    first, second = cycles[0], cycles[1]
+    summary = replace(
+        second, payloads={TOPIC_SEAL: second.payloads[TOPIC_SEAL]}, sensors=[], summary={}
+    )
+    status = verify_cycle(summary, digest(first.payloads[TOPIC_SEAL]))
+    assert status.state == "summarised" and status.ok and status.link == "ok"
+    assert set(status.summarised) == set(second.digests())
+    assert status.describe() == "summarised (chain verified, payloads not retained)"
+    assert verify_cycle(summary, GENESIS).state == "broken_link"

@@ -1,0 +1,132 @@
+"""Checkpoints: signed statements of a robot's chain head (``/trace/checkpoint``).
+
+Anyone can recompute a hash chain; a checkpoint states the chain head (the digest of the
+last seal) and is signed with the robot's Ed25519 key, like a Certificate Transparency
+signed tree head or a CloudTrail digest file. A signed head vouches for every cycle the
+chain reaches back to. This module builds, encodes, decodes, reads and checks them; the
+signed bytes (``signing_bytes``) are specified in docs/integrity.md.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import TYPE_CHECKING, Literal
+
+import orjson
+
+from trace_runtime.errors import RecordError
+from trace_runtime.keys import PublicKey, Signer
+from trace_runtime.records import TOPIC_CHECKPOINT, Checkpoint, validate_record
+
+if TYPE_CHECKING:
+    from trace_runtime.cycles import RawMessage
+    from trace_runtime.reader import Segment
+
+__all__ = [
+    "CHECKPOINT_FORMAT",
+    "CheckpointState",
+    "check_checkpoint",
+    "decode_checkpoint",
+    "encode_checkpoint",
+    "iter_checkpoints",
+    "make_checkpoint",
+    "signing_bytes",
+]
+
+CHECKPOINT_FORMAT = "trace-checkpoint/1"
+"""First line of the signed bytes; bumped if the signed fields ever change."""
+
+
+def signing_bytes(checkpoint: Checkpoint) -> bytes:
+    """The exact bytes an Ed25519 checkpoint signature covers (docs/integrity.md).
+
+    Not JSON: one ``name=value`` line per field of the unsigned body, in fixed order, decimal
+    integers, lowercase hex digests, ``true``/``false``, empty for an absent key id. Every
+    language produces these bytes the same way; the message's own JSON never has to be
+    re-serialised to check a signature.
+    """
+    c = checkpoint
+    lines = (
+        CHECKPOINT_FORMAT,
+        f"robot_id={c.robot_id}",
+        f"segment={c.segment}",
+        f"first_cycle={c.first_cycle}",
+        f"cycle={c.cycle}",
+        f"t_ns={c.t_ns}",
+        f"sealed={c.sealed}",
+        f"head={c.head}",
+        f"final={'true' if c.final else 'false'}",
+        f"key_id={c.key_id or ''}",
+    )
+    return ("\n".join(lines) + "\n").encode()
+
+
+def make_checkpoint(
+    *,
+    robot_id: str,
+    segment: int,
+    first_cycle: int,
+    cycle: int,
+    t_ns: int,
+    sealed: int,
+    head: str,
+    final: bool = False,
+    signer: Signer | None = None,
+) -> Checkpoint:
+    """Build a checkpoint of the chain head; signed when ``signer`` is given."""
+    body = Checkpoint(
+        cycle=cycle,
+        t_ns=t_ns,
+        robot_id=robot_id,
+        segment=segment,
+        first_cycle=first_cycle,
+        sealed=sealed,
+        head=head,
+        final=final,
+        key_id=None if signer is None else signer.key_id,
+    )
+    if signer is None:
+        return body
+    return body.model_copy(update={"signature": signer.sign(signing_bytes(body)).hex()})
+
+
+def encode_checkpoint(checkpoint: Checkpoint) -> bytes:
+    """The message data of a checkpoint: compact JSON of the model, like a seal."""
+    return checkpoint.model_dump_json(by_alias=True).encode()
+
+
+def decode_checkpoint(data: bytes) -> Checkpoint:
+    """Parse checkpoint message data; ``RecordError`` when it is not a valid checkpoint."""
+    try:
+        value = orjson.loads(data)
+    except orjson.JSONDecodeError as err:
+        raise RecordError(f"invalid Checkpoint: not JSON ({err})") from err
+    return validate_record(Checkpoint, value)
+
+
+CheckpointState = Literal["valid", "unchecked", "unsigned", "bad_signature", "key_mismatch"]
+"""``valid``: signed by the expected key; ``unchecked``: no key to check against;
+``unsigned``: a key was expected but the checkpoint has no signature; ``key_mismatch``: it
+names another key; ``bad_signature``: it names the key but the signature does not verify."""
+
+
+def check_checkpoint(checkpoint: Checkpoint, key: PublicKey | None) -> CheckpointState:
+    """Check a checkpoint's signature against the expected public key (None: cannot check)."""
+    if key is None:
+        return "unchecked"
+    if not checkpoint.signature:
+        return "unsigned"
+    if checkpoint.key_id != key.key_id:
+        return "key_mismatch"
+    try:
+        signature = bytes.fromhex(checkpoint.signature)
+    except ValueError:
+        return "bad_signature"
+    return "valid" if key.verify(signature, signing_bytes(checkpoint)) else "bad_signature"
+
+
+def iter_checkpoints(segment: Segment) -> Iterator[RawMessage]:
+    """The raw ``/trace/checkpoint`` messages of a segment, in reading order."""
+    for message in segment.iter_messages():
+        if message.topic == TOPIC_CHECKPOINT:
+            yield message

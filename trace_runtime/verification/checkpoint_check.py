@@ -1,0 +1,235 @@
+"""A segment's checkpoints against its chain: each head must be a seal the log holds, each
+count the sealed cycles it holds, each signature the robot's key; a segment its logger closed
+must end with its closing checkpoint, and nothing may follow it.
+
+A checkpoint that matches (and, with a key, verifies) is an ``Anchor``: it vouches for every
+cycle up to it.
+"""
+
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass
+
+from trace_runtime.checkpoints import CheckpointState, check_checkpoint
+from trace_runtime.gaps import CycleRange
+from trace_runtime.keys import PublicKey
+from trace_runtime.reader import Segment
+from trace_runtime.records import Checkpoint
+from trace_runtime.session import TIER_METADATA
+from trace_runtime.verification.report import FindingKind
+from trace_runtime.verification.scan import Anchor, SealScan
+from trace_runtime.verification.sink import SegmentReporter
+
+__all__ = ["CheckpointCheck", "ReadCheckpoint"]
+
+ReadCheckpoint = tuple[int, int, Checkpoint | None]
+"""A checkpoint message as read: (log time, MCAP sequence, the record or None if invalid)."""
+
+_SIGNATURE_PROBLEMS = {
+    "bad_signature": "its signature does not verify with the given key",
+    "unsigned": "it is not signed, but a key was given",
+}
+
+
+@dataclass(slots=True)
+class CheckpointCheck:
+    """Checks one segment's checkpoints against its scan; counts them and finds the anchor."""
+
+    report: SegmentReporter
+    scan: SealScan
+    segment: Segment
+    key: PublicKey | None
+    checkpoints: int = 0
+    valid: int = 0
+    anchor: Anchor | None = None
+
+    def run(self, read: list[ReadCheckpoint]) -> None:
+        """Check every checkpoint read from the segment, then how the segment ends."""
+        scan = self.scan
+        last_cycle = scan.num[-1] if scan.num else None
+        is_sorted = all(scan.num[i] < scan.num[i + 1] for i in range(len(scan.num) - 1))
+        window_start = self.segment.session.first_cycle
+        final_seen: Checkpoint | None = None
+        for log_time, sequence, checkpoint in read:
+            self.checkpoints += 1
+            if checkpoint is None:
+                self.report.finding(
+                    "modified",
+                    f"the checkpoint after cycle {sequence} is not a valid checkpoint record",
+                    CycleRange(sequence, sequence, log_time, log_time),
+                )
+                continue
+            c = checkpoint
+            # Located by what it claims and by where it sits (its MCAP sequence is its cycle).
+            where = CycleRange(min(window_start, c.cycle), max(c.cycle, sequence), None, log_time)
+            if self._one(c, where, window_start, last_cycle, is_sorted=is_sorted):
+                window_start = c.cycle + 1
+            if c.final:
+                final_seen = c
+        # A segment its logger closed ends with its closing checkpoint; one without a summary
+        # (a crash) cannot have one. Compacted tiers carry checkpoints over with the cycles.
+        if _closed_by_logger(self.segment) and last_cycle is not None:
+            self._check_end(read, final_seen, last_cycle)
+
+    def _one(
+        self,
+        c: Checkpoint,
+        where: CycleRange,
+        window_start: int,
+        last_cycle: int | None,
+        *,
+        is_sorted: bool,
+    ) -> bool:
+        """Check one checkpoint record; True when it matches the chain and vouches for it."""
+        scan = self.scan
+        problems = self._checkpoint_problems(c, last_cycle, is_sorted)
+        state: CheckpointState = check_checkpoint(c, self.key)
+        if problems:
+            kind: FindingKind = problems[0][0]
+            located = where
+            if kind == "truncated" and last_cycle is not None:
+                located = CycleRange(last_cycle + 1, c.cycle, scan.t[-1], c.t_ns)
+            self.report.finding(
+                kind,
+                f"checkpoint at cycle {c.cycle}: " + "; ".join(p[1] for p in problems),
+                located,
+            )
+        if state in ("bad_signature", "key_mismatch", "unsigned"):
+            message = (
+                f"it is signed by another key ({(c.key_id or '?')[:16]}…)"
+                if state == "key_mismatch"
+                else _SIGNATURE_PROBLEMS[state]
+            )
+            self.report.finding(
+                "unsigned_checkpoint" if state == "unsigned" else state,
+                f"checkpoint at cycle {c.cycle}: {message}; "
+                f"cycles {window_start}..{c.cycle} are not vouched for",
+                where,
+            )
+        if problems or state not in ("valid", "unchecked"):
+            return False
+        self.valid += 1
+        if self.anchor is None or c.cycle >= self.anchor.cycle:
+            self.anchor = Anchor(c.cycle, c.t_ns)
+        return True
+
+    def _check_end(
+        self, read: list[ReadCheckpoint], final_seen: Checkpoint | None, last_cycle: int
+    ) -> None:
+        """A closed segment: its closing checkpoint is there and nothing follows it."""
+        scan = self.scan
+        last_t = scan.t[-1]
+        if not read:
+            self._no_checkpoints(last_cycle, last_t)
+        elif final_seen is None:
+            anchored = f"cycle {self.anchor.cycle}" if self.anchor else "none"
+            self.report.finding(
+                "truncated",
+                "the segment was finished but has no closing checkpoint: its end was cut "
+                f"after cycle {last_cycle} (last checkpoint: {anchored})",
+                CycleRange(last_cycle + 1, None, last_t, None),
+            )
+        elif final_seen.cycle < last_cycle:
+            after = [i for i in range(len(scan.num)) if scan.num[i] > final_seen.cycle]
+            self.report.finding(
+                "inserted",
+                f"cycles after the closing checkpoint (cycle {final_seen.cycle}): "
+                f"{len(after)} cycle(s) appended",
+                CycleRange(final_seen.cycle + 1, last_cycle, final_seen.t_ns, last_t),
+            )
+            scan.bad_positions.update(after)
+
+    def _no_checkpoints(self, last_cycle: int, last_t: int | None) -> None:
+        """A closed segment without a single checkpoint: its writer skips PROFILE §6's SHOULD.
+
+        Nothing shows that its end was cut (a writer that checkpoints at all closes with a
+        final one, so a missing final among others is ``truncated``), but nothing vouches for
+        its end either. With a key the investigator expects signatures: then it is a finding.
+        """
+        first_t = min(self.scan.t) if self.scan.t else None
+        first_cycle = self.segment.session.first_cycle
+        span = CycleRange(first_cycle, last_cycle, first_t, last_t)
+        if self.key is not None:
+            self.report.finding(
+                "unsigned_checkpoint",
+                "a key was given but the segment holds no checkpoint: no signature vouches "
+                f"for cycles {first_cycle}..{last_cycle}",
+                span,
+            )
+            return
+        self.report.note(
+            "no_checkpoints",
+            "end not anchored: no final checkpoint (the segment holds no checkpoints at all; "
+            "its writer skips the SHOULD of PROFILE §6, so a cut end could not be told)",
+            CycleRange(last_cycle, last_cycle, last_t, last_t),
+        )
+
+    def _checkpoint_problems(
+        self, c: Checkpoint, last_cycle: int | None, is_sorted: bool
+    ) -> list[tuple[FindingKind, str]]:
+        problems: list[tuple[FindingKind, str]] = []
+        session = self.segment.session
+        if c.robot_id != session.robot_id:
+            problems.append(("checkpoint_mismatch", f"names robot {c.robot_id!r}"))
+        if c.segment != session.segment:
+            problems.append(
+                ("checkpoint_mismatch", f"it was written in segment {c.segment}, not this one")
+            )
+        heads = self.scan.heads.get(c.cycle)
+        if not heads:
+            if last_cycle is not None and c.cycle > last_cycle:
+                problems.append(
+                    (
+                        "truncated",
+                        f"it vouches for cycle {c.cycle} but the segment "
+                        f"ends at cycle {last_cycle}: the end was cut",
+                    )
+                )
+            else:
+                problems.append(
+                    ("checkpoint_mismatch", f"its head cycle {c.cycle} is not in the log")
+                )
+            return problems
+        if c.head not in heads:
+            problems.append(
+                (
+                    "checkpoint_mismatch",
+                    "the chain head it vouches for differs "
+                    "from the log's seal: records up to it were altered and the chain "
+                    "recomputed",
+                )
+            )
+        if c.segment == session.segment and c.first_cycle == session.first_cycle:
+            num = self.scan.num
+            if is_sorted:
+                count = bisect.bisect_right(num, c.cycle) - bisect.bisect_left(num, c.first_cycle)
+            else:
+                count = sum(1 for n in num if c.first_cycle <= n <= c.cycle)
+            # Cycles lost in damaged chunks were sealed; the damage finding accounts for them.
+            count += sum(
+                lost for a, b, lost in self.scan.damaged if c.first_cycle <= a and b <= c.cycle
+            )
+            if count != c.sealed:
+                problems.append(
+                    (
+                        "checkpoint_mismatch",
+                        f"it counts {c.sealed} sealed cycles "
+                        f"from cycle {c.first_cycle}, the log has {count}",
+                    )
+                )
+        return problems
+
+
+def _closed_by_logger(segment: Segment) -> bool | None:
+    """Whether the segment's logger closed it (so it must end with a closing checkpoint).
+
+    A hot segment is the logger's own file: closed when it has a summary. A compacted one is
+    always finished; its ``trace.tier`` metadata says whether its hot source was
+    (``source_finished``). None when it does not say: the closing checkpoint is not required.
+    """
+    if segment.session.tier == "hot":
+        return segment.info.finished
+
+    value = segment.metadata.get(TIER_METADATA, {}).get("source_finished")
+    return None if value is None else value == "true"

@@ -1,0 +1,184 @@
+"""What ``verify`` reports: the kinds of finding and note, a located ``Finding``, and the
+summaries of a segment, a robot's chain and the whole log.
+
+Every location is a ``gaps.CycleRange`` (cycles and times, any end unknown), inlined in JSON
+as the ``first_cycle``/``last_cycle``/``start_ns``/``end_ns`` keys. A finding whose message
+names an external recording (``EXTERNAL_RECORDING``) is about evidence outside the log.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from trace_runtime.gaps import JSON_INLINE, NOWHERE, CycleRange
+from trace_runtime.session import TIERS
+
+__all__ = [
+    "EXTERNAL_RECORDING",
+    "Finding",
+    "FindingKind",
+    "NoteKind",
+    "RobotSummary",
+    "SegmentSummary",
+    "VerifyReport",
+    "describe_numbers",
+    "display_name",
+    "is_external_evidence",
+]
+
+FindingKind = Literal[
+    "modified",
+    "evidence_mismatch",
+    "missing",
+    "inserted",
+    "reordered",
+    "unsealed",
+    "undeclared_gap",
+    "truncated",
+    "missing_segment",
+    "checkpoint_mismatch",
+    "bad_signature",
+    "key_mismatch",
+    "unsigned_checkpoint",
+    "damaged",
+]
+"""What a finding says happened; every kind makes ``verify`` exit 1."""
+
+NoteKind = Literal[
+    "declared_gap",
+    "summarised",
+    "unanchored",
+    "recovered",
+    "signatures_unchecked",
+    "chain_start",
+    "duplicate_segment",
+    "skipped_file",
+    "uncovered_sensors",
+    "no_checkpoints",
+    "external_unresolved",
+    "clock_backwards",
+    "clock_restart",
+]
+"""Things an investigator should know that are not tampering."""
+
+_INLINE = {JSON_INLINE: True}
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Finding:
+    """One located problem (or note): what, where in the log, which cycles and times."""
+
+    kind: FindingKind | NoteKind
+    message: str
+    robot_id: str = ""
+    segment: str = ""
+    segment_no: int | None = None
+    where: CycleRange = field(default=NOWHERE, metadata=_INLINE)
+
+    def covers(self, cycle: int) -> bool:
+        """True when ``cycle`` lies in the finding's cycle range."""
+        return cycle in self.where
+
+
+@dataclass(slots=True)
+class SegmentSummary:
+    """What verify saw in one segment file."""
+
+    path: str
+    robot_id: str
+    number: int
+    tier: str
+    finished: bool
+    recovered: bool
+    cycles: int = 0
+    cycles_valid: int = 0
+    cycles_summarised: int = 0
+    checkpoints: int = 0
+    checkpoints_valid: int = 0
+    cycle_range: CycleRange = field(default=NOWHERE, metadata=_INLINE)
+    """The sealed cycles read, and their times."""
+    findings: int = 0
+    ok: bool = True
+    last_seal: str | None = None
+    """Digest of the segment's last seal in reading order: where the next segment enters."""
+    copy: bool = False
+    """A second copy of a segment (mid-compaction): verified, but not counted twice."""
+    external_resolved: int = 0
+    """Evidence refs into external recordings that resolved with a matching digest."""
+    external_unresolved: int = 0
+    """Evidence refs into external recordings that were not given (not checked)."""
+
+
+@dataclass(slots=True)
+class RobotSummary:
+    """One robot's chain: the validated range and how much of it a checkpoint vouches for."""
+
+    robot_id: str
+    segments: int = 0
+    cycles: int = 0
+    cycles_valid: int = 0
+    cycles_summarised: int = 0
+    declared_dropped: int = 0
+    cycle_range: CycleRange = field(default=NOWHERE, metadata=_INLINE)
+    """The validated range: every sealed cycle of the segments read first."""
+    anchored_cycle: int | None = None
+    """Last cycle a matching (and, with a key, validly signed) checkpoint vouches for."""
+    anchored_ns: int | None = None
+    unanchored_cycles: int = 0
+    """Cycles after ``anchored_cycle``: chained, but no checkpoint vouches for them yet."""
+
+
+@dataclass(slots=True)
+class VerifyReport:
+    """The result of ``verify``; ``ok`` is False when there is any finding."""
+
+    path: str
+    key_id: str | None
+    signatures_checked: bool
+    robots: list[RobotSummary] = field(default_factory=list)
+    segments: list[SegmentSummary] = field(default_factory=list)
+    findings: list[Finding] = field(default_factory=list)
+    notes: list[Finding] = field(default_factory=list)
+    cycles: int = 0
+    cycles_valid: int = 0
+    cycles_summarised: int = 0
+    checkpoints: int = 0
+    checkpoints_valid: int = 0
+    segments_valid: int = 0
+    declared_dropped: int = 0
+    external_resolved: int = 0
+    """Evidence refs into external recordings (--evidence) that resolved, digests equal."""
+    external_unresolved: int = 0
+    """Evidence refs into external recordings that were not given: unchecked, not broken."""
+    cycle_range: CycleRange = field(default=NOWHERE, metadata=_INLINE)
+    """Every robot's validated range merged."""
+    ok: bool = True
+    """No finding: every cycle read verifies (notes may still say what is not covered)."""
+
+
+EXTERNAL_RECORDING = "external recording"
+"""Named in the message of every finding about a ref into an external recording (changed
+or absent), so ``is_external_evidence`` can tell them from in-log refs."""
+
+
+def is_external_evidence(finding: Finding) -> bool:
+    """True for an evidence mismatch of a ref into an external recording (PROFILE section 11),
+    whether the message it names differs or is not there."""
+    return finding.kind == "evidence_mismatch" and EXTERNAL_RECORDING in finding.message
+
+
+def display_name(path: Path) -> str:
+    """How findings name a segment file: ``tier/name`` inside a tier folder, else its name."""
+    parts = path.parts
+    return "/".join(parts[-2:]) if len(parts) >= 2 and parts[-2] in TIERS else path.name
+
+
+def describe_numbers(numbers: list[int]) -> str:
+    """Cycle or segment numbers as a finding names them: ``a..b`` when consecutive."""
+    if len(numbers) == 1:
+        return str(numbers[0])
+    if numbers == list(range(numbers[0], numbers[-1] + 1)):
+        return f"{numbers[0]}..{numbers[-1]}"
+    return ", ".join(str(n) for n in numbers[:8]) + (", …" if len(numbers) > 8 else "")
