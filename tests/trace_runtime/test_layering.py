@@ -91,11 +91,12 @@ def test_the_runtime_package_exports_import_lazily_and_resolve() -> None:
 def _module_imports(package: str) -> dict[str, set[str]]:
     """Imports between modules of ``package``, deferred ones (inside functions, or by
     ``importlib.import_module("...")``) included: a cycle through a deferred import is still
-    a cycle. ``if TYPE_CHECKING:`` blocks are left out: they never run."""
+    a cycle. ``if TYPE_CHECKING:`` blocks are left out: they never run. ``from pkg import
+    mod`` counts as importing ``pkg.mod`` when that is a module."""
+    paths = list((ROOT / package).rglob("*.py"))
+    modules = {_module_name(path) for path in paths}
     graph: dict[str, set[str]] = {}
-    for path in (ROOT / package).rglob("*.py"):
-        rel = path.relative_to(ROOT).with_suffix("")
-        name = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+    for path in paths:
         tree = ast.parse(path.read_text())
         type_only = {
             id(inner)
@@ -110,7 +111,8 @@ def _module_imports(package: str) -> dict[str, set[str]]:
             if isinstance(node, ast.Import):
                 targets |= {alias.name for alias in node.names}
             elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-                targets.add(node.module)
+                submodules = {f"{node.module}.{alias.name}" for alias in node.names} & modules
+                targets |= submodules or {node.module}
             elif (
                 isinstance(node, ast.Call)
                 and ast.unparse(node.func).endswith("import_module")
@@ -118,14 +120,21 @@ def _module_imports(package: str) -> dict[str, set[str]]:
                 and isinstance(node.args[0], ast.Constant)
             ):
                 targets.add(str(node.args[0].value))
-        graph[name] = {t for t in targets if t.startswith(package + ".")}
+        name = _module_name(path)
+        graph[name] = {t for t in targets if t in modules and t != name}
     return graph
 
 
-def test_no_import_cycles_inside_the_runtime() -> None:
+def _module_name(path: Path) -> str:
+    rel = path.relative_to(ROOT).with_suffix("")
+    return ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+
+
+@pytest.mark.parametrize("package", ["trace_runtime", "trace_audit", "sim", "evaluation"])
+def test_no_import_cycles_inside_a_package(package: str) -> None:
     """A cycle (the reader and the tiers importing each other, filled by side effects) makes
     import order matter; the layers must only ever import downwards."""
-    graph = _module_imports("trace_runtime")
+    graph = _module_imports(package)
     state: dict[str, int] = {}
     cycles: list[list[str]] = []
 
@@ -142,6 +151,75 @@ def test_no_import_cycles_inside_the_runtime() -> None:
         if module not in state:
             visit(module, [module])
     assert not cycles
+
+
+FLOORS: dict[str, list[set[str]]] = {
+    # docs/architecture.md draws these floors; a module imports from its own floor or below.
+    "trace_runtime": [
+        # the vocabulary: records, errors and the rules every reader and writer shares
+        {
+            "errors", "lazy", "costs", "clock", "flags", "segment_names", "read_limits",
+            "gaps", "records", "session", "schemas", "chain", "keys", "checkpoints",
+        },
+        # encodings: a record's bytes, an MCAP file's bytes, the warm and cold tier formats
+        {
+            "codec", "cycles", "seal_check", "mcap_records", "mcap_chunks", "mcap_file",
+            "tier_formats",
+        },
+        # reading: one segment, a robot's recordings, a log of many files
+        {"reader", "recordings", "logset"},
+        # writing: the logger a robot embeds, and its test double
+        {
+            "segment_writer", "logger_config", "cycle_builder", "handover", "writer_lock",
+            "chain_writer", "writer_thread", "resume", "logger", "testing",
+        },
+        {"verification"},
+        # moving segments between tiers verifies every copy it makes
+        {"tiers"},
+        {""},  # the package's face
+    ],
+    "trace_audit": [
+        # what every question needs: times, sources, a cycle's fields, JSON, evidence
+        {
+            "jsonout", "log_time", "log_source", "cycle_fields", "log_gaps", "sensor_window",
+            "evidence",
+        },
+        # views over one decision: its causal graph and its chains
+        {"causal", "chains"},
+        # the questions an investigator asks of a log
+        {"metrics", "explain", "export", "timeline", "info", "verify", "doctor"},
+        # what is built from the answers: the fleet index, the incident report
+        {"fleet", "report"},
+        {"cli"},
+        {""},
+    ],
+}  # fmt: skip
+
+
+def _floor_of(package: str, module: str) -> int | None:
+    inside = module.removeprefix(package).removeprefix(".")
+    for floor, names in enumerate(FLOORS[package]):
+        if inside in names or inside.split(".")[0] in names - {""}:
+            return floor
+    return None
+
+
+@pytest.mark.parametrize("package", sorted(FLOORS))
+def test_every_module_stands_on_a_floor(package: str) -> None:
+    """A new module is given its floor on purpose, in FLOORS and in docs/architecture.md."""
+    unplaced = sorted(m for m in _module_imports(package) if _floor_of(package, m) is None)
+    assert not unplaced
+
+
+@pytest.mark.parametrize("package", sorted(FLOORS))
+def test_no_module_imports_from_a_higher_floor(package: str) -> None:
+    upward = sorted(
+        (module, target)
+        for module, targets in _module_imports(package).items()
+        for target in targets
+        if (_floor_of(package, target) or 0) > (_floor_of(package, module) or 0)
+    )
+    assert not upward
 
 
 def test_the_reader_layers_import_downwards() -> None:
