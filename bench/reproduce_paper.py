@@ -31,6 +31,7 @@ from evaluation.baselines.evaluate import Spread
 from sim import SCENARIOS, FaultRates, RunConfig, RunResult, read_truth, run
 from sim.replay import check_counterfactuals
 from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
+from trace_runtime.flags import split_flags
 from trace_runtime.logset import open_log
 from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION
 
@@ -100,7 +101,7 @@ def behave(seed: int, workdir: Path) -> Behaviour:
             continue
         cycles += 1
         failed += any(not c["passed"] for c in execution["checks"])
-        scenario = next(f[9:] for f in execution["flags"] if f.startswith("scenario:"))
+        _flags, scenario = split_flags(execution["flags"])
         commands.setdefault(scenario, Counter())[action["command"]] += 1
     share = {s: 1 - c["CONTINUE"] / sum(c.values()) for s, c in commands.items()}
     return Behaviour(seed, result, cycles, failed, share)

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from sim import FaultRates, RunConfig, run
+from trace_runtime.flags import split_flags
 from trace_runtime.logset import open_log
 from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION
 
@@ -36,7 +37,7 @@ def measure(seed: int, work: Path, faults: FaultRates) -> dict[str, Any]:
         if execution is None or action is None:
             continue
         cycles += 1
-        scenario = next(f[9:] for f in execution["flags"] if f.startswith("scenario:"))
+        _flags, scenario = split_flags(execution["flags"])
         commands.setdefault(scenario, Counter())[action["command"]] += 1
         failed = [c["rule"] for c in execution["checks"] if not c["passed"]]
         if failed:
