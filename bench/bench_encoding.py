@@ -46,7 +46,7 @@ MODELS = list(LAYER_MODELS.values())
 
 
 def _v1_encode(cycle: int, record: _Record) -> bytes:
-    """What the v1 logger's writer did per record: pydantic's serializer, then the stamp."""
+    """The baseline path per record (labelled v1): pydantic's serializer, then the stamp."""
     body = type(record).__pydantic_serializer__.to_json(record, by_alias=True)
     return b'{"cycle":%d,"t_ns":%d,' % (cycle, cycle * 100) + body[1:]
 
