@@ -28,9 +28,9 @@ zstd chunks; reading every cycle; and ``cycle_at`` at 40 random times, hot and c
 a first ask (caches cleared) and cold asked again (median ms); and a first cold ask in a
 new process (nothing decoded or compiled yet), median of 9 processes.
 
-``--paired`` measures, instead, the codec's fast paths against the slow ones they replace,
+``--paired`` measures, instead, the codec's fast paths against the slow paths they avoid,
 in one process, alternating block by block over ``--blocks`` blocks of the first segment
-(the only before/after figure that held still on a busy shared machine): the check decode
+(the only fast/slow figure that held still on a busy shared machine): the check decode
 with digest references taken from the input's digests or hashed again, and compaction's
 pipeline check on the source block's objects or on the decoded copies; encoding a block,
 for scale.
@@ -153,7 +153,7 @@ def seeks_ms(hot: Any, cold: Any, rng: random.Random) -> dict[str, float]:
     """Median ms of ``cycle_at`` at random times: a first ask (caches cleared), and asked again."""
     times = [rng.randrange(hot.start_ns, hot.end_ns) for _ in range(40)]
     out = seek_medians_ms(hot, cold, times, hot_label="hot, first ask")
-    # the same first asks answered by decoding the whole block (as before partial decodes),
+    # the same first asks answered by decoding the whole block (no partial decode),
     # alternating with the partial ones so a busy spell hits both: a paired ratio
     whole: list[float] = []
     partial: list[float] = []

@@ -7,7 +7,8 @@ models) and as plain dicts, each candidate turns one cycle's four records into m
 bytes. Times are microseconds per cycle (four records), the median of several runs, each
 run timing every candidate once in turn so machine noise hits them alike; read the ratios.
 
-- pydantic (v1 logger): ``model_validate`` for dicts, the model's serializer (Rust) for both.
+- pydantic (the baseline of the ratios): ``model_validate`` for dicts, the model's serializer
+  (Rust) for both.
 - orjson, fixed key order: ``model_dump`` + orjson for models; for dicts orjson of the dict
   as given, NO validation (a lower bound; the key order is the robot's, not the schema's).
 - msgspec mirror: a ``msgspec.Struct`` per model (``trace_runtime.codec._mirror``), converted
@@ -45,7 +46,7 @@ MODELS = list(LAYER_MODELS.values())
 
 
 def _v1_encode(cycle: int, record: _Record) -> bytes:
-    """What the v1 logger's writer did per record: pydantic's serializer, then the stamp."""
+    """The baseline path per record (labelled v1): pydantic's serializer, then the stamp."""
     body = type(record).__pydantic_serializer__.to_json(record, by_alias=True)
     return b'{"cycle":%d,"t_ns":%d,' % (cycle, cycle * 100) + body[1:]
 
@@ -199,8 +200,8 @@ def main() -> None:
     print("for scale:")
     for name, us in measure(scale(built), n, runs).items():
         print(f"  {name:52s} {us:7.1f}")
-    # Same bytes whichever way the record comes in (the v1 bytes); msgspec's own JSON would
-    # not always give them (exponent spelling).
+    # Same bytes whichever way the record comes in (pydantic's: the model defines the format);
+    # msgspec's own JSON would not always give them (exponent spelling).
     for i, (c, d) in enumerate(zip(built, dicts, strict=True)):
         for m, r, rd in zip(MODELS, c, d, strict=True):
             assert layer_message(m, i, i * 100, rd) == encode_layer(i, i * 100, r)

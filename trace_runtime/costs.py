@@ -5,7 +5,7 @@ What is measured is the control thread's time inside the logger for one cycle: t
 ``sensor()`` calls, the four layer calls (validating and encoding plain dicts) and
 ``commit()`` up to the hand-over to the writer. The writer thread's work (sealing,
 compression, the write) is not on the control thread and is not counted. The Python logger
-times one cycle in eight (``logger.COST_SAMPLE_EVERY``), so timing costs the other seven
+times one cycle in eight (``cycle_builder.COST_SAMPLE_EVERY``), so timing costs the other seven
 nothing; ``cycles`` in the record counts the cycles timed, ``sample_every`` says which.
 
 The histogram is log-linear: exact below 16 ns, then eight buckets per power of two, so a
