@@ -1,4 +1,5 @@
-"""The ``trace-audit`` command line: typer + rich live here and in ``sim/cli.py`` only."""
+"""The ``trace-audit`` command line: typer + rich live here and in the two program modules
+(``sim/cli.py``, ``evaluation/cli.py``) only."""
 
 from __future__ import annotations
 
