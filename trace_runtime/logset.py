@@ -96,13 +96,15 @@ def preferred_copies(segments: Sequence[Segment]) -> tuple[list[Segment], list[S
     read: list[Segment] = []
     shadowed: list[Segment] = []
     for copies in by_position.values():
-        best, *others = _best_copy_first(copies)
+        best, *others = best_copy_first(copies)
         read.append(best)
         shadowed.extend(others)
     return read, shadowed
 
 
-def _best_copy_first(copies: list[Segment]) -> list[Segment]:
+def best_copy_first(copies: list[Segment]) -> list[Segment]:
+    """Copies of one chain position, the one every reader reads first: the first by
+    ``copy_rank``, unless it is proven to be another copy cut short (``cut_short_copy``)."""
     if len(copies) == 1:
         return copies
     ranked = sorted(copies, key=copy_rank)

@@ -3,7 +3,7 @@ some of its segments: the next cycle number, the seal to link to, the next segme
 
 The segments are the log's own (``logset.robot_segment_files``), and of a segment found in
 several copies (one mid-compaction in two tiers, a copy cut short beside its original) the
-copy every reader reads comes first (``logset.copy_rank``). It runs at logger start-up, so
+copy every reader reads comes first (``logset.best_copy_first``). It runs at logger start-up, so
 it reads only what it needs: names, then the newest segment's last seal (from its end).
 """
 
@@ -12,7 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import NamedTuple
 
-from trace_runtime.logset import copy_rank, open_segments, robot_segment_files
+from trace_runtime.logset import best_copy_first, open_segments, robot_segment_files
 from trace_runtime.reader import Segment, last_seal
 from trace_runtime.records import GENESIS
 
@@ -59,4 +59,4 @@ def _copies_best_first(files: list[Path]) -> list[Path] | list[Segment]:
     if len(files) == 1:
         return files
     segments, _unreadable = open_segments(sorted(files))
-    return sorted(segments, key=copy_rank)
+    return best_copy_first(segments) if segments else []
