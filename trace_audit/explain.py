@@ -32,7 +32,7 @@ from trace_runtime.chain import GENESIS, digest
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
 from trace_runtime.gaps import continuity, gap_limit_ns
-from trace_runtime.logset import Log
+from trace_runtime.logset import Log, StaleCatalogError
 from trace_runtime.recordings import Recordings
 from trace_runtime.records import TOPIC_ACTION, TOPIC_PERCEPTION, TOPIC_SEAL
 from trace_runtime.seal_check import verify_cycle
@@ -203,7 +203,33 @@ def explain(
         raise UsageError("give exactly one of a time (--t) or a cycle number (--cycle)")
     if lookback_s < 0:
         raise UsageError(f"lookback must be >= 0 s, got {lookback_s}")
-    log = as_log(source, lazy=True)
+
+    def explain_in(log: Log) -> Explanation:
+        return _explain(
+            log,
+            t=t,
+            cycle=cycle,
+            lookback_s=lookback_s,
+            sensor_window=sensor_window,
+            evidence=evidence,
+        )
+
+    try:
+        return explain_in(as_log(source, lazy=True))
+    except StaleCatalogError:
+        # The catalog is a hint: a row its file does not confirm is ignored, not obeyed.
+        return explain_in(as_log(source))
+
+
+def _explain(
+    log: Log,
+    *,
+    t: TimeArg,
+    cycle: int | None,
+    lookback_s: float,
+    sensor_window: int,
+    evidence: Sequence[str | Path],
+) -> Explanation:
     require_cycles(log)
     t_ns, target, offset = _find_target(log, t, cycle)
     whole, log = log, log.clock_run(target.segment)

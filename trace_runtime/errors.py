@@ -71,3 +71,18 @@ class PayloadError(LogReadError):
     def __init__(self, path: str, topic: str, reason: str) -> None:
         super().__init__(path, f"{topic} message: {reason}")
         self.topic = topic
+
+
+class UnsafePathError(LogReadError):
+    """A name in an untrusted folder that the tools refuse to follow: a symbolic link, a
+    FIFO, socket, device or directory where a file is expected, or a name leading outside."""
+
+
+class StorageError(TraceError):
+    """The filesystem refused a write a command must make (read-only folder, full disk,
+    permission): nothing was lost, and nothing half-written was left in place."""
+
+    def __init__(self, path: str, reason: str) -> None:
+        super().__init__(f"{path}: cannot write: {reason}")
+        self.path = path
+        self.reason = reason

@@ -17,13 +17,13 @@ import bisect
 import hashlib
 import itertools
 import logging
+import stat
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import orjson
-
+from trace_runtime.boundary import file_kind, read_side_json, tier_folder
 from trace_runtime.clock import clock_restarted
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeError, UsageError
@@ -176,10 +176,28 @@ def _same_bytes(a: Path, b: Path) -> bool:
 
 def find_segment_files(path: Path) -> list[Path]:
     """Segment files of a log: the file itself, or every ``*.mcap`` below a directory
-    (writes in progress excluded)."""
-    if path.is_dir():
-        return sorted(p for p in path.rglob("*.mcap") if p.is_file() and PARTIAL_MARK not in p.name)
-    return [path]
+    (writes in progress excluded).
+
+    Below a directory only regular files count: a link (to a file elsewhere, or a tier folder
+    that is one: ``boundary.tier_folder`` refuses it) would let the log reach outside its
+    folder, and a FIFO would block the reader, so each is skipped with a warning."""
+    if not path.is_dir():
+        return [path]
+    for tier in TIERS:
+        tier_folder(path, tier)
+    files: list[Path] = []
+    for candidate in sorted(path.rglob("*.mcap")):
+        if PARTIAL_MARK in candidate.name:
+            continue
+        try:
+            mode = candidate.lstat().st_mode
+        except OSError:
+            continue  # removed while we looked
+        if stat.S_ISREG(mode):
+            files.append(candidate)
+        elif not stat.S_ISDIR(mode):
+            log.warning("%s: %s, not a segment file; skipped", candidate, file_kind(mode))
+    return files
 
 
 def robot_segment_files(root: Path, robot_id: str) -> dict[int, list[Path]]:
@@ -193,13 +211,19 @@ def robot_segment_files(root: Path, robot_id: str) -> dict[int, list[Path]]:
     return numbered
 
 
+class StaleCatalogError(LogReadError):
+    """A lazily opened log found a segment that is not what the root's catalog row says (a
+    catalog edited, or copied with other files): the row is ignored, and a query is asked
+    again of the log opened in full."""
+
+
 @dataclass(slots=True)
 class _Unopened:
-    """A segment the catalog vouches for, opened when a query first reaches it.
+    """A segment the catalog describes, opened when a query first reaches it.
 
-    ``start_ns`` and ``end_ns`` are the catalog's; they equal the segment's own (a finished
-    segment's statistics) because the catalog row was made from this very file, unchanged
-    since (same size and modification time)."""
+    ``start_ns`` and ``end_ns`` are the catalog's; the catalog is a hint, so ``open``
+    confirms them (and the robot and segment number) against the file's own summary and
+    raises ``StaleCatalogError`` when they differ."""
 
     path: Path
     robot: str
@@ -211,7 +235,16 @@ class _Unopened:
 
     def open(self) -> Segment:
         if self.opened is None:
-            self.opened = Segment(self.path, self.limits)
+            segment = Segment(self.path, self.limits)
+            own = (segment.session.robot_id, segment.session.segment, segment.start_ns)
+            if (*own, segment.end_ns) != (self.robot, self.segment, self.start_ns, self.end_ns):
+                log.warning(
+                    "%s: the root's catalog.json does not describe it as it is; the catalog "
+                    "is ignored",
+                    self.path,
+                )
+                raise StaleCatalogError(str(self.path), "not as the root's catalog.json says")
+            self.opened = segment
         return self.opened
 
 
@@ -424,6 +457,7 @@ class Log:
         # A time up to one period past the last cycle is still that cycle's; the periods
         # (every segment's) are read only for such a time.
         if t_ns < start or (t_ns > end and t_ns > end + self.period_ns):
+            self._confirm_range()
             raise TimeOutOfRangeError(t_ns, start, end)
         candidates = self._slots[: bisect.bisect_right(self._starts, t_ns)]
         # A segment whose span holds t first: after a restart with a monotonic clock, a later
@@ -434,6 +468,13 @@ class Log:
             if found is not None:
                 return found
         raise TimeOutOfRangeError(t_ns, start, end)
+
+    def _confirm_range(self) -> None:
+        """Before a lazily opened log refuses a time, open the segments its range comes
+        from, so that a catalog row cannot narrow the log (``StaleCatalogError``)."""
+        if self._all is None:
+            _opened(min(self._timed, key=lambda s: s.start_ns))
+            _opened(max(self._timed, key=lambda s: s.end_ns))
 
     def get_cycle(self, number: int) -> Cycle | None:
         """The cycle with this number (a scan bounded to the segment that covers it)."""
@@ -576,9 +617,9 @@ def _catalog_rows(root: Path) -> list[dict[str, Any]] | None:
     pins these rows to ``load_catalog``'s entries.
     """
     try:
-        body = orjson.loads((root / _CATALOG_NAME).read_bytes())
-    except (OSError, orjson.JSONDecodeError):
-        return None
+        body = read_side_json(root / _CATALOG_NAME)
+    except LogReadError:
+        return None  # a hint that cannot be read is no hint: every segment is opened
     if not isinstance(body, dict) or body.get("format") != _CATALOG_FORMAT or body.get("problems"):
         return None
     rows = body.get("segments")

@@ -3,7 +3,8 @@
 Exit codes (documented in the README and in ``--help``):
   0 ok · 1 findings (verify failed, a metric under its threshold) · 2 usage (bad option,
   t outside the log, unknown action) · 3 unreadable input (missing, not MCAP, truncated,
-  not a TRACE log, empty).
+  not a TRACE log, empty, a link or FIFO where a file belongs) · 4 cannot write (a read-only
+  folder, a full disk).
 """
 
 from __future__ import annotations
@@ -16,9 +17,10 @@ import typer
 
 from trace_audit.cli.output import setup_logging
 from trace_audit.cli.typer_compat import App, Group
-from trace_runtime.errors import TimeOutOfRangeError, TraceError, UsageError
+from trace_runtime.errors import StorageError, TimeOutOfRangeError, TraceError, UsageError
 
 __all__ = [
+    "EXIT_CANNOT_WRITE",
     "EXIT_FINDINGS",
     "EXIT_OK",
     "EXIT_UNREADABLE",
@@ -36,6 +38,7 @@ EXIT_OK = 0
 EXIT_FINDINGS = 1
 EXIT_USAGE = 2
 EXIT_UNREADABLE = 3
+EXIT_CANNOT_WRITE = 4
 
 
 # The help is drawn by click's plain formatter (``rich_markup_mode=None``), not typer's rich
@@ -47,7 +50,7 @@ app = App(
     help=(
         "Investigate TRACE robot decision logs: explain a decision, find why the robot "
         "stopped, measure auditability, verify integrity, compact storage tiers.\n\n"
-        "Exit codes: 0 ok, 1 findings, 2 usage error, 3 unreadable input."
+        "Exit codes: 0 ok, 1 findings, 2 usage error, 3 unreadable input, 4 cannot write."
     ),
     no_args_is_help=True,
     add_completion=False,
@@ -79,6 +82,8 @@ def exit_code_for(err: TraceError) -> int:
     errors are wrapped where they arise), so nothing here knows zstd, struct or orjson."""
     if isinstance(err, TimeOutOfRangeError | UsageError):
         return EXIT_USAGE
+    if isinstance(err, StorageError):
+        return EXIT_CANNOT_WRITE
     # LogReadError (and its LogLimitError, PayloadError, NotTraceLogError) and every other
     # TraceError describe the input: unreadable, not a TRACE log, over a read limit.
     return EXIT_UNREADABLE

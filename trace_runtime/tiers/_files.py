@@ -1,5 +1,6 @@
-"""Crash-safe file steps: write aside and rename, fsync directories, one compactor per root,
-and the proof that a file written aside is compaction's own.
+"""Compaction's own files: partial segments created exclusively, one compactor per root, and
+the proof that a file written aside is compaction's own (general file steps are in
+``trace_runtime.boundary``).
 
 A partial segment (``<robot>_<segment>.mcap.partial``) is created exclusively and its first
 write holds the MCAP header, the ``trace.session`` record and a ``trace.compaction`` metadata
@@ -12,13 +13,12 @@ create and first write; it holds nothing to lose), is ever removed as an unfinis
 from __future__ import annotations
 
 import contextlib
-import os
 import struct
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
 
-from trace_runtime.errors import UsageError
+from trace_runtime.boundary import create_exclusive, folder_lock
 from trace_runtime.records import PROFILE
 from trace_runtime.segment_names import parse_segment_name
 from trace_runtime.segment_writer import LIBRARY
@@ -38,36 +38,15 @@ PartialOpener = Callable[[Path], BinaryIO]
 """Creates the stream a partial segment is written to (a plug point: tests inject faults)."""
 
 
-def fsync_dir(directory: Path) -> None:
-    """Make a rename or unlink in ``directory`` durable (no-op where unsupported)."""
-    with contextlib.suppress(OSError):
-        fd = os.open(directory, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-
-
-def write_atomic(path: Path, data: bytes) -> None:
-    """Replace ``path`` with ``data``: write a sibling, fsync it, rename it over, fsync the dir."""
-    tmp = path.with_name(path.name + PARTIAL_SUFFIX)
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-    fsync_dir(path.parent)
-
-
 def partial_path(target: Path) -> Path:
     """Where a segment is written before it is verified and renamed to ``target``."""
     return target.with_name(target.name + PARTIAL_SUFFIX)
 
 
 def open_partial(path: Path) -> BinaryIO:
-    """Create ``path`` for writing; ``FileExistsError`` if anything is there already."""
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-    return os.fdopen(fd, "wb")
+    """Create ``path`` for writing; ``FileExistsError`` if anything is there already (a
+    link planted at the name included: it is never followed)."""
+    return create_exclusive(path)
 
 
 class PartialStream:
@@ -216,20 +195,8 @@ def _map(data: bytes, pos: int) -> dict[str, str]:
     return out
 
 
-@contextlib.contextmanager
-def root_lock(root: Path) -> Iterator[None]:
+def root_lock(root: Path) -> contextlib.AbstractContextManager[None]:
     """Hold an exclusive lock on ``root`` for one compaction (released even on kill -9)."""
-    try:
-        import fcntl
-    except ImportError:  # not POSIX: no lock, compaction stays correct when run alone
-        yield
-        return
-    fd = os.open(root / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError as err:
-            raise UsageError(f"{root}: another compaction is running on this log root") from err
-        yield
-    finally:
-        os.close(fd)
+    return folder_lock(
+        root / LOCK_NAME, held=f"{root}: another compaction is running on this log root"
+    )

@@ -4,14 +4,19 @@ A log root holds ``hot/``, ``warm/`` and ``cold/`` and a ``catalog.json`` that i
 segment in them: robot, tier, segment number, time range, cycle range and count, the
 digests of its first and last seal (and the previous segment's last seal it links to), the
 SHA-256 of the file and its size. The files are the truth: ``refresh_catalog`` rebuilds the
-catalog from them (re-reading only files whose size or mtime changed) and replaces
-``catalog.json`` atomically; ``load_catalog`` only reads it.
+catalog from them and replaces ``catalog.json`` atomically; ``load_catalog`` only reads it.
+
+A root travels, so its catalog is a hint, never authority: a row is reused by a rebuild only
+for its digests (the costly part), and only when the file still has the row's size and mtime
+and its own summary confirms the row's robot, tier, segment, times and state;
+``refresh_catalog(rehash=True)`` recomputes every digest too. Whoever needs a digest as
+evidence (the fleet index, retention's journal) takes it from the file itself.
 """
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
+import logging
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -19,6 +24,13 @@ from typing import Any
 
 import orjson
 
+from trace_runtime.boundary import (
+    read_side_file,
+    read_side_json,
+    remove_stale_partials,
+    tier_folder,
+    write_atomic,
+)
 from trace_runtime.chain import digest
 from trace_runtime.errors import LogReadError
 from trace_runtime.logset import find_segment_files
@@ -26,7 +38,8 @@ from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.session import TIER_METADATA, TIERS
 from trace_runtime.tier_formats.cold import INDEX_TOPIC
-from trace_runtime.tiers._files import write_atomic
+
+log = logging.getLogger(__name__)
 
 CATALOG_NAME = "catalog.json"
 CATALOG_FORMAT = "trace-catalog-v1"
@@ -91,11 +104,13 @@ class Catalog:
 
 
 def load_catalog(root: str | Path) -> Catalog | None:
-    """The catalog stored in ``root`` as last written, or None if there is none (or unreadable)."""
+    """The catalog stored in ``root`` as last written, or None if there is none, or none that
+    can be read (not a regular file, over the side-file bounds, not a catalog: a warning)."""
     root = Path(root)
     try:
-        body = orjson.loads((root / CATALOG_NAME).read_bytes())
-    except (OSError, orjson.JSONDecodeError):
+        body = read_side_json(root / CATALOG_NAME)
+    except LogReadError as err:
+        log.warning("%s; the catalog is rebuilt from the files", err)
         return None
     if not isinstance(body, dict) or body.get("format") != CATALOG_FORMAT:
         return None
@@ -106,52 +121,67 @@ def load_catalog(root: str | Path) -> Catalog | None:
     return Catalog(root, entries, [str(p) for p in body.get("problems", [])])
 
 
-def refresh_catalog(root: str | Path, *, write: bool = True) -> Catalog:
-    """Rebuild the catalog from the segment files; rewrite ``catalog.json`` if it changed."""
+def refresh_catalog(root: str | Path, *, write: bool = True, rehash: bool = False) -> Catalog:
+    """Rebuild the catalog from the segment files; rewrite ``catalog.json`` if it changed.
+
+    ``rehash``: recompute every file's digests instead of reusing a confirmed row's."""
     root = Path(root)
     if not root.is_dir():
         raise LogReadError(str(root), "not a log root (no such directory)")
-    old = load_catalog(root)
+    old = None if rehash else load_catalog(root)
     known = {e.path: e for e in old.entries} if old else {}
     entries: list[CatalogEntry] = []
     problems: list[str] = []
     for path in segment_files(root):
         rel = _relative(root, path)
         try:
-            stat = path.stat()
-        except OSError:
+            entries.append(_confirmed(root, path, known.get(rel)))
+        except FileNotFoundError:
             continue  # removed while we looked
-        cached = known.get(rel)
-        if (
-            cached is not None
-            and cached.bytes == stat.st_size
-            and cached.mtime_ns == stat.st_mtime_ns
-        ):
-            entries.append(cached)
-            continue
-        try:
-            entries.append(describe_segment(root, path))
         except LogReadError as err:
             problems.append(f"{rel}: {err.reason}")
     entries.sort(key=lambda e: (e.robot, e.segment, TIERS.index(e.tier) if e.tier in TIERS else 9))
     catalog = Catalog(root, entries, problems)
     if write:
         data = catalog.to_json()
-        current = None
-        with contextlib.suppress(OSError):
-            current = (root / CATALOG_NAME).read_bytes()
+        try:
+            current = read_side_file(root / CATALOG_NAME)
+        except LogReadError:
+            current = None  # write_atomic refuses a name held by anything but a file
         if data != current:
             write_atomic(root / CATALOG_NAME, data)
+        else:
+            remove_stale_partials(root / CATALOG_NAME)
     return catalog
+
+
+def _confirmed(root: Path, path: Path, cached: CatalogEntry | None) -> CatalogEntry:
+    """``path``'s entry: ``cached`` when the file still has its size and mtime and its own
+    summary says what the row says; otherwise described afresh from the file."""
+    stat = path.stat()
+    if cached is None or cached.bytes != stat.st_size or cached.mtime_ns != stat.st_mtime_ns:
+        return describe_segment(root, path)
+    segment = Segment(path)
+    info, session = segment.info, segment.session
+    facts = (session.robot_id, session.tier, session.segment, session.prev_seal)
+    times = (info.start_ns, info.end_ns, info.finished)
+    if facts != (cached.robot, cached.tier, cached.segment, cached.prev_seal) or times != (
+        cached.start_ns,
+        cached.end_ns,
+        cached.finished,
+    ):
+        return describe_segment(root, path, segment)
+    return cached
 
 
 def segment_files(root: Path) -> list[Path]:
     """Every segment file directly in the tier directories of ``root``, as
-    ``logset.find_segment_files`` finds them (writes in progress excluded)."""
+    ``logset.find_segment_files`` finds them (writes in progress excluded); a tier folder
+    that is a symbolic link is refused (``boundary.tier_folder``)."""
     files: list[Path] = []
     for tier in TIERS:
-        directory = root / tier
-        if directory.is_dir():
+        directory = tier_folder(root, tier)
+        if directory is not None:
             files += [p for p in find_segment_files(directory) if p.parent == directory]
     return files
 

@@ -34,12 +34,14 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+from trace_runtime.boundary import regular_file, tier_folder
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.keys import PublicKey
 from trace_runtime.reader import Segment
 from trace_runtime.session import TIERS
 from trace_runtime.tier_formats.warm import WarmPolicy
-from trace_runtime.tiers._files import PartialOpener, open_partial, root_lock
+from trace_runtime.tiers._files import LOCK_NAME, PartialOpener, open_partial, root_lock
+from trace_runtime.tiers.catalog import CATALOG_NAME
 from trace_runtime.tiers.durations import DAY_NS
 from trace_runtime.tiers.plan import (
     Choice,
@@ -59,7 +61,7 @@ from trace_runtime.tiers.report import (
     ProgressCallback,
     SegmentResult,
 )
-from trace_runtime.tiers.retention import apply_retention
+from trace_runtime.tiers.retention import RETENTION_LOG, apply_retention
 from trace_runtime.tiers.workers import compact_in_workers, picklable
 
 __all__ = ["DEFAULT_OLDER_THAN_NS", "DEFAULT_RETENTION_NS", "DEFAULT_SOURCES", "compact"]
@@ -131,6 +133,12 @@ def _check_target(root: Path, tier: str, sources: Iterable[str] | None) -> tuple
     """The source tiers to compact from, once ``root`` and ``tier`` are known to be usable."""
     if not root.is_dir():
         raise LogReadError(str(root), "not a log root (no such directory)")
+    # Refused before any work: a tier folder that is a link (compaction would write and
+    # delete outside the root), or a side file that is not a file (a FIFO would hang it).
+    for name in TIERS:
+        tier_folder(root, name)
+    for name in (CATALOG_NAME, RETENTION_LOG, LOCK_NAME):
+        regular_file(root / name)
     if tier not in ("warm", "cold"):
         raise UsageError(f"unknown target tier {tier!r}: use warm or cold")
     chosen = tuple(sources) if sources is not None else DEFAULT_SOURCES[tier]

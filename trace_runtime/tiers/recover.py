@@ -8,6 +8,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from trace_runtime.boundary import fsync_dir
 from trace_runtime.cycles import RawMessage
 from trace_runtime.errors import LogReadError, VerificationError
 from trace_runtime.keys import PublicKey
@@ -15,7 +16,7 @@ from trace_runtime.logset import Log
 from trace_runtime.reader import Segment
 from trace_runtime.session import TIER_METADATA, TIERS
 from trace_runtime.tier_formats.cold import ColdFormatError, iter_decoded
-from trace_runtime.tiers._files import PARTIAL_SUFFIX, compaction_marker, fsync_dir, partial_owner
+from trace_runtime.tiers._files import PARTIAL_SUFFIX, compaction_marker, partial_owner
 from trace_runtime.tiers.catalog import segment_files
 from trace_runtime.tiers.copies import verify_replacement
 from trace_runtime.tiers.report import Leftover, rel_path

@@ -9,9 +9,11 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from trace_runtime.boundary import fsync_dir
+from trace_runtime.errors import StorageError, TraceError
 from trace_runtime.reader import Segment
 from trace_runtime.tier_formats.warm import WarmPolicy
-from trace_runtime.tiers._files import PartialOpener, fsync_dir, open_partial, partial_path
+from trace_runtime.tiers._files import PartialOpener, open_partial, partial_path
 from trace_runtime.tiers.catalog import refresh_catalog
 from trace_runtime.tiers.plan import segment_result
 from trace_runtime.tiers.report import ColdOptions, SegmentResult
@@ -90,6 +92,8 @@ def refresh_quietly(root: Path) -> str:
     truth and the next run rebuilds it."""
     try:
         refresh_catalog(root)
-    except OSError as err:
-        return f"catalog not updated ({err.strerror or err})"
+    except StorageError as err:
+        return f"catalog not updated ({err.reason})"
+    except (TraceError, OSError) as err:
+        return f"catalog not updated ({err})"
     return ""

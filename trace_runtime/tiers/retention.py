@@ -1,19 +1,24 @@
 """Retention of the cold tier: old cold segments that ``verify`` finds clean, whose successor
 continues their chain, are deleted, each deletion recorded in ``retention.jsonl`` first;
-every other one is held as evidence."""
+every other one is held as evidence.
+
+Retention takes only the oldest part of a robot's chain: a segment is deleted only when every
+segment before it is gone or deleted in the same run, so what remains always starts at one
+segment and runs on without a hole (``verify`` notes a ``chain_start``, never a
+``missing_segment``)."""
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 
 import orjson
 
+from trace_runtime.boundary import append_line, remove_own_file
+from trace_runtime.errors import TraceError
 from trace_runtime.keys import PublicKey
 from trace_runtime.logset import Log, open_segments
 from trace_runtime.reader import Segment
-from trace_runtime.tiers._files import fsync_dir
 from trace_runtime.tiers.catalog import file_digest, segment_files
 from trace_runtime.tiers.report import RetentionResult, rel_path
 from trace_runtime.verification import SegmentSummary, VerifyReport, verify
@@ -60,25 +65,46 @@ def _retire(
     summaries = {Path(s.path): s for s in report.segments}
     named = {f.segment for f in report.findings}
     out: list[RetentionResult] = []
+    taken = {s.path for s in candidates}  # what this run may still delete
     for segment in sorted(candidates, key=lambda s: s.session.segment):
         rel, end = rel_path(root, segment.path), segment.info.end_ns
-        summary = summaries[segment.path]
-        why = _retention_hold(segment, summary, named, chain, report)
+        why = _retention_hold(segment, summaries[segment.path], named, chain, report)
+        if not why:
+            why = _hole_it_would_leave(segment, chain, taken)
         if why:
+            taken.discard(segment.path)
             out.append(RetentionResult(rel, end, "kept", why))
             continue
         if dry_run:
             out.append(RetentionResult(rel, end, "would delete"))
             continue
-        try:
-            _record_retired(root, segment.path, segment, summary.last_seal)
-        except OSError as err:
-            out.append(RetentionResult(rel, end, "kept", f"cannot record the deletion: {err}"))
-            continue
-        segment.path.unlink()
-        fsync_dir(segment.path.parent)
-        out.append(RetentionResult(rel, end, "deleted"))
+        out.append(_delete(root, segment, summaries[segment.path].last_seal))
     return out
+
+
+def _hole_it_would_leave(segment: Segment, chain: list[Segment], taken: set[Path]) -> str:
+    """Why deleting ``segment`` would leave a hole in the chain ("" when it would not): an
+    older segment of the robot stays (held, in another tier, or not old enough)."""
+    number = segment.session.segment
+    kept = sorted(
+        s.session.segment for s in chain if s.session.segment < number and s.path not in taken
+    )
+    if kept:
+        return f"held: segment {kept[0]} before it is kept (deleting this would leave a hole)"
+    return ""
+
+
+def _delete(root: Path, segment: Segment, last_seal: str | None) -> RetentionResult:
+    """Record ``segment``'s deletion in the journal (fsynced), then delete it."""
+    rel, end = rel_path(root, segment.path), segment.info.end_ns
+    try:
+        _record_retired(root, segment.path, segment, last_seal)
+    except (TraceError, OSError) as err:
+        return RetentionResult(rel, end, "kept", f"cannot record the deletion: {err}")
+    why_not = remove_own_file(segment.path)
+    if why_not:
+        return RetentionResult(rel, end, "kept", f"not deleted: {why_not}")
+    return RetentionResult(rel, end, "deleted")
 
 
 def _retention_hold(
@@ -116,7 +142,4 @@ def _record_retired(root: Path, path: Path, segment: Segment, last_seal: str | N
         "sha256": file_digest(path),
         "deleted_at_ns": time.time_ns(),
     }
-    with open(root / RETENTION_LOG, "ab") as log:
-        log.write(orjson.dumps(line) + b"\n")
-        log.flush()
-        os.fsync(log.fileno())
+    append_line(root / RETENTION_LOG, orjson.dumps(line) + b"\n")
