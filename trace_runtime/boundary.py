@@ -71,6 +71,20 @@ def storage_error(path: Path, err: OSError) -> StorageError:
     return StorageError(str(path), err.strerror or str(err))
 
 
+def _not_a_file(path: Path) -> UnsafePathError | None:
+    """The refusal for ``path`` when something other than a regular file holds the name
+    (why an open of it failed), or None."""
+    try:
+        mode = os.lstat(path).st_mode
+    except OSError:
+        return None
+    return None if stat.S_ISREG(mode) else _refused(path, mode)
+
+
+def _refused(path: Path, mode: int) -> UnsafePathError:
+    return UnsafePathError(str(path), f"is {file_kind(mode)}, not a regular file; refused")
+
+
 def file_kind(mode: int) -> str:
     """What a file of ``mode`` is, in the words an error message uses."""
     for test, name in (
@@ -97,7 +111,7 @@ def regular_file(path: Path) -> bool:
     except OSError as err:
         raise UnsafePathError(str(path), f"cannot look at it ({err.strerror or err})") from err
     if not stat.S_ISREG(mode):
-        raise UnsafePathError(str(path), f"is {file_kind(mode)}, not a regular file; refused")
+        raise _refused(path, mode)
     return True
 
 
@@ -153,15 +167,14 @@ def read_side_file(path: Path, *, limit: int = SIDE_FILE_BYTES) -> bytes | None:
     except FileNotFoundError:
         return None
     except OSError as err:
-        if os.path.islink(path):
-            raise UnsafePathError(str(path), "is a symbolic link; refused") from err
-        raise UnsafePathError(str(path), f"cannot read it ({err.strerror or err})") from err
+        raise _not_a_file(path) or UnsafePathError(
+            str(path), f"cannot read it ({err.strerror or err})"
+        ) from err
+    info = os.fstat(fd)
+    if not stat.S_ISREG(info.st_mode):
+        os.close(fd)
+        raise _refused(path, info.st_mode)
     with os.fdopen(fd, "rb") as f:
-        info = os.fstat(f.fileno())
-        if not stat.S_ISREG(info.st_mode):
-            raise UnsafePathError(
-                str(path), f"is {file_kind(info.st_mode)}, not a regular file; refused"
-            )
         if info.st_size > limit:
             raise LogLimitError(str(path), f"holds {info.st_size:,} bytes, over the {limit:,} read")
         data = f.read(limit + 1)
@@ -284,13 +297,11 @@ def append_line(path: Path, line: bytes) -> None:
             path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | _NOFOLLOW | _NONBLOCK | _CLOEXEC, 0o644
         )
     except OSError as err:
-        if os.path.islink(path):
-            raise UnsafePathError(str(path), "is a symbolic link; refused") from err
-        raise storage_error(path, err) from err
+        raise _not_a_file(path) or storage_error(path, err) from err
     with os.fdopen(fd, "ab") as f:
         mode = os.fstat(f.fileno()).st_mode
         if not stat.S_ISREG(mode):
-            raise UnsafePathError(str(path), f"is {file_kind(mode)}, not a regular file; refused")
+            raise _refused(path, mode)
         try:
             f.write(line)
             f.flush()
@@ -343,13 +354,11 @@ def folder_lock(path: Path, *, held: str) -> Iterator[None]:
     try:
         fd = os.open(path, os.O_RDWR | os.O_CREAT | _NOFOLLOW | _NONBLOCK | _CLOEXEC, 0o644)
     except OSError as err:
-        if os.path.islink(path):
-            raise UnsafePathError(str(path), "is a symbolic link; refused") from err
-        raise storage_error(path, err) from err
+        raise _not_a_file(path) or storage_error(path, err) from err
     try:
         mode = os.fstat(fd).st_mode
         if not stat.S_ISREG(mode):
-            raise UnsafePathError(str(path), f"is {file_kind(mode)}, not a regular file; refused")
+            raise _refused(path, mode)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError as err:
