@@ -46,6 +46,7 @@ __all__ = [
     "file_kind",
     "folder_lock",
     "fsync_dir",
+    "open_lock_file",
     "read_side_file",
     "read_side_json",
     "regular_file",
@@ -339,6 +340,20 @@ def fsync_dir(directory: Path) -> None:
             os.close(fd)
 
 
+def open_lock_file(path: Path) -> int:
+    """A descriptor of lock file ``path`` (created if absent), opened read-write without
+    following a link or blocking; refused unless it is a regular file."""
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | _NOFOLLOW | _NONBLOCK | _CLOEXEC, 0o644)
+    except OSError as err:
+        raise _not_a_file(path) or storage_error(path, err) from err
+    mode = os.fstat(fd).st_mode
+    if not stat.S_ISREG(mode):
+        os.close(fd)
+        raise _refused(path, mode)
+    return fd
+
+
 @contextlib.contextmanager
 def folder_lock(path: Path, *, held: str) -> Iterator[None]:
     """Hold an exclusive ``flock`` on lock file ``path`` (released even on kill -9).
@@ -351,14 +366,8 @@ def folder_lock(path: Path, *, held: str) -> Iterator[None]:
     except ImportError:  # not POSIX: no lock; each command stays correct when run alone
         yield
         return
+    fd = open_lock_file(path)
     try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT | _NOFOLLOW | _NONBLOCK | _CLOEXEC, 0o644)
-    except OSError as err:
-        raise _not_a_file(path) or storage_error(path, err) from err
-    try:
-        mode = os.fstat(fd).st_mode
-        if not stat.S_ISREG(mode):
-            raise _refused(path, mode)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError as err:

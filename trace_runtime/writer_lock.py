@@ -10,7 +10,8 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from trace_runtime.errors import LogLockedError
+from trace_runtime.boundary import open_lock_file
+from trace_runtime.errors import LogLockedError, TraceError
 from trace_runtime.session import TIERS
 
 if sys.platform != "win32":  # Linux is the target; elsewhere the writer lock is skipped
@@ -51,7 +52,7 @@ class WriterLock:
         if sys.platform == "win32":
             return None
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        fd = open_lock_file(path)  # a link planted at the name is refused, never truncated
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -81,7 +82,7 @@ class WriterLock:
         except LogLockedError as err:
             report("lock", f"audit log lock lost with its directory and taken by another: {err}")
             return
-        except OSError as err:
+        except (OSError, TraceError) as err:  # a link planted at the name, a full disk
             report("lock", f"could not renew the audit log lock {self.path}: {err}")
             return
         if fresh is not None:

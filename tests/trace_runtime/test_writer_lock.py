@@ -11,7 +11,7 @@ import pytest
 
 from tests.trace_runtime.robot_helpers import log_cycles, spawn
 from trace_runtime import AuditLogger, LoggerConfig, open_log
-from trace_runtime.errors import LogLockedError
+from trace_runtime.errors import LogLockedError, UnsafePathError
 
 _HOLDER = """
     import sys, time
@@ -92,3 +92,16 @@ def test_a_live_process_holds_the_lock_and_kill_9_releases_it(tmp_path: Path) ->
     log_cycles(logger, range(5, 8))
     logger.close()
     assert [c.cycle for c in open_log(root).iter_cycles()] == list(range(8))
+
+
+def test_a_link_planted_at_the_lock_name_is_refused_and_its_target_untouched(
+    tmp_path: Path,
+) -> None:
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me\n")
+    root = tmp_path / "root"
+    (root / ".locks").mkdir(parents=True)
+    (root / ".locks" / "r.lock").symlink_to(victim)
+    with pytest.raises(UnsafePathError, match="symbolic link"):
+        AuditLogger(root, robot_id="r", config=LoggerConfig(threaded=False))
+    assert victim.read_text() == "keep me\n"
