@@ -34,6 +34,7 @@ from trace_runtime.tier_formats.cold import (
 )
 from trace_runtime.tier_formats.cold.columns import pack_i64
 from trace_runtime.tier_formats.cold.format import MAGIC
+from trace_runtime.tier_formats.shapes import Shape
 from trace_runtime.tiers import ColdOptions, compact
 
 MAX_SECONDS = 5.0
@@ -161,7 +162,7 @@ def _peak_mb(run: Callable[[], object]) -> float:
 @pytest.mark.parametrize("name", list(BLOCKS))
 def test_a_bomb_is_refused_before_it_inflates(name: str) -> None:
     block = _block(name)
-    assert _peak_mb(lambda: BlockCache(0).body(block)) < 70  # the limit for ~64 KB: 64 MiB
+    assert _peak_mb(lambda: BlockCache(0).body(block)) < 4
 
 
 def test_a_frame_declaring_more_than_it_holds_is_refused_without_the_allocation() -> None:
@@ -262,3 +263,34 @@ def test_a_constant_repeated_past_the_limit_is_refused_while_building() -> None:
         partial.messages(0, 499)
 
     assert _peak_mb(seek) < 16
+
+
+def _many_big_shapes(header: dict[str, object], rest: bytearray) -> bytes:
+    """20 shapes of 20,000 constant leaves each (200 KB of descriptor apiece) that no
+    message uses: compiling them all takes seconds and hundreds of MB."""
+    names = [f"k{i}" for i in range(20_000)]
+    shapes, cols = header["shapes"], header["cols"]
+    assert isinstance(shapes, list) and isinstance(cols, list)
+    for i in range(20):
+        shapes.append([0, orjson.dumps(dict.fromkeys(names[i:] + names[:i], 0)).decode()])
+    cols += [[0, [name], "c", 0, 0] for name in names]
+    return bytes(rest)
+
+
+def test_compiling_the_shapes_a_block_declares_is_charged(monkeypatch: pytest.MonkeyPatch) -> None:
+    block = _reblocked(_vector_block(), _many_big_shapes)
+    assert len(block) < 64_000
+    compiled: list[int] = []
+    real = Shape._compile
+
+    def counting(shape: Shape) -> None:
+        compiled.append(len(shape.paths))
+        real(shape)
+
+    monkeypatch.setattr(Shape, "_compile", counting)
+    for most, compiles in ((8 << 20, 1), (512 << 20, 11)):  # 2 MiB of descriptors at 512 MiB
+        compiled.clear()
+        cache = BlockCache(0, limits=ReadLimits(max_chunk_bytes=most))
+        with pytest.raises(ColdFormatError, match="builds more than the limit"):
+            cache.decode(block)
+        assert sum(n > 100 for n in compiled) <= compiles
