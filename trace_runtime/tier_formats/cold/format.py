@@ -1,5 +1,6 @@
 """The trace-cold-v1 format's constants and its one error: topics, schemas, block header
-codes, and the guard that turns whatever a damaged block trips over into that error.
+codes, the guard that turns whatever a damaged block trips over into that error, and the
+``BuildBudget`` that bounds what decoding one block may build.
 
 A cold segment holds, per block of ``block_cycles`` whole cycles, one MCAP chunk: the
 block's signed checkpoints as plain messages, the block itself on ``/trace/cold/block``
