@@ -17,6 +17,7 @@ import orjson
 
 from trace_runtime.cycles import Cycle, RawMessage, assemble_hot
 from trace_runtime.errors import LogReadError
+from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.tier_formats.cold.cache import BlockCache
 from trace_runtime.tier_formats.cold.format import (
@@ -105,12 +106,13 @@ def assemble_cold(
 
 class ColdAssembler:
     """The reader's assembler for the cold tier: a cycle run ends with its block. It owns the
-    cache of recently decoded blocks; make one per reader to bound the cache's lifetime."""
+    cache of recently decoded blocks; make one per reader to bound the cache's lifetime.
+    ``limits`` bound what one block may make it do."""
 
     closer_topic = BLOCK_TOPIC
 
-    def __init__(self, cache_blocks: int = 4) -> None:
-        self.cache = BlockCache(cache_blocks)
+    def __init__(self, cache_blocks: int = 4, limits: ReadLimits = DEFAULT_LIMITS) -> None:
+        self.cache = BlockCache(cache_blocks, limits)
 
     def __call__(self, messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
         return assemble_cold(messages, segment, self.cache)

@@ -4,6 +4,12 @@ blocks, the compiled shapes their headers name, and a zstd decompressor for each
 python-zstandard forbids using one decompressor from two threads at once, so each thread
 that decodes through a cache gets its own; the shapes are shared (compiling one costs
 milliseconds) and the cache of blocks is guarded by a lock.
+
+A block is bounded as the hot reader bounds a chunk (``ReadLimits.chunk_bytes`` of its
+compressed size): the size its zstd frame declares (the encoder always writes it; a frame
+without one is refused) is checked before anything is allocated, and zstd inflates the
+frame into exactly that much. What the body then makes the decoder build is bounded by a
+``BuildBudget``.
 """
 
 from __future__ import annotations
@@ -14,10 +20,11 @@ from collections import OrderedDict
 
 import zstandard
 
+from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.tier_formats.cold.decode import DecodedBlock, decode_body
 from trace_runtime.tier_formats.cold.format import (
     MAGIC,
-    MAX_BLOCK_BYTES,
+    BuildBudget,
     ColdFormatError,
     gc_paused,
     malformed_as_format_error,
@@ -32,12 +39,14 @@ class BlockCache:
     the block's digest, so the same bytes share an entry. Thread-safe; owned by an assembler
     (so it lives as long as whoever holds that assembler: a reader, a compaction) or by an
     encoder, which decodes each block it makes with its own shapes. ``size`` 0 keeps no
-    blocks, only the shapes."""
+    blocks, only the shapes. ``limits`` bound what one block may make it do (the encoder
+    checks its blocks within the same ones, so it never writes a block a reader refuses)."""
 
-    def __init__(self, size: int = 4) -> None:
+    def __init__(self, size: int = 4, limits: ReadLimits = DEFAULT_LIMITS) -> None:
         if size < 0:
             raise ValueError("BlockCache size must not be negative")
         self.size = size
+        self.limits = limits
         self.shapes = ShapeCache()
         self._blocks: OrderedDict[bytes, DecodedBlock | PartialBlock] = OrderedDict()
         self._lock = threading.Lock()
@@ -53,11 +62,29 @@ class BlockCache:
         return found
 
     def body(self, block: bytes) -> bytes:
-        """The decompressed body of a block (every decode, whole or partial, starts here)."""
+        """The decompressed body of a block (every decode, whole or partial, starts here),
+        never larger than the limits allow for the block's size."""
         if block[:4] != MAGIC:
             raise ColdFormatError("not a trace-cold-v1 block (bad magic)")
+        frame = block[4:]
+        most = self.limits.chunk_bytes(len(block))
         with malformed_as_format_error():
-            return self._decompressor().decompress(block[4:], max_output_size=MAX_BLOCK_BYTES)
+            declared = zstandard.frame_content_size(frame)
+            if declared < 0:
+                raise ColdFormatError("cold block does not declare its decompressed size")
+            if declared > most:
+                raise ColdFormatError(
+                    f"cold block declares {declared} bytes decompressed from {len(block)}, "
+                    f"over the limit of {most} bytes"
+                )
+            if declared == 0:
+                raise ColdFormatError("cold block declares an empty body")
+            # zstd allocates what the frame declares and fails a frame that holds more
+            return self._decompressor().decompress(frame, max_output_size=declared)
+
+    def budget(self) -> BuildBudget:
+        """What one decode of a block may build within the cache's limits."""
+        return BuildBudget.within(self.limits)
 
     def _get(self, key: bytes) -> DecodedBlock | PartialBlock | None:
         with self._lock:
@@ -75,7 +102,7 @@ class BlockCache:
     def _decode(self, data: bytes) -> DecodedBlock:
         body = self.body(data)
         with malformed_as_format_error(), gc_paused():
-            return decode_body(body, self.shapes)
+            return decode_body(body, self.shapes, budget=self.budget())
 
     def decode(self, data: bytes) -> DecodedBlock:
         """Every message of the block ``data``, byte for byte, in order (plain ones left
@@ -99,7 +126,7 @@ class BlockCache:
         Never cached."""
         body = self.body(data)
         with malformed_as_format_error(), gc_paused():
-            return decode_body(body, self.shapes, dict(enumerate(digests)))
+            return decode_body(body, self.shapes, dict(enumerate(digests)), self.budget())
 
     def open(self, data: bytes) -> DecodedBlock | PartialBlock:
         """The block whole if it was decoded lately, else opened for a partial decode (kept,
@@ -110,7 +137,7 @@ class BlockCache:
             return found
         body = self.body(data)
         with malformed_as_format_error(), gc_paused():
-            block = PartialBlock(body, self.shapes)
+            block = PartialBlock(body, self.shapes, self.budget())
         if self.size:
             self._put(key, block)
         return block

@@ -3,7 +3,9 @@ rebuilt byte for byte from its shape and row, digest back-references resolved.
 
 A block's body (decompressed by its ``BlockCache``, which also owns the shapes) starts with
 a header, then the per-message streams (topic, shape, sequence delta, log time delta, the
-lengths and bytes of the messages no shape describes), then the column bodies.
+lengths and bytes of the messages no shape describes), then the column bodies. Every size
+the header declares is checked against the body before it is used, and what the block
+rebuilds is charged to its ``BuildBudget`` as it is built.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from trace_runtime.tier_formats.cold.format import (
     DIGEST,
     FLAT,
     LENGTHS,
+    BuildBudget,
     ColdFormatError,
     ColumnKey,
 )
@@ -68,13 +71,13 @@ class BlockStreams:
     def read(cls, body: bytes, cache: ShapeCache) -> BlockStreams:
         """The header and message streams of ``body``; its shapes looked up in ``cache``."""
         (head_len,) = struct.unpack_from("<I", body, 0)
-        header = orjson.loads(body[4 : 4 + head_len])
-        pos = 4 + head_len
+        pos = fitting(4, head_len, len(body))
+        header = orjson.loads(memoryview(body)[4:pos])  # read in place, not copied
         n = int(header["n"])
         topic_code, shape_code, *sizes = header["msg"]
         parts: list[bytes] = []
         for size in sizes:
-            parts.append(body[pos : pos + size])
+            parts.append(body[pos : fitting(pos, size, len(body))])
             pos += size
         topic_body, shape_body, seq_body, time_body, raw_len_body, raw_body = parts
         topic_ids = unpack_small(topic_code, topic_body)
@@ -82,6 +85,8 @@ class BlockStreams:
         seq_deltas = unpack_stream(seq_body, delta=False)
         times = unpack_stream(time_body, delta=True)
         raw_lens = unpack_i64(raw_len_body, delta=False) if raw_len_body else []
+        if sum(raw_lens) != len(raw_body) or min(raw_lens, default=0) < 0:
+            raise ColdFormatError("the raw messages' lengths disagree with their bytes")
         if not (len(topic_ids) == len(shape_ids) == len(seq_deltas) == len(times) == n):
             raise ColdFormatError("message streams disagree on the message count")
         shapes = [
@@ -103,6 +108,13 @@ class BlockStreams:
         )
 
 
+def fitting(pos: int, size: Any, end: int) -> int:
+    """Where a stream or column of ``size`` bytes at ``pos`` ends, if it lies in the body."""
+    if type(size) is not int or size < 0 or pos + size > end:
+        raise ColdFormatError(f"a stream or column of {size!r} bytes does not fit in the block")
+    return pos + size
+
+
 def _sequences(topic_ids: list[int], seq_deltas: list[int]) -> list[int]:
     """Each message's sequence number: the deltas run per topic."""
     sequences: list[int] = []
@@ -114,13 +126,18 @@ def _sequences(topic_ids: list[int], seq_deltas: list[int]) -> list[int]:
 
 
 def decode_body(
-    body: bytes, cache: ShapeCache, known_digests: dict[int, str] | None = None
+    body: bytes,
+    cache: ShapeCache,
+    known_digests: dict[int, str] | None = None,
+    budget: BuildBudget | None = None,
 ) -> DecodedBlock:
-    """A block body's messages; ``known_digests`` (message position -> SHA-256 hex) is
+    """A block body's messages, refused once they pass ``budget`` (by default, what the
+    default ``ReadLimits`` allow); ``known_digests`` (message position -> SHA-256 hex) is
     only ever the encoder's check (``BlockCache.decode_checked``)."""
+    budget = budget if budget is not None else BuildBudget.within()
     streams = BlockStreams.read(body, cache)
     header, n, shapes = streams.header, streams.n, streams.shapes
-    reader = _read_columns(body, header, streams.columns_at)
+    reader = _read_columns(body, header, streams.columns_at, budget)
     positions: list[list[int]] = [[] for _ in range(len(shapes) + 1)]
     for index, group in enumerate(streams.shape_ids):
         positions[group].append(index)
@@ -131,27 +148,31 @@ def decode_body(
     for index, size in zip(positions[0], streams.raw_lens, strict=True):
         datas[index] = streams.raw_body[raw_at : raw_at + size]
         raw_at += size
+    budget.spend(len(streams.raw_body))
     built = bytearray(n)
     for index in positions[0]:
         built[index] = 1
-    waiting = _build_plain_groups(shapes, positions, reader, datas, built)
+    waiting = _build_plain_groups(shapes, positions, reader, datas, built, budget=budget)
     hexes: dict[int, str] = known_digests if known_digests is not None else {}
-    _build_waiting_groups(waiting, positions, datas, built, hexes)
+    _build_waiting_groups(waiting, positions, datas, built, hexes, budget=budget)
     topics = list(map(streams.topic_names.__getitem__, streams.topic_ids))
     messages = list(map(RawMessage, topics, streams.sequences, streams.times, datas))
     plain = [int(p) for p in header.get("plain", [])]
     return DecodedBlock(str(header["tier"]), messages, plain)
 
 
-def _read_columns(body: bytes, header: dict[str, Any], pos: int) -> _ColumnReader:
+def _read_columns(
+    body: bytes, header: dict[str, Any], pos: int, budget: BuildBudget
+) -> _ColumnReader:
     """Every column of the block decoded, from the header's column table."""
-    reader = _ColumnReader()
+    reader = _ColumnReader(budget)
     for topic_id, path, codec, size, param in header["cols"]:
         key = (int(topic_id), tuple(path))
+        end = fitting(pos, size, len(body))
         if codec == CONST:
             reader.constants[key] = param  # no body: one value, repeated for every row
         else:
-            reader.columns[key] = decode_column(codec, param, body[pos : pos + size])
+            reader.columns[key] = decode_column(codec, param, body[pos:end])
         if codec == DIGEST:
             reader.digests.add(key)
         pos += size
@@ -168,14 +189,18 @@ def _build_plain_groups(
     reader: _ColumnReader,
     datas: list[bytes],
     built: bytearray,
+    *,
+    budget: BuildBudget,
 ) -> list[_Waiting]:
     """Build, in bulk, the messages of every shape group without digest references; return
     the groups that have them.
 
     A shape whose leaves hold digests of earlier messages (seals, evidence refs) can be
-    built only once those messages are, so those wait for ``_build_waiting_groups``.
+    built only once those messages are, so those wait for ``_build_waiting_groups``. Each
+    message's bytes are charged to ``budget`` as it is built.
     """
     dumps = orjson.dumps
+    spend = budget.spend
     waiting: list[_Waiting] = []
     for group, (topic_id, shape) in enumerate(shapes, start=1):
         count = len(positions[group])
@@ -186,7 +211,9 @@ def _build_plain_groups(
         if slots:
             waiting.append((group, shape, list(rows), slots))
             continue
-        for index, data in zip(positions[group], map(dumps, map(shape.build, rows)), strict=True):
+        build = budget.compiled(shape)
+        for index, data in zip(positions[group], map(dumps, map(build, rows)), strict=True):
+            spend(len(data))
             datas[index] = data
             built[index] = 1
     return waiting
@@ -198,11 +225,14 @@ def _build_waiting_groups(
     datas: list[bytes],
     built: bytearray,
     hexes: dict[int, str],
+    *,
+    budget: BuildBudget,
 ) -> None:
     """Build the groups with digest references: each group whose targets are all built
     (refs to sensor readings) in bulk; what is left (seals, which name the previous seal)
-    in message order."""
+    in message order. Each message's bytes are charged to ``budget``."""
     dumps = orjson.dumps
+    spend = budget.spend
     sequential = []
     for group, shape, rows_list, slots in waiting:
         filled = _fill_digests(
@@ -211,7 +241,9 @@ def _build_waiting_groups(
         if filled is None:
             sequential.append((group, shape, iter(rows_list), slots))
             continue
-        for index, data in zip(positions[group], map(dumps, map(shape.build, filled)), strict=True):
+        build = budget.compiled(shape)
+        for index, data in zip(positions[group], map(dumps, map(build, filled)), strict=True):
+            spend(len(data))
             datas[index] = data
             built[index] = 1
     if sequential:
@@ -222,13 +254,16 @@ def _build_waiting_groups(
                 back = row[slot]
                 if type(back) is int:
                     row[slot] = hex_of(datas, hexes, index - back)
-            datas[index] = dumps(shape.build(row))
+            data = datas[index] = dumps(budget.compiled(shape)(row))
+            spend(len(data))
 
 
 class _ColumnReader:
-    """Hands out the next values of each decoded column, shape group by shape group."""
+    """Hands out the next values of each decoded column, shape group by shape group; a
+    constant's repetitions are charged to ``budget`` before they are made."""
 
-    def __init__(self) -> None:
+    def __init__(self, budget: BuildBudget) -> None:
+        self.budget = budget
         self.columns: dict[ColumnKey, list[Any]] = {}
         self.constants: dict[ColumnKey, Any] = {}
         self.digests: set[ColumnKey] = set()
@@ -236,7 +271,7 @@ class _ColumnReader:
 
     def take(self, key: ColumnKey, count: int) -> list[Any]:
         if key in self.constants:
-            return [self.constants[key]] * count
+            return self.budget.repeat(self.constants[key], count)
         values = self.columns[key]
         start = self._taken.get(key, 0)
         if start + count > len(values):
@@ -248,12 +283,13 @@ class _ColumnReader:
         """``take`` (or ``take_vectors``) of every key of a shape group, in one call: a
         block has hundreds of groups times dozens of keys, and this is the decoder's loop."""
         columns, constants, taken = self.columns, self.constants, self._taken
+        repeat_constant = self.budget.repeat
         out: list[list[Any]] = []
         for key, vector in zip(keys, vectors, strict=True):
             if vector:
                 out.append(self.take_vectors(key, count))
             elif key in constants:
-                out.append([constants[key]] * count)
+                out.append(repeat_constant(constants[key], count))
             else:
                 values = columns[key]
                 start = taken.get(key, 0)

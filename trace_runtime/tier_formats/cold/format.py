@@ -1,5 +1,6 @@
 """The trace-cold-v1 format's constants and its one error: topics, schemas, block header
-codes, and the guard that turns whatever a damaged block trips over into that error.
+codes, the guard that turns whatever a damaged block trips over into that error, and the
+``BuildBudget`` that bounds what decoding one block may build.
 
 A cold segment holds, per block of ``block_cycles`` whole cycles, one MCAP chunk: the
 block's signed checkpoints as plain messages, the block itself on ``/trace/cold/block``
@@ -14,15 +15,16 @@ from __future__ import annotations
 import contextlib
 import gc
 import struct
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import orjson
 import zstandard
 
 from trace_runtime.errors import TraceError
+from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import TOPIC_CHECKPOINT
-from trace_runtime.tier_formats.shapes import ShapeError
+from trace_runtime.tier_formats.shapes import Shape, ShapeError
 
 CODEC = "trace-cold-v1"
 BLOCK_TOPIC = "/trace/cold/block"
@@ -42,7 +44,6 @@ heads stay readable by any MCAP tool without decoding. The block records where t
 DEFAULT_BLOCK_CYCLES = 256
 DEFAULT_LEVEL = 11
 MAGIC = b"TCB\x01"
-MAX_BLOCK_BYTES = 1 << 31
 
 # column codecs, as a block's header names them
 CONST, INT, DEC, F64, BOOL, STR, DIGEST, JSON = "c", "i", "d", "f", "b", "s", "h", "j"
@@ -60,6 +61,52 @@ ColumnKey = tuple[int, tuple[Any, ...]]
 class ColdFormatError(TraceError, ValueError):
     """A cold block is malformed (wrapped into ``LogReadError`` by callers). A ``TraceError``
     so that one that escapes still maps to an exit code; a ``ValueError`` because it is one."""
+
+
+COMPILE_BYTES = 256
+"""What compiling a shape is charged per byte of its descriptor: compiling a shape of
+60,000 leaves (650 KB) takes ~0.4 s and ~200 MB at its peak, ~300 bytes a byte."""
+
+
+class BuildBudget:
+    """What decoding one block may still build: the bytes of the messages it rebuilds, a
+    pointer's 8 bytes for every value a constant column is repeated for, and
+    ``COMPILE_BYTES`` a descriptor byte for every shape it compiles. A block stores a value
+    (or a shape) once and rebuilds it for every row, so what it declares (a vector's length,
+    a row count, its shapes) is charged here before the decoder allocates for it, and a
+    block that would build more than ``ReadLimits.max_chunk_bytes`` (what one chunk may
+    inflate to) is refused while it is built, not after."""
+
+    __slots__ = ("left", "most")
+
+    def __init__(self, most: int) -> None:
+        self.most = most
+        self.left = most
+
+    @classmethod
+    def within(cls, limits: ReadLimits = DEFAULT_LIMITS) -> BuildBudget:
+        """What one block may build within ``limits``."""
+        return cls(limits.max_chunk_bytes)
+
+    def spend(self, size: int) -> None:
+        self.left -= size
+        if self.left < 0:
+            raise ColdFormatError(
+                f"cold block builds more than the limit of {self.most} bytes (a bomb, not a log)"
+            )
+
+    def compiled(self, shape: Shape) -> Callable[[Any], Any]:
+        """``shape.build``, its compiling charged first (once: a compiled shape is kept)."""
+        if not shape.compiled:
+            self.spend(COMPILE_BYTES * len(shape.key))
+        return shape.build
+
+    def repeat(self, value: Any, count: int) -> list[Any]:
+        """``[value] * count``, charged first."""
+        if count < 0:
+            raise ColdFormatError("a column declares a negative number of values")
+        self.spend(8 * count)
+        return [value] * count
 
 
 @contextlib.contextmanager

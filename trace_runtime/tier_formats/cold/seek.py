@@ -12,12 +12,13 @@ import orjson
 from trace_runtime.cycles import RawMessage
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.tier_formats.cold.columns import counters, decode_column, plan
-from trace_runtime.tier_formats.cold.decode import BlockStreams, hex_of
+from trace_runtime.tier_formats.cold.decode import BlockStreams, fitting, hex_of
 from trace_runtime.tier_formats.cold.format import (
     CONST,
     DIGEST,
     FLAT,
     LENGTHS,
+    BuildBudget,
     ColdFormatError,
     ColumnKey,
 )
@@ -35,10 +36,15 @@ class PartialBlock:
     cycles) back to the nearest seal whose ``prev`` the block stores as a literal (the
     encoder writes one every ``SEAL_ANCHOR_CYCLES`` cycles; a block without such anchors
     is built back to its start, correctly, only more slowly).
+
+    What the block builds, over all the seeks into it, is charged to one ``BuildBudget``:
+    the messages it keeps and the repetitions of its constants.
     """
 
-    def __init__(self, body: bytes, cache: ShapeCache) -> None:
-        """Open the decompressed ``body`` of a block; its shapes are looked up in ``cache``."""
+    def __init__(self, body: bytes, cache: ShapeCache, budget: BuildBudget | None = None) -> None:
+        """Open the decompressed ``body`` of a block; its shapes are looked up in ``cache``;
+        what it builds is charged to ``budget`` (by default, what the default limits allow)."""
+        budget = budget if budget is not None else BuildBudget.within()
         streams = BlockStreams.read(body, cache)
         header, pos, raw_lens, raw_body = (
             streams.header,
@@ -57,11 +63,13 @@ class PartialBlock:
         self.shapes = streams.shapes
 
         self._body = body
+        self._budget = budget
         self._specs: dict[ColumnKey, tuple[str, Any, int, int]] = {}
         self._constants: dict[ColumnKey, Any] = {}
         self._digest_keys: set[ColumnKey] = set()
         for topic_id, path, codec, size, param in header["cols"]:
             key = (int(topic_id), tuple(path))
+            fitting(pos, size, len(body))
             if codec == CONST:
                 self._constants[key] = param
             else:
@@ -85,6 +93,7 @@ class PartialBlock:
         for index, size in zip(raw_positions, raw_lens, strict=True):
             self.datas[index] = raw_body[raw_at : raw_at + size]
             raw_at += size
+        budget.spend(len(raw_body))
         self._counts = counts
         self._layout = self._lay_out(counts)
         self._by_path: dict[ColumnKey, list[tuple[int, int]]] | None = None
@@ -112,7 +121,7 @@ class PartialBlock:
 
     def _cut(self, key: ColumnKey, start: int, count: int) -> list[Any]:
         if key in self._constants:
-            return [self._constants[key]] * count
+            return self._budget.repeat(self._constants[key], count)
         values = self._column(key)
         if start + count > len(values):
             raise ColdFormatError("a column is shorter than its shapes need")
@@ -261,7 +270,8 @@ class PartialBlock:
                     if type(back) is int:
                         row[slot] = hex_of(built, hexes, index - back)
             build = shape.build if shape.compiled else shape.build_uncompiled
-            datas[index] = dumps(build(row))
+            data = datas[index] = dumps(build(row))
+            self._budget.spend(len(data))
         names = self.topic_names
         return [
             RawMessage(names[self.topic_ids[i]], self.sequences[i], self.times[i], built[i])
