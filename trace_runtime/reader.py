@@ -31,13 +31,14 @@ from trace_runtime.tier_formats.warm import WarmAssembler
 
 log = logging.getLogger("trace_runtime")
 
-ASSEMBLERS: Mapping[str, Callable[[], Assembler]] = {
-    "hot": HotAssembler,
-    "warm": WarmAssembler,
-    "cold": ColdAssembler,
+ASSEMBLERS: Mapping[str, Callable[[ReadLimits], Assembler]] = {
+    "hot": lambda _limits: HotAssembler(),
+    "warm": lambda _limits: WarmAssembler(),
+    "cold": lambda limits: ColdAssembler(limits=limits),
 }
 """How each tier's messages become cycles (``trace.session`` ``tier``): one assembler per
-segment, so a cache an assembler keeps (cold: decoded blocks) lives as long as the reader."""
+segment, so a cache an assembler keeps (cold: decoded blocks) lives as long as the reader,
+bounded by the reader's limits where decoding can be asked to inflate (cold blocks)."""
 
 _MAX_LEAD_IN_CHUNKS = 4096
 """How far back a cycle's first messages are looked for (chunks of one message each hold a
@@ -127,7 +128,7 @@ class Segment(McapFile):
 
     @cached_property
     def _assembler(self) -> Assembler:
-        return ASSEMBLERS.get(self.session.tier, HotAssembler)()
+        return ASSEMBLERS.get(self.session.tier, ASSEMBLERS["hot"])(self.limits)
 
     def clear_caches(self) -> None:
         """Forget recently decoded chunks and blocks (to measure a first read)."""
