@@ -5,13 +5,13 @@ Failure policy (schemas/PROFILE.md, "Dropped cycles"): nothing here raises. A fa
 a lost disk or permission drops the batch and counts it; the first failure of each kind is
 logged once through ``logging``; the next seal written carries the count in ``dropped``, and
 drops after the last seal are declared in ``trace.close`` when the segment ends. A failed
-write that could not be rolled back is judged by the file's real end: a batch whose chunk is
-in the file whole is written (a reader recovers it), and the next segment chains from its last
-seal; one cut short is dropped. A segment file whose header could not be written holds
-nothing and is removed. A segment
-deleted under the writer is noticed at the next batch and replaced. The segment opener and
-the checkpoint signer are plug points that may raise anything, so the boundary around them
-catches ``Exception``: a bug there costs cycles (counted and logged), never the robot.
+write that could not be rolled back is judged by the file's real end, as a reader will judge
+it: a batch whose chunk is in the file whole counts as written and the next segment chains
+from its last seal; one cut short is dropped and declared. A segment file whose header could
+not be written holds nothing and is removed. A segment deleted under the writer is noticed
+at the next batch and replaced. The segment opener and the checkpoint signer are plug points
+that may raise anything, so the boundary around them catches ``Exception``: a bug there
+costs cycles (counted and logged), never the robot.
 
 Every method runs on one thread at a time: the writer thread, or the control thread with
 ``threaded=False`` (``trace_runtime.writer_thread`` holds the lock).
