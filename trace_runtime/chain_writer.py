@@ -278,25 +278,13 @@ class ChainWriter:
         segment, self._segment = self._segment, None
         if segment is None:
             return
-        if self._head is not None and not segment.broken:
-            # The closing checkpoint: a finished segment without one was cut (docs/integrity.md).
-            cycle, t_ns = self._head
-            message = self._checkpoint_message(
-                segment, cycle, t_ns, self.prev_seal, self._sealed_in_segment, final=True
-            )
-            if message is not None:
-                try:
-                    self.stats.bytes_written += segment.write_batch([message])
-                    self.stats.checkpoints += 1
-                except SegmentWriteError as err:
-                    if err.kept:  # in the file, though the segment is given up
-                        self.stats.checkpoints += 1
-                    else:
-                        self.stats.checkpoint_failures += 1
-                    self.report_once("checkpoint", f"could not write a checkpoint: {err}")
-                except Exception as err:
-                    self.stats.checkpoint_failures += 1
-                    self.report_once("checkpoint", f"could not write a checkpoint: {err}")
+        head = self._head
+        if head is not None and not segment.broken and not self._final_checkpoint(segment, *head):
+            # A finished segment without its closing checkpoint reads as cut short
+            # (docs/integrity.md): leave it unfinished, as a crash would, for readers to scan.
+            with contextlib.suppress(Exception):  # the opener's stream: a plug point
+                segment._stream.close()
+            return
         if self._costs.cycles and not segment.broken:
             # The logger's own cost per cycle, for Table II of `trace-audit metrics`.
             try:
@@ -307,6 +295,29 @@ class ChainWriter:
             segment.close()
         except Exception as err:
             self.report_once("close", f"could not finish segment: {err}")
+
+    def _final_checkpoint(self, segment: SegmentWriter, cycle: int, t_ns: int) -> bool:
+        """Write the segment's closing checkpoint (its last seal: ``cycle`` at ``t_ns``);
+        whether it is in the file."""
+        message = self._checkpoint_message(
+            segment, cycle, t_ns, self.prev_seal, self._sealed_in_segment, final=True
+        )
+        if message is None:
+            return False
+        try:
+            self.stats.bytes_written += segment.write_batch([message])
+        except SegmentWriteError as err:
+            self.report_once("checkpoint", f"could not write a checkpoint: {err}")
+            if not err.kept:
+                self.stats.checkpoint_failures += 1
+                return False
+            self.stats.bytes_written += err.written  # in the file; the segment is given up
+        except Exception as err:
+            self.stats.checkpoint_failures += 1
+            self.report_once("checkpoint", f"could not write a checkpoint: {err}")
+            return False
+        self.stats.checkpoints += 1
+        return True
 
     def _segment_path(self, session: SessionInfo) -> Path:
         if not self.is_root:

@@ -178,6 +178,25 @@ def test_a_batch_that_reached_the_file_is_chained_from_not_dropped(tmp_path: Pat
     assert_log_agrees(root, logger.stats)
 
 
+@pytest.mark.parametrize("rollback_works", [False, True], ids=["rollback fails", "rolled back"])
+def test_a_closing_checkpoint_the_disk_refuses_leaves_the_segment_unfinished(
+    tmp_path: Path, rollback_works: bool
+) -> None:
+    """A finished segment without its closing checkpoint reads as cut short: when the disk
+    refuses that checkpoint, the segment is left without a summary, as a crash leaves it."""
+    # Writes: the header and session metadata, one per cycle, then the closing checkpoint.
+    disk = FullDisk(fails_at=2 + 10 + 1, lands=lambda n: 0, rollback_works=rollback_works)
+    root = tmp_path / "root"
+    config = LoggerConfig(threaded=False, checkpoint_interval_s=None, opener=disk.open)
+    logger = AuditLogger(root, robot_id="r", config=config)
+    log_cycles(logger, range(10))
+    logger.close()
+    assert logger.stats.checkpoint_failures == 1 and logger.stats.written == 10
+    (segment,) = open_log(root).segments
+    assert segment.info.recovered
+    assert_log_agrees(root, logger.stats)
+
+
 def test_a_robot_filling_a_real_tmpfs_leaves_a_log_that_verifies(tmp_path: Path) -> None:
     """A robot logs into a 2 MiB tmpfs that some ballast fills; in some runs the ballast is
     deleted after the first drop and the robot goes on. Every run verifies, and the cycles
