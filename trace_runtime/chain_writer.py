@@ -4,10 +4,14 @@ and writes them, a chunk per batch, into segments it rotates, checkpoints and re
 Failure policy (schemas/PROFILE.md, "Dropped cycles"): nothing here raises. A failed write,
 a lost disk or permission drops the batch and counts it; the first failure of each kind is
 logged once through ``logging``; the next seal written carries the count in ``dropped``, and
-drops after the last seal are declared in ``trace.close`` when the segment ends. A segment
-deleted under the writer is noticed at the next batch and replaced. The segment opener and
-the checkpoint signer are plug points that may raise anything, so the boundary around them
-catches ``Exception``: a bug there costs cycles (counted and logged), never the robot.
+drops after the last seal are declared in ``trace.close`` when the segment ends. A failed
+write that could not be rolled back is judged by the file's real end, as a reader will judge
+it: a batch whose chunk is in the file whole counts as written and the next segment chains
+from its last seal; one cut short is dropped and declared. A segment file whose header could
+not be written holds nothing and is removed. A segment deleted under the writer is noticed
+at the next batch and replaced. The segment opener and the checkpoint signer are plug points
+that may raise anything, so the boundary around them catches ``Exception``: a bug there
+costs cycles (counted and logged), never the robot.
 
 Every method runs on one thread at a time: the writer thread, or the control thread with
 ``threaded=False`` (``trace_runtime.writer_thread`` holds the lock).
@@ -21,6 +25,7 @@ import logging
 import os
 import time
 from pathlib import Path
+from typing import BinaryIO
 
 from trace_runtime.chain import digest
 from trace_runtime.checkpoints import encode_checkpoint, make_checkpoint
@@ -126,8 +131,14 @@ class ChainWriter:
             messages, last_seal, checkpoints = self._seal(segment, batch)
             self.stats.bytes_written += segment.write_batch(messages)
         except SegmentWriteError as err:
-            self._lose(batch, err, abandon=not err.rolled_back)
-            return
+            if not err.kept:
+                self._lose(batch, err, abandon=not err.rolled_back)
+                return
+            # The batch is in the file, the segment can take no more: the batch counts as
+            # written, and the next segment continues the chain from its last seal.
+            self.stats.bytes_written += err.written
+            self.report_once(f"io:{type(err).__name__}", f"audit write failed: {err}")
+            self._segment = None
         except Exception as err:
             self._lose(batch, err, abandon=True)
             return
@@ -232,11 +243,11 @@ class ChainWriter:
         path = self._segment_path(session)
         path.parent.mkdir(parents=True, exist_ok=True)
         stream = self._opener(path)
+        opened = _identity(stream)  # before a failed header closes the stream
         try:
             segment = SegmentWriter(stream, session, level=self.config.compression_level)
         except BaseException:
-            with contextlib.suppress(Exception):  # the header failed; the file is given up
-                stream.close()
+            _give_up_header(stream, path, opened)
             raise
         self._segment = segment
         self.session = session
@@ -267,19 +278,13 @@ class ChainWriter:
         segment, self._segment = self._segment, None
         if segment is None:
             return
-        if self._head is not None and not segment.broken:
-            # The closing checkpoint: a finished segment without one was cut (docs/integrity.md).
-            cycle, t_ns = self._head
-            message = self._checkpoint_message(
-                segment, cycle, t_ns, self.prev_seal, self._sealed_in_segment, final=True
-            )
-            if message is not None:
-                try:
-                    self.stats.bytes_written += segment.write_batch([message])
-                    self.stats.checkpoints += 1
-                except Exception as err:
-                    self.stats.checkpoint_failures += 1
-                    self.report_once("checkpoint", f"could not write a checkpoint: {err}")
+        head = self._head
+        if head is not None and not segment.broken and not self._final_checkpoint(segment, *head):
+            # A finished segment without its closing checkpoint reads as cut short
+            # (docs/integrity.md): leave it unfinished, as a crash would, for readers to scan.
+            with contextlib.suppress(Exception):  # the opener's stream: a plug point
+                segment._stream.close()
+            return
         if self._costs.cycles and not segment.broken:
             # The logger's own cost per cycle, for Table II of `trace-audit metrics`.
             try:
@@ -290,6 +295,29 @@ class ChainWriter:
             segment.close()
         except Exception as err:
             self.report_once("close", f"could not finish segment: {err}")
+
+    def _final_checkpoint(self, segment: SegmentWriter, cycle: int, t_ns: int) -> bool:
+        """Write the segment's closing checkpoint (its last seal: ``cycle`` at ``t_ns``);
+        whether it is in the file."""
+        message = self._checkpoint_message(
+            segment, cycle, t_ns, self.prev_seal, self._sealed_in_segment, final=True
+        )
+        if message is None:
+            return False
+        try:
+            self.stats.bytes_written += segment.write_batch([message])
+        except SegmentWriteError as err:
+            self.report_once("checkpoint", f"could not write a checkpoint: {err}")
+            if not err.kept:
+                self.stats.checkpoint_failures += 1
+                return False
+            self.stats.bytes_written += err.written  # in the file; the segment is given up
+        except Exception as err:
+            self.stats.checkpoint_failures += 1
+            self.report_once("checkpoint", f"could not write a checkpoint: {err}")
+            return False
+        self.stats.checkpoints += 1
+        return True
 
     def _segment_path(self, session: SessionInfo) -> Path:
         if not self.is_root:
@@ -379,3 +407,27 @@ class ChainWriter:
         if kind not in self._reported:
             self._reported.add(kind)
             log.warning("%s (reported once; see AuditLogger.stats)", message)
+
+
+def _identity(stream: BinaryIO) -> tuple[int, int] | None:
+    """(device, inode) of the file behind an opened stream; None without a descriptor."""
+    try:
+        stat = os.fstat(stream.fileno())
+    except (AttributeError, OSError, ValueError):  # no descriptor (a stream in memory)
+        return None
+    return stat.st_dev, stat.st_ino
+
+
+def _give_up_header(stream: BinaryIO, path: Path, opened: tuple[int, int] | None) -> None:
+    """A new segment's header could not be written: close its stream and remove the file,
+    which holds no cycle (a reader would call it damaged). Only when ``path`` is still the
+    file the stream was opened on (``opened``: device and inode), an opener may write
+    elsewhere than ``path``."""
+    with contextlib.suppress(Exception):  # the header failed; the file is given up
+        stream.close()
+    if opened is None:
+        return
+    with contextlib.suppress(OSError):  # gone already, or not ours to remove: leave it
+        there = os.lstat(path)
+        if (there.st_dev, there.st_ino) == opened:
+            os.unlink(path)

@@ -5,12 +5,18 @@ so a killed process loses that chunk. Here every ``write_batch`` call closes a c
 hands it, with its message indexes, to the OS in one write: a batch that returned is on
 disk as far as the process is concerned, and a crash can only cut the batch in flight.
 A failed write is rolled back (the file is truncated to the end of the last good batch) so
-the segment stays valid and the caller can drop the batch and go on.
+the segment stays valid and the caller can drop the batch and go on. When even the rollback
+fails (a full disk: a buffered stream cannot seek without writing first) the file is closed
+and its real end, read after the close, says whether the batch's chunk is in it whole: a
+reader of the unfinished segment keeps a complete chunk and cuts a partial one
+(schemas/PROFILE.md §8), so the caller is told which of the two the file holds.
 """
 
 from __future__ import annotations
 
 import array
+import contextlib
+import errno
 import os
 import struct
 import sys
@@ -91,11 +97,20 @@ def _message_records(
 
 
 class SegmentWriteError(TraceError):
-    """A batch could not be written. ``rolled_back`` says whether the segment is still usable."""
+    """A batch could not be written. ``rolled_back`` says whether the segment is still usable.
 
-    def __init__(self, reason: str, *, rolled_back: bool) -> None:
+    ``kept``: the write failed and could not be rolled back, yet the batch's chunk is in the
+    file whole (its ``written`` bytes), so a reader recovers every cycle of it; the segment
+    is given up all the same.
+    """
+
+    def __init__(
+        self, reason: str, *, rolled_back: bool, kept: bool = False, written: int = 0
+    ) -> None:
         super().__init__(reason)
         self.rolled_back = rolled_back
+        self.kept = kept
+        self.written = written
 
 
 class OutMessage(NamedTuple):
@@ -153,6 +168,9 @@ class SegmentWriter:
         self.offset = 0
         self.broken = False
         self.finished = False
+        self.file_end: int | None = None
+        """Once ``broken``: the file's size after it was closed (None: it cannot be known,
+        the stream has no file descriptor)."""
 
         head = _RecordBuilder()
         head.write(MAGIC)
@@ -219,7 +237,9 @@ class SegmentWriter:
 
         On failure the file is truncated back to the last good batch and
         ``SegmentWriteError(rolled_back=True)`` is raised; if even that fails the segment is
-        marked broken (``rolled_back=False``) and must be abandoned.
+        marked broken (``rolled_back=False``), its stream closed, and it must be abandoned;
+        the error's ``kept`` then says whether the file ends past the batch's chunk (a reader
+        recovers the batch) or before its end (a reader cuts it: the batch is lost).
         """
         if self.broken or self.finished:
             raise SegmentWriteError("segment is closed", rolled_back=False)
@@ -232,7 +252,18 @@ class SegmentWriter:
         chunk_offset = self.offset + len(self._pending)  # where this batch's chunk will start
         out, chunk_length, offsets = self._chunk(records, payload, indexes, start, end)
         index_length = len(out) - chunk_length
-        self._write_now(bytes(out))
+        try:
+            self._write_now(bytes(out))
+        except SegmentWriteError as err:
+            file_end = self.file_end
+            if err.rolled_back or file_end is None or file_end < chunk_offset + chunk_length:
+                raise
+            raise SegmentWriteError(
+                f"{err}; the batch is in the file",
+                rolled_back=False,
+                kept=True,
+                written=file_end - before,
+            ) from err
 
         self._chunk_indexes.append(
             ChunkIndex(
@@ -442,12 +473,23 @@ class SegmentWriter:
         good = self.offset
         data = self._pending + data
         try:
-            self._stream.write(data)
+            written = self._stream.write(data)
+            if written is not None and written < len(data):
+                self._write_rest(data, written)
             self._stream.flush()
         except (OSError, ValueError) as err:
             self._roll_back(good, err)
         self._pending = b""
         self.offset = good + len(data)
+
+    def _write_rest(self, data: bytes, done: int) -> None:
+        """An unbuffered stream took only part of ``data`` (a filling disk shows so, and
+        raises ENOSPC only at the next write): write the rest, or raise."""
+        while done < len(data):
+            written = self._stream.write(data[done:])
+            if not written:
+                raise OSError(errno.EIO, f"short write: {done} of {len(data)} bytes")
+            done += written
 
     def _roll_back(self, good: int, err: Exception) -> None:
         try:
@@ -455,8 +497,31 @@ class SegmentWriter:
             self._stream.truncate(good)
             self._stream.flush()
         except (OSError, ValueError):
-            self.broken = True
+            self._give_up()
             raise SegmentWriteError(
                 f"write failed ({err}); rollback failed", rolled_back=False
             ) from err
         raise SegmentWriteError(f"write failed ({err})", rolled_back=True) from err
+
+    def _give_up(self) -> None:
+        """A write could not be rolled back: close the stream and read where the file ends.
+
+        The end is read after the close, through a copy of the descriptor, because closing
+        a buffered stream writes what it still held: only then is the file's end final.
+        """
+        self.broken = True
+        fileno = self._fileno()
+        copy: int | None = None
+        if fileno is not None:
+            with contextlib.suppress(OSError):  # no descriptor left: the end stays unknown
+                copy = os.dup(fileno)
+        with contextlib.suppress(OSError, ValueError):  # already failing; the end tells
+            self._stream.close()
+        if copy is None:
+            return
+        try:
+            self.file_end = os.fstat(copy).st_size
+        except OSError:
+            self.file_end = None
+        finally:
+            os.close(copy)
