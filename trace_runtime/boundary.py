@@ -42,6 +42,7 @@ __all__ = [
     "SIDE_FILE_DEPTH",
     "append_line",
     "confined",
+    "create_aside",
     "create_exclusive",
     "file_kind",
     "folder_lock",
@@ -230,7 +231,7 @@ def write_atomic(path: Path, data: bytes) -> None:
     """Replace ``path`` with ``data``: write a fresh sibling, fsync it, rename it over, fsync
     the folder. Refused when ``path`` is held by anything but a regular file."""
     regular_file(path)
-    tmp, f = _fresh_sibling(path)
+    tmp, f = create_aside(path)
     try:
         with f:
             f.write(data)
@@ -247,7 +248,7 @@ def write_atomic(path: Path, data: bytes) -> None:
 
 def remove_stale_partials(path: Path) -> None:
     """Remove the partial files of earlier ``write_atomic`` calls on ``path`` that were
-    killed before their rename: named as ``_fresh_sibling`` names them, regular files, and
+    killed before their rename: named as ``create_aside`` names them, regular files, and
     written by a process that no longer runs (a live one may be writing right now)."""
     prefix = f".{path.name}."
     with contextlib.suppress(OSError):
@@ -261,7 +262,7 @@ def remove_stale_partials(path: Path) -> None:
 
 
 def _writer_pid(name: str, prefix: str) -> int | None:
-    """The process id in a partial file name of ``_fresh_sibling``'s, or None."""
+    """The process id in a partial file name of ``create_aside``'s, or None."""
     if not (name.startswith(prefix) and name.endswith(".partial")):
         return None
     middle = name[len(prefix) : -len(".partial")].split(".")
@@ -280,7 +281,7 @@ def _running(pid: int) -> bool:
     return True
 
 
-def _fresh_sibling(path: Path) -> tuple[Path, BinaryIO]:
+def create_aside(path: Path) -> tuple[Path, BinaryIO]:
     """A new file beside ``path`` under a name no one holds (this process's id and a count),
     created exclusively: a link or file planted at a likely name is skipped, never followed."""
     for attempt in range(1000):

@@ -18,11 +18,8 @@ process or a Dask worker), which writes its own files; the manifest is replaced 
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
-import json
 import logging
-import os
 import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
@@ -30,19 +27,26 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from trace_audit.fleet.folder import (
+    MANIFEST,
+    check_target,
+    index_lock,
+    load_manifest,
+    remove_own,
+    write_manifest,
+    write_table_file,
+)
 from trace_audit.fleet.rows import SegmentRows, day_of
-from trace_audit.fleet.tables import INDEX_FORMAT, INDEX_VERSION, parquet_options
+from trace_audit.fleet.tables import INDEX_VERSION, parquet_options
 from trace_audit.metrics import MetricsConfig, score_segment
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.logset import Log, open_logs, preferred_copies
 from trace_runtime.reader import Segment, open_segment
 from trace_runtime.records import TOPIC_SEAL
-from trace_runtime.session import TIERS
-from trace_runtime.tiers.catalog import file_digest, refresh_catalog
+from trace_runtime.tiers.catalog import file_digest
 
 __all__ = ["MANIFEST", "IndexReport", "build_index", "index_segment", "load_manifest"]
 
-MANIFEST = "index.json"
 ProgressCallback = Callable[[int, int | None], None]
 
 
@@ -120,11 +124,8 @@ def index_segment(task: IndexTask) -> IndexedSegment:
         for day in sorted(set(days)):
             part = table if len(set(days)) == 1 else _rows_of_day(table, days, day)
             rel = f"{name}/robot={robot}/day={day}/{stem}.parquet"
-            target = out / rel
-            target.parent.mkdir(parents=True, exist_ok=True)
-            partial = target.with_name(target.name + ".partial")
-            pq.write_table(part, partial, **parquet_options(part.schema))
-            os.replace(partial, target)
+            options = parquet_options(part.schema)
+            write_table_file(out, rel, lambda f, p=part, o=options: pq.write_table(p, f, **o))
             files.append(rel)
     return IndexedSegment(
         key=task.key,
@@ -187,61 +188,6 @@ def _segment_row(segment: Segment, rows: SegmentRows, sha256: str) -> tuple[Any,
 
 
 # --- the whole index ---------------------------------------------------------------------------
-
-
-def load_manifest(index: str | Path) -> dict[str, Any] | None:
-    """The index's manifest, or None when the directory holds no index of this version."""
-    try:
-        body = json.loads((Path(index) / MANIFEST).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    if not isinstance(body, dict) or body.get("format") != INDEX_FORMAT:
-        return None
-    if body.get("version") != INDEX_VERSION:
-        return None
-    return body
-
-
-def _check_target(out: Path) -> dict[str, Any] | None:
-    """The manifest to update, None for a new index; refuses a directory that is not ours,
-    and a manifest that cannot be read (nothing in the directory is touched then)."""
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"{out}: exists and is not a directory")
-    if (out / MANIFEST).exists():
-        try:
-            body = json.loads((out / MANIFEST).read_text(encoding="utf-8"))
-        except (OSError, ValueError) as err:
-            raise LogReadError(
-                str(out / MANIFEST),
-                "unreadable index manifest; nothing changed (rebuild into a new directory)",
-            ) from err
-        if not isinstance(body, dict) or body.get("format") != INDEX_FORMAT:
-            raise LogReadError(
-                str(out / MANIFEST),
-                "not a fleet index manifest; nothing changed (give a new directory)",
-            )
-        if body.get("version") != INDEX_VERSION:
-            # Another version of our own index: the files its manifest lists are ours,
-            # rebuilt in place; anything else in the directory is left alone.
-            return {"segments": {}, "stale_files": _listed_files(body)}
-        return body
-    if out.is_dir() and any(out.iterdir()):
-        raise UsageError(f"{out}: not empty and not a fleet index; give a new directory")
-    return None
-
-
-def _listed_files(manifest: dict[str, Any]) -> list[str]:
-    """The Parquet files a manifest names (relative to the index), and nothing else."""
-    entries = manifest.get("segments")
-    if not isinstance(entries, dict):
-        return []
-    return [
-        rel
-        for entry in entries.values()
-        if isinstance(entry, dict)
-        for rel in entry.get("files") or ()
-        if isinstance(rel, str) and rel.endswith(".parquet") and ".." not in Path(rel).parts
-    ]
 
 
 def _files_intact(out: Path, entry: dict[str, Any]) -> bool:
@@ -341,20 +287,11 @@ def _against_manifest(task: IndexTask, entry: dict[str, Any] | None) -> str | No
 
 
 def _digests(log: Log, cache: dict[str, Any]) -> dict[Path, str]:
-    """SHA-256 of every segment file: from its log root's catalog when it sits in one,
-    else from the manifest's (size, mtime) cache, else read."""
+    """SHA-256 of every segment file: from the manifest's (size, mtime) cache, else read.
+    Never from a log root's catalog: it is a hint anyone who sent the root could forge."""
     out: dict[Path, str] = {}
-    roots: dict[Path, dict[str, str]] = {}
     for segment in log.segments:
         path = segment.path
-        root = path.parent.parent
-        if path.parent.name in TIERS:
-            if root not in roots:
-                roots[root] = _catalog_digests(root)
-            found = roots[root].get(path.resolve().as_posix())
-            if found is not None:
-                out[path] = found
-                continue
         stat = path.stat()
         cached = cache.get(str(path.resolve()))
         if cached and cached[0] == stat.st_size and cached[1] == stat.st_mtime_ns:
@@ -363,16 +300,6 @@ def _digests(log: Log, cache: dict[str, Any]) -> dict[Path, str]:
             out[path] = file_digest(path)
         cache[str(path.resolve())] = [stat.st_size, stat.st_mtime_ns, out[path]]
     return out
-
-
-def _catalog_digests(root: Path) -> dict[str, str]:
-    try:
-        catalog = refresh_catalog(root)
-    except OSError:  # a read-only archive: the catalog is rebuilt in memory only
-        catalog = refresh_catalog(root, write=False)
-    except LogReadError:
-        return {}
-    return {(root / e.path).resolve().as_posix(): e.sha256 for e in catalog.entries}
 
 
 def _plan(
@@ -439,7 +366,33 @@ def build_index(
     # Absolute on the client: a Dask worker runs in its own directory, where a relative
     # --out would name another place (the files landed there, the manifest here).
     target = Path(out).absolute()
-    manifest = _check_target(target) or {"segments": {}}
+    check_target(target)  # a folder that is not ours is refused before the lock is made in it
+    with index_lock(target):
+        return _build(
+            paths,
+            target,
+            out=str(out),
+            cfg=cfg,
+            workers=workers,
+            executor=executor,
+            progress=progress,
+            started=started,
+        )
+
+
+def _build(
+    paths: Sequence[str | Path],
+    target: Path,
+    *,
+    out: str,
+    cfg: MetricsConfig,
+    workers: int,
+    executor: Executor | None,
+    progress: ProgressCallback | None,
+    started: float,
+) -> IndexReport:
+    """``build_index`` with the folder's lock held."""
+    manifest = check_target(target) or {"segments": {}}
     settings = {"gap_tolerance": cfg.gap_tolerance, "sensor_window": cfg.sensor_window}
     known: dict[str, Any] = dict(manifest.get("segments", {}))
     if manifest.get("config") not in (None, settings):
@@ -510,11 +463,10 @@ def _record(
         if old is not None:
             stale.update(set(old["files"]) - set(result.files))
         known[result.key] = asdict(result)
-    _write_manifest(target, known, settings, digests)
+    write_manifest(target, known, settings, digests)
     live = {rel for entry in known.values() for rel in entry["files"]}
     for rel in sorted(stale - live):  # files of an older copy of a segment, or an older index
-        with contextlib.suppress(FileNotFoundError):
-            (target / rel).unlink()
+        remove_own(target, rel)
 
 
 def _unchanged(entry: dict[str, Any] | None, task: IndexTask) -> bool:
@@ -546,18 +498,3 @@ def _as_done(executor: Executor, tasks: list[IndexTask]) -> Iterator[IndexedSegm
     futures = [executor.submit(index_segment, t) for t in ordered]
     for future in as_completed(futures):
         yield future.result()
-
-
-def _write_manifest(
-    out: Path, segments: dict[str, Any], settings: dict[str, Any], digests: dict[str, Any]
-) -> None:
-    body = {
-        "format": INDEX_FORMAT,
-        "version": INDEX_VERSION,
-        "config": settings,
-        "segments": dict(sorted(segments.items())),
-        "digests": digests,
-    }
-    partial = out / (MANIFEST + ".partial")
-    partial.write_text(json.dumps(body, indent=1) + "\n", encoding="utf-8")
-    os.replace(partial, out / MANIFEST)

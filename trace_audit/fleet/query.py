@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from trace_audit.fleet.index import load_manifest
+from trace_audit.fleet.folder import listed_files, load_manifest
 from trace_audit.fleet.tables import TABLES, schema
 from trace_audit.metrics import (
     NO_SCENARIO,
@@ -127,9 +127,9 @@ def connect(index: str | Path, *, confined: bool = True) -> duckdb.DuckDBPyConne
     # No progress bar: DuckDB draws one on the terminal for long queries, into our output.
     con = duckdb.connect(":memory:")
     con.execute("SET enable_progress_bar = false")
-    listed = sorted(
-        rel for entry in manifest.get("segments", {}).values() for rel in entry.get("files", ())
-    )
+    # Only the index's own files inside the folder (``folder.listed_files``): a name the
+    # manifest lists outside it would otherwise widen what the session may read.
+    listed = listed_files(root, manifest)
     for table in TABLES:
         # The files the manifest lists, not a glob: a stray or leftover file in the
         # directory is not the index's and must not be counted.
