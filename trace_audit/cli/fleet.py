@@ -14,13 +14,16 @@ from trace_audit.cli.options import (
     CsvOption,
     IndexArgument,
     JsonOption,
+    MemoryLimitOption,
     PlainOption,
     SchedulerOption,
+    SqlTimeoutOption,
     action_option,
     cluster,
     jobs_option,
     limit_option,
     robot_option,
+    sql_limits,
 )
 from trace_audit.cli.output import emit, print_json, progress_bar
 
@@ -127,13 +130,17 @@ def query_command(
     *,
     csv_out: CsvOption = False,
     limit: Annotated[int | None, limit_option("Print at most this many rows.", least=0)] = None,
+    memory_limit: MemoryLimitOption = None,
+    timeout: SqlTimeoutOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
     from trace_audit.fleet.query import run_query
 
     _one_format(json_out=json_out, csv_out=csv_out)
-    result = guarded(lambda: run_query(index, sql, limit=limit))
+    result = guarded(
+        lambda: run_query(index, sql, limit=limit, limits=sql_limits(memory_limit, timeout))
+    )
     _print_rows(result, json_out=json_out, csv_out=csv_out, plain=plain)
 
 
@@ -174,6 +181,8 @@ def find_command(
     ] = None,
     robot: Annotated[str | None, robot_option("Only this robot.")] = None,
     limit: Annotated[int, limit_option("At most this many rows, oldest first.", least=1)] = 1000,
+    memory_limit: MemoryLimitOption = None,
+    timeout: SqlTimeoutOption = None,
     csv_out: CsvOption = False,
     json_out: JsonOption = False,
     plain: PlainOption = False,
@@ -190,6 +199,7 @@ def find_command(
             where=where,
             robot=robot,
             limit=limit,
+            limits=sql_limits(memory_limit, timeout),
         )
     )
     _print_rows(result, json_out=json_out, csv_out=csv_out, plain=plain)

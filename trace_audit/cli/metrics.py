@@ -18,12 +18,15 @@ from trace_audit.cli.app import EXIT_FINDINGS, app, guarded
 from trace_audit.cli.doc import BoxColumn, BoxTable, Printout
 from trace_audit.cli.options import (
     JsonOption,
+    MemoryLimitOption,
     PlainOption,
     Recordings,
     SchedulerOption,
+    SqlTimeoutOption,
     cluster,
     evidence_option,
     jobs_option,
+    sql_limits,
 )
 from trace_audit.cli.output import console_width, emit, progress_bar
 from trace_runtime.errors import UsageError
@@ -31,6 +34,7 @@ from trace_runtime.errors import UsageError
 if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
     from concurrent.futures import Executor
 
+    from trace_audit.fleet.limits import QueryLimits
     from trace_audit.metrics import MetricsConfig, MetricsReport, Stat
 
 __all__ = ["metrics_command", "metrics_doc"]
@@ -171,6 +175,8 @@ def metrics_command(
     end: _End = None,
     tcs_weights: _TcsWeights = None,
     evidence: Annotated[Recordings, evidence_option("the logs' evidence refs")] = None,
+    memory_limit: MemoryLimitOption = None,
+    timeout: SqlTimeoutOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
@@ -192,7 +198,10 @@ def metrics_command(
             evidence=tuple(str(p) for p in evidence or ()),
         )
         if index is not None:
-            return _from_index(index, by, config, failures=failures)
+            limits = sql_limits(memory_limit, timeout)
+            return _from_index(index, by, config, failures=failures, limits=limits)
+        if memory_limit is not None or timeout is not None:
+            raise UsageError("--memory-limit and --timeout bound the SQL of --index only")
         with cluster(scheduler) as executor:
             return _with_progress(logs or [], config, quiet=json_out or plain, executor=executor)
 
@@ -223,7 +232,7 @@ def _parse_by(value: str | None) -> Any:
 
 
 def _from_index(
-    index: Path, by: str | None, config: MetricsConfig, *, failures: bool
+    index: Path, by: str | None, config: MetricsConfig, *, failures: bool, limits: QueryLimits
 ) -> MetricsReport:
     from trace_audit.fleet.query import index_metrics, parse_index_by
 
@@ -232,7 +241,7 @@ def _from_index(
             "--failures is not supported with --index (run metrics on the logs, or "
             "trace-audit find INDEX --where 'NOT d.dr' for the rows)"
         )
-    return index_metrics(index, parse_index_by(by), config)
+    return index_metrics(index, parse_index_by(by), config, limits)
 
 
 def _with_progress(

@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
+from trace_audit.fleet.limits import QueryLimits, format_size
+
 if TYPE_CHECKING:
     from concurrent.futures import Executor
 
@@ -25,10 +27,12 @@ __all__ = [
     "IndexArgument",
     "JsonOption",
     "LogArgument",
+    "MemoryLimitOption",
     "PlainOption",
     "Recordings",
     "RootArgument",
     "SchedulerOption",
+    "SqlTimeoutOption",
     "TimeOption",
     "action_option",
     "cluster",
@@ -38,6 +42,7 @@ __all__ = [
     "key_option",
     "limit_option",
     "robot_option",
+    "sql_limits",
 ]
 
 # --- output ----------------------------------------------------------------------------------
@@ -151,6 +156,42 @@ def cluster(address: str | None) -> Iterator[Executor | None]:
 
     with dask_executor(address) as executor:
         yield executor
+
+
+_SQL_DEFAULTS = QueryLimits()
+
+MemoryLimitOption = Annotated[
+    str | None,
+    typer.Option(
+        "--memory-limit",
+        help="Memory the SQL may use, e.g. 4GB or 512MiB (DuckDB's memory_limit; the "
+        f"process is capped at twice it). Default: {format_size(_SQL_DEFAULTS.memory_bytes)}.",
+        show_default=False,
+    ),
+]
+SqlTimeoutOption = Annotated[
+    float | None,
+    typer.Option(
+        "--timeout",
+        help=f"Seconds the SQL may run before it is stopped. Default: {_SQL_DEFAULTS.timeout_s:g}.",
+        show_default=False,
+    ),
+]
+
+
+def sql_limits(memory_limit: str | None, timeout: float | None) -> QueryLimits:
+    """The bounds ``--memory-limit`` and ``--timeout`` give, with this process capped to
+    them (a CLI process runs one command and exits; ``limits.cap_process_memory``)."""
+    from trace_audit.fleet.limits import cap_process_memory, parse_size
+
+    limits = QueryLimits(
+        memory_bytes=_SQL_DEFAULTS.memory_bytes
+        if memory_limit is None
+        else parse_size(memory_limit),
+        timeout_s=_SQL_DEFAULTS.timeout_s if timeout is None else timeout,
+    )
+    cap_process_memory(limits)
+    return limits
 
 
 def key_option(help: str) -> Any:

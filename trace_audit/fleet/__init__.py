@@ -16,6 +16,7 @@ _EXPORTS = {
     "find_decisions": "trace_audit.fleet.query",
     "QueryResult": "trace_audit.fleet.query",
     "index_metrics": "trace_audit.fleet.query",
+    "QueryLimits": "trace_audit.fleet.limits",
     "dask_executor": "trace_audit.fleet.cluster",
 }
 

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from trace_audit.fleet.folder import listed_files, load_manifest
+from trace_audit.fleet.limits import QueryLimits, format_size, over_limit, row_bytes, watchdog
 from trace_audit.fleet.tables import TABLES, schema
 from trace_audit.metrics import (
     NO_SCENARIO,
@@ -113,11 +114,14 @@ def _duration(value: datetime.timedelta) -> str:
     return f"{sign}P{text or 'T0S'}"
 
 
-def connect(index: str | Path, *, confined: bool = True) -> duckdb.DuckDBPyConnection:
+def connect(
+    index: str | Path, *, confined: bool = True, limits: QueryLimits | None = None
+) -> duckdb.DuckDBPyConnection:
     """An in-memory DuckDB with the index's tables as views; ``LogReadError`` when
     ``index`` is not a fleet index of this version. ``confined`` (the CLI's only mode):
-    the session reads the index's files and nothing else; off, it is a full DuckDB (a
-    script of the caller's own that also writes files, e.g. ``bench/``)."""
+    the session reads the index's files and nothing else, within ``limits`` (memory and
+    threads; the defaults when None); off, it is a full DuckDB (a script of the caller's
+    own that also writes files, e.g. ``bench/``)."""
     import duckdb
 
     root = Path(index)
@@ -161,7 +165,10 @@ def connect(index: str | Path, *, confined: bool = True) -> duckdb.DuckDBPyConne
     # ATTACH), loads no extension and reaches no network, and cannot undo this. The views
     # keep working (DuckDB checks each file against allowed_paths).
     if not confined:
+        if limits is not None:
+            limits.apply(con)
         return con
+    (limits or QueryLimits()).apply(con)
     every = [(root / rel).as_posix() for rel in listed]
     con.execute("SET allowed_paths = ?", [every])
     con.execute("SET enable_external_access = false")
@@ -170,28 +177,33 @@ def connect(index: str | Path, *, confined: bool = True) -> duckdb.DuckDBPyConne
 
 
 def run_query(
-    index: str | Path, sql: str, params: Sequence[Any] = (), *, limit: int | None = None
+    index: str | Path,
+    sql: str,
+    params: Sequence[Any] = (),
+    *,
+    limit: int | None = None,
+    limits: QueryLimits | None = None,
 ) -> QueryResult:
     """Run one SQL statement on the index; a bad statement is a ``UsageError`` (one line),
     a Parquet file of the index that cannot be read a ``LogReadError``. With ``limit``,
-    the rows past it are counted (not kept) so the result can say it was cut."""
+    the rows past it are counted (not kept) so the result can say it was cut.
+
+    Within ``limits`` (the defaults when None): a statement that runs too long, needs too
+    much memory or gives too large a result is a ``UsageError`` naming the bound."""
     import duckdb
 
+    bounds = limits or QueryLimits()
     started = time.perf_counter()
-    con = connect(index)
+    con = connect(index, limits=bounds)
     try:
-        statements = con.extract_statements(sql)
-        if not statements:
-            raise UsageError("no SQL statement given (only blanks, ';' or comments)")
-        if len(statements) > 1:
-            raise UsageError(f"give one SQL statement at a time ({len(statements)} given)")
-        cursor = con.execute(sql, list(params))
-        if cursor.description is None:
-            return QueryResult((), [], time.perf_counter() - started)
-        columns = tuple(d[0] for d in cursor.description)
-        rows = cursor.fetchall() if limit is None else cursor.fetchmany(limit)
-        total = None if limit is None or len(rows) < limit else len(rows) + _rest(cursor)
-    except duckdb.Error as err:
+        with watchdog(con, bounds):
+            return _run(con, index, sql, params, limit=limit, bounds=bounds, started=started)
+    except (duckdb.Error, MemoryError) as err:
+        refused = over_limit(err, bounds)
+        if refused is not None:
+            raise refused from err
+        if isinstance(err, MemoryError):
+            raise
         first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
         if isinstance(err, duckdb.IOException | duckdb.InvalidInputException) and (
             ".parquet" in first
@@ -200,12 +212,57 @@ def run_query(
         raise UsageError(f"SQL: {first}") from err
     finally:
         con.close()
+
+
+def _run(
+    con: duckdb.DuckDBPyConnection,
+    index: str | Path,
+    sql: str,
+    params: Sequence[Any],
+    *,
+    limit: int | None,
+    bounds: QueryLimits,
+    started: float,
+) -> QueryResult:
+    """``run_query`` on an open session, under its watchdog."""
+    statements = con.extract_statements(sql)
+    if not statements:
+        raise UsageError("no SQL statement given (only blanks, ';' or comments)")
+    if len(statements) > 1:
+        raise UsageError(f"give one SQL statement at a time ({len(statements)} given)")
+    cursor = con.execute(sql, list(params))
+    if cursor.description is None:
+        return QueryResult((), [], time.perf_counter() - started)
+    columns = tuple(d[0] for d in cursor.description)
+    rows = _fetch(cursor, limit, bounds)
+    total = None if limit is None or len(rows) < limit else len(rows) + _rest(cursor)
     return QueryResult(
         columns,
         rows,
         time.perf_counter() - started,
         total=total if total is not None and total > len(rows) else None,
     )
+
+
+def _fetch(cursor: Any, limit: int | None, bounds: QueryLimits) -> list[tuple[Any, ...]]:
+    """Up to ``limit`` rows (all when None), a batch at a time; ``UsageError`` once they
+    hold more than ``bounds.result_bytes``."""
+    rows: list[tuple[Any, ...]] = []
+    held = 0
+    while limit is None or len(rows) < limit:
+        want = 2048 if limit is None else min(2048, limit - len(rows))
+        batch = cursor.fetchmany(want)
+        for row in batch:
+            held += row_bytes(row)
+        if held > bounds.result_bytes:
+            raise UsageError(
+                f"SQL: the result holds more than {format_size(bounds.result_bytes)} "
+                "(add a LIMIT, or select fewer or shorter columns)"
+            )
+        rows.extend(batch)
+        if len(batch) < want:
+            break
+    return rows
 
 
 def _rest(cursor: Any) -> int:
@@ -227,6 +284,7 @@ def find_decisions(
     where: str | None = None,
     robot: str | None = None,
     limit: int = 1000,
+    limits: QueryLimits | None = None,
 ) -> QueryResult:
     """Decisions by command, by a perceived entity's class and distance, and by any SQL
     condition on the decisions' columns; each row with ``robot``, ``t_ns`` and ``explain``."""
@@ -266,7 +324,8 @@ def find_decisions(
     if conditions:
         sql += " WHERE " + " AND ".join(conditions)
     try:
-        found = run_query(index, sql + f" ORDER BY d.t_ns, d.robot LIMIT {int(limit)}", params)
+        ordered = sql + f" ORDER BY d.t_ns, d.robot LIMIT {int(limit)}"
+        found = run_query(index, ordered, params, limits=limits)
     except UsageError as err:
         if where:  # the error is about SQL the user did not write around the condition
             raise UsageError(f"--where {where!r}: {err}") from err
@@ -274,7 +333,7 @@ def find_decisions(
     if len(found.rows) < limit:
         return found
     # As many rows as the limit: count the matches so the output can say it was cut.
-    count = run_query(index, f"SELECT count(*) FROM ({sql})", params).rows[0][0]
+    count = run_query(index, f"SELECT count(*) FROM ({sql})", params, limits=limits).rows[0][0]
     return dataclasses.replace(found, total=int(count) if count > len(found.rows) else None)
 
 
@@ -297,14 +356,17 @@ def parse_index_by(text: str | None) -> list[str]:
 
 
 def index_metrics(
-    index: str | Path, by: Sequence[str] = (), config: MetricsConfig | None = None
+    index: str | Path,
+    by: Sequence[str] = (),
+    config: MetricsConfig | None = None,
+    limits: QueryLimits | None = None,
 ) -> MetricsReport:
     """ET, ET_partial, TC, DR and TCS from the index's decision rows, without reading a log:
     the sums metrics keeps per group, summed again by DuckDB (``report_from_sums``)."""
     started = time.perf_counter()
     cfg = config or MetricsConfig()
     _check_index_config(index, cfg, by)
-    result = run_query(index, _sums_sql(cfg, by))
+    result = run_query(index, _sums_sql(cfg, by), limits=limits)
     groups: dict[str, GroupSums] = {}
     segments: set[str] = set()
     cycles = failures_total = 0
