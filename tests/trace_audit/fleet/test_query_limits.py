@@ -1,7 +1,7 @@
 """SQL over the index is bounded: a statement that runs too long is stopped, one that asks
 for too much memory or gives too large a result is refused, each in one line with exit 2,
 and the session cannot lift its own bounds. Run from the outside: the CLI in a subprocess,
-its peak memory read by a parent process of its own."""
+its peak memory read by a parent process of its own (``hostile.run_cli``)."""
 
 from __future__ import annotations
 
@@ -15,21 +15,13 @@ from pathlib import Path
 import pytest
 
 from tests.trace_audit.conftest import write_log
+from tests.trace_runtime import hostile
 from trace_audit.fleet.index import build_index
 from trace_audit.fleet.limits import QueryLimits, parse_size
 from trace_audit.fleet.query import find_decisions, run_query
 from trace_runtime.errors import UsageError
 
 REPO = Path(__file__).resolve().parents[3]
-
-# Runs the CLI as its only child and prints the child's exit code and peak RSS (KiB): the
-# test process's own children (other tests) do not count.
-_MEASURE = """
-import resource, subprocess, sys
-done = subprocess.run(sys.argv[1:], capture_output=True, text=True)
-sys.stderr.write(done.stderr)
-print(done.returncode, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
-"""
 
 
 @pytest.fixture(scope="module")
@@ -41,18 +33,9 @@ def index(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _measured(*args: str | Path) -> tuple[int, int, str]:
-    """(exit code, peak RSS in bytes, stderr) of one CLI run."""
-    cli = [sys.executable, "-m", "trace_audit.cli", *map(str, args)]
-    done = subprocess.run(
-        [sys.executable, "-c", _MEASURE, *cli],
-        capture_output=True,
-        text=True,
-        check=False,
-        env={**os.environ, "PYTHONPATH": str(REPO)},
-        timeout=120,
-    )
-    code, peak_kib = done.stdout.split()
-    return int(code), int(peak_kib) * 1024, done.stderr
+    """(exit code, peak RSS in bytes, stderr) of one CLI run, measured by a fresh parent."""
+    run = hostile.run_cli([str(a) for a in args], timeout_s=120)
+    return run.code, int(run.rss_mb * 2**20), run.stderr
 
 
 def _refused(stderr: str, *needles: str) -> None:
