@@ -20,7 +20,7 @@ from trace_audit.cli import (  # noqa: F401 - each module registers its commands
     timeline,
     why,
 )
-from trace_audit.cli.app import EXIT_USAGE, app
+from trace_audit.cli.app import EXIT_USAGE, app, claim_process
 from trace_audit.cli.typer_compat import TyperException, usage_error_line
 
 __all__ = ["app", "main"]
@@ -41,6 +41,7 @@ def main() -> None:
 
     Usage errors (an unknown option, a bad value) are one line on stderr with exit code 2,
     like every other error, instead of click's framed block."""
+    claim_process()
     try:
         code = app.runner_for(sys.argv[1:])(standalone_mode=False)
     except TyperException as err:  # the command line's own errors: unknown option, bad value

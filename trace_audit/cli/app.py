@@ -26,10 +26,12 @@ __all__ = [
     "EXIT_UNREADABLE",
     "EXIT_USAGE",
     "app",
+    "claim_process",
     "exit_code_for",
     "fail",
     "guarded",
     "help_text",
+    "process_is_ours",
 ]
 
 T = TypeVar("T")
@@ -39,6 +41,20 @@ EXIT_FINDINGS = 1
 EXIT_USAGE = 2
 EXIT_UNREADABLE = 3
 EXIT_CANNOT_WRITE = 4
+
+_PROCESS = {"ours": False}
+"""Whether this process runs one command and exits (``main``), so its process-wide limits are
+ours to set; False when the app is called inside someone else's process (a test runner,
+a script), whose children would inherit them."""
+
+
+def claim_process() -> None:
+    """Mark this process as the CLI's own (called by the console-script entry point)."""
+    _PROCESS["ours"] = True
+
+
+def process_is_ours() -> bool:
+    return _PROCESS["ours"]
 
 
 # The help is drawn by click's plain formatter (``rich_markup_mode=None``), not typer's rich

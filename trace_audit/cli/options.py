@@ -181,7 +181,10 @@ SqlTimeoutOption = Annotated[
 
 def sql_limits(memory_limit: str | None, timeout: float | None) -> QueryLimits:
     """The bounds ``--memory-limit`` and ``--timeout`` give, with this process capped to
-    them (a CLI process runs one command and exits; ``limits.cap_process_memory``)."""
+    them when it is the CLI's own (``app.process_is_ours``; ``limits.cap_process_memory``):
+    never the process of a caller who runs the app inside theirs, whose later children
+    (a browser) would inherit the cap."""
+    from trace_audit.cli.app import process_is_ours
     from trace_audit.fleet.limits import cap_process_memory, parse_size
 
     limits = QueryLimits(
@@ -190,7 +193,8 @@ def sql_limits(memory_limit: str | None, timeout: float | None) -> QueryLimits:
         else parse_size(memory_limit),
         timeout_s=_SQL_DEFAULTS.timeout_s if timeout is None else timeout,
     )
-    cap_process_memory(limits)
+    if process_is_ours():
+        cap_process_memory(limits)
     return limits
 
 

@@ -150,3 +150,18 @@ def test_the_library_applies_the_same_bounds(index: Path) -> None:
 )
 def test_sizes_read_as_people_write_them(text: str, size: int) -> None:
     assert parse_size(text) == size
+
+
+def test_the_app_inside_someone_elses_process_leaves_its_limits_alone(index: Path) -> None:
+    """Only the CLI's own process is capped: a caller running the app in theirs (this test
+    runner) keeps its limits, which its later children (a browser) would inherit."""
+    import resource
+
+    from typer.testing import CliRunner
+
+    from trace_audit.cli import app
+
+    before = resource.getrlimit(resource.RLIMIT_DATA)
+    done = CliRunner().invoke(app, ["query", str(index), "SELECT 1", "--memory-limit", "64MB"])
+    assert done.exit_code == 0, done.output
+    assert resource.getrlimit(resource.RLIMIT_DATA) == before
