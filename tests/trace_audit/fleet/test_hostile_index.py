@@ -7,12 +7,11 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from tests.outside import cli, one_line, snapshot
 from tests.trace_audit.conftest import write_log
 from trace_audit.fleet.folder import LOCK
 from trace_audit.fleet.index import MANIFEST, build_index
@@ -20,33 +19,14 @@ from trace_audit.fleet.query import run_query
 from trace_runtime.boundary import folder_lock
 from trace_runtime.errors import UnsafePathError
 
-REPO = Path(__file__).resolve().parents[3]
 SECRET = "the victim's own words\n"
-
-
-def _cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "trace_audit.cli", *map(str, args)],
-        capture_output=True,
-        text=True,
-        check=False,
-        env={**os.environ, "PYTHONPATH": str(REPO)},
-        timeout=60,
-    )
-
-
-def _one_line(done: subprocess.CompletedProcess[str], code: int, *needles: str) -> None:
-    assert done.returncode == code, (done.returncode, done.stderr)
-    assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr, done.stderr
-    for needle in needles:
-        assert needle in done.stderr, done.stderr
 
 
 @pytest.fixture()
 def built(tmp_path: Path) -> tuple[Path, Path]:
     """A log root and an index of it."""
     root = write_log(tmp_path / "logs", robot_id="r1", max_segment_s=3.0)
-    done = _cli("index", root, "--out", tmp_path / "idx")
+    done = cli("index", root, "--out", tmp_path / "idx")
     assert done.returncode == 0, done.stderr
     return root, tmp_path / "idx"
 
@@ -69,14 +49,6 @@ def _forge(index: Path, name: str, *, stale: bool) -> None:
     (index / MANIFEST).write_text(json.dumps(manifest), encoding="utf-8")
 
 
-def _tree(folder: Path) -> dict[str, bytes]:
-    return {
-        p.relative_to(folder).as_posix(): p.read_bytes()
-        for p in sorted(folder.rglob("*"))
-        if p.is_file() and not p.is_symlink()
-    }
-
-
 @pytest.mark.parametrize("how", ["absolute", "dotdot"])
 def test_a_manifest_naming_a_file_outside_is_refused_and_the_file_stays(
     built: tuple[Path, Path], tmp_path: Path, how: str
@@ -84,11 +56,11 @@ def test_a_manifest_naming_a_file_outside_is_refused_and_the_file_stays(
     root, index = built
     victim = _victim(tmp_path)
     _forge(index, str(victim) if how == "absolute" else "../victim.txt", stale=True)
-    before = _tree(index)
-    done = _cli("index", root, "--out", index)
-    _one_line(done, 3, "index.json", "refused")
+    before = snapshot(index)
+    done = cli("index", root, "--out", index)
+    one_line(done, 3, "index.json", "refused")
     assert victim.read_text(encoding="utf-8") == SECRET
-    assert _tree(index) == before
+    assert snapshot(index) == before
 
 
 def test_a_manifest_cannot_widen_what_a_query_may_read(
@@ -97,8 +69,8 @@ def test_a_manifest_cannot_widen_what_a_query_may_read(
     _, index = built
     victim = _victim(tmp_path)
     _forge(index, str(victim), stale=False)
-    done = _cli("query", index, f"SELECT * FROM read_text('{victim}')", "--json")
-    _one_line(done, 3, "index.json")
+    done = cli("query", index, f"SELECT * FROM read_text('{victim}')", "--json")
+    one_line(done, 3, "index.json")
     assert "victim's own words" not in done.stdout + done.stderr
 
 
@@ -138,16 +110,16 @@ def test_a_table_folder_linked_elsewhere_is_refused(tmp_path: Path) -> None:
     elsewhere = tmp_path / "elsewhere"
     (index / "decisions").rename(elsewhere)
     (index / "decisions").symlink_to(elsewhere)
-    before = _tree(elsewhere)
+    before = snapshot(elsewhere)
     with pytest.raises(UnsafePathError):
         build_index([root], index)
-    assert _tree(elsewhere) == before
-    done = _cli("query", index, "SELECT count(*) FROM decisions")
-    _one_line(done, 3, "refused")
+    assert snapshot(elsewhere) == before
+    done = cli("query", index, "SELECT count(*) FROM decisions")
+    one_line(done, 3, "refused")
 
 
 @pytest.mark.parametrize("what", ["fifo", "deep", "huge"])
-def test_a_manifest_that_is_a_fifo_deep_or_huge_is_one_line(
+def test_a_manifest_that_is_a_fifo_deep_or_huge_isone_line(
     built: tuple[Path, Path], what: str
 ) -> None:
     root, index = built
@@ -161,16 +133,16 @@ def test_a_manifest_that_is_a_fifo_deep_or_huge_is_one_line(
         with manifest.open("wb") as f:  # sparse: larger than any manifest may be
             f.truncate(65 * 2**20)
     for args in (("index", root, "--out", index), ("query", index, "SELECT 1")):
-        _one_line(_cli(*args), 3, "index.json")
+        one_line(cli(*args), 3, "index.json")
 
 
 def test_a_second_index_run_at_the_same_time_is_refused(built: tuple[Path, Path]) -> None:
     root, index = built
-    before = _tree(index)
+    before = snapshot(index)
     with folder_lock(index / LOCK, held="held by this test"):
-        done = _cli("index", root, "--out", index)
-    _one_line(done, 2, "another index run")
-    assert _tree(index) == before
+        done = cli("index", root, "--out", index)
+    one_line(done, 2, "another index run")
+    assert snapshot(index) == before
 
 
 def test_a_folder_a_killed_run_left_without_a_manifest_is_rebuilt(
@@ -182,13 +154,13 @@ def test_a_folder_a_killed_run_left_without_a_manifest_is_rebuilt(
     total = run_query(index, "SELECT count(*) FROM decisions").rows[0][0]
     (index / MANIFEST).unlink()
     (index / f".{MANIFEST}.999999.0.partial").write_text("{", encoding="utf-8")
-    done = _cli("index", root, "--out", index, "--json")
+    done = cli("index", root, "--out", index, "--json")
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout)["decisions_written"] == total
     assert run_query(index, "SELECT count(*) FROM decisions").rows == [(total,)]
 
     (index / MANIFEST).unlink()
     (index / "notes.txt").write_text(SECRET, encoding="utf-8")
-    before = _tree(index)
-    _one_line(_cli("index", root, "--out", index), 2, "not a fleet index")
-    assert _tree(index) == before
+    before = snapshot(index)
+    one_line(cli("index", root, "--out", index), 2, "not a fleet index")
+    assert snapshot(index) == before

@@ -5,37 +5,22 @@ damaged, a corrupt manifest. Run from the outside: the CLI in a subprocess, real
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
+from tests.outside import cli
 from tests.trace_audit.conftest import T0_NS, write_log
 from trace_audit.fleet.index import MANIFEST
 
-REPO = Path(__file__).resolve().parents[3]
-
-
-def _cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "trace_audit.cli", *map(str, args)],
-        capture_output=True,
-        text=True,
-        check=False,
-        env={**os.environ, "PYTHONPATH": str(REPO)},
-        timeout=120,
-    )
-
 
 def _count(index: Path, where: str = "true") -> int:
-    done = _cli("query", index, f"SELECT count(*) AS n FROM decisions WHERE {where}", "--json")
+    done = cli("query", index, f"SELECT count(*) AS n FROM decisions WHERE {where}", "--json")
     assert done.returncode == 0, done.stderr
     return int(json.loads(done.stdout)[0]["n"])
 
 
 def _index(*args: str | Path) -> dict[str, object]:
-    done = _cli("index", *args, "--json")
+    done = cli("index", *args, "--json")
     assert done.returncode == 0, done.stderr
     report: dict[str, object] = json.loads(done.stdout)
     return report
@@ -46,7 +31,7 @@ def test_two_logs_of_one_robot_at_one_position_are_refused(tmp_path: Path) -> No
     are named in one line, exit 2, and an existing index keeps its rows."""
     write_log(tmp_path / "a", robot_id="amr-01")
     write_log(tmp_path / "b", robot_id="amr-01", t0_ns=T0_NS + 7_000_000_000, skip=lambda i: i == 3)
-    done = _cli("index", tmp_path / "a", tmp_path / "b", "--out", tmp_path / "both")
+    done = cli("index", tmp_path / "a", tmp_path / "b", "--out", tmp_path / "both")
     assert done.returncode == 2, done.stderr
     assert done.stderr.count("\n") == 1
     assert "a/hot/amr-01_000000.mcap" in done.stderr and "b/hot/amr-01_000000.mcap" in done.stderr
@@ -55,7 +40,7 @@ def test_two_logs_of_one_robot_at_one_position_are_refused(tmp_path: Path) -> No
     first = _index(tmp_path / "a", "--out", tmp_path / "idx")
     before = _count(tmp_path / "idx")
     assert before == first["decisions_total"] > 0
-    done = _cli("index", tmp_path / "b", "--out", tmp_path / "idx")
+    done = cli("index", tmp_path / "b", "--out", tmp_path / "idx")
     assert done.returncode == 2, done.stderr
     assert "a/hot/amr-01_000000.mcap" in done.stderr
     assert _count(tmp_path / "idx") == before
@@ -101,7 +86,7 @@ def test_a_corrupt_manifest_is_refused_and_nothing_is_deleted(tmp_path: Path) ->
     files = sorted(p for p in (tmp_path / "idx").rglob("*") if p.is_file())
     (tmp_path / "idx" / MANIFEST).write_text("{", encoding="utf-8")
     other = write_log(tmp_path / "mini.mcap", robot_id="mini")
-    done = _cli("index", other, "--out", tmp_path / "idx")
+    done = cli("index", other, "--out", tmp_path / "idx")
     assert done.returncode == 3, done.stderr
     assert done.stderr.count("\n") == 1 and "index.json" in done.stderr
     assert sorted(p for p in (tmp_path / "idx").rglob("*") if p.is_file()) == files
@@ -126,16 +111,16 @@ def test_metrics_from_the_index_says_what_the_index_does_not_hold(tmp_path: Path
     root = write_log(tmp_path / "logs", robot_id="r1", max_segment_s=3.0)
     _index(root, "--out", tmp_path / "idx")
     for extra in (["--failures"], ["--evidence", str(tmp_path)]):
-        done = _cli("metrics", "--index", tmp_path / "idx", *extra)
+        done = cli("metrics", "--index", tmp_path / "idx", *extra)
         assert done.returncode == 2, done.stderr
         assert done.stderr.count("\n") == 1 and "index" in done.stderr
-    logs = json.loads(_cli("metrics", root, "--json").stdout)
-    index = json.loads(_cli("metrics", "--index", tmp_path / "idx", "--json").stdout)
+    logs = json.loads(cli("metrics", root, "--json").stdout)
+    index = json.loads(cli("metrics", "--index", tmp_path / "idx", "--json").stdout)
     assert logs["failures_total"] > 0
     assert index["failures_total"] == logs["failures_total"]
     assert index["gaps_total"] == logs["gaps_total"]
     assert "not in the index" in index["logging_time"]
     assert set(index["not_in_index"]) >= {"logging_cost", "channel_deviation", "external_refs"}
     assert "not_in_index" not in logs
-    text = _cli("metrics", "--index", tmp_path / "idx", "--plain").stdout
+    text = cli("metrics", "--index", tmp_path / "idx", "--plain").stdout
     assert "not in the index" in text and "not logged" not in text

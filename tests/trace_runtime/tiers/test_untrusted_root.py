@@ -10,35 +10,16 @@ import json
 import os
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from tests.outside import cli, one_line, snapshot
 from tests.trace_audit.conftest import T0_NS, write_log
 from trace_runtime.tiers.catalog import refresh_catalog
 
-REPO = Path(__file__).resolve().parents[3]
 SECRET = b"not the tool's to touch\n"
 INSIDE_T = f"{T0_NS / 1e9 + 5.0:.1f}"  # a time inside the fixture log (10 s from t = 100 s)
-
-
-def _cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "trace_audit.cli", *map(str, args)],
-        capture_output=True,
-        text=True,
-        check=False,
-        env={**os.environ, "PYTHONPATH": str(REPO)},
-        timeout=60,  # a FIFO that blocked a reader would hang here, and fail the test
-    )
-
-
-def _one_line(done: subprocess.CompletedProcess[str], code: int, *needles: str) -> None:
-    assert done.returncode == code, (done.returncode, done.stderr)
-    assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr, done.stderr
-    for needle in needles:
-        assert needle in done.stderr, done.stderr
 
 
 def _no_traceback(done: subprocess.CompletedProcess[str], code: int) -> None:
@@ -51,14 +32,6 @@ def root(tmp_path: Path) -> Path:
     return write_log(tmp_path / "root", robot_id="r1", max_segment_s=3.0)
 
 
-def _snapshot(folder: Path) -> dict[str, bytes]:
-    return {
-        p.relative_to(folder).as_posix(): p.read_bytes()
-        for p in sorted(folder.rglob("*"))
-        if p.is_file() and not p.is_symlink()
-    }
-
-
 @pytest.mark.parametrize("tier", ["hot", "cold"])
 def test_a_tier_folder_that_is_a_link_is_refused_by_every_command(
     root: Path, tmp_path: Path, tier: str
@@ -69,7 +42,7 @@ def test_a_tier_folder_that_is_a_link_is_refused_by_every_command(
     else:
         elsewhere.mkdir()
     (root / tier).symlink_to(elsewhere, target_is_directory=True)
-    before = _snapshot(elsewhere)
+    before = snapshot(elsewhere)
     for args in (
         ("info", root),
         ("verify", root),
@@ -77,8 +50,8 @@ def test_a_tier_folder_that_is_a_link_is_refused_by_every_command(
         ("explain", root, "--t", INSIDE_T),
         ("compact", root, "--tier", "cold", "--older-than", "0"),
     ):
-        _one_line(_cli(*args), 3, "symbolic link")
-    assert _snapshot(elsewhere) == before
+        one_line(cli(*args), 3, "symbolic link")
+    assert snapshot(elsewhere) == before
 
 
 @pytest.mark.parametrize("name", ["catalog.json", "retention.jsonl", ".compact.lock"])
@@ -88,11 +61,11 @@ def test_a_side_file_linked_elsewhere_is_never_written_through(
     victim = tmp_path / "victim.txt"
     victim.write_bytes(SECRET)
     (root / name).symlink_to(victim)
-    hot = _snapshot(root / "hot")
-    _one_line(_cli("compact", root, "--tier", "cold", "--older-than", "0"), 3, "refused")
+    hot = snapshot(root / "hot")
+    one_line(cli("compact", root, "--tier", "cold", "--older-than", "0"), 3, "refused")
     assert victim.read_bytes() == SECRET
-    assert _snapshot(root / "hot") == hot  # refused before any work
-    done = _cli("catalog", root, "--refresh")
+    assert snapshot(root / "hot") == hot  # refused before any work
+    done = cli("catalog", root, "--refresh")
     assert victim.read_bytes() == SECRET
     _no_traceback(done, 3 if name == "catalog.json" else 0)
 
@@ -120,8 +93,8 @@ def test_links_planted_at_the_catalogs_partial_names_are_not_followed(
 def test_a_fifo_where_a_side_file_belongs_blocks_nothing(root: Path, name: str) -> None:
     os.mkfifo(root / name)
     for args in (("info", root), ("explain", root, "--t", INSIDE_T), ("catalog", root)):
-        _no_traceback(_cli(*args), 0)
-    _one_line(_cli("compact", root, "--tier", "cold", "--older-than", "0"), 3, "FIFO")
+        _no_traceback(cli(*args), 0)
+    one_line(cli("compact", root, "--tier", "cold", "--older-than", "0"), 3, "FIFO")
     assert sorted(p.name for p in (root / "hot").iterdir()) == [
         f"r1_00000{i}.mcap" for i in range(4)
     ]
@@ -137,17 +110,17 @@ def test_a_catalog_too_large_too_deep_or_a_directory_is_ignored(root: Path, what
         catalog.write_text("[" * 200_000 + "]" * 200_000, encoding="utf-8")
     else:
         catalog.mkdir()
-    done = _cli("catalog", root, "--json")
+    done = cli("catalog", root, "--json")
     _no_traceback(done, 0)
     assert "warning" in done.stderr and "catalog.json" in done.stderr
     assert len(json.loads(done.stdout)["segments"]) == 4
-    _no_traceback(_cli("explain", root, "--t", INSIDE_T), 0)
+    _no_traceback(cli("explain", root, "--t", INSIDE_T), 0)
 
 
 def test_a_forged_catalog_is_not_believed(root: Path) -> None:
     """Rows that keep each file's real size and mtime but carry another robot, times and
     digest: explain still answers inside the log, and --refresh puts the truth back."""
-    assert _cli("catalog", root, "--refresh").returncode == 0
+    assert cli("catalog", root, "--refresh").returncode == 0
     body = json.loads((root / "catalog.json").read_text(encoding="utf-8"))
     for entry in body["segments"]:
         entry["robot"] = "someone-else"
@@ -155,9 +128,9 @@ def test_a_forged_catalog_is_not_believed(root: Path) -> None:
         entry["end_ns"] += 10**12
         entry["sha256"] = "0" * 64
     (root / "catalog.json").write_text(json.dumps(body), encoding="utf-8")
-    done = _cli("explain", root, "--t", INSIDE_T, "--json")
+    done = cli("explain", root, "--t", INSIDE_T, "--json")
     _no_traceback(done, 0)
-    assert _cli("catalog", root, "--refresh").returncode == 0
+    assert cli("catalog", root, "--refresh").returncode == 0
     rows = json.loads((root / "catalog.json").read_text(encoding="utf-8"))["segments"]
     for entry in rows:
         assert entry["robot"] == "r1"
@@ -169,9 +142,9 @@ def test_retention_leaves_no_hole_behind_a_held_segment(root: Path) -> None:
     robot is deleted, so verify finds no segment missing."""
     (root / "cold").mkdir()
     (root / "cold" / "r1_000000.mcap.partial").write_text("someone else's\n", encoding="utf-8")
-    done = _cli("compact", root, "--tier", "cold", "--older-than", "0", "--retention", "0s")
+    done = cli("compact", root, "--tier", "cold", "--older-than", "0", "--retention", "0s")
     assert "Traceback" not in done.stderr, done.stderr
-    verify = _cli("verify", root, "--json")
+    verify = cli("verify", root, "--json")
     assert "missing_segment" not in verify.stdout, verify.stdout
     assert verify.returncode == 0, verify.stdout[-2000:]
 
@@ -193,7 +166,7 @@ def test_a_read_only_root_is_one_line_exit_4(root: Path, tmp_path: Path) -> None
             ("catalog", mount / "root", "--refresh"),
             ("compact", mount / "root", "--tier", "cold", "--older-than", "0"),
         ):
-            _one_line(_cli(*args), 4, "cannot write")
-        _no_traceback(_cli("verify", mount / "root"), 0)
+            one_line(cli(*args), 4, "cannot write")
+        _no_traceback(cli("verify", mount / "root"), 0)
     finally:
         subprocess.run(["umount", "-l", str(mount)], check=False)
