@@ -197,7 +197,7 @@ def run_query(
     con = connect(index, limits=bounds)
     try:
         with watchdog(con, bounds):
-            return _run(con, index, sql, params, limit=limit, bounds=bounds, started=started)
+            return _run(con, sql, params, limit=limit, bounds=bounds, started=started)
     except (duckdb.Error, MemoryError) as err:
         refused = over_limit(err, bounds)
         if refused is not None:
@@ -216,7 +216,6 @@ def run_query(
 
 def _run(
     con: duckdb.DuckDBPyConnection,
-    index: str | Path,
     sql: str,
     params: Sequence[Any],
     *,
