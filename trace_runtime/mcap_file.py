@@ -89,43 +89,74 @@ class McapFile:
         # Loaded lazily from the writer's compact index (or the MCAP chunk indexes), so
         # opening a long file does not pay for parsing tens of thousands of records.
         self._table: tuple[Sequence[int], Sequence[int], Sequence[int]] | None = None
-        self._table_source: tuple[str, int, int] = ("none", 0, 0)
+        self._index_spans: list[tuple[int, int]] = []  # where the Chunk Index records are
+        self._attachment_at: int | None = None  # our trace.chunk_columns attachment
         self._ends_sorted = True
         self._starts_in_file_order = True
         self._sorted_offsets: list[int] | None = None
         self.statistics: tuple[int, int, int, dict[int, int]] | None = None
         """(message start ns, message end ns, chunk count, messages per channel id)."""
-        self.loose: list[RawMessage] = []
-        """Messages written outside chunks (some writers do; ours never)."""
+        self._loose: list[RawMessage] = []
+        self.summarized = False
+        """Whether the summary section was read (its indexes are hints, checked when used)."""
+        self.notes: list[str] = []
+        """Indexes of the file that were not used because they disagree with its data."""
+        self._statistics_hold = True
         self.skipped_chunks: list[tuple[int, str]] = []
         """Damaged chunks stepped over, by a scan or when read: (file offset, why)."""
         self._damaged: set[int] = set()
         self._recent_chunks: OrderedDict[int, list[RawMessage]] = OrderedDict()
         self._chunks = ChunkDecoder(self.path, limits)
+        with self.damage_as_read_error():
+            self.finished = self._has_footer()
+        """Whether the file ends in a footer: its writer closed it (with a summary or not)."""
         try:
-            finished = self._read_summary()
+            self.summarized = self.finished and self._read_summary()
         except DAMAGE as err:
             # A damaged summary does not make the data unreadable: scan the data instead.
             log.warning("%s: damaged MCAP summary (%s); reading the data by scan", path, err)
             self._reset_index()
-            finished = False
-        if not finished:
-            with self.damage_as_read_error():
+            self.summarized = False
+        with self.damage_as_read_error():
+            if not self.summarized:
                 self._scan()
-        self.finished = finished
+            elif not self._metadata and not self._metadata_at:
+                # No Metadata Index (an optional summary group): the records are in the data.
+                self._walk_data(chunks=False)
+            elif self.statistics is not None and self.statistics[2] == 0:
+                # An unchunked file: its messages sit in the data section. (Its summary may
+                # still hold an empty Chunk Index group, as the mcap library writes one.)
+                self._walk_data(chunks=False)
 
     @property
     def size(self) -> int:
         return len(self._data)
 
     @property
+    def loose(self) -> list[RawMessage]:
+        """Messages written outside chunks (some writers do; ours never). Looked for in the
+        data section whenever no chunk index is there to use, as the reference readers do."""
+        self.chunk_table()
+        return self._loose
+
+    @property
     def holds_messages(self) -> bool:
         """False for a file with no chunk and no loose message (its times read 0)."""
-        if self.loose:
-            return True
-        if self.finished and self.statistics is not None:
-            return self.statistics[2] > 0
-        return len(self.chunk_table()[0]) > 0
+        return bool(self.loose) or len(self.chunk_table()[0]) > 0
+
+    def trusted_statistics(self) -> tuple[int, int, int, dict[str, int]] | None:
+        """The summary's Statistics (start ns, end ns, chunks, messages per topic) when they
+        agree with the chunks found and name only known channels; None to count by reading."""
+        if not self.summarized or self.statistics is None:
+            return None
+        starts = self.chunk_table()[0]
+        start, end, chunk_count, counts = self.statistics
+        topics = self.topics
+        if not self._statistics_hold or chunk_count != len(starts):
+            return None
+        if any(cid not in topics for cid in counts):
+            return None  # channels only inside chunks: the counts cannot be named
+        return start, end, chunk_count, {topics[cid]: n for cid, n in counts.items()}
 
     def _reset_index(self) -> None:
         self._schemas.clear()
@@ -133,7 +164,8 @@ class McapFile:
         self._deferred_summary.clear()
         self._metadata_at.clear()
         self._metadata.clear()
-        self._table, self._table_source, self.statistics = None, ("none", 0, 0), None
+        self._table, self.statistics, self._attachment_at = None, None, None
+        self._index_spans.clear()
 
     @contextlib.contextmanager
     def damage_as_read_error(self) -> Iterator[None]:
@@ -172,40 +204,39 @@ class McapFile:
 
     # --- summary and scan ------------------------------------------------------------------
 
-    def _read_summary(self) -> bool:
+    def _has_footer(self) -> bool:
         data = self._data
-        header = self._parse_header(8)
-        if header is None:
+        if self._parse_header(8) is None:
             raise LogReadError(str(self.path), "truncated before the MCAP header ended")
         if len(data) < 8 + FOOTER_SIZE + 8 or data[-8:] != MAGIC:
             return False
+        opcode, length = RECORD_HEADER.unpack_from(data, len(data) - 8 - FOOTER_SIZE)
+        return bool(opcode == OP_FOOTER and length == 20)
+
+    def _read_summary(self) -> bool:
+        """Read the summary section a footer points at; False when there is none."""
+        data = self._data
         footer_at = len(data) - 8 - FOOTER_SIZE
-        opcode, length = RECORD_HEADER.unpack_from(data, footer_at)
-        if opcode != OP_FOOTER or length != 20:
-            return False
         summary_start, offsets_start, _crc = struct.unpack_from("<QQI", data, footer_at + 9)
         if summary_start == 0:
             return False  # a finished file written without a summary: scan it
+        check_fits(summary_start, 0, footer_at)
         ranges = self._summary_groups(offsets_start or footer_at, footer_at)
-        if not ranges:  # no summary offsets: walk the whole summary section once
+        if OP_CHUNK_INDEX not in ranges:
+            # No summary offsets, or none for the Chunk Indexes (a file without chunks, or a
+            # writer that did not point at them): walk the whole summary section once.
             ranges = {0: [(summary_start, offsets_start or footer_at)]}
         for opcode, spans in ranges.items():
             if opcode == OP_CHUNK_INDEX:
-                self._table_source = ("chunk_index", spans[0][0], spans[-1][1])
+                self._index_spans += spans
                 continue
             if opcode in (OP_SCHEMA, OP_CHANNEL):
                 self._deferred_summary += spans
                 continue
             for begin, end in spans:
                 self._parse_summary_records(begin, end)
-        if self._table_source[0] == "none" and 0 in ranges:
-            self._table_source = ("chunk_index", summary_start, offsets_start or footer_at)
-        if not self._metadata and not self._metadata_at:
-            return False
-        if self.statistics is not None and self.statistics[2] == 0:
-            # An unchunked file: its messages sit in the data section. (Its summary may still
-            # hold an empty Chunk Index group, as the mcap library writes one.)
-            self._scan_loose_messages()
+        if 0 in ranges:
+            self._index_spans = ranges[0]
         return True
 
     def _summary_groups(self, begin: int, end: int) -> dict[int, list[tuple[int, int]]]:
@@ -240,10 +271,10 @@ class McapFile:
                 name, _ = read_str(data, body + 16)
                 self._metadata_at.setdefault(name, []).append(offset)
             elif opcode == OP_ATTACHMENT_INDEX:
-                offset, _len, _log, _create, size = struct.unpack_from("<QQQQQ", data, body)
+                offset, _len, _log, _create, _size = struct.unpack_from("<QQQQQ", data, body)
                 name, _ = read_str(data, body + 40)
                 if name == CHUNK_TABLE_ATTACHMENT:
-                    self._table_source = ("attachment", offset, size)
+                    self._attachment_at = offset
             pos = body + length
 
     def _parse_statistics(self, body: int) -> None:
@@ -299,25 +330,42 @@ class McapFile:
                     rows.append((start, stop, pos))
                     self._skip_chunk(pos, damage)
             elif opcode == OP_MESSAGE:
-                self.loose.append(self._parse_message(body, length, data))
+                self._loose.append(self._parse_message(body, length, data))
             elif opcode in (OP_DATA_END, OP_FOOTER):
                 break
             pos = body + length
         self._set_table(rows)
 
-    def _scan_loose_messages(self) -> None:
-        """Messages written outside chunks are not indexed; find them between chunks."""
+    def _walk_data(self, *, chunks: bool) -> None:
+        """Walk the data section's records of a finished file without decoding a chunk: the
+        messages written outside chunks, the metadata when no index names it, and (with
+        ``chunks``) every chunk's place and time range. Damage is found when a chunk is read."""
         data = self._data
+        rows: list[tuple[int, int, int]] = []
+        want_metadata = not self._metadata and not self._metadata_at
+        self._loose.clear()
         pos = self._parse_header(8) or len(data)
         while pos + 9 <= len(data):
             opcode, length = RECORD_HEADER.unpack_from(data, pos)
-            if length > self.limits.max_record_bytes or pos + 9 + length > len(data):
+            body = pos + 9
+            if length > self.limits.max_record_bytes or body + length > len(data):
                 break
             if opcode == OP_MESSAGE:
-                self.loose.append(self._parse_message(pos + 9, length, data))
+                self._loose.append(self._parse_message(body, length, data))
+            elif opcode == OP_CHUNK and chunks:
+                start, stop = struct.unpack_from("<QQ", data, body)
+                rows.append((start, stop, pos))
+            elif opcode == OP_SCHEMA:
+                self._parse_schema(body)
+            elif opcode == OP_CHANNEL:
+                self._parse_channel(body)
+            elif opcode == OP_METADATA and want_metadata:
+                self._parse_metadata(body)
             elif opcode in (OP_DATA_END, OP_FOOTER):
                 break
-            pos += 9 + length
+            pos = body + length
+        if chunks:
+            self._set_table(rows)
 
     def _chunk_damage(self, pos: int) -> str | None:
         """Why a chunk met in a scan does not decode (None if it does); a limit hit is not
@@ -371,16 +419,54 @@ class McapFile:
     def chunk_table(self) -> tuple[Sequence[int], Sequence[int], Sequence[int]]:
         """(start ns, end ns, file offset) columns of every chunk, sorted by start time."""
         if self._table is None:
-            kind, first, second = self._table_source
             with self.damage_as_read_error():
-                if kind == "attachment":
-                    self._load_table_attachment(first)
-                elif kind == "chunk_index":
-                    self._set_table(self._load_chunk_indexes(first, second))
-                else:
-                    self._set_table([])
+                self._resolve_table()
         assert self._table is not None
         return self._table
+
+    def _resolve_table(self) -> None:
+        """The chunk table from the first index that agrees with the data: our attachment,
+        then the Chunk Index records, then a walk of the data section. Every index is a hint:
+        one that disagrees is noted and the next is tried, so no tool that kept a stale copy
+        of it, dropped it or never wrote it changes what is read."""
+        expected = None if self.statistics is None else self.statistics[2]
+        if self._attachment_at is not None:
+            why = self._load_table_attachment(self._attachment_at, expected)
+            if why is None:
+                return
+            self._note(f"its {CHUNK_TABLE_ATTACHMENT} attachment is not used: {why}")
+        if self._index_spans:
+            rows = [row for span in self._index_spans for row in self._load_chunk_indexes(*span)]
+            why = self._rows_disagree(rows, expected)
+            if why is None and (rows or expected == 0):
+                self._set_table(rows)
+                return
+            if why is not None:
+                self._note(f"its Chunk Index records are not used: {why}")
+        elif expected == 0:
+            self._set_table([])  # no chunks, says the summary; loose messages were walked
+            return
+        self._walk_data(chunks=True)
+        if expected is not None and expected != len(self._table[0] if self._table else ()):
+            self._statistics_hold = False
+
+    def _note(self, text: str) -> None:
+        self.notes.append(text)
+        log.info("%s: %s; the chunks are found another way", self.path, text)
+
+    def _rows_disagree(self, rows: list[tuple[int, int, int]], expected: int | None) -> str | None:
+        """Why Chunk Index rows do not describe this file's chunks (None when they do)."""
+        if expected is not None and len({r[2] for r in rows}) != expected:
+            return f"{len(rows)} of them for the {expected} chunks its Statistics count"
+        data, unpack = self._data, struct.unpack_from
+        for start, stop, offset in rows:
+            if (
+                offset + 25 > len(data)
+                or data[offset] != OP_CHUNK
+                or unpack("<QQ", data, offset + 9) != (start, stop)
+            ):
+                return f"the one for offset {offset} does not point at a chunk of its times"
+        return None
 
     def _set_table(self, rows: list[tuple[int, int, int]]) -> None:
         # Sorted by start time for seeks; chunks that start together stay in file order.
@@ -393,8 +479,9 @@ class McapFile:
         self._starts_in_file_order = offsets == sorted(offsets)
         self._table = (starts, ends, offsets)
 
-    def _load_table_attachment(self, offset: int) -> None:
-        """Map the writer's chunk columns in place: no copy, no parse, already in order."""
+    def _load_table_attachment(self, offset: int, expected: int | None) -> str | None:
+        """Map the writer's chunk columns in place: no copy, no parse, already in order.
+        Returns why they do not describe this file (None when they were loaded)."""
         data = self._data
         pos = offset + 9 + 16
         _name, pos = read_str(data, pos)
@@ -402,6 +489,8 @@ class McapFile:
         (size,) = struct.unpack_from("<Q", data, pos)
         check_fits(pos + 8, size, len(data))
         count = size // 24
+        if size % 24 or (expected is not None and count != expected):
+            return f"it lists {count} chunks, the file's Statistics {expected}"
         raw = memoryview(data)[pos + 8 : pos + 8 + 24 * count]
         if sys.byteorder == "big":
             values = array.array("Q", raw.tobytes())
@@ -413,15 +502,24 @@ class McapFile:
         # places, so that opening a long segment stays free of a pass over its table (a
         # table that lies elsewhere costs at most a re-read of chunks it names, and the
         # chunks themselves are checked when read).
+        # A copy kept by a tool that rewrote the file (the mcap CLI keeps attachments) names
+        # the old file's offsets: at a sampled place, no chunk of those times is there.
         places = sorted({*range(0, count, max(1, count // 64)), count - 1} - {-1})
         sample = [offsets[i] for i in places]
-        if any(b <= a for a, b in itertools.pairwise(sample)) or any(
-            o >= len(data) for o in sample
-        ):
-            raise LogReadError(str(self.path), "the chunk table is not in file order")
+        if any(b <= a for a, b in itertools.pairwise(sample)):
+            return "its chunks are not in file order"
+        for i in places:
+            at = offsets[i]
+            if (
+                at + 25 > len(data)
+                or data[at] != OP_CHUNK
+                or struct.unpack_from("<QQ", data, at + 9) != (column[i], column[count + i])
+            ):
+                return f"no chunk of the times it lists at offset {at} (a copy of another file's)"
         self._table = (column[:count], column[count : 2 * count], offsets)
         # Our writer's own table: written in file order, one chunk per batch in time order.
         self._ends_sorted = self._starts_in_file_order = True
+        return None
 
     def _load_chunk_indexes(self, begin: int, end: int) -> list[tuple[int, int, int]]:
         data = self._data
@@ -559,19 +657,14 @@ class McapFile:
 
     def channel_counts(self) -> tuple[int, int, int, dict[str, int]]:
         """(start ns, end ns, chunk count, messages per topic), from the summary or a scan."""
+        trusted = self.trusted_statistics()
+        if trusted is not None:
+            return trusted
+        starts, ends, _offsets = self.chunk_table()
         channels: dict[str, int] = {}
-        if self.finished and self.statistics is not None:
-            start, end, chunk_count, counts = self.statistics
-            channels = {self.topics.get(cid, str(cid)): n for cid, n in counts.items()}
-        else:
-            starts, ends, _offsets = self.chunk_table()
-            start, end = min(starts, default=0), max(ends, default=0)
-            for messages in self.iter_chunk_messages(None, None, reverse=False):
-                for msg in messages:
-                    channels[msg.topic] = channels.get(msg.topic, 0) + 1
-            chunk_count = len(starts)
-        if self.loose:
-            times = [m.log_time_ns for m in self.loose]
-            start = min(times) if not channels else min(start, *times)
-            end = max(end, *times)
-        return start, end, chunk_count, channels
+        times: list[int] = [*starts, *ends]
+        for messages in self.iter_chunk_messages(None, None, reverse=False):
+            for msg in messages:
+                channels[msg.topic] = channels.get(msg.topic, 0) + 1
+        times += (m.log_time_ns for m in self.loose)
+        return min(times, default=0), max(times, default=0), len(starts), channels
