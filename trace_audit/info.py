@@ -39,6 +39,7 @@ class SegmentRow:
     chunks: int
     finished: bool
     recovered: bool
+    live: bool
     software_version: str
     policy_version: str
 
@@ -58,6 +59,7 @@ class LogInfo:
     channels: dict[str, int]
     finished: bool
     recovered: bool
+    live: bool
     scanned: bool
     dropped: int | None
     gaps: tuple[Gap, ...]
@@ -105,6 +107,7 @@ def log_info(
         channels=dict(sorted(channels.items())),
         finished=all(r.finished for r in rows),
         recovered=log.recovered,
+        live=log.live,
         scanned=scan,
         dropped=seen.dropped,
         gaps=tuple(seen.gaps),
@@ -167,6 +170,7 @@ def _segment_row(segment: Segment, cycles: CycleRange | None, count: int) -> Seg
         chunks=info.chunk_count,
         finished=info.finished,
         recovered=info.recovered,
+        live=info.live,
         software_version=segment.session.software_version,
         policy_version=segment.session.policy_version,
     )

@@ -31,11 +31,12 @@ from trace_runtime.cycle_builder import UNTIMED, CycleBuilder, TimedCycleBuilder
 from trace_runtime.errors import LogLockedError, UsageError
 from trace_runtime.handover import PendingCycle
 from trace_runtime.keys import Signer, load_signer
+from trace_runtime.live_writers import lock_path
 from trace_runtime.logger_config import LoggerConfig, LoggerStats
 from trace_runtime.records import GENESIS
 from trace_runtime.segment_writer import SegmentWriter
 from trace_runtime.session import MIN_PERIOD_NS, SessionInfo
-from trace_runtime.writer_lock import WriterLock, lock_path
+from trace_runtime.writer_lock import WriterLock
 from trace_runtime.writer_thread import WriterThread
 
 __all__ = ["AuditLogger", "CycleBuilder", "LogLockedError", "LoggerConfig", "LoggerStats"]

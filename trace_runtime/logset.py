@@ -292,7 +292,8 @@ class Log:
         # A segment that holds nothing (a logger opened and closed without a cycle) has no
         # time range; its zeros must not stretch the log's range back to the epoch.
         self._timed: list[_Slot] = [s for s in kept if s.holds_messages] or list(kept)
-        self._recovered = any(not s.finished for s in kept)
+        self._recovered = any(not s.finished and not s.live for s in kept)
+        self._live = any(not s.finished and s.live for s in kept)
 
     @classmethod
     def _catalogued(cls, slots: Sequence[_Unopened], root: Path) -> Log:
@@ -302,7 +303,7 @@ class Log:
         log.root, log.problems, log.shadowed = root, [], []
         log._place(sorted(slots, key=lambda s: (s.start_ns, s.path.name)))
         log._timed = list(log._slots)
-        log._recovered = False
+        log._recovered = log._live = False
         return log
 
     def clock_run(self, segment_name: str) -> Log:
@@ -349,7 +350,9 @@ class Log:
         log._place(sorted(run, key=lambda s: (s.start_ns, s.path.name)))
         timed = [s for s in run if isinstance(s, _Unopened) or s.holds_messages]
         log._timed = timed or list(run)
-        log._recovered = any(isinstance(s, Segment) and not s.finished for s in run)
+        opened = [s for s in run if isinstance(s, Segment) and not s.finished]
+        log._recovered = any(not s.live for s in opened)
+        log._live = any(s.live for s in opened)
         return log
 
     def _place(self, slots: Sequence[_Slot]) -> None:
@@ -436,7 +439,13 @@ class Log:
 
     @property
     def recovered(self) -> bool:
+        """A segment has no footer and no logger writing it: read by scan after a crash."""
         return self._recovered
+
+    @property
+    def live(self) -> bool:
+        """A segment is being written right now (its logger holds the writer lock)."""
+        return self._live
 
     def iter_cycles(
         self, start_ns: int | None = None, end_ns: int | None = None, *, reverse: bool = False

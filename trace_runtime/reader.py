@@ -22,6 +22,7 @@ from pydantic import ValidationError
 from trace_runtime.chain import digest
 from trace_runtime.cycles import Assembler, Cycle, HotAssembler, RawMessage
 from trace_runtime.errors import LogReadError, NotTraceLogError
+from trace_runtime.live_writers import is_live
 from trace_runtime.mcap_file import McapFile
 from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import PROFILE, TOPIC_SEAL, Seal
@@ -53,6 +54,7 @@ class SegmentInfo:
     session: SessionInfo
     finished: bool
     recovered: bool
+    """No footer and no writer: the logger died (a crash, a full disk); read by scan."""
     start_ns: int
     end_ns: int
     message_count: int
@@ -60,6 +62,8 @@ class SegmentInfo:
     channels: dict[str, int]
     bytes: int
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    live: bool = False
+    """No footer yet because its logger is still writing it (PROFILE §8)."""
 
     @property
     def tier(self) -> str:
@@ -79,15 +83,19 @@ class Segment(McapFile):
         self.session  # noqa: B018 - a malformed or merged session is refused at open
         self.start_ns: int
         self.end_ns: int
-        if self.finished and self.statistics is not None:
-            self.start_ns, self.end_ns = self.statistics[0], self.statistics[1]
+        trusted = self.trusted_statistics()
+        if trusted is not None:
+            self.start_ns, self.end_ns = trusted[0], trusted[1]
         else:
             self.start_ns, self.end_ns = self.info.start_ns, self.info.end_ns
-            log.warning(
-                "%s: no summary (unfinished segment); recovered %d complete messages by scan",
-                self.path,
-                self.info.message_count,
-            )
+            if self.live:
+                log.info("%s: being written; read up to its last complete chunk", self.path)
+            elif not self.finished:
+                log.warning(
+                    "%s: no summary (unfinished segment); recovered %d complete messages by scan",
+                    self.path,
+                    self.info.message_count,
+                )
 
     @cached_property
     def info(self) -> SegmentInfo:
@@ -97,7 +105,7 @@ class Segment(McapFile):
             path=self.path,
             session=self.session,
             finished=self.finished,
-            recovered=not self.finished,
+            recovered=not self.finished and not self.live,
             start_ns=start,
             end_ns=end,
             message_count=sum(channels.values()),
@@ -105,7 +113,13 @@ class Segment(McapFile):
             channels=channels,
             bytes=self.size,
             metadata=dict(self.metadata),
+            live=self.live,
         )
+
+    @cached_property
+    def live(self) -> bool:
+        """Whether this segment has no footer because its logger is writing it right now."""
+        return not self.finished and is_live(self.path, self.session.robot_id)
 
     @cached_property
     def session(self) -> SessionInfo:

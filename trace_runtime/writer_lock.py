@@ -1,5 +1,5 @@
 """One live writer per robot and log root: the OS file lock an ``AuditLogger`` holds while
-it writes, and where that lock lives."""
+it writes (where it lives, and how a reader sees it held, is ``live_writers``)."""
 
 from __future__ import annotations
 
@@ -12,25 +12,13 @@ from pathlib import Path
 
 from trace_runtime.boundary import open_lock_file
 from trace_runtime.errors import LogLockedError, TraceError
-from trace_runtime.session import TIERS
 
 if sys.platform != "win32":  # Linux is the target; elsewhere the writer lock is skipped
     import fcntl
 
-__all__ = ["WriterLock", "lock_path"]
+__all__ = ["WriterLock"]
 
 log = logging.getLogger("trace_runtime")
-
-
-def lock_path(path: Path, is_root: bool, robot_id: str) -> Path:
-    """Where the writer lock of a log lives: per robot in a root, per file otherwise. A file
-    written straight into a root's tier directory takes the robot's root lock: it would
-    otherwise fork the chain of a logger writing that root."""
-    if is_root:
-        return path / ".locks" / f"{robot_id}.lock"
-    if path.parent.name in TIERS:
-        return path.parent.parent / ".locks" / f"{robot_id}.lock"
-    return path.with_name(f".{path.name}.lock")
 
 
 class WriterLock:

@@ -78,6 +78,8 @@ def _summary_rows(r: LogInfo) -> list[tuple[str, Any]]:
     state = (
         Seg("RECOVERED (a segment has no summary: read by scan)", "bold yellow")
         if r.recovered
+        else Seg("LIVE (being written: read up to its last complete chunk)", "bold cyan")
+        if r.live
         else Seg("finished", "green")
         if r.finished
         else "unfinished"
@@ -134,7 +136,11 @@ def _segment_table(doc: Doc, r: LogInfo) -> None:
                 f"{s.start_ns / 1e9:.1f}..{s.end_ns / 1e9:.1f}",
                 f"{s.first_cycle}..{s.last_cycle}" if s.first_cycle is not None else "-",
                 _size(s.bytes),
-                Seg("recovered", "yellow") if s.recovered else "ok",
+                Seg("recovered", "yellow")
+                if s.recovered
+                else Seg("live", "cyan")
+                if s.live
+                else "ok",
             ]
             for s in r.segments
         ],

@@ -51,6 +51,7 @@ NoteKind = Literal[
     "summarised",
     "unanchored",
     "recovered",
+    "live",
     "signatures_unchecked",
     "chain_start",
     "duplicate_segment",
@@ -92,6 +93,8 @@ class SegmentSummary:
     tier: str
     finished: bool
     recovered: bool
+    live: bool = False
+    """No footer yet because its logger is writing it (not a crash)."""
     cycles: int = 0
     cycles_valid: int = 0
     cycles_summarised: int = 0

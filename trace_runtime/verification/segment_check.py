@@ -64,6 +64,7 @@ class SegmentCheck:
             tier=self.session.tier,
             finished=info.finished,
             recovered=info.recovered,
+            live=info.live,
         )
         self.scan = SealScan()
         self.numbering = Numbering(self.report, self.scan, entry_cycle)
@@ -130,6 +131,13 @@ class SegmentCheck:
                 "recovered",
                 "segment has no summary (the robot crashed or the disk "
                 "filled); read by a linear scan",
+                s.cycle_range,
+            )
+        elif s.live:
+            self.report.note(
+                "live",
+                "segment is being written (its logger holds the writer lock); read up to "
+                "its last complete chunk",
                 s.cycle_range,
             )
 
@@ -378,7 +386,7 @@ class SegmentCheck:
         scan = self.scan
         n = len(scan.num)
         for position, number, t in scan.unsealed:
-            if position == n and self.summary.recovered:
+            if position == n and (self.summary.recovered or self.summary.live):
                 self.report.note(
                     "unanchored",
                     f"cycle {number} was being written when the robot "
