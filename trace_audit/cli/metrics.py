@@ -296,6 +296,12 @@ def metrics_doc(report: MetricsReport, *, failures: bool, width: int) -> Printou
     _table_ii_notes(out, report)
     if report.channel_deviation:
         out.table(_channels(report))
+        fewest = min(c.cycles for c in report.channel_deviation)
+        if fewest < report.overall.decisions:
+            out.print(
+                f"  Channel figures cover the cycles that log each channel (as few as "
+                f"{fewest:,} of the {report.overall.decisions:,} decisions), not every decision."
+            )
     if report.groups:
         wide = width >= _WIDE
         out.table(_table_iii(report, wide=wide))

@@ -166,6 +166,8 @@ class _Scanner:
         execution = cycle.payloads.get(TOPIC_EXECUTION)
         if execution is not None and HAS_CHANNELS in execution:  # parsed only when it has
             add_channels(self.partial.channels, cycle.layer(TOPIC_EXECUTION))
+        elif execution is None and cycle.summary is not None:  # warm keeps execution whole
+            add_channels(self.partial.channels, cycle.summary.get(TOPIC_EXECUTION))
         group = group_of(cycle)
         partial = self.partial
         acc = partial.groups.get(group)

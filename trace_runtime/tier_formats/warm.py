@@ -264,7 +264,10 @@ def summarize(layers: dict[str, Any]) -> dict[str, Any]:
     factors with values, truncated), counterfactuals and counterfactuals_none_applicable;
     belief: the factor nodes and all their ancestors, with the edges among them; perception:
     the entities those nodes name (id, class, pose, confidence, evidence: sensor, weight,
-    ref) and the sensors used / unavailable; execution: intended, actual, deviation, flags.
+    ref) and the sensors used / unavailable; execution: the whole record, every field a
+    profile defines (planar motion, actuator channels with their units, deviation and its
+    unit, checks, flags) and any a later profile adds: it is what "executed how" is read
+    from, and small beside the other layers.
     """
     out: dict[str, Any] = {}
     action = layers.get(TOPIC_ACTION)
@@ -280,10 +283,7 @@ def summarize(layers: dict[str, Any]) -> dict[str, Any]:
         out[TOPIC_PERCEPTION] = _summarize_perception(perception, entity_ids)
     execution = layers.get(TOPIC_EXECUTION)
     if isinstance(execution, dict):
-        out[TOPIC_EXECUTION] = {
-            **_stamp(execution),
-            **_pick(execution, ("intended", "actual", "deviation", "flags")),
-        }
+        out[TOPIC_EXECUTION] = execution
     return out
 
 
