@@ -92,7 +92,7 @@ def doctor_doc(r: DoctorReport) -> Doc:
         [
             ("segments", str(len(r.segments))),
             ("read", f"{sum(s.messages for s in r.segments)} messages, "
-             f"{sum(s.cycles for s in r.segments)} sealed cycles"),
+             f"{sum(s.cycles for s in r.segments)} sealed cycles" + _summarised(r)),
             ("rules", f"{r.rules_checked} rules of PROFILE.md"),
             ("evidence", ", ".join(r.evidence) if r.evidence else "no external recording given"),
         ]
@@ -119,3 +119,14 @@ def _problem_table(doc: Doc, problems: list[Problem]) -> None:
     doc.table([Column("rule"), Column("where"), Column("what", wrap=True)], rows)
     if len(problems) > _MAX_LISTED:
         doc.line(f"… and {len(problems) - _MAX_LISTED} more (--json lists all)", 2)
+
+
+def _summarised(r: DoctorReport) -> str:
+    """What was not checked: warm summaries are pruned layers, not the layer records."""
+    n = sum(s.summarised for s in r.segments)
+    if not n:
+        return ""
+    return (
+        f" ({n} of them warm summaries: their pruned layers are checked for stamps and "
+        "order, not against the layer schemas)"
+    )

@@ -30,6 +30,7 @@ from trace_runtime.records import (
     TOPIC_SEAL,
     validate_record,
 )
+from trace_runtime.tier_formats.warm import SUMMARY_TOPIC
 
 __all__ = ["CHECKPOINT_GAP_NS", "CycleCheck"]
 
@@ -109,6 +110,8 @@ class CycleCheck:
 
     def message(self, topic: str, message: Message, offset: int) -> None:
         self.report.messages += 1
+        if topic == SUMMARY_TOPIC:
+            self.report.summarised += 1
         if not topic.startswith("/trace/"):
             self._sensor(topic, message, offset)
             return

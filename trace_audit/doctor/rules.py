@@ -159,6 +159,8 @@ class SegmentDoctor:
     problems: list[Problem] = field(default_factory=list)
     messages: int = 0
     cycles: int = 0
+    summarised: int = 0
+    """Warm summaries read: their pruned layers are checked for stamps and order only."""
     chunks: int = 0
     closed: bool = False
     conforms: bool = True

@@ -34,7 +34,8 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 
 from trace_audit.doctor.content import CycleCheck
 from trace_audit.doctor.rules import SegmentDoctor
-from trace_runtime.errors import LogLimitError, LogReadError
+from trace_runtime.cycles import RawMessage
+from trace_runtime.errors import LogLimitError, LogReadError, TraceError
 from trace_runtime.mcap_records import (
     OP_CHANNEL,
     OP_CHUNK_INDEX,
@@ -46,7 +47,7 @@ from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import MESSAGE_MODELS, PROFILE
 from trace_runtime.schemas import schema_name
 from trace_runtime.session import SESSION_METADATA, SessionInfo
-from trace_runtime.tier_formats.cold import BLOCK_TOPIC, INDEX_TOPIC
+from trace_runtime.tier_formats.cold import BLOCK_TOPIC, INDEX_TOPIC, BlockCache, iter_decoded
 from trace_runtime.tier_formats.warm import SUMMARY_TOPIC
 
 __all__ = ["check_structure"]
@@ -92,6 +93,8 @@ class _Seen:
     footer: Footer | None = None
     data_end: bool = False
     last_chunk_start: int | None = None
+    cold_pending: list[RawMessage] = field(default_factory=list)  # up to the next block
+    cold_cache: BlockCache = field(default_factory=lambda: BlockCache(0))
 
 
 def check_structure(
@@ -117,6 +120,7 @@ def check_structure(
         size = path.stat().st_size
         seen = _Seen(report, CycleCheck(report), limits, progress)
         _walk(stream, size, seen)
+        _decode_cold(seen, None)
         seen.content.finish(closed=seen.footer is not None)
     report.closed = seen.footer is not None and seen.footer.summary_start != 0
     for channel_id, channel in seen.channels.items():
@@ -289,11 +293,37 @@ def _message(message: Message, offset: int, seen: _Seen) -> None:
     seen.start_ns = t if seen.start_ns is None else min(seen.start_ns, t)
     seen.end_ns = t if seen.end_ns is None else max(seen.end_ns, t)
     if _tier(seen) == "cold":
-        # Cold blocks are a columnar re-encoding (docs/storage.md): the verifier reads them
-        # back to the canonical bytes and checks those; here they are only counted.
-        seen.report.messages += 1
+        seen.cold_pending.append(RawMessage(topic, message.sequence, t, message.data))
+        if topic == BLOCK_TOPIC:
+            _decode_cold(seen, offset)
         return
     seen.content.message(topic, message, offset)
+
+
+def _decode_cold(seen: _Seen, offset: int | None) -> None:
+    """Cold blocks are a columnar re-encoding (docs/storage.md) of the original messages:
+    each block is decoded back to them, and they get the content checks of a hot segment's.
+    A block that does not decode breaks ``readable``. ``offset``: the block's chunk (None at
+    the end of the file, for plain messages no block followed)."""
+    pending, seen.cold_pending = seen.cold_pending, []
+    if not pending:
+        return
+    try:
+        decoded = list(iter_decoded(pending, seen.cold_cache))
+    except (TraceError, ValueError) as err:
+        where = "" if offset is None else f" in the chunk at offset {offset}"
+        seen.report.add("readable", f"a cold block{where} does not decode: {err}", offset=offset)
+        seen.content.damage()
+        return
+    for raw in decoded:
+        inner = Message(
+            channel_id=0,
+            sequence=raw.sequence,
+            log_time=raw.log_time_ns,
+            publish_time=raw.log_time_ns,
+            data=raw.data,
+        )
+        seen.content.message(raw.topic, inner, offset or 0)
 
 
 def _check_session(seen: _Seen, report: SegmentDoctor) -> None:

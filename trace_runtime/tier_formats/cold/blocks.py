@@ -152,13 +152,16 @@ class ColdAssembler:
         return matching[-1] if matching else None
 
 
-def iter_decoded(messages: Iterable[RawMessage]) -> Iterator[RawMessage]:
+def iter_decoded(
+    messages: Iterable[RawMessage], cache: BlockCache | None = None
+) -> Iterator[RawMessage]:
     """The original message stream behind a cold segment's messages, in the original order.
 
     ``messages`` is what ``Segment.iter_messages()`` gives for the whole segment: the plain
-    messages of each chunk come before its block and are put back where they were.
+    messages of each chunk come before its block and are put back where they were. A caller
+    that feeds a segment's messages a block at a time passes one ``cache`` for all of them.
     """
-    cache = BlockCache(0)
+    cache = BlockCache(0) if cache is None else cache
     beside: list[RawMessage] = []
     for msg in messages:
         if msg.topic == BLOCK_TOPIC:
