@@ -125,7 +125,9 @@ _MESSAGES = st.lists(
 )
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 @given(messages=_MESSAGES, layout=st.sampled_from([*every_layout(), *single_changes()]))
 def test_any_mcap_reads_the_messages_the_reference_reader_reads(
     messages: list[tuple[int, int, bytes]], layout: Variant, tmp_path: Path
