@@ -148,6 +148,8 @@ class Explanation:
     clock_run: tuple[str, ...] = ()
     """When the robot's clock restarted in the log: the segments of the run that holds the
     decision (a time may name a decision in another run too); empty otherwise."""
+    live: bool = False
+    """A segment of the log is being written right now (its logger holds the lock)."""
 
     @property
     def stale(self) -> bool:
@@ -258,6 +260,7 @@ def _explain(
         log_start_ns=whole.start_ns,
         log_end_ns=whole.end_ns,
         recovered=whole.recovered,
+        live=whole.live,
         query_t_ns=t_ns,
         query_cycle=cycle,
         cycle=target.cycle,

@@ -47,6 +47,9 @@ def test_a_robot_logging_in_another_process_is_live_and_after_kill_9_recovered(
         notes = {n["kind"] for n in json.loads(verified.stdout)["notes"]}
         assert "live" in notes and "recovered" not in notes
         assert "no summary" not in verified.stderr
+        explained = cli("explain", root, "--t", "1.0", "--plain")
+        assert "live: the log is being written" in explained.stdout, explained.stderr
+        assert "recovered" not in explained.stdout
         robot.send_signal(signal.SIGKILL)
         robot.wait(10)
     finally:

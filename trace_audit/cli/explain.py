@@ -116,6 +116,8 @@ def _decision_rows(r: Explanation, lookback_s: float) -> list[tuple[str, Any]]:
     where = f"{r.path}"
     if r.recovered:
         where += " (recovered from an unfinished segment)"
+    elif r.live:
+        where += " (live: the log is being written)"
     rows: list[tuple[str, Any]] = [("Log", where), ("Decision", _decided(r))]
     if r.stale:
         rows.append(
