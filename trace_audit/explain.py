@@ -17,7 +17,7 @@ walk reaches the bound first, the action has held "at least since" the oldest cy
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -25,6 +25,7 @@ from trace_audit.causal import Decision, causal_graph_data, read_decision, tree_
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, DecisionChains, SensorWindow, trace_cycle
 from trace_audit.cycle_fields import command_of
 from trace_audit.evidence import ExternalEvidence, describe_refs, open_recordings
+from trace_audit.jsonout import OMIT_EMPTY
 from trace_audit.log_source import LogSource, as_log, require_cycles
 from trace_audit.log_time import TimeArg, resolve_time
 from trace_audit.metrics import MetricsConfig, dr_problems, trust_score
@@ -148,8 +149,9 @@ class Explanation:
     clock_run: tuple[str, ...] = ()
     """When the robot's clock restarted in the log: the segments of the run that holds the
     decision (a time may name a decision in another run too); empty otherwise."""
-    live: bool = False
-    """A segment of the log is being written right now (its logger holds the lock)."""
+    live: bool | None = field(default=None, metadata={OMIT_EMPTY: True})
+    """True when a segment of the log is being written right now (its logger holds the
+    lock); None otherwise, and then left out of the JSON."""
 
     @property
     def stale(self) -> bool:
@@ -260,7 +262,7 @@ def _explain(
         log_start_ns=whole.start_ns,
         log_end_ns=whole.end_ns,
         recovered=whole.recovered,
-        live=whole.live,
+        live=whole.live or None,
         query_t_ns=t_ns,
         query_cycle=cycle,
         cycle=target.cycle,

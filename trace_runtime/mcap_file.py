@@ -655,6 +655,15 @@ class McapFile:
                 ):
                     yield msg
 
+    def time_range(self) -> tuple[int, int]:
+        """(first, last) log time from the chunks' time ranges and the loose messages, without
+        decoding a chunk (0, 0 for a file that holds no message)."""
+        starts, ends, _offsets = self.chunk_table()
+        times = [*ends, *(m.log_time_ns for m in self.loose)]
+        if starts:
+            times.append(min(starts))
+        return min(times, default=0), max(times, default=0)
+
     def channel_counts(self) -> tuple[int, int, int, dict[str, int]]:
         """(start ns, end ns, chunk count, messages per topic), from the summary or a scan."""
         trusted = self.trusted_statistics()

@@ -86,6 +86,10 @@ class Segment(McapFile):
         trusted = self.trusted_statistics()
         if trusted is not None:
             self.start_ns, self.end_ns = trusted[0], trusted[1]
+        elif self.finished:
+            # No Statistics to go by (a stock writer's choice): the chunks' own time ranges
+            # and the loose messages give the range without decoding a chunk.
+            self.start_ns, self.end_ns = self.time_range()
         else:
             self.start_ns, self.end_ns = self.info.start_ns, self.info.end_ns
             if self.live:

@@ -62,7 +62,12 @@ def write_replacement(
     """Write the ``tier`` copy of a segment aside as its partial file, fsync it and check that
     it holds exactly what was written; the failure detail (a str) if not, the partial gone."""
     target_dir = root / tier
-    target_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        target_dir.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        # Something else sits at the tier's name (a FIFO, a file someone planted): it is not
+        # ours to replace, and nothing is written through it.
+        return f"{tier}/ in the root is not a folder; nothing was written there"
     target = target_dir / path.name
     partial = partial_path(target)
     if target.exists():
