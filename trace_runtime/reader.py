@@ -41,6 +41,10 @@ ASSEMBLERS: Mapping[str, Callable[[ReadLimits], Assembler]] = {
 segment, so a cache an assembler keeps (cold: decoded blocks) lives as long as the reader,
 bounded by the reader's limits where decoding can be asked to inflate (cold blocks)."""
 
+RECOVERED_WARNING = "%s: no footer (unfinished segment); recovered %d complete messages by scan"
+"""What opening a segment its logger did not close, and no longer writes, logs (once a file:
+callers that open one file twice filter on this message)."""
+
 _MAX_LEAD_IN_CHUNKS = 4096
 """How far back a cycle's first messages are looked for (chunks of one message each hold a
 cycle of a few dozen messages; a run of thousands of chunks without a seal is damage)."""
@@ -96,7 +100,7 @@ class Segment(McapFile):
                 log.info("%s: being written; read up to its last complete chunk", self.path)
             elif not self.finished:
                 log.warning(
-                    "%s: no summary (unfinished segment); recovered %d complete messages by scan",
+                    RECOVERED_WARNING,
                     self.path,
                     self.info.message_count,
                 )

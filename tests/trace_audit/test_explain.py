@@ -221,7 +221,7 @@ def test_a_crashed_segment_is_recovered_and_said_so(
     with caplog.at_level(logging.WARNING, logger="trace_runtime"):
         r = explain(crashed_log, t=t_ns(45))
     assert r.recovered and r.decision.command == "STOP" and r.seal.verified
-    assert sum("no summary" in m for m in caplog.messages) == 1
+    assert sum("no footer" in m for m in caplog.messages) == 1
 
 
 def test_refs_to_an_earlier_cycles_reading_resolve_through_the_window(tmp_path: Path) -> None:

@@ -32,7 +32,7 @@ def test_a_crashed_segment_is_recovered(
         r = log_info(crashed_log)
     assert r.recovered and not r.finished
     assert r.cycles == 100 and r.segments[0].recovered
-    assert sum("no summary" in m for m in caplog.messages) == 1
+    assert sum("no footer" in m for m in caplog.messages) == 1
 
 
 def test_a_log_root_of_rotated_segments_with_drops(tmp_path: Path) -> None:

@@ -46,7 +46,7 @@ def test_a_robot_logging_in_another_process_is_live_and_after_kill_9_recovered(
         verified = cli("verify", root, "--json")
         notes = {n["kind"] for n in json.loads(verified.stdout)["notes"]}
         assert "live" in notes and "recovered" not in notes
-        assert "no summary" not in verified.stderr
+        assert "no footer" not in verified.stderr
         explained = cli("explain", root, "--t", "1.0", "--plain")
         words = " ".join(explained.stdout.split())  # the line may wrap
         assert "(live: the log is being written)" in words, explained.stderr

@@ -76,7 +76,7 @@ def info_doc(r: LogInfo) -> Doc:
 def _summary_rows(r: LogInfo) -> list[tuple[str, Any]]:
     """Time range, cycles, segments and tiers, state; drops and gaps when scanned."""
     state = (
-        Seg("RECOVERED (a segment has no summary: read by scan)", "bold yellow")
+        Seg("RECOVERED (a segment has no footer and no writer: read by scan)", "bold yellow")
         if r.recovered
         else Seg("LIVE (being written: read up to its last complete chunk)", "bold cyan")
         if r.live

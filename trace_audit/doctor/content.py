@@ -102,13 +102,17 @@ class CycleCheck:
         self.window = SensorWindow(DEFAULT_SENSOR_WINDOW)
         self.checkpoints: list[tuple[int, bool]] = []  # (t_ns, final)
         self.first_t: int | None = None
+        self._in_chunk = True
 
     def damage(self) -> None:
         """A chunk did not decode: do not join the cycles on either side of it."""
         self.open = _Open()
         self.window.clear()
 
-    def message(self, topic: str, message: Message, offset: int) -> None:
+    def message(self, topic: str, message: Message, offset: int, *, in_chunk: bool = True) -> None:
+        """Check one message; ``offset`` locates it (its chunk's, or its own when it was
+        written outside chunks: ``in_chunk`` False, and no chunk boundary is crossed)."""
+        self._in_chunk = in_chunk
         self.report.messages += 1
         if topic == SUMMARY_TOPIC:
             self.report.summarised += 1
@@ -152,7 +156,8 @@ class CycleCheck:
         self.open.sensors.append(
             RawMessage(topic, message.sequence, message.log_time, message.data)
         )
-        self.open.chunks.add(offset)
+        if self._in_chunk:
+            self.open.chunks.add(offset)
 
     def _stamp(
         self, topic: str, value: dict[str, Any], message: Message, offset: int
@@ -192,7 +197,8 @@ class CycleCheck:
                 "one-per-cycle", f"two {topic} messages in one cycle", cycle=stamp[0], offset=offset
             )
         current.layers[topic] = value
-        current.chunks.add(offset)
+        if self._in_chunk:
+            current.chunks.add(offset)
 
     def _same_cycle(self, topic: str, stamp: tuple[int, int], offset: int) -> None:
         current = self.open
@@ -211,7 +217,8 @@ class CycleCheck:
     def _seal(self, stamp: tuple[int, int], offset: int) -> None:
         self._same_cycle(TOPIC_SEAL, stamp, offset)
         current = self.open
-        current.chunks.add(offset)
+        if self._in_chunk:
+            current.chunks.add(offset)
         cycle, t_ns = stamp
         if self.first_t is None:
             self.first_t = t_ns

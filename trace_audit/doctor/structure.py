@@ -121,6 +121,11 @@ def check_structure(
         seen = _Seen(report, CycleCheck(report), limits, progress)
         _walk(stream, size, seen)
         _decode_cold(seen, None)
+        stream.seek(max(0, size - 8))
+        if seen.footer is not None and stream.read(8) != _MAGIC:
+            # A footer without the closing magic: the last write was cut (readers scan it)
+            report.add("closed", "the file ends in its footer without the closing magic")
+            seen.footer = None
         seen.content.finish(closed=seen.footer is not None)
     report.closed = seen.footer is not None and seen.footer.summary_start != 0
     for channel_id, channel in seen.channels.items():
@@ -157,12 +162,28 @@ def _walk(stream: IO[bytes], size: int, seen: _Seen) -> None:
     except _DAMAGE as err:
         if offset == 8 and not isinstance(err, EOFError):
             raise LogReadError(str(report.path), f"no readable MCAP header ({err})") from err
-        report.add(
-            "closed",
-            f"the file ends in a record cut short after offset {offset} (not closed: "
-            "readers scan it and keep every complete record)",
-            offset=offset,
-        )
+        if _ends_after_record(stream, offset, size):
+            text = (
+                f"the file ends after the complete record at offset {offset}, without a "
+                "footer (its writer stopped between records, or is still writing it: not "
+                "closed; readers scan it and keep every record)"
+            )
+        else:
+            text = (
+                f"the file ends in a record cut short after offset {offset} (not closed: "
+                "readers scan it and keep every complete record)"
+            )
+        report.add("closed", text, offset=offset)
+
+
+def _ends_after_record(stream: IO[bytes], offset: int, size: int) -> bool:
+    """Whether the record at ``offset`` is complete and nothing follows it."""
+    stream.seek(offset)
+    head = stream.read(9)
+    if len(head) < 9:
+        return False
+    (length,) = struct.unpack_from("<Q", head, 1)
+    return bool(offset + 9 + length == size)
 
 
 def _data_record(offset: int, record: Any, seen: _Seen) -> None:
@@ -182,7 +203,7 @@ def _data_record(offset: int, record: Any, seen: _Seen) -> None:
     elif isinstance(record, Chunk):
         _chunk(offset, record, seen)
     elif isinstance(record, Message):
-        _message(record, offset, seen)
+        _message(record, offset, seen, in_chunk=False)
     elif isinstance(record, DataEnd):
         seen.data_end = True
 
@@ -284,7 +305,7 @@ def _chunk(offset: int, chunk: Chunk, seen: _Seen) -> None:
             _message(record, offset, seen)
 
 
-def _message(message: Message, offset: int, seen: _Seen) -> None:
+def _message(message: Message, offset: int, seen: _Seen, *, in_chunk: bool = True) -> None:
     channel = seen.channels.get(message.channel_id)
     topic = channel.topic if channel else f"<channel {message.channel_id}>"
     counts = seen.messages_per_channel
@@ -297,7 +318,7 @@ def _message(message: Message, offset: int, seen: _Seen) -> None:
         if topic == BLOCK_TOPIC:
             _decode_cold(seen, offset)
         return
-    seen.content.message(topic, message, offset)
+    seen.content.message(topic, message, offset, in_chunk=in_chunk)
 
 
 def _decode_cold(seen: _Seen, offset: int | None) -> None:

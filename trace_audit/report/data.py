@@ -41,7 +41,7 @@ from trace_runtime.cycles import Cycle
 from trace_runtime.errors import UsageError
 from trace_runtime.keys import PublicKey
 from trace_runtime.logset import Log
-from trace_runtime.reader import Segment
+from trace_runtime.reader import RECOVERED_WARNING, Segment
 from trace_runtime.records import TOPIC_BELIEF, TOPIC_PERCEPTION
 from trace_runtime.session import SessionInfo
 from trace_runtime.verification import VerifyReport, verify
@@ -327,7 +327,7 @@ def _window_integrity(report: VerifyReport, whole: Log, scope: Sequence[Segment]
 
 
 class _SaidAlready(logging.Filter):
-    """Drops the reader's "no summary" warning for a file it has already been given for."""
+    """Drops the reader's recovered-segment warning for a file it was already given for."""
 
     def __init__(self, paths: set[Path]) -> None:
         super().__init__()
@@ -336,7 +336,7 @@ class _SaidAlready(logging.Filter):
     def filter(self, record: logging.LogRecord) -> bool:
         args = record.args
         if (
-            "no summary" in str(record.msg)
+            record.msg == RECOVERED_WARNING
             and isinstance(args, tuple)
             and args
             and isinstance(args[0], str | Path)

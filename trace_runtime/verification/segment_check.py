@@ -129,7 +129,7 @@ class SegmentCheck:
         if s.recovered:
             self.report.note(
                 "recovered",
-                "segment has no summary (the robot crashed or the disk "
+                "segment has no footer (the robot crashed or the disk "
                 "filled); read by a linear scan",
                 s.cycle_range,
             )

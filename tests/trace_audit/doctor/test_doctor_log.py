@@ -202,3 +202,49 @@ def test_time_going_backwards_is_a_broken_must(tmp_path: Path) -> None:
     log = write_profile_log(tmp_path / "p.mcap", faults=Faults(clock_step_back_at=12))
     report = doctor_log(log)
     assert "time-order" in _broken(report)
+
+
+# --- how a file ends, and files without chunks (found by trying rewrites from outside) -----
+
+
+def _problems(report: DoctorReport, rule: str) -> list[str]:
+    return [p.message for s in report.segments for p in s.problems if p.rule == rule]
+
+
+def test_a_file_that_stops_between_records_is_not_called_cut_short(tmp_path: Path) -> None:
+    from tests.mcap_variants import Variant, rewrite
+
+    whole = rewrite(write_log(tmp_path / "log.mcap"), tmp_path / "copy.mcap", Variant())
+    data = whole.read_bytes()
+    data_end = data.index(b"\x0f\x04\x00\x00\x00\x00\x00\x00\x00", 8)  # the DataEnd record
+    between = tmp_path / "between" / "log.mcap"
+    between.parent.mkdir()
+    between.write_bytes(data[:data_end])  # a writer stopped after its last complete record
+    cut = tmp_path / "cut" / "log.mcap"
+    cut.parent.mkdir()
+    cut.write_bytes(data[: data_end - 5])  # a writer killed inside a record
+    (stopped,) = _problems(doctor_log(between), "closed")
+    assert "complete record" in stopped and "cut short" not in stopped
+    (killed,) = _problems(doctor_log(cut), "closed")
+    assert "cut short" in killed
+
+
+def test_a_footer_without_its_closing_magic_is_not_closed(tmp_path: Path) -> None:
+    source = write_log(tmp_path / "log.mcap")
+    short = tmp_path / "short" / "log.mcap"
+    short.parent.mkdir()
+    short.write_bytes(source.read_bytes()[:-8])
+    report = doctor_log(short)
+    assert any("closing magic" in m for m in _problems(report, "closed"))
+    assert not report.segments[0].closed
+
+
+def test_messages_outside_chunks_cross_no_chunk_boundary(tmp_path: Path) -> None:
+    from tests.mcap_variants import Variant, rewrite
+
+    loose = tmp_path / "loose" / "log.mcap"
+    loose.parent.mkdir()
+    rewrite(write_log(tmp_path / "log.mcap"), loose, Variant(chunked=False))
+    report = doctor_log(loose)
+    assert report.conforms and not _problems(report, "cycle-in-chunk")
+    assert report.segments[0].cycles == 100
