@@ -21,6 +21,21 @@ def log_cycles(logger: AuditLogger, numbers: range) -> None:
         logger.log_cycle(i * PERIOD_NS, perception=p, belief=b, action=a, execution=e)
 
 
+LOCK_HOLDER = """
+    import sys, time
+    from trace_runtime import AuditLogger, LoggerConfig
+    from trace_runtime.testing import synthetic_cycle
+    log = AuditLogger(sys.argv[1], robot_id="r", config=LoggerConfig(threaded=False))
+    for i in range(int(sys.argv[2])):
+        p, b, a, e = synthetic_cycle(i)
+        log.log_cycle(i * 100_000_000, perception=p, belief=b, action=a, execution=e)
+    print("ready", flush=True)
+    time.sleep(60)
+"""
+"""A robot that logs ``argv[2]`` cycles into ``argv[1]`` as robot ``r``, says ``ready`` and
+keeps its log open (and its writer lock held) for a minute: run it with ``spawn``."""
+
+
 def spawn(script: str, *args: str) -> subprocess.Popen[str]:
     env = {**os.environ, "PYTHONPATH": str(WORKTREE)}
     return subprocess.Popen(

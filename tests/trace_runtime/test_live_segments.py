@@ -10,21 +10,9 @@ from pathlib import Path
 import pytest
 
 from tests.outside import cli
-from tests.trace_runtime.robot_helpers import log_cycles, spawn
+from tests.trace_runtime.robot_helpers import LOCK_HOLDER, log_cycles, spawn
 from trace_runtime import AuditLogger, LoggerConfig, live_writers, open_log
 from trace_runtime.testing import simulate_crash
-
-_ROBOT = """
-    import sys, time
-    from trace_runtime import AuditLogger, LoggerConfig
-    from trace_runtime.testing import synthetic_cycle
-    log = AuditLogger(sys.argv[1], robot_id="r", config=LoggerConfig(threaded=False))
-    for i in range(20):
-        p, b, a, e = synthetic_cycle(i)
-        log.log_cycle(i * 100_000_000, perception=p, belief=b, action=a, execution=e)
-    print("ready", flush=True)
-    time.sleep(60)
-"""
 
 
 def _info(root: Path) -> dict[str, object]:
@@ -37,7 +25,7 @@ def test_a_robot_logging_in_another_process_is_live_and_after_kill_9_recovered(
     tmp_path: Path,
 ) -> None:
     root = tmp_path / "root"
-    robot = spawn(_ROBOT, str(root))
+    robot = spawn(LOCK_HOLDER, str(root), "20")
     try:
         assert robot.stdout is not None
         assert robot.stdout.readline().strip() == "ready", robot.stderr

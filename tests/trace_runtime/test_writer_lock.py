@@ -9,21 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from tests.trace_runtime.robot_helpers import log_cycles, spawn
+from tests.trace_runtime.robot_helpers import LOCK_HOLDER, log_cycles, spawn
 from trace_runtime import AuditLogger, LoggerConfig, open_log
 from trace_runtime.errors import LogLockedError, UnsafePathError
-
-_HOLDER = """
-    import sys, time
-    from trace_runtime import AuditLogger, LoggerConfig
-    from trace_runtime.testing import synthetic_cycle
-    log = AuditLogger(sys.argv[1], robot_id="r", config=LoggerConfig(threaded=False))
-    for i in range(5):
-        p, b, a, e = synthetic_cycle(i)
-        log.log_cycle(i * 100_000_000, perception=p, belief=b, action=a, execution=e)
-    print("ready", flush=True)
-    time.sleep(60)
-"""
 
 
 def test_a_second_logger_for_the_same_robot_and_root_is_refused(tmp_path: Path) -> None:
@@ -72,7 +60,7 @@ def test_two_robots_on_one_root_are_independent(tmp_path: Path) -> None:
 
 def test_a_live_process_holds_the_lock_and_kill_9_releases_it(tmp_path: Path) -> None:
     root = tmp_path / "root"
-    holder = spawn(_HOLDER, str(root))
+    holder = spawn(LOCK_HOLDER, str(root), "5")
     try:
         assert holder.stdout is not None
         assert holder.stdout.readline().strip() == "ready", holder.stderr
