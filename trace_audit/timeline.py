@@ -104,6 +104,8 @@ class Timeline:
     clock_runs: tuple[ClockRun, ...] = field(default=(), metadata={OMIT_EMPTY: True})
     """When the robot's clock restarted in the log: its runs, in chain order; the rows and
     gaps of each run are its own (a run's first row is no decision change). Empty else."""
+    live: bool | None = field(default=None, metadata={OMIT_EMPTY: True})
+    """True when a segment of the log is being written right now; left out of JSON else."""
 
 
 def _window(log: Log, start: TimeArg, end: TimeArg) -> tuple[int, int]:
@@ -172,6 +174,7 @@ def timeline(
         tuple(gaps),
         log.recovered,
         clock_runs,
+        live=log.live or None,
     )
 
 
@@ -292,6 +295,8 @@ class WhyResult:
     actions_present: dict[str, int]
     """Cycles per command in the log (only the action asked about with ``t``)."""
     recovered: bool
+    live: bool | None = field(default=None, metadata={OMIT_EMPTY: True})
+    """True when a segment of the log is being written right now; left out of JSON else."""
 
 
 def _match(action: str, command: str | None) -> bool:
@@ -376,6 +381,7 @@ def why(source: LogSource, action: str, *, t: TimeArg = None) -> WhyResult:
             (one,),
             {one.command: one.held_cycles},
             log.recovered,
+            live=log.live or None,
         )
     every, present = _all_transitions(log, action, period)
     if not every:
@@ -389,6 +395,7 @@ def why(source: LogSource, action: str, *, t: TimeArg = None) -> WhyResult:
         transitions,
         dict(present.most_common()),
         log.recovered,
+        live=log.live or None,
     )
 
 

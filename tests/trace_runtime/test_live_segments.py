@@ -39,6 +39,9 @@ def test_a_robot_logging_in_another_process_is_live_and_after_kill_9_recovered(
         words = " ".join(explained.stdout.split())  # the line may wrap
         assert "(live: the log is being written)" in words, explained.stderr
         assert "recovered" not in words
+        for command in (("timeline", root), ("why", root, "--action", "STOP")):
+            shown = " ".join(cli(*command, "--plain").stdout.split())
+            assert "live: the log is being written" in shown, command
         robot.send_signal(signal.SIGKILL)
         robot.wait(10)
     finally:

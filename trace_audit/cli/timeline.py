@@ -75,6 +75,7 @@ def timeline_doc(r: Timeline) -> Doc:
         f"{r.cycles} cycles, {changes} decision change{'s' if changes != 1 else ''}, "
         f"{len(r.gaps)} gap{'s' if len(r.gaps) != 1 else ''}"
         + ("; recovered from an unfinished segment" if r.recovered else "")
+        + ("; live: the log is being written" if r.live else "")
     )
     if not r.clock_runs:
         _timeline_table(doc, r, list(r.rows), list(r.gaps))

@@ -69,6 +69,8 @@ def why_doc(r: WhyResult) -> Doc:
     doc.title([f"Why {r.action}? ", f"{r.robot}, {scope}"])
     if r.recovered:
         doc.line("(log recovered from an unfinished segment)")
+    elif r.live:
+        doc.line("(live: the log is being written)")
     for i, tr in enumerate(r.transitions, 1):
         doc.heading(f"#{i}  t={fmt_t(tr.t_ns)}  cycle {tr.cycle}")
         before = (
