@@ -101,7 +101,6 @@ class McapFile:
         """Whether the summary section was read (its indexes are hints, checked when used)."""
         self.notes: list[str] = []
         """Indexes of the file that were not used because they disagree with its data."""
-        self._statistics_hold = True
         self.skipped_chunks: list[tuple[int, str]] = []
         """Damaged chunks stepped over, by a scan or when read: (file offset, why)."""
         self._damaged: set[int] = set()
@@ -119,13 +118,13 @@ class McapFile:
             self.summarized = False
         with self.damage_as_read_error():
             if not self.summarized:
-                self._scan()
-            elif not self._metadata and not self._metadata_at:
-                # No Metadata Index (an optional summary group): the records are in the data.
-                self._walk_data(chunks=False)
-            elif self.statistics is not None and self.statistics[2] == 0:
-                # An unchunked file: its messages sit in the data section. (Its summary may
-                # still hold an empty Chunk Index group, as the mcap library writes one.)
+                self._walk_data(chunks=True, decode=True)
+            elif (not self._metadata and not self._metadata_at) or (
+                self.statistics is not None and self.statistics[2] == 0
+            ):
+                # No Metadata Index (an optional summary group), or an unchunked file (its
+                # summary may still hold an empty Chunk Index group, as the mcap library
+                # writes one): the metadata records or the messages are in the data section.
                 self._walk_data(chunks=False)
 
     @property
@@ -152,7 +151,7 @@ class McapFile:
         starts = self.chunk_table()[0]
         start, end, chunk_count, counts = self.statistics
         topics = self.topics
-        if not self._statistics_hold or chunk_count != len(starts):
+        if chunk_count != len(starts):
             return None
         if any(cid not in topics for cid in counts):
             return None  # channels only inside chunks: the counts cannot be named
@@ -302,44 +301,12 @@ class McapFile:
         self.profile = profile
         return int(pos + 9 + length)
 
-    def _scan(self) -> None:
-        """Walk every record after the header; stop at the first incomplete one."""
-        rows: list[tuple[int, int, int]] = []
-        data = self._data
-        pos = self._parse_header(8) or len(data)
-        end = len(data)
-        while pos + 9 <= end:
-            opcode, length = RECORD_HEADER.unpack_from(data, pos)
-            body = pos + 9
-            if length > self.limits.max_record_bytes or body + length > end:
-                break  # a record cut short by the crash: everything before it is kept
-            if opcode == OP_SCHEMA:
-                self._parse_schema(body)
-            elif opcode == OP_CHANNEL:
-                self._parse_channel(body)
-            elif opcode == OP_METADATA:
-                self._parse_metadata(body)
-            elif opcode == OP_CHUNK:
-                start, stop = struct.unpack_from("<QQ", data, body)
-                damage = self._chunk_damage(pos)
-                if damage is None:
-                    rows.append((start, stop, pos))
-                else:
-                    # Kept in the table (its time range says where the damage is), but
-                    # read as empty; the scan goes on to the next complete record.
-                    rows.append((start, stop, pos))
-                    self._skip_chunk(pos, damage)
-            elif opcode == OP_MESSAGE:
-                self._loose.append(self._parse_message(body, length, data))
-            elif opcode in (OP_DATA_END, OP_FOOTER):
-                break
-            pos = body + length
-        self._set_table(rows)
-
-    def _walk_data(self, *, chunks: bool) -> None:
-        """Walk the data section's records of a finished file without decoding a chunk: the
-        messages written outside chunks, the metadata when no index names it, and (with
-        ``chunks``) every chunk's place and time range. Damage is found when a chunk is read."""
+    def _walk_data(self, *, chunks: bool, decode: bool = False) -> None:
+        """Walk the data section's records, stopping at the first incomplete one (a record a
+        crash cut short: everything before it is kept): the messages written outside chunks,
+        the metadata when no index names it, and (with ``chunks``) every chunk's place and
+        time range. ``decode`` (a file without a summary) decodes each chunk met, so that
+        damage is known before the table is used; otherwise it is found when a chunk is read."""
         data = self._data
         rows: list[tuple[int, int, int]] = []
         want_metadata = not self._metadata and not self._metadata_at
@@ -354,7 +321,12 @@ class McapFile:
                 self._loose.append(self._parse_message(body, length, data))
             elif opcode == OP_CHUNK and chunks:
                 start, stop = struct.unpack_from("<QQ", data, body)
+                # A damaged chunk stays in the table (its time range says where the damage
+                # is) but reads as empty; the walk goes on to the next complete record.
                 rows.append((start, stop, pos))
+                damage = self._chunk_damage(pos) if decode else None
+                if damage is not None:
+                    self._skip_chunk(pos, damage)
             elif opcode == OP_SCHEMA:
                 self._parse_schema(body)
             elif opcode == OP_CHANNEL:
@@ -447,8 +419,6 @@ class McapFile:
             self._set_table([])  # no chunks, says the summary; loose messages were walked
             return
         self._walk_data(chunks=True)
-        if expected is not None and expected != len(self._table[0] if self._table else ()):
-            self._statistics_hold = False
 
     def _note(self, text: str) -> None:
         self.notes.append(text)
@@ -458,15 +428,19 @@ class McapFile:
         """Why Chunk Index rows do not describe this file's chunks (None when they do)."""
         if expected is not None and len({r[2] for r in rows}) != expected:
             return f"{len(rows)} of them for the {expected} chunks its Statistics count"
-        data, unpack = self._data, struct.unpack_from
         for start, stop, offset in rows:
-            if (
-                offset + 25 > len(data)
-                or data[offset] != OP_CHUNK
-                or unpack("<QQ", data, offset + 9) != (start, stop)
-            ):
+            if not self._chunk_at(offset, start, stop):
                 return f"the one for offset {offset} does not point at a chunk of its times"
         return None
+
+    def _chunk_at(self, offset: int, start_ns: int, end_ns: int) -> bool:
+        """Whether a chunk record with this time range starts at ``offset``."""
+        data = self._data
+        return (
+            offset + 25 <= len(data)
+            and data[offset] == OP_CHUNK
+            and struct.unpack_from("<QQ", data, offset + 9) == (start_ns, end_ns)
+        )
 
     def _set_table(self, rows: list[tuple[int, int, int]]) -> None:
         # Sorted by start time for seeks; chunks that start together stay in file order.
@@ -509,13 +483,11 @@ class McapFile:
         if any(b <= a for a, b in itertools.pairwise(sample)):
             return "its chunks are not in file order"
         for i in places:
-            at = offsets[i]
-            if (
-                at + 25 > len(data)
-                or data[at] != OP_CHUNK
-                or struct.unpack_from("<QQ", data, at + 9) != (column[i], column[count + i])
-            ):
-                return f"no chunk of the times it lists at offset {at} (a copy of another file's)"
+            if not self._chunk_at(offsets[i], column[i], column[count + i]):
+                return (
+                    f"no chunk of the times it lists at offset {offsets[i]} (a copy of "
+                    "another file's)"
+                )
         self._table = (column[:count], column[count : 2 * count], offsets)
         # Our writer's own table: written in file order, one chunk per batch in time order.
         self._ends_sorted = self._starts_in_file_order = True
@@ -659,9 +631,7 @@ class McapFile:
         """(first, last) log time from the chunks' time ranges and the loose messages, without
         decoding a chunk (0, 0 for a file that holds no message)."""
         starts, ends, _offsets = self.chunk_table()
-        times = [*ends, *(m.log_time_ns for m in self.loose)]
-        if starts:
-            times.append(min(starts))
+        times = [*starts, *ends, *(m.log_time_ns for m in self.loose)]
         return min(times, default=0), max(times, default=0)
 
     def channel_counts(self) -> tuple[int, int, int, dict[str, int]]:
@@ -669,11 +639,9 @@ class McapFile:
         trusted = self.trusted_statistics()
         if trusted is not None:
             return trusted
-        starts, ends, _offsets = self.chunk_table()
         channels: dict[str, int] = {}
-        times: list[int] = [*starts, *ends]
         for messages in self.iter_chunk_messages(None, None, reverse=False):
             for msg in messages:
                 channels[msg.topic] = channels.get(msg.topic, 0) + 1
-        times += (m.log_time_ns for m in self.loose)
-        return min(times, default=0), max(times, default=0), len(starts), channels
+        start, end = self.time_range()
+        return start, end, len(self.chunk_table()[0]), channels

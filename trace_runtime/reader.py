@@ -98,7 +98,7 @@ class Segment(McapFile):
             self.start_ns, self.end_ns = self.info.start_ns, self.info.end_ns
             if self.live:
                 log.info("%s: being written; read up to its last complete chunk", self.path)
-            elif not self.finished:
+            else:
                 log.warning(
                     RECOVERED_WARNING,
                     self.path,

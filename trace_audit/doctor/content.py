@@ -38,6 +38,9 @@ CHECKPOINT_GAP_NS = 20_000_000_000
 """Checkpoints further apart than this in log time are noted (PROFILE section 6: a
 checkpoint every 10 s, with room for a writer that checkpoints after its batch)."""
 
+_OUTSIDE_CHUNKS = -1
+"""The chunk key of every message written outside chunks: they are one stretch of the file."""
+
 _STRING = re.compile(rb'"(?:[^"\\]|\\.)*"')
 _WHITESPACE = re.compile(rb"[ \t\r\n]")
 _MAX_DEPTH_TEXT = "JSON nested too deep"
@@ -102,7 +105,7 @@ class CycleCheck:
         self.window = SensorWindow(DEFAULT_SENSOR_WINDOW)
         self.checkpoints: list[tuple[int, bool]] = []  # (t_ns, final)
         self.first_t: int | None = None
-        self._in_chunk = True
+        self._chunk = 0  # the chunk of the message being checked (_OUTSIDE_CHUNKS: none)
 
     def damage(self) -> None:
         """A chunk did not decode: do not join the cycles on either side of it."""
@@ -112,7 +115,7 @@ class CycleCheck:
     def message(self, topic: str, message: Message, offset: int, *, in_chunk: bool = True) -> None:
         """Check one message; ``offset`` locates it (its chunk's, or its own when it was
         written outside chunks: ``in_chunk`` False, and no chunk boundary is crossed)."""
-        self._in_chunk = in_chunk
+        self._chunk = offset if in_chunk else _OUTSIDE_CHUNKS
         self.report.messages += 1
         if topic == SUMMARY_TOPIC:
             self.report.summarised += 1
@@ -156,8 +159,7 @@ class CycleCheck:
         self.open.sensors.append(
             RawMessage(topic, message.sequence, message.log_time, message.data)
         )
-        if self._in_chunk:
-            self.open.chunks.add(offset)
+        self.open.chunks.add(self._chunk)
 
     def _stamp(
         self, topic: str, value: dict[str, Any], message: Message, offset: int
@@ -197,8 +199,7 @@ class CycleCheck:
                 "one-per-cycle", f"two {topic} messages in one cycle", cycle=stamp[0], offset=offset
             )
         current.layers[topic] = value
-        if self._in_chunk:
-            current.chunks.add(offset)
+        current.chunks.add(self._chunk)
 
     def _same_cycle(self, topic: str, stamp: tuple[int, int], offset: int) -> None:
         current = self.open
@@ -217,8 +218,7 @@ class CycleCheck:
     def _seal(self, stamp: tuple[int, int], offset: int) -> None:
         self._same_cycle(TOPIC_SEAL, stamp, offset)
         current = self.open
-        if self._in_chunk:
-            current.chunks.add(offset)
+        current.chunks.add(self._chunk)
         cycle, t_ns = stamp
         if self.first_t is None:
             self.first_t = t_ns
