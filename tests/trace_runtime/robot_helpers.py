@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
 import textwrap
+from collections.abc import Iterator
 from pathlib import Path
 
 from trace_runtime import AuditLogger
@@ -45,3 +47,21 @@ def spawn(script: str, *args: str) -> subprocess.Popen[str]:
         text=True,
         env=env,
     )
+
+
+@contextlib.contextmanager
+def lock_holder(root: Path, cycles: int) -> Iterator[subprocess.Popen[str]]:
+    """``LOCK_HOLDER`` logging ``cycles`` into ``root``, once it has said ``ready``; killed
+    (when still alive) and its pipes closed on the way out."""
+    proc = spawn(LOCK_HOLDER, str(root), str(cycles))
+    try:
+        assert proc.stdout is not None
+        assert proc.stdout.readline().strip() == "ready", proc.stderr
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+        for stream in (proc.stdout, proc.stderr):
+            if stream is not None:
+                stream.close()

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from tests.outside import cli
-from tests.trace_runtime.robot_helpers import LOCK_HOLDER, log_cycles, spawn
+from tests.trace_runtime.robot_helpers import lock_holder, log_cycles
 from trace_runtime import AuditLogger, LoggerConfig, live_writers, open_log
 from trace_runtime.testing import simulate_crash
 
@@ -25,10 +25,7 @@ def test_a_robot_logging_in_another_process_is_live_and_after_kill_9_recovered(
     tmp_path: Path,
 ) -> None:
     root = tmp_path / "root"
-    robot = spawn(LOCK_HOLDER, str(root), "20")
-    try:
-        assert robot.stdout is not None
-        assert robot.stdout.readline().strip() == "ready", robot.stderr
+    with lock_holder(root, 20) as robot:
         live = _info(root)
         assert live["live"] is True and live["recovered"] is False
         verified = cli("verify", root, "--json")
@@ -44,13 +41,6 @@ def test_a_robot_logging_in_another_process_is_live_and_after_kill_9_recovered(
             assert "live: the log is being written" in shown, command
         robot.send_signal(signal.SIGKILL)
         robot.wait(10)
-    finally:
-        if robot.poll() is None:
-            robot.kill()
-            robot.wait(10)
-        for stream in (robot.stdout, robot.stderr):
-            if stream is not None:
-                stream.close()
     dead = _info(root)
     assert dead["live"] is False and dead["recovered"] is True
     assert dead["cycles"] == 20  # every cycle logged before the kill survived

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.trace_runtime.robot_helpers import LOCK_HOLDER, log_cycles, spawn
+from tests.trace_runtime.robot_helpers import lock_holder, log_cycles
 from trace_runtime import AuditLogger, LoggerConfig, open_log
 from trace_runtime.errors import LogLockedError, UnsafePathError
 
@@ -60,21 +60,11 @@ def test_two_robots_on_one_root_are_independent(tmp_path: Path) -> None:
 
 def test_a_live_process_holds_the_lock_and_kill_9_releases_it(tmp_path: Path) -> None:
     root = tmp_path / "root"
-    holder = spawn(LOCK_HOLDER, str(root), "5")
-    try:
-        assert holder.stdout is not None
-        assert holder.stdout.readline().strip() == "ready", holder.stderr
+    with lock_holder(root, 5) as holder:
         with pytest.raises(LogLockedError, match=f"pid {holder.pid}"):
             AuditLogger(root, robot_id="r", config=LoggerConfig(threaded=False))
         holder.send_signal(signal.SIGKILL)
         holder.wait(10)
-    finally:
-        if holder.poll() is None:
-            holder.kill()
-            holder.wait(10)
-        for stream in (holder.stdout, holder.stderr):
-            if stream is not None:
-                stream.close()
     # The kernel released the lock with the process: no stale lock, and the chain goes on.
     logger = AuditLogger(root, robot_id="r", config=LoggerConfig(threaded=False))
     log_cycles(logger, range(5, 8))
