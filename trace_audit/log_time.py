@@ -1,20 +1,35 @@
-"""Times as the investigator takes them: integer ns in the log's clock, or CLI text.
+"""Times as the investigator takes and shows them: integer ns in the log's clock, or text.
 
 The library takes integer nanoseconds in the log's own clock (``t_ns``). At the CLI a time
 is seconds in that clock (``12.3`` means t_ns = 12_300_000_000); ``+12.3`` means 12.3 s
-after the log's first record. ``TimePoint.parse`` reads both and ``resolve_time`` turns any
-of them into ``t_ns`` for a given log, so every command reads times the same way.
+after the log's first record; on a wall clock (``trace_runtime.clock.is_wall_clock``) an
+ISO 8601 time (``2026-05-04T06:04:25.9Z``, or with an offset, ``+02:00``) names the moment.
+``TimePoint.parse`` reads all three and ``resolve_time`` turns any of them into ``t_ns`` for
+a given log, so every command reads times the same way.
+
+``LogClock`` is the other direction: a time as a person reads it (ISO UTC and seconds since
+the log's start on a wall clock, seconds otherwise), and as a command line takes it back
+exactly (``LogClock.arg``: every printed command names the same nanosecond).
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
 from decimal import Decimal, InvalidOperation
 
+from trace_runtime.clock import is_wall_clock
 from trace_runtime.errors import UsageError
 from trace_runtime.logset import Log
 
-__all__ = ["TimeArg", "TimePoint", "resolve_time"]
+__all__ = ["LogClock", "TimeArg", "TimePoint", "exact_seconds", "resolve_time"]
+
+_ISO = re.compile(
+    r"(\d{4}-\d{2}-\d{2})[T ](\d{2}):(\d{2})(?::(\d{2})(?:[.,](\d{1,9}))?)?"
+    r"(Z|[+-]\d{2}:?\d{2})?"
+)
+_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 
 
 @dataclass(frozen=True, slots=True)
@@ -23,11 +38,16 @@ class TimePoint:
 
     ns: int
     relative: bool = False
+    wall: bool = False
+    """Given as an ISO 8601 time: ``ns`` since the Unix epoch, for a wall-clock log only."""
 
     @classmethod
     def parse(cls, text: str) -> TimePoint:
-        """Read ``12.3``, ``12.3s`` or ``+12.3`` (relative to the log start); UsageError else."""
+        """Read ``12.3``, ``12.3s``, ``+12.3`` (relative to the log start) or an ISO 8601
+        time; UsageError else."""
         raw = text.strip()
+        if _ISO.fullmatch(raw):
+            return cls(_iso_ns(raw), wall=True)
         relative = raw.startswith("+")
         number = raw[1:] if relative else raw
         number = number[:-1] if number.endswith("s") else number
@@ -37,14 +57,88 @@ class TimePoint:
             seconds = Decimal("NaN")
         if not seconds.is_finite() or seconds < 0 or number.strip() != number or not number:
             raise UsageError(
-                f"invalid time {text!r}: give seconds in the log's clock (e.g. 12.3) "
-                "or +seconds after the log start (e.g. +5)"
+                f"invalid time {text!r}: give seconds in the log's clock (e.g. 12.3), "
+                "+seconds after the log start (e.g. +5) or, on a wall clock, an ISO 8601 "
+                "time (e.g. 2026-05-04T06:04:25Z)"
             )
         return cls(int(seconds * 1_000_000_000), relative)
 
     def resolve(self, log: Log) -> int:
         """This time as ``t_ns`` in ``log``'s clock."""
+        if self.wall and not is_wall_clock(log.clock, log.start_ns):
+            raise UsageError(
+                f"this log's clock ({log.clock!r}) counts seconds from its own start, not the "
+                "time of day: give seconds (e.g. 12.3) or +seconds after the log start"
+            )
         return log.start_ns + self.ns if self.relative else self.ns
+
+
+def _iso_ns(text: str) -> int:
+    """Nanoseconds since the Unix epoch of an ISO 8601 time (UTC when no offset is given)."""
+    found = _ISO.fullmatch(text)
+    assert found is not None
+    day, hour, minute, second, fraction, zone = found.groups()
+    try:
+        moment = datetime.fromisoformat(f"{day}T{hour}:{minute}:{second or '00'}")
+    except ValueError as err:
+        raise UsageError(f"invalid time {text!r}: {err}") from None
+    offset = timedelta(0)
+    if zone and zone != "Z":
+        digits = zone[1:].replace(":", "")
+        offset = timedelta(hours=int(digits[:2]), minutes=int(digits[2:]))
+        offset = -offset if zone[0] == "-" else offset
+    whole = (moment.replace(tzinfo=UTC) - offset - _EPOCH) // timedelta(seconds=1)
+    return whole * 1_000_000_000 + int((fraction or "0").ljust(9, "0"))
+
+
+def exact_seconds(t_ns: int) -> str:
+    """``t_ns`` as seconds with every nanosecond kept (``1777874664.9``): the text
+    ``TimePoint.parse`` reads back to the same ``t_ns``, never rounded like ``:.9g``."""
+    sign, t_ns = ("-", -t_ns) if t_ns < 0 else ("", t_ns)
+    whole, part = divmod(t_ns, 1_000_000_000)
+    fraction = f"{part:09d}".rstrip("0")
+    return f"{sign}{whole}.{fraction}" if fraction else f"{sign}{whole}"
+
+
+@dataclass(frozen=True, slots=True)
+class LogClock:
+    """How a log's times are shown to a person and given back on a command line.
+
+    ``name`` is the segments' ``clock``; ``start_ns`` the log's first time. On a wall clock a
+    time reads ``2026-05-04T06:04:25.900Z (+265.000 s)``: the UTC moment and the seconds
+    since the log's start; on any other clock, ``265.000 s``."""
+
+    name: str
+    start_ns: int
+
+    @classmethod
+    def of(cls, log: Log) -> LogClock:
+        return cls(log.clock, log.start_ns)
+
+    @property
+    def wall(self) -> bool:
+        return is_wall_clock(self.name, self.start_ns)
+
+    def show(self, t_ns: int) -> str:
+        """A time as people read it, to the millisecond."""
+        if not self.wall:
+            return f"{t_ns / 1e9:.3f} s"
+        return f"{self.iso(t_ns, digits=3)} (+{(t_ns - self.start_ns) / 1e9:.3f} s)"
+
+    def iso(self, t_ns: int, *, digits: int = 9) -> str:
+        """The UTC moment of a wall-clock time, with ``digits`` decimals of the second
+        (trailing zeros dropped when ``digits`` is 9, so the text is exact but short)."""
+        whole, part = divmod(t_ns, 1_000_000_000)
+        moment = (_EPOCH + timedelta(seconds=whole)).strftime("%Y-%m-%dT%H:%M:%S")
+        fraction = f"{part:09d}"[:digits]
+        if digits == 9:
+            fraction = fraction.rstrip("0")
+        return f"{moment}.{fraction}Z" if fraction else f"{moment}Z"
+
+    def arg(self, t_ns: int) -> str:
+        """The text a command line takes back to exactly ``t_ns``: ISO on a wall clock,
+        seconds otherwise."""
+        return self.iso(t_ns) if self.wall else exact_seconds(t_ns)
 
 
 TimeArg = TimePoint | int | str | None

@@ -370,8 +370,38 @@ class Log:
 
     @property
     def robots(self) -> list[str]:
-        """The robots whose segments make up the log, sorted."""
-        return sorted({s.session.robot_id for s in self.segments})
+        """The robots whose segments make up the log, sorted (known without opening a
+        catalogued segment)."""
+        return sorted({_robot_of(s) for s in self._slots})
+
+    def of_robots(self, robots: Sequence[str]) -> Log:
+        """The log cut to these robots' segments (the log itself when it holds no other).
+
+        ``UsageError`` names the robots the log holds when one asked for is not among them."""
+        held = self.robots
+        missing = [r for r in robots if r not in held]
+        if missing:
+            raise UsageError(
+                f"robot {', '.join(missing)} is not in this log; it holds {', '.join(held)}"
+            )
+        if set(held) <= set(robots):
+            return self
+        cut = self._of_run([s for s in self._slots if _robot_of(s) in robots])
+        cut.shadowed = [s for s in self.shadowed if s.session.robot_id in robots]
+        # A file that did not open is kept unless its name says it is another robot's.
+        cut.problems = [
+            p
+            for p in self.problems
+            if (named := parse_segment_name(p.path.name)) is None or named[0] in robots
+        ]
+        return cut
+
+    @property
+    def clock(self) -> str:
+        """The clock behind the log's times (``SessionInfo.clock``) as its earliest segment
+        names it; ``trace_runtime.clock.is_wall_clock`` says whether it tells the time of
+        day. One robot's segments share a clock; so do a fleet's, as a rule."""
+        return _opened(min(self._timed, key=lambda s: s.start_ns)).session.clock
 
     @property
     def first_robot(self) -> str:
@@ -448,9 +478,18 @@ class Log:
         return self._live
 
     def iter_cycles(
-        self, start_ns: int | None = None, end_ns: int | None = None, *, reverse: bool = False
+        self,
+        start_ns: int | None = None,
+        end_ns: int | None = None,
+        *,
+        reverse: bool = False,
+        robot: str | None = None,
     ) -> Iterator[Cycle]:
-        """Every cycle in time order across segments (or newest first)."""
+        """Every cycle in time order across segments (or newest first); ``robot``: only that
+        robot's (``of_robots`` says which robots there are)."""
+        if robot is not None:
+            yield from self.of_robots([robot]).iter_cycles(start_ns, end_ns, reverse=reverse)
+            return
         slots = [
             s
             for s in self._slots

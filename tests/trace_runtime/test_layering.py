@@ -182,7 +182,7 @@ FLOORS: dict[str, list[set[str]]] = {
     "trace_audit": [
         # what every question needs: times, sources, a cycle's fields, JSON, evidence
         {
-            "jsonout", "log_time", "log_source", "cycle_fields", "log_gaps", "sensor_window",
+            "jsonout", "log_time", "selection", "log_source", "cycle_fields", "log_gaps", "sensor_window",
             "evidence",
         },
         # views over one decision: its causal graph and its chains
