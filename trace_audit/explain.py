@@ -27,8 +27,9 @@ from trace_audit.cycle_fields import command_of
 from trace_audit.evidence import ExternalEvidence, describe_refs, open_recordings
 from trace_audit.jsonout import OMIT_EMPTY
 from trace_audit.log_source import LogSource, as_log, require_cycles
-from trace_audit.log_time import TimeArg, resolve_time
+from trace_audit.log_time import LogClock, TimeArg, resolve_time
 from trace_audit.metrics import MetricsConfig, dr_problems, trust_score
+from trace_audit.selection import Selection, robot_at, robot_with_cycle
 from trace_runtime.chain import GENESIS, digest
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
@@ -128,6 +129,8 @@ class Explanation:
     robot: str
     log_start_ns: int
     log_end_ns: int
+    clock: str
+    """The clock behind the times (``SessionInfo.clock``; ``log_time.LogClock`` shows them)."""
     recovered: bool
     query_t_ns: int | None
     query_cycle: int | None
@@ -152,6 +155,11 @@ class Explanation:
     live: bool | None = field(default=None, metadata={OMIT_EMPTY: True})
     """True when a segment of the log is being written right now (its logger holds the
     lock); None otherwise, and then left out of the JSON."""
+
+    @property
+    def log_clock(self) -> LogClock:
+        """How this log's times are shown (``log_time.LogClock``)."""
+        return LogClock(self.clock, self.log_start_ns)
 
     @property
     def stale(self) -> bool:
@@ -198,11 +206,15 @@ def explain(
     lookback_s: float = DEFAULT_LOOKBACK_S,
     sensor_window: int = DEFAULT_SENSOR_WINDOW,
     evidence: Sequence[str | Path] = (),
+    robots: Sequence[str] = (),
 ) -> Explanation:
     """Explain the decision in force at ``t`` (or cycle number ``cycle``) in a log.
 
     ``evidence``: external recordings (MCAP files, rosbag2 directories) whose messages the
-    decision's evidence refs may name; they are resolved, digest-checked and decoded."""
+    decision's evidence refs may name; they are resolved, digest-checked and decoded.
+    ``robots``: look only at these robots' decisions. On a log of several robots the time
+    (or cycle number) must name one robot's decision (``selection.robot_at``): otherwise
+    ``SeveralRobotsError`` names the robots that have one."""
     if (t is None) == (cycle is None):
         raise UsageError("give exactly one of a time (--t) or a cycle number (--cycle)")
     if lookback_s < 0:
@@ -216,6 +228,7 @@ def explain(
             lookback_s=lookback_s,
             sensor_window=sensor_window,
             evidence=evidence,
+            selection=Selection(tuple(robots)),
         )
 
     try:
@@ -233,9 +246,11 @@ def _explain(
     lookback_s: float,
     sensor_window: int,
     evidence: Sequence[str | Path],
+    selection: Selection,
 ) -> Explanation:
+    log = selection.of(log)
     require_cycles(log)
-    t_ns, target, offset = _find_target(log, t, cycle)
+    t_ns, log, target, offset = _find_target(log, t, cycle)
     whole, log = log, log.clock_run(target.segment)
     decision = read_decision(target)
     recordings = open_recordings(evidence)
@@ -261,6 +276,7 @@ def _explain(
         robot=log.first_robot,
         log_start_ns=whole.start_ns,
         log_end_ns=whole.end_ns,
+        clock=whole.clock,
         recovered=whole.recovered,
         live=whole.live or None,
         query_t_ns=t_ns,
@@ -281,15 +297,19 @@ def _explain(
     )
 
 
-def _find_target(log: Log, t: TimeArg, cycle: int | None) -> tuple[int | None, Cycle, int]:
-    """(the query time in ns or None, the decision in force then or with that number, the
-    query time - decision time)."""
+def _find_target(
+    log: Log, t: TimeArg, cycle: int | None
+) -> tuple[int | None, Log, Cycle, int]:
+    """(the query time in ns or None, the log of the robot that decided, the decision in
+    force then or with that number, the query time - decision time)."""
     t_ns = resolve_time(t, log)
     if t_ns is not None:
+        log = robot_at(log, t_ns)
         target = log.cycle_at(t_ns)
-        return t_ns, target, t_ns - target.t_ns
+        return t_ns, log, target, t_ns - target.t_ns
     assert cycle is not None
-    return None, find_cycle(log, cycle), 0
+    log, target = robot_with_cycle(log, cycle, find_cycle)
+    return None, log, target, 0
 
 
 def _chains_and_back(

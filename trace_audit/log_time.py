@@ -67,8 +67,8 @@ class TimePoint:
         """This time as ``t_ns`` in ``log``'s clock."""
         if self.wall and not is_wall_clock(log.clock, log.start_ns):
             raise UsageError(
-                f"this log's clock ({log.clock!r}) counts seconds from its own start, not the "
-                "time of day: give seconds (e.g. 12.3) or +seconds after the log start"
+                f"this log's times are seconds on its own clock ({log.clock!r}), not times of "
+                "day: give seconds (e.g. 12.3) or +seconds after the log start"
             )
         return log.start_ns + self.ns if self.relative else self.ns
 

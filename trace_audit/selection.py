@@ -19,7 +19,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from trace_audit.log_time import TimeArg, resolve_time
+from trace_audit.log_time import LogClock, TimeArg, resolve_time
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
 from trace_runtime.logset import Log
@@ -33,10 +33,10 @@ _CycleFinder = Callable[[Log, int], Cycle]
 class SeveralRobotsError(UsageError):
     """A question about one decision reached decisions of several robots (exit 2)."""
 
-    def __init__(self, robots: Sequence[str], where: str) -> None:
+    def __init__(self, robots: Sequence[str], what: str) -> None:
         self.robots = tuple(robots)
         super().__init__(
-            f"{len(self.robots)} robots have a decision {where}: {', '.join(self.robots)}; "
+            f"{len(self.robots)} robots have {what}: {', '.join(self.robots)}; "
             "choose one with --robot"
         )
 
@@ -83,7 +83,8 @@ def robot_at(log: Log, t_ns: int) -> Log:
     if not having:
         raise TimeOutOfRangeError(t_ns, log.start_ns, log.end_ns)
     if len(having) > 1:
-        raise SeveralRobotsError([r.first_robot for r in having], "in force at that time")
+        when = LogClock.of(log).show(t_ns)
+        raise SeveralRobotsError([r.first_robot for r in having], f"a decision in force at {when}")
     return having[0]
 
 
@@ -103,7 +104,7 @@ def robot_with_cycle(log: Log, number: int, find: _CycleFinder) -> tuple[Log, Cy
         return found[0]
     if not found:
         raise UsageError(f"cycle {number} is in none of this log's robots ({_names(log)})")
-    raise SeveralRobotsError([r.first_robot for r, _ in found], f"numbered cycle {number}")
+    raise SeveralRobotsError([r.first_robot for r, _ in found], f"a cycle numbered {number}")
 
 
 def _names(log: Log) -> str:

@@ -14,7 +14,10 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
+
+if TYPE_CHECKING:
+    from trace_audit.log_time import LogClock
 
 __all__ = [
     "Block",
@@ -172,9 +175,10 @@ class Printout:
 # --- formats ---------------------------------------------------------------------------------
 
 
-def fmt_t(t_ns: int) -> str:
-    """A log time in seconds with millisecond precision."""
-    return f"{t_ns / 1e9:.3f} s"
+def fmt_t(t_ns: int, clock: LogClock | None = None) -> str:
+    """A log time to the millisecond: in seconds, or as ``clock`` shows it (ISO UTC and
+    seconds since the log's start on a wall clock)."""
+    return clock.show(t_ns) if clock is not None else f"{t_ns / 1e9:.3f} s"
 
 
 def fmt_duration(ns: int) -> str:

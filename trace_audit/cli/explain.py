@@ -21,6 +21,7 @@ from trace_audit.cli.options import (
     JsonOption,
     LogArgument,
     PlainOption,
+    RobotsOption,
     TimeOption,
     cycle_option,
 )
@@ -41,7 +42,9 @@ execution record, this decision's ET / ET_partial, whether its seal verifies, an
 when the action has held.
 
 The decision in force at t is the last cycle at or before t. A time outside the log's
-range is a usage error (exit 2) that names the range.
+range is a usage error (exit 2) that names the range. In a root of several robots, --robot
+names the robot; without it the time must name one robot's decision, or the command stops
+(exit 2) listing the robots that have one then.
 
 [bold]Examples[/bold]:
 
@@ -50,6 +53,8 @@ range is a usage error (exit 2) that names the range.
   trace-audit explain logs/amr-7/ --t +600 --plain
 
   trace-audit explain run.mcap --cycle 4242 --json
+
+  trace-audit explain fleet/ --robot amr-2 --t 2026-05-04T06:04:25Z
 """
 
 
@@ -58,6 +63,7 @@ def explain_command(  # noqa: PLR0917 - typer maps each parameter to an option
     log: LogArgument,
     t: TimeOption = None,
     cycle: Annotated[int | None, cycle_option("Explain")] = None,
+    robot: RobotsOption = None,
     lookback: Annotated[
         float,
         typer.Option(
@@ -73,7 +79,14 @@ def explain_command(  # noqa: PLR0917 - typer maps each parameter to an option
     from trace_audit.explain import explain
 
     result = guarded(
-        lambda: explain(log, t=t, cycle=cycle, lookback_s=lookback, evidence=evidence or ())
+        lambda: explain(
+            log,
+            t=t,
+            cycle=cycle,
+            lookback_s=lookback,
+            evidence=evidence or (),
+            robots=robot or (),
+        )
     )
     emit(result, lambda r: explain_doc(r, lookback), json_out=json_out, plain=plain)
 
@@ -81,7 +94,7 @@ def explain_command(  # noqa: PLR0917 - typer maps each parameter to an option
 def explain_doc(r: Explanation, lookback_s: float = 600.0) -> Doc:
     """The explain report as a document."""
     doc = Doc()
-    when = f"t={fmt_t(r.query_t_ns)}" if r.query_t_ns is not None else f"cycle {r.cycle}"
+    when = f"t={fmt_t(r.query_t_ns, r.log_clock)}" if r.query_t_ns is not None else f"cycle {r.cycle}"
     command = r.decision.command
     doc.title([f"{r.robot} at {when}: ", Seg(command or "no action logged", "bold yellow")])
     doc.fields(_decision_rows(r, lookback_s))
@@ -152,10 +165,10 @@ def _decision_rows(r: Explanation, lookback_s: float) -> list[tuple[str, Any]]:
 
 def _decided(r: Explanation) -> str:
     if r.query_t_ns is None:
-        return f"cycle {r.cycle} at {fmt_t(r.t_ns)}"
+        return f"cycle {r.cycle} at {fmt_t(r.t_ns, r.log_clock)}"
     if r.offset_ns == 0:
         return f"cycle {r.cycle}, decided exactly at the asked time"
-    return f"cycle {r.cycle} at {fmt_t(r.t_ns)}, {fmt_duration(r.offset_ns)} before the asked time"
+    return f"cycle {r.cycle} at {fmt_t(r.t_ns, r.log_clock)}, {fmt_duration(r.offset_ns)} before the asked time"
 
 
 def _clock_line(r: Explanation) -> Seg:
@@ -178,7 +191,7 @@ def _held_line(r: Explanation, lookback_s: float) -> Any:
     span = fmt_duration(r.t_ns - h.since_t_ns)
     if h.cycles <= 1 and h.bound == "change":
         return f"new at this cycle (before: {h.previous or '?'}, cycle {h.previous_cycle})"
-    base = f"since {fmt_t(h.since_t_ns)} (cycle {h.since_cycle}; {span}, {h.cycles} cycles)"
+    base = f"since {fmt_t(h.since_t_ns, r.log_clock)} (cycle {h.since_cycle}; {span}, {h.cycles} cycles)"
     if h.bound == "change":
         return f"{base}; before it: {h.previous or '?'} (cycle {h.previous_cycle})"
     if h.bound == "lookback":

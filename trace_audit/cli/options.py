@@ -30,6 +30,7 @@ __all__ = [
     "MemoryLimitOption",
     "PlainOption",
     "Recordings",
+    "RobotsOption",
     "RootArgument",
     "SchedulerOption",
     "SqlTimeoutOption",
@@ -99,7 +100,8 @@ TimeOption = Annotated[
     str | None,
     typer.Option(
         "--t",
-        help="Seconds in the log's clock (12.3), or seconds after the log start (+12.3).",
+        help="Seconds in the log's clock (12.3), seconds after the log start (+12.3), or on a "
+        "wall clock an ISO 8601 time (2026-05-04T06:04:25Z).",
         show_default=False,
     ),
 ]
@@ -115,6 +117,18 @@ def cycle_option(verb: str) -> Any:
 def action_option(help: str) -> Any:
     """``--action``: a command the robot logged, e.g. STOP."""
     return typer.Option("--action", help=help, show_default=False)
+
+
+RobotsOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--robot",
+        help="Only this robot's decisions (repeat for several). A log root of several robots "
+        "answers per robot without it.",
+        show_default=False,
+    ),
+]
+"""``--robot``, repeatable: the robots an investigating command reads (``selection``)."""
 
 
 def robot_option(help: str) -> Any:
