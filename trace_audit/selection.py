@@ -6,7 +6,8 @@ library select the same way:
 - ``Selection.robots`` (``--robot``, repeatable) cuts the log to those robots
   (``Log.of_robots``); none means every robot.
 - A question over time (``why``, ``timeline``, ``info``, ``metrics``) is answered per robot:
-  ``each_robot`` gives one log per selected robot, in order, and each answer names its robot.
+  ``each_robot`` gives one log per selected robot, in order, ``per_robot`` asks the question
+  of each, and each answer names its robot (``PerRobot`` holds them for a printer).
 - A question about one moment (``explain``, ``report``, ``export``) needs one decision:
   ``robot_at`` keeps the one robot with a decision in force at that time, or refuses
   (``SeveralRobotsError``) naming the robots that have one. Never a silent pick.
@@ -18,13 +19,24 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Generic, TypeVar
 
 from trace_audit.log_time import LogClock, TimeArg, resolve_time
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
 from trace_runtime.logset import Log
 
-__all__ = ["Selection", "SeveralRobotsError", "each_robot", "robot_at", "robot_with_cycle"]
+__all__ = [
+    "PerRobot",
+    "Selection",
+    "SeveralRobotsError",
+    "each_robot",
+    "per_robot",
+    "robot_at",
+    "robot_with_cycle",
+]
+
+Answer = TypeVar("Answer")
 
 _CycleFinder = Callable[[Log, int], Cycle]
 """Looks a cycle number up in one robot's log, raising ``UsageError`` when it is not there."""
@@ -64,6 +76,38 @@ def each_robot(log: Log) -> list[Log]:
     """One log per robot of ``log``, robots in order of name; ``[log]`` for one robot."""
     robots = log.robots
     return [log] if len(robots) == 1 else [log.of_robots([r]) for r in robots]
+
+
+@dataclass(frozen=True, slots=True)
+class PerRobot(Generic[Answer]):
+    """One question's answers over a log of several robots, one per robot, in order of name
+    (as JSON: ``{"path": ..., "robots": [answer, ...]}``, each answer naming its robot)."""
+
+    path: str
+    robots: tuple[Answer, ...]
+
+
+def per_robot(
+    log: Log,
+    ask: Callable[[Log], Answer],
+    *,
+    skip: type[Exception] | tuple[type[Exception], ...] = (),
+) -> list[Answer]:
+    """``ask`` of each robot's log (``each_robot``), in order of name.
+
+    A robot whose question raises ``skip`` (it has nothing to say: no cycle in the window,
+    never takes the action) is left out; when every robot is, the first one's error is
+    raised, so a question that no robot can answer fails as it would on one robot."""
+    answers: list[Answer] = []
+    first_error: Exception | None = None
+    for robot in each_robot(log):
+        try:
+            answers.append(ask(robot))
+        except skip as err:
+            first_error = first_error or err
+    if not answers and first_error is not None:
+        raise first_error
+    return answers
 
 
 def robot_at(log: Log, t_ns: int) -> Log:

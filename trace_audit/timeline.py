@@ -10,6 +10,7 @@ time) are reported as gaps between rows, not papered over.
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from trace_audit.causal import CounterfactualView, FactorValue, read_decision
@@ -17,7 +18,8 @@ from trace_audit.cycle_fields import command_of, execution_fields
 from trace_audit.jsonout import OMIT_EMPTY
 from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log, require_cycles
-from trace_audit.log_time import TimeArg, resolve_time
+from trace_audit.log_time import LogClock, TimeArg, resolve_time
+from trace_audit.selection import Selection, SeveralRobotsError
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import UsageError
 from trace_runtime.flags import split_flags
@@ -25,12 +27,15 @@ from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap
 from trace_runtime.logset import Log
 
 __all__ = [
+    "ActionNotTakenError",
     "ClockRun",
     "Gap",
     "Timeline",
     "TimelineRow",
     "Transition",
     "WhyResult",
+    "WindowOutsideLogError",
+    "one_robot",
     "timeline",
     "why",
 ]
@@ -106,6 +111,12 @@ class Timeline:
     gaps of each run are its own (a run's first row is no decision change). Empty else."""
     live: bool | None = field(default=None, metadata={OMIT_EMPTY: True})
     """True when a segment of the log is being written right now; left out of JSON else."""
+    clock: LogClock = LogClock("system", 0)
+    """The log's clock and first time: how its times are shown (``log_time.LogClock``)."""
+
+
+class WindowOutsideLogError(UsageError):
+    """The asked window holds none of the log's time."""
 
 
 def _window(log: Log, start: TimeArg, end: TimeArg) -> tuple[int, int]:
@@ -113,14 +124,25 @@ def _window(log: Log, start: TimeArg, end: TimeArg) -> tuple[int, int]:
     end_ns = resolve_time(end, log)
     lo = log.start_ns if start_ns is None else start_ns
     hi = log.end_ns if end_ns is None else end_ns
+    clock = LogClock.of(log)
     if hi < lo:
-        raise UsageError(f"the window ends before it starts ({lo / 1e9:.3f} s > {hi / 1e9:.3f} s)")
+        raise UsageError(f"the window ends before it starts ({clock.show(lo)} > {clock.show(hi)})")
     if lo > log.end_ns or hi < log.start_ns:
-        raise UsageError(
-            f"the window [{lo / 1e9:.3f} s, {hi / 1e9:.3f} s] does not overlap the log's "
-            f"range [{log.start_ns / 1e9:.3f} s, {log.end_ns / 1e9:.3f} s]"
+        raise WindowOutsideLogError(
+            f"the window [{clock.show(lo)}, {clock.show(hi)}] does not overlap the log's "
+            f"range [{clock.show(log.start_ns)}, {clock.show(log.end_ns)}]"
         )
     return lo, hi
+
+
+def one_robot(source: LogSource, robots: Sequence[str], what: str) -> Log:
+    """The log of the one robot a question over time reads (``robots`` selecting it when the
+    log holds several); ``SeveralRobotsError`` otherwise: ``selection.per_robot`` asks the
+    question of each robot."""
+    log = Selection(tuple(robots)).of(as_log(source))
+    if len(log.robots) > 1:
+        raise SeveralRobotsError(log.robots, what)
+    return log
 
 
 def timeline(
@@ -130,14 +152,16 @@ def timeline(
     end: TimeArg = None,
     every: bool = False,
     gap_tolerance: float = DEFAULT_GAP_TOLERANCE,
+    robots: Sequence[str] = (),
 ) -> Timeline:
-    """A row per decision change (per cycle with ``every``) between ``start`` and ``end``."""
-    log = as_log(source)
+    """A row per decision change (per cycle with ``every``) between ``start`` and ``end``.
+
+    One robot's: ``robots`` selects it in a log of several (``selection.per_robot`` gives
+    each robot's timeline). ``WindowOutsideLogError`` when the window misses the log."""
+    log = one_robot(source, robots, "decisions in this log")
     require_cycles(log)
     lo, hi = _window(log, start, end)
     runs = log.clock_runs()
-    if len({run.first_robot for run in runs}) > 1:
-        runs = [log]  # several robots' runs do not line up: the log is one sequence
     rows: list[TimelineRow] = []
     gaps: list[Gap] = []
     counts: list[tuple[int, int, int | None, int | None]] = []
@@ -161,7 +185,7 @@ def timeline(
         if len(runs) > 1
         else ()
     )
-    robot = log.segments[0].session.robot_id
+    robot = log.first_robot
     return Timeline(
         str(log.root),
         robot,
@@ -175,6 +199,7 @@ def timeline(
         log.recovered,
         clock_runs,
         live=log.live or None,
+        clock=LogClock.of(log),
     )
 
 
@@ -297,6 +322,8 @@ class WhyResult:
     recovered: bool
     live: bool | None = field(default=None, metadata={OMIT_EMPTY: True})
     """True when a segment of the log is being written right now; left out of JSON else."""
+    clock: LogClock = LogClock("system", 0)
+    """The log's clock and first time: how its times are shown (``log_time.LogClock``)."""
 
 
 def _match(action: str, command: str | None) -> bool:
@@ -340,24 +367,35 @@ class _Run:
         )
 
 
+class ActionNotTakenError(UsageError):
+    """The robot never took the asked action (or not by the asked time)."""
+
+
 def _unknown_action(action: str, present: Counter[str]) -> UsageError:
     listed = ", ".join(f"{c} ({n})" for c, n in present.most_common()) or "none"
-    return UsageError(f"action {action!r} is never taken in this log; actions present: {listed}")
+    return ActionNotTakenError(
+        f"action {action!r} is never taken in this log; actions present: {listed}"
+    )
 
 
-def why(source: LogSource, action: str, *, t: TimeArg = None) -> WhyResult:
+def why(
+    source: LogSource, action: str, *, t: TimeArg = None, robots: Sequence[str] = ()
+) -> WhyResult:
     """Why the robot took ``action``: each transition into it with its logged reason.
 
     With ``t``, only the transition that led to the state at ``t`` (the latest one at or
     before ``t``). Without, every transition in the log. The action is matched without
-    regard to case. An action the log never shows raises ``UsageError`` naming those it does.
+    regard to case. An action the log never shows raises ``ActionNotTakenError`` naming
+    those it does. One robot's: ``robots`` selects it in a log of several
+    (``selection.per_robot`` asks each robot).
     """
     if not action.strip():
         raise UsageError("--action must name a command, e.g. STOP")
-    log = as_log(source)
+    log = one_robot(source, robots, "decisions in this log")
     require_cycles(log)
-    robot = log.segments[0].session.robot_id
+    robot = log.first_robot
     period = _period_ns(log)
+    clock = LogClock.of(log)
     t_ns = resolve_time(t, log)
     if t_ns is not None:
         log.cycle_at(t_ns)  # raises TimeOutOfRangeError outside the log, naming its range
@@ -368,9 +406,9 @@ def why(source: LogSource, action: str, *, t: TimeArg = None) -> WhyResult:
             if name is None:
                 raise _unknown_action(action, present)
             first = next(c for c in log.iter_cycles() if _match(action, command_of(c)))
-            raise UsageError(
-                f"{name} is not taken at or before t={t_ns / 1e9:.3f} s; it is first taken "
-                f"at t={first.t_ns / 1e9:.3f} s (cycle {first.cycle})"
+            raise ActionNotTakenError(
+                f"{name} is not taken at or before t={clock.show(t_ns)}; it is first taken "
+                f"at t={clock.show(first.t_ns)} (cycle {first.cycle})"
             )
         one = run.transition(period)
         return WhyResult(
@@ -382,6 +420,7 @@ def why(source: LogSource, action: str, *, t: TimeArg = None) -> WhyResult:
             {one.command: one.held_cycles},
             log.recovered,
             live=log.live or None,
+            clock=clock,
         )
     every, present = _all_transitions(log, action, period)
     if not every:
@@ -396,6 +435,7 @@ def why(source: LogSource, action: str, *, t: TimeArg = None) -> WhyResult:
         dict(present.most_common()),
         log.recovered,
         live=log.live or None,
+        clock=clock,
     )
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import shutil
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, TypeVar
 
@@ -108,6 +108,28 @@ def emit(
         print_json(result if to_json is None else to_json(result))
     else:
         show(to_doc(result), plain=plain)
+
+
+def emit_per_robot(
+    path: str,
+    answers: Sequence[R],
+    to_doc: Callable[[R], Doc],
+    *,
+    json_out: bool,
+    plain: bool,
+) -> None:
+    """A question's answers for each robot of a log (``selection.per_robot``): one answer
+    printed as on a one-robot log; several as one document, robot after robot, or as
+    ``{"path": ..., "robots": [...]}`` (``selection.PerRobot``)."""
+    if len(answers) == 1:
+        emit(answers[0], to_doc, json_out=json_out, plain=plain)
+        return
+    from trace_audit.selection import PerRobot
+
+    def each(fleet: PerRobot[R]) -> Doc:
+        return Doc([block for answer in fleet.robots for block in to_doc(answer).blocks])
+
+    emit(PerRobot(path, tuple(answers)), each, json_out=json_out, plain=plain)
 
 
 _HANDLER_NAME = "trace-audit stderr line"

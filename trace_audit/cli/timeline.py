@@ -12,10 +12,13 @@ import typer
 
 from trace_audit.cli.app import app, guarded, help_text
 from trace_audit.cli.doc import Column, Doc, Seg, fmt_duration, fmt_t, fmt_value
-from trace_audit.cli.options import JsonOption, LogArgument, PlainOption
-from trace_audit.cli.output import emit
+from trace_audit.cli.options import JsonOption, LogArgument, PlainOption, RobotsOption
+from trace_audit.cli.output import emit_per_robot
 
 if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
+    from collections.abc import Sequence
+    from pathlib import Path
+
     from trace_audit.timeline import ClockRun, Timeline
     from trace_runtime.gaps import Gap
 
@@ -26,7 +29,8 @@ factor and execution flags, and the gaps where no cycle was logged.
 
 Each row is a stretch of cycles with one command: when it began, how long it held, the
 leading factor (the first the rationale names) and the flags raised while it held.
---every gives a row per cycle instead.
+--every gives a row per cycle instead. In a root of several robots each robot's timeline
+is shown under its name (--robot selects robots).
 
 [bold]Examples[/bold]:
 
@@ -45,8 +49,8 @@ def timeline_command(  # noqa: PLR0917 - typer maps each parameter to an option
         str | None,
         typer.Option(
             "--from",
-            help="Start of the window (seconds, or +seconds after the log "
-            "start). Default: the log start.",
+            help="Start of the window (seconds, +seconds after the log start, or on a wall "
+            "clock an ISO 8601 time). Default: the log start.",
             show_default=False,
         ),
     ] = None,
@@ -57,19 +61,38 @@ def timeline_command(  # noqa: PLR0917 - typer maps each parameter to an option
         ),
     ] = None,
     every: Annotated[bool, typer.Option("--every", help="A row per cycle.")] = False,
+    robot: RobotsOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
-    from trace_audit.timeline import timeline
+    path, answers = guarded(lambda: _each_robot(log, start, end, every, robot or ()))
+    emit_per_robot(path, answers, timeline_doc, json_out=json_out, plain=plain)
 
-    result = guarded(lambda: timeline(log, start=start, end=end, every=every))
-    emit(result, timeline_doc, json_out=json_out, plain=plain)
+
+def _each_robot(
+    source: Path, start: str | None, end: str | None, every: bool, robots: Sequence[str]
+) -> tuple[str, list[Timeline]]:
+    """Each selected robot's timeline of the window (read in the clock of the robots
+    selected); a robot with no time in the window is left out."""
+    from trace_audit.log_source import as_log
+    from trace_audit.log_time import resolve_time
+    from trace_audit.selection import Selection, per_robot
+    from trace_audit.timeline import WindowOutsideLogError, timeline
+
+    log = Selection(tuple(robots)).of(as_log(source))
+    lo, hi = resolve_time(start, log), resolve_time(end, log)
+    answers = per_robot(
+        log,
+        lambda one: timeline(one, start=lo, end=hi, every=every),
+        skip=WindowOutsideLogError,
+    )
+    return str(log.root), answers
 
 
 def timeline_doc(r: Timeline) -> Doc:
     """The timeline as a document: one table, or one per run of the robot's clock."""
     doc = Doc()
-    doc.title(f"{r.robot}: {fmt_t(r.start_ns)} .. {fmt_t(r.end_ns)}")
+    doc.title(f"{r.robot}: {fmt_t(r.start_ns, r.clock)} .. {fmt_t(r.end_ns, r.clock)}")
     changes = r.changes
     doc.line(
         f"{r.cycles} cycles, {changes} decision change{'s' if changes != 1 else ''}, "
@@ -126,7 +149,7 @@ def _timeline_table(doc: Doc, r: Timeline, rows: list[Any], gaps: list[Gap]) -> 
                 row.t_ns,
                 0,
                 [
-                    f"{row.t_ns / 1e9:.3f}",
+                    _cell(r, row.t_ns),
                     str(row.cycle),
                     Seg(command, "bold yellow" if row.previous != row.command else ""),
                     f"{held} / {row.cycles}" if not r.every else held,
@@ -135,11 +158,11 @@ def _timeline_table(doc: Doc, r: Timeline, rows: list[Any], gaps: list[Gap]) -> 
             )
         )
     for gap in gaps:
-        events.append((gap.after_t_ns, 1, _gap_row(gap)))
+        events.append((gap.after_t_ns, 1, _gap_row(gap, _cell(r, gap.after_t_ns))))
     events.sort(key=lambda e: (e[0], e[1]))
     doc.table(
         [
-            Column("t (s)", "right"),
+            Column("t (UTC)" if r.clock.wall else "t (s)", "right"),
             Column("cycle", "right"),
             Column("decision"),
             Column("held / cycles" if not r.every else "held", "right"),
@@ -149,13 +172,22 @@ def _timeline_table(doc: Doc, r: Timeline, rows: list[Any], gaps: list[Gap]) -> 
     )
 
 
-def _gap_row(gap: Gap) -> list[Any]:
+def _cell(r: Timeline, t_ns: int) -> str:
+    """A row's time: seconds, or on a wall clock the UTC time of day (the whole ISO time
+    when the row falls on another day than the window's start)."""
+    if not r.clock.wall:
+        return f"{t_ns / 1e9:.3f}"
+    shown, start = r.clock.iso(t_ns, digits=3), r.clock.iso(r.start_ns, digits=3)
+    return shown[11:-1] if shown[:10] == start[:10] else shown
+
+
+def _gap_row(gap: Gap, when: str) -> list[Any]:
     """A timeline row for a gap: how long beyond the period, the cycles it would have held,
     and what the seal after it declares."""
     declared = gap.declared_dropped
     said = "" if declared is None else f", {declared} declared dropped by the seal after it"
     return [
-        f"{gap.after_t_ns / 1e9:.3f}",
+        when,
         "",
         Seg("GAP", "bold red"),
         fmt_duration(gap.gap_ns),

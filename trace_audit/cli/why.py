@@ -12,10 +12,20 @@ import typer
 
 from trace_audit.cli.app import EXIT_USAGE, app, fail, guarded, help_text
 from trace_audit.cli.doc import Doc, Seg, fmt_duration, fmt_t
-from trace_audit.cli.options import JsonOption, LogArgument, PlainOption, TimeOption, action_option
-from trace_audit.cli.output import emit
+from trace_audit.cli.options import (
+    JsonOption,
+    LogArgument,
+    PlainOption,
+    RobotsOption,
+    TimeOption,
+    action_option,
+)
+from trace_audit.cli.output import emit_per_robot
 
 if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
+    from collections.abc import Sequence
+    from pathlib import Path
+
     from trace_audit.timeline import WhyResult
 
 __all__ = ["why_command", "why_doc"]
@@ -27,6 +37,8 @@ For each: when, what it changed from, how long it held, the rationale, the facto
 their values (the leading one first), the counterfactuals and any execution flags. With
 --t, only the transition that led to the state at that time. ACTION is matched without
 regard to case; one the log never shows is a usage error (exit 2) listing those it does.
+In a root of several robots each robot's transitions are shown under its name (--robot
+selects robots).
 
 [bold]Examples[/bold]:
 
@@ -46,15 +58,35 @@ def why_command(  # noqa: PLR0917 - typer maps each parameter to an option
     all_: Annotated[
         bool, typer.Option("--all", help="Every transition in the log (the default without --t).")
     ] = False,
+    robot: RobotsOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
     if all_ and t is not None:
         fail("give either --t or --all, not both", EXIT_USAGE)
-    from trace_audit.timeline import why
+    path, answers = guarded(lambda: _why_each_robot(log, action, t, robot or ()))
+    emit_per_robot(path, answers, why_doc, json_out=json_out, plain=plain)
 
-    result = guarded(lambda: why(log, action, t=t))
-    emit(result, why_doc, json_out=json_out, plain=plain)
+
+def _why_each_robot(
+    source: Path, action: str, t: str | None, robots: Sequence[str]
+) -> tuple[str, list[WhyResult]]:
+    """Each selected robot's answer; a robot that never takes the action (or has no
+    decision at ``t``) is left out. ``t`` is read in the clock of the robots selected."""
+    from trace_audit.log_source import as_log
+    from trace_audit.log_time import resolve_time
+    from trace_audit.selection import Selection, per_robot
+    from trace_audit.timeline import ActionNotTakenError, why
+    from trace_runtime.errors import TimeOutOfRangeError
+
+    log = Selection(tuple(robots)).of(as_log(source))
+    t_ns = resolve_time(t, log)
+    answers = per_robot(
+        log,
+        lambda one: why(one, action, t=t_ns),
+        skip=(ActionNotTakenError, TimeOutOfRangeError),
+    )
+    return str(log.root), answers
 
 
 def why_doc(r: WhyResult) -> Doc:
@@ -62,7 +94,7 @@ def why_doc(r: WhyResult) -> Doc:
     doc = Doc()
     n = len(r.transitions)
     scope = (
-        f"in force at t={fmt_t(r.t_ns)}"
+        f"in force at t={fmt_t(r.t_ns, r.clock)}"
         if r.t_ns is not None
         else (f"{n} transition{'s' if n != 1 else ''}")
     )
@@ -72,7 +104,7 @@ def why_doc(r: WhyResult) -> Doc:
     elif r.live:
         doc.line("(live: the log is being written)")
     for i, tr in enumerate(r.transitions, 1):
-        doc.heading(f"#{i}  t={fmt_t(tr.t_ns)}  cycle {tr.cycle}")
+        doc.heading(f"#{i}  t={fmt_t(tr.t_ns, r.clock)}  cycle {tr.cycle}")
         before = (
             f"{tr.previous} (cycle {tr.previous_cycle})"
             if tr.previous is not None
@@ -85,7 +117,7 @@ def why_doc(r: WhyResult) -> Doc:
         if tr.ongoing:
             until = "and still holds at the end of the log"
         else:
-            until = f"until {fmt_t(tr.ended_t_ns or 0)}, then {tr.next_command or '?'}"
+            until = f"until {fmt_t(tr.ended_t_ns or 0, r.clock)}, then {tr.next_command or '?'}"
         rows: list[tuple[str, Any]] = [
             ("Changed from", before),
             ("Held", f"{held} ({tr.held_cycles} cycles) {until}"),
