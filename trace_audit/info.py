@@ -8,11 +8,14 @@ reads them all; ``scan=False`` answers from the summaries alone and says so.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from trace_audit.cycle_fields import seal_dropped
 from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log, require_cycles
+from trace_audit.log_time import LogClock
+from trace_audit.selection import Selection
 from trace_runtime.chain_writer import CLOSE_METADATA
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, CycleRange, Gap
 from trace_runtime.logset import Log
@@ -64,6 +67,8 @@ class LogInfo:
     dropped: int | None
     gaps: tuple[Gap, ...]
     """Gaps between each robot's sealed cycles, by the rule metrics uses for TC."""
+    clock: LogClock = LogClock("system", 0)
+    """The log's clock and first time: how its times are shown (``log_time.LogClock``)."""
 
     @property
     def duration_ns(self) -> int:
@@ -76,10 +81,16 @@ class LogInfo:
 
 
 def log_info(
-    source: LogSource, *, scan: bool = True, gap_tolerance: float = DEFAULT_GAP_TOLERANCE
+    source: LogSource,
+    *,
+    scan: bool = True,
+    gap_tolerance: float = DEFAULT_GAP_TOLERANCE,
+    robots: Sequence[str] = (),
 ) -> LogInfo:
-    """Describe a log; ``scan`` reads every seal to count dropped cycles and gaps."""
-    log = as_log(source)
+    """Describe a log (``robots``: only these robots' segments); ``scan`` reads every seal to
+    count dropped cycles and gaps. The CLI describes each robot of a root on its own
+    (``selection.per_robot``)."""
+    log = Selection(tuple(robots)).of(as_log(source))
     require_cycles(log)
     period = max((s.session.period_ns for s in log.segments), default=0)
     seen = _scan_seals(log, gap_tolerance) if scan else _Scanned({}, {}, None, [])
@@ -111,6 +122,7 @@ def log_info(
         scanned=scan,
         dropped=seen.dropped,
         gaps=tuple(seen.gaps),
+        clock=LogClock.of(log),
     )
 
 

@@ -13,10 +13,12 @@ import typer
 
 from trace_audit.cli.app import app, guarded, help_text
 from trace_audit.cli.doc import Column, Doc, Seg, fmt_duration, fmt_t
-from trace_audit.cli.options import JsonOption, LogArgument, PlainOption
-from trace_audit.cli.output import emit
+from trace_audit.cli.options import JsonOption, LogArgument, PlainOption, RobotsOption
+from trace_audit.cli.output import emit_per_robot
 
 if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
+    from collections.abc import Sequence
+
     from trace_audit.info import LogInfo
 
 __all__ = ["info_command", "info_doc"]
@@ -25,7 +27,8 @@ _INFO_HELP = """What a log holds: robot, time range, cycles, segments and tiers,
 dropped cycles and gaps, and whether each segment was finished or recovered.
 
 Dropped cycles and gaps need every seal (a scan of the log); --quick answers from the
-segment summaries alone.
+segment summaries alone. A root of several robots is described robot by robot (--robot
+selects robots).
 
 [bold]Examples[/bold]:
 
@@ -41,13 +44,21 @@ def info_command(
     quick: Annotated[
         bool, typer.Option("--quick", help="Skip the scan of every seal (no drops or gaps).")
     ] = False,
+    robot: RobotsOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
-    from trace_audit.info import log_info
+    path, answers = guarded(lambda: _each_robot(log, not quick, robot or ()))
+    emit_per_robot(path, answers, info_doc, json_out=json_out, plain=plain)
 
-    result = guarded(lambda: log_info(log, scan=not quick))
-    emit(result, info_doc, json_out=json_out, plain=plain)
+
+def _each_robot(source: Path, scan: bool, robots: Sequence[str]) -> tuple[str, list[LogInfo]]:
+    from trace_audit.info import log_info
+    from trace_audit.log_source import as_log
+    from trace_audit.selection import Selection, per_robot
+
+    log = Selection(tuple(robots)).of(as_log(source))
+    return str(log.root), per_robot(log, lambda one: log_info(one, scan=scan))
 
 
 def _size(n: int) -> str:
@@ -87,7 +98,11 @@ def _summary_rows(r: LogInfo) -> list[tuple[str, Any]]:
     tiers = ", ".join(f"{k} x{v}" for k, v in sorted(r.tiers.items()))
     period = f"{r.period_ns / 1e6:g} ms" if r.period_ns else "?"
     rows: list[tuple[str, Any]] = [
-        ("Time range", f"{fmt_t(r.start_ns)} .. {fmt_t(r.end_ns)} ({fmt_duration(r.duration_ns)})"),
+        (
+            "Time range",
+            f"{fmt_t(r.start_ns, r.clock)} .. {fmt_t(r.end_ns, r.clock)} "
+            f"({fmt_duration(r.duration_ns)})",
+        ),
         (
             "Cycles",
             f"{r.cycles:,} (nominal period {period})"
@@ -124,7 +139,7 @@ def _segment_table(doc: Doc, r: LogInfo) -> None:
         [
             Column("file", wrap=True),
             Column("tier"),
-            Column("time (s)"),
+            Column("time (UTC)" if r.clock.wall else "time (s)"),
             Column("cycles"),
             Column("size", "right"),
             Column("state"),
@@ -133,7 +148,7 @@ def _segment_table(doc: Doc, r: LogInfo) -> None:
             [
                 Path(s.path).name,
                 s.tier,
-                f"{s.start_ns / 1e9:.1f}..{s.end_ns / 1e9:.1f}",
+                _span(r, s.start_ns, s.end_ns),
                 f"{s.first_cycle}..{s.last_cycle}" if s.first_cycle is not None else "-",
                 _size(s.bytes),
                 Seg("recovered", "yellow")
@@ -147,6 +162,13 @@ def _segment_table(doc: Doc, r: LogInfo) -> None:
     )
 
 
+def _span(r: LogInfo, start_ns: int, end_ns: int) -> str:
+    """A segment's time: seconds, or on a wall clock its UTC start and end to the second."""
+    if not r.clock.wall:
+        return f"{start_ns / 1e9:.1f}..{end_ns / 1e9:.1f}"
+    return f"{r.clock.iso(start_ns, digits=0)}..{r.clock.iso(end_ns, digits=0)[11:]}"
+
+
 def _gap_table(doc: Doc, r: LogInfo) -> None:
     """The first gaps (the JSON lists them all)."""
     doc.heading("Gaps")
@@ -154,7 +176,7 @@ def _gap_table(doc: Doc, r: LogInfo) -> None:
     doc.table(
         [
             Column("after cycle", "right"),
-            Column("from (s)", "right"),
+            Column("from (UTC)" if r.clock.wall else "from (s)", "right"),
             Column("beyond period", "right"),
             Column("missing", "right"),
             Column("declared", "right"),
@@ -162,7 +184,9 @@ def _gap_table(doc: Doc, r: LogInfo) -> None:
         [
             [
                 str(g.after_cycle),
-                f"{g.after_t_ns / 1e9:.3f}",
+                r.clock.iso(g.after_t_ns, digits=3)
+                if r.clock.wall
+                else f"{g.after_t_ns / 1e9:.3f}",
                 fmt_duration(g.gap_ns),
                 f"~{g.missing_cycles}",
                 "?" if g.declared_dropped is None else str(g.declared_dropped),
