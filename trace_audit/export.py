@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, get_args
 
@@ -45,12 +45,14 @@ def export_decision(
     t: TimeArg = None,
     cycle: int | None = None,
     fmt: str = "dot",
+    robots: Sequence[str] = (),
 ) -> Export:
-    """The causal graph and counterfactual tree of the decision at ``t`` (or ``cycle``)."""
+    """The causal graph and counterfactual tree of the decision at ``t`` (or ``cycle``);
+    ``robots`` as ``explain`` takes them (one robot's decision, or ``SeveralRobotsError``)."""
     if fmt not in FORMATS:
         raise UsageError(f"unknown export format {fmt!r} (use {', '.join(FORMATS)})")
     # No look-back is needed for the graphs: only the sensor window and the seal.
-    result = explain(source, t=t, cycle=cycle, lookback_s=0)
+    result = explain(source, t=t, cycle=cycle, lookback_s=0, robots=robots)
     return render_export(result, fmt)
 
 
@@ -79,7 +81,7 @@ def render_export(result: Explanation, fmt: str) -> Export:
 
 def _title(result: Explanation) -> str:
     return (
-        f"{result.robot} cycle {result.cycle} at {result.t_ns / 1e9:.3f} s: "
+        f"{result.robot} cycle {result.cycle} at {result.log_clock.show(result.t_ns)}: "
         f"{result.decision.command or '?'}"
     )
 

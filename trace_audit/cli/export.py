@@ -11,7 +11,7 @@ from typing import Annotated
 import typer
 
 from trace_audit.cli.app import EXIT_USAGE, app, fail, guarded, help_text
-from trace_audit.cli.options import LogArgument, PlainOption, TimeOption, cycle_option
+from trace_audit.cli.options import LogArgument, PlainOption, RobotsOption, TimeOption, cycle_option
 from trace_audit.cli.output import print_json
 
 __all__ = ["EXPORT_FORMATS", "export_command"]
@@ -39,6 +39,7 @@ def export_command(
     *,
     t: TimeOption = None,
     cycle: Annotated[int | None, cycle_option("Export")] = None,
+    robot: RobotsOption = None,
     fmt: Annotated[
         str, typer.Option("--format", help=f"One of {', '.join(EXPORT_FORMATS)}.")
     ] = "dot",
@@ -58,7 +59,7 @@ def export_command(
 ) -> None:
     from trace_audit.export import export_decision
 
-    result = guarded(lambda: export_decision(log, t=t, cycle=cycle, fmt=fmt))
+    result = guarded(lambda: export_decision(log, t=t, cycle=cycle, fmt=fmt, robots=robot or ()))
     if json_out and out is None:
         print_json(result)
         return
