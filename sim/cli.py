@@ -17,7 +17,7 @@ from typing import Annotated
 
 import typer
 
-from sim.faults import FaultRates
+from sim.faults import DEFAULT_ROBOT_ID, FaultRates
 from sim.runner import (
     DURATION_BATCH,
     RunConfig,
@@ -25,6 +25,7 @@ from sim.runner import (
     SimOutputError,
     SimUsageError,
     parse_duration,
+    parse_start,
     run,
 )
 from sim.scenarios import EPISODE_CYCLES, SCENARIOS
@@ -107,6 +108,13 @@ Examples:
   trace-sim run --duration 24h --seed 1 --out /data/amr-01
 
   trace-sim run --duration 2h --faults off --batch 100 --out day/ --json
+
+Several simulated robots share one log root when each has its own --robot-id; --start
+with an ISO 8601 UTC time gives them a wall clock (the segments' clock is then "system",
+times are ns since the Unix epoch), with seconds a sim clock starting there (the default:
+a sim clock from 0):
+
+  trace-sim run --duration 30s --robot-id amr-1 --start 2026-05-04T06:00:00Z --out fleet/
 """
 
 
@@ -144,6 +152,22 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
             "1 writes cycle by cycle like the paper's runs",
         ),
     ] = None,
+    robot_id: Annotated[
+        str,
+        typer.Option(
+            "--robot-id",
+            metavar="TEXT",
+            help="the robot's id; robots with distinct ids share a log root",
+        ),
+    ] = DEFAULT_ROBOT_ID,
+    start: Annotated[
+        str | None,
+        typer.Option(
+            metavar="TEXT",
+            help="the first cycle's time: an ISO 8601 UTC time (e.g. 2026-05-04T06:00:00Z, "
+            "a wall clock) or seconds (a sim clock); default a sim clock from 0",
+        ),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="print the summary as JSON")] = False,
 ) -> None:
     """Simulate scenarios and write the TRACE log plus a fault ground-truth sidecar."""
@@ -157,6 +181,7 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
         if batch is not None and duration is None:
             raise SimUsageError("--batch needs --duration (scenario runs write cycle by cycle)")
         total = parse_duration(duration) if duration is not None else None
+        start_ns, clock = (0, "sim") if start is None else parse_start(start)
         config = RunConfig(
             out=out,
             scenario=scenario,
@@ -165,6 +190,9 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
             faults=FaultRates() if faults == "on" else FaultRates.off(),
             total_cycles=total,
             batch_cycles=1 if total is None else DURATION_BATCH if batch is None else batch,
+            robot_id=robot_id,
+            start_ns=start_ns,
+            clock=clock,
         )
         result = run(config) if as_json else _run_with_progress(config)
     except SimUsageError as err:

@@ -142,11 +142,18 @@ class FailingOpener:
             s.failing = failing
 
 
-def truth_path_for(out: Path) -> Path:
-    """Where the truth sidecar of a log goes: ``X.mcap.truth.jsonl`` or ``ROOT/truth/``."""
+DEFAULT_ROBOT_ID = "amr-01"
+"""The simulated robot's id unless told otherwise (``trace-sim run --robot-id``)."""
+
+
+def truth_path_for(out: Path, robot_id: str = DEFAULT_ROBOT_ID) -> Path:
+    """Where the truth sidecar of a log goes: ``X.mcap.truth.jsonl``, or in a log root
+    ``ROOT/truth/sim-truth.jsonl`` for the default robot and ``sim-truth-<robot>.jsonl`` for
+    another, so several simulated robots sharing a root keep their truth apart."""
     if out.suffix == ".mcap":
         return out.with_name(out.name + ".truth.jsonl")
-    return out / "truth" / "sim-truth.jsonl"
+    name = "sim-truth" if robot_id == DEFAULT_ROBOT_ID else f"sim-truth-{robot_id}"
+    return out / "truth" / f"{name}.jsonl"
 
 
 class TruthLog:

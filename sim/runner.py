@@ -6,10 +6,13 @@
 from __future__ import annotations
 
 import gc
+import re
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +23,7 @@ from sim.counterfactual import BudgetExhaustedError, probe
 from sim.decision import Decider, Decision, graph_edges
 from sim.execution import Actuator, Executed, Steering
 from sim.faults import (
+    DEFAULT_ROBOT_ID,
     CycleFaults,
     FailingOpener,
     FaultInjector,
@@ -47,6 +51,8 @@ from sim.scenarios import EPISODE_CYCLES, SCENARIOS
 from sim.sensors import detect_camera, range_ultrasonic, scan_lidar
 from sim.world import PERIOD_S, World
 from trace_runtime import AuditLogger, LoggerConfig, TraceError
+from trace_runtime.clock import EARLIEST_WALL_NS
+from trace_runtime.errors import UsageError
 from trace_runtime.flags import SCENARIO_FLAG
 
 PERIOD_NS = 100_000_000
@@ -86,8 +92,12 @@ class RunConfig:
     faults: FaultRates = field(default_factory=FaultRates)
     total_cycles: int | None = None
     """Routine operation: this many cycles, cycling through the scenarios episode by episode."""
-    robot_id: str = "amr-01"
+    robot_id: str = DEFAULT_ROBOT_ID
     start_ns: int = 0
+    """The first cycle's time: ns on ``clock`` (``parse_start``)."""
+    clock: str = "sim"
+    """The segments' session ``clock``: ``sim`` (counting from an arbitrary zero) or
+    ``system`` (``start_ns`` is then ns since the Unix epoch, a time of day)."""
     batch_cycles: int = 1
     """Cycles per write (``LoggerConfig.batch_cycles``). 1 for the paper's runs: an injected
     audit-write timeout then loses exactly one cycle. Above 1 (long generated runs) every
@@ -157,6 +167,41 @@ def parse_duration(text: str) -> int:
     return max(1, round(seconds / PERIOD_S))
 
 
+_ISO = re.compile(r"\d{4}-\d{2}-\d{2}T.*")
+
+
+def parse_start(text: str) -> tuple[int, str]:
+    """``--start`` -> (first cycle's time in ns, session clock).
+
+    An ISO 8601 time with a zone (``2026-05-04T06:00:00Z``) starts a wall clock
+    (``system``, ns since the Unix epoch); seconds (``3600``, ``0.5``) a sim clock there."""
+    t = text.strip()
+    if _ISO.fullmatch(t):
+        try:
+            moment = datetime.fromisoformat(t)
+        except ValueError as err:
+            raise SimUsageError(f"bad --start {text!r}: {err}") from err
+        if moment.tzinfo is None:
+            raise SimUsageError(f"--start {text!r} needs a zone, e.g. Z for UTC")
+        delta = moment.astimezone(UTC) - datetime(1970, 1, 1, tzinfo=UTC)
+        ns = (delta.days * 86_400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1000
+        if ns < EARLIEST_WALL_NS:
+            # Readers take a system clock before 2000 for one counting from zero
+            # (trace_runtime.clock.is_wall_clock): it would not be shown as a time of day.
+            raise SimUsageError(f"--start {text!r} is before 2000; give seconds for a sim clock")
+        return ns, "system"
+    try:
+        seconds = Decimal(t)
+    except InvalidOperation as err:
+        raise SimUsageError(
+            f"bad --start {text!r}: give seconds (e.g. 3600) or an ISO 8601 UTC time "
+            "(e.g. 2026-05-04T06:00:00Z)"
+        ) from err
+    if not seconds.is_finite() or seconds < 0:
+        raise SimUsageError(f"--start must be seconds >= 0, got {text!r}")
+    return int(seconds * 1_000_000_000), "sim"
+
+
 def plan(config: RunConfig) -> Iterator[tuple[str, bool]]:
     """(scenario, starts a new episode) for each cycle of the run."""
     if config.total_cycles is not None:
@@ -174,6 +219,8 @@ def plan(config: RunConfig) -> Iterator[tuple[str, bool]]:
 def _validate(config: RunConfig) -> int:
     if config.batch_cycles < 1:
         raise SimUsageError(f"batch cycles must be at least 1, got {config.batch_cycles}")
+    if config.start_ns < 0:
+        raise SimUsageError(f"the start time must be >= 0 ns, got {config.start_ns}")
     if config.total_cycles is not None:
         if config.total_cycles <= 0:
             raise SimUsageError("total cycles must be positive")
@@ -193,7 +240,7 @@ def run(config: RunConfig, progress: Callable[[int, int], None] | None = None) -
     """Simulate and log; ``progress(done, total)`` is called every 1000 cycles and at the end."""
     total = _validate(config)
     out = Path(config.out)
-    truth_path = truth_path_for(out)
+    truth_path = truth_path_for(out, config.robot_id)
     opener = FailingOpener()
     truth, logger = _open_outputs(config, out, truth_path, opener)
     sim = _Pipeline(config, logger, opener, truth)
@@ -251,7 +298,8 @@ def _open_outputs(
             out.parent.mkdir(parents=True, exist_ok=True)
         else:
             out.mkdir(parents=True, exist_ok=True)
-        truth = TruthLog(truth_path, keep=out.suffix != ".mcap")
+        # The logger first: it refuses a bad robot id before the truth file (named by it)
+        # is made.
         logger: AuditLogger | NullLogger = (
             NullLogger()
             if not config.audit
@@ -261,7 +309,7 @@ def _open_outputs(
                 period_s=PERIOD_S,
                 software_version=SOFTWARE_VERSION,
                 policy_version=POLICY_VERSION,
-                clock="sim",
+                clock=config.clock,
                 config=LoggerConfig(
                     threaded=False,
                     fsync_interval_s=None,
@@ -270,10 +318,17 @@ def _open_outputs(
                 ),
             )
         )
+    except UsageError as err:
+        raise SimUsageError(str(err)) from err
     except OSError as err:
         raise SimOutputError(f"cannot write {out}: {err.strerror or err}") from err
     except TraceError as err:
         raise SimOutputError(f"cannot write {out}: {err}") from err
+    try:
+        truth = TruthLog(truth_path, keep=out.suffix != ".mcap")
+    except OSError as err:
+        logger.close()
+        raise SimOutputError(f"cannot write {truth_path}: {err.strerror or err}") from err
     return truth, logger
 
 
