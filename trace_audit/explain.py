@@ -297,9 +297,7 @@ def _explain(
     )
 
 
-def _find_target(
-    log: Log, t: TimeArg, cycle: int | None
-) -> tuple[int | None, Log, Cycle, int]:
+def _find_target(log: Log, t: TimeArg, cycle: int | None) -> tuple[int | None, Log, Cycle, int]:
     """(the query time in ns or None, the log of the robot that decided, the decision in
     force then or with that number, the query time - decision time)."""
     t_ns = resolve_time(t, log)

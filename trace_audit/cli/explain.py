@@ -94,7 +94,9 @@ def explain_command(  # noqa: PLR0917 - typer maps each parameter to an option
 def explain_doc(r: Explanation, lookback_s: float = 600.0) -> Doc:
     """The explain report as a document."""
     doc = Doc()
-    when = f"t={fmt_t(r.query_t_ns, r.log_clock)}" if r.query_t_ns is not None else f"cycle {r.cycle}"
+    when = (
+        f"t={fmt_t(r.query_t_ns, r.log_clock)}" if r.query_t_ns is not None else f"cycle {r.cycle}"
+    )
     command = r.decision.command
     doc.title([f"{r.robot} at {when}: ", Seg(command or "no action logged", "bold yellow")])
     doc.fields(_decision_rows(r, lookback_s))

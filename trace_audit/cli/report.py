@@ -15,6 +15,7 @@ from trace_audit.cli.options import (
     JsonOption,
     LogArgument,
     PlainOption,
+    RobotsOption,
     TimeOption,
     cycle_option,
     key_option,
@@ -54,6 +55,7 @@ def report_command(  # noqa: PLR0917 - typer maps each parameter to an option
     log: LogArgument,
     t: TimeOption = None,
     cycle: Annotated[int | None, cycle_option("Report on")] = None,
+    robot: RobotsOption = None,
     window: Annotated[
         str,
         typer.Option(
@@ -82,6 +84,8 @@ def report_command(  # noqa: PLR0917 - typer maps each parameter to an option
             window_s=parse_window(window),
             key=public,
             evidence=evidence or (),
+            robots=robot or (),
+            key_path=key,
         )
         return report, write_report(report, out)
 
@@ -112,6 +116,8 @@ def _summary(report: IncidentReport, written: Path) -> dict[str, Any]:
         "cycle": e.cycle,
         "t_ns": e.t_ns,
         "command": e.decision.command,
+        "clock": e.clock,
+        "log_start_ns": e.log_start_ns,
         "window_start_ns": data.start_ns,
         "window_end_ns": data.end_ns,
         "cycles_in_window": len(data.samples),
@@ -128,6 +134,9 @@ def _summary(report: IncidentReport, written: Path) -> dict[str, Any]:
 
 
 def _summary_doc(summary: dict[str, Any]) -> Doc:
+    from trace_audit.log_time import LogClock
+
+    clock = LogClock(summary["clock"], summary["log_start_ns"])
     doc = Doc()
     doc.title(["Incident report: ", Seg(summary["out"], "bold")])
     integrity = _integrity_line(summary)
@@ -136,12 +145,12 @@ def _summary_doc(summary: dict[str, Any]) -> Doc:
             (
                 "Decision",
                 f"{summary['robot']} {summary['command']} at "
-                f"{summary['t_ns'] / 1e9:.3f} s (cycle {summary['cycle']})",
+                f"{clock.show(summary['t_ns'])} (cycle {summary['cycle']})",
             ),
             (
                 "Window",
-                f"{summary['window_start_ns'] / 1e9:.3f} s to "
-                f"{summary['window_end_ns'] / 1e9:.3f} s, "
+                f"{clock.show(summary['window_start_ns'])} to "
+                f"{clock.show(summary['window_end_ns'])}, "
                 f"{summary['cycles_in_window']} cycles",
             ),
             ("Integrity", integrity),

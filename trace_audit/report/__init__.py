@@ -65,15 +65,27 @@ def build_report(
     key: PublicKey | None = None,
     evidence: Sequence[str | Path] = (),
     command_name: str = "trace-audit",
+    robots: Sequence[str] = (),
+    key_path: str | Path | None = None,
 ) -> IncidentReport:
-    """The incident report of the decision in force at ``t`` (or cycle ``cycle``)."""
+    """The incident report of the decision in force at ``t`` (or cycle ``cycle``) of one
+    robot (``robots`` as ``explain`` takes them); ``key_path``: where ``key`` came from."""
     try:
         import matplotlib  # noqa: F401 - the report extra
     except ImportError as err:
         raise UsageError("the report needs matplotlib: pip install 'trace-audit[report]'") from err
     from trace_audit.report.page import render_page
 
-    data = gather_report(path, t=t, cycle=cycle, window_s=window_s, key=key, evidence=evidence)
+    data = gather_report(
+        path,
+        t=t,
+        cycle=cycle,
+        window_s=window_s,
+        key=key,
+        evidence=evidence,
+        robots=robots,
+        key_path=key_path,
+    )
     return IncidentReport(data, render_page(data, command_name=command_name))
 
 

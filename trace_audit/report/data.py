@@ -205,8 +205,13 @@ class ReportData:
     evidence: tuple[str, ...] = ()
     """The external recordings given (``--evidence``), as the investigator named them."""
     window_inputs: tuple[str, ...] = ()
-    """What the window's metrics read when not the whole log: the segment files of the run
-    of the robot's clock that holds the decision (its clock restarted in the log)."""
+    """What the window's metrics read when not the whole log: the segment files of the
+    decision's robot (the log holds others) and of the run of its clock that holds the
+    decision (its clock restarted in the log)."""
+    key_path: str | None = None
+    """The public key file given (``--key``), as the investigator named it."""
+    robot_option: str | None = None
+    """The decision's robot when the log holds others: the page's commands name it."""
 
     @property
     def decision(self) -> Decision:
@@ -251,15 +256,21 @@ def gather_report(
     window_s: float = DEFAULT_WINDOW_S,
     key: PublicKey | None = None,
     evidence: Sequence[str | Path] = (),
+    robots: Sequence[str] = (),
+    key_path: str | Path | None = None,
 ) -> ReportData:
     """Gather the report of the decision in force at ``t`` (or cycle ``cycle``) in a log.
 
     ``evidence``: external recordings (MCAP files, rosbag2 directories) the log's evidence
-    refs may name; explain, metrics and verify resolve and digest-check them there."""
+    refs may name; explain, metrics and verify resolve and digest-check them there.
+    ``robots`` as ``explain`` takes them: the report is of one robot's decision, and its
+    window, metrics and integrity are that robot's. ``key_path``: where ``key`` was read
+    from, for the page's Reproduce commands."""
     if not 0 < window_s <= MAX_WINDOW_S:
         raise UsageError(f"window must be in (0, {MAX_WINDOW_S:.0f}] s, got {window_s}")
-    whole = as_log(path)
-    result = explain(whole, t=t, cycle=cycle, evidence=evidence)
+    given = as_log(path)
+    result = explain(given, t=t, cycle=cycle, evidence=evidence, robots=robots)
+    whole = given.of_robots([result.robot])
     log = whole.clock_run(result.decision.segment)
     before = int(window_s * 2 / 3 * 1e9)
     start = max(log.start_ns, result.t_ns - before)
@@ -267,7 +278,7 @@ def gather_report(
     spans = timeline(log, start=start, end=end)
     samples, target, sensors = _samples(log, start, end, result)
     entities = _entities(target, sensors) if target is not None else ()
-    inputs = () if log is whole else tuple(str(s.path) for s in log.segments)
+    inputs = () if log is given else tuple(str(s.path) for s in log.segments)
     with _warned_once(whole):
         metrics = compute_metrics(
             list(inputs) or [path],
@@ -298,6 +309,8 @@ def gather_report(
         integrity=integrity,
         integrity_scope=tuple(s.path.name for s in scope),
         key_id=key.key_id if key is not None else None,
+        key_path=None if key_path is None else str(key_path),
+        robot_option=result.robot if len(given.robots) > 1 else None,
         evidence=tuple(str(e) for e in evidence),
         not_retained=_not_retained(result),
         window_inputs=inputs,

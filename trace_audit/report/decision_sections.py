@@ -7,7 +7,6 @@ string from the log passes through ``html.escape``.
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
 from html import escape
 
 from trace_audit.causal import format_value
@@ -38,9 +37,8 @@ __all__ = [
 def _clock_line(data: ReportData) -> str:
     e = data.explanation
     line = f"{seconds(e.t_ns)} in the log's clock ({escape(data.session.clock)})"
-    if data.session.clock == "system":
-        utc = datetime.fromtimestamp(e.t_ns / 1e9, tz=UTC)
-        line += f" = {escape(utc.isoformat(timespec='milliseconds'))}"
+    if e.log_clock.wall:
+        line += f" = {escape(e.log_clock.iso(e.t_ns, digits=3))}"
     return line
 
 

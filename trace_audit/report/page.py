@@ -170,18 +170,25 @@ def _in_short(data: ReportData) -> str:
 def _reproduce(data: ReportData, command_name: str) -> str:
     e = data.explanation
     log = shlex.quote(data.path)
-    at = f"--t {e.t_ns / 1e9:.9g}"
-    start, end = f"{data.start_ns / 1e9:.9g}", f"{data.end_ns / 1e9:.9g}"
-    key = " --key PUBLIC_KEY" if data.key_id else ""
+    robot = f" --robot {shlex.quote(data.robot_option)}" if data.robot_option else ""
+    # The decision by its number (a time could name another run's decision after a clock
+    # restart), the window to the nanosecond, in the clock the log keeps.
+    at = f"--cycle {e.cycle}{robot}"
+    start, end = (shlex.quote(e.log_clock.arg(t)) for t in (data.start_ns, data.end_ns))
+    key_file = shlex.quote(data.key_path) if data.key_path else "PUBLIC_KEY"
+    key = f" --key {key_file}" if data.key_id else ""
     given = "".join(f" --evidence {shlex.quote(e)}" for e in data.evidence)
-    # After a clock restart the window's figures come from its run's segments alone.
+    # The window's figures come from its robot's segments (of its clock's run) alone.
     window = " ".join(shlex.quote(p) for p in data.window_inputs) or log
     lines = [
         (
             "Summary, factors, chains, counterfactuals, execution, this decision's scores",
             f"{command_name} explain {log} {at}{given}",
         ),
-        ("Commands over the window", f"{command_name} timeline {log} --from {start} --to {end}"),
+        (
+            "Commands over the window",
+            f"{command_name} timeline {log}{robot} --from {start} --to {end}",
+        ),
         ("Integrity", f"{command_name} verify {log}{key}{given}"),
         (
             "Window auditability",
