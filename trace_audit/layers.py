@@ -1,0 +1,403 @@
+"""Whole layers of a log as Arrow tables, and its decisions as typed objects, for notebooks.
+
+Each function takes a log (a path or an open ``Log``) and the same selection every command
+uses (``trace_audit.selection``): ``robots`` (none: all of the log's) and a window
+``start``/``end`` (int ns in the log's clock, or text as the CLI reads it: ``12.3``, ``+5``,
+an ISO 8601 time on a wall clock). Rows run robot by robot (robots in order of name), each
+robot's in time order, and every row names its robot.
+
+- ``iter_decisions`` yields each cycle's ``Decision`` (``read_decision``, what the CLI renders).
+- ``decision_table``, ``channel_table`` and ``check_table`` are columns of those decisions;
+  ``entity_table`` the perceived entities; ``gap_table`` the gaps between sealed cycles by the
+  one gap rule (``trace_runtime.gaps``). Column names are the fleet index's where it has the
+  same column (docs/fleet.md); ``.to_pandas()`` gives a DataFrame.
+
+pyarrow comes with the ``fleet`` extra; without it the tables raise ``UsageError``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from typing import Any, NamedTuple
+
+from trace_audit.causal import Decision, format_value, layer_with_defaults, read_decision
+from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
+from trace_audit.log_gaps import gap_stepper
+from trace_audit.log_source import LogSource, as_log
+from trace_audit.log_time import TimeArg
+from trace_audit.selection import Selection, each_robot
+from trace_runtime.cycles import Cycle
+from trace_runtime.errors import UsageError
+from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, check_tolerance
+from trace_runtime.logset import Log
+from trace_runtime.records import TOPIC_PERCEPTION
+from trace_runtime.seal_check import verify_cycle
+
+__all__ = [
+    "RobotDecision",
+    "channel_table",
+    "check_table",
+    "decision_table",
+    "entity_table",
+    "gap_table",
+    "iter_decisions",
+]
+
+Robots = str | Sequence[str]
+"""One robot's id, or several (empty: every robot of the log)."""
+
+
+class RobotDecision(NamedTuple):
+    """One logged decision and the robot that made it."""
+
+    robot: str
+    decision: Decision
+
+
+def iter_decisions(
+    source: LogSource, *, robots: Robots = (), start: TimeArg = None, end: TimeArg = None
+) -> Iterator[RobotDecision]:
+    """Every decision of the selected robots in the window, as the CLI reads it."""
+    for robot, cycle in _iter_selected(source, robots, start, end):
+        yield RobotDecision(robot, read_decision(cycle))
+
+
+def decision_table(
+    source: LogSource, *, robots: Robots = (), start: TimeArg = None, end: TimeArg = None
+) -> Any:
+    """A ``pyarrow.Table`` with one row per decision: what it did, why, and its seal."""
+    pa = _pyarrow()
+    rows = _Columns(pa, _decision_schema(pa))
+    for robot, cycle in _iter_selected(source, robots, start, end):
+        decision = read_decision(cycle)
+        execution = decision.execution
+        lead = decision.leading
+        seal = verify_cycle(cycle)
+        rows.add(
+            robot,
+            decision.segment,
+            decision.cycle,
+            decision.t_ns,
+            decision.command,
+            decision.score,
+            decision.rationale,
+            decision.truncated,
+            lead.label if lead else None,
+            _number(lead.value) if lead else None,
+            _text(lead.value) if lead else None,
+            lead.unit if lead else None,
+            [_factor(f) for f in decision.factors],
+            len(decision.alternatives),
+            len(decision.counterfactuals),
+            execution.deviation if execution else None,
+            execution.deviation_unit if execution else None,
+            [c.rule for c in execution.checks if not c.passed] if execution else [],
+            list(execution.flags) if execution else [],
+            execution.scenario if execution else None,
+            decision.summary,
+            cycle.sealed,
+            seal.ok,
+        )
+    return rows.table()
+
+
+def entity_table(
+    source: LogSource, *, robots: Robots = (), start: TimeArg = None, end: TimeArg = None
+) -> Any:
+    """A ``pyarrow.Table`` with one row per perceived entity of each decision.
+
+    ``x``, ``y``, ``z`` and ``frame`` are the entity's logged position (null where the record
+    has none: nothing assumes a planar robot); ``confidence`` is that of its own class."""
+    pa = _pyarrow()
+    rows = _Columns(pa, _entity_schema(pa))
+    for robot, cycle in _iter_selected(source, robots, start, end):
+        perception = as_mapping(layer_with_defaults(cycle, TOPIC_PERCEPTION))
+        for entity in mappings(perception.get("entities") if perception else None):
+            cls = as_str(entity.get("class"))
+            confidence = as_mapping(entity.get("confidence"))
+            pose = as_mapping(entity.get("pose"))
+            x, y, z = _position(pose.get("position") if pose else None)
+            rows.add(
+                robot,
+                cycle.cycle,
+                cycle.t_ns,
+                as_str(entity.get("id")),
+                cls,
+                as_float(confidence.get(cls)) if confidence and cls else None,
+                x,
+                y,
+                z,
+                as_str(pose.get("frame")) if pose else None,
+                len(list(mappings(entity.get("evidence")))),
+            )
+    return rows.table()
+
+
+def channel_table(
+    source: LogSource, *, robots: Robots = (), start: TimeArg = None, end: TimeArg = None
+) -> Any:
+    """A ``pyarrow.Table`` with one row per logged actuator channel of each decision
+    (profile 1.1): intended, actual and deviation in the channel's ``unit``; ``deviation_unit``
+    is the unit of the execution record's overall deviation."""
+    pa = _pyarrow()
+    rows = _Columns(pa, _channel_schema(pa))
+    for robot, decision in iter_decisions(source, robots=robots, start=start, end=end):
+        execution = decision.execution
+        for channel in execution.channels if execution else ():
+            rows.add(
+                robot,
+                decision.cycle,
+                decision.t_ns,
+                channel.name,
+                channel.intended,
+                channel.actual,
+                channel.deviation,
+                channel.unit,
+                execution.deviation_unit if execution else None,
+            )
+    return rows.table()
+
+
+def check_table(
+    source: LogSource, *, robots: Robots = (), start: TimeArg = None, end: TimeArg = None
+) -> Any:
+    """A ``pyarrow.Table`` with one row per compliance check of each decision's execution."""
+    pa = _pyarrow()
+    rows = _Columns(pa, _check_schema(pa))
+    for robot, decision in iter_decisions(source, robots=robots, start=start, end=end):
+        execution = decision.execution
+        for check in execution.checks if execution else ():
+            rows.add(
+                robot,
+                decision.cycle,
+                decision.t_ns,
+                check.rule,
+                check.passed,
+                check.value,
+                check.limit,
+                check.detail,
+            )
+    return rows.table()
+
+
+def gap_table(
+    source: LogSource,
+    *,
+    robots: Robots = (),
+    start: TimeArg = None,
+    end: TimeArg = None,
+    tolerance: float = DEFAULT_GAP_TOLERANCE,
+) -> Any:
+    """A ``pyarrow.Table`` with one row per gap between two sealed cycles of a robot inside
+    the window (``trace_runtime.gaps``: ``gap_ns`` is the time beyond one period)."""
+    pa = _pyarrow()
+    check_tolerance(tolerance)
+    rows = _Columns(pa, _gap_schema(pa))
+    log, lo, hi = _selected(source, robots, start, end)
+    for robot_log in each_robot(log):
+        step = gap_stepper(robot_log, tolerance)
+        for cycle in robot_log.iter_cycles(lo, hi):
+            gap = step(cycle)
+            if gap is not None:
+                rows.add(
+                    gap.robot,
+                    gap.after_cycle,
+                    gap.after_t_ns,
+                    gap.before_cycle,
+                    gap.before_t_ns,
+                    gap.period_ns,
+                    gap.gap_ns,
+                    gap.missing_cycles,
+                    gap.declared_dropped,
+                )
+    return rows.table()
+
+
+# --- selection -----------------------------------------------------------------------------
+
+
+def _selected(
+    source: LogSource, robots: Robots, start: TimeArg, end: TimeArg
+) -> tuple[Log, int | None, int | None]:
+    """The log cut to the robots, and the window in its clock (``Selection``)."""
+    chosen = (robots,) if isinstance(robots, str) else tuple(robots)
+    selection = Selection(chosen, start, end)
+    log = selection.of(as_log(source))
+    lo, hi = selection.window(log)
+    return log, lo, hi
+
+
+def _iter_selected(
+    source: LogSource, robots: Robots, start: TimeArg, end: TimeArg
+) -> Iterator[tuple[str, Cycle]]:
+    """Each selected robot's cycles in the window: robots by name, each in time order."""
+    log, lo, hi = _selected(source, robots, start, end)
+    for robot_log in each_robot(log):
+        robot = robot_log.first_robot
+        for cycle in robot_log.iter_cycles(lo, hi):
+            yield robot, cycle
+
+
+# --- columns -------------------------------------------------------------------------------
+
+
+def _pyarrow() -> Any:
+    try:
+        import pyarrow as pa
+    except ImportError as err:
+        raise UsageError("the layer tables need pyarrow: pip install 'trace-audit[fleet]'") from err
+    return pa
+
+
+class _Columns:
+    """Rows gathered column by column, made into one table at the end."""
+
+    def __init__(self, pa: Any, schema: Any) -> None:
+        self.pa, self.schema = pa, schema
+        self.values: list[list[Any]] = [[] for _ in schema.names]
+
+    def add(self, *row: Any) -> None:
+        for column, value in zip(self.values, row, strict=True):
+            column.append(value)
+
+    def table(self) -> Any:
+        pa, schema = self.pa, self.schema
+        return pa.Table.from_arrays(
+            [pa.array(v, type=f.type) for v, f in zip(self.values, schema, strict=True)],
+            schema=schema,
+        )
+
+
+def _number(value: Any) -> float | None:
+    """A factor's value as a number (booleans as 0/1, as the fleet index has them)."""
+    if isinstance(value, bool):
+        return float(value)
+    return as_float(value)
+
+
+def _text(value: Any) -> str | None:
+    """A factor's value as text when it is not a number (the CLI's rendering)."""
+    return None if value is None or _number(value) is not None else format_value(value)
+
+
+def _factor(factor: Any) -> dict[str, Any]:
+    return {
+        "node": factor.node,
+        "name": factor.name,
+        "value": _number(factor.value),
+        "text": _text(factor.value),
+        "unit": factor.unit,
+    }
+
+
+def _position(value: Any) -> tuple[float | None, float | None, float | None]:
+    """x, y, z of a logged position (a list of numbers); None for what is not there."""
+    if not isinstance(value, list):
+        return None, None, None
+    x, y, z = ([as_float(v) for v in value[:3]] + [None, None, None])[:3]
+    return x, y, z
+
+
+def _decision_schema(pa: Any) -> Any:
+    factor = pa.struct(
+        [
+            ("node", pa.string()),
+            ("name", pa.string()),
+            ("value", pa.float64()),
+            ("text", pa.string()),
+            ("unit", pa.string()),
+        ]
+    )
+    strings = pa.list_(pa.string())
+    return pa.schema(
+        [
+            ("robot", pa.string()),
+            ("segment", pa.string()),
+            ("cycle", pa.int64()),
+            ("t_ns", pa.int64()),
+            ("command", pa.string()),
+            ("score", pa.float64()),
+            ("rationale", pa.string()),
+            ("truncated", pa.bool_()),
+            ("lead_factor", pa.string()),
+            ("lead_value", pa.float64()),
+            ("lead_text", pa.string()),
+            ("lead_unit", pa.string()),
+            ("factors", pa.list_(factor)),
+            ("alternatives", pa.int32()),
+            ("counterfactuals", pa.int32()),
+            ("deviation", pa.float64()),
+            ("deviation_unit", pa.string()),
+            ("failed_checks", strings),
+            ("flags", strings),
+            ("scenario", pa.string()),
+            ("summarized", pa.bool_()),
+            ("sealed", pa.bool_()),
+            ("seal_verified", pa.bool_()),
+        ]
+    )
+
+
+def _entity_schema(pa: Any) -> Any:
+    return pa.schema(
+        [
+            ("robot", pa.string()),
+            ("cycle", pa.int64()),
+            ("t_ns", pa.int64()),
+            ("entity", pa.string()),
+            ("class", pa.string()),
+            ("confidence", pa.float64()),
+            ("x", pa.float64()),
+            ("y", pa.float64()),
+            ("z", pa.float64()),
+            ("frame", pa.string()),
+            ("evidence", pa.int32()),
+        ]
+    )
+
+
+def _channel_schema(pa: Any) -> Any:
+    return pa.schema(
+        [
+            ("robot", pa.string()),
+            ("cycle", pa.int64()),
+            ("t_ns", pa.int64()),
+            ("channel", pa.string()),
+            ("intended", pa.float64()),
+            ("actual", pa.float64()),
+            ("deviation", pa.float64()),
+            ("unit", pa.string()),
+            ("deviation_unit", pa.string()),
+        ]
+    )
+
+
+def _check_schema(pa: Any) -> Any:
+    return pa.schema(
+        [
+            ("robot", pa.string()),
+            ("cycle", pa.int64()),
+            ("t_ns", pa.int64()),
+            ("rule", pa.string()),
+            ("passed", pa.bool_()),
+            ("value", pa.float64()),
+            ("limit", pa.float64()),
+            ("detail", pa.string()),
+        ]
+    )
+
+
+def _gap_schema(pa: Any) -> Any:
+    return pa.schema(
+        [
+            ("robot", pa.string()),
+            ("after_cycle", pa.int64()),
+            ("after_t_ns", pa.int64()),
+            ("before_cycle", pa.int64()),
+            ("before_t_ns", pa.int64()),
+            ("period_ns", pa.int64()),
+            ("gap_ns", pa.int64()),
+            ("missing_cycles", pa.int64()),
+            ("declared_dropped", pa.int64()),
+        ]
+    )
