@@ -9,6 +9,11 @@ Open a log (a segment, a directory or a log root, in any tier), then ask it ques
     report = compute_metrics(["run.mcap"])        # ET, ET_partial, TC, DR, TCS
     integrity = verify_log("logs/")               # chain, checkpoints, signatures
     conformance = doctor_log("run.mcap")          # every rule of schemas/PROFILE.md
+    frame = decision_table("logs/", robots=["amr-7"], start="+5").to_pandas()
+
+``iter_decisions`` yields the typed ``Decision`` of every cycle the CLI renders; the
+``*_table`` functions give whole layers as Arrow tables (the ``fleet`` extra). docs/api.md
+is the long form.
 
 Names are imported on first use, so ``import trace_audit`` (and the CLI's start-up) stays fast.
 """
@@ -21,6 +26,15 @@ from trace_runtime.lazy import lazy_exports
 
 _EXPORTS = {
     "open_log": "trace_runtime.logset",
+    "Selection": "trace_audit.selection",
+    "LogClock": "trace_audit.log_time",
+    "iter_decisions": "trace_audit.layers",
+    "RobotDecision": "trace_audit.layers",
+    "decision_table": "trace_audit.layers",
+    "entity_table": "trace_audit.layers",
+    "channel_table": "trace_audit.layers",
+    "check_table": "trace_audit.layers",
+    "gap_table": "trace_audit.layers",
     "explain": "trace_audit.explain",
     "Explanation": "trace_audit.explain",
     "why": "trace_audit.timeline",
@@ -51,18 +65,27 @@ __all__ = [
     "DoctorReport",
     "Explanation",
     "ExternalEvidence",
+    "LogClock",
     "LogInfo",
     "MetricsConfig",
     "MetricsReport",
+    "RobotDecision",
+    "Selection",
     "Timeline",
     "VerifyReport",
     "WhyResult",
     "causal_graph",
+    "channel_table",
+    "check_table",
     "compute_metrics",
+    "decision_table",
     "describe_refs",
     "doctor_log",
+    "entity_table",
     "explain",
     "export_decision",
+    "gap_table",
+    "iter_decisions",
     "log_info",
     "open_log",
     "read_decision",
@@ -81,7 +104,18 @@ if TYPE_CHECKING:
     from trace_audit.explain import Explanation, explain
     from trace_audit.export import export_decision
     from trace_audit.info import LogInfo, log_info
+    from trace_audit.layers import (
+        RobotDecision,
+        channel_table,
+        check_table,
+        decision_table,
+        entity_table,
+        gap_table,
+        iter_decisions,
+    )
+    from trace_audit.log_time import LogClock
     from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
+    from trace_audit.selection import Selection
     from trace_audit.timeline import Timeline, WhyResult, timeline, why
     from trace_audit.verify import VerifyReport, verify_log
     from trace_runtime.logset import open_log
