@@ -57,9 +57,10 @@ class RobotDecision(NamedTuple):
 def iter_decisions(
     source: LogSource, *, robots: Robots = (), start: TimeArg = None, end: TimeArg = None
 ) -> Iterator[RobotDecision]:
-    """Every decision of the selected robots in the window, as the CLI reads it."""
-    for robot, cycle in _iter_selected(source, robots, start, end):
-        yield RobotDecision(robot, read_decision(cycle))
+    """Every decision of the selected robots in the window, as the CLI reads it (the
+    selection is checked here, before the first decision is read)."""
+    cycles = _iter_selected(source, robots, start, end)
+    return (RobotDecision(robot, read_decision(cycle)) for robot, cycle in cycles)
 
 
 def decision_table(
@@ -230,12 +231,10 @@ def _selected(
 def _iter_selected(
     source: LogSource, robots: Robots, start: TimeArg, end: TimeArg
 ) -> Iterator[tuple[str, Cycle]]:
-    """Each selected robot's cycles in the window: robots by name, each in time order."""
+    """Each selected robot's cycles in the window: robots by name, each in time order. The
+    log is opened and the selection checked now; the cycles are read as they are asked for."""
     log, lo, hi = _selected(source, robots, start, end)
-    for robot_log in each_robot(log):
-        robot = robot_log.first_robot
-        for cycle in robot_log.iter_cycles(lo, hi):
-            yield robot, cycle
+    return ((r.first_robot, cycle) for r in each_robot(log) for cycle in r.iter_cycles(lo, hi))
 
 
 # --- columns -------------------------------------------------------------------------------

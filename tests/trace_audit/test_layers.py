@@ -325,3 +325,8 @@ def test_the_tables_name_the_extra_when_pyarrow_is_missing(
     with pytest.raises(UsageError, match=r"pip install 'trace-audit\[fleet\]'"):
         decision_table(root)
     assert next(iter_decisions(root)).robot == AMR  # the typed decisions need no pyarrow
+
+
+def test_an_unknown_robot_is_refused_before_anything_is_read(root: Path) -> None:
+    with pytest.raises(UsageError, match="robot nobody is not in this log"):
+        iter_decisions(root, robots="nobody")
