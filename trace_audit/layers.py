@@ -20,7 +20,13 @@ from __future__ import annotations
 from collections.abc import Iterator, Sequence
 from typing import Any, NamedTuple
 
-from trace_audit.causal import Decision, format_value, layer_with_defaults, read_decision
+from trace_audit.causal import (
+    Decision,
+    FactorValue,
+    format_value,
+    layer_with_defaults,
+    read_decision,
+)
 from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
 from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log
@@ -279,7 +285,7 @@ def _text(value: Any) -> str | None:
     return None if value is None or _number(value) is not None else format_value(value)
 
 
-def _factor(factor: Any) -> dict[str, Any]:
+def _factor(factor: FactorValue) -> dict[str, Any]:
     return {
         "node": factor.node,
         "name": factor.name,
