@@ -16,6 +16,7 @@ from tests.trace_audit.metrics.test_scan import PERIOD, HandLog, layers, t
 from trace_audit.explain import explain
 from trace_audit.info import log_info
 from trace_audit.metrics import MetricsConfig, compute_metrics
+from trace_audit.selection import per_robot
 from trace_audit.timeline import timeline
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap
 from trace_runtime.logset import open_log
@@ -181,4 +182,5 @@ def test_two_robots_are_never_compared_with_each_other(tmp_path: Path) -> None:
     r2.close()
     assert compute_metrics([root]).overall.gaps == 0
     assert log_info(root).gaps == ()
-    assert timeline(root).gaps == ()
+    each = per_robot(open_log(root), timeline)
+    assert [(one.robot, one.gaps) for one in each] == [("r1", ()), ("r2", ())]

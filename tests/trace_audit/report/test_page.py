@@ -173,9 +173,16 @@ def test_a_hostile_log_cannot_inject_markup_or_fetch_anything(tmp_path: Path) ->
     assert "does NOT verify" in page.section_text["integrity"]  # the edit broke the seal
 
 
-def test_a_system_clock_is_also_shown_in_utc(sample_log: Path) -> None:
+def test_a_wall_clock_is_also_shown_in_utc(tmp_path: Path) -> None:
+    wall = write_log(tmp_path / "wall.mcap", t0_ns=1_777_874_400 * 10**9)
+    text = parse_report(build_report(wall, t="+4.5").html).section_text["summary"]
+    assert "(system) = 2026-05-04T06:00:04.500Z" in text
+
+
+def test_a_system_clock_counting_from_zero_is_not_a_time_of_day(sample_log: Path) -> None:
     text = parse_report(build_report(sample_log, t=t_s(45)).html).section_text["summary"]
-    assert "(system) = 1970-01-01T00:01:44.500+00:00" in text  # t = 104.5 s after the epoch
+    assert "104.500 s in the log's clock (system)" in text
+    assert "1970" not in text  # t = 104.5 s: seconds since the log's own zero
 
 
 def test_a_log_with_hundreds_of_entities_gives_a_bounded_page(
