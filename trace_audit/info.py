@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from trace_audit.cycle_fields import seal_dropped
 from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log, require_cycles
-from trace_audit.log_time import LogClock
+from trace_audit.log_time import SECONDS_CLOCK, LogClock
 from trace_audit.selection import Selection
 from trace_runtime.chain_writer import CLOSE_METADATA
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, CycleRange, Gap
@@ -67,7 +67,7 @@ class LogInfo:
     dropped: int | None
     gaps: tuple[Gap, ...]
     """Gaps between each robot's sealed cycles, by the rule metrics uses for TC."""
-    clock: LogClock = LogClock("system", 0)
+    clock: LogClock = SECONDS_CLOCK
     """The log's clock and first time: how its times are shown (``log_time.LogClock``)."""
 
     @property

@@ -23,7 +23,7 @@ from trace_runtime.clock import is_wall_clock
 from trace_runtime.errors import UsageError
 from trace_runtime.logset import Log
 
-__all__ = ["LogClock", "TimeArg", "TimePoint", "exact_seconds", "resolve_time"]
+__all__ = ["SECONDS_CLOCK", "LogClock", "TimeArg", "TimePoint", "exact_seconds", "resolve_time"]
 
 _ISO = re.compile(
     r"(\d{4}-\d{2}-\d{2})[T ](\d{2}):(\d{2})(?::(\d{2})(?:[.,](\d{1,9}))?)?"
@@ -155,3 +155,7 @@ def resolve_time(value: TimeArg, log: Log) -> int | None:
     if isinstance(value, str):
         value = TimePoint.parse(value)
     return value.resolve(log)
+
+
+SECONDS_CLOCK = LogClock("system", 0)
+"""A clock that tells no time of day: times shown as seconds (a result's default)."""

@@ -18,7 +18,7 @@ from trace_audit.cycle_fields import command_of, execution_fields
 from trace_audit.jsonout import OMIT_EMPTY
 from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log, require_cycles
-from trace_audit.log_time import LogClock, TimeArg, resolve_time
+from trace_audit.log_time import SECONDS_CLOCK, LogClock, TimeArg, resolve_time
 from trace_audit.selection import Selection, SeveralRobotsError
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import UsageError
@@ -111,7 +111,7 @@ class Timeline:
     gaps of each run are its own (a run's first row is no decision change). Empty else."""
     live: bool | None = field(default=None, metadata={OMIT_EMPTY: True})
     """True when a segment of the log is being written right now; left out of JSON else."""
-    clock: LogClock = LogClock("system", 0)
+    clock: LogClock = SECONDS_CLOCK
     """The log's clock and first time: how its times are shown (``log_time.LogClock``)."""
 
 
@@ -322,7 +322,7 @@ class WhyResult:
     recovered: bool
     live: bool | None = field(default=None, metadata={OMIT_EMPTY: True})
     """True when a segment of the log is being written right now; left out of JSON else."""
-    clock: LogClock = LogClock("system", 0)
+    clock: LogClock = SECONDS_CLOCK
     """The log's clock and first time: how its times are shown (``log_time.LogClock``)."""
 
 

@@ -182,8 +182,8 @@ FLOORS: dict[str, list[set[str]]] = {
     "trace_audit": [
         # what every question needs: times, sources, a cycle's fields, JSON, evidence
         {
-            "jsonout", "log_time", "selection", "log_source", "cycle_fields", "log_gaps", "sensor_window",
-            "evidence",
+            "jsonout", "log_time", "selection", "log_source", "cycle_fields", "log_gaps",
+            "sensor_window", "evidence",
         },
         # views over one decision: its causal graph and its chains
         {"causal", "chains"},

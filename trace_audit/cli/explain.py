@@ -170,7 +170,8 @@ def _decided(r: Explanation) -> str:
         return f"cycle {r.cycle} at {fmt_t(r.t_ns, r.log_clock)}"
     if r.offset_ns == 0:
         return f"cycle {r.cycle}, decided exactly at the asked time"
-    return f"cycle {r.cycle} at {fmt_t(r.t_ns, r.log_clock)}, {fmt_duration(r.offset_ns)} before the asked time"
+    before = f"{fmt_duration(r.offset_ns)} before the asked time"
+    return f"cycle {r.cycle} at {fmt_t(r.t_ns, r.log_clock)}, {before}"
 
 
 def _clock_line(r: Explanation) -> Seg:
@@ -193,7 +194,8 @@ def _held_line(r: Explanation, lookback_s: float) -> Any:
     span = fmt_duration(r.t_ns - h.since_t_ns)
     if h.cycles <= 1 and h.bound == "change":
         return f"new at this cycle (before: {h.previous or '?'}, cycle {h.previous_cycle})"
-    base = f"since {fmt_t(h.since_t_ns, r.log_clock)} (cycle {h.since_cycle}; {span}, {h.cycles} cycles)"
+    since = fmt_t(h.since_t_ns, r.log_clock)
+    base = f"since {since} (cycle {h.since_cycle}; {span}, {h.cycles} cycles)"
     if h.bound == "change":
         return f"{base}; before it: {h.previous or '?'} (cycle {h.previous_cycle})"
     if h.bound == "lookback":
