@@ -17,6 +17,7 @@ from concurrent.futures import Executor
 from pathlib import Path
 
 from trace_audit.evidence import open_recordings
+from trace_audit.selection import Selection
 from trace_runtime.keys import PublicKey
 from trace_runtime.logset import open_log
 from trace_runtime.verification import (
@@ -46,6 +47,7 @@ def verify_log(
     key: PublicKey | None = None,
     evidence: Sequence[str | Path] = (),
     executor: Executor | None = None,
+    robots: Sequence[str] = (),
 ) -> VerifyReport:
     """Verify a segment file, a directory of segments or a log root; never raises on tampering.
 
@@ -53,7 +55,9 @@ def verify_log(
     name: each such ref is resolved and its digest checked there (a mismatch is a finding);
     refs into recordings not given are counted as unresolved (a note), not as broken.
     Raises ``LogReadError`` only when nothing readable is there (exit 3 at the CLI); a damaged
-    segment inside a root is a finding.
+    segment inside a root is a finding. ``robots``: only these robots' chains
+    (``selection.Selection``).
     """
     recordings = open_recordings(evidence)
-    return verify(open_log(path), key=key, recordings=recordings, executor=executor)
+    log = Selection(tuple(robots)).of(open_log(path))
+    return verify(log, key=key, recordings=recordings, executor=executor)

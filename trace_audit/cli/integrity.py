@@ -19,6 +19,7 @@ from trace_audit.cli.options import (
     JsonOption,
     PlainOption,
     Recordings,
+    RobotsOption,
     SchedulerOption,
     cluster,
     evidence_option,
@@ -92,6 +93,7 @@ def verify_command(
         evidence_option(then=": their digests are checked there. Repeat for several."),
     ] = None,
     scheduler: SchedulerOption = None,
+    robot: RobotsOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
@@ -103,7 +105,9 @@ def verify_command(
     def run() -> VerifyReport:
         public = load_public_key(key) if key is not None else None
         with cluster(scheduler) as executor:
-            return verify_log(log, key=public, evidence=evidence or (), executor=executor)
+            return verify_log(
+                log, key=public, evidence=evidence or (), executor=executor, robots=robot or ()
+            )
 
     report = guarded(run)
     emit(report, verify_doc, json_out=json_out, plain=plain)
@@ -193,12 +197,15 @@ def _robot_rows(robot: RobotSummary, prefix: str) -> list[tuple[str, str | Seg]]
     r = robot.cycle_range
     if r.first_cycle is None or r.start_ns is None or r.end_ns is None:
         return [(f"{prefix}range", "no sealed cycles")]
+    from trace_audit.log_time import LogClock
+
     span = fmt_duration(r.end_ns - r.start_ns)
+    clock = LogClock(robot.clock, r.start_ns)
     rows: list[tuple[str, str | Seg]] = [
         (
             f"{prefix}validated range",
-            f"cycles {r.first_cycle}..{r.last_cycle}, t = {fmt_t(r.start_ns)} .. "
-            f"{fmt_t(r.end_ns)} ({span}, {robot.segments} segment(s))",
+            f"cycles {r.first_cycle}..{r.last_cycle}, t = {fmt_t(r.start_ns, clock)} .. "
+            f"{fmt_t(r.end_ns, clock)} ({span}, {robot.segments} segment(s))",
         )
     ]
     if robot.anchored_cycle is None or robot.anchored_ns is None:
@@ -212,7 +219,8 @@ def _robot_rows(robot: RobotSummary, prefix: str) -> list[tuple[str, str | Seg]]
         rows.append(
             (
                 f"{prefix}anchored",
-                f"through cycle {robot.anchored_cycle} (t = {fmt_t(robot.anchored_ns)}){tail}",
+                f"through cycle {robot.anchored_cycle} "
+                f"(t = {fmt_t(robot.anchored_ns, clock)}){tail}",
             )
         )
     return rows

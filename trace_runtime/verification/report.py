@@ -131,6 +131,8 @@ class RobotSummary:
     anchored_ns: int | None = None
     unanchored_cycles: int = 0
     """Cycles after ``anchored_cycle``: chained, but no checkpoint vouches for them yet."""
+    clock: str = "system"
+    """The clock behind the robot's times (``SessionInfo.clock``), for showing them."""
 
 
 @dataclass(slots=True)

@@ -158,6 +158,8 @@ class _RobotChain:
             self._segment(number, by_number[number])
         robot = self.robot
         robot.declared_dropped = self.sink.declared - declared_before
+        if segments:
+            robot.clock = segments[0].session.clock
         if self.anchor is not None:
             robot.anchored_cycle, robot.anchored_ns = self.anchor.cycle, self.anchor.t_ns
         self._note_unanchored()
