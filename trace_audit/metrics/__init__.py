@@ -28,8 +28,13 @@ Definitions (docs/metrics.md is the long form; every number here comes from the 
   forced to 0 when integrity fails and ``integrity_gate`` is on. Continuity(d) is 1, or
   period / interval when the interval that ends at d holds a gap.
 
-Stds are population stds (ddof = 0); each ``Stat`` says what it is taken across.
-Nothing here reads an injected-fault flag or a simulator's ground truth.
+- **Failed checks**: per robot and rule, the checks of its ``/trace/execution`` records
+  whose ``passed`` is false: how many, and the first and last to fail (time and cycle, in
+  the robot's chain order).
+
+On a log of several robots and no ``by``, the groups are the robots. Stds are population
+stds (ddof = 0); each ``Stat`` says what it is taken across. Nothing here reads an
+injected-fault flag or a simulator's ground truth.
 
 The modules, in import order: ``config`` (how to score), ``results`` (the report's types),
 ``decision`` (what one decision scores), ``sums`` (what a scan adds up), ``scan`` (a
@@ -59,9 +64,11 @@ from trace_audit.metrics.results import (
     AcrossGroups,
     ChannelDeviation,
     DecisionFailure,
+    FailedChecks,
     GroupMetrics,
     LoggingCost,
     MetricsReport,
+    RuleFailures,
     Stat,
     ThresholdCheck,
 )
@@ -83,6 +90,7 @@ __all__ = [
     "ChannelDeviation",
     "DecisionFailure",
     "DecisionSink",
+    "FailedChecks",
     "Gap",
     "GroupBy",
     "GroupMetrics",
@@ -91,6 +99,7 @@ __all__ = [
     "MetricsConfig",
     "MetricsReport",
     "ProgressCallback",
+    "RuleFailures",
     "ScanResult",
     "ScoredDecision",
     "SealOutcome",

@@ -12,7 +12,7 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from trace_audit.metrics.config import MetricsConfig
@@ -20,6 +20,7 @@ from trace_audit.metrics.report import build_report
 from trace_audit.metrics.results import MetricsReport
 from trace_audit.metrics.scan import score_robot, score_segment
 from trace_audit.metrics.sums import ScanResult
+from trace_audit.selection import Selection
 from trace_runtime.errors import LogReadError
 from trace_runtime.logset import Log, open_logs
 from trace_runtime.reader import Segment
@@ -82,19 +83,26 @@ def compute_metrics(
     paths: Sequence[str | Path],
     config: MetricsConfig | None = None,
     *,
+    robots: Sequence[str] | None = None,
     progress: ProgressCallback | None = None,
     executor: Executor | None = None,
 ) -> MetricsReport:
     """Score every decision in the given logs (files, directories or log roots) in one pass.
 
-    Memory is bounded: cycles are streamed, sums accumulated, and at most
-    ``config.max_listed`` failing decisions and gaps kept for listing. Given an
+    ``robots`` selects robots (``trace_audit.selection``; a robot not in the logs is a
+    ``UsageError`` naming those that are). When more than one robot is read and
+    ``config.by`` is None, the decisions are grouped by robot: a question over time is
+    answered per robot. Memory is bounded: cycles are streamed, sums accumulated, and at
+    most ``config.max_listed`` failing decisions and gaps kept for listing. Given an
     ``executor`` (e.g. a Dask cluster's, ``trace_audit.fleet.cluster``), segments are
     scored there, one task each, instead of in local processes; the report is the same.
     """
     cfg = config or MetricsConfig()
     started = time.perf_counter()
-    log = open_logs(paths)
+    selection = Selection(robots=tuple(robots or ()))
+    log = selection.of(open_logs(paths))
+    if cfg.by is None and len(log.robots) > 1:
+        cfg = replace(cfg, by="robot")
     plan = _plan(log)
     expected = sum(_expected_cycles(s) for _, segs in plan for s in segs) or None
     total = ScanResult()
@@ -124,7 +132,14 @@ def compute_metrics(
     elapsed = time.perf_counter() - started
     segments_read = tuple(str(s.path) for _, segs in plan for s in segs)
     report = build_report(
-        paths, cfg, log=log, total=total, segments=segments_read, elapsed=elapsed, by=cfg.by
+        paths,
+        cfg,
+        log=log,
+        total=total,
+        segments=segments_read,
+        elapsed=elapsed,
+        by=cfg.by,
+        robots=selection.robots,
     )
     if report.overall.decisions == 0 and cfg.start_ns is None and cfg.end_ns is None:
         # As info, explain and verify say it: nothing to score is an empty log, not 0 %.

@@ -11,17 +11,20 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 from trace_audit.chains import EXPECTED_DEPTH_ENTITY, EXPECTED_DEPTH_STATE
+from trace_audit.log_time import LogClock
 from trace_audit.metrics.config import MetricsConfig
 from trace_audit.metrics.results import (
     AcrossGroups,
     ChannelDeviation,
+    FailedChecks,
     GroupMetrics,
     LoggingCost,
     MetricsReport,
+    RuleFailures,
     Stat,
     ThresholdCheck,
 )
-from trace_audit.metrics.sums import GroupSums, ScanResult
+from trace_audit.metrics.sums import CheckTally, GroupSums, ScanResult
 from trace_runtime.costs import TIMING_METADATA, CostHistogram
 from trace_runtime.errors import LogReadError
 from trace_runtime.logset import Log
@@ -60,9 +63,11 @@ def build_report(
     segments: tuple[str, ...],
     elapsed: float,
     by: str | None,
+    robots: Sequence[str] = (),
 ) -> MetricsReport:
     """The report of ``paths`` from what scanning them produced (``total``); ``log`` names
-    the copies not read and the files that could not be (None: the sums came from elsewhere)."""
+    the copies not read and the files that could not be, and the clock of their times (None:
+    the sums came from elsewhere). ``robots``: the robots asked for (empty: all)."""
     overall_acc = GroupSums()
     for acc in total.groups.values():
         overall_acc.merge(acc)
@@ -96,6 +101,8 @@ def build_report(
         logging_cost=cost,
         channel_deviation=_channel_deviation(total.channels),
         cycles_per_s=total.cycles / elapsed if elapsed > 0 else 0.0,
+        failed_checks=_failed_checks(total.checks, log) if total.checks and log else None,
+        robots=tuple(robots),
         external_refs=dict(sorted(total.external.items())),
     )
 
@@ -197,6 +204,24 @@ def _channel_deviation(
             max=top if logged else None,
         )
         for (name, unit), (n, logged, total, top) in sorted(channels.items())
+    )
+
+
+def _failed_checks(checks: Mapping[tuple[str, str], CheckTally], log: Log) -> FailedChecks:
+    return FailedChecks(
+        clock=LogClock.of(log),
+        rules=tuple(
+            RuleFailures(
+                robot=robot,
+                rule=rule,
+                failed=tally.failed,
+                first_t_ns=tally.first_t_ns,
+                first_cycle=tally.first_cycle,
+                last_t_ns=tally.last_t_ns,
+                last_cycle=tally.last_cycle,
+            )
+            for (robot, rule), tally in sorted(checks.items())
+        ),
     )
 
 

@@ -8,15 +8,18 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from trace_audit.jsonout import OMIT_EMPTY
+from trace_audit.log_time import LogClock
 from trace_runtime.gaps import Gap
 
 __all__ = [
     "AcrossGroups",
     "ChannelDeviation",
     "DecisionFailure",
+    "FailedChecks",
     "GroupMetrics",
     "LoggingCost",
     "MetricsReport",
+    "RuleFailures",
     "Stat",
     "ThresholdCheck",
 ]
@@ -122,6 +125,33 @@ class ChannelDeviation:
 
 
 @dataclass(frozen=True, slots=True)
+class RuleFailures:
+    """The failed checks of one rule in one robot's execution records: how many, and the
+    first and the last to fail in the robot's chain order (its time and cycle)."""
+
+    robot: str
+    rule: str
+    failed: int
+    first_t_ns: int
+    first_cycle: int
+    last_t_ns: int
+    last_cycle: int
+
+
+@dataclass(frozen=True, slots=True)
+class FailedChecks:
+    """The execution checks (``/trace/execution`` ``checks``) that failed, per robot and
+    rule (robots, then rules, in order of name), and the clock their times are in."""
+
+    clock: LogClock
+    rules: tuple[RuleFailures, ...]
+
+    @property
+    def total(self) -> int:
+        return sum(r.failed for r in self.rules)
+
+
+@dataclass(frozen=True, slots=True)
 class LoggingCost:
     """The logger's control-thread cost per cycle as the log's writers measured it
     (``trace.timing`` metadata). Percentiles are None unless every timed segment carries a
@@ -162,6 +192,12 @@ class MetricsReport:
     """The logger's own control-thread cost per cycle, from the segments' ``trace.timing``."""
     channel_deviation: tuple[ChannelDeviation, ...] = field(default=(), metadata={OMIT_EMPTY: True})
     """Per actuator channel of the execution records (profile 1.1), by name and unit."""
+    failed_checks: FailedChecks | None = field(default=None, metadata={OMIT_EMPTY: True})
+    """The execution checks that failed, per robot and rule; None when none did (or the
+    report comes from the fleet index)."""
+    robots: tuple[str, ...] = field(default=(), metadata={OMIT_EMPTY: True})
+    """The robots the report was asked for (``robots``, ``--robot``); empty: every robot of
+    the logs."""
     external_refs: dict[str, int] = field(default_factory=dict)
     """Evidence refs into external recordings, by what became of them: ``resolved``,
     ``broken`` (recording given, message missing or changed) and ``unresolved`` (recording

@@ -28,12 +28,14 @@ from trace_audit.metrics.decision import (
 from trace_audit.metrics.results import DecisionFailure
 from trace_audit.metrics.sums import (
     HAS_CHANNELS,
+    MAY_FAIL_A_CHECK,
     DecisionSink,
     GroupSums,
     ScanResult,
     ScoredDecision,
     SealOutcome,
     add_channels,
+    add_failed_checks,
 )
 from trace_runtime.chain import digest
 from trace_runtime.clock import clock_restarted
@@ -163,11 +165,7 @@ class _Scanner:
         if perception is not None and _may_cite_recording(cycle.payloads.get(TOPIC_PERCEPTION)):
             self._count_external(perception)
         missing_dr = dr_problems(action)
-        execution = cycle.payloads.get(TOPIC_EXECUTION)
-        if execution is not None and HAS_CHANNELS in execution:  # parsed only when it has
-            add_channels(self.partial.channels, cycle.layer(TOPIC_EXECUTION))
-        elif execution is None and cycle.summary is not None:  # warm keeps execution whole
-            add_channels(self.partial.channels, cycle.summary.get(TOPIC_EXECUTION))
+        self._add_execution(cycle, segment)
         group = group_of(cycle)
         partial = self.partial
         acc = partial.groups.get(group)
@@ -214,6 +212,26 @@ class _Scanner:
                     integrity=seal.problems,
                 )
             )
+
+    def _add_execution(self, cycle: Cycle, segment: Segment) -> None:
+        """Add the execution record's actuator channels and failed checks to the sums; the
+        record is parsed only when its bytes show it may hold either."""
+        partial = self.partial
+        data = cycle.payloads.get(TOPIC_EXECUTION)
+        if data is None:
+            if cycle.summary is not None:  # warm keeps execution whole
+                execution = cycle.summary.get(TOPIC_EXECUTION)
+                add_channels(partial.channels, execution)
+                add_failed_checks(partial.checks, execution, segment.session.robot_id, cycle)
+            return
+        channels, may_fail = HAS_CHANNELS in data, MAY_FAIL_A_CHECK in data
+        if not (channels or may_fail):
+            return
+        execution = cycle.layer(TOPIC_EXECUTION)
+        if channels:
+            add_channels(partial.channels, execution)
+        if may_fail:
+            add_failed_checks(partial.checks, execution, segment.session.robot_id, cycle)
 
     def _add_scores(
         self, acc: GroupSums, cycle: Cycle, score: DecisionScore, *, dr_ok: bool, seal: SealOutcome

@@ -21,12 +21,16 @@ from trace_runtime.reader import Segment
 
 __all__ = [
     "HAS_CHANNELS",
+    "MAY_FAIL_A_CHECK",
+    "CheckTally",
     "DecisionSink",
     "GroupSums",
     "ScanResult",
     "ScoredDecision",
     "SealOutcome",
     "add_channels",
+    "add_failed_checks",
+    "failed_check_rules",
 ]
 
 
@@ -102,6 +106,23 @@ DecisionSink = Callable[[ScoredDecision], None]
 
 
 @dataclass(slots=True)
+class CheckTally:
+    """The failed checks of one rule on one robot so far: how many, the first and the last
+    (time and cycle) in the order they were read."""
+
+    failed: int
+    first_t_ns: int
+    first_cycle: int
+    last_t_ns: int
+    last_cycle: int
+
+    def merge(self, later: CheckTally) -> None:
+        """Add ``later``'s failures, read after these (the next segment in plan order)."""
+        self.failed += later.failed
+        self.last_t_ns, self.last_cycle = later.last_t_ns, later.last_cycle
+
+
+@dataclass(slots=True)
 class ScanResult:
     """What scanning one or more segments produced; merged in segment order."""
 
@@ -116,6 +137,8 @@ class ScanResult:
     channels: dict[tuple[str, str], list[float]] = field(default_factory=dict)
     """(name, unit) -> [cycles, deviations logged, sum, max] of the execution channels."""
     external: dict[str, int] = field(default_factory=dict)
+    checks: dict[tuple[str, str], CheckTally] = field(default_factory=dict)
+    """(robot, rule) -> the failed execution checks of that rule, in chain order."""
 
     def merge(self, other: ScanResult, limit: int) -> None:
         for state, count in other.external.items():
@@ -138,6 +161,12 @@ class ScanResult:
             sums[1] += logged
             sums[2] += total
             sums[3] = max(sums[3], top)
+        for key, tally in other.checks.items():
+            earlier = self.checks.get(key)
+            if earlier is None:
+                self.checks[key] = tally
+            else:
+                earlier.merge(tally)
 
 
 HAS_CHANNELS = b'"channels":[{'
@@ -161,3 +190,34 @@ def add_channels(into: dict[tuple[str, str], list[float]], execution: Any) -> No
             sums[1] += 1
             sums[2] += deviation
             sums[3] = max(sums[3], deviation)
+
+
+MAY_FAIL_A_CHECK = b"false"
+"""Every execution record with a failed check contains this: JSON has no other spelling of
+``false`` (a literal cannot be escaped). Records without it (nearly all) are not parsed for
+their checks."""
+
+
+def failed_check_rules(execution: Any) -> list[str]:
+    """The rules of an execution record's checks that failed (``passed`` is false), in order."""
+    checks = execution.get("checks") if isinstance(execution, dict) else None
+    if not isinstance(checks, list):
+        return []
+    return [
+        str(check.get("rule"))
+        for check in checks
+        if type(check) is dict and check.get("passed") is False
+    ]
+
+
+def add_failed_checks(
+    into: dict[tuple[str, str], CheckTally], execution: Any, robot: str, cycle: Cycle
+) -> None:
+    """Count an execution record's failed checks into ``into`` (see ``ScanResult.checks``)."""
+    for rule in failed_check_rules(execution):
+        tally = into.get((robot, rule))
+        if tally is None:
+            into[robot, rule] = CheckTally(1, cycle.t_ns, cycle.cycle, cycle.t_ns, cycle.cycle)
+        else:
+            tally.failed += 1
+            tally.last_t_ns, tally.last_cycle = cycle.t_ns, cycle.cycle
