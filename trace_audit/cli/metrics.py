@@ -21,6 +21,7 @@ from trace_audit.cli.options import (
     MemoryLimitOption,
     PlainOption,
     Recordings,
+    RobotsOption,
     SchedulerOption,
     SqlTimeoutOption,
     cluster,
@@ -35,7 +36,7 @@ if TYPE_CHECKING:  # the library is imported inside the command: start-up stays 
     from concurrent.futures import Executor
 
     from trace_audit.fleet.limits import QueryLimits
-    from trace_audit.metrics import MetricsConfig, MetricsReport, Stat
+    from trace_audit.metrics import FailedChecks, MetricsConfig, MetricsReport, Stat
 
 __all__ = ["metrics_command", "metrics_doc"]
 
@@ -82,9 +83,15 @@ _HELP = "\n\n".join(
             "--by, the std of the group values across groups is shown as well (the paper's "
             "footnote)."
         ),
+        (
+            "On a log root of several robots and no --by, each robot is a row (--robot "
+            "selects robots). Failed execution checks (/trace/execution checks whose passed "
+            "is false) are counted per robot and rule, with the first and last to fail."
+        ),
         ("[bold]Examples[/bold]:"),
         ("  trace-audit metrics run.mcap --by scenario"),
         ("  trace-audit metrics fleet/ --by robot --json --jobs 2"),
+        ("  trace-audit metrics fleet/ --robot amr-01 --robot amr-02 --by scenario"),
         ("  trace-audit metrics run.mcap --failures --fail-under ET=0.95,DR=95%"),
         ("  trace-audit metrics --index fleet-index/ --by robot,day"),
         ("  trace-audit metrics logs/ --scheduler tcp://10.0.0.5:8786 --json"),
@@ -163,6 +170,7 @@ _TcsWeights = Annotated[
 def metrics_command(
     logs: _Logs = None,
     *,
+    robot: RobotsOption = None,
     by: _By = None,
     index: _Index = None,
     scheduler: SchedulerOption = None,
@@ -198,12 +206,16 @@ def metrics_command(
             evidence=tuple(str(p) for p in evidence or ()),
         )
         if index is not None:
+            if robot:
+                raise UsageError("--robot is not supported with --index (use --by robot)")
             limits = sql_limits(memory_limit, timeout)
             return _from_index(index, by, config, failures=failures, limits=limits)
         if memory_limit is not None or timeout is not None:
             raise UsageError("--memory-limit and --timeout bound the SQL of --index only")
         with cluster(scheduler) as executor:
-            return _with_progress(logs or [], config, quiet=json_out or plain, executor=executor)
+            return _with_progress(
+                logs or [], config, robots=robot, quiet=json_out or plain, executor=executor
+            )
 
     report = guarded(run)
     emit(
@@ -245,12 +257,17 @@ def _from_index(
 
 
 def _with_progress(
-    logs: list[Path], config: MetricsConfig, *, quiet: bool, executor: Executor | None
+    logs: list[Path],
+    config: MetricsConfig,
+    *,
+    robots: list[str] | None,
+    quiet: bool,
+    executor: Executor | None,
 ) -> MetricsReport:
     from trace_audit.metrics import compute_metrics
 
     if quiet or not sys.stderr.isatty():
-        return compute_metrics(logs, config, executor=executor)
+        return compute_metrics(logs, config, robots=robots, executor=executor)
     with progress_bar("scoring cycles", visible=False) as bar:
         task = bar.task_ids[0]
 
@@ -258,7 +275,7 @@ def _with_progress(
             visible = expected is None or expected >= _PROGRESS_MIN_CYCLES
             bar.update(task, completed=done, total=expected, visible=visible)
 
-        return compute_metrics(logs, config, progress=progress, executor=executor)
+        return compute_metrics(logs, config, robots=robots, progress=progress, executor=executor)
 
 
 # --- the document -------------------------------------------------------------------------
@@ -284,13 +301,16 @@ _WIDE = 90
 
 def metrics_doc(report: MetricsReport, *, failures: bool, width: int) -> Printout:
     """The metrics report for people: Table II and its notes, the execution deviation per
-    channel, Table III, what was not read, the failures (``--failures``), the thresholds."""
+    channel, Table III, the failed execution checks, what was not read, the failures
+    (``--failures``), the thresholds."""
     out = Printout()
     overall = report.overall
     segs = len(report.segments)
+    named = len(report.robots)
+    robots = f"; robot{'s' if named > 1 else ''} {', '.join(report.robots)}" if named else ""
     out.print(
         f"[bold]Auditability[/bold] of {overall.decisions} decisions in {segs} "
-        f"segment{'s' if segs != 1 else ''} ({', '.join(report.logs)})"
+        f"segment{'s' if segs != 1 else ''} ({', '.join(report.logs)}{robots})"
     )
     out.table(_table_ii(report))
     _table_ii_notes(out, report)
@@ -309,6 +329,8 @@ def metrics_doc(report: MetricsReport, *, failures: bool, width: int) -> Printou
             "  ET std in each row is across that group's decisions; ET_p = ET_partial mean"
             + ("." if wide else "; TCS per group in --json (the terminal is too narrow).")
         )
+    if report.failed_checks is not None:
+        out.table(_failed_checks(report.failed_checks))
     _reading_notes(out, report)
     if failures:
         _failures(out, report)
@@ -451,6 +473,26 @@ def _table_iii(report: MetricsReport, *, wide: bool) -> BoxTable:
     return BoxTable(
         tuple(columns), rows, title=f"Table III: per {report.by}", flush=True, collapse_plain=True
     )
+
+
+def _failed_checks(checks: FailedChecks) -> BoxTable:
+    """Failed execution checks per robot and rule: how many, and the first and the last to
+    fail (a row each; one when it failed once), at times in the log's clock."""
+    names = ("robot", "rule", "failed", "", "cycle", "at")
+    columns = tuple(
+        BoxColumn(name, "right" if name in ("failed", "cycle") else "left") for name in names
+    )
+    show = checks.clock.show
+    rows: list[tuple[str, ...]] = []
+    for r in checks.rules:
+        if r.failed == 1:
+            rows.append((r.robot, r.rule, "1", "only", str(r.first_cycle), show(r.first_t_ns)))
+            continue
+        rows.append(
+            (r.robot, r.rule, str(r.failed), "first", str(r.first_cycle), show(r.first_t_ns))
+        )
+        rows.append(("", "", "", "last", str(r.last_cycle), show(r.last_t_ns)))
+    return BoxTable(columns, tuple(rows), title="Failed execution checks", flush=True)
 
 
 def _reading_notes(out: Printout, report: MetricsReport) -> None:
