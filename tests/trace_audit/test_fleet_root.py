@@ -19,7 +19,9 @@ import pytest
 
 from tests.outside import REPO, cli, one_line
 from tests.trace_audit.conftest import write_log
+from trace_audit.jsonout import to_jsonable
 from trace_audit.log_time import LogClock
+from trace_audit.report.data import gather_report
 
 SIM_ROBOTS = ("amr-1", "amr-2", "amr-3")
 WALL_T0_NS = 1_777_874_400 * 10**9  # 2026-05-04T06:00:00Z
@@ -127,6 +129,10 @@ def test_the_reports_commands_reproduce_its_decision_and_window(fleet: Path) -> 
         summary["window_end_ns"],
     )
     assert window["cycles"] == summary["cycles_in_window"]
+    scored = _json(*commands["metrics"])
+    page_figures = gather_report(fleet, robots=["tractor-1"], t="+5.55").metrics.overall
+    assert scored["overall"] == to_jsonable(page_figures)
+    assert scored["overall"]["decisions"] == summary["cycles_in_window"]
     again = _json(*commands["report"], "--out", fleet.parent / "again.html")
     assert {k: again[k] for k in ("robot", "cycle", "window_start_ns", "window_end_ns")} == {
         k: summary[k] for k in ("robot", "cycle", "window_start_ns", "window_end_ns")

@@ -150,11 +150,17 @@ _SensorWindow = Annotated[
     ),
 ]
 _Start = Annotated[
-    float | None,
-    typer.Option("--start", help="Analysis window start, log time in seconds (t1)."),
+    str | None,
+    typer.Option(
+        "--start",
+        help="Analysis window start (t1): seconds in the log's clock, +seconds after the "
+        "log start, or on a wall clock an ISO 8601 time.",
+        show_default=False,
+    ),
 ]
 _End = Annotated[
-    float | None, typer.Option("--end", help="Analysis window end, log time in seconds (t2).")
+    str | None,
+    typer.Option("--end", help="Analysis window end (t2), in the same forms.", show_default=False),
 ]
 _TcsWeights = Annotated[
     str | None,
@@ -200,8 +206,8 @@ def metrics_command(
             weights=TCSWeights.parse(tcs_weights) if tcs_weights else TCSWeights(),
             thresholds=parse_thresholds(fail_under) if fail_under else {},
             workers=jobs,
-            start_ns=None if start is None else round(start * 1e9),
-            end_ns=None if end is None else round(end * 1e9),
+            start_ns=_window_ns(start, logs, robot),
+            end_ns=_window_ns(end, logs, robot),
             max_listed=10_000 if failures else 0,
             evidence=tuple(str(p) for p in evidence or ()),
         )
@@ -233,6 +239,24 @@ def metrics_command(
         )
         sys.stderr.write(f"trace-audit: below threshold: {below}\n")
         raise typer.Exit(EXIT_FINDINGS)
+
+
+def _window_ns(text: str | None, logs: list[Path] | None, robots: list[str] | None) -> int | None:
+    """A window end as ``t_ns``: seconds are read exactly as given; ``+seconds`` and ISO
+    times need the log (its start, its clock), which is opened for them alone."""
+    if text is None:
+        return None
+    from trace_audit.log_time import TimePoint, resolve_time
+
+    point = TimePoint.parse(text)
+    if not (point.relative or point.wall):
+        return point.ns
+    if not logs:
+        raise UsageError(f"--start/--end {text!r} needs the logs (not --index): give seconds")
+    from trace_audit.selection import Selection
+    from trace_runtime.logset import open_logs
+
+    return resolve_time(point, Selection(tuple(robots or ())).of(open_logs(logs)))
 
 
 def _parse_by(value: str | None) -> Any:
