@@ -46,7 +46,7 @@ def api_logs(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_the_page_makes_its_logs_and_has_examples() -> None:
-    assert len(_sim_commands()) == 2
+    assert len(_sim_commands()) == 4
     assert len(_blocks("python")) >= 6
 
 

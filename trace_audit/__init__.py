@@ -27,6 +27,8 @@ from trace_runtime.lazy import lazy_exports
 _EXPORTS = {
     "open_log": "trace_runtime.logset",
     "Selection": "trace_audit.selection",
+    "SeveralRobotsError": "trace_audit.selection",
+    "per_robot": "trace_audit.selection",
     "LogClock": "trace_audit.log_time",
     "iter_decisions": "trace_audit.layers",
     "RobotDecision": "trace_audit.layers",
@@ -71,6 +73,7 @@ __all__ = [
     "MetricsReport",
     "RobotDecision",
     "Selection",
+    "SeveralRobotsError",
     "Timeline",
     "VerifyReport",
     "WhyResult",
@@ -88,6 +91,7 @@ __all__ = [
     "iter_decisions",
     "log_info",
     "open_log",
+    "per_robot",
     "read_decision",
     "timeline",
     "trace_cycle",
@@ -115,7 +119,7 @@ if TYPE_CHECKING:
     )
     from trace_audit.log_time import LogClock
     from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
-    from trace_audit.selection import Selection
+    from trace_audit.selection import Selection, SeveralRobotsError, per_robot
     from trace_audit.timeline import Timeline, WhyResult, timeline, why
     from trace_audit.verify import VerifyReport, verify_log
     from trace_runtime.logset import open_log
