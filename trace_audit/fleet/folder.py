@@ -50,7 +50,8 @@ __all__ = [
 MANIFEST = "index.json"
 LOCK = ".index.lock"
 _OWN_NAME = re.compile(
-    rf"^(?:{'|'.join(TABLES)})/robot=[A-Za-z0-9._-]+/day=[0-9-]+/[A-Za-z0-9._-]+\.parquet$"
+    rf"^(?:{'|'.join(TABLES)})/robot=[A-Za-z0-9._-]+/day=(?:[0-9-]+|run-[0-9]+)/"
+    r"[A-Za-z0-9._-]+\.parquet$"
 )
 """The names the index gives its Parquet files (``index._segment_files``)."""
 

@@ -4,7 +4,11 @@ The index is a directory::
 
     INDEX/index.json                                      manifest: version, config, segments
     INDEX/decisions/robot=R/day=YYYY-MM-DD/<seg>.parquet   one file per segment and day
-    INDEX/entities/...  INDEX/gaps/...  INDEX/segments/...
+    INDEX/entities/...  INDEX/channels/...  INDEX/checks/...  INDEX/gaps/...  INDEX/segments/...
+
+``day`` is the UTC day on a wall clock and ``run-<first segment>`` on a sim or monotonic
+clock (``rows.partition_of``): the runs are the robots' clock runs among this run's inputs
+(``Log.clock_runs``).
 
 A segment's rows depend on its bytes and, through the chain link, the sensor window and
 the gap rule at its start, on the bytes of the robot's previous segment. The manifest
@@ -36,7 +40,7 @@ from trace_audit.fleet.folder import (
     write_manifest,
     write_table_file,
 )
-from trace_audit.fleet.rows import SegmentRows, day_of
+from trace_audit.fleet.rows import ROW_TABLES, SegmentRows, day_of, partition_of
 from trace_audit.fleet.tables import INDEX_VERSION, parquet_options
 from trace_audit.metrics import MetricsConfig, score_segment
 from trace_runtime.errors import LogReadError, UsageError
@@ -62,6 +66,8 @@ class IndexTask:
     out: str
     gap_tolerance: float
     sensor_window: int
+    run: str | None = None
+    """The ``day`` partition of every row on a sim or monotonic clock; None: by UTC day."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,7 +115,7 @@ def index_segment(task: IndexTask) -> IndexedSegment:
     import pyarrow.parquet as pq
 
     segment = open_segment(task.path)
-    rows = SegmentRows(segment, previous_command=_last_command(task.previous))
+    rows = SegmentRows(segment, previous_command=_last_command(task.previous), run=task.run)
     config = MetricsConfig(
         gap_tolerance=task.gap_tolerance, sensor_window=task.sensor_window, max_listed=0
     )
@@ -118,8 +124,8 @@ def index_segment(task: IndexTask) -> IndexedSegment:
     robot = segment.session.robot_id
     stem = task.key.replace("/", "_")
     files: list[str] = []
-    tables = {name: rows.table(name) for name in ("decisions", "entities", "gaps")}
-    tables["segments"] = _segment_row(segment, rows, task.sha256)
+    tables = {name: rows.table(name) for name in ROW_TABLES}
+    tables["segments"] = _segment_row(segment, rows, task.sha256, task.run)
     for name, (table, days) in tables.items():
         for day in sorted(set(days)):
             part = table if len(set(days)) == 1 else _rows_of_day(table, days, day)
@@ -157,7 +163,9 @@ def _last_command(previous: str | None) -> str | None:
     return None
 
 
-def _segment_row(segment: Segment, rows: SegmentRows, sha256: str) -> tuple[Any, list[str]]:
+def _segment_row(
+    segment: Segment, rows: SegmentRows, sha256: str, run: str | None
+) -> tuple[Any, list[str]]:
     import pyarrow as pa
 
     from trace_audit.fleet.tables import schema
@@ -184,7 +192,7 @@ def _segment_row(segment: Segment, rows: SegmentRows, sha256: str) -> tuple[Any,
         "period_ns": session.period_ns,
     }
     table = pa.Table.from_pylist([row], schema=schema("segments"))
-    return table, [day_of(info.start_ns)]
+    return table, [run or day_of(info.start_ns)]
 
 
 # --- the whole index ---------------------------------------------------------------------------
@@ -310,6 +318,7 @@ def _plan(
     left_out: set[Path] = frozenset(),  # type: ignore[assignment]
 ) -> list[IndexTask]:
     tasks: list[IndexTask] = []
+    runs = _runs(log)
     for robot in log.robots:
         segments = [s for s in log.segments_of(robot) if s.path not in left_out]
         for i, segment in enumerate(segments):
@@ -324,9 +333,22 @@ def _plan(
                     out=str(out),
                     gap_tolerance=config.gap_tolerance,
                     sensor_window=config.sensor_window,
+                    run=runs[segment.path],
                 )
             )
     return tasks
+
+
+def _runs(log: Log) -> dict[Path, str | None]:
+    """Each segment's run partition (``partition_of``): the clock run of its robot it
+    belongs to (``Log.clock_runs``), named by the run's first segment in chain order."""
+    out: dict[Path, str | None] = {}
+    for run in log.clock_runs():
+        for robot in run.robots:
+            chain = run.segments_of(robot)
+            partition = partition_of(run.clock, run.start_ns, chain[0].session.segment)
+            out.update((s.path, partition) for s in chain)
+    return out
 
 
 def _select(

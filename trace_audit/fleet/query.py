@@ -2,8 +2,9 @@
 named questions (``find_decisions``) and fleet metrics without re-reading the logs.
 
 The tables are views over the Parquet files (Hive partitions ``robot`` and ``day`` come back
-as columns). ``decisions`` gains ``explain``: the exact ``trace-audit explain`` command that
-reconstructs the row's decision from its segment.
+as columns; ``day`` is text: the UTC date on a wall clock, ``run-<segment>`` on a sim or
+monotonic clock). ``decisions`` gains ``explain``: the exact ``trace-audit explain`` command
+that reconstructs the row's decision from its segment, by cycle and robot.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ if TYPE_CHECKING:
     import duckdb
 
 __all__ = [
+    "DAY_MEANING",
     "INDEX_GROUP_BYS",
     "QueryResult",
     "connect",
@@ -56,10 +58,32 @@ INDEX_GROUP_BYS: dict[str, str] = {
 }
 """What ``metrics --index --by`` may group by (comma-separated for several), as SQL."""
 
+
+def _literal(text: str) -> str:
+    """``text`` as a SQL string literal."""
+    return "'" + text.replace("'", "''") + "'"
+
+
+_SHELL_SAFE = _literal("[A-Za-z0-9_./+:@%=,-]+")
+_QUOTE = _literal("'")
+_QUOTE_IN_QUOTES = _literal("'\"'\"'")
 _EXPLAIN = (
-    "'trace-audit explain ' || segment_path || ' --t ' || "
-    "CAST(t_ns // 1000000000 AS VARCHAR) || '.' || lpad(CAST(t_ns % 1000000000 AS VARCHAR), 9, '0')"
+    "'trace-audit explain ' || "
+    # The segment's absolute path, quoted for a POSIX shell unless it needs no quoting.
+    f"CASE WHEN regexp_full_match(segment_path, {_SHELL_SAFE}) THEN segment_path "
+    f"ELSE {_QUOTE} || replace(segment_path, {_QUOTE}, {_QUOTE_IN_QUOTES}) || {_QUOTE} END || "
+    # Robot ids in the index are simple names (the folder's naming): no quoting needed.
+    "' --cycle ' || CAST(cycle AS VARCHAR) || ' --robot ' || robot"
 )
+"""The exact decision: its segment file, its cycle number and its robot (a time would name
+the decision in force then, and a float time not even that)."""
+
+DAY_MEANING = (
+    "the UTC date (YYYY-MM-DD) of the decision's time on a wall clock; on a sim or "
+    "monotonic clock, whose times count from an arbitrary zero, the robot's run: "
+    "run-<number of the run's first segment>"
+)
+"""What the index's ``day`` column (and ``metrics --index --by day``) means."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -142,14 +166,14 @@ def connect(
             names = ", ".join(_literal(f) for f in files)
             source = (
                 f"read_parquet([{names}], hive_partitioning = true, "
-                "hive_types = {'robot': VARCHAR, 'day': DATE})"
+                "hive_types = {'robot': VARCHAR, 'day': VARCHAR})"
             )
         else:  # no rows yet (e.g. no gaps): an empty view of the right shape
             import pyarrow as pa
 
             empty = schema(table).empty_table()
             empty = empty.append_column("robot", pa.array([], pa.string()))
-            empty = empty.append_column("day", pa.array([], pa.date32()))
+            empty = empty.append_column("day", pa.array([], pa.string()))
             con.register(f"_empty_{table}", empty)
             source = f"_empty_{table}"
         extra = f", {_EXPLAIN} AS explain" if table == "decisions" else ""
@@ -336,11 +360,6 @@ def find_decisions(
     return dataclasses.replace(found, total=int(count) if count > len(found.rows) else None)
 
 
-def _literal(text: str) -> str:
-    """``text`` as a SQL string literal."""
-    return "'" + text.replace("'", "''") + "'"
-
-
 def parse_index_by(text: str | None) -> list[str]:
     """``robot,day`` -> ["robot", "day"]; ``UsageError`` naming what is allowed."""
     if not text:
@@ -361,10 +380,13 @@ def index_metrics(
     limits: QueryLimits | None = None,
 ) -> MetricsReport:
     """ET, ET_partial, TC, DR and TCS from the index's decision rows, without reading a log:
-    the sums metrics keeps per group, summed again by DuckDB (``report_from_sums``)."""
+    the sums metrics keeps per group, summed again by DuckDB (``report_from_sums``). As
+    ``compute_metrics`` does, an index of several robots and no ``by`` is grouped by robot."""
     started = time.perf_counter()
     cfg = config or MetricsConfig()
-    _check_index_config(index, cfg, by)
+    robots = _check_index_config(index, cfg, by)
+    if not by and len(robots) > 1:
+        by = ["robot"]
     result = run_query(index, _sums_sql(cfg, by), limits=limits)
     groups: dict[str, GroupSums] = {}
     segments: set[str] = set()
@@ -386,8 +408,12 @@ def index_metrics(
     )
     # Counted from the rows as the logs count them; the listing itself stays with the logs.
     gaps_total = sum(g.gaps for g in groups.values())
+    definitions = dict(report.definitions)
+    if "day" in by:
+        definitions["day"] = DAY_MEANING
     return dataclasses.replace(
         report,
+        definitions=definitions,
         failures_total=failures_total,
         gaps_total=gaps_total,
         logging_time="not in the index",
@@ -395,9 +421,10 @@ def index_metrics(
     )
 
 
-def _check_index_config(index: str | Path, cfg: MetricsConfig, by: Sequence[str]) -> None:
+def _check_index_config(index: str | Path, cfg: MetricsConfig, by: Sequence[str]) -> set[str]:
     """``UsageError`` (``LogReadError`` for no index) unless the index can answer with ``cfg``:
-    built with the same gap tolerance and sensor window, no time window, no evidence."""
+    built with the same gap tolerance and sensor window, no time window, no evidence. The
+    robots the index holds."""
     manifest = load_manifest(index)
     if manifest is None:
         raise LogReadError(str(index), "not a fleet index (run trace-audit index first)")
@@ -415,6 +442,12 @@ def _check_index_config(index: str | Path, cfg: MetricsConfig, by: Sequence[str]
             raise UsageError(f"cannot group the index by {key!r}")
     if cfg.evidence:
         raise UsageError("--evidence is not supported with --index (run metrics on the logs)")
+    entries = manifest.get("segments")
+    return {
+        str(e.get("robot"))
+        for e in (entries.values() if isinstance(entries, dict) else ())
+        if isinstance(e, dict)
+    }
 
 
 def _sums_sql(cfg: MetricsConfig, by: Sequence[str]) -> str:

@@ -4,6 +4,10 @@
 scores each decision once (ET, ET_partial, DR, the seal check, the gap rule); this module
 only copies those figures and the parsed layers' fields into columns. Nothing here scores.
 
+Each row goes under a ``day`` partition (``partition_of``): on a wall clock the UTC day of
+its time; on a sim or monotonic clock, whose times count from an arbitrary zero, the
+robot's run (``run-<number of the run's first segment>``), never a day of 1970.
+
 The rows are built for speed (bench/bench_fleet.py, docs/fleet.md "Build cost"): a row is
 one tuple of plain scalars, and the list-, struct- and map-valued columns are kept flat
 (one list of values and one of offsets per column), so a decision adds no Python
@@ -19,12 +23,13 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from trace_audit.metrics import NO_SCENARIO, ScoredDecision, scenario_of
+from trace_runtime.clock import is_wall_clock
 from trace_runtime.reader import Segment
 
 if TYPE_CHECKING:
     import pyarrow as pa
 
-__all__ = ["SegmentRows", "day_of"]
+__all__ = ["ROW_TABLES", "SegmentRows", "day_of", "partition_of"]
 
 _HOUR_NS = 3_600_000_000_000
 _DISTANCE_UNITS = frozenset(("m", "meter", "metre", "meters", "metres"))
@@ -34,11 +39,22 @@ _SEGMENT_CONSTANTS = ("segment", "segment_path", "tier", "software_version", "po
 _FLAT = ("factors", "failed_checks", "flags", "nearest", "dr_problems", "integrity_problems")
 """Decision columns holding a list (or map) per row: kept as flat values and offsets."""
 _FACTOR_FIELDS = ("node", "name", "value", "text", "unit")
+ROW_TABLES = ("decisions", "entities", "channels", "checks", "gaps")
+"""The tables filled decision by decision (``segments`` has one row, made by the index)."""
 
 
 def day_of(t_ns: int) -> str:
-    """The UTC day of a log time, ``YYYY-MM-DD`` (the index's partition value)."""
+    """The UTC day of a wall-clock time, ``YYYY-MM-DD`` (the index's partition value)."""
     return time.strftime("%Y-%m-%d", time.gmtime(t_ns // 1_000_000_000))
+
+
+def partition_of(clock: str, start_ns: int, first_segment: int) -> str | None:
+    """The ``day`` partition of every row of a robot's run on ``clock`` starting at
+    ``start_ns`` whose first segment is ``first_segment``: None on a wall clock (each row
+    goes under its own UTC day, ``day_of``), else ``run-<first segment>``."""
+    if is_wall_clock(clock, start_ns):
+        return None
+    return f"run-{first_segment:06d}"
 
 
 def _number(value: Any) -> float | None:
@@ -48,6 +64,10 @@ def _number(value: Any) -> float | None:
     if kind is int or kind is bool:
         return float(value)
     return None
+
+
+def _text(value: Any) -> str | None:
+    return None if value is None else str(value)
 
 
 def _distances(belief: Any) -> dict[str, float]:
@@ -107,6 +127,8 @@ class SegmentRows:
 
     segment: Segment
     previous_command: str | None = None
+    run: str | None = None
+    """The run's partition (``partition_of``) on a sim or monotonic clock; None: by UTC day."""
     rows: dict[str, list[tuple[Any, ...]]] = field(default_factory=dict)
     """Per table, one tuple of scalars per row (the decisions' flat columns excluded)."""
     days: dict[str, list[str]] = field(default_factory=dict)
@@ -120,7 +142,7 @@ class SegmentRows:
     _name: str = ""
 
     def __post_init__(self) -> None:
-        for table in ("decisions", "entities", "gaps"):
+        for table in ROW_TABLES:
             self.rows[table] = []
             self.days[table] = []
         self.flat = {name: _Flat() for name in _FLAT}
@@ -132,14 +154,15 @@ class SegmentRows:
         return len(self.rows["decisions"])
 
     def _day_hour(self, t_ns: int) -> tuple[str, str]:
+        """The row's partition (the UTC day, or the run on a sim or monotonic clock) and its
+        ``hour``, ``YYYY-MM-DD HH:00`` UTC as ``metrics --by hour`` groups (so the index's
+        groups are the logs')."""
         bucket = t_ns // _HOUR_NS
         found = self._hours.get(bucket)
         if found is None:
             t = time.gmtime(t_ns // 1_000_000_000)
-            found = self._hours[bucket] = (
-                time.strftime("%Y-%m-%d", t),
-                time.strftime("%Y-%m-%d %H:00", t),
-            )
+            day = time.strftime("%Y-%m-%d", t) if self.run is None else self.run
+            found = self._hours[bucket] = (day, time.strftime("%Y-%m-%d %H:00", t))
         return found
 
     def __call__(self, d: ScoredDecision) -> None:
@@ -154,6 +177,12 @@ class SegmentRows:
         if type(perception) is dict and perception.get("entities"):
             nearest = self._entities(d, perception["entities"], day)
         self._decision(d, day, hour, nearest)
+        execution = d.execution
+        if type(execution) is dict:
+            if execution.get("channels"):
+                self._channels(d, execution, day)
+            if execution.get("checks"):
+                self._checks(d, execution["checks"], day)
         if d.seal.gap is not None:
             self._gap(d, self._day_hour(d.seal.gap.after_t_ns)[0])
 
@@ -222,6 +251,7 @@ class SegmentRows:
                 len(action.get("alternatives") or ()),
                 len(action.get("counterfactuals") or ()),
                 _number(execution.get("deviation")),
+                _text(execution.get("deviation_unit")),
                 None if scenario == NO_SCENARIO else scenario,
                 score.et,
                 score.et_partial,
@@ -260,6 +290,54 @@ class SegmentRows:
                 gap.declared_dropped,
             )
         )
+
+    def _channels(self, d: ScoredDecision, execution: dict[str, Any], day: str) -> None:
+        """Add the cycle's actuator channel rows, each with the record's ``deviation_unit``."""
+        channels = execution["channels"]
+        if type(channels) is not list:
+            return
+        unit = _text(execution.get("deviation_unit"))
+        rows, days = self.rows["channels"], self.days["channels"]
+        number, t_ns = d.cycle.cycle, d.cycle.t_ns
+        for channel in channels:
+            if type(channel) is not dict:
+                continue
+            days.append(day)
+            rows.append(
+                (
+                    number,
+                    t_ns,
+                    _text(channel.get("name")),
+                    _number(channel.get("intended")),
+                    _number(channel.get("actual")),
+                    _number(channel.get("deviation")),
+                    _text(channel.get("unit")),
+                    unit,
+                )
+            )
+
+    def _checks(self, d: ScoredDecision, checks: Any, day: str) -> None:
+        """Add the cycle's compliance check rows, one per rule checked."""
+        if type(checks) is not list:
+            return
+        rows, days = self.rows["checks"], self.days["checks"]
+        number, t_ns = d.cycle.cycle, d.cycle.t_ns
+        for check in checks:
+            if type(check) is not dict:
+                continue
+            passed = check.get("passed")
+            days.append(day)
+            rows.append(
+                (
+                    number,
+                    t_ns,
+                    _text(check.get("rule")),
+                    passed if type(passed) is bool else None,
+                    _number(check.get("value")),
+                    _number(check.get("limit")),
+                    _text(check.get("detail")),
+                )
+            )
 
     def _entities(self, d: ScoredDecision, entities: Any, day: str) -> dict[str, float]:
         """Add the cycle's entity rows; return the nearest distance of each class seen."""
@@ -307,7 +385,7 @@ class SegmentRows:
         rows = self.rows[name]
         if name == "decisions":
             return pa.Table.from_arrays(self._decision_arrays(shape), schema=shape), self.days[name]
-        constant_segment = name == "entities"  # not stored per row: filled here
+        constant_segment = name != "gaps"  # not stored per row: filled here
         width = len(shape) - constant_segment
         columns: list[Any] = list(zip(*rows, strict=True)) if rows else [()] * width
         if constant_segment:

@@ -3,7 +3,9 @@
 docs/fleet.md is the long form; a test checks that every column here is documented there.
 Files are Hive-partitioned (``decisions/robot=amr-7/day=2026-11-29/*.parquet``), so ``robot``
 and ``day`` are directory names, not columns inside the files; every reader that knows Hive
-partitioning (DuckDB, pyarrow.dataset, Spark, Trino) gives them back as columns.
+partitioning (DuckDB, pyarrow.dataset, Spark, Trino) gives them back as columns. ``day`` is
+text: the UTC date on a wall clock, ``run-<segment>`` on a sim or monotonic clock
+(``rows.partition_of``).
 """
 
 from __future__ import annotations
@@ -23,12 +25,14 @@ __all__ = [
 ]
 
 INDEX_FORMAT = "trace-fleet-index"
-INDEX_VERSION = 1
+INDEX_VERSION = 2
 """Bumped whenever a column is added, removed or changes meaning; an index of another
-version is rebuilt from the logs, not read."""
+version is rebuilt from the logs, not read. 2: the ``channels`` and ``checks`` tables,
+``decisions.deviation_unit``, and ``day`` = ``run-<segment>`` on sim and monotonic clocks
+(1 put their rows under 1970-01-01)."""
 
 PARTITION_COLUMNS = ("robot", "day")
-TABLES = ("decisions", "entities", "gaps", "segments")
+TABLES = ("decisions", "entities", "channels", "checks", "gaps", "segments")
 _RISING = ("cycle", "t_ns")
 """Integer columns that climb row by row: delta-encoded, not dictionary-encoded."""
 
@@ -55,6 +59,8 @@ def schema(table: str) -> pa.Schema:
     columns = {
         "decisions": _decision_columns,
         "entities": _entity_columns,
+        "channels": _channel_columns,
+        "checks": _check_columns,
         "gaps": _gap_columns,
         "segments": _segment_columns,
     }[table]()
@@ -95,6 +101,7 @@ def _decision_columns() -> _Columns:
         ("alternatives", pa.int32()),
         ("counterfactuals", pa.int32()),
         ("deviation", pa.float64()),
+        ("deviation_unit", pa.string()),
         ("failed_checks", strings),
         ("flags", strings),
         ("nearest", pa.map_(pa.string(), pa.float64())),
@@ -136,6 +143,39 @@ def _entity_columns() -> _Columns:
         ("x", pa.float64()),
         ("y", pa.float64()),
         ("evidence", pa.int32()),
+    ]
+
+
+def _channel_columns() -> _Columns:
+    """One row per actuator channel of a decision's execution record (profile 1.1)."""
+    import pyarrow as pa
+
+    return [
+        ("segment", pa.string()),
+        ("cycle", pa.int64()),
+        ("t_ns", pa.int64()),
+        ("channel", pa.string()),
+        ("intended", pa.float64()),
+        ("actual", pa.float64()),
+        ("deviation", pa.float64()),
+        ("unit", pa.string()),
+        ("deviation_unit", pa.string()),
+    ]
+
+
+def _check_columns() -> _Columns:
+    """One row per compliance check of a decision's execution record."""
+    import pyarrow as pa
+
+    return [
+        ("segment", pa.string()),
+        ("cycle", pa.int64()),
+        ("t_ns", pa.int64()),
+        ("rule", pa.string()),
+        ("passed", pa.bool_()),
+        ("value", pa.float64()),
+        ("limit", pa.float64()),
+        ("detail", pa.string()),
     ]
 
 

@@ -217,7 +217,7 @@ def test_an_index_of_another_version_is_rebuilt_in_place(fleet: Path, tmp_path: 
     manifest = json.loads((index / MANIFEST).read_text())
     manifest["version"] = 0
     (index / MANIFEST).write_text(json.dumps(manifest))
-    day = index / "decisions" / "robot=r1" / "day=1970-01-01"
+    day = index / "decisions" / "robot=r1" / "day=run-000000"
     stray = day / "from-version-0.parquet"
     shutil.copy(sorted(day.glob("*.parquet"))[0], stray)
     report = build_index([fleet], index)
