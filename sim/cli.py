@@ -114,7 +114,7 @@ with an ISO 8601 UTC time gives them a wall clock (the segments' clock is then "
 times are ns since the Unix epoch), with seconds a sim clock starting there (the default:
 a sim clock from 0):
 
-  trace-sim run --duration 30s --robot-id amr-1 --start 2026-05-04T06:00:00Z --out fleet/
+  trace-sim run --robot-id amr-3 --start 2026-05-04T06:00:00Z --out fleet/
 """
 
 

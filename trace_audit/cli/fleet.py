@@ -33,14 +33,18 @@ if TYPE_CHECKING:  # the library is imported inside each command: start-up stays
 
 _INDEX_HELP = help_text("""
 Build or update the fleet index: Parquet tables of every decision (decisions, entities,
-gaps, segments), partitioned by robot and day, scored by the same code as metrics. Only new
-or changed segments are read (keyed by their SHA-256). Schema: docs/fleet.md.
+actuator channels, checks, gaps, segments), partitioned by robot and day, scored by the same
+code as metrics. The day is the UTC date on a wall clock; on a sim or monotonic clock it is
+the robot's run, run-<first segment>. Only new or changed segments are read (keyed by their
+SHA-256). Schema: docs/fleet.md.
 
 [bold]Examples[/bold]:
 
   trace-audit index logs/ --out idx/
 
   trace-audit index logs/ --out idx/ --scheduler tcp://10.0.0.5:8786
+
+  trace-audit index sim1/ sim2/ --out idx/
 
 Two different logs at one chain position (two roots whose robot has the same id) are
 refused, exit 2; of two copies of one segment (a truncated one beside the intact file)
@@ -106,9 +110,10 @@ def _index_doc(r: IndexReport) -> Doc:
 
 _QUERY_HELP = help_text("""
 Run one SQL statement (DuckDB) on a fleet index. Tables: decisions (with an explain
-column: the command that reconstructs the decision), entities, gaps, segments; robot and
-day on each. A bad statement, none or several is one line on stderr, exit 2; a damaged
-index file, exit 3. The statement reads the index's files and nothing else: other files,
+column: the command that reconstructs the decision), entities, channels, checks, gaps,
+segments; robot and day on each (day: the UTC date, or run-<segment> on a sim clock).
+A bad statement, none or several is one line on stderr, exit 2; a damaged index file,
+exit 3. The statement reads the index's files and nothing else: other files,
 COPY, ATTACH, extensions and the network are refused (export with --csv or --json, or
 point DuckDB itself at the Parquet files). SQL that starts with a comment (--) goes
 after a lone --.
@@ -146,7 +151,8 @@ def query_command(
 
 _FIND_HELP = help_text("""
 Find decisions by command, by what the robot saw near it, and by any SQL condition on
-the decisions table; each row ends with the explain command that reconstructs it.
+the decisions table; each row ends with the explain command that reconstructs it
+(trace-audit explain SEGMENT --cycle N --robot R).
 
 [bold]Examples[/bold]:
 

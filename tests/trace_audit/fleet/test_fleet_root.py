@@ -249,3 +249,33 @@ def test_a_restarted_sim_clock_starts_a_new_run_partition(tmp_path: Path) -> Non
     )
     assert [(r["day"], r["t0"]) for r in rows] == [("run-000000", 0), ("run-000001", 0)]
     assert rows[1]["first"] > rows[0]["first"]
+
+
+def _readme_fleet_commands() -> list[list[str]]:
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    block = text.split("Robots with distinct ids share", 1)[1].split("```sh", 1)[1]
+    lines = [line.split("#", 1)[0].strip() for line in block.split("```", 1)[0].splitlines()]
+    return [shlex.split(line) for line in lines if line]
+
+
+def test_the_readme_fleet_commands_run_as_written(tmp_path: Path) -> None:
+    """Shorter runs (20 s, not 10 min), else word for word, in a fresh directory."""
+    commands = _readme_fleet_commands()
+    assert [c[0] for c in commands].count("trace-sim") == 3
+    modules = {"trace-sim": "evaluation.cli", "trace-audit": "trace_audit.cli"}
+    outputs = []
+    for words in commands:
+        args = ["20s" if w == "10m" else w for w in words[1:]]
+        done = subprocess.run(
+            [sys.executable, "-m", modules[words[0]], *args, "--json"],
+            capture_output=True,
+            text=True,
+            check=False,
+            cwd=tmp_path,
+            env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"},
+            timeout=120,
+        )
+        assert done.returncode == 0, (words, done.stderr)
+        outputs.append(json.loads(done.stdout))
+    days = {(r["robot"], r["day"]) for r in outputs[4]}
+    assert days == {("amr-1", "run-000000"), ("amr-2", "run-000000"), ("amr-3", "2026-05-04")}
