@@ -108,6 +108,7 @@ def test_help_names_values_as_click_does_not_by_python_type() -> None:
     from trace_audit.cli import app
 
     shown = CliRunner().invoke(app, ["metrics", "--help"]).output
-    assert "--evidence PATH" in shown and "--jobs INTEGER" in shown and "--end NUMBER" in shown
+    assert "--evidence PATH" in shown and "--jobs INTEGER" in shown
+    assert "--gap-tolerance NUMBER" in shown and "--end TIME" in shown
     assert "\n  LOGS...  " in shown
     assert "<" not in shown.split("Arguments:")[1].replace("<=", "")

@@ -156,11 +156,17 @@ _Start = Annotated[
         help="Analysis window start (t1): seconds in the log's clock, +seconds after the "
         "log start, or on a wall clock an ISO 8601 time.",
         show_default=False,
+        metavar="TIME",
     ),
 ]
 _End = Annotated[
     str | None,
-    typer.Option("--end", help="Analysis window end (t2), in the same forms.", show_default=False),
+    typer.Option(
+        "--end",
+        help="Analysis window end (t2), in the same forms.",
+        show_default=False,
+        metavar="TIME",
+    ),
 ]
 _TcsWeights = Annotated[
     str | None,
