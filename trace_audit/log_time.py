@@ -23,7 +23,15 @@ from trace_runtime.clock import is_wall_clock
 from trace_runtime.errors import UsageError
 from trace_runtime.logset import Log
 
-__all__ = ["SECONDS_CLOCK", "LogClock", "TimeArg", "TimePoint", "exact_seconds", "resolve_time"]
+__all__ = [
+    "SECONDS_CLOCK",
+    "LogClock",
+    "TimeArg",
+    "TimePoint",
+    "exact_seconds",
+    "hour_of",
+    "resolve_time",
+]
 
 _ISO = re.compile(
     r"(\d{4}-\d{2}-\d{2})[T ](\d{2}):(\d{2})(?::(\d{2})(?:[.,](\d{1,9}))?)?"
@@ -159,3 +167,14 @@ def resolve_time(value: TimeArg, log: Log) -> int | None:
 
 SECONDS_CLOCK = LogClock("system", 0)
 """A clock that tells no time of day: times shown as seconds (a result's default)."""
+
+_HOUR_NS = 3600 * 1_000_000_000
+
+
+def hour_of(t_ns: int, wall: bool) -> str:
+    """The hour a time falls in, as ``metrics --by hour`` and the fleet index name it: the
+    UTC hour (``2026-05-04 06:00``) on a wall clock, else the hour of the robot's own clock
+    (``+0003h``: 3 to 4 hours after its zero), never an hour of 1970."""
+    if not wall:
+        return f"+{t_ns // _HOUR_NS:04d}h"
+    return (_EPOCH + timedelta(seconds=t_ns // 1_000_000_000)).strftime("%Y-%m-%d %H:00")

@@ -22,6 +22,7 @@ import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from trace_audit.log_time import hour_of
 from trace_audit.metrics import NO_SCENARIO, ScoredDecision, scenario_of
 from trace_runtime.clock import is_wall_clock
 from trace_runtime.reader import Segment
@@ -155,14 +156,14 @@ class SegmentRows:
 
     def _day_hour(self, t_ns: int) -> tuple[str, str]:
         """The row's partition (the UTC day, or the run on a sim or monotonic clock) and its
-        ``hour``, ``YYYY-MM-DD HH:00`` UTC as ``metrics --by hour`` groups (so the index's
+        ``hour`` as ``metrics --by hour`` groups (``log_time.hour_of``) (so the index's
         groups are the logs')."""
         bucket = t_ns // _HOUR_NS
         found = self._hours.get(bucket)
         if found is None:
-            t = time.gmtime(t_ns // 1_000_000_000)
-            day = time.strftime("%Y-%m-%d", t) if self.run is None else self.run
-            found = self._hours[bucket] = (day, time.strftime("%Y-%m-%d %H:00", t))
+            hour = hour_of(t_ns, wall=self.run is None)
+            day = hour[:10] if self.run is None else self.run
+            found = self._hours[bucket] = (day, hour)
         return found
 
     def __call__(self, d: ScoredDecision) -> None:

@@ -9,7 +9,6 @@ the previous segment) come out as in one pass (``score_robot``).
 from __future__ import annotations
 
 import contextlib
-import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +16,7 @@ from typing import Any, NamedTuple
 
 from trace_audit.chains import DecisionScore, SensorWindow, score_layers, trace_layers
 from trace_audit.evidence import open_recordings
+from trace_audit.log_time import hour_of
 from trace_audit.metrics.config import MetricsConfig
 from trace_audit.metrics.decision import (
     dr_problems,
@@ -38,7 +38,7 @@ from trace_audit.metrics.sums import (
     add_failed_checks,
 )
 from trace_runtime.chain import digest
-from trace_runtime.clock import clock_restarted
+from trace_runtime.clock import clock_restarted, is_wall_clock
 from trace_runtime.costs import TIMING_METADATA, CostHistogram
 from trace_runtime.cycles import Cycle
 from trace_runtime.gaps import Gap, continuity, find_gap
@@ -135,9 +135,8 @@ class _Scanner:
             return lambda _cycle: robot
         if by == "scenario":
             return lambda cycle: scenario_of(cycle.layer(TOPIC_EXECUTION))
-        return lambda cycle: time.strftime(
-            "%Y-%m-%d %H:00", time.gmtime(cycle.t_ns // 1_000_000_000)
-        )
+        wall = is_wall_clock(segment.session.clock, segment.info.start_ns)
+        return lambda cycle: hour_of(cycle.t_ns, wall)
 
     def _count_external(self, perception: Any) -> None:
         """Tally the perception's refs into external recordings by resolved / broken /

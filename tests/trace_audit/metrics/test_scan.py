@@ -16,6 +16,7 @@ from typing import Any
 import pytest
 from mcap.writer import Writer
 
+from trace_audit.log_time import hour_of
 from trace_audit.metrics import (
     MetricsConfig,
     MetricsReport,
@@ -536,7 +537,12 @@ def test_group_by_segment_and_hour(tmp_path: Path) -> None:
     assert [g.name for g in by_segment.groups] == ["amr-7_000000.mcap", "amr-7_000001.mcap"]
     assert [g.decisions for g in by_segment.groups] == [4, 4]
     by_hour = compute_metrics([root], MetricsConfig(by="hour"))
-    assert [g.name for g in by_hour.groups] == ["1970-01-01 00:00"]
+    assert [g.name for g in by_hour.groups] == ["+0000h"]  # the robot's own clock, not 1970
+
+
+def test_hours_of_a_wall_clock_are_utc_hours() -> None:
+    assert hour_of(1_777_874_665 * 10**9, wall=True) == "2026-05-04 06:00"
+    assert hour_of(3 * 3600 * 10**9 + 5, wall=False) == "+0003h"
 
 
 def test_the_same_segment_in_two_tiers_is_read_once(tmp_path: Path) -> None:
