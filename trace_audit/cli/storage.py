@@ -276,15 +276,14 @@ def _span(ns: int) -> str:
     return f"{ns / 1e9:g}s"
 
 
-_YEAR_2000_NS = 946_684_800 * 10**9
-
-
 def _when(t_ns: int | None) -> str:
     """A log time as a UTC date when it can be one; a robot's own clock (a simulator's, a
     monotonic one) starts near zero, and reads as seconds, not as a day in 1970."""
+    from trace_runtime.clock import EARLIEST_WALL_NS
+
     if t_ns is None:
         return "-"
-    if t_ns < _YEAR_2000_NS:
+    if t_ns < EARLIEST_WALL_NS:
         return f"{t_ns / 1e9:.3f} s"
     return datetime.fromtimestamp(t_ns / 1e9, tz=UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
 
