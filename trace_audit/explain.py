@@ -27,7 +27,7 @@ from trace_audit.cycle_fields import command_of
 from trace_audit.evidence import ExternalEvidence, describe_refs, open_recordings
 from trace_audit.jsonout import OMIT_EMPTY
 from trace_audit.log_source import LogSource, as_log, require_cycles
-from trace_audit.log_time import LogClock, TimeArg, resolve_time
+from trace_audit.log_time import LogClock, TimeArg
 from trace_audit.metrics import MetricsConfig, dr_problems, trust_score
 from trace_audit.selection import Selection, robot_at, robot_with_cycle
 from trace_runtime.chain import GENESIS, digest
@@ -300,9 +300,8 @@ def _explain(
 def _find_target(log: Log, t: TimeArg, cycle: int | None) -> tuple[int | None, Log, Cycle, int]:
     """(the query time in ns or None, the log of the robot that decided, the decision in
     force then or with that number, the query time - decision time)."""
-    t_ns = resolve_time(t, log)
-    if t_ns is not None:
-        log = robot_at(log, t_ns)
+    if t is not None:
+        log, t_ns = robot_at(log, t)
         target = log.cycle_at(t_ns)
         return t_ns, log, target, t_ns - target.t_ns
     assert cycle is not None

@@ -19,13 +19,14 @@ from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from decimal import Decimal, InvalidOperation
 
-from trace_runtime.clock import is_wall_clock
+from trace_runtime.clock import is_wall_clock, iso_utc, show_time
 from trace_runtime.errors import UsageError
 from trace_runtime.logset import Log
 
 __all__ = [
     "SECONDS_CLOCK",
     "LogClock",
+    "NotWallClockError",
     "TimeArg",
     "TimePoint",
     "exact_seconds",
@@ -35,7 +36,7 @@ __all__ = [
 
 _ISO = re.compile(
     r"(\d{4}-\d{2}-\d{2})[T ](\d{2}):(\d{2})(?::(\d{2})(?:[.,](\d{1,9}))?)?"
-    r"(Z|[+-]\d{2}:?\d{2})?"
+    r"([Zz]|[+-]\d{2}:?\d{2})?"
 )
 _EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 
@@ -74,11 +75,15 @@ class TimePoint:
     def resolve(self, log: Log) -> int:
         """This time as ``t_ns`` in ``log``'s clock."""
         if self.wall and not is_wall_clock(log.clock, log.start_ns):
-            raise UsageError(
+            raise NotWallClockError(
                 f"this log's times are seconds on its own clock ({log.clock!r}), not times of "
                 "day: give seconds (e.g. 12.3) or +seconds after the log start"
             )
         return log.start_ns + self.ns if self.relative else self.ns
+
+
+class NotWallClockError(UsageError):
+    """An ISO 8601 time was given for a log whose clock tells no time of day."""
 
 
 def _iso_ns(text: str) -> int:
@@ -91,7 +96,7 @@ def _iso_ns(text: str) -> int:
     except ValueError as err:
         raise UsageError(f"invalid time {text!r}: {err}") from None
     offset = timedelta(0)
-    if zone and zone != "Z":
+    if zone and zone not in "Zz":
         digits = zone[1:].replace(":", "")
         offset = timedelta(hours=int(digits[:2]), minutes=int(digits[2:]))
         offset = -offset if zone[0] == "-" else offset
@@ -128,20 +133,12 @@ class LogClock:
         return is_wall_clock(self.name, self.start_ns)
 
     def show(self, t_ns: int) -> str:
-        """A time as people read it, to the millisecond."""
-        if not self.wall:
-            return f"{t_ns / 1e9:.3f} s"
-        return f"{self.iso(t_ns, digits=3)} (+{(t_ns - self.start_ns) / 1e9:.3f} s)"
+        """A time as people read it, to the millisecond (``clock.show_time``)."""
+        return show_time(t_ns, self.name, self.start_ns)
 
     def iso(self, t_ns: int, *, digits: int = 9) -> str:
-        """The UTC moment of a wall-clock time, with ``digits`` decimals of the second
-        (trailing zeros dropped when ``digits`` is 9, so the text is exact but short)."""
-        whole, part = divmod(t_ns, 1_000_000_000)
-        moment = (_EPOCH + timedelta(seconds=whole)).strftime("%Y-%m-%dT%H:%M:%S")
-        fraction = f"{part:09d}"[:digits]
-        if digits == 9:
-            fraction = fraction.rstrip("0")
-        return f"{moment}.{fraction}Z" if fraction else f"{moment}Z"
+        """The UTC moment of a wall-clock time (``clock.iso_utc``)."""
+        return iso_utc(t_ns, digits=digits)
 
     def arg(self, t_ns: int) -> str:
         """The text a command line takes back to exactly ``t_ns``: ISO on a wall clock,

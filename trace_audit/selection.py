@@ -11,8 +11,9 @@ library select the same way:
 - A question about one moment (``explain``, ``report``, ``export``) needs one decision:
   ``robot_at`` keeps the one robot with a decision in force at that time, or refuses
   (``SeveralRobotsError``) naming the robots that have one. Never a silent pick.
-- The window (``start``, ``end``) is read by ``log_time.resolve_time`` in the selected log's
-  clock, so ``+5`` counts from the selected robots' first record.
+- A time is read in each robot's own clock (``log_time.resolve_time``): ``+5`` counts from
+  that robot's first record, an ISO time is a moment only to robots on a wall clock (the
+  others have no decision then), plain seconds are the same number for every robot.
 """
 
 from __future__ import annotations
@@ -21,7 +22,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
-from trace_audit.log_time import LogClock, TimeArg, resolve_time
+from trace_audit.log_time import (
+    LogClock,
+    NotWallClockError,
+    TimeArg,
+    TimePoint,
+    exact_seconds,
+    resolve_time,
+)
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
 from trace_runtime.logset import Log
@@ -62,6 +70,9 @@ class Selection:
     start: TimeArg = None
     end: TimeArg = None
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "robots", tuple(dict.fromkeys(self.robots)))  # once each
+
     def of(self, log: Log) -> Log:
         """``log`` cut to the selected robots (``UsageError`` naming the log's robots when one
         is not there)."""
@@ -97,39 +108,79 @@ def per_robot(
 
     A robot whose question raises ``skip`` (it has nothing to say: no cycle in the window,
     never takes the action) is left out; when every robot is, the first one's error is
-    raised, so a question that no robot can answer fails as it would on one robot."""
+    raised (on several robots, as a ``UsageError`` that says so and quotes the first), so a
+    question that no robot can answer fails as it would on one robot."""
     answers: list[Answer] = []
-    first_error: Exception | None = None
-    for robot in each_robot(log):
+    errors: list[tuple[str, Exception]] = []
+    robots = each_robot(log)
+    for robot in robots:
         try:
             answers.append(ask(robot))
         except skip as err:
-            first_error = first_error or err
-    if not answers and first_error is not None:
-        raise first_error
+            errors.append((robot.first_robot, err))
+    if not answers and errors:
+        if len(robots) == 1:
+            raise errors[0][1]
+        first, why = errors[0]
+        raise UsageError(f"none of the {len(robots)} robots answers ({first}: {why})") from why
     return answers
 
 
-def robot_at(log: Log, t_ns: int) -> Log:
-    """The log of the one robot with a decision in force at ``t_ns``.
+def robot_at(log: Log, t: TimeArg) -> tuple[Log, int]:
+    """The log of the one robot with a decision in force at ``t``, and ``t`` as its ``t_ns``.
 
-    ``log`` itself when it holds one robot; ``TimeOutOfRangeError`` when no robot has a
-    decision then; ``SeveralRobotsError`` naming them when more than one has."""
+    ``t`` is read in each robot's own clock (``log_time.resolve_time``): ``+5`` is 5 s after
+    that robot's first record, and an ISO time names a moment only to robots on a wall
+    clock. ``log`` itself when it holds one robot. Otherwise ``SeveralRobotsError`` names
+    the robots with a decision then, and a time no robot has a decision at is a
+    ``UsageError`` giving each robot's range."""
     if len(log.robots) == 1:
-        return log
-    having: list[Log] = []
+        t_ns = resolve_time(t, log)
+        assert t_ns is not None
+        return log, t_ns
+    having: list[tuple[Log, int]] = []
+    missed: list[Log] = []
     for robot in each_robot(log):
+        try:
+            t_ns = resolve_time(t, robot)
+        except NotWallClockError:
+            continue
+        assert t_ns is not None
         try:
             robot.cycle_at(t_ns)
         except TimeOutOfRangeError:
+            missed.append(robot)
             continue
-        having.append(robot)
-    if not having:
-        raise TimeOutOfRangeError(t_ns, log.start_ns, log.end_ns)
-    if len(having) > 1:
-        when = LogClock.of(log).show(t_ns)
-        raise SeveralRobotsError([r.first_robot for r in having], f"a decision in force at {when}")
-    return having[0]
+        having.append((robot, t_ns))
+    if len(having) == 1:
+        return having[0]
+    asked = _asked(t, log)
+    if having:
+        raise SeveralRobotsError([r.first_robot for r, _ in having], f"a decision at {asked}")
+    if not missed:
+        raise NotWallClockError(
+            f"{asked} is a time of day, and no robot of this log keeps a wall clock: give seconds"
+        )
+    ranges = "; ".join(f"{r.first_robot} {_range(r)}" for r in missed)
+    raise UsageError(f"no robot has a decision at {asked}: {ranges}")
+
+
+def _asked(t: TimeArg, log: Log) -> str:
+    """A time as the user gave it, for a message about several robots."""
+    if isinstance(t, str):
+        return t.strip()
+    if isinstance(t, TimePoint):
+        return f"+{exact_seconds(t.ns)} s" if t.relative else exact_seconds(t.ns)
+    return LogClock.of(log).show(t) if isinstance(t, int) else "?"
+
+
+def _range(log: Log) -> str:
+    clock = LogClock.of(log)
+
+    def shown(t_ns: int) -> str:
+        return clock.iso(t_ns, digits=3) if clock.wall else f"{t_ns / 1e9:.3f} s"
+
+    return f"{shown(log.start_ns)} .. {shown(log.end_ns)}"
 
 
 def robot_with_cycle(log: Log, number: int, find: _CycleFinder) -> tuple[Log, Cycle]:

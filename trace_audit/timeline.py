@@ -125,9 +125,9 @@ def _window(log: Log, start: TimeArg, end: TimeArg) -> tuple[int, int]:
     lo = log.start_ns if start_ns is None else start_ns
     hi = log.end_ns if end_ns is None else end_ns
     clock = LogClock.of(log)
-    if hi < lo:
+    if start_ns is not None and end_ns is not None and end_ns < start_ns:
         raise UsageError(f"the window ends before it starts ({clock.show(lo)} > {clock.show(hi)})")
-    if lo > log.end_ns or hi < log.start_ns:
+    if lo > log.end_ns or hi < log.start_ns or hi < lo:
         raise WindowOutsideLogError(
             f"the window [{clock.show(lo)}, {clock.show(hi)}] does not overlap the log's "
             f"range [{clock.show(log.start_ns)}, {clock.show(log.end_ns)}]"

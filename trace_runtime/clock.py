@@ -18,7 +18,16 @@ a ``system`` log whose times start before 2000 (``EARLIEST_WALL_NS``): a reader 
 
 from __future__ import annotations
 
-__all__ = ["EARLIEST_WALL_NS", "WALL_CLOCKS", "clock_restarted", "is_wall_clock"]
+import datetime as _dt
+
+__all__ = [
+    "EARLIEST_WALL_NS",
+    "WALL_CLOCKS",
+    "clock_restarted",
+    "is_wall_clock",
+    "iso_utc",
+    "show_time",
+]
 
 WALL_CLOCKS = frozenset({"system"})
 """Clock names whose ``t_ns`` are nanoseconds since the Unix epoch (UTC)."""
@@ -36,3 +45,26 @@ def is_wall_clock(clock: str, start_ns: int) -> bool:
     """True when times of a log on ``clock`` starting at ``start_ns`` are times of day
     (nanoseconds since the Unix epoch, UTC)."""
     return clock in WALL_CLOCKS and start_ns >= EARLIEST_WALL_NS
+
+
+_EPOCH = _dt.datetime(1970, 1, 1, tzinfo=_dt.UTC)
+
+
+def iso_utc(t_ns: int, *, digits: int = 9) -> str:
+    """A wall-clock time as ISO 8601 UTC with ``digits`` decimals of the second (trailing
+    zeros dropped when ``digits`` is 9, so the text is exact but short)."""
+    whole, part = divmod(t_ns, 1_000_000_000)
+    moment = (_EPOCH + _dt.timedelta(seconds=whole)).strftime("%Y-%m-%dT%H:%M:%S")
+    fraction = f"{part:09d}"[:digits]
+    if digits == 9:
+        fraction = fraction.rstrip("0")
+    return f"{moment}.{fraction}Z" if fraction else f"{moment}Z"
+
+
+def show_time(t_ns: int, clock: str, start_ns: int) -> str:
+    """A time of a log on ``clock`` that starts at ``start_ns``, as people read it, to the
+    millisecond: ``2026-05-04T06:04:25.900Z (+265.000 s)`` on a wall clock, else
+    ``265.000 s``."""
+    if not is_wall_clock(clock, start_ns):
+        return f"{t_ns / 1e9:.3f} s"
+    return f"{iso_utc(t_ns, digits=3)} ({(t_ns - start_ns) / 1e9:+.3f} s)"

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from trace_runtime.clock import is_wall_clock, iso_utc
+
 
 class TraceError(Exception):
     """Base of every error this project raises on purpose."""
@@ -29,12 +31,16 @@ class NotTraceLogError(LogReadError):
 
 
 class TimeOutOfRangeError(TraceError):
-    """A time asked about lies outside the log's time range."""
+    """A time asked about lies outside the log's time range (shown in ISO UTC when
+    ``clock`` names a wall clock)."""
 
-    def __init__(self, t_ns: int, start_ns: int, end_ns: int) -> None:
+    def __init__(self, t_ns: int, start_ns: int, end_ns: int, clock: str = "") -> None:
+        def shown(ns: int) -> str:
+            wall = is_wall_clock(clock, start_ns)
+            return iso_utc(ns, digits=3) if wall else f"{ns / 1e9:.3f} s"
+
         super().__init__(
-            f"t={t_ns / 1e9:.3f} s is outside the log's range "
-            f"[{start_ns / 1e9:.3f} s, {end_ns / 1e9:.3f} s]"
+            f"t={shown(t_ns)} is outside the log's range [{shown(start_ns)}, {shown(end_ns)}]"
         )
         self.t_ns = t_ns
         self.start_ns = start_ns

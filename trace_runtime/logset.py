@@ -379,7 +379,7 @@ class Log:
 
         ``UsageError`` names the robots the log holds when one asked for is not among them."""
         held = self.robots
-        missing = [r for r in robots if r not in held]
+        missing = [repr(r) for r in dict.fromkeys(robots) if r not in held]
         if missing:
             raise UsageError(
                 f"robot {', '.join(missing)} is not in this log; it holds {', '.join(held)}"
@@ -506,7 +506,7 @@ class Log:
         # (every segment's) are read only for such a time.
         if t_ns < start or (t_ns > end and t_ns > end + self.period_ns):
             self._confirm_range()
-            raise TimeOutOfRangeError(t_ns, start, end)
+            raise TimeOutOfRangeError(t_ns, start, end, self.clock)
         candidates = self._slots[: bisect.bisect_right(self._starts, t_ns)]
         # A segment whose span holds t first: after a restart with a monotonic clock, a later
         # run starting lower must not answer for a time only the earlier run reached.
@@ -515,7 +515,7 @@ class Log:
             found = _opened(slot).cycle_at(t_ns)
             if found is not None:
                 return found
-        raise TimeOutOfRangeError(t_ns, start, end)
+        raise TimeOutOfRangeError(t_ns, start, end, self.clock)
 
     def _confirm_range(self) -> None:
         """Before a lazily opened log refuses a time, open the segments its range comes

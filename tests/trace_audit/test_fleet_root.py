@@ -61,7 +61,7 @@ def test_a_time_only_one_robot_has_is_that_robots_decision(fleet: Path) -> None:
     assert (only["robot"], only["cycle"], only["clock_run"]) == ("amr-3", 30, [])
     chosen = _json("explain", fleet, "--t", "106", "--robot", "amr-2")
     assert (chosen["robot"], chosen["cycle"]) == ("amr-2", 10)
-    one_line(cli("explain", fleet, "--t", "106", "--robot", "amr-9"), 2, "amr-9 is not in")
+    one_line(cli("explain", fleet, "--t", "106", "--robot", "amr-9"), 2, "'amr-9' is not in")
 
 
 def test_questions_over_time_are_answered_per_robot(fleet: Path) -> None:
@@ -137,3 +137,21 @@ def test_the_reports_commands_reproduce_its_decision_and_window(fleet: Path) -> 
     assert {k: again[k] for k in ("robot", "cycle", "window_start_ns", "window_end_ns")} == {
         k: summary[k] for k in ("robot", "cycle", "window_start_ns", "window_end_ns")
     }
+
+
+def test_a_time_is_read_in_each_robots_own_clock(fleet: Path) -> None:
+    # +5 is five seconds into each robot's own log: every robot has a decision then
+    one_line(cli("explain", fleet, "--t", "+5"), 2, "5 robots have a decision at +5")
+    # an ISO time is a moment only to the robot on a wall clock
+    iso = _json("explain", fleet, "--t", "2026-05-04T06:00:05Z")
+    assert (iso["robot"], iso["cycle"]) == ("tractor-1", 50)
+    # seconds in no robot's range: each robot's range is named
+    one_line(cli("explain", fleet, "--t", "99999"), 2, "no robot has a decision at 99999", "amr-3")
+    per_robot = _json("timeline", fleet, "--from", "+2", "--to", "+3")
+    firsts = {r["robot"]: r["rows"][0]["cycle"] for r in per_robot["robots"]}
+    assert firsts == {r: 20 for r in ("amr-1", "amr-2", "amr-3", "arm-1", "tractor-1")}
+    # one window for every robot scored: +offset needs one robot, ISO wall-clock robots
+    one_line(cli("metrics", fleet, "--start", "+2"), 2, "choose one with --robot")
+    one_line(cli("metrics", fleet, "--start", "2026-05-04T06:00:02Z"), 2, "amr-1", "no wall")
+    alone = _json("metrics", fleet, "--robot", "tractor-1", "--start", "+2", "--end", "+3")
+    assert alone["overall"]["decisions"] == 11

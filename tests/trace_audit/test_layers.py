@@ -328,5 +328,5 @@ def test_the_tables_name_the_extra_when_pyarrow_is_missing(
 
 
 def test_an_unknown_robot_is_refused_before_anything_is_read(root: Path) -> None:
-    with pytest.raises(UsageError, match="robot nobody is not in this log"):
+    with pytest.raises(UsageError, match="robot 'nobody' is not in this log"):
         iter_decisions(root, robots="nobody")

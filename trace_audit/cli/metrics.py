@@ -212,8 +212,8 @@ def metrics_command(
             weights=TCSWeights.parse(tcs_weights) if tcs_weights else TCSWeights(),
             thresholds=parse_thresholds(fail_under) if fail_under else {},
             workers=jobs,
-            start_ns=_window_ns(start, logs, robot),
-            end_ns=_window_ns(end, logs, robot),
+            start_ns=_window_ns(start, logs, robot, index),
+            end_ns=_window_ns(end, logs, robot, index),
             max_listed=10_000 if failures else 0,
             evidence=tuple(str(p) for p in evidence or ()),
         )
@@ -247,22 +247,39 @@ def metrics_command(
         raise typer.Exit(EXIT_FINDINGS)
 
 
-def _window_ns(text: str | None, logs: list[Path] | None, robots: list[str] | None) -> int | None:
+def _window_ns(
+    text: str | None, logs: list[Path] | None, robots: list[str] | None, index: Path | None
+) -> int | None:
     """A window end as ``t_ns``: seconds are read exactly as given; ``+seconds`` and ISO
-    times need the log (its start, its clock), which is opened for them alone."""
+    times need the log (its start, its clock), which is opened for them alone. The window
+    is one for every robot scored, so ``+seconds`` (each robot's own start) needs one robot,
+    and an ISO time robots on a wall clock."""
     if text is None:
         return None
-    from trace_audit.log_time import TimePoint, resolve_time
+    if index is not None:
+        raise UsageError("--start/--end are not supported with --index (filter in SQL)")
+    from trace_audit.log_time import LogClock, NotWallClockError, TimePoint, resolve_time
 
     point = TimePoint.parse(text)
     if not (point.relative or point.wall):
         return point.ns
-    if not logs:
-        raise UsageError(f"--start/--end {text!r} needs the logs (not --index): give seconds")
-    from trace_audit.selection import Selection
+    from trace_audit.selection import Selection, each_robot
     from trace_runtime.logset import open_logs
 
-    return resolve_time(point, Selection(tuple(robots or ())).of(open_logs(logs)))
+    log = Selection(tuple(robots or ())).of(open_logs(logs or []))
+    if point.relative and len(log.robots) > 1:
+        raise UsageError(
+            f"{text!r} counts from each robot's own start, and this log holds "
+            f"{len(log.robots)} robots: choose one with --robot, or give seconds"
+        )
+    if point.wall:
+        unclocked = [r.first_robot for r in each_robot(log) if not LogClock.of(r).wall]
+        if unclocked:
+            raise NotWallClockError(
+                f"{text!r} is a time of day, and {', '.join(unclocked)} keep(s) no wall "
+                "clock: choose robots with --robot, or give seconds"
+            )
+    return resolve_time(point, log)
 
 
 def _parse_by(value: str | None) -> Any:

@@ -123,8 +123,7 @@ RobotsOption = Annotated[
     list[str] | None,
     typer.Option(
         "--robot",
-        help="Only this robot's decisions (repeat for several). A log root of several robots "
-        "answers per robot without it.",
+        help="Only this robot's decisions (repeat for several).",
         show_default=False,
     ),
 ]

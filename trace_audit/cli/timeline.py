@@ -72,19 +72,18 @@ def timeline_command(  # noqa: PLR0917 - typer maps each parameter to an option
 def _each_robot(
     source: Path, start: str | None, end: str | None, every: bool, robots: Sequence[str]
 ) -> tuple[str, list[Timeline]]:
-    """Each selected robot's timeline of the window (read in the clock of the robots
-    selected); a robot with no time in the window is left out."""
+    """Each selected robot's timeline of the window (read in each robot's own clock); a
+    robot with no time in the window is left out."""
     from trace_audit.log_source import as_log
-    from trace_audit.log_time import resolve_time
+    from trace_audit.log_time import NotWallClockError
     from trace_audit.selection import Selection, per_robot
     from trace_audit.timeline import WindowOutsideLogError, timeline
 
     log = Selection(tuple(robots)).of(as_log(source))
-    lo, hi = resolve_time(start, log), resolve_time(end, log)
     answers = per_robot(
         log,
-        lambda one: timeline(one, start=lo, end=hi, every=every),
-        skip=WindowOutsideLogError,
+        lambda one: timeline(one, start=start, end=end, every=every),
+        skip=(WindowOutsideLogError, NotWallClockError),
     )
     return str(log.root), answers
 

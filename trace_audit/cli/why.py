@@ -72,19 +72,18 @@ def _why_each_robot(
     source: Path, action: str, t: str | None, robots: Sequence[str]
 ) -> tuple[str, list[WhyResult]]:
     """Each selected robot's answer; a robot that never takes the action (or has no
-    decision at ``t``) is left out. ``t`` is read in the clock of the robots selected."""
+    decision at ``t``) is left out. ``t`` is read in each robot's own clock."""
     from trace_audit.log_source import as_log
-    from trace_audit.log_time import resolve_time
+    from trace_audit.log_time import NotWallClockError
     from trace_audit.selection import Selection, per_robot
     from trace_audit.timeline import ActionNotTakenError, why
     from trace_runtime.errors import TimeOutOfRangeError
 
     log = Selection(tuple(robots)).of(as_log(source))
-    t_ns = resolve_time(t, log)
     answers = per_robot(
         log,
-        lambda one: why(one, action, t=t_ns),
-        skip=(ActionNotTakenError, TimeOutOfRangeError),
+        lambda one: why(one, action, t=t),
+        skip=(ActionNotTakenError, TimeOutOfRangeError, NotWallClockError),
     )
     return str(log.root), answers
 

@@ -50,7 +50,7 @@ def summary_section(data: ReportData) -> str:
     else:
         lead = "at least " if held.at_least else ""
         since = (
-            f"{lead}since {escape(seconds(held.since_t_ns))} (cycle {held.since_cycle}, "
+            f"{lead}since {escape(e.log_clock.show(held.since_t_ns))} (cycle {held.since_cycle}, "
             f"{held.cycles} cycles)"
         )
         if held.previous:
@@ -58,7 +58,8 @@ def summary_section(data: ReportData) -> str:
     asked = (
         f"cycle {e.cycle} (asked for cycle {e.query_cycle})"
         if e.query_t_ns is None
-        else f"cycle {e.cycle}, the decision in force at the asked time {seconds(e.query_t_ns)}"
+        else f"cycle {e.cycle}, the decision in force at the asked time "
+        f"{e.log_clock.show(e.query_t_ns)}"
     )
     leading = d.leading
     rows = [
@@ -75,7 +76,8 @@ def summary_section(data: ReportData) -> str:
         ("Policy", escape(s.policy_version or "not recorded")),
         (
             "Window shown",
-            f"{seconds(data.start_ns)} to {seconds(data.end_ns)} ({len(data.samples)} cycles; "
+            f"{e.log_clock.show(data.start_ns)} to {e.log_clock.show(data.end_ns)} "
+            f"({len(data.samples)} cycles; "
             f"asked for {data.window_s:g} s)",
         ),
     ]
