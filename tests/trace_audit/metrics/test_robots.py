@@ -61,7 +61,7 @@ def test_naming_every_robot_is_the_whole_root(fleet: Path) -> None:
 
 
 def test_an_unknown_robot_is_refused_naming_the_robots(fleet: Path) -> None:
-    with pytest.raises(UsageError, match=r"amr-9 .*amr-1, amr-2"):
+    with pytest.raises(UsageError, match=r"'amr-9' .*amr-1, amr-2"):
         compute_metrics([fleet], robots=["amr-9"])
 
 
