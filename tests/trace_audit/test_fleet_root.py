@@ -155,3 +155,8 @@ def test_a_time_is_read_in_each_robots_own_clock(fleet: Path) -> None:
     one_line(cli("metrics", fleet, "--start", "2026-05-04T06:00:02Z"), 2, "amr-1", "no wall")
     alone = _json("metrics", fleet, "--robot", "tractor-1", "--start", "+2", "--end", "+3")
     assert alone["overall"]["decisions"] == 11
+
+
+def test_a_metrics_window_that_misses_every_robot_is_a_usage_error(fleet: Path) -> None:
+    done = cli("metrics", fleet, "--robot", "amr-1", "--start", "500", "--end", "600")
+    one_line(done, 2, "holds no decision of the log", "amr-1 100.000 s .. 109.900 s")

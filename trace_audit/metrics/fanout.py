@@ -15,13 +15,14 @@ from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from trace_audit.log_time import LogClock
 from trace_audit.metrics.config import MetricsConfig
 from trace_audit.metrics.report import build_report
 from trace_audit.metrics.results import MetricsReport
 from trace_audit.metrics.scan import score_robot, score_segment
 from trace_audit.metrics.sums import ScanResult
-from trace_audit.selection import Selection
-from trace_runtime.errors import LogReadError
+from trace_audit.selection import Selection, each_robot
+from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.logset import Log, open_logs
 from trace_runtime.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
@@ -79,6 +80,26 @@ def _tasks(
     ]
 
 
+def _check_window(log: Log, cfg: MetricsConfig) -> None:
+    """A window that misses every robot's log is a usage error (as a time outside the log
+    is to ``explain``), not a report of 0 decisions."""
+    if cfg.start_ns is None and cfg.end_ns is None:
+        return
+    lo = cfg.start_ns if cfg.start_ns is not None else -(1 << 63)
+    hi = cfg.end_ns if cfg.end_ns is not None else 1 << 63
+    robots = each_robot(log)
+    if any(r.start_ns <= hi and r.end_ns >= lo for r in robots):
+        return
+    clock = LogClock.of(log)
+    ends = (("from", cfg.start_ns), ("to", cfg.end_ns))
+    window = " ".join(f"{word} {clock.show(t)}" for word, t in ends if t is not None)
+    ranges = "; ".join(
+        f"{r.first_robot} {LogClock.of(r).show(r.start_ns)} .. {LogClock.of(r).show(r.end_ns)}"
+        for r in robots
+    )
+    raise UsageError(f"the window ({window}) holds no decision of the log: {ranges}")
+
+
 def compute_metrics(
     paths: Sequence[str | Path],
     config: MetricsConfig | None = None,
@@ -101,6 +122,7 @@ def compute_metrics(
     started = time.perf_counter()
     selection = Selection(robots=tuple(robots or ()))
     log = selection.of(open_logs(paths))
+    _check_window(log, cfg)
     if cfg.by is None and len(log.robots) > 1:
         cfg = replace(cfg, by="robot")
     plan = _plan(log)
