@@ -76,7 +76,7 @@ def decision_table(
     pa = _pyarrow()
     rows = _Columns(pa, _decision_schema(pa))
     for robot, cycle in _iter_selected(source, robots, start, end):
-        decision = read_decision(cycle)
+        decision = read_decision(cycle, with_tree=False)  # no column holds the tree
         execution = decision.execution
         lead = decision.leading
         seal = verify_cycle(cycle)

@@ -209,9 +209,11 @@ class Decision:
         return self.factors[0] if self.factors else None
 
 
-def read_decision(cycle: Cycle) -> Decision:
+def read_decision(cycle: Cycle, *, with_tree: bool = True) -> Decision:
     """The decision logged in ``cycle`` (full or warm summary), read leniently, with
-    omitted optional fields at their schema defaults."""
+    omitted optional fields at their schema defaults. ``with_tree=False``: leave the
+    counterfactual tree out (``tree`` None), for a reader of the other fields alone; the
+    tree is most of the cost of a decision."""
     action = as_mapping(layer_with_defaults(cycle, TOPIC_ACTION))
     execution = as_mapping(layer_with_defaults(cycle, TOPIC_EXECUTION))
     layers = tuple(
@@ -256,7 +258,7 @@ def read_decision(cycle: Cycle) -> Decision:
         counterfactuals_none_applicable=bool(
             action.get("counterfactuals_none_applicable") if action else False
         ),
-        tree=_tree_view(tree, command) if tree else None,
+        tree=_tree_view(tree, command) if tree and with_tree else None,
         execution=_execution(execution) if execution else None,
         layers=layers,
     )
