@@ -18,12 +18,13 @@ from trace_audit.cli.options import (
     JsonOption,
     PlainOption,
     Recordings,
+    RobotsOption,
     evidence_option,
 )
 from trace_audit.cli.output import emit, progress_bar, setup_logging
 
 if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
-    from trace_audit.doctor import DoctorReport, Problem
+    from trace_audit.doctor import DoctorReport, Problem, SegmentDoctor
 
 _HELP = """Check a log against every rule of the TRACE profile: the tool to run first when
 you write TRACE logs from C++, Rust or anything else.
@@ -47,6 +48,8 @@ Exit codes: 0 conforming (SHOULD deviations are listed as notes), 1 a MUST is br
   trace-audit doctor robot.mcap --evidence rosbag2_2026_11_29/ --plain
 
   trace-audit doctor /data/logs/amr-7/ --json | jq '.segments[].problems'
+
+  trace-audit doctor /data/fleet/ --robot amr-7 --robot amr-9
 """
 
 _MAX_LISTED = 100
@@ -56,6 +59,7 @@ _MAX_LISTED = 100
 def doctor_command(
     log: CheckedLogArgument,
     *,
+    robot: RobotsOption = None,
     evidence: Annotated[Recordings, evidence_option("that evidence refs")] = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
@@ -63,8 +67,9 @@ def doctor_command(
     from trace_audit.doctor import doctor_log
 
     setup_logging()
+    robots = robot or ()
     if json_out or plain or not sys.stderr.isatty():
-        report = guarded(lambda: doctor_log(log, evidence=evidence or ()))
+        report = guarded(lambda: doctor_log(log, robots=robots, evidence=evidence or ()))
     else:
         with progress_bar("checking records (MB)") as bar:
             task = bar.task_ids[0]
@@ -72,7 +77,9 @@ def doctor_command(
             def progress(done: int, total: int) -> None:
                 bar.update(task, completed=done >> 20, total=total >> 20)
 
-            report = guarded(lambda: doctor_log(log, evidence=evidence or (), progress=progress))
+            report = guarded(
+                lambda: doctor_log(log, robots=robots, evidence=evidence or (), progress=progress)
+            )
     emit(report, doctor_doc, json_out=json_out, plain=plain)
     if not report.conforms:
         raise typer.Exit(EXIT_FINDINGS)
@@ -88,8 +95,10 @@ def doctor_doc(r: DoctorReport) -> Doc:
         else Seg(f"{len(errors)} RULE(S) BROKEN", "bold red", f"{len(errors)} RULE(S) BROKEN")
     )
     doc.title([f"Doctor {r.path}: ", verdict])
+    several = len(r.robots) > 1
     doc.fields(
         [
+            *([("robots", ", ".join(r.robots))] if several else []),
             ("segments", str(len(r.segments))),
             ("read", f"{sum(s.messages for s in r.segments)} messages, "
              f"{sum(s.cycles for s in r.segments)} sealed cycles" + _summarised(r)),
@@ -99,24 +108,32 @@ def doctor_doc(r: DoctorReport) -> Doc:
     )  # fmt: skip
     if errors:
         doc.heading("MUST broken (the log does not conform)")
-        _problem_table(doc, errors)
+        _problem_table(doc, r.located("MUST"), several=several)
     if notes:
         doc.heading("SHOULD not followed (notes)")
-        _problem_table(doc, notes)
+        _problem_table(doc, r.located("SHOULD"), several=several)
     return doc
 
 
-def _problem_table(doc: Doc, problems: list[Problem]) -> None:
+def _problem_table(
+    doc: Doc, problems: list[tuple[SegmentDoctor, Problem]], *, several: bool
+) -> None:
+    """One row a problem; on a log of several robots, each first names its robot (or, for
+    a file no robot owns, the file)."""
     rows = []
-    for p in problems[:_MAX_LISTED]:
+    for segment, p in problems[:_MAX_LISTED]:
         where = []
         if p.cycle is not None:
             where.append(f"cycle {p.cycle}")
         if p.offset is not None:
             where.append(f"@{p.offset}")
         times = f" (x{p.count})" if p.count > 1 else ""
-        rows.append([f"{p.section} {p.rule}", " ".join(where), p.message + times])
-    doc.table([Column("rule"), Column("where"), Column("what", wrap=True)], rows)
+        row = [f"{p.section} {p.rule}", " ".join(where), p.message + times]
+        if several:
+            row.insert(0, segment.robot or segment.path.rsplit("/", 1)[-1])
+        rows.append(row)
+    columns = [Column("rule"), Column("where"), Column("what", wrap=True)]
+    doc.table([Column("robot"), *columns] if several else columns, rows)
     if len(problems) > _MAX_LISTED:
         doc.line(f"… and {len(problems) - _MAX_LISTED} more (--json lists all)", 2)
 

@@ -6,6 +6,10 @@ seals, chain, checkpoints, drops and evidence digests by the one verifier
 (``trace_runtime.verification``), whose findings are mapped to the rules they break. Every
 problem names its rule, the PROFILE section, MUST or SHOULD, and where it is (cycle, file
 offset). A log conforms when no MUST is broken; SHOULD deviations are notes.
+
+A log root of several robots is checked whole, or cut to some of its robots
+(``selection.Selection``, as every investigating command selects): then only their segment
+files are checked, and only their chains verified.
 """
 
 from __future__ import annotations
@@ -17,9 +21,12 @@ from pathlib import Path
 from trace_audit.doctor.rules import RULES, DoctorReport, Problem, Rule, SegmentDoctor
 from trace_audit.doctor.structure import check_structure
 from trace_audit.evidence import open_recordings
+from trace_audit.selection import Selection
 from trace_runtime.errors import LogReadError
-from trace_runtime.logset import find_segment_files, open_log
+from trace_runtime.logset import Log, find_segment_files, open_log
 from trace_runtime.recordings import Recordings
+from trace_runtime.segment_names import parse_segment_name
+from trace_runtime.session import SessionInfo
 from trace_runtime.verification import Finding, is_external_evidence, verify
 
 __all__ = ["RULES", "DoctorReport", "Problem", "Rule", "SegmentDoctor", "doctor_log"]
@@ -47,11 +54,14 @@ _NOTE_RULES = {"external_unresolved": "external-given", "no_checkpoints": "check
 def doctor_log(
     path: str | Path,
     *,
+    robots: Sequence[str] = (),
     evidence: Sequence[str | Path] = (),
     progress: Callable[[int, int], None] | None = None,
 ) -> DoctorReport:
     """Check a segment file, or every segment under a directory, against the profile.
 
+    ``robots``: only these robots' segments (``Selection.of``: a robot the log does not
+    hold is a ``UsageError`` naming those it does, exit 2); none means every file.
     ``evidence``: external recordings (MCAP files or rosbag2 directories) that evidence refs
     name; without them such refs are a note (not checked), never a broken rule.
     ``progress(bytes_done, bytes_total)`` is called as the files are walked.
@@ -64,6 +74,12 @@ def doctor_log(
     files = find_segment_files(root)
     if not files:
         raise LogReadError(str(root), "no .mcap segment here")
+    selected: Log | None = None
+    if robots:
+        # The reader must know whose each file is; a log it cannot open at all has no
+        # robots to choose among (doctor without --robot explains such files).
+        selected = Selection(robots=tuple(robots)).of(open_log(root))
+        files = _files_in(selected, files)
     recordings = open_recordings(evidence)
     report = DoctorReport(str(root))
     by_name: dict[str, SegmentDoctor] = {}
@@ -71,16 +87,30 @@ def doctor_log(
     for file in files:
         segment = SegmentDoctor(str(file))
         step = None if progress is None else functools.partial(_step, progress, done, total)
-        check_structure(file, segment, progress=step)
+        segment.robot = _robot(file, check_structure(file, segment, progress=step))
         report.segments.append(segment)
         by_name[file.name] = segment
         done += file.stat().st_size
         if progress is not None:
             progress(done, total)
-    _verify_into(root, report, by_name, recordings)
+    _verify_into(root, selected, report, by_name, recordings)
     report.evidence = recordings.names if recordings else []
     report.conforms = all(s.conforms for s in report.segments)
     return report
+
+
+def _files_in(log: Log, files: Sequence[Path]) -> list[Path]:
+    """``files`` (in their order) that ``log`` reads, shadows, or could not open."""
+    held = {s.path for s in (*log.segments, *log.shadowed)} | {p.path for p in log.problems}
+    return [f for f in files if f in held]
+
+
+def _robot(file: Path, session: SessionInfo | None) -> str | None:
+    """Whose segment ``file`` is: its session says; when it has none, its name."""
+    if session is not None:
+        return session.robot_id
+    named = parse_segment_name(file.name)
+    return None if named is None else named[0]
 
 
 def _step(progress: Callable[[int, int], None], before: int, total: int, offset: int) -> None:
@@ -89,13 +119,15 @@ def _step(progress: Callable[[int, int], None], before: int, total: int, offset:
 
 def _verify_into(
     root: Path,
+    log: Log | None,
     report: DoctorReport,
     by_name: dict[str, SegmentDoctor],
     recordings: Recordings | None,
 ) -> None:
-    """Run the verifier over the whole log and file its findings under their segments."""
+    """Run the verifier over the log (``log``, the robots selected; else the whole of
+    ``root``) and file its findings under their segments."""
     try:
-        verified = verify(open_log(root), recordings=recordings)
+        verified = verify(open_log(root) if log is None else log, recordings=recordings)
     except LogReadError as err:
         # The reader refuses what the structure checks may have let through (or explained).
         target = report.segments[0] if len(report.segments) == 1 else None

@@ -156,6 +156,9 @@ class SegmentDoctor:
     """Problems of one segment file, and what was looked at."""
 
     path: str
+    robot: str | None = None
+    """The robot whose segment it is (its ``trace.session``, else its file name), None when
+    neither says."""
     problems: list[Problem] = field(default_factory=list)
     messages: int = 0
     cycles: int = 0
@@ -210,8 +213,17 @@ class DoctorReport:
 
     @property
     def errors(self) -> list[Problem]:
-        return [p for s in self.segments for p in s.problems if p.level == "MUST"]
+        return [p for _, p in self.located("MUST")]
 
     @property
     def notes(self) -> list[Problem]:
-        return [p for s in self.segments for p in s.problems if p.level == "SHOULD"]
+        return [p for _, p in self.located("SHOULD")]
+
+    @property
+    def robots(self) -> list[str]:
+        """The robots whose segments were checked, sorted."""
+        return sorted({s.robot for s in self.segments if s.robot is not None})
+
+    def located(self, level: Level) -> list[tuple[SegmentDoctor, Problem]]:
+        """The problems of ``level``, each with the segment it was found in, in file order."""
+        return [(s, p) for s in self.segments for p in s.problems if p.level == level]
