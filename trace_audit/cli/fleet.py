@@ -16,13 +16,13 @@ from trace_audit.cli.options import (
     JsonOption,
     MemoryLimitOption,
     PlainOption,
+    RobotsOption,
     SchedulerOption,
     SqlTimeoutOption,
     action_option,
     cluster,
     jobs_option,
     limit_option,
-    robot_option,
     sql_limits,
 )
 from trace_audit.cli.output import emit, print_json, progress_bar
@@ -159,6 +159,8 @@ the decisions table; each row ends with the explain command that reconstructs it
   trace-audit find idx/ --action STOP --near person --within 1.0
 
   trace-audit find idx/ --action STOP --where "software_version='2.4'" --json
+
+  trace-audit find idx/ --action STOP --robot amr-7 --robot amr-9
 """)
 
 
@@ -185,7 +187,7 @@ def find_command(
         str | None,
         typer.Option("--where", help="SQL condition on decisions (alias d).", show_default=False),
     ] = None,
-    robot: Annotated[str | None, robot_option("Only this robot.")] = None,
+    robot: RobotsOption = None,
     limit: Annotated[int, limit_option("At most this many rows, oldest first.", least=1)] = 1000,
     memory_limit: MemoryLimitOption = None,
     timeout: SqlTimeoutOption = None,
@@ -203,7 +205,7 @@ def find_command(
             near=near,
             within_m=within,
             where=where,
-            robot=robot,
+            robots=robot or (),
             limit=limit,
             limits=sql_limits(memory_limit, timeout),
         )

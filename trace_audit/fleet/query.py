@@ -42,6 +42,7 @@ __all__ = [
     "connect",
     "find_decisions",
     "index_metrics",
+    "index_robots",
     "run_query",
 ]
 
@@ -305,20 +306,25 @@ def find_decisions(
     near: str | None = None,
     within_m: float | None = None,
     where: str | None = None,
-    robot: str | None = None,
+    robots: Sequence[str] = (),
     limit: int = 1000,
     limits: QueryLimits | None = None,
 ) -> QueryResult:
     """Decisions by command, by a perceived entity's class and distance, and by any SQL
-    condition on the decisions' columns; each row with ``robot``, ``t_ns`` and ``explain``."""
+    condition on the decisions' columns; each row with ``robot``, ``t_ns`` and ``explain``.
+
+    ``robots``: only these robots' decisions (none: every robot's); a robot the index
+    does not hold is a ``UsageError`` naming those it does (``index_robots``)."""
     conditions: list[str] = []
     params: list[Any] = []
     if action is not None:
         conditions.append("upper(d.command) = upper(?)")
         params.append(action)
-    if robot is not None:
-        conditions.append("d.robot = ?")
-        params.append(robot)
+    if robots:
+        robots = _held_robots(index, robots, limits)
+        # One placeholder per robot: the ids themselves only ever travel as parameters.
+        conditions.append(f"d.robot IN ({', '.join('?' for _ in robots)})")
+        params.extend(robots)
     if where:
         conditions.append(f"({where})")
     select = (
@@ -358,6 +364,23 @@ def find_decisions(
     # As many rows as the limit: count the matches so the output can say it was cut.
     count = run_query(index, f"SELECT count(*) FROM ({sql})", params, limits=limits).rows[0][0]
     return dataclasses.replace(found, total=int(count) if count > len(found.rows) else None)
+
+
+def index_robots(index: str | Path, limits: QueryLimits | None = None) -> list[str]:
+    """The robots the index holds (those with an indexed segment), sorted."""
+    found = run_query(index, "SELECT DISTINCT robot FROM segments ORDER BY robot", limits=limits)
+    return [str(row[0]) for row in found.rows]
+
+
+def _held_robots(index: str | Path, robots: Sequence[str], limits: QueryLimits | None) -> list[str]:
+    """``robots`` once each; ``UsageError`` naming the index's robots when one is not held."""
+    wanted = list(dict.fromkeys(robots))
+    held = index_robots(index, limits)
+    missing = [repr(r) for r in wanted if r not in held]
+    if missing:
+        holds = ", ".join(held) if held else "no robot"
+        raise UsageError(f"robot {', '.join(missing)} is not in this index; it holds {holds}")
+    return wanted
 
 
 def parse_index_by(text: str | None) -> list[str]:
