@@ -379,11 +379,19 @@ def catalog_command(
 
 
 def catalog_doc(catalog: Catalog) -> Printout:
-    """A row per segment of the catalog, the total, and what could not be read."""
-    names = ("robot", "seg", "tier", "start", "end", "cycles", "size")
-    columns = tuple(
-        BoxColumn(name, "right" if name in ("seg", "cycles", "size") else "left", no_wrap=True)
-        for name in names
+    """A row per segment of the catalog, the total, and what could not be read.
+
+    Too wide for the console, the tier and the times wrap; the robot is never cut (at its
+    full width even when the table then runs past the edge), nor are the numbers."""
+    robot_width = max((len(e.robot) for e in catalog.entries), default=0)
+    columns = (
+        BoxColumn("robot", min_width=max(len("robot"), robot_width), no_wrap=True),
+        BoxColumn("seg", "right", no_wrap=True),
+        BoxColumn("tier"),
+        BoxColumn("start"),
+        BoxColumn("end"),
+        BoxColumn("cycles", "right", no_wrap=True),
+        BoxColumn("size", "right", no_wrap=True),
     )
     rows = tuple(
         (
