@@ -1,0 +1,45 @@
+"""Safety requirements checked over the logs: Signal Temporal Logic rules, evaluated by rtamt.
+
+``read_rules`` reads a TOML rules file (each ``[[rule]]`` a name and an ``stl`` formula over
+signals the log defines, ``trace_audit.rules.signals``); ``check_rules`` judges each rule on
+each selected robot, gap-free stretch by stretch (``trace_audit.rules.check``), and returns a
+``CheckResult``: per rule and robot satisfied, violated or not decidable, rtamt's robustness,
+every violation with the decision in force and the command that explains it. docs/rules.md.
+"""
+
+from __future__ import annotations
+
+from trace_audit.rules.check import check_rules
+from trace_audit.rules.formula import Formula, Horizon, RulesError, compile_formula
+from trace_audit.rules.results import (
+    CheckResult,
+    Outcome,
+    RobotRules,
+    RuleResult,
+    Undecided,
+    UndecidedReason,
+    Violation,
+)
+from trace_audit.rules.rulebook import Rule, parse_rules, read_rules
+from trace_audit.rules.signals import FAMILIES, read_signals, signal_names
+
+__all__ = [
+    "FAMILIES",
+    "CheckResult",
+    "Formula",
+    "Horizon",
+    "Outcome",
+    "RobotRules",
+    "Rule",
+    "RuleResult",
+    "RulesError",
+    "Undecided",
+    "UndecidedReason",
+    "Violation",
+    "check_rules",
+    "compile_formula",
+    "parse_rules",
+    "read_rules",
+    "read_signals",
+    "signal_names",
+]

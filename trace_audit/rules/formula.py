@@ -1,0 +1,234 @@
+"""A rule's STL formula, parsed and evaluated by rtamt, and how far in time it looks.
+
+Nothing here evaluates STL itself: ``rtamt.StlDiscreteTimeSpecification`` parses the formula
+and computes its robustness, sample by sample, with the sampling period set to the log's.
+This module only
+
+- checks the rule's shape: ``always(<body>)``, the body's temporal operators all bounded
+  (``eventually[0:0.5]``, ``once[0:2]``, ``prev``, ``next``), so that every cycle's verdict
+  depends on a known stretch of time around it (docs/rules.md, "The STL subset");
+- renames the signals (``nearest.person``: rtamt reads a dot as a field of a variable) to
+  plain identifiers and back;
+- measures the body's horizon, how far into the past and the future its value at a cycle
+  reads (``Horizon``), from the bounds in rtamt's own syntax tree: a cycle whose horizon
+  reaches a gap or an end of the log is not decidable (``trace_audit.rules.check``).
+
+rtamt is imported only when a rules file is read (the ``rules`` extra).
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from fractions import Fraction
+from typing import Any
+
+from trace_audit.rules.signals import SIGNAL_PATTERN, bad_signal, signal_names
+from trace_runtime.errors import UsageError
+
+__all__ = ["Formula", "Horizon", "RulesError", "compile_formula"]
+
+
+class RulesError(UsageError):
+    """A rules file, one of its rules or its formula cannot be used (exit 2); the message
+    names the file and the rule."""
+
+
+_UNITS = {"": Fraction(1), "s": Fraction(1), "ms": Fraction(1, 1000)}
+_UNITS |= {"us": Fraction(1, 10**6), "ns": Fraction(1, 10**9)}
+
+_FUTURE = frozenset(("TimedAlways", "TimedEventually", "TimedUntil"))
+_PAST = frozenset(("TimedHistorically", "TimedOnce", "TimedSince", "TimedPrecedes"))
+_STEP_FUTURE = frozenset(("Next", "StrongNext"))
+_STEP_PAST = frozenset(("Previous", "StrongPrevious", "Rise", "Fall"))
+_UNBOUNDED = frozenset(("Always", "Eventually", "Until", "Historically", "Once", "Since"))
+
+_ALWAYS = re.compile(r"\s*(?:always|G)\s*\(")
+
+
+@dataclass(frozen=True, slots=True)
+class Horizon:
+    """How far a formula's value at a cycle reads around it: seconds of bounds plus single
+    steps (``prev``/``next``, ``rise``/``fall``), into the past and into the future."""
+
+    past_s: Fraction = Fraction(0)
+    past_steps: int = 0
+    future_s: Fraction = Fraction(0)
+    future_steps: int = 0
+
+    def steps(self, period_ns: int) -> tuple[int, int]:
+        """(past, future) in cycles at ``period_ns``."""
+        period_s = Fraction(period_ns, 10**9)
+        return (
+            math.ceil(self.past_s / period_s) + self.past_steps,
+            math.ceil(self.future_s / period_s) + self.future_steps,
+        )
+
+    def span_ns(self, period_ns: int) -> tuple[int, int]:
+        """(past, future) in ns at ``period_ns``: how much log to read around a window."""
+        past, future = self.steps(period_ns)
+        return past * period_ns, future * period_ns
+
+    def widest(self, other: Horizon) -> Horizon:
+        return Horizon(
+            max(self.past_s, other.past_s),
+            max(self.past_steps, other.past_steps),
+            max(self.future_s, other.future_s),
+            max(self.future_steps, other.future_steps),
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class Formula:
+    """A rule's checked formula: the body under its ``always``, the signals it reads and
+    its horizon. ``evaluate`` runs rtamt over one gap-free stretch of cycles."""
+
+    rule: str
+    stl: str
+    body: str
+    signals: tuple[str, ...]
+    horizon: Horizon
+
+    def evaluate(self, columns: dict[str, Sequence[float]], period_ns: int) -> list[float]:
+        """rtamt's robustness of the body at each sample of ``columns`` (one value per
+        signal per consecutive cycle), in discrete time at ``period_ns``."""
+        n = len(next(iter(columns.values()))) if columns else 0
+        spec = self._spec(period_ns)
+        data: dict[str, list[float]] = {"time": [i * period_ns / 1e9 for i in range(n)]}
+        for i, name in enumerate(self.signals):
+            data[_ident(i)] = list(columns[name])
+        try:
+            out = spec.evaluate(data)
+        except _rtamt_errors() as err:
+            raise RulesError(f"rule {self.rule!r}: {_message(err, self.signals)}") from err
+        return [float(value) for _, value in out]
+
+    def _spec(self, period_ns: int) -> Any:
+        spec = _specification(self.signals)
+        spec.set_sampling_period(period_ns, "ns", 0.5)
+        spec.spec = _renamed(self.body, self.signals)
+        _parse(spec, self.rule, self.signals)
+        return spec
+
+
+def compile_formula(rule: str, stl: str) -> Formula:
+    """``stl`` checked as a rule (``always`` of a body with bounded operators), or
+    ``RulesError`` naming ``rule`` and what is wrong."""
+    names = signal_names(stl)
+    for name in names:
+        problem = bad_signal(name)
+        if problem is not None:
+            raise RulesError(f"rule {rule!r}: {problem}")
+    body = _body(rule, stl)
+    spec = _specification(names)
+    spec.spec = _renamed(body, names)
+    _parse(spec, rule, names)
+    unknown = sorted(set(spec.free_vars) - {_ident(i) for i in range(len(names))})
+    if unknown:
+        raise RulesError(
+            f"rule {rule!r}: unknown signal {unknown[0]!r} (signals are "
+            "command.<ACTION>, channel.<name>.<part>, nearest.<class>, factor.<name>, "
+            "check.<rule>, flag.<name>; docs/rules.md)"
+        )
+    if not names:
+        raise RulesError(f"rule {rule!r}: the formula reads no signal")
+    horizon = _horizon(spec.ast.specs[0], rule)
+    return Formula(rule, stl, body, names, horizon)
+
+
+def _body(rule: str, stl: str) -> str:
+    """The formula under the rule's top-level ``always(...)``."""
+    start = _ALWAYS.match(stl)
+    if start is not None:
+        depth = 0
+        for i in range(start.end() - 1, len(stl)):
+            depth += {"(": 1, ")": -1}.get(stl[i], 0)
+            if depth == 0:
+                if not stl[i + 1 :].strip():
+                    return stl[start.end() : i]
+                break
+    raise RulesError(
+        f"rule {rule!r}: a rule is always(<formula>), a requirement on every cycle "
+        f"(got {stl.strip()!r})"
+    )
+
+
+def _horizon(node: Any, rule: str) -> Horizon:
+    kind = type(node).__name__
+    if kind in _UNBOUNDED:
+        raise RulesError(
+            f"rule {rule!r}: an unbounded {kind.lower()} inside the rule reads the whole log; "
+            "give it a bound, e.g. eventually[0:0.5](...)"
+        )
+    inner = Horizon()
+    for child in node.children:
+        inner = inner.widest(_horizon(child, rule))
+    if kind in _FUTURE:
+        return Horizon(inner.past_s, inner.past_steps, inner.future_s + _end(node), inner.future_steps)
+    if kind in _PAST:
+        return Horizon(inner.past_s + _end(node), inner.past_steps, inner.future_s, inner.future_steps)
+    if kind in _STEP_FUTURE:
+        return Horizon(inner.past_s, inner.past_steps, inner.future_s, inner.future_steps + 1)
+    if kind in _STEP_PAST:
+        return Horizon(inner.past_s, inner.past_steps + 1, inner.future_s, inner.future_steps)
+    return inner
+
+
+def _end(node: Any) -> Fraction:
+    """A temporal operator's upper bound in seconds."""
+    return Fraction(node.end) * _UNITS.get(str(node.end_unit or ""), Fraction(1))
+
+
+def _ident(i: int) -> str:
+    return f"trace_signal_{i}"
+
+
+def _renamed(formula: str, names: Sequence[str]) -> str:
+    index = {name: i for i, name in enumerate(names)}
+    return SIGNAL_PATTERN.sub(lambda m: _ident(index[m.group(0)]), formula)
+
+
+def _rtamt() -> Any:
+    try:
+        return importlib.import_module("rtamt")
+    except ImportError as err:
+        raise RulesError("checking rules needs rtamt: pip install 'trace-audit[rules]'") from err
+
+
+def _rtamt_errors() -> tuple[type[Exception], ...]:
+    """What rtamt raises for a formula it cannot parse or evaluate (its own exception, and
+    a ``KeyError`` for an undeclared name in some versions)."""
+    return (_rtamt().RTAMTException, KeyError, ValueError, ZeroDivisionError)
+
+
+def _specification(names: Sequence[str]) -> Any:
+    spec = _rtamt().StlDiscreteTimeSpecification()
+    for i in range(len(names)):
+        spec.declare_var(_ident(i), "float")
+    return spec
+
+
+def _parse(spec: Any, rule: str, names: Sequence[str]) -> None:
+    # rtamt logs a warning (on the root logger) for each undeclared name before it declares
+    # it itself; the unknown name is reported here instead, as one line.
+    previous = logging.root.manager.disable
+    logging.disable(logging.WARNING)
+    try:
+        spec.parse()
+    except _rtamt_errors() as err:
+        raise RulesError(f"rule {rule!r}: {_message(err, names)}") from err
+    finally:
+        logging.disable(previous)
+
+
+def _message(err: Exception, names: Sequence[str]) -> str:
+    """rtamt's message in the rule's own words (its signal names, on one line)."""
+    text = str(err).replace("RTAMT Exception:", "").strip()
+    text = re.sub(r"trace_signal_(\d+)", lambda m: names[int(m.group(1))], text)
+    if isinstance(err, KeyError):
+        return f"unknown name {text}"
+    return " ".join(text.split()) or type(err).__name__

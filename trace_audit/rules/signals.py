@@ -1,0 +1,183 @@
+"""The signals a rule reads, by name, from one logged cycle.
+
+A rule's formula names signals in six families (docs/rules.md):
+
+- ``command.<ACTION>``: 1.0 while the cycle's command is ACTION (matched without regard to
+  case, as ``why`` does), else 0.0.
+- ``channel.<name>.intended|actual|deviation``: an actuator channel (profile 1.1) in its own
+  unit. A planar record's linear motion is ``channel.speed.*`` (speeds, m/s, as magnitudes;
+  its deviation ``|actual - intended|``), unless the record names a ``speed`` channel itself.
+- ``nearest.<class>``: the distance to the nearest perceived entity of that class, in metres,
+  from the belief graph's distance nodes (a state node in metres whose label or id says
+  ``distance``, with an edge from the entity); +inf when no entity of the class has one.
+- ``factor.<node>`` or ``factor.<name>``: a factor value the decision names (booleans 0/1).
+- ``check.<rule>``: 1.0 when that execution check passed, 0.0 when it failed.
+- ``flag.<name>``: 1.0 when the execution record raises that flag, else 0.0.
+
+A cycle that does not log what a signal is read from (no action, no execution record, no
+perception, a check it did not run, a factor it does not name) has no value for it: the
+signal is *missing* there, never guessed (``read_signals`` leaves it out).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+from trace_audit.causal import Decision, layer_with_defaults
+from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
+from trace_runtime.cycles import Cycle
+from trace_runtime.records import TOPIC_BELIEF, TOPIC_PERCEPTION
+
+__all__ = [
+    "FAMILIES",
+    "SIGNAL_PATTERN",
+    "bad_signal",
+    "nearest_by_class",
+    "read_signals",
+    "signal_names",
+]
+
+FAMILIES = ("command", "channel", "nearest", "factor", "check", "flag")
+"""The first word of every signal name."""
+
+SIGNAL_PATTERN = re.compile(rf"\b(?:{'|'.join(FAMILIES)})(?:\.[A-Za-z0-9_]+)+")
+"""A signal name in a formula: a family, then dot-separated words of letters, digits, ``_``."""
+
+_CHANNEL_PARTS = ("intended", "actual", "deviation")
+_DISTANCE_UNITS = frozenset(("m", "meter", "metre", "meters", "metres"))
+
+
+def signal_names(formula: str) -> tuple[str, ...]:
+    """The signal names a formula uses, each once, in order of first use."""
+    return tuple(dict.fromkeys(m.group(0) for m in SIGNAL_PATTERN.finditer(formula)))
+
+
+def bad_signal(name: str) -> str | None:
+    """Why ``name`` is not a signal name a cycle can give, or None when it is one."""
+    family, _, rest = name.partition(".")
+    if family == "channel":
+        channel, _, part = rest.rpartition(".")
+        if not channel or part not in _CHANNEL_PARTS:
+            return f"{name}: a channel signal is channel.<name>.intended|actual|deviation"
+    elif family == "command" and "." in rest:
+        return f"{name}: a command signal is command.<ACTION>"
+    return None
+
+
+def read_signals(cycle: Cycle, decision: Decision, names: Iterable[str]) -> dict[str, float]:
+    """The value of each named signal in ``cycle`` (its ``decision`` already read); a signal
+    the cycle does not log is left out."""
+    out: dict[str, float] = {}
+    nearest: dict[str, float] | None = None
+    for name in names:
+        family, _, rest = name.partition(".")
+        if family == "nearest":
+            if nearest is None:
+                nearest = nearest_by_class(cycle)
+            value = _nearest(nearest, rest)
+        else:
+            value = _decision_signal(decision, family, rest)
+        if value is not None:
+            out[name] = value
+    return out
+
+
+def _decision_signal(decision: Decision, family: str, rest: str) -> float | None:
+    execution = decision.execution
+    if family == "command":
+        if decision.command is None:
+            return None
+        return 1.0 if decision.command.casefold() == rest.casefold() else 0.0
+    if family == "factor":
+        for factor in decision.factors:
+            if rest in (factor.node, factor.name):
+                return _number(factor.value)
+        return None
+    if execution is None:
+        return None
+    if family == "check":
+        passed = [c.passed for c in execution.checks if c.rule == rest]
+        return (1.0 if all(passed) else 0.0) if passed else None
+    if family == "flag":
+        return 1.0 if rest in execution.problems else 0.0
+    if family == "channel":
+        channel, _, part = rest.rpartition(".")
+        return _channel(decision, channel, part)
+    return None
+
+
+def _channel(decision: Decision, name: str, part: str) -> float | None:
+    execution = decision.execution
+    assert execution is not None
+    for channel in execution.channels:
+        if channel.name == name:
+            return {
+                "intended": channel.intended,
+                "actual": channel.actual,
+                "deviation": channel.deviation,
+            }.get(part)
+    if name != "speed" or not execution.planar:
+        return None
+    intended, actual = execution.intended[0], execution.actual[0]
+    if part == "intended":
+        return abs(intended) if intended is not None else None
+    if part == "actual":
+        return abs(actual) if actual is not None else None
+    if intended is None or actual is None:
+        return None
+    return abs(actual - intended)
+
+
+def _nearest(nearest: Mapping[str, float] | None, cls: str) -> float | None:
+    if nearest is None:  # no perception logged: nothing is known of what was near
+        return None
+    return nearest.get(cls, math.inf)
+
+
+def nearest_by_class(cycle: Cycle) -> dict[str, float] | None:
+    """Entity class -> nearest distance in metres this cycle (None: no perception logged)."""
+    perception = as_mapping(layer_with_defaults(cycle, TOPIC_PERCEPTION))
+    if perception is None:
+        return None
+    distances = _distances(as_mapping(layer_with_defaults(cycle, TOPIC_BELIEF)))
+    nearest: dict[str, float] = {}
+    for entity in mappings(perception.get("entities")):
+        cls = as_str(entity.get("class"))
+        distance = distances.get(as_str(entity.get("id")) or "")
+        if cls is not None and distance is not None:
+            nearest[cls] = min(distance, nearest.get(cls, distance))
+    return nearest
+
+
+def _distances(belief: Mapping[str, Any] | None) -> dict[str, float]:
+    """Entity id -> distance to the robot where the belief graph derives one; the rule the
+    fleet index's ``nearest`` column uses (``trace_audit.fleet.rows``)."""
+    if belief is None:
+        return {}
+    values: dict[str, float] = {}
+    for node in mappings(belief.get("nodes")):
+        text = f"{node.get('label', '')} {node.get('id', '')}".lower()
+        value = as_float(node.get("value"))
+        if (
+            node.get("kind") == "state"
+            and node.get("unit") in _DISTANCE_UNITS
+            and "distance" in text
+            and value is not None
+        ):
+            values[str(node.get("id"))] = value
+    out: dict[str, float] = {}
+    for edge in mappings(belief.get("edges")):
+        value = values.get(str(edge.get("child")))
+        if value is not None:
+            parent = str(edge.get("parent"))
+            out[parent] = min(value, out.get(parent, value))
+    return out
+
+
+def _number(value: Any) -> float | None:
+    if isinstance(value, bool):
+        return float(value)
+    return as_float(value)
