@@ -188,7 +188,7 @@ FLOORS: dict[str, list[set[str]]] = {
         # views over one decision: its causal graph and its chains
         {"causal", "chains"},
         # the questions an investigator asks of a log
-        {"metrics", "explain", "export", "timeline", "info", "verify", "doctor", "layers"},
+        {"metrics", "explain", "export", "timeline", "info", "verify", "doctor", "layers", "rules"},
         # what is built from the answers: the fleet index, the incident report
         {"fleet", "report"},
         {"cli"},

@@ -8,6 +8,7 @@ import sys
 import typer
 
 from trace_audit.cli import (  # noqa: F401 - each module registers its commands
+    check,
     doctor,
     explain,
     export,
@@ -26,7 +27,7 @@ from trace_audit.cli.typer_compat import TyperException, usage_error_line
 __all__ = ["app", "main"]
 
 _LISTED = (
-    *("doctor", "index", "query", "find", "verify", "keygen"),
+    *("doctor", "check", "index", "query", "find", "verify", "keygen"),
     *("explain", "why", "timeline", "info", "export"),
     *("metrics", "report", "compact", "catalog"),
 )

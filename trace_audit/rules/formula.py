@@ -105,7 +105,7 @@ class Formula:
             out = spec.evaluate(data)
         except _rtamt_errors() as err:
             raise RulesError(f"rule {self.rule!r}: {_message(err, self.signals)}") from err
-        return [float(value) for _, value in out]
+        return [float(value) + 0.0 for _, value in out]  # + 0.0: no -0 robustness
 
     def _spec(self, period_ns: int) -> Any:
         spec = _specification(self.signals)
