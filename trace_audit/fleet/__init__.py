@@ -14,6 +14,7 @@ _EXPORTS = {
     "IndexReport": "trace_audit.fleet.index",
     "run_query": "trace_audit.fleet.query",
     "find_decisions": "trace_audit.fleet.query",
+    "index_robots": "trace_audit.fleet.query",
     "QueryResult": "trace_audit.fleet.query",
     "index_metrics": "trace_audit.fleet.query",
     "QueryLimits": "trace_audit.fleet.limits",
@@ -27,13 +28,20 @@ __all__ = [
     "dask_executor",
     "find_decisions",
     "index_metrics",
+    "index_robots",
     "run_query",
 ]
 
 if TYPE_CHECKING:
     from trace_audit.fleet.cluster import dask_executor
     from trace_audit.fleet.index import IndexReport, build_index
-    from trace_audit.fleet.query import QueryResult, find_decisions, index_metrics, run_query
+    from trace_audit.fleet.query import (
+        QueryResult,
+        find_decisions,
+        index_metrics,
+        index_robots,
+        run_query,
+    )
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, __all__)
