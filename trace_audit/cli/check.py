@@ -42,7 +42,7 @@ or usage (one line naming the rule), 3 an unreadable log.
 
   trace-audit check run.mcap --rules docs/rules/warehouse.toml
 
-  trace-audit check logs/ --rules rules.toml --robot amr-7 --from +60 --to +120
+  trace-audit check logs/ --rules rules.toml --robot amr-7 --from +60
 
   trace-audit check run.mcap --rules docs/rules/warehouse.toml --json
 """
@@ -83,7 +83,11 @@ def check_command(  # noqa: PLR0917 - typer maps each parameter to an option
 
 
 def _check(
-    source: Path, rules_path: Path, robots: list[str] | tuple[str, ...], start: str | None, end: str | None
+    source: Path,
+    rules_path: Path,
+    robots: list[str] | tuple[str, ...],
+    start: str | None,
+    end: str | None,
 ) -> CheckResult:
     from trace_audit.rules import check_rules, read_rules
 

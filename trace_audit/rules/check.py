@@ -95,7 +95,9 @@ def _check_robot(log: Log, rules: Sequence[Rule], selection: Selection, path: st
     lo, hi = selection.window(log)
     rows = _read_rows(log, rules, lo, hi)
     clock = LogClock.of(log)
-    results = tuple(_judge(rule.formula, rows, period_ns, clock, log, path) for rule in rules)
+    results = tuple(
+        _judge(rule.formula, rows, period_ns, clock, log=log, path=path) for rule in rules
+    )
     judged = sum(1 for r in rows if r.judged)
     return RobotRules(log.first_robot, period_ns, judged, results, clock)
 
@@ -141,7 +143,7 @@ class _Verdict:
 
 
 def _judge(
-    formula: Formula, rows: list[_Row], period_ns: int, clock: LogClock, log: Log, path: str
+    formula: Formula, rows: list[_Row], period_ns: int, clock: LogClock, *, log: Log, path: str
 ) -> RuleResult:
     verdicts = _verdicts(formula, rows, period_ns)
     judged = [(row, v) for row, v in zip(rows, verdicts, strict=True) if row.judged]
@@ -210,9 +212,7 @@ def _stretches(formula: Formula, rows: list[_Row]) -> list[tuple[int, int]]:
     return out
 
 
-def _boundary(
-    rows: list[_Row], i: int, *, before: bool
-) -> tuple[UndecidedReason, str, Gap | None]:
+def _boundary(rows: list[_Row], i: int, *, before: bool) -> tuple[UndecidedReason, str, Gap | None]:
     """What ends the stretch at row ``i``, on the side asked: a gap, a row without a signal,
     or the end of what the log holds."""
     if before:

@@ -22,7 +22,8 @@ import importlib
 import logging
 import math
 import re
-from collections.abc import Sequence
+import warnings
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
@@ -30,7 +31,7 @@ from typing import Any
 from trace_audit.rules.signals import SIGNAL_PATTERN, bad_signal, signal_names
 from trace_runtime.errors import UsageError
 
-__all__ = ["Formula", "Horizon", "RulesError", "compile_formula"]
+__all__ = ["Formula", "Horizon", "RulesError", "compile_formula", "rtamt_module"]
 
 
 class RulesError(UsageError):
@@ -46,6 +47,11 @@ _PAST = frozenset(("TimedHistorically", "TimedOnce", "TimedSince", "TimedPrecede
 _STEP_FUTURE = frozenset(("Next", "StrongNext"))
 _STEP_PAST = frozenset(("Previous", "StrongPrevious", "Rise", "Fall"))
 _UNBOUNDED = frozenset(("Always", "Eventually", "Until", "Historically", "Once", "Since"))
+
+_SIGNALS_HELP = (
+    "signals are command.<ACTION>, channel.<name>.intended|actual|deviation, "
+    "nearest.<class>, factor.<name>, check.<rule>, flag.<name>; docs/rules.md"
+)
 
 _ALWAYS = re.compile(r"\s*(?:always|G)\s*\(")
 
@@ -93,7 +99,7 @@ class Formula:
     signals: tuple[str, ...]
     horizon: Horizon
 
-    def evaluate(self, columns: dict[str, Sequence[float]], period_ns: int) -> list[float]:
+    def evaluate(self, columns: Mapping[str, Sequence[float]], period_ns: int) -> list[float]:
         """rtamt's robustness of the body at each sample of ``columns`` (one value per
         signal per consecutive cycle), in discrete time at ``period_ns``."""
         n = len(next(iter(columns.values()))) if columns else 0
@@ -129,11 +135,7 @@ def compile_formula(rule: str, stl: str) -> Formula:
     _parse(spec, rule, names)
     unknown = sorted(set(spec.free_vars) - {_ident(i) for i in range(len(names))})
     if unknown:
-        raise RulesError(
-            f"rule {rule!r}: unknown signal {unknown[0]!r} (signals are "
-            "command.<ACTION>, channel.<name>.<part>, nearest.<class>, factor.<name>, "
-            "check.<rule>, flag.<name>; docs/rules.md)"
-        )
+        raise RulesError(f"rule {rule!r}: unknown signal {unknown[0]!r} ({_SIGNALS_HELP})")
     if not names:
         raise RulesError(f"rule {rule!r}: the formula reads no signal")
     horizon = _horizon(spec.ast.specs[0], rule)
@@ -168,9 +170,13 @@ def _horizon(node: Any, rule: str) -> Horizon:
     for child in node.children:
         inner = inner.widest(_horizon(child, rule))
     if kind in _FUTURE:
-        return Horizon(inner.past_s, inner.past_steps, inner.future_s + _end(node), inner.future_steps)
+        return Horizon(
+            inner.past_s, inner.past_steps, inner.future_s + _end(node), inner.future_steps
+        )
     if kind in _PAST:
-        return Horizon(inner.past_s + _end(node), inner.past_steps, inner.future_s, inner.future_steps)
+        return Horizon(
+            inner.past_s + _end(node), inner.past_steps, inner.future_s, inner.future_steps
+        )
     if kind in _STEP_FUTURE:
         return Horizon(inner.past_s, inner.past_steps, inner.future_s, inner.future_steps + 1)
     if kind in _STEP_PAST:
@@ -192,11 +198,22 @@ def _renamed(formula: str, names: Sequence[str]) -> str:
     return SIGNAL_PATTERN.sub(lambda m: _ident(index[m.group(0)]), formula)
 
 
+def rtamt_module() -> Any:
+    """The ``rtamt`` module (imported on first use; ``RulesError`` when it is missing)."""
+    return _rtamt()
+
+
 def _rtamt() -> Any:
     try:
-        return importlib.import_module("rtamt")
+        with warnings.catch_warnings():
+            # rtamt's pinned parser runtime (antlr4 4.7) imports ``typing.io``, deprecated
+            # since Python 3.8: a warning about rtamt's dependency, not about the rules.
+            warnings.simplefilter("ignore", DeprecationWarning)
+            return importlib.import_module("rtamt")
     except ImportError as err:
-        raise RulesError("checking rules needs rtamt: pip install 'trace-audit[rules]'") from err
+        raise RulesError(
+            f"checking rules needs rtamt: pip install 'trace-audit[rules]' ({err})"
+        ) from err
 
 
 def _rtamt_errors() -> tuple[type[Exception], ...]:
@@ -230,5 +247,5 @@ def _message(err: Exception, names: Sequence[str]) -> str:
     text = str(err).replace("RTAMT Exception:", "").strip()
     text = re.sub(r"trace_signal_(\d+)", lambda m: names[int(m.group(1))], text)
     if isinstance(err, KeyError):
-        return f"unknown name {text}"
+        return f"unknown signal {text} ({_SIGNALS_HELP})"
     return " ".join(text.split()) or type(err).__name__

@@ -78,10 +78,10 @@ def _rule(entry: Any, i: int, origin: str) -> Rule:
         raise RulesError(f"{origin}: rule #{i} is not a table")
     name = entry.get("name")
     if not isinstance(name, str) or not name.strip():
-        raise RulesError(f"{origin}: rule #{i} has no name (name = \"...\")")
+        raise RulesError(f'{origin}: rule #{i} has no name (name = "...")')
     stl = entry.get("stl")
     if not isinstance(stl, str) or not stl.strip():
-        raise RulesError(f"{origin}: rule {name!r} has no formula (stl = \"...\")")
+        raise RulesError(f'{origin}: rule {name!r} has no formula (stl = "...")')
     unknown = sorted(set(entry) - _FIELDS)
     if unknown:
         raise RulesError(f"{origin}: rule {name!r} has an unknown field {unknown[0]!r}")
