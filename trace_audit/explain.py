@@ -276,7 +276,7 @@ def _explain(
         robot=log.first_robot,
         log_start_ns=whole.start_ns,
         log_end_ns=whole.end_ns,
-        clock=whole.clock,
+        clock=holder.session.clock if holder is not None else whole.clock,
         recovered=whole.recovered,
         live=whole.live or None,
         query_t_ns=t_ns,
