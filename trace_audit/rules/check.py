@@ -231,8 +231,9 @@ def _boundary(rows: list[_Row], i: int, *, before: bool) -> tuple[UndecidedReaso
 
 
 def _gap_detail(gap: Gap) -> str:
+    n = gap.missing_cycles
     return (
-        f"gap after cycle {gap.after_cycle}: {gap.missing_cycles} cycles "
+        f"gap after cycle {gap.after_cycle}: {n} cycle{'s' if n != 1 else ''} "
         f"({gap.gap_ns / 1e9:.3f} s) not logged"
     )
 
