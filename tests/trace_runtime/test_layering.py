@@ -188,9 +188,10 @@ FLOORS: dict[str, list[set[str]]] = {
         # views over one decision: its causal graph and its chains
         {"causal", "chains"},
         # the questions an investigator asks of a log
-        {"metrics", "explain", "export", "timeline", "info", "verify", "doctor", "layers", "rules"},
-        # what is built from the answers: the fleet index, the incident report
-        {"fleet", "report"},
+        {"metrics", "explain", "export", "timeline", "info", "verify", "doctor", "layers", "rules"}
+        | {"tail"},
+        # what is built from the answers: the fleet index, the incident report, the Foxglove view
+        {"fleet", "report", "foxglove"},
         {"cli"},
         {""},
     ],

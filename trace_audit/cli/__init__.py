@@ -18,6 +18,7 @@ from trace_audit.cli import (  # noqa: F401 - each module registers its commands
     metrics,
     report,
     storage,
+    tail,
     timeline,
     why,
 )
@@ -28,7 +29,7 @@ __all__ = ["app", "main"]
 
 _LISTED = (
     *("doctor", "check", "index", "query", "find", "verify", "keygen"),
-    *("explain", "why", "timeline", "info", "export"),
+    *("explain", "why", "timeline", "tail", "info", "export"),
     *("metrics", "report", "compact", "catalog"),
 )
 """The commands in the order ``trace-audit --help`` lists them: checks and the fleet first,

@@ -1,0 +1,122 @@
+"""``trace-audit tail``: each decision change with its reason as it is written.
+
+Parses its arguments, iterates ``trace_audit.tail.tail`` and prints each event as it comes:
+a line for people, or one JSON object a line with ``--json`` (like ``journalctl -o json``).
+Ctrl-C (SIGINT) ends a followed tail cleanly, with exit code 0.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
+
+import typer
+
+from trace_audit.cli.app import app, guarded, help_text
+from trace_audit.cli.options import JsonOption, RobotsOption
+
+if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
+    from collections.abc import Sequence
+
+    from trace_audit.tail import TailEvent
+
+__all__ = ["event_json", "event_line", "tail_command"]
+
+_TAIL_HELP = """Each decision change with its reason, as the robot writes it.
+
+Reads each robot's newest segment of a log root (the one being written) and prints every
+cycle whose command differs from the robot's previous cycle's: its time, the change, the
+leading factor and the rationale. A segment being written is shown as live (its writer holds
+its lock), one whose writer died as recovered. --follow keeps watching, following the logger
+to its next segment when it rotates, until Ctrl-C; without it, tail prints the changes
+written so far and exits. --json prints one JSON object a line.
+
+[bold]Examples[/bold]:
+
+  trace-audit tail logs/ --follow
+
+  trace-audit tail logs/ --robot amr-7 --follow --json
+"""
+
+
+@app.command("tail", help=help_text(_TAIL_HELP))
+def tail_command(
+    root: Annotated[
+        Path,
+        typer.Argument(help="A log root (the folder a robot logs into).", show_default=False),
+    ],
+    follow: Annotated[
+        bool, typer.Option("--follow", "-f", help="Keep watching for new changes until Ctrl-C.")
+    ] = False,
+    robot: RobotsOption = None,
+    json_out: JsonOption = False,
+) -> None:
+    guarded(lambda: _run(root, robot or (), follow=follow, json_out=json_out))
+
+
+def _run(root: Path, robots: Sequence[str], *, follow: bool, json_out: bool) -> None:
+    """Print each event as it comes; SIGINT sets the stop flag the poll waits on, so the
+    loop ends between reads, never with a traceback."""
+    import threading
+
+    from trace_audit.tail import tail
+
+    stop = threading.Event()
+
+    def interrupted(_signum: int, _frame: Any) -> None:
+        stop.set()
+
+    previous = signal.signal(signal.SIGINT, interrupted)
+    try:
+        for event in tail(root, robots=robots, follow=follow, stop=stop):
+            if stop.is_set():
+                break
+            _print(event_json(event) if json_out else event_line(event), json_out=json_out)
+    except BrokenPipeError:  # `tail ... | head`: the reader went away, nothing more to say
+        sys.stderr.close()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _print(value: Any, *, json_out: bool) -> None:
+    if json_out:
+        import orjson
+
+        sys.stdout.write(orjson.dumps(value).decode() + "\n")
+    else:
+        sys.stdout.write(value + "\n")
+    sys.stdout.flush()
+
+
+def event_line(event: TailEvent) -> str:
+    """One event as a line for people."""
+    from trace_audit.tail import SegmentState
+
+    if isinstance(event, SegmentState):
+        said = {
+            "live": "live (being written)",
+            "finished": "finished",
+            "recovered": "recovered (no footer, its writer is gone)",
+        }[event.status.value]
+        return f"-- {event.robot}: {event.segment} {said}"
+    change = f"{event.previous} -> {event.command}" if event.previous else f"{event.command}"
+    parts = [f"{event.shown_t}  {event.robot}  cycle {event.cycle}  {change}"]
+    if event.leading is not None:
+        parts.append(f"leading {event.leading.label} = {event.leading.shown}")
+    if event.rationale:
+        parts.append(f"because {event.rationale}")
+    return "; ".join(parts)
+
+
+def event_json(event: TailEvent) -> dict[str, Any]:
+    """One event as JSON data; a change carries its time as shown (``t``) beside ``t_ns``."""
+    from trace_audit.jsonout import to_jsonable
+    from trace_audit.tail import DecisionChange
+
+    data: dict[str, Any] = to_jsonable(event)
+    if isinstance(event, DecisionChange):
+        del data["clock"]
+        data["t"] = event.shown_t
+    return data

@@ -1,0 +1,270 @@
+"""Decision changes as they are written: a log root followed like ``journalctl -f``.
+
+A *decision change* is what the timeline calls one (``trace_audit.timeline``): a cycle whose
+command differs from the previous cycle's of the same robot; a robot's first cycle read opens
+with one too (``previous`` None). ``tail`` reads each robot's newest segment (the one being
+written, or the last one written), yields its decision changes, and with ``follow`` polls for
+what is new, moving on to the next segment when the logger rotates.
+
+What it remembers is bounded however long it runs: per robot, the segment it reads, the last
+cycle number and time read from it, its size when read, and the last command. A segment is
+re-read only when it grew, and then only from the last time read (the reader decodes the
+chunks from there). Whether a segment is being written is the writer lock's answer
+(``trace_runtime.live_writers``), looked up, never taken: a segment without a footer whose
+writer is gone is shown as recovered, one whose writer holds its lock as live.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+
+from trace_audit.causal import FactorValue, read_decision
+from trace_audit.cycle_fields import command_of
+from trace_audit.log_time import SECONDS_CLOCK, LogClock
+from trace_audit.selection import Selection
+from trace_runtime.cycles import Cycle
+from trace_runtime.errors import LogReadError, UsageError
+from trace_runtime.live_writers import is_live
+from trace_runtime.logset import find_segment_files, open_log, preferred_copies
+from trace_runtime.reader import RECOVERED_WARNING, Segment
+from trace_runtime.segment_names import parse_segment_name
+
+__all__ = [
+    "DEFAULT_POLL_S",
+    "DecisionChange",
+    "SegmentState",
+    "SegmentStatus",
+    "TailEvent",
+    "tail",
+]
+
+DEFAULT_POLL_S = 0.2
+"""How often a followed log is looked at: a logger writes a chunk a batch (10 Hz by default),
+so a change shows within about one batch of its write."""
+
+
+class SegmentStatus(Enum):
+    """What a segment is to its reader right now."""
+
+    LIVE = "live"
+    """No footer yet, and its writer holds the lock: being written."""
+    FINISHED = "finished"
+    """Closed by its logger (a footer)."""
+    RECOVERED = "recovered"
+    """No footer, and no writer: the logger died; read up to its last complete chunk."""
+
+
+@dataclass(frozen=True, slots=True)
+class SegmentState:
+    """The segment a robot's changes are read from, when tail starts on it, moves to it or
+    its state changes (a writer that dies: live to recovered; a logger that closes it)."""
+
+    robot: str
+    segment: str
+    status: SegmentStatus
+    kind: str = field(default="segment", init=False)
+
+
+@dataclass(frozen=True, slots=True)
+class DecisionChange:
+    """A cycle whose command differs from the robot's previous cycle's, with its reason."""
+
+    robot: str
+    segment: str
+    cycle: int
+    t_ns: int
+    command: str | None
+    previous: str | None
+    """The command before (None: the first cycle tail read of this robot)."""
+    rationale: str | None
+    leading: FactorValue | None
+    """The leading factor: the first the rationale names."""
+    clock: LogClock = SECONDS_CLOCK
+    kind: str = field(default="change", init=False)
+
+    @property
+    def shown_t(self) -> str:
+        return self.clock.show(self.t_ns)
+
+
+TailEvent = DecisionChange | SegmentState
+
+
+@dataclass(slots=True)
+class _Robot:
+    """What tail remembers of one robot: a fixed handful of fields, however long it runs."""
+
+    name: str
+    clock: LogClock | None = None
+    number: int = -1
+    path: Path | None = None
+    size: int = -1
+    status: SegmentStatus | None = None
+    last_cycle: int | None = None
+    last_t_ns: int | None = None
+    command: str | None = None
+    seen_any: bool = False
+
+
+class _QuietRecovered(logging.Filter):
+    """Tail re-opens a growing segment; the state is its own event (``SegmentState``), so
+    the reader's once-a-file "recovered" warning is not repeated on every re-read."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.msg != RECOVERED_WARNING
+
+
+def tail(
+    root: str | Path,
+    *,
+    robots: Sequence[str] = (),
+    follow: bool = False,
+    poll_s: float = DEFAULT_POLL_S,
+    stop: threading.Event | None = None,
+) -> Iterator[TailEvent]:
+    """Each robot's decision changes from its newest segment on, as ``SegmentState`` and
+    ``DecisionChange`` events; with ``follow``, polling every ``poll_s`` for what is new
+    until ``stop`` is set (without, once through what is written so far).
+
+    ``robots`` selects robots (``selection.Selection``; one not in the log is a
+    ``UsageError``); none follows every robot, including robots that start logging later."""
+    path = Path(root)
+    if not path.is_dir():
+        raise UsageError(f"{path}: tail follows a log root (a folder), not one file")
+    chosen = _selected(path, robots)
+    stop = stop or threading.Event()
+    state: dict[str, _Robot] = {}
+    quiet = _QuietRecovered()
+    reader_log = logging.getLogger("trace_runtime")
+    reader_log.addFilter(quiet)
+    try:
+        while True:
+            began = time.monotonic()
+            for name, numbered in _newest_segments(path, chosen).items():
+                robot = state.setdefault(name, _Robot(name))
+                yield from _read_robot(robot, numbered)
+            # A growing segment without a footer is re-read by scan (about 35 ms a minute of
+            # 10 Hz log): never poll faster than a pass takes, so a long segment costs at
+            # most half a core and a change still shows within two passes.
+            if not follow or stop.wait(max(poll_s, time.monotonic() - began)):
+                return
+    finally:
+        reader_log.removeFilter(quiet)
+
+
+def _selected(root: Path, robots: Sequence[str]) -> tuple[str, ...]:
+    """The robots asked for, checked against the log (``()``: every robot, found anew at
+    each poll). An empty root has no robots yet: followed, robots appear as they log."""
+    if not robots:
+        return ()
+    log = Selection(tuple(robots)).of(open_log(root, lazy=True))
+    return tuple(log.robots)
+
+
+def _newest_segments(root: Path, robots: tuple[str, ...]) -> dict[str, dict[int, list[Path]]]:
+    """Each robot's segment files by number, known by their names (nothing opened)."""
+    found: dict[str, dict[int, list[Path]]] = {}
+    for file in find_segment_files(root):
+        named = parse_segment_name(file.name)
+        if named is None or (robots and named[0] not in robots):
+            continue
+        found.setdefault(named[0], {}).setdefault(named[1], []).append(file)
+    return dict(sorted(found.items()))
+
+
+def _read_robot(robot: _Robot, numbered: dict[int, list[Path]]) -> Iterator[TailEvent]:
+    """What is new in one robot's segments: the rest of the one read so far, then each later
+    one in turn (a rotation); a robot met for the first time starts at its newest."""
+    if robot.path is None:
+        robot.number = max(numbered) - 1
+    newer = sorted(n for n in numbered if n > robot.number)
+    if robot.path is not None:
+        yield from _read_segment(robot, robot.path)
+    for number in newer:
+        chosen = _copy_of(numbered[number])
+        if chosen is None:
+            continue
+        robot.number, robot.path, robot.size, robot.status = number, chosen, -1, None
+        robot.last_cycle = robot.last_t_ns = None
+        yield from _read_segment(robot, chosen)
+
+
+def _copy_of(copies: list[Path]) -> Path | None:
+    """The copy of a segment to read (``logset.preferred_copies`` when there are several)."""
+    if len(copies) == 1:
+        return copies[0]
+    opened: list[Segment] = []
+    for copy in copies:
+        try:
+            opened.append(Segment(copy))
+        except LogReadError:
+            continue
+    kept, _ = preferred_copies(opened)
+    return kept[0].path if kept else None
+
+
+def _read_segment(robot: _Robot, path: Path) -> Iterator[TailEvent]:
+    """The decision changes written to ``path`` since it was last read, and its state when
+    that changed. A segment that has not grown is not re-opened: only its writer's lock is
+    looked at (a kill -9 turns it from live to recovered without a byte written)."""
+    try:
+        size = path.stat().st_size
+    except OSError:
+        return  # moved away (compaction) or removed: the next poll finds what replaced it
+    if size == robot.size:
+        if robot.status is SegmentStatus.LIVE and not is_live(path, robot.name):
+            robot.status = SegmentStatus.RECOVERED
+            yield SegmentState(robot.name, path.name, robot.status)
+        return
+    try:
+        segment = Segment(path)
+    except LogReadError:
+        return  # a header still being written; the next poll reads it
+    robot.size = size
+    status = (
+        SegmentStatus.FINISHED
+        if segment.finished
+        else SegmentStatus.LIVE
+        if segment.live
+        else SegmentStatus.RECOVERED
+    )
+    if robot.clock is None:
+        robot.clock = LogClock(segment.session.clock, segment.start_ns)
+    if status is not robot.status:
+        robot.status = status
+        yield SegmentState(robot.name, path.name, status)
+    yield from _changes(robot, segment.iter_cycles(start_ns=robot.last_t_ns))
+
+
+def _changes(robot: _Robot, cycles: Iterator[Cycle]) -> Iterator[DecisionChange]:
+    """The decision changes among sealed cycles not read before (by cycle number); a cycle
+    whose seal is not written yet is read again at the next poll."""
+    for cycle in cycles:
+        if not cycle.sealed:
+            continue  # its seal is not written yet (read again next poll) or was lost
+        if robot.last_cycle is not None and cycle.cycle <= robot.last_cycle:
+            continue
+        robot.last_cycle, robot.last_t_ns = cycle.cycle, cycle.t_ns
+        command = command_of(cycle)
+        if robot.seen_any and command == robot.command:
+            continue
+        previous, robot.command = robot.command if robot.seen_any else None, command
+        robot.seen_any = True
+        decision = read_decision(cycle, with_tree=False)
+        yield DecisionChange(
+            robot.name,
+            cycle.segment,
+            cycle.cycle,
+            cycle.t_ns,
+            command,
+            previous,
+            decision.rationale,
+            decision.leading,
+            robot.clock or SECONDS_CLOCK,
+        )
