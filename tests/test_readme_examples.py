@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import re
 import shlex
+import shutil
 from pathlib import Path
 
 import pytest
@@ -61,4 +62,6 @@ def readme_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
         ],
     )
     assert made.exit_code == 0, made.output
+    # A reader runs the commands in the checkout, where the shipped rules files are.
+    shutil.copytree(README.parent / "docs" / "rules", where / "docs" / "rules")
     return where
