@@ -22,6 +22,7 @@ import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from trace_audit.causal.distances import entity_distances
 from trace_audit.log_time import hour_of
 from trace_audit.metrics import NO_SCENARIO, ScoredDecision, scenario_of
 from trace_runtime.clock import is_wall_clock
@@ -33,8 +34,6 @@ if TYPE_CHECKING:
 __all__ = ["ROW_TABLES", "SegmentRows", "day_of", "partition_of"]
 
 _HOUR_NS = 3_600_000_000_000
-_DISTANCE_UNITS = frozenset(("m", "meter", "metre", "meters", "metres"))
-
 _SEGMENT_CONSTANTS = ("segment", "segment_path", "tier", "software_version", "policy_version")
 """Decision columns equal on every row of a segment: not stored per row."""
 _FLAT = ("factors", "failed_checks", "flags", "nearest", "dr_problems", "integrity_problems")
@@ -69,34 +68,6 @@ def _number(value: Any) -> float | None:
 
 def _text(value: Any) -> str | None:
     return None if value is None else str(value)
-
-
-def _distances(belief: Any) -> dict[str, float]:
-    """Entity id -> distance to the robot, where the belief graph derives one: a state node
-    labelled or named ``distance`` in metres with a documented edge from the entity."""
-    if type(belief) is not dict:
-        return {}
-    values: dict[Any, float] = {}
-    for node in belief.get("nodes") or ():
-        if (
-            type(node) is dict
-            and node.get("kind") == "state"
-            and node.get("unit") in _DISTANCE_UNITS
-            and "distance" in f"{node.get('label', '')} {node.get('id', '')}".lower()
-        ):
-            value = _number(node.get("value"))
-            if value is not None:
-                values[node.get("id")] = value
-    if not values:
-        return {}
-    out: dict[str, float] = {}
-    for edge in belief.get("edges") or ():
-        if type(edge) is dict:
-            value = values.get(edge.get("child"))
-            if value is not None:
-                parent = str(edge.get("parent"))
-                out[parent] = min(value, out.get(parent, value))
-    return out
 
 
 @dataclass(slots=True)
@@ -342,7 +313,7 @@ class SegmentRows:
 
     def _entities(self, d: ScoredDecision, entities: Any, day: str) -> dict[str, float]:
         """Add the cycle's entity rows; return the nearest distance of each class seen."""
-        distances = _distances(d.belief)
+        distances = entity_distances(d.belief)
         nearest: dict[str, float] = {}
         rows = self.rows["entities"]
         days = self.days["entities"]

@@ -27,6 +27,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from trace_audit.causal import Decision, layer_with_defaults
+from trace_audit.causal.distances import entity_distances
 from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
 from trace_runtime.cycles import Cycle
 from trace_runtime.records import TOPIC_BELIEF, TOPIC_PERCEPTION
@@ -47,7 +48,6 @@ SIGNAL_PATTERN = re.compile(rf"\b(?:{'|'.join(FAMILIES)})(?:\.[A-Za-z0-9_]+)+")
 """A signal name in a formula: a family, then dot-separated words of letters, digits, ``_``."""
 
 _CHANNEL_PARTS = ("intended", "actual", "deviation")
-_DISTANCE_UNITS = frozenset(("m", "meter", "metre", "meters", "metres"))
 
 
 def signal_names(formula: str) -> tuple[str, ...]:
@@ -142,7 +142,7 @@ def nearest_by_class(cycle: Cycle) -> dict[str, float] | None:
     perception = as_mapping(layer_with_defaults(cycle, TOPIC_PERCEPTION))
     if perception is None:
         return None
-    distances = _distances(as_mapping(layer_with_defaults(cycle, TOPIC_BELIEF)))
+    distances = entity_distances(layer_with_defaults(cycle, TOPIC_BELIEF))
     nearest: dict[str, float] = {}
     for entity in mappings(perception.get("entities")):
         cls = as_str(entity.get("class"))
@@ -150,31 +150,6 @@ def nearest_by_class(cycle: Cycle) -> dict[str, float] | None:
         if cls is not None and distance is not None:
             nearest[cls] = min(distance, nearest.get(cls, distance))
     return nearest
-
-
-def _distances(belief: Mapping[str, Any] | None) -> dict[str, float]:
-    """Entity id -> distance to the robot where the belief graph derives one; the rule the
-    fleet index's ``nearest`` column uses (``trace_audit.fleet.rows``)."""
-    if belief is None:
-        return {}
-    values: dict[str, float] = {}
-    for node in mappings(belief.get("nodes")):
-        text = f"{node.get('label', '')} {node.get('id', '')}".lower()
-        value = as_float(node.get("value"))
-        if (
-            node.get("kind") == "state"
-            and node.get("unit") in _DISTANCE_UNITS
-            and "distance" in text
-            and value is not None
-        ):
-            values[str(node.get("id"))] = value
-    out: dict[str, float] = {}
-    for edge in mappings(belief.get("edges")):
-        value = values.get(str(edge.get("child")))
-        if value is not None:
-            parent = str(edge.get("parent"))
-            out[parent] = min(value, out.get(parent, value))
-    return out
 
 
 def _number(value: Any) -> float | None:
