@@ -16,12 +16,17 @@ from trace_audit.cli.output import print_json
 
 __all__ = ["EXPORT_FORMATS", "export_command"]
 
-EXPORT_FORMATS = ("dot", "mermaid", "json")
+EXPORT_FORMATS = ("dot", "mermaid", "json", "foxglove")
 
 _EXPORT_HELP = """Export a decision's causal graph and counterfactual tree for a report.
 
 dot (Graphviz), mermaid (Markdown-friendly) or json. Undocumented links are dashed and
 labelled MISSING; the tree's taken path is bold.
+
+--format foxglove writes a whole robot's log (or --from/--to of it) as an MCAP file for
+Foxglove into --out: the robot and its perceived entities in 3-D, each decision change as a
+log line, factors and actuator channels for the Plot panel, and the TRACE channels copied
+through (trace-audit verify checks the export). docs/foxglove.md; needs the look extra.
 
 [bold]Examples[/bold]:
 
@@ -30,6 +35,8 @@ labelled MISSING; the tree's taken path is bold.
   trace-audit export run.mcap --t 12.3 --format mermaid >> incident.md
 
   trace-audit export run.mcap --cycle 4242 --format json
+
+  trace-audit export logs/ --robot amr-7 --format foxglove --out view.mcap
 """
 
 
@@ -56,7 +63,26 @@ def export_command(
         ),
     ] = False,
     plain: PlainOption = False,  # the export is plain text already; accepted like elsewhere
+    start: Annotated[
+        str | None,
+        typer.Option(
+            "--from",
+            help="foxglove: start of the window (as --t). Default: the log start.",
+            show_default=False,
+        ),
+    ] = None,
+    end: Annotated[
+        str | None,
+        typer.Option(
+            "--to",
+            help="foxglove: end of the window (as --t). Default: the log end.",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
+    if fmt == "foxglove":
+        _foxglove(log, out, robot or (), start, end, json_out=json_out)
+        return
     from trace_audit.export import export_decision
 
     result = guarded(lambda: export_decision(log, t=t, cycle=cycle, fmt=fmt, robots=robot or ()))
@@ -73,4 +99,31 @@ def export_command(
     sys.stderr.write(
         f"trace-audit: wrote {out} ({result.format}: cycle {result.cycle}, "
         f"{result.nodes} nodes, {result.edges} edges, {result.undocumented} undocumented)\n"
+    )
+
+
+def _foxglove(
+    log: Path,
+    out: Path | None,
+    robots: list[str] | tuple[str, ...],
+    start: str | None,
+    end: str | None,
+    *,
+    json_out: bool,
+) -> None:
+    """``--format foxglove``: the library writes the file; this says what it wrote."""
+    if out is None:
+        fail("--format foxglove writes an MCAP file: give --out FILE.mcap", EXIT_USAGE)
+    from trace_audit.foxglove import export_foxglove
+
+    target = out
+    result = guarded(
+        lambda: export_foxglove(log, target, robots=tuple(robots), start=start, end=end)
+    )
+    if json_out:
+        print_json(result)
+        return
+    sys.stderr.write(
+        f"trace-audit: wrote {result.path} (foxglove: {result.robot}, {result.cycles} cycles, "
+        f"{result.scene_updates} scene updates, {result.decision_changes} decision changes)\n"
     )

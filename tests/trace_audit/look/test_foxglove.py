@@ -1,0 +1,130 @@
+"""``trace-audit export --format foxglove``, read back with the reference ``mcap`` reader and
+decoded with the SDK's own protobuf schemas."""
+
+from __future__ import annotations
+
+import struct
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import orjson
+import pytest
+from mcap.reader import make_reader
+
+from tests.outside import REPO, cli
+from tests.trace_audit.conftest import write_log
+from trace_audit.timeline import timeline
+
+pytest.importorskip("foxglove")
+
+from foxglove.messages import Log as FoxLog
+from foxglove.messages import SceneUpdate
+
+
+def _messages(path: Path) -> list[tuple[Any, Any, Any]]:
+    with path.open("rb") as f:
+        return list(make_reader(f).iter_messages(log_time_order=False))
+
+
+def _holds_position(data: bytes, xyz: list[float]) -> bool:
+    """Whether a protobuf message holds this x, y, z: a double is its 8 little-endian bytes
+    (proto3 leaves a 0.0 out), so each coordinate's bytes are in the message."""
+    return all(struct.pack("<d", v) in data for v in xyz if v != 0.0)
+
+
+def _export(log: Path, out: Path, *args: str) -> None:
+    done = cli("export", log, "--format", "foxglove", "--out", out, *args)
+    assert done.returncode == 0, done.stderr
+
+
+def test_the_export_is_foxglove_and_still_a_trace_log(tmp_path: Path) -> None:
+    log = write_log(tmp_path / "root", max_segment_s=3.0)  # four segments
+    out = tmp_path / "view.mcap"
+    _export(log, out)
+    messages = _messages(out)
+    by_topic: dict[str, list[tuple[Any, Any, Any]]] = {}
+    for schema, channel, message in messages:
+        by_topic.setdefault(channel.topic, []).append((schema, channel, message))
+    scene_schema = by_topic["/foxglove/scene"][0][0]
+    assert (scene_schema.name, scene_schema.encoding) == ("foxglove.SceneUpdate", "protobuf")
+    assert by_topic["/foxglove/scene"][0][1].message_encoding == "protobuf"
+    log_schema = by_topic["/foxglove/decisions"][0][0]
+    assert (log_schema.name, log_schema.encoding) == ("foxglove.Log", "protobuf")
+    assert scene_schema.data == SceneUpdate.get_schema().data
+    assert by_topic["/foxglove/factors"][0][1].message_encoding == "json"
+
+    original = [m for p in sorted(log.rglob("*.mcap")) for m in _messages(p)]
+    trace = [(c.topic, m.sequence, m.log_time, m.data) for _, c, m in original]
+    copied = [
+        (c.topic, m.sequence, m.log_time, m.data)
+        for _, c, m in messages
+        if c.topic.startswith(("/trace/", "/sensors/"))
+    ]
+    assert sorted(copied) == sorted(
+        t
+        for t in trace
+        if t[0].startswith(("/trace/", "/sensors/")) and t[0] != "/trace/checkpoint"
+    )
+    assert "CLEAN" in cli("verify", out).stdout
+
+    cycles = {m.log_time for _, c, m in original if c.topic == "/trace/seal"}
+    scenes = by_topic["/foxglove/scene"]
+    assert sorted(m.log_time for _, _, m in scenes) == sorted(cycles)  # one per cycle
+    perceptions = {
+        m.log_time: orjson.loads(m.data) for _, c, m in original if c.topic == "/trace/perception"
+    }
+    for _, _, message in scenes:
+        for entity in perceptions[message.log_time]["entities"]:
+            assert entity["id"].encode() in message.data
+            assert _holds_position(message.data, entity["pose"]["position"]), entity
+        assert b"evidence verified" in message.data or b"evidence not verified" in message.data
+
+    rows = timeline(log).rows
+    logs = [m.data for _, _, m in by_topic["/foxglove/decisions"]]
+    assert len(logs) == len(rows)
+    for row, entry in zip(rows, logs, strict=True):
+        assert f"cycle {row.cycle}: ".encode() in entry and str(row.command).encode() in entry
+    assert FoxLog.get_schema().name == "foxglove.Log"
+
+
+def test_a_window_exports_only_its_cycles_and_still_verifies(tmp_path: Path) -> None:
+    log = write_log(tmp_path / "root", max_segment_s=3.0)
+    out = tmp_path / "window.mcap"
+    _export(log, out, "--from", "103.05", "--to", "106")
+    seals = [m for _, c, m in _messages(out) if c.topic == "/trace/seal"]
+    assert seals[0].log_time == 103_100_000_000 and len(seals) == 30
+    assert "CLEAN" in cli("verify", out).stdout
+
+
+def test_an_existing_file_or_no_out_is_refused(tmp_path: Path) -> None:
+    log = write_log(tmp_path / "run.mcap")
+    out = tmp_path / "view.mcap"
+    out.write_bytes(b"mine")
+    taken = cli("export", log, "--format", "foxglove", "--out", out)
+    assert taken.returncode == 4 and out.read_bytes() == b"mine", taken.stderr
+    no_out = cli("export", log, "--format", "foxglove")
+    assert no_out.returncode == 2 and "--out" in no_out.stderr
+
+
+def test_an_arm_log_exports_without_planar_fields(tmp_path: Path) -> None:
+    arm = tmp_path / "arm"
+    made = subprocess.run(
+        [sys.executable, str(REPO / "examples" / "pick_and_place_arm.py"), "--out", str(arm)],
+        capture_output=True,
+        text=True,
+        check=False,
+        env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"},
+    )
+    assert made.returncode == 0, made.stderr
+    out = tmp_path / "arm.mcap"
+    _export(arm, out)
+    messages = _messages(out)
+    topics = {c.topic for _, c, _ in messages}
+    assert {"/foxglove/scene", "/foxglove/decisions", "/foxglove/actuators"} <= topics
+    actuators = [orjson.loads(m.data) for _, c, m in messages if c.topic == "/foxglove/actuators"]
+    names = set().union(*(a.keys() for a in actuators))
+    assert names - {"deviation"}, names  # the arm's own joint channels, by their names
+    assert not {"linear", "angular", "x", "y"} & names
+    assert "CLEAN" in cli("verify", out).stdout

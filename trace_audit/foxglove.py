@@ -1,0 +1,402 @@
+"""A TRACE log as Foxglove shows it: scene, decisions and plots, in Foxglove's own schemas.
+
+``export_foxglove`` writes one robot's cycles (a window of them, or all) into one MCAP file
+with the SDK's own message types, schemas and encoding (``foxglove-sdk``):
+
+- ``/foxglove/scene`` (``foxglove.SceneUpdate``), one per cycle: the robot (where the cycle
+  logs ``robot_pose``) and each perceived entity that has a position, as a cube with a text
+  label (class, confidence, whether its evidence verified), coloured green when every
+  evidence ref resolves, amber otherwise. Each update first deletes the previous cycle's
+  entities, so an entity lives exactly as long as the log perceives it. Positions are the
+  log's x, y, z in the pose's own frame; nothing planar is assumed.
+- ``/foxglove/robot_pose`` (``foxglove.PoseInFrame``) where the robot logs its pose.
+- ``/foxglove/decisions`` (``foxglove.Log``): each decision change, its command, leading
+  factor and rationale.
+- ``/foxglove/factors`` and ``/foxglove/actuators``: plain JSON numbers for the Plot panel
+  (each factor by name; each actuator channel's intended, actual and deviation).
+- the ``/trace/*`` and ``/sensors/*`` channels, copied through: each message's bytes are the
+  canonical bytes its seal covers, with the segment's ``trace.session`` record (its
+  ``prev_seal`` and ``first_cycle`` those of the first cycle exported), so the export is
+  itself a TRACE log that ``trace-audit verify`` checks.
+
+``foxglove-sdk`` comes with the ``look`` extra; without it the export raises ``UsageError``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import orjson
+
+from trace_audit.causal import layer_with_defaults, read_decision
+from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
+from trace_audit.cycle_fields import command_of
+from trace_audit.log_source import LogSource, require_cycles
+from trace_audit.log_time import TimeArg
+from trace_audit.selection import Selection
+from trace_audit.sensor_window import DEFAULT_SENSOR_WINDOW, SensorWindow
+from trace_runtime.cycles import Cycle
+from trace_runtime.errors import StorageError, UsageError
+from trace_runtime.logset import Log
+from trace_runtime.records import PROFILE, TOPIC_PERCEPTION, TOPIC_SEAL
+from trace_runtime.schemas import SENSOR_SCHEMA_NAME, schema_bytes, schema_name
+from trace_runtime.session import SESSION_METADATA
+
+__all__ = [
+    "TOPIC_ACTUATORS",
+    "TOPIC_DECISIONS",
+    "TOPIC_FACTORS",
+    "TOPIC_ROBOT_POSE",
+    "TOPIC_SCENE",
+    "FoxgloveExport",
+    "export_foxglove",
+]
+
+TOPIC_SCENE = "/foxglove/scene"
+TOPIC_ROBOT_POSE = "/foxglove/robot_pose"
+TOPIC_DECISIONS = "/foxglove/decisions"
+TOPIC_FACTORS = "/foxglove/factors"
+TOPIC_ACTUATORS = "/foxglove/actuators"
+
+_VERIFIED = (0.2, 0.75, 0.3, 0.9)
+_UNVERIFIED = (0.95, 0.6, 0.1, 0.9)
+_ROBOT = (0.2, 0.45, 0.95, 0.9)
+_ENTITY_SIZE_M = 0.5
+_PLOT_KEY = re.compile(r"[^A-Za-z0-9_]")
+
+_NUMBERS_SCHEMA: dict[str, Any] = {"type": "object", "additionalProperties": True}
+
+
+@dataclass(frozen=True, slots=True)
+class FoxgloveExport:
+    """What an export wrote: the file, the robot, and how many of each kind of message."""
+
+    path: str
+    robot: str
+    cycles: int
+    scene_updates: int
+    entities: int
+    decision_changes: int
+    trace_messages: int
+    sensor_messages: int
+    start_ns: int
+    end_ns: int
+
+
+def export_foxglove(
+    source: LogSource,
+    out: str | Path,
+    *,
+    robots: tuple[str, ...] = (),
+    start: TimeArg = None,
+    end: TimeArg = None,
+) -> FoxgloveExport:
+    """Write one robot's cycles between ``start`` and ``end`` to ``out`` for Foxglove.
+
+    One robot: ``robots`` selects it in a log of several (``SeveralRobotsError`` else). The
+    file must not exist (``StorageError``), and the SDK must be installed (``UsageError``)."""
+    from trace_audit.timeline import one_robot
+
+    log = one_robot(source, robots, "decisions in this log")
+    require_cycles(log)
+    window = Selection(robots, start, end).window(log)
+    target = Path(out)
+    if target.exists():
+        raise StorageError(str(target), "exists; the export never overwrites a file")
+    fox = _sdk()
+    cycles = list(log.iter_cycles(*window))
+    if not cycles:
+        raise UsageError("no cycle of the log falls in the window")
+    writer = _Writer(fox, target, log, cycles[0])
+    try:
+        for cycle in cycles:
+            writer.cycle(cycle)
+    except BaseException:
+        writer.close()
+        target.unlink(missing_ok=True)  # ours, half written: never left as if it were whole
+        raise
+    writer.close()
+    return writer.result(str(target), log.first_robot)
+
+
+def _sdk() -> Any:
+    try:
+        import foxglove
+        import foxglove.channels
+        import foxglove.messages
+    except ImportError as err:
+        raise UsageError(
+            "the Foxglove export needs foxglove-sdk: pip install 'trace-audit[look]'"
+        ) from err
+    return foxglove
+
+
+def _stamp(fox: Any, t_ns: int) -> Any:
+    return fox.messages.Timestamp(t_ns // 1_000_000_000, t_ns % 1_000_000_000)
+
+
+class _Writer:
+    """One export file: the SDK's messages and schemas, and the TRACE channels as logged.
+
+    The file is written with the reference ``mcap`` writer, not the SDK's ``open_mcap``: a
+    TRACE message's MCAP ``sequence`` is its cycle (PROFILE section 4), and the SDK's writer
+    numbers every channel's messages itself, which would break the copied log."""
+
+    def __init__(self, fox: Any, target: Path, log: Log, first: Cycle) -> None:
+        from mcap.writer import Writer
+
+        self.fox = fox
+        self.m = fox.messages
+        try:
+            self.file = target.open("xb")
+        except OSError as err:
+            raise StorageError(str(target), f"cannot write ({err.strerror or err})") from err
+        self.mcap: Any = Writer(self.file)  # the mcap package ships no type hints
+        self.mcap.start(profile=PROFILE, library="trace-audit foxglove export")
+        self.mcap.add_metadata(SESSION_METADATA, _session(log, first))
+        self.schemas: dict[str, int] = {}
+        self.channels: dict[str, int] = {}
+        self.sensors = SensorWindow(DEFAULT_SENSOR_WINDOW)
+        self.command: str | None = None
+        self.counts = {"cycles": 0, "scene": 0, "entities": 0, "changes": 0, "trace": 0}
+        self.counts["sensors"] = 0
+        self.span = (first.t_ns, first.t_ns)
+        self.last_xyz = (0.0, 0.0, 0.0)
+
+    def _channel(self, topic: str, schema: tuple[str, str, bytes], encoding: str) -> int:
+        """The channel id of ``topic``, registered with ``schema`` (name, encoding, data)."""
+        channel = self.channels.get(topic)
+        if channel is None:
+            name, schema_encoding, data = schema
+            schema_id = self.schemas.get(name)
+            if schema_id is None:
+                schema_id = self.mcap.register_schema(name, schema_encoding, data)
+                self.schemas[name] = schema_id
+            channel = self.mcap.register_channel(topic, encoding, schema_id)
+            self.channels[topic] = channel
+        return channel
+
+    def _sdk_message(self, topic: str, message: Any, t_ns: int) -> None:
+        """A message of the SDK's own types, in its own schema and encoding (protobuf)."""
+        sdk = type(message).get_schema()
+        channel = self._channel(topic, (sdk.name, sdk.encoding, bytes(sdk.data)), sdk.encoding)
+        self.mcap.add_message(channel, t_ns, bytes(message.encode()), t_ns)
+
+    def _json(self, topic: str, value: dict[str, Any], t_ns: int) -> None:
+        schema = (topic.rsplit("/", 1)[-1], "jsonschema", orjson.dumps(_NUMBERS_SCHEMA))
+        channel = self._channel(topic, schema, "json")
+        self.mcap.add_message(channel, t_ns, orjson.dumps(value), t_ns)
+
+    def cycle(self, cycle: Cycle) -> None:
+        """Everything one cycle contributes: its TRACE messages, scene, decision, numbers."""
+        self.counts["cycles"] += 1
+        self.span = (self.span[0], cycle.t_ns)
+        self._copy(cycle)
+        self.sensors.push(cycle.sensors)
+        self._scene(cycle)
+        decision = read_decision(cycle, with_tree=False)
+        command = command_of(cycle)
+        if self.counts["cycles"] == 1 or command != self.command:
+            self._decision(cycle, decision, command)
+        self.command = command
+        numbers = {
+            _PLOT_KEY.sub("_", f.label): as_float(f.value)
+            for f in decision.factors
+            if as_float(f.value) is not None
+        }
+        self._json(TOPIC_FACTORS, numbers, cycle.t_ns)
+        execution = decision.execution
+        if execution is not None:
+            channels: dict[str, Any] = {"deviation": execution.deviation}
+            for channel in execution.channels:
+                channels[_PLOT_KEY.sub("_", channel.name)] = {
+                    "intended": channel.intended,
+                    "actual": channel.actual,
+                    "deviation": channel.deviation,
+                }
+            self._json(TOPIC_ACTUATORS, channels, cycle.t_ns)
+
+    def _copy(self, cycle: Cycle) -> None:
+        """The cycle's sensor readings and layer messages, their bytes as logged."""
+        for msg in cycle.sensors:
+            channel = self._channel(msg.topic, _logged_schema(msg.topic), "json")
+            self.mcap.add_message(channel, msg.log_time_ns, msg.data, msg.log_time_ns, msg.sequence)
+            self.counts["sensors"] += 1
+        seal = cycle.payloads.get(TOPIC_SEAL)
+        layers = [(t, d) for t, d in cycle.payloads.items() if t != TOPIC_SEAL]
+        # the seal closes its cycle, after every layer it covers
+        for topic, data in [*layers, *([(TOPIC_SEAL, seal)] if seal is not None else [])]:
+            channel = self._channel(topic, _logged_schema(topic), "json")
+            self.mcap.add_message(channel, cycle.t_ns, data, cycle.t_ns, cycle.cycle)
+            self.counts["trace"] += 1
+
+    def _scene(self, cycle: Cycle) -> None:
+        m = self.m
+        stamp = _stamp(self.fox, cycle.t_ns)
+        perception = as_mapping(layer_with_defaults(cycle, TOPIC_PERCEPTION)) or {}
+        entities = []
+        robot_pose = as_mapping(perception.get("robot_pose"))
+        if robot_pose is not None and (pose := self._pose(robot_pose)) is not None:
+            frame = as_str(robot_pose.get("frame")) or ""
+            entities.append(self._cube(stamp, frame, "robot", pose, colour=_ROBOT, label="robot"))
+            self._sdk_message(
+                TOPIC_ROBOT_POSE,
+                m.PoseInFrame(timestamp=stamp, frame_id=frame, pose=pose),
+                cycle.t_ns,
+            )
+        for entity in mappings(perception.get("entities")):
+            shown = self._entity(stamp, entity)
+            if shown is not None:
+                entities.append(shown)
+        self.counts["entities"] += len(entities)
+        everything = m.SceneEntityDeletion(timestamp=stamp, type=m.SceneEntityDeletionType.All)
+        self._sdk_message(
+            TOPIC_SCENE, m.SceneUpdate(deletions=[everything], entities=entities), cycle.t_ns
+        )
+        self.counts["scene"] += 1
+
+    def _entity(self, stamp: Any, entity: Mapping[str, Any]) -> Any:
+        """A perceived entity as a cube and its label; None when it has no position."""
+        pose_data = as_mapping(entity.get("pose"))
+        pose = self._pose(pose_data) if pose_data is not None else None
+        if pose is None or pose_data is None:
+            return None
+        cls = as_str(entity.get("class")) or "?"
+        confidence = as_float((as_mapping(entity.get("confidence")) or {}).get(cls))
+        refs = [as_mapping(e.get("ref")) for e in mappings(entity.get("evidence"))]
+        verified = bool(refs) and all(
+            r is not None and not self.sensors.resolve(dict(r)) for r in refs
+        )
+        label = f"{as_str(entity.get('id')) or '?'}: {cls}"
+        if confidence is not None:
+            label += f" {confidence:.2f}"
+        label += ", evidence verified" if verified else ", evidence not verified"
+        frame = as_str(pose_data.get("frame")) or ""
+        colour = _VERIFIED if verified else _UNVERIFIED
+        return self._cube(
+            stamp, frame, as_str(entity.get("id")) or "", pose, colour=colour, label=label
+        )
+
+    def _pose(self, pose: Mapping[str, Any]) -> Any:
+        """The SDK pose of a logged one; None without a finite x, y, z."""
+        m = self.m
+        position = pose.get("position")
+        if not isinstance(position, list) or len(position) != 3:
+            return None
+        xyz = [as_float(v) for v in position]
+        if any(v is None or not math.isfinite(v) for v in xyz):
+            return None
+        x, y, z = (float(v) for v in xyz if v is not None)
+        self.last_xyz = (x, y, z)
+        q = pose.get("orientation")
+        quat = [as_float(v) for v in q] if isinstance(q, list) and len(q) == 4 else []
+        if len(quat) != 4 or any(v is None for v in quat):
+            quat = [0.0, 0.0, 0.0, 1.0]
+        qx, qy, qz, qw = (float(v) for v in quat if v is not None)
+        return m.Pose(
+            position=m.Vector3(x=x, y=y, z=z), orientation=m.Quaternion(x=qx, y=qy, z=qz, w=qw)
+        )
+
+    def _cube(
+        self,
+        stamp: Any,
+        frame: str,
+        entity_id: str,
+        pose: Any,
+        *,
+        colour: tuple[float, float, float, float],
+        label: str,
+    ) -> Any:
+        m = self.m
+        r, g, b, a = colour
+        size = m.Vector3(x=_ENTITY_SIZE_M, y=_ENTITY_SIZE_M, z=_ENTITY_SIZE_M)
+        x, y, z = self.last_xyz  # of ``pose``: the SDK's messages do not read back
+        above = m.Pose(
+            position=m.Vector3(x=x, y=y, z=z + _ENTITY_SIZE_M),
+            orientation=m.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
+        )
+        return m.SceneEntity(
+            timestamp=stamp,
+            frame_id=frame,
+            id=entity_id,
+            cubes=[m.CubePrimitive(pose=pose, size=size, color=m.Color(r=r, g=g, b=b, a=a))],
+            texts=[
+                m.TextPrimitive(
+                    pose=above,
+                    billboard=True,
+                    font_size=14.0,
+                    scale_invariant=True,
+                    color=m.Color(r=1.0, g=1.0, b=1.0, a=1.0),
+                    text=label,
+                )
+            ],
+        )
+
+    def _decision(self, cycle: Cycle, decision: Any, command: str | None) -> None:
+        m = self.m
+        was = "" if self.counts["cycles"] == 1 else f"{self.command} -> "
+        text = f"cycle {cycle.cycle}: {was}{command}"
+        if decision.leading is not None:
+            text += f"; leading {decision.leading.label} = {decision.leading.shown}"
+        if decision.rationale:
+            text += f"; because {decision.rationale}"
+        self._sdk_message(
+            TOPIC_DECISIONS,
+            m.Log(
+                timestamp=_stamp(self.fox, cycle.t_ns),
+                level=m.LogLevel.Info,
+                message=text,
+                name=cycle.segment.split("_")[0] if cycle.segment else "",
+                file=cycle.segment,
+                line=cycle.cycle,
+            ),
+            cycle.t_ns,
+        )
+        self.counts["changes"] += 1
+
+    def close(self) -> None:
+        try:
+            self.mcap.finish()
+        finally:
+            self.file.close()
+
+    def result(self, path: str, robot: str) -> FoxgloveExport:
+        c = self.counts
+        return FoxgloveExport(
+            path,
+            robot,
+            c["cycles"],
+            c["scene"],
+            c["entities"],
+            c["changes"],
+            c["trace"],
+            c["sensors"],
+            *self.span,
+        )
+
+
+def _logged_schema(topic: str) -> tuple[str, str, bytes]:
+    """The schema the logger gives a topic (``trace_runtime.schemas``): the export's TRACE
+    channels are the hot tier's, whatever tier the log was read from."""
+    name = schema_name(topic) if topic.startswith("/trace/") else SENSOR_SCHEMA_NAME
+    return name, "jsonschema", schema_bytes(topic)
+
+
+def _session(log: Log, first: Cycle) -> dict[str, str]:
+    """The ``trace.session`` of the export: that of the first exported cycle's segment, as a
+    hot segment starting at that cycle (its chain continues from the seal before it)."""
+    segment = log.segment_named(first.segment) or log.segments[0]
+    seal = orjson.loads(first.payloads[TOPIC_SEAL]) if TOPIC_SEAL in first.payloads else {}
+    prev = seal.get("prev") if isinstance(seal, dict) else None
+    session = replace(
+        segment.session,
+        tier="hot",
+        first_cycle=first.cycle,
+        prev_seal=prev if isinstance(prev, str) else segment.session.prev_seal,
+    )
+    return session.to_metadata()
