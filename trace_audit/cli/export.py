@@ -80,6 +80,8 @@ def export_command(
         ),
     ] = None,
 ) -> None:
+    if fmt not in EXPORT_FORMATS:
+        fail(f"unknown export format {fmt!r} (use {', '.join(EXPORT_FORMATS)})", EXIT_USAGE)
     if fmt == "foxglove":
         _foxglove(log, out, robot or (), start, end, json_out=json_out)
         return
