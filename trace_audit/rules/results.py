@@ -15,6 +15,8 @@ from trace_runtime.gaps import Gap
 
 __all__ = [
     "CheckResult",
+    "GroupRule",
+    "GroupRules",
     "Outcome",
     "RobotRules",
     "RuleResult",
@@ -44,6 +46,8 @@ class UndecidedReason(StrEnum):
     """A cycle does not log a signal the rule reads."""
     LOG_START = "log_start"
     LOG_END = "log_end"
+    NOT_IN_INDEX = "not_in_index"
+    """The rule reads a signal the fleet index does not hold (``check --index``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -118,12 +122,44 @@ class RobotRules:
 
 
 @dataclass(frozen=True, slots=True)
+class GroupRule:
+    """One rule over one group of a robot's cycles (``check --index --by robot,day``)."""
+
+    rule: str
+    outcome: Outcome
+    robustness: float | None
+    """The lowest robustness over the group's decidable cycles (None: none)."""
+    decidable_cycles: int
+    violations: int
+    undecided: int
+
+    @classmethod
+    def of(cls, r: RuleResult) -> GroupRule:
+        return cls(
+            r.rule, r.outcome, r.robustness, r.decidable_cycles, len(r.violations), len(r.undecided)
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class GroupRules:
+    """Every rule over one robot's cycles of one day (on a sim or monotonic clock, one run):
+    the table a safety case quotes."""
+
+    robot: str
+    day: str
+    cycles: int
+    rules: tuple[GroupRule, ...]
+
+
+@dataclass(frozen=True, slots=True)
 class CheckResult:
-    """Every rule of a rules file over each selected robot of a log."""
+    """Every rule of a rules file over each selected robot of a log (or of a fleet index)."""
 
     path: str
     rules_file: str
     robots: tuple[RobotRules, ...]
+    groups: tuple[GroupRules, ...] = field(default=(), metadata={OMIT_EMPTY: True})
+    """Per robot and day, with ``--by robot,day`` (``check --index``); empty otherwise."""
 
     @property
     def violated(self) -> bool:
