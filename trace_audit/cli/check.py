@@ -1,8 +1,10 @@
 """``trace-audit check``: safety requirements (STL rules) checked over a log.
 
 Parses its arguments, reads the rules file (``trace_audit.rules.read_rules``), calls
-``trace_audit.rules.check_rules`` and renders the typed result: rich on a terminal, plain
-text with ``--plain`` or in a pipe, JSON with ``--json``. Exit 1 when a rule is violated.
+``trace_audit.rules.check_rules`` on a log (or, with ``--index``,
+``trace_audit.rules.check_index`` over the fleet index's rows, its SQL run by the fleet's
+bounded ``run_query``) and renders the typed result: rich on a terminal, plain text with
+``--plain`` or in a pipe, JSON with ``--json``. Exit 1 when a rule is violated.
 """
 
 from __future__ import annotations
@@ -13,12 +15,21 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from trace_audit.cli.app import EXIT_FINDINGS, app, guarded, help_text
-from trace_audit.cli.doc import Doc, Seg
-from trace_audit.cli.options import JsonOption, LogArgument, PlainOption, RobotsOption
+from trace_audit.cli.doc import Column, Doc, Line, Seg
+from trace_audit.cli.options import (
+    JsonOption,
+    MemoryLimitOption,
+    PlainOption,
+    RobotsOption,
+    SqlTimeoutOption,
+    sql_limits,
+)
 from trace_audit.cli.output import emit
+from trace_runtime.errors import UsageError
 
 if TYPE_CHECKING:  # the library (and rtamt) is imported inside the command
-    from trace_audit.rules import CheckResult, RobotRules, RuleResult
+    from trace_audit.fleet.limits import QueryLimits
+    from trace_audit.rules import CheckResult, GroupRules, RobotRules, RuleResult
 
 __all__ = ["check_command", "check_doc"]
 
@@ -35,8 +46,14 @@ decision in force and the command that explains it) or not decidable (a gap or a
 signal hides part of the window: never interpolated). Robustness is rtamt's: how far the
 worst cycle is from the rule's boundary, in the signals' units.
 
+With --index IDX instead of a log, the rules are judged over a fleet index (trace-audit
+index): the same evaluation and JSON, the signals read with DuckDB per robot in time order,
+the gaps from the index's gaps table. A rule reading a signal the index does not hold (a
+planar robot's channel.speed.*) is not decidable there. --by robot,day adds the table of
+outcomes and robustness minima per robot and day (on a sim clock, per run).
+
 Exit codes: 0 every rule satisfied or not decidable, 1 a rule violated, 2 a bad rules file
-or usage (one line naming the rule), 3 an unreadable log.
+or usage (one line naming the rule), 3 an unreadable log or index.
 
 [bold]Examples[/bold]:
 
@@ -45,18 +62,46 @@ or usage (one line naming the rule), 3 an unreadable log.
   trace-audit check logs/ --rules rules.toml --robot amr-7 --from +60
 
   trace-audit check run.mcap --rules docs/rules/warehouse.toml --json
+
+  trace-audit check --index fleet-index/ --rules rules.toml --by robot,day
 """
+
+_LogArgument = Annotated[
+    Path | None,
+    typer.Argument(
+        help="A TRACE segment (.mcap), a directory of segments, or a log root (hot/ warm/ "
+        "cold/); or none, with --index.",
+        show_default=False,
+    ),
+]
+_Index = Annotated[
+    Path | None,
+    typer.Option(
+        "--index",
+        help="Judge the rules over a fleet index (trace-audit index) instead of a log.",
+        show_default=False,
+    ),
+]
+_By = Annotated[
+    str | None,
+    typer.Option(
+        "--by",
+        help="With --index: robot,day adds the outcomes and robustness minima per robot and "
+        "day (per run on a sim or monotonic clock).",
+        show_default=False,
+    ),
+]
 
 
 @app.command("check", help=help_text(_CHECK_HELP))
 def check_command(  # noqa: PLR0917 - typer maps each parameter to an option
-    log: LogArgument,
     rules: Annotated[
         Path,
         typer.Option(
             "--rules", help="The rules file (TOML: [[rule]] name, stl).", show_default=False
         ),
     ],
+    log: _LogArgument = None,
     robot: RobotsOption = None,
     start: Annotated[
         str | None,
@@ -73,10 +118,27 @@ def check_command(  # noqa: PLR0917 - typer maps each parameter to an option
             "--to", help="End of the window (same forms). Default: the log end.", show_default=False
         ),
     ] = None,
+    index: _Index = None,
+    by: _By = None,
+    memory_limit: MemoryLimitOption = None,
+    timeout: SqlTimeoutOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
-    result = guarded(lambda: _check(log, rules, robot or (), start, end))
+    def run() -> CheckResult:
+        if (index is None) == (log is None):
+            raise UsageError("give either a log or --index INDEX")
+        if index is None:
+            assert log is not None
+            if by is not None or memory_limit is not None or timeout is not None:
+                raise UsageError("--by, --memory-limit and --timeout need --index")
+            return _check(log, rules, robot or (), start, end)
+        if start is not None or end is not None:
+            raise UsageError("--from/--to are not supported with --index (check the logs)")
+        keys = [k.strip() for k in (by or "").split(",") if k.strip()]
+        return _check_index(index, rules, robot or (), keys, sql_limits(memory_limit, timeout))
+
+    result = guarded(run)
     emit(result, check_doc, json_out=json_out, plain=plain)
     if result.violated:
         raise typer.Exit(EXIT_FINDINGS)
@@ -97,6 +159,39 @@ def _check(
     )
 
 
+def _check_index(
+    index: Path,
+    rules_path: Path,
+    robots: list[str] | tuple[str, ...],
+    by: list[str],
+    limits: QueryLimits,
+) -> CheckResult:
+    from trace_audit.fleet import run_query
+    from trace_audit.fleet.folder import load_manifest
+    from trace_audit.rules import check_index, read_rules
+    from trace_runtime.errors import LogReadError
+    from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE
+
+    rules = read_rules(rules_path)  # before the index: a bad rule is exit 2 without a read
+    manifest = load_manifest(index)
+    if manifest is None:
+        raise LogReadError(str(index), "not a fleet index (run trace-audit index first)")
+    built = manifest.get("config", {}).get("gap_tolerance")
+    if built != DEFAULT_GAP_TOLERANCE:  # the gaps table is the gap rule at that tolerance
+        raise UsageError(
+            f"the index was built with gap_tolerance {built}, not the rules' "
+            f"{DEFAULT_GAP_TOLERANCE}: its gaps are not the rules' (rebuild it)"
+        )
+    return check_index(
+        lambda sql, params: run_query(index, sql, params, limits=limits).rows,
+        rules,
+        robots=tuple(robots),
+        by=by,
+        index=str(index),
+        rules_file=str(rules_path),
+    )
+
+
 _STYLE = {"satisfied": "green", "violated": "bold red", "not_decidable": "yellow"}
 _WORDS = {"satisfied": "satisfied", "violated": "VIOLATED", "not_decidable": "not decidable"}
 
@@ -110,7 +205,39 @@ def check_doc(r: CheckResult) -> Doc:
         doc.heading(f"{robot.robot}: {robot.cycles} cycles at {period:g} s")
         for rule in robot.rules:
             _rule_block(doc, robot, rule)
+    if r.groups:
+        _groups_table(doc, r.groups)
     return doc
+
+
+def _groups_table(doc: Doc, groups: tuple[GroupRules, ...]) -> None:
+    """Outcome and lowest robustness of each rule per robot and day."""
+    doc.heading("By robot and day")
+    rows: list[list[Line]] = [
+        [
+            g.robot,
+            g.day,
+            rule.rule,
+            Seg(_WORDS[rule.outcome.value], _STYLE[rule.outcome.value]),
+            "n/a" if rule.robustness is None else f"{rule.robustness:.4g}",
+            str(rule.decidable_cycles),
+            str(rule.violations),
+        ]
+        for g in groups
+        for rule in g.rules
+    ]
+    doc.table(
+        [
+            Column("robot"),
+            Column("day"),
+            Column("rule"),
+            Column("outcome"),
+            Column("robustness", "right"),
+            Column("judged", "right"),
+            Column("violations", "right"),
+        ],
+        rows,
+    )
 
 
 def _rule_block(doc: Doc, robot: RobotRules, rule: RuleResult) -> None:

@@ -36,7 +36,9 @@ __all__ = [
     "FAMILIES",
     "SIGNAL_PATTERN",
     "bad_signal",
+    "command_signal",
     "nearest_by_class",
+    "nearest_signal",
     "read_signals",
     "signal_names",
 ]
@@ -77,7 +79,7 @@ def read_signals(cycle: Cycle, decision: Decision, names: Iterable[str]) -> dict
         if family == "nearest":
             if nearest is None:
                 nearest = nearest_by_class(cycle)
-            value = _nearest(nearest, rest)
+            value = None if nearest is None else nearest_signal(nearest, rest)
         else:
             value = _decision_signal(decision, family, rest)
         if value is not None:
@@ -88,9 +90,7 @@ def read_signals(cycle: Cycle, decision: Decision, names: Iterable[str]) -> dict
 def _decision_signal(decision: Decision, family: str, rest: str) -> float | None:
     execution = decision.execution
     if family == "command":
-        if decision.command is None:
-            return None
-        return 1.0 if decision.command.casefold() == rest.casefold() else 0.0
+        return command_signal(decision.command, rest)
     if family == "factor":
         for factor in decision.factors:
             if rest in (factor.node, factor.name):
@@ -131,9 +131,16 @@ def _channel(decision: Decision, name: str, part: str) -> float | None:
     return abs(actual - intended)
 
 
-def _nearest(nearest: Mapping[str, float] | None, cls: str) -> float | None:
-    if nearest is None:  # no perception logged: nothing is known of what was near
+def command_signal(command: str | None, action: str) -> float | None:
+    """``command.<action>`` for a cycle whose command is ``command`` (None: none logged)."""
+    if command is None:
         return None
+    return 1.0 if command.casefold() == action.casefold() else 0.0
+
+
+def nearest_signal(nearest: Mapping[str, float], cls: str) -> float:
+    """``nearest.<cls>`` from a cycle's class -> nearest distance (+inf: none of the class
+    perceived). A cycle without perception has no value: the caller leaves it out."""
     return nearest.get(cls, math.inf)
 
 
