@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from trace_audit.cli.app import app, guarded, help_text
-from trace_audit.cli.options import JsonOption, RobotsOption
+from trace_audit.cli.options import JsonOption, PlainOption, RobotsOption
 
 if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
     from collections.abc import Sequence
@@ -52,6 +52,7 @@ def tail_command(
     ] = False,
     robot: RobotsOption = None,
     json_out: JsonOption = False,
+    plain: PlainOption = False,  # the lines are plain text already; accepted like elsewhere
 ) -> None:
     guarded(lambda: _run(root, robot or (), follow=follow, json_out=json_out))
 
