@@ -9,8 +9,11 @@ bounded ``run_query``) and renders the typed result: rich on a terminal, plain t
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from concurrent.futures import Executor
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -21,7 +24,9 @@ from trace_audit.cli.options import (
     MemoryLimitOption,
     PlainOption,
     RobotsOption,
+    SchedulerOption,
     SqlTimeoutOption,
+    cluster,
     sql_limits,
 )
 from trace_audit.cli.output import emit
@@ -50,7 +55,8 @@ With --index IDX instead of a log, the rules are judged over a fleet index (trac
 index): the same evaluation and JSON, the signals read with DuckDB per robot in time order,
 the gaps from the index's gaps table. A rule reading a signal the index does not hold (a
 planar robot's channel.speed.*) is not decidable there. --by robot,day adds the table of
-outcomes and robustness minima per robot and day (on a sim clock, per run).
+outcomes and robustness minima per robot and day (on a sim clock, per run); --scheduler
+judges each robot as one task on a Dask cluster (the same JSON).
 
 Exit codes: 0 every rule satisfied or not decidable, 1 a rule violated, 2 a bad rules file
 or usage (one line naming the rule), 3 an unreadable log or index.
@@ -122,6 +128,7 @@ def check_command(  # noqa: PLR0917 - typer maps each parameter to an option
     by: _By = None,
     memory_limit: MemoryLimitOption = None,
     timeout: SqlTimeoutOption = None,
+    scheduler: SchedulerOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
@@ -130,13 +137,15 @@ def check_command(  # noqa: PLR0917 - typer maps each parameter to an option
             raise UsageError("give either a log or --index INDEX")
         if index is None:
             assert log is not None
-            if by is not None or memory_limit is not None or timeout is not None:
-                raise UsageError("--by, --memory-limit and --timeout need --index")
+            if any(o is not None for o in (by, memory_limit, timeout, scheduler)):
+                raise UsageError("--by, --memory-limit, --timeout and --scheduler need --index")
             return _check(log, rules, robot or (), start, end)
         if start is not None or end is not None:
             raise UsageError("--from/--to are not supported with --index (check the logs)")
         keys = [k.strip() for k in (by or "").split(",") if k.strip()]
-        return _check_index(index, rules, robot or (), keys, sql_limits(memory_limit, timeout))
+        limits = sql_limits(memory_limit, timeout)
+        with cluster(scheduler) as executor:
+            return _check_index(index, rules, robot or (), keys, limits, executor=executor)
 
     result = guarded(run)
     emit(result, check_doc, json_out=json_out, plain=plain)
@@ -165,8 +174,9 @@ def _check_index(
     robots: list[str] | tuple[str, ...],
     by: list[str],
     limits: QueryLimits,
+    *,
+    executor: Executor | None = None,
 ) -> CheckResult:
-    from trace_audit.fleet import run_query
     from trace_audit.fleet.folder import load_manifest
     from trace_audit.rules import check_index, read_rules
     from trace_runtime.errors import LogReadError
@@ -183,13 +193,28 @@ def _check_index(
             f"{DEFAULT_GAP_TOLERANCE}: its gaps are not the rules' (rebuild it)"
         )
     return check_index(
-        lambda sql, params: run_query(index, sql, params, limits=limits).rows,
+        IndexRows(str(index.absolute()), limits),  # absolute: the workers' directory may differ
         rules,
         robots=tuple(robots),
         by=by,
         index=str(index),
         rules_file=str(rules_path),
+        executor=executor,
     )
+
+
+@dataclass(frozen=True, slots=True)
+class IndexRows:
+    """The rules' query function over one index: the fleet's bounded ``run_query``; a
+    plain object, so that it travels to a Dask worker (``--scheduler``)."""
+
+    index: str
+    limits: QueryLimits
+
+    def __call__(self, sql: str, params: Sequence[Any]) -> list[tuple[Any, ...]]:
+        from trace_audit.fleet import run_query
+
+        return run_query(self.index, sql, params, limits=self.limits).rows
 
 
 _STYLE = {"satisfied": "green", "violated": "bold red", "not_decidable": "yellow"}

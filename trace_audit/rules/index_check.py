@@ -12,12 +12,15 @@ and has no rows) is not guessed: a rule that reads it is not decidable, its reas
 
 The SQL runs through a query function the caller gives (``query(sql, params) -> rows``),
 the fleet package's bounded, confined ``run_query`` (``trace_audit.fleet``, which stands on
-a floor above this one): nothing here opens a file.
+a floor above this one): nothing here opens a file. Given an ``Executor`` (a Dask
+cluster's, ``--scheduler``), each robot is one task (its rows read and judged on a worker,
+so the query function must pickle); the answers are kept in robot order, as locally.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from concurrent.futures import Executor
 from typing import Any
 
 from trace_audit.log_time import LogClock
@@ -29,7 +32,7 @@ from trace_audit.rules.signals import command_signal, nearest_signal
 from trace_runtime.errors import UsageError
 from trace_runtime.gaps import Gap
 
-__all__ = ["BY_KEYS", "NOT_WALL_CLOCK", "IndexQuery", "check_index"]
+__all__ = ["BY_KEYS", "NOT_WALL_CLOCK", "IndexQuery", "check_index", "judge_index_robot"]
 
 IndexQuery = Callable[[str, Sequence[Any]], Sequence[Sequence[Any]]]
 """Runs one SQL statement with parameters on the index; the rows."""
@@ -63,9 +66,11 @@ def check_index(
     by: Sequence[str] = (),
     index: str = "",
     rules_file: str = "",
+    executor: Executor | None = None,
 ) -> CheckResult:
     """Every rule over each selected robot of the index ``query`` reads; with ``by`` naming
-    ``day``, also per robot and day (``CheckResult.groups``)."""
+    ``day``, also per robot and day (``CheckResult.groups``). ``executor``: one task a
+    robot on it (None: one after the other here)."""
     if not rules:
         raise RulesError(f"{rules_file or 'the rules'}: no rules to check")
     for key in by:
@@ -77,14 +82,26 @@ def check_index(
     if missing:
         holds = ", ".join(held) if held else "no robot"
         raise UsageError(f"robot {', '.join(missing)} is not in this index; it holds {holds}")
-    answers: list[RobotRules] = []
-    groups: list[GroupRules] = []
-    for robot in wanted:
-        signals = robot_signals(query, robot, rules)
-        answers.append(judge_robot(signals, rules))
-        if "day" in by:
-            groups.extend(judge_groups(signals, rules))
-    return CheckResult(index, rules_file, tuple(answers), tuple(groups))
+    by_day = "day" in by
+    if executor is None:
+        judged = [judge_index_robot(query, robot, tuple(rules), by_day) for robot in wanted]
+    else:
+        tasks = [
+            executor.submit(judge_index_robot, query, robot, tuple(rules), by_day)
+            for robot in wanted
+        ]
+        judged = [task.result() for task in tasks]
+    answers = tuple(answer for answer, _ in judged)
+    groups = tuple(group for _, robot_groups in judged for group in robot_groups)
+    return CheckResult(index, rules_file, answers, groups)
+
+
+def judge_index_robot(
+    query: IndexQuery, robot: str, rules: tuple[Rule, ...], by_day: bool
+) -> tuple[RobotRules, tuple[GroupRules, ...]]:
+    """One robot of the index judged (and, ``by_day``, per day): one task of a fan-out."""
+    signals = robot_signals(query, robot, rules)
+    return judge_robot(signals, rules), judge_groups(signals, rules) if by_day else ()
 
 
 def robot_signals(query: IndexQuery, robot: str, rules: Sequence[Rule]) -> RobotSignals:

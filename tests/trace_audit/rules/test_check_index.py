@@ -203,3 +203,21 @@ def test_by_without_an_index_and_a_missing_index(tmp_path: Path, sample_log: Pat
     assert code == 2 and "need --index" in err
     code, _, err = _run("check", "--index", str(tmp_path / "none"), "--rules", str(rules))
     assert code == 3 and "not a fleet index" in err
+
+
+def test_scheduler_fans_robots_out_over_dask_with_the_local_json(tmp_path: Path) -> None:
+    pytest.importorskip("distributed")
+    from trace_audit.fleet.local import LocalDask
+
+    root = tmp_path / "root"
+    _sim(root, "amr-1", 1)
+    _sim(root, "amr-2", 2)
+    index = _index(root, tmp_path / "idx")
+    rules = str(_rules_file(tmp_path))
+    args = ("--index", str(index), "--rules", rules, "--by", "robot,day")
+    _, local = _check(*args)
+    with LocalDask(tmp_path / "dask", pythonpath=ROOT) as cluster:
+        cluster.add_worker()
+        code, out, err = _run("check", *args, "--scheduler", cluster.address, "--json")
+    assert code == 1, err
+    assert json.loads(out) == local
