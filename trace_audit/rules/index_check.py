@@ -28,7 +28,7 @@ from trace_audit.rules.formula import RulesError
 from trace_audit.rules.judge import RobotSignals, SignalRow, judge_groups, judge_robot
 from trace_audit.rules.results import CheckResult, GroupRules, RobotRules
 from trace_audit.rules.rulebook import Rule
-from trace_audit.rules.signals import command_signal, nearest_signal
+from trace_audit.rules.signals import command_signal
 from trace_runtime.errors import UsageError
 from trace_runtime.gaps import Gap
 
@@ -50,9 +50,6 @@ _PLANAR_SPEED = (
 )
 _RUN_ORDER = "CASE WHEN starts_with(day, 'run-') THEN day ELSE '' END"
 """Clock runs in chain order; wall-clock days all in one, ordered by time."""
-
-_FAMILY_COLUMNS = (("factor", "factors"), ("nearest", "nearest"), ("flag", "flags"))
-"""The decisions' columns a signal family is read from (beside the command)."""
 
 Key = tuple[str, int, int]
 """A row's place: (segment, cycle, t_ns)."""
@@ -124,14 +121,12 @@ def robot_signals(query: IndexQuery, robot: str, rules: Sequence[Rule]) -> Robot
     }
     checks = _checks(query, robot, names)
     gaps = _gaps(query, robot)
-    families = {n.partition(".")[0] for n in names}
-    columns = ["day", "segment", "cycle", "t_ns", "command"]
-    columns += [c for f, c in _FAMILY_COLUMNS if f in families]
+    columns, exprs, params = _decision_columns(names)
     rows: list[SignalRow] = []
     for values in query(
-        f"SELECT {', '.join(columns)} FROM decisions WHERE robot = ? "
+        f"SELECT {', '.join(exprs)} FROM decisions WHERE robot = ? "
         f"ORDER BY {_RUN_ORDER}, t_ns, cycle",
-        [robot],
+        [*params, robot],
     ):
         row = dict(zip(columns, values, strict=True))
         segment, cycle, t_ns = str(row["segment"]), int(row["cycle"]), int(row["t_ns"])
@@ -157,6 +152,30 @@ def robot_signals(query: IndexQuery, robot: str, rules: Sequence[Rule]) -> Robot
     return RobotSignals(robot, period_ns, clock, rows, unavailable)
 
 
+def _decision_columns(names: Sequence[str]) -> tuple[list[str], list[str], list[Any]]:
+    """What to select from ``decisions``: the names the row's values go by, their SQL, and
+    its parameters. A ``nearest.<class>`` is the class's value in the row's ``nearest`` map
+    (+inf when the class is not in it) and a ``flag.<name>`` whether ``flags`` holds it, both
+    taken out by DuckDB; the factors come whole (a factor is found by node or name)."""
+    columns = ["day", "segment", "cycle", "t_ns", "command"]
+    exprs = list(columns)
+    params: list[Any] = []
+    for name in names:
+        family, _, rest = name.partition(".")
+        if family == "nearest":
+            exprs.append("coalesce(map_extract(nearest, ?)[1], 'inf'::DOUBLE)")
+        elif family == "flag":
+            exprs.append("coalesce(list_contains(flags, ?), false)")
+        else:
+            continue
+        columns.append(name)
+        params.append(rest)
+    if any(n.startswith("factor.") for n in names):
+        columns.append("factors")
+        exprs.append("factors")
+    return columns, exprs, params
+
+
 def _signal(
     name: str, row: dict[str, Any], channel: float | None, check: float | None
 ) -> float | None:
@@ -166,7 +185,7 @@ def _signal(
         command = row["command"]
         return command_signal(None if command is None else str(command), rest)
     if family == "nearest":
-        return nearest_signal(row["nearest"] or {}, rest)
+        return float(row[name])
     if family == "factor":
         for factor in row["factors"] or ():
             if rest in (factor.get("node"), factor.get("name")):
@@ -174,7 +193,7 @@ def _signal(
                 return None if value is None else float(value)
         return None
     if family == "flag":
-        return 1.0 if rest in (row["flags"] or ()) else 0.0
+        return 1.0 if row[name] else 0.0
     if family == "check":
         return check
     if family == "channel":
