@@ -103,15 +103,28 @@ class Formula:
         """rtamt's robustness of the body at each sample of ``columns`` (one value per
         signal per consecutive cycle), in discrete time at ``period_ns``."""
         n = len(next(iter(columns.values()))) if columns else 0
+        if n == 0:
+            return []
         spec = self._spec(period_ns)
-        data: dict[str, list[float]] = {"time": [i * period_ns / 1e9 for i in range(n)]}
+        # rtamt's offline evaluate fails on a single sample (it measures the sampling period
+        # between samples: UnboundLocalError). A one-cycle stretch is given twice; the copy's
+        # values are never read back, and the one cycle is decidable only when the horizon
+        # is 0 (no prev/next, no bound), where its value depends on that cycle alone.
+        m = max(n, 2)
+        data: dict[str, list[float]] = {"time": [i * period_ns / 1e9 for i in range(m)]}
         for i, name in enumerate(self.signals):
-            data[_ident(i)] = list(columns[name])
+            values = list(columns[name])
+            data[_ident(i)] = values + values[-1:] * (m - n)
         try:
             out = spec.evaluate(data)
         except _rtamt_errors() as err:
             raise RulesError(f"rule {self.rule!r}: {_message(err, self.signals)}") from err
-        return [float(value) + 0.0 for _, value in out]  # + 0.0: no -0 robustness
+        except Exception as err:
+            raise RulesError(
+                f"rule {self.rule!r}: rtamt could not evaluate it over {n} cycle"
+                f"{'s' if n != 1 else ''} ({type(err).__name__}: {err})"
+            ) from err
+        return [float(value) + 0.0 for _, value in out[:n]]  # + 0.0: no -0 robustness
 
     def _spec(self, period_ns: int) -> Any:
         spec = _specification(self.signals)
@@ -238,6 +251,11 @@ def _parse(spec: Any, rule: str, names: Sequence[str]) -> None:
         spec.parse()
     except _rtamt_errors() as err:
         raise RulesError(f"rule {rule!r}: {_message(err, names)}") from err
+    except Exception as err:
+        raise RulesError(
+            f"rule {rule!r}: rtamt could not parse it ({type(err).__name__}: "
+            f"{_message(err, names)})"
+        ) from err
     finally:
         logging.disable(previous)
 
