@@ -83,6 +83,12 @@ def export_command(
     if fmt not in EXPORT_FORMATS:
         fail(f"unknown export format {fmt!r} (use {', '.join(EXPORT_FORMATS)})", EXIT_USAGE)
     if fmt == "foxglove":
+        if t is not None or cycle is not None:
+            given = "--t" if t is not None else "--cycle"
+            fail(
+                f"--format foxglove exports a window (--from/--to), not one decision: drop {given}",
+                EXIT_USAGE,
+            )
         _foxglove(log, out, robot or (), start, end, json_out=json_out)
         return
     from trace_audit.export import export_decision

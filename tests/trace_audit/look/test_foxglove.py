@@ -128,3 +128,15 @@ def test_an_arm_log_exports_without_planar_fields(tmp_path: Path) -> None:
     assert names - {"deviation"}, names  # the arm's own joint channels, by their names
     assert not {"linear", "angular", "x", "y"} & names
     assert "CLEAN" in cli("verify", out).stdout
+
+
+@pytest.mark.parametrize("option", [("--t", "105"), ("--cycle", "50")])
+def test_one_decision_options_are_refused_for_a_window_export(
+    tmp_path: Path, option: tuple[str, str]
+) -> None:
+    log = write_log(tmp_path / "run.mcap")
+    out = tmp_path / "view.mcap"
+    done = cli("export", log, "--format", "foxglove", "--out", out, *option)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count("\n") == 1 and "--from/--to" in done.stderr, done.stderr
+    assert option[0] in done.stderr and not out.exists()
