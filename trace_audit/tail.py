@@ -25,11 +25,12 @@ from enum import Enum
 from pathlib import Path
 
 from trace_audit.causal import FactorValue, read_decision
-from trace_audit.cycle_fields import command_of
+from trace_audit.cycle_fields import command_of, seal_dropped
 from trace_audit.log_time import SECONDS_CLOCK, LogClock
 from trace_audit.selection import Selection
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, UsageError
+from trace_runtime.gaps import GapFinder, SealedStamp
 from trace_runtime.live_writers import is_live
 from trace_runtime.logset import find_segment_files, open_log, preferred_copies
 from trace_runtime.reader import RECOVERED_WARNING, Segment
@@ -38,6 +39,7 @@ from trace_runtime.segment_names import parse_segment_name
 __all__ = [
     "DEFAULT_POLL_S",
     "DecisionChange",
+    "LogGap",
     "SegmentState",
     "SegmentStatus",
     "TailEvent",
@@ -93,7 +95,48 @@ class DecisionChange:
         return self.clock.show(self.t_ns)
 
 
-TailEvent = DecisionChange | SegmentState
+@dataclass(frozen=True, slots=True)
+class LogGap:
+    """Time without a logged cycle beyond what the period allows, by the one gap rule
+    (``trace_runtime.gaps``, as ``timeline`` and ``info`` find gaps): yielded at the sealed
+    cycle that ends it, before that cycle's decision change if it has one, so a change right
+    after a gap never reads as a direct one."""
+
+    robot: str
+    segment: str
+    after_cycle: int
+    """The last sealed cycle before the gap."""
+    cycle: int
+    """The first sealed cycle after it."""
+    t_ns: int
+    """The time of ``cycle``."""
+    gap_ns: int
+    """Time beyond one period (what TC counts as lost)."""
+    missing_cycles: int
+    """Cycles the gap would have held at the nominal period."""
+    declared_dropped: int | None
+    """Cycles the seal after the gap declares dropped."""
+    clock: LogClock = SECONDS_CLOCK
+    kind: str = field(default="gap", init=False)
+
+    @property
+    def shown_t(self) -> str:
+        return self.clock.show(self.t_ns)
+
+    @property
+    def not_logged(self) -> str:
+        """Which cycles the log lacks: their numbers, or none when the numbers run on (a
+        stall: the robot did not cycle, nothing was lost)."""
+        first, last = self.after_cycle + 1, self.cycle - 1
+        if last < first:
+            return f"no cycle number skipped between {self.after_cycle} and {self.cycle}"
+        numbers = f"cycle {first}" if first == last else f"cycles {first}..{last}"
+        declared = self.declared_dropped
+        said = "" if not declared else f", {declared} declared dropped by the logger"
+        return f"{numbers} not logged{said}"
+
+
+TailEvent = DecisionChange | LogGap | SegmentState
 
 
 @dataclass(slots=True)
@@ -110,6 +153,8 @@ class _Robot:
     last_t_ns: int | None = None
     command: str | None = None
     seen_any: bool = False
+    gaps: GapFinder = field(default_factory=GapFinder)
+    """The one gap rule, remembering this robot's last sealed cycle (across rotations)."""
 
 
 class _QuietRecovered(logging.Filter):
@@ -135,6 +180,8 @@ def tail(
     ``robots`` selects robots (``selection.Selection``; one not in the log is a
     ``UsageError``); none follows every robot, including robots that start logging later."""
     path = Path(root)
+    if not path.exists():
+        raise LogReadError(str(path), "no such file or directory")
     if not path.is_dir():
         raise UsageError(f"{path}: tail follows a log root (a folder), not one file")
     chosen = _selected(path, robots)
@@ -239,18 +286,35 @@ def _read_segment(robot: _Robot, path: Path) -> Iterator[TailEvent]:
     if status is not robot.status:
         robot.status = status
         yield SegmentState(robot.name, path.name, status)
-    yield from _changes(robot, segment.iter_cycles(start_ns=robot.last_t_ns))
+    period_ns = segment.session.period_ns
+    yield from _changes(robot, segment.iter_cycles(start_ns=robot.last_t_ns), period_ns)
 
 
-def _changes(robot: _Robot, cycles: Iterator[Cycle]) -> Iterator[DecisionChange]:
-    """The decision changes among sealed cycles not read before (by cycle number); a cycle
-    whose seal is not written yet is read again at the next poll."""
+def _changes(
+    robot: _Robot, cycles: Iterator[Cycle], period_ns: int
+) -> Iterator[DecisionChange | LogGap]:
+    """The gaps and decision changes among sealed cycles not read before (by cycle number);
+    a cycle whose seal is not written yet is read again at the next poll."""
     for cycle in cycles:
         if not cycle.sealed:
             continue  # its seal is not written yet (read again next poll) or was lost
         if robot.last_cycle is not None and cycle.cycle <= robot.last_cycle:
             continue
         robot.last_cycle, robot.last_t_ns = cycle.cycle, cycle.t_ns
+        stamp = SealedStamp(cycle.cycle, cycle.t_ns, period_ns, seal_dropped(cycle))
+        gap = robot.gaps.step(robot.name, stamp)
+        if gap is not None:
+            yield LogGap(
+                robot.name,
+                cycle.segment,
+                gap.after_cycle,
+                gap.before_cycle,
+                gap.before_t_ns,
+                gap.gap_ns,
+                gap.missing_cycles,
+                gap.declared_dropped,
+                robot.clock or SECONDS_CLOCK,
+            )
         command = command_of(cycle)
         if robot.seen_any and command == robot.command:
             continue

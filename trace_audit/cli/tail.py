@@ -93,8 +93,14 @@ def _print(value: Any, *, json_out: bool) -> None:
 
 def event_line(event: TailEvent) -> str:
     """One event as a line for people."""
-    from trace_audit.tail import SegmentState
+    from trace_audit.cli.doc import fmt_duration
+    from trace_audit.tail import LogGap, SegmentState
 
+    if isinstance(event, LogGap):
+        return (
+            f"{event.shown_t}  {event.robot}  cycle {event.cycle}  GAP of "
+            f"{fmt_duration(event.gap_ns)} after cycle {event.after_cycle}: {event.not_logged}"
+        )
     if isinstance(event, SegmentState):
         said = {
             "live": "live (being written)",
@@ -114,10 +120,12 @@ def event_line(event: TailEvent) -> str:
 def event_json(event: TailEvent) -> dict[str, Any]:
     """One event as JSON data; a change carries its time as shown (``t``) beside ``t_ns``."""
     from trace_audit.jsonout import to_jsonable
-    from trace_audit.tail import DecisionChange
+    from trace_audit.tail import DecisionChange, LogGap
 
     data: dict[str, Any] = to_jsonable(event)
-    if isinstance(event, DecisionChange):
+    if isinstance(event, DecisionChange | LogGap):
         del data["clock"]
         data["t"] = event.shown_t
+    if isinstance(event, LogGap):
+        data["not_logged"] = event.not_logged
     return data

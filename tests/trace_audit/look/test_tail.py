@@ -199,3 +199,44 @@ def test_an_unknown_robot_or_a_file_is_a_usage_error(tmp_path: Path) -> None:
     for done in (unknown, a_file):
         assert done.returncode == 2, done.stderr
         assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr, done.stderr
+
+
+def test_a_missing_path_is_unreadable_input_like_other_commands(tmp_path: Path) -> None:
+    done = cli("tail", tmp_path / "nope")
+    assert done.returncode == 3, done.stderr
+    assert done.stderr.count("\n") == 1 and "no such file or directory" in done.stderr
+    assert "log root" not in done.stderr
+
+
+def test_a_change_right_after_a_gap_is_shown_after_a_gap_line(tmp_path: Path) -> None:
+    from tests.trace_audit.conftest import write_log
+
+    # cycles 20..39 dropped (2 s at 10 Hz); cycle 40 is the first STOP
+    root = write_log(tmp_path / "root", skip=lambda i: 20 <= i < 40)
+    done = cli("tail", root)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    at = next(i for i, line in enumerate(lines) if "cycle 40" in line and "-> STOP" in line)
+    gap = lines[at - 1]
+    assert "cycle 40  GAP of 2.0 s after cycle 19" in gap, lines
+    assert "cycles 20..39 not logged, 20 declared dropped" in gap, lines
+    assert sum("GAP" in line for line in lines) == 1, lines  # the one rule: one gap
+
+    events = [json.loads(x) for x in cli("tail", root, "--json").stdout.splitlines()]
+    gaps = [e for e in events if e["kind"] == "gap"]
+    assert len(gaps) == 1
+    assert gaps[0] | {"segment": None} == {
+        "robot": "amr-7",
+        "segment": None,
+        "after_cycle": 19,
+        "cycle": 40,
+        "t_ns": 104_000_000_000,
+        "gap_ns": 2_000_000_000,
+        "missing_cycles": 20,
+        "declared_dropped": 20,
+        "kind": "gap",
+        "t": "104.000 s",
+        "not_logged": "cycles 20..39 not logged, 20 declared dropped by the logger",
+    }
+    kinds = [e["kind"] for e in events if e.get("cycle") == 40]
+    assert kinds == ["gap", "change"]
