@@ -208,7 +208,33 @@ def _ident(i: int) -> str:
 
 def _renamed(formula: str, names: Sequence[str]) -> str:
     index = {name: i for i, name in enumerate(names)}
-    return SIGNAL_PATTERN.sub(lambda m: _ident(index[m.group(0)]), formula)
+    return _steps_grouped(SIGNAL_PATTERN.sub(lambda m: _ident(index[m.group(0)]), formula))
+
+
+_STEP_CALL = re.compile(r"(?<![\w.])(?:prev|next|sprev|snext|rise|fall)\s*\(")
+
+
+def _steps_grouped(formula: str) -> str:
+    """``formula`` with each single-step operator's application in parentheses.
+
+    rtamt's grammar takes ``prev``/``next`` (and ``rise``/``fall``) as prefix operators of
+    the lowest precedence, not as functions: ``next(x) - x <= 0`` is parsed as
+    ``next((x) - x <= 0)``, so ``next(x) - x`` is always 0. Written as a call, the operator
+    applies to its parenthesised argument only: ``(next(x)) - x <= 0``."""
+    opens: dict[int, int] = {}  # insert "(" before -> how many
+    closes: dict[int, int] = {}  # insert ")" after -> how many
+    for m in _STEP_CALL.finditer(formula):
+        depth = 0
+        for i in range(m.end() - 1, len(formula)):
+            depth += {"(": 1, ")": -1}.get(formula[i], 0)
+            if depth == 0:
+                opens[m.start()] = opens.get(m.start(), 0) + 1
+                closes[i] = closes.get(i, 0) + 1
+                break
+    out: list[str] = []
+    for i, ch in enumerate(formula):
+        out.append("(" * opens.get(i, 0) + ch + ")" * closes.get(i, 0))
+    return "".join(out)
 
 
 def rtamt_module() -> Any:

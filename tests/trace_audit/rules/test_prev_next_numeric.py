@@ -1,0 +1,57 @@
+"""Bugs an outside user found in check: one-cycle stretches, prev/next on numbers, JSON
+infinities, windows outside the log, and error messages."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from trace_audit.cli import app
+from trace_audit.rules import Outcome, check_rules, parse_rules
+from trace_audit.rules.formula import compile_formula
+
+PERIOD_NS = 100_000_000
+
+
+def _rules(name: str, stl: str) -> str:
+    return f'[[rule]]\nname = "{name}"\nstl = "{stl}"\n'
+
+
+def _run(*args: str) -> tuple[int, str, str]:
+    result = CliRunner().invoke(app, ["check", *args])
+    return result.exit_code, result.stdout, result.stderr
+
+
+def _file(tmp_path: Path, text: str) -> str:
+    path = tmp_path / "rules.toml"
+    path.write_text(text)
+    return str(path)
+
+
+def test_next_and_prev_of_a_number_read_the_next_and_previous_cycle() -> None:
+    speed = [0.0, 1.0, 3.0, 3.0, 7.0]
+    nxt = compile_formula(
+        "n", "always(abs(next(channel.speed.actual) - channel.speed.actual) <= 0.01)"
+    )
+    got = nxt.evaluate({"channel.speed.actual": speed}, PERIOD_NS)
+    # 0.01 - |s[i+1] - s[i]|, by hand; the last cycle has no next (not decidable anyway)
+    assert got[:4] == [pytest.approx(v) for v in (-0.99, -1.99, 0.01, -3.99)]
+    prv = compile_formula(
+        "p", "always(abs(prev(channel.speed.actual) - channel.speed.actual) <= 0.01)"
+    )
+    got = prv.evaluate({"channel.speed.actual": speed}, PERIOD_NS)
+    assert got[1:] == [pytest.approx(v) for v in (-0.99, -1.99, 0.01, -3.99)]
+    stop = compile_formula("s", "always(next(command.STOP) <= command.STOP)")
+    got = stop.evaluate({"command.STOP": [0.0, 1.0, 1.0, 0.0, 1.0]}, PERIOD_NS)
+    assert got[:4] == [pytest.approx(v) for v in (-1.0, 0.0, 1.0, -1.0)]
+
+
+def test_next_stop_rule_counts_each_start_of_stop(sample_log: Path) -> None:
+    from trace_audit.timeline import why
+
+    rules = parse_rules(_rules("starts", "always(next(command.STOP) <= command.STOP)"))
+    (rule,) = check_rules(sample_log, rules).robots[0].rules
+    assert rule.outcome is Outcome.VIOLATED
+    assert len(rule.violations) == len(why(sample_log, "STOP").transitions)
