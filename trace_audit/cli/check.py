@@ -9,6 +9,7 @@ bounded ``run_query``) and renders the typed result: rich on a terminal, plain t
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass
@@ -36,7 +37,7 @@ if TYPE_CHECKING:  # the library (and rtamt) is imported inside the command
     from trace_audit.fleet.limits import QueryLimits
     from trace_audit.rules import CheckResult, GroupRules, RobotRules, RuleResult
 
-__all__ = ["check_command", "check_doc"]
+__all__ = ["check_command", "check_doc", "check_json"]
 
 _CHECK_HELP = """Check safety requirements over a log: named Signal Temporal Logic rules.
 
@@ -148,7 +149,7 @@ def check_command(  # noqa: PLR0917 - typer maps each parameter to an option
             return _check_index(index, rules, robot or (), keys, limits, executor=executor)
 
     result = guarded(run)
-    emit(result, check_doc, json_out=json_out, plain=plain)
+    emit(result, check_doc, json_out=json_out, plain=plain, to_json=check_json)
     if result.violated:
         raise typer.Exit(EXIT_FINDINGS)
 
@@ -201,6 +202,24 @@ def _check_index(
         rules_file=str(rules_path),
         executor=executor,
     )
+
+
+def check_json(result: CheckResult) -> Any:
+    """The result as JSON data, every non-finite float (an infinite robustness: no person
+    ever perceived) ``null``: JSON has no Infinity (docs/rules.md, "Reading robustness")."""
+    from trace_audit.jsonout import to_jsonable
+
+    return _finite(to_jsonable(result))
+
+
+def _finite(value: Any) -> Any:
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
 
 
 @dataclass(frozen=True, slots=True)
