@@ -24,6 +24,7 @@ from trace_audit.rules.results import CheckResult, RobotRules
 from trace_audit.rules.rulebook import Rule
 from trace_audit.rules.signals import read_signals
 from trace_audit.selection import Selection, per_robot
+from trace_audit.timeline import WindowOutsideLogError
 from trace_runtime.errors import TimeOutOfRangeError
 from trace_runtime.logset import Log
 
@@ -48,7 +49,7 @@ def check_rules(
     answers = per_robot(
         log,
         lambda one: _check_robot(one, rules, selection, path),
-        skip=(TimeOutOfRangeError, NotWallClockError),
+        skip=(TimeOutOfRangeError, NotWallClockError, WindowOutsideLogError),
     )
     return CheckResult(path, rules_file, tuple(answers))
 
@@ -58,8 +59,24 @@ def _check_robot(log: Log, rules: Sequence[Rule], selection: Selection, path: st
     if period_ns <= 0:
         raise RulesError(f"{log.first_robot}: the log declares no cycle period to judge rules at")
     lo, hi = selection.window(log)
+    _overlaps(log, lo, hi)
     rows = _read_rows(log, rules, lo, hi, path)
     return judge_robot(RobotSignals(log.first_robot, period_ns, LogClock.of(log), rows), rules)
+
+
+def _overlaps(log: Log, lo: int | None, hi: int | None) -> None:
+    """``WindowOutsideLogError`` (exit 2, naming the log's range, as ``trace-audit timeline``
+    does) when the window ``lo``..``hi`` holds none of the robot's log time."""
+    clock = LogClock.of(log)
+    first, last = log.start_ns, log.end_ns
+    start = first if lo is None else lo
+    end = last if hi is None else hi
+    shown = f"[{clock.show(start)}, {clock.show(end)}]"
+    where = f"the log's range [{clock.show(first)}, {clock.show(last)}]"
+    if lo is not None and hi is not None and hi < lo:
+        raise WindowOutsideLogError(f"the window {shown} ends before it starts ({where})")
+    if start > last or end < first or end < start:
+        raise WindowOutsideLogError(f"the window {shown} does not overlap {where}")
 
 
 def _read_rows(
