@@ -17,7 +17,10 @@ with the SDK's own message types, schemas and encoding (``foxglove-sdk``):
 - the ``/trace/*`` and ``/sensors/*`` channels, copied through: each message's bytes are the
   canonical bytes its seal covers, with the segment's ``trace.session`` record (its
   ``prev_seal`` and ``first_cycle`` those of the first cycle exported), so the export is
-  itself a TRACE log that ``trace-audit verify`` checks.
+  itself a TRACE log that ``trace-audit verify`` checks: clean from the log's start or from
+  a later segment (a ``chain_start`` note), but a window that starts inside segment 0 after
+  its first cycle has the cycles before it ``missing`` (segment 0's chain starts at genesis;
+  the export does not renumber it to pass), as ``FoxgloveExport.unverifiable_before`` says.
 
 ``foxglove-sdk`` comes with the ``look`` extra; without it the export raises ``UsageError``.
 """
@@ -43,7 +46,7 @@ from trace_audit.sensor_window import DEFAULT_SENSOR_WINDOW, SensorWindow
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import StorageError, UsageError
 from trace_runtime.logset import Log
-from trace_runtime.records import PROFILE, TOPIC_PERCEPTION, TOPIC_SEAL
+from trace_runtime.records import GENESIS, PROFILE, TOPIC_PERCEPTION, TOPIC_SEAL
 from trace_runtime.schemas import SENSOR_SCHEMA_NAME, schema_bytes, schema_name
 from trace_runtime.session import SESSION_METADATA
 
@@ -86,6 +89,12 @@ class FoxgloveExport:
     sensor_messages: int
     start_ns: int
     end_ns: int
+    unverifiable_before: tuple[int, int] | None = None
+    """The cycles ``trace-audit verify`` reports ``missing`` in the export, first and last:
+    those of the robot's first segment (number 0) before a window that starts after its
+    first cycle. A segment 0's chain starts at genesis (PROFILE sections 2 and 6), and the
+    export keeps the segment's number, so what it leaves out of segment 0 reads as removed;
+    a window starting in a later segment reads as retention (a ``chain_start`` note)."""
 
 
 def export_foxglove(
@@ -158,7 +167,11 @@ class _Writer:
             raise StorageError(str(target), f"cannot write ({err.strerror or err})") from err
         self.mcap: Any = Writer(self.file)  # the mcap package ships no type hints
         self.mcap.start(profile=PROFILE, library="trace-audit foxglove export")
-        self.mcap.add_metadata(SESSION_METADATA, _session(log, first))
+        session = _session(log, first)
+        self.mcap.add_metadata(SESSION_METADATA, session)
+        self.unverifiable_before: tuple[int, int] | None = None
+        if session["segment"] == "0" and session["prev_seal"] != GENESIS and first.cycle > 0:
+            self.unverifiable_before = (0, first.cycle - 1)
         self.schemas: dict[str, int] = {}
         self.channels: dict[str, int] = {}
         self.sensors = SensorWindow(DEFAULT_SENSOR_WINDOW)
@@ -377,6 +390,7 @@ class _Writer:
             c["trace"],
             c["sensors"],
             *self.span,
+            self.unverifiable_before,
         )
 
 

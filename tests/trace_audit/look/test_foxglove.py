@@ -140,3 +140,37 @@ def test_one_decision_options_are_refused_for_a_window_export(
     assert done.returncode == 2, done.stderr
     assert done.stderr.count("\n") == 1 and "--from/--to" in done.stderr, done.stderr
     assert option[0] in done.stderr and not out.exists()
+
+
+def _verified(out: Path) -> tuple[int, list[dict[str, Any]], list[str]]:
+    done = cli("verify", out, "--json")
+    report = orjson.loads(done.stdout)
+    return done.returncode, report["findings"], [n["kind"] for n in report["notes"]]
+
+
+def test_windowed_exports_verify_as_docs_foxglove_says(tmp_path: Path) -> None:
+    """A window from a later segment verifies clean (its chain starts as after retention, a
+    note); one from the start is clean; one starting inside segment 0 after its first cycle
+    reports exactly those earlier cycles missing, as the export itself says."""
+    file = write_log(tmp_path / "run.mcap")
+    root = write_log(tmp_path / "root", max_segment_s=5.0)  # segments 0 and 1 (from 105 s)
+    assert len(list(root.rglob("*.mcap"))) == 2
+
+    later = tmp_path / "later.mcap"
+    _export(root, later, "--from", "106", "--to", "108")
+    code, findings, notes = _verified(later)
+    assert (code, findings) == (0, []) and "chain_start" in notes
+
+    for log in (file, root):
+        head = tmp_path / f"head-{log.name}.mcap"
+        _export(log, head, "--to", "103")
+        assert _verified(head)[:2] == (0, [])
+
+        inside = tmp_path / f"inside-{log.name}.mcap"
+        done = cli("export", log, "--format", "foxglove", "--out", inside, "--from", "102")
+        assert done.returncode == 0, done.stderr
+        assert "verify of the export reports cycles 0..19 missing" in done.stderr
+        code, findings, _ = _verified(inside)
+        assert code == 1 and len(findings) == 1, findings
+        assert findings[0]["kind"] == "missing"
+        assert (findings[0]["first_cycle"], findings[0]["last_cycle"]) == (0, 19)
