@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
 
-from trace_audit.rules.signals import SIGNAL_PATTERN, bad_signal, signal_names
+from trace_audit.rules.signals import FAMILIES, SIGNAL_PATTERN, bad_signal, signal_names
 from trace_runtime.errors import UsageError
 
 __all__ = ["Formula", "Horizon", "RulesError", "compile_formula", "rtamt_module"]
@@ -47,6 +47,11 @@ _PAST = frozenset(("TimedHistorically", "TimedOnce", "TimedSince", "TimedPrecede
 _STEP_FUTURE = frozenset(("Next", "StrongNext"))
 _STEP_PAST = frozenset(("Previous", "StrongPrevious", "Rise", "Fall"))
 _UNBOUNDED = frozenset(("Always", "Eventually", "Until", "Historically", "Once", "Since"))
+_KEYWORDS = {kind: kind.lower() for kind in _UNBOUNDED}
+_BOUNDED = _FUTURE | _PAST
+
+_DOTTED = re.compile(r"(?<![\w.])[A-Za-z_]\w*(?:\.\w+)+")
+_FAMILIES_HELP = "signals: " + ", ".join(f"{f}.*" for f in FAMILIES)
 
 _SIGNALS_HELP = (
     "signals are command.<ACTION>, channel.<name>.intended|actual|deviation, "
@@ -98,6 +103,10 @@ class Formula:
     body: str
     signals: tuple[str, ...]
     horizon: Horizon
+    bounds: tuple[tuple[str, Fraction], ...] = ()
+    """Each temporal bound, as shown in errors (``0.5 s``) and in seconds."""
+    origin: str = ""
+    """The rules file the rule is read from (named in errors found at evaluation)."""
 
     def evaluate(self, columns: Mapping[str, Sequence[float]], period_ns: int) -> list[float]:
         """rtamt's robustness of the body at each sample of ``columns`` (one value per
@@ -127,6 +136,15 @@ class Formula:
         return [float(value) + 0.0 for _, value in out[:n]]  # + 0.0: no -0 robustness
 
     def _spec(self, period_ns: int) -> Any:
+        period_s = Fraction(period_ns, 10**9)
+        for text, seconds in self.bounds:
+            if seconds % period_s:
+                where = f"{self.origin}: " if self.origin else ""
+                raise RulesError(
+                    f"{where}rule {self.rule!r}: the bound {text} is not a multiple of the "
+                    f"sampling period, the log's cycle period {float(period_s):g} s (rtamt "
+                    "steps in whole cycles)"
+                )
         spec = _specification(self.signals)
         spec.set_sampling_period(period_ns, "ns", 0.5)
         spec.spec = _renamed(self.body, self.signals)
@@ -134,9 +152,13 @@ class Formula:
         return spec
 
 
-def compile_formula(rule: str, stl: str) -> Formula:
+def compile_formula(rule: str, stl: str, *, origin: str = "") -> Formula:
     """``stl`` checked as a rule (``always`` of a body with bounded operators), or
-    ``RulesError`` naming ``rule`` and what is wrong."""
+    ``RulesError`` naming ``rule`` and what is wrong (``origin``: the rules file, named in
+    errors found when the rule is evaluated)."""
+    for m in _DOTTED.finditer(stl):
+        if m.group(0).partition(".")[0] not in FAMILIES:
+            raise RulesError(f"rule {rule!r}: unknown signal {m.group(0)!r} ({_FAMILIES_HELP})")
     names = signal_names(stl)
     for name in names:
         problem = bad_signal(name)
@@ -152,7 +174,19 @@ def compile_formula(rule: str, stl: str) -> Formula:
     if not names:
         raise RulesError(f"rule {rule!r}: the formula reads no signal")
     horizon = _horizon(spec.ast.specs[0], rule)
-    return Formula(rule, stl, body, names, horizon)
+    return Formula(rule, stl, body, names, horizon, _bounds(spec.ast.specs[0]), origin)
+
+
+def _bounds(node: Any) -> tuple[tuple[str, Fraction], ...]:
+    """Every temporal bound under ``node``: as shown (``0.05 s``) and in seconds."""
+    out: list[tuple[str, Fraction]] = []
+    if type(node).__name__ in _BOUNDED:
+        for value, unit in ((node.begin, node.begin_unit), (node.end, node.end_unit)):
+            seconds = Fraction(value) * _UNITS.get(str(unit or ""), Fraction(1))
+            out.append((f"{float(seconds):g} s", seconds))
+    for child in node.children:
+        out.extend(_bounds(child))
+    return tuple(out)
 
 
 def _body(rule: str, stl: str) -> str:
@@ -175,9 +209,11 @@ def _body(rule: str, stl: str) -> str:
 def _horizon(node: Any, rule: str) -> Horizon:
     kind = type(node).__name__
     if kind in _UNBOUNDED:
+        op = _KEYWORDS[kind]
+        example = f"a {op}[0:0.5] b" if kind in ("Until", "Since") else f"{op}[0:0.5](...)"
         raise RulesError(
-            f"rule {rule!r}: an unbounded {kind.lower()} inside the rule reads the whole log; "
-            "give it a bound, e.g. eventually[0:0.5](...)"
+            f"rule {rule!r}: an unbounded {op} inside the rule reads the whole log; "
+            f"give it a bound, e.g. {example}"
         )
     inner = Horizon()
     for child in node.children:

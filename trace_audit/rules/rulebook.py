@@ -77,10 +77,14 @@ def _rule(entry: Any, i: int, origin: str) -> Rule:
     if not isinstance(entry, dict):
         raise RulesError(f"{origin}: rule #{i} is not a table")
     name = entry.get("name")
-    if not isinstance(name, str) or not name.strip():
+    if name is not None and not isinstance(name, str):
+        raise RulesError(f'{origin}: rule #{i}: name must be text (name = "...")')
+    if not name or not name.strip():
         raise RulesError(f'{origin}: rule #{i} has no name (name = "...")')
     stl = entry.get("stl")
-    if not isinstance(stl, str) or not stl.strip():
+    if stl is not None and not isinstance(stl, str):
+        raise RulesError(f'{origin}: rule {name!r}: stl must be text (stl = "always(...)")')
+    if not stl or not stl.strip():
         raise RulesError(f'{origin}: rule {name!r} has no formula (stl = "...")')
     unknown = sorted(set(entry) - _FIELDS)
     if unknown:
@@ -89,7 +93,7 @@ def _rule(entry: Any, i: int, origin: str) -> Rule:
     if not isinstance(description, str):
         raise RulesError(f"{origin}: rule {name!r}: description is text")
     try:
-        formula = compile_formula(name, stl)
+        formula = compile_formula(name, stl, origin=origin)
     except RulesError as err:
         raise RulesError(f"{origin}: {err}") from err
     return Rule(name, stl, description, formula)
