@@ -17,10 +17,9 @@ with the SDK's own message types, schemas and encoding (``foxglove-sdk``):
 - the ``/trace/*`` and ``/sensors/*`` channels, copied through: each message's bytes are the
   canonical bytes its seal covers, with the segment's ``trace.session`` record (its
   ``prev_seal`` and ``first_cycle`` those of the first cycle exported), so the export is
-  itself a TRACE log that ``trace-audit verify`` checks: clean from the log's start or from
-  a later segment (a ``chain_start`` note), but a window that starts inside segment 0 after
-  its first cycle has the cycles before it ``missing`` (segment 0's chain starts at genesis;
-  the export does not renumber it to pass), as ``FoxgloveExport.unverifiable_before`` says.
+  itself a TRACE log that ``trace-audit verify`` checks: clean from the log's start, and
+  clean with a ``chain_start`` note from a later cycle (a window cut inside a segment carries
+  a ``trace.excerpt`` record naming where it was cut, PROFILE section 2.1).
 
 ``foxglove-sdk`` comes with the ``look`` extra; without it the export raises ``UsageError``.
 """
@@ -46,9 +45,10 @@ from trace_audit.sensor_window import DEFAULT_SENSOR_WINDOW, SensorWindow
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import StorageError, UsageError
 from trace_runtime.logset import Log
-from trace_runtime.records import GENESIS, PROFILE, TOPIC_PERCEPTION, TOPIC_SEAL
+from trace_runtime.reader import Segment
+from trace_runtime.records import PROFILE, TOPIC_PERCEPTION, TOPIC_SEAL
 from trace_runtime.schemas import SENSOR_SCHEMA_NAME, schema_bytes, schema_name
-from trace_runtime.session import SESSION_METADATA
+from trace_runtime.session import EXCERPT_METADATA, SESSION_METADATA
 
 __all__ = [
     "TOPIC_ACTUATORS",
@@ -89,12 +89,6 @@ class FoxgloveExport:
     sensor_messages: int
     start_ns: int
     end_ns: int
-    unverifiable_before: tuple[int, int] | None = None
-    """The cycles ``trace-audit verify`` reports ``missing`` in the export, first and last:
-    those of the robot's first segment (number 0) before a window that starts after its
-    first cycle. A segment 0's chain starts at genesis (PROFILE sections 2 and 6), and the
-    export keeps the segment's number, so what it leaves out of segment 0 reads as removed;
-    a window starting in a later segment reads as retention (a ``chain_start`` note)."""
 
 
 def export_foxglove(
@@ -167,11 +161,13 @@ class _Writer:
             raise StorageError(str(target), f"cannot write ({err.strerror or err})") from err
         self.mcap: Any = Writer(self.file)  # the mcap package ships no type hints
         self.mcap.start(profile=PROFILE, library="trace-audit foxglove export")
-        session = _session(log, first)
+        session, source = _session(log, first)
         self.mcap.add_metadata(SESSION_METADATA, session)
-        self.unverifiable_before: tuple[int, int] | None = None
-        if session["segment"] == "0" and session["prev_seal"] != GENESIS and first.cycle > 0:
-            self.unverifiable_before = (0, first.cycle - 1)
+        if source.session.first_cycle != first.cycle:
+            # cut inside a segment: the chain starts at the seal before the window, and the
+            # file says so (PROFILE section 2.1, trace.excerpt), so verify notes the start
+            excerpt = {"source": source.path.name, "first_cycle": str(first.cycle)}
+            self.mcap.add_metadata(EXCERPT_METADATA, excerpt)
         self.schemas: dict[str, int] = {}
         self.channels: dict[str, int] = {}
         self.sensors = SensorWindow(DEFAULT_SENSOR_WINDOW)
@@ -390,7 +386,6 @@ class _Writer:
             c["trace"],
             c["sensors"],
             *self.span,
-            self.unverifiable_before,
         )
 
 
@@ -401,9 +396,10 @@ def _logged_schema(topic: str) -> tuple[str, str, bytes]:
     return name, "jsonschema", schema_bytes(topic)
 
 
-def _session(log: Log, first: Cycle) -> dict[str, str]:
+def _session(log: Log, first: Cycle) -> tuple[dict[str, str], Segment]:
     """The ``trace.session`` of the export: that of the first exported cycle's segment, as a
-    hot segment starting at that cycle (its chain continues from the seal before it)."""
+    hot segment starting at that cycle (its chain continues from the seal before it), and
+    that segment."""
     segment = log.segment_named(first.segment) or log.segments[0]
     seal = orjson.loads(first.payloads[TOPIC_SEAL]) if TOPIC_SEAL in first.payloads else {}
     prev = seal.get("prev") if isinstance(seal, dict) else None
@@ -413,4 +409,4 @@ def _session(log: Log, first: Cycle) -> dict[str, str]:
         first_cycle=first.cycle,
         prev_seal=prev if isinstance(prev, str) else segment.session.prev_seal,
     )
-    return session.to_metadata()
+    return session.to_metadata(), segment

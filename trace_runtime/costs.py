@@ -1,5 +1,5 @@
 """The logger's own cost per cycle: a fixed-size histogram the writer fills, and the
-``trace.timing`` metadata record it ends each segment with (schemas/PROFILE.md §2.1).
+``trace.timing`` metadata record it ends each segment with (schemas/PROFILE.md §2.2).
 
 What is measured is the control thread's time inside the logger for one cycle: the
 ``sensor()`` calls, the four layer calls (validating and encoding plain dicts) and

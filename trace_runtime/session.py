@@ -12,6 +12,12 @@ SESSION_METADATA = "trace.session"
 TIER_METADATA = "trace.tier"
 """The metadata record a compacted segment carries: its source, whether it is lossy."""
 
+EXCERPT_METADATA = "trace.excerpt"
+"""The metadata record of a file cut from a robot's log at a cycle that began no segment (an
+export of a window): ``source``, the segment it was cut from, and ``first_cycle``. Its chain
+starts at the seal before that cycle (``trace.session`` ``prev_seal``), as a log whose
+earlier segments retention removed starts at its first segment's."""
+
 TIERS = ("hot", "warm", "cold")
 """The storage tiers, from the robot's own segments to the most compacted: the values of
 ``trace.session`` ``tier`` and the subdirectories of a log root (PROFILE section 9)."""

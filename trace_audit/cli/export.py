@@ -135,10 +135,3 @@ def _foxglove(
         f"trace-audit: wrote {result.path} (foxglove: {result.robot}, {result.cycles} cycles, "
         f"{result.scene_updates} scene updates, {result.decision_changes} decision changes)\n"
     )
-    if result.unverifiable_before is not None:
-        first, last = result.unverifiable_before
-        sys.stderr.write(
-            f"trace-audit: note: the window starts at cycle {last + 1} of the robot's first "
-            f"segment, so trace-audit verify of the export reports cycles {first}..{last} "
-            "missing (a first segment's chain starts at genesis; docs/foxglove.md)\n"
-        )

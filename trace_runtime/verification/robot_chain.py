@@ -22,6 +22,7 @@ from trace_runtime.logset import FileProblem, Log, copy_rank, cut_short_copy
 from trace_runtime.reader import Segment
 from trace_runtime.recordings import Recordings
 from trace_runtime.records import GENESIS
+from trace_runtime.session import EXCERPT_METADATA
 from trace_runtime.verification.report import (
     Finding,
     RobotSummary,
@@ -194,6 +195,19 @@ class _RobotChain:
         (None, None across a missing segment: the chain cannot be followed over the hole)."""
         session, tail, robot_id = first.session, self.tail, self.robot.robot_id
         if self.previous is None:
+            excerpt = first.metadata.get(EXCERPT_METADATA)
+            if number == 0 and excerpt is not None and session.first_cycle > 0:
+                self.sink.note(
+                    Finding(
+                        kind="chain_start",
+                        message=f"the log is an excerpt from cycle {session.first_cycle} of "
+                        f"{excerpt.get('source', '?')}; the cycles before it are not in it",
+                        robot_id=robot_id,
+                        segment=display_name(first.path),
+                        segment_no=number,
+                    )
+                )
+                return session.prev_seal, None
             if number == 0:
                 return GENESIS, -1
             self.sink.note(

@@ -150,8 +150,8 @@ def _verified(out: Path) -> tuple[int, list[dict[str, Any]], list[str]]:
 
 def test_windowed_exports_verify_as_docs_foxglove_says(tmp_path: Path) -> None:
     """A window from a later segment verifies clean (its chain starts as after retention, a
-    note); one from the start is clean; one starting inside segment 0 after its first cycle
-    reports exactly those earlier cycles missing, as the export itself says."""
+    note); one from the start is clean; one cut inside a segment is an excerpt: clean, with
+    a note naming where it was cut."""
     file = write_log(tmp_path / "run.mcap")
     root = write_log(tmp_path / "root", max_segment_s=5.0)  # segments 0 and 1 (from 105 s)
     assert len(list(root.rglob("*.mcap"))) == 2
@@ -167,10 +167,41 @@ def test_windowed_exports_verify_as_docs_foxglove_says(tmp_path: Path) -> None:
         assert _verified(head)[:2] == (0, [])
 
         inside = tmp_path / f"inside-{log.name}.mcap"
-        done = cli("export", log, "--format", "foxglove", "--out", inside, "--from", "102")
-        assert done.returncode == 0, done.stderr
-        assert "verify of the export reports cycles 0..19 missing" in done.stderr
-        code, findings, _ = _verified(inside)
-        assert code == 1 and len(findings) == 1, findings
-        assert findings[0]["kind"] == "missing"
-        assert (findings[0]["first_cycle"], findings[0]["last_cycle"]) == (0, 19)
+        _export(log, inside, "--from", "102")
+        code, findings, notes = _verified(inside)
+        assert (code, findings) == (0, []) and "chain_start" in notes
+        said = orjson.loads(cli("verify", inside, "--json").stdout)["notes"]
+        assert any("excerpt from cycle 20" in n["message"] for n in said), said
+
+
+def test_an_excerpt_with_a_cycle_changed_is_still_found(tmp_path: Path) -> None:
+    """The excerpt record moves where the chain starts, nothing else: a cycle changed in
+    the excerpt is still a finding."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    inside = tmp_path / "inside.mcap"
+    _export(write_log(tmp_path / "run.mcap"), inside, "--from", "102")
+    tampered = tmp_path / "tampered.mcap"
+    with inside.open("rb") as src, tampered.open("wb") as dst:
+        reader = make_reader(src)
+        writer = Writer(dst)
+        writer.start(profile="trace", library="tests")
+        for record in reader.iter_metadata():
+            writer.add_metadata(record.name, record.metadata)
+        ids: dict[int, int] = {}
+        for schema, channel, message in reader.iter_messages():
+            if channel.id not in ids:
+                sid = writer.register_schema(schema.name, schema.encoding, schema.data)
+                ids[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, sid
+                )
+            data = message.data
+            if channel.topic == "/trace/action" and message.sequence == 30:
+                data = data.replace(b"STOP", b"SLOW") if b"STOP" in data else data + b" "
+            writer.add_message(
+                ids[channel.id], message.log_time, data, message.publish_time, message.sequence
+            )
+        writer.finish()
+    code, findings, _ = _verified(tampered)
+    assert code == 1 and any(f.get("first_cycle") == 30 for f in findings), findings
