@@ -21,12 +21,14 @@ import typer
 from trace_audit.cli.app import EXIT_FINDINGS, app, guarded, help_text
 from trace_audit.cli.doc import Column, Doc, Line, Seg
 from trace_audit.cli.options import (
+    FromOption,
     JsonOption,
     MemoryLimitOption,
     PlainOption,
     RobotsOption,
     SchedulerOption,
     SqlTimeoutOption,
+    ToOption,
     cluster,
     sql_limits,
 )
@@ -110,21 +112,8 @@ def check_command(  # noqa: PLR0917 - typer maps each parameter to an option
     ],
     log: _LogArgument = None,
     robot: RobotsOption = None,
-    start: Annotated[
-        str | None,
-        typer.Option(
-            "--from",
-            help="Start of the window (seconds, +seconds after the log start, or on a wall "
-            "clock an ISO 8601 time). Default: the log start.",
-            show_default=False,
-        ),
-    ] = None,
-    end: Annotated[
-        str | None,
-        typer.Option(
-            "--to", help="End of the window (same forms). Default: the log end.", show_default=False
-        ),
-    ] = None,
+    start: FromOption = None,
+    end: ToOption = None,
     index: _Index = None,
     by: _By = None,
     memory_limit: MemoryLimitOption = None,

@@ -24,6 +24,7 @@ __all__ = [
     "CheckedLogArgument",
     "CsvOption",
     "EvidenceOption",
+    "FromOption",
     "IndexArgument",
     "JsonOption",
     "LogArgument",
@@ -35,6 +36,7 @@ __all__ = [
     "SchedulerOption",
     "SqlTimeoutOption",
     "TimeOption",
+    "ToOption",
     "action_option",
     "cluster",
     "cycle_option",
@@ -118,6 +120,24 @@ def action_option(help: str) -> Any:
     """``--action``: a command the robot logged, e.g. STOP."""
     return typer.Option("--action", help=help, show_default=False)
 
+
+FromOption = Annotated[
+    str | None,
+    typer.Option(
+        "--from",
+        help="Start of the window (seconds, +seconds after the log start, or on a wall "
+        "clock an ISO 8601 time). Default: the log start.",
+        show_default=False,
+    ),
+]
+"""``--from``: the start of the window a command reads (``selection``, ``log_time``)."""
+ToOption = Annotated[
+    str | None,
+    typer.Option(
+        "--to", help="End of the window (same forms). Default: the log end.", show_default=False
+    ),
+]
+"""``--to``: the end of that window."""
 
 RobotsOption = Annotated[
     list[str] | None,

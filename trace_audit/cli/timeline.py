@@ -12,7 +12,14 @@ import typer
 
 from trace_audit.cli.app import app, guarded, help_text
 from trace_audit.cli.doc import Column, Doc, Seg, fmt_duration, fmt_t, fmt_value
-from trace_audit.cli.options import JsonOption, LogArgument, PlainOption, RobotsOption
+from trace_audit.cli.options import (
+    FromOption,
+    JsonOption,
+    LogArgument,
+    PlainOption,
+    RobotsOption,
+    ToOption,
+)
 from trace_audit.cli.output import emit_per_robot
 
 if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
@@ -45,21 +52,8 @@ is shown under its name (--robot selects robots).
 @app.command("timeline", help=help_text(_TIMELINE_HELP))
 def timeline_command(  # noqa: PLR0917 - typer maps each parameter to an option
     log: LogArgument,
-    start: Annotated[
-        str | None,
-        typer.Option(
-            "--from",
-            help="Start of the window (seconds, +seconds after the log start, or on a wall "
-            "clock an ISO 8601 time). Default: the log start.",
-            show_default=False,
-        ),
-    ] = None,
-    end: Annotated[
-        str | None,
-        typer.Option(
-            "--to", help="End of the window (same forms). Default: the log end.", show_default=False
-        ),
-    ] = None,
+    start: FromOption = None,
+    end: ToOption = None,
     every: Annotated[bool, typer.Option("--every", help="A row per cycle.")] = False,
     robot: RobotsOption = None,
     json_out: JsonOption = False,
