@@ -28,6 +28,7 @@ from trace_audit.cli.options import (
 from trace_audit.cli.output import emit, setup_logging
 
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
+    from trace_audit.log_time import LogClock
     from trace_audit.verify import Finding, RobotSummary, SegmentSummary, VerifyReport
     from trace_runtime.keys import KeyPair
 
@@ -155,12 +156,13 @@ def verify_doc(r: VerifyReport) -> Doc:
             )
         )
     doc.fields(rows)
+    clocks = _robot_clocks(r.robots)
     if r.findings:
         doc.heading("Findings")
-        _finding_table(doc, r.findings)
+        _finding_table(doc, r.findings, clocks)
     if r.notes:
         doc.heading("Notes (not tampering)")
-        _finding_table(doc, r.notes)
+        _finding_table(doc, r.notes, clocks)
     if len(r.segments) > 1:
         _segment_table(doc, r.segments)
     return doc
@@ -226,7 +228,14 @@ def _robot_rows(robot: RobotSummary, prefix: str) -> list[tuple[str, str | Seg]]
     return rows
 
 
-def _finding_table(doc: Doc, findings: list[Finding]) -> None:
+def _robot_clocks(robots: list[RobotSummary]) -> dict[str, LogClock]:
+    """Each robot's clock, so a finding's time reads as the robot's other times do."""
+    from trace_audit.log_time import LogClock
+
+    return {r.robot_id: LogClock(r.clock, r.cycle_range.start_ns or 0) for r in robots}
+
+
+def _finding_table(doc: Doc, findings: list[Finding], clocks: dict[str, LogClock]) -> None:
     rows = []
     for f in findings[:_MAX_LISTED]:
         at = f.where
@@ -236,7 +245,8 @@ def _finding_table(doc: Doc, findings: list[Finding]) -> None:
             cycles = str(at.first_cycle)
         else:
             cycles = f"{at.first_cycle}..{at.last_cycle}"
-        when = fmt_t(at.start_ns) if at.start_ns is not None else ""
+        clock = clocks.get(f.robot_id or "")
+        when = fmt_t(at.start_ns, clock) if at.start_ns is not None else ""
         rows.append([f.kind, f.segment or f.robot_id, cycles, when, f.message])
     doc.table(
         [Column("kind"), Column("where"), Column("cycles"), Column("t"), Column("what", wrap=True)],
