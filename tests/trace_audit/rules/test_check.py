@@ -8,15 +8,12 @@ from pathlib import Path
 import pytest
 
 from tests.trace_audit.conftest import stretch, t_ns, write_log
+from tests.trace_audit.rules.check_helpers import rule_text
 from trace_audit.rules import Outcome, RulesError, UndecidedReason, check_rules, parse_rules
 from trace_audit.rules.formula import rtamt_module
 from trace_audit.timeline import why
 
 NEVER_STOP = '[[rule]]\nname = "never_stop"\nstl = "always(command.STOP < 0.5)"\n'
-
-
-def _rules(name: str, stl: str) -> str:
-    return f'[[rule]]\nname = "{name}"\nstl = "{stl}"\n'
 
 
 def test_never_stop_fails_exactly_where_why_says_stop_was_in_force(sample_log: Path) -> None:
@@ -37,7 +34,7 @@ def test_never_stop_fails_exactly_where_why_says_stop_was_in_force(sample_log: P
 
 def test_a_rule_that_holds_is_satisfied(sample_log: Path) -> None:
     rules = parse_rules(
-        _rules(
+        rule_text(
             "no_continue_close", "always((nearest.person < 2.0) implies (command.CONTINUE < 0.5))"
         )
     )
@@ -48,7 +45,7 @@ def test_a_rule_that_holds_is_satisfied(sample_log: Path) -> None:
 
 def test_a_window_across_a_gap_is_not_decidable_and_names_the_gap(tmp_path: Path) -> None:
     log = write_log(tmp_path / "gap.mcap", [stretch("clear", 40)], skip=lambda i: 20 <= i < 25)
-    rules = parse_rules(_rules("soon_stop", "always(eventually[0:0.3](command.CONTINUE > 0.5))"))
+    rules = parse_rules(rule_text("soon_stop", "always(eventually[0:0.3](command.CONTINUE > 0.5))"))
     (rule,) = check_rules(log, rules).robots[0].rules
     assert rule.outcome is Outcome.NOT_DECIDABLE and rule.violations == ()
     gap = next(u for u in rule.undecided if u.reason is UndecidedReason.GAP)
@@ -70,7 +67,7 @@ def test_a_gap_alone_makes_even_a_pointwise_rule_not_decidable(tmp_path: Path) -
 
 
 def test_the_window_is_judged_on_real_cycles_around_it(sample_log: Path) -> None:
-    rules = parse_rules(_rules("r", "always(eventually[0:0.5](command.CONTINUE > -1))"))
+    rules = parse_rules(rule_text("r", "always(eventually[0:0.5](command.CONTINUE > -1))"))
     (rule,) = check_rules(sample_log, rules, start=t_ns(10), end=t_ns(19)).robots[0].rules
     assert rule.outcome is Outcome.SATISFIED and rule.decidable_cycles == 10
     assert rule.undecided == ()
@@ -85,7 +82,7 @@ def test_robustness_is_rtamts_on_a_hand_made_signal(tmp_path: Path) -> None:
     ]
     log = write_log(tmp_path / "tiny.mcap", script)
     body = "(nearest.person < 3.0) implies eventually[0:0.2](command.STOP > 0.5)"
-    (rule,) = check_rules(log, parse_rules(_rules("r", f"always({body})"))).robots[0].rules
+    (rule,) = check_rules(log, parse_rules(rule_text("r", f"always({body})"))).robots[0].rules
     nearest = [math.inf] * 5 + [3.2] * 4 + [1.5] * 6 + [math.inf] * 5
     stop = [0.0] * 9 + [1.0] * 6 + [0.0] * 5
     spec = rtamt_module().StlDiscreteTimeSpecification()
@@ -123,6 +120,6 @@ def test_a_bad_rules_file_is_one_usage_error_naming_the_rule(text: str, words: s
 
 
 def test_a_bound_off_the_log_period_names_the_rule(sample_log: Path) -> None:
-    rules = parse_rules(_rules("odd", "always(eventually[0:0.25](command.STOP > 0.5))"))
+    rules = parse_rules(rule_text("odd", "always(eventually[0:0.25](command.STOP > 0.5))"))
     with pytest.raises(RulesError, match=r"rule 'odd'.*multiple of the sampling period"):
         check_rules(sample_log, rules)

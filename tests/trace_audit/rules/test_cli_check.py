@@ -8,39 +8,29 @@ import sys
 from pathlib import Path
 
 import pytest
-from typer.testing import CliRunner
 
-from trace_audit.cli import app
+from tests.trace_audit.rules.check_helpers import rules_file, run_check
 
 ROOT = Path(__file__).resolve().parents[3]
 
 
-def _run(*args: str) -> tuple[int, str, str]:
-    result = CliRunner().invoke(app, ["check", *args])
-    return result.exit_code, result.stdout, result.stderr
-
-
-def _rules(tmp_path: Path, text: str) -> str:
-    path = tmp_path / "rules.toml"
-    path.write_text(text)
-    return str(path)
-
-
 def test_a_violated_rule_exits_1_with_the_explain_command(tmp_path: Path, sample_log: Path) -> None:
-    rules = _rules(tmp_path, '[[rule]]\nname = "never_stop"\nstl = "always(command.STOP < 0.5)"\n')
-    code, out, _ = _run(str(sample_log), "--rules", rules, "--json")
+    rules = rules_file(
+        tmp_path, '[[rule]]\nname = "never_stop"\nstl = "always(command.STOP < 0.5)"\n'
+    )
+    code, out, _ = run_check(str(sample_log), "--rules", rules, "--json")
     assert code == 1
     (rule,) = json.loads(out)["robots"][0]["rules"]
     assert rule["outcome"] == "violated"
     assert rule["violations"][0]["explain"].endswith("--cycle 40 --robot amr-7")
     assert rule["violations"][0]["start"] == "104"
-    code, out, _ = _run(str(sample_log), "--rules", rules, "--plain")
+    code, out, _ = run_check(str(sample_log), "--rules", rules, "--plain")
     assert code == 1 and "[VIOLATED] never_stop" in out
 
 
 def test_a_satisfied_rule_exits_0(tmp_path: Path, sample_log: Path) -> None:
-    rules = _rules(tmp_path, '[[rule]]\nname = "ok"\nstl = "always(command.STOP < 1.5)"\n')
-    assert _run(str(sample_log), "--rules", rules, "--plain")[0] == 0
+    rules = rules_file(tmp_path, '[[rule]]\nname = "ok"\nstl = "always(command.STOP < 1.5)"\n')
+    assert run_check(str(sample_log), "--rules", rules, "--plain")[0] == 0
 
 
 @pytest.mark.parametrize(
@@ -50,16 +40,16 @@ def test_a_satisfied_rule_exits_0(tmp_path: Path, sample_log: Path) -> None:
 def test_a_bad_rules_file_is_exit_2_in_one_line(
     tmp_path: Path, sample_log: Path, text: str
 ) -> None:
-    code, out, err = _run(str(sample_log), "--rules", _rules(tmp_path, text))
+    code, out, err = run_check(str(sample_log), "--rules", rules_file(tmp_path, text))
     assert code == 2 and out == ""
     assert err.count("\n") == 1 and err.startswith("trace-audit: ")
     assert "rule 'bad'" in err or "not valid TOML" in err
 
 
 def test_an_unreadable_log_is_exit_3(tmp_path: Path) -> None:
-    rules = _rules(tmp_path, '[[rule]]\nname = "ok"\nstl = "always(command.STOP < 1.5)"\n')
+    rules = rules_file(tmp_path, '[[rule]]\nname = "ok"\nstl = "always(command.STOP < 1.5)"\n')
     (tmp_path / "junk.mcap").write_bytes(b"not mcap")
-    assert _run(str(tmp_path / "junk.mcap"), "--rules", rules)[0] == 3
+    assert run_check(str(tmp_path / "junk.mcap"), "--rules", rules)[0] == 3
 
 
 def test_the_warehouse_rules_hold_on_a_faults_off_sim_run(tmp_path: Path) -> None:
@@ -74,7 +64,9 @@ def test_the_warehouse_rules_hold_on_a_faults_off_sim_run(tmp_path: Path) -> Non
         capture_output=True,
         timeout=120,
     )
-    code, text, err = _run(str(out), "--rules", str(ROOT / "docs/rules/warehouse.toml"), "--json")
+    code, text, err = run_check(
+        str(out), "--rules", str(ROOT / "docs/rules/warehouse.toml"), "--json"
+    )
     assert code == 0, err
     outcomes = {r["rule"]: r["outcome"] for r in json.loads(text)["robots"][0]["rules"]}
     assert set(outcomes) >= {"person_stop_distance", "speed_limit_near_people", "time_to_stop"}
@@ -85,14 +77,14 @@ def test_the_arm_rules_find_what_the_arms_own_check_finds(tmp_path: Path) -> Non
     log = tmp_path / "arm.mcap"
     script = ROOT / "examples" / "pick_and_place_arm.py"
     subprocess.run([sys.executable, str(script), "--out", str(log)], check=True, timeout=60)
-    own = _rules(
+    own = rules_file(
         tmp_path, '[[rule]]\nname = "own"\nstl = "always(check.ee_speed_near_hand > 0.5)"\n'
     )
-    code, text, _ = _run(str(log), "--rules", str(ROOT / "docs/rules/arm.toml"), "--json")
+    code, text, _ = run_check(str(log), "--rules", str(ROOT / "docs/rules/arm.toml"), "--json")
     assert code == 1
     rules = {r["rule"]: r for r in json.loads(text)["robots"][0]["rules"]}
     assert rules["grip_force_limit"]["outcome"] == "satisfied"
     assert rules["halt_for_hand"]["outcome"] == "satisfied"
-    (own_rule,) = json.loads(_run(str(log), "--rules", own, "--json")[1])["robots"][0]["rules"]
+    (own_rule,) = json.loads(run_check(str(log), "--rules", own, "--json")[1])["robots"][0]["rules"]
     cycles = [(v["first_cycle"], v["last_cycle"]) for v in rules["slow_near_hand"]["violations"]]
     assert cycles == [(v["first_cycle"], v["last_cycle"]) for v in own_rule["violations"]]

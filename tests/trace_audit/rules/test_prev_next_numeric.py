@@ -1,33 +1,16 @@
-"""Bugs an outside user found in check: one-cycle stretches, prev/next on numbers, JSON
-infinities, windows outside the log, and error messages."""
+"""prev and next of a number read the previous and next cycle's value, however rtamt's
+grammar would bind them."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
-from typer.testing import CliRunner
 
-from trace_audit.cli import app
+from tests.trace_audit.conftest import PERIOD_NS
+from tests.trace_audit.rules.check_helpers import rule_text
 from trace_audit.rules import Outcome, check_rules, parse_rules
 from trace_audit.rules.formula import compile_formula
-
-PERIOD_NS = 100_000_000
-
-
-def _rules(name: str, stl: str) -> str:
-    return f'[[rule]]\nname = "{name}"\nstl = "{stl}"\n'
-
-
-def _run(*args: str) -> tuple[int, str, str]:
-    result = CliRunner().invoke(app, ["check", *args])
-    return result.exit_code, result.stdout, result.stderr
-
-
-def _file(tmp_path: Path, text: str) -> str:
-    path = tmp_path / "rules.toml"
-    path.write_text(text)
-    return str(path)
 
 
 def test_next_and_prev_of_a_number_read_the_next_and_previous_cycle() -> None:
@@ -51,7 +34,7 @@ def test_next_and_prev_of_a_number_read_the_next_and_previous_cycle() -> None:
 def test_next_stop_rule_counts_each_start_of_stop(sample_log: Path) -> None:
     from trace_audit.timeline import why
 
-    rules = parse_rules(_rules("starts", "always(next(command.STOP) <= command.STOP)"))
+    rules = parse_rules(rule_text("starts", "always(next(command.STOP) <= command.STOP)"))
     (rule,) = check_rules(sample_log, rules).robots[0].rules
     assert rule.outcome is Outcome.VIOLATED
     assert len(rule.violations) == len(why(sample_log, "STOP").transitions)

@@ -6,11 +6,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.trace_audit.rules.check_helpers import rule_text
 from trace_audit.rules import RulesError, check_rules, parse_rules
-
-
-def _rules(name: str, stl: str) -> str:
-    return f'[[rule]]\nname = "{name}"\nstl = "{stl}"\n'
 
 
 def test_a_name_that_is_not_text_says_it_must_be_text() -> None:
@@ -34,13 +31,13 @@ def test_a_name_that_is_not_text_says_it_must_be_text() -> None:
 )
 def test_an_unbounded_operator_suggests_a_bound_on_that_operator(stl: str, suggested: str) -> None:
     with pytest.raises(RulesError) as err:
-        parse_rules(_rules("r", stl), "r.toml")
+        parse_rules(rule_text("r", stl), "r.toml")
     assert f"e.g. {suggested}" in str(err.value) and "\n" not in str(err.value)
 
 
 def test_an_unknown_signal_family_is_named_with_the_families() -> None:
     with pytest.raises(RulesError) as err:
-        parse_rules(_rules("r", "always(bogus.x > 1 and command.STOP < 0.5)"), "r.toml")
+        parse_rules(rule_text("r", "always(bogus.x > 1 and command.STOP < 0.5)"), "r.toml")
     assert str(err.value) == (
         "r.toml: rule 'r': unknown signal 'bogus.x' "
         "(signals: command.*, channel.*, nearest.*, factor.*, check.*, flag.*)"
@@ -50,7 +47,7 @@ def test_an_unknown_signal_family_is_named_with_the_families() -> None:
 def test_a_bound_not_in_whole_cycles_names_the_file_the_bound_and_the_period(
     sample_log: Path,
 ) -> None:
-    rules = parse_rules(_rules("r", "always(eventually[0:0.05](command.STOP > 0.5))"), "r.toml")
+    rules = parse_rules(rule_text("r", "always(eventually[0:0.05](command.STOP > 0.5))"), "r.toml")
     with pytest.raises(RulesError) as err:
         check_rules(sample_log, rules, rules_file="r.toml")
     text = str(err.value)
