@@ -304,15 +304,7 @@ def _position(value: Any) -> tuple[float | None, float | None, float | None]:
 
 
 def _decision_schema(pa: Any) -> Any:
-    factor = pa.struct(
-        [
-            ("node", pa.string()),
-            ("name", pa.string()),
-            ("value", pa.float64()),
-            ("text", pa.string()),
-            ("unit", pa.string()),
-        ]
-    )
+    factor = factor_struct(pa)
     strings = pa.list_(pa.string())
     return pa.schema(
         [
@@ -361,35 +353,53 @@ def _entity_schema(pa: Any) -> Any:
     )
 
 
-def _channel_schema(pa: Any) -> Any:
-    return pa.schema(
+def factor_struct(pa: Any) -> Any:
+    """A factor as a column value: the same in these tables and the fleet index's."""
+    return pa.struct(
         [
-            ("robot", pa.string()),
-            ("cycle", pa.int64()),
-            ("t_ns", pa.int64()),
-            ("channel", pa.string()),
-            ("intended", pa.float64()),
-            ("actual", pa.float64()),
-            ("deviation", pa.float64()),
+            ("node", pa.string()),
+            ("name", pa.string()),
+            ("value", pa.float64()),
+            ("text", pa.string()),
             ("unit", pa.string()),
-            ("deviation_unit", pa.string()),
         ]
     )
+
+
+def channel_columns(pa: Any) -> list[tuple[str, Any]]:
+    """An actuator channel row's columns after the key saying whose it is (``robot`` here,
+    ``segment`` in the fleet index): one definition for both."""
+    return [
+        ("cycle", pa.int64()),
+        ("t_ns", pa.int64()),
+        ("channel", pa.string()),
+        ("intended", pa.float64()),
+        ("actual", pa.float64()),
+        ("deviation", pa.float64()),
+        ("unit", pa.string()),
+        ("deviation_unit", pa.string()),
+    ]
+
+
+def check_columns(pa: Any) -> list[tuple[str, Any]]:
+    """An execution check row's columns after its key, as ``channel_columns``."""
+    return [
+        ("cycle", pa.int64()),
+        ("t_ns", pa.int64()),
+        ("rule", pa.string()),
+        ("passed", pa.bool_()),
+        ("value", pa.float64()),
+        ("limit", pa.float64()),
+        ("detail", pa.string()),
+    ]
+
+
+def _channel_schema(pa: Any) -> Any:
+    return pa.schema([("robot", pa.string()), *channel_columns(pa)])
 
 
 def _check_schema(pa: Any) -> Any:
-    return pa.schema(
-        [
-            ("robot", pa.string()),
-            ("cycle", pa.int64()),
-            ("t_ns", pa.int64()),
-            ("rule", pa.string()),
-            ("passed", pa.bool_()),
-            ("value", pa.float64()),
-            ("limit", pa.float64()),
-            ("detail", pa.string()),
-        ]
-    )
+    return pa.schema([("robot", pa.string()), *check_columns(pa)])
 
 
 def _gap_schema(pa: Any) -> Any:

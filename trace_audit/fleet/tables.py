@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from trace_audit.layers import channel_columns, check_columns, factor_struct
+
 if TYPE_CHECKING:
     import pyarrow as pa
 
@@ -74,15 +76,7 @@ def _decision_columns() -> _Columns:
     """One row per decision: what it did, why, and how it scores."""
     import pyarrow as pa
 
-    factor = pa.struct(
-        [
-            ("node", pa.string()),
-            ("name", pa.string()),
-            ("value", pa.float64()),
-            ("text", pa.string()),
-            ("unit", pa.string()),
-        ]
-    )
+    factor = factor_struct(pa)
     strings = pa.list_(pa.string())
     return [
         ("segment", pa.string()),
@@ -150,33 +144,14 @@ def _channel_columns() -> _Columns:
     """One row per actuator channel of a decision's execution record (profile 1.1)."""
     import pyarrow as pa
 
-    return [
-        ("segment", pa.string()),
-        ("cycle", pa.int64()),
-        ("t_ns", pa.int64()),
-        ("channel", pa.string()),
-        ("intended", pa.float64()),
-        ("actual", pa.float64()),
-        ("deviation", pa.float64()),
-        ("unit", pa.string()),
-        ("deviation_unit", pa.string()),
-    ]
+    return [("segment", pa.string()), *channel_columns(pa)]
 
 
 def _check_columns() -> _Columns:
     """One row per compliance check of a decision's execution record."""
     import pyarrow as pa
 
-    return [
-        ("segment", pa.string()),
-        ("cycle", pa.int64()),
-        ("t_ns", pa.int64()),
-        ("rule", pa.string()),
-        ("passed", pa.bool_()),
-        ("value", pa.float64()),
-        ("limit", pa.float64()),
-        ("detail", pa.string()),
-    ]
+    return [("segment", pa.string()), *check_columns(pa)]
 
 
 def _gap_columns() -> _Columns:
