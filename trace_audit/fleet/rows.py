@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 from trace_audit.causal.distances import entity_distances
 from trace_audit.log_time import hour_of
 from trace_audit.metrics import NO_SCENARIO, ScoredDecision, scenario_of
+from trace_audit.metrics.sums import failed_check_rules
 from trace_runtime.clock import is_wall_clock
 from trace_runtime.reader import Segment
 
@@ -196,13 +197,7 @@ class SegmentRows:
         self.integrity_failed += not intact
         gap = seal.gap
         flat = self.flat
-        flat["failed_checks"].add(
-            [
-                str(c.get("rule"))
-                for c in execution.get("checks") or ()
-                if type(c) is dict and c.get("passed") is False
-            ]
-        )
+        flat["failed_checks"].add(failed_check_rules(execution))
         flat["flags"].add([str(f) for f in execution.get("flags") or ()])
         flat["nearest"].add(tuple(nearest))
         if nearest:
