@@ -32,9 +32,8 @@ from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.gaps import GapFinder, SealedStamp
 from trace_runtime.live_writers import is_live
-from trace_runtime.logset import find_segment_files, open_log, preferred_copies
+from trace_runtime.logset import open_log, preferred_copies, segment_files_by_robot
 from trace_runtime.reader import RECOVERED_WARNING, Segment
-from trace_runtime.segment_names import parse_segment_name
 
 __all__ = [
     "DEFAULT_POLL_S",
@@ -215,14 +214,9 @@ def _selected(root: Path, robots: Sequence[str]) -> tuple[str, ...]:
 
 
 def _newest_segments(root: Path, robots: tuple[str, ...]) -> dict[str, dict[int, list[Path]]]:
-    """Each robot's segment files by number, known by their names (nothing opened)."""
-    found: dict[str, dict[int, list[Path]]] = {}
-    for file in find_segment_files(root):
-        named = parse_segment_name(file.name)
-        if named is None or (robots and named[0] not in robots):
-            continue
-        found.setdefault(named[0], {}).setdefault(named[1], []).append(file)
-    return dict(sorted(found.items()))
+    """Each selected robot's segment files by number, known by their names (nothing opened)."""
+    found = segment_files_by_robot(root)
+    return {robot: files for robot, files in found.items() if not robots or robot in robots}
 
 
 def _read_robot(robot: _Robot, numbered: dict[int, list[Path]]) -> Iterator[TailEvent]:

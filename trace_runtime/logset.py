@@ -203,12 +203,18 @@ def find_segment_files(path: Path) -> list[Path]:
 def robot_segment_files(root: Path, robot_id: str) -> dict[int, list[Path]]:
     """``robot_id``'s segment files among a log root's (``find_segment_files``), by segment
     number, known by their names (``parse_segment_name``): nothing is opened."""
-    numbered: dict[int, list[Path]] = {}
+    return segment_files_by_robot(root).get(robot_id, {})
+
+
+def segment_files_by_robot(root: Path) -> dict[str, dict[int, list[Path]]]:
+    """Every robot's segment files among a log root's, by robot (in order of name), then
+    by segment number, known by their names: nothing is opened."""
+    found: dict[str, dict[int, list[Path]]] = {}
     for path in find_segment_files(root):
         parsed = parse_segment_name(path.name)
-        if parsed is not None and parsed[0] == robot_id:
-            numbered.setdefault(parsed[1], []).append(path)
-    return numbered
+        if parsed is not None:
+            found.setdefault(parsed[0], {}).setdefault(parsed[1], []).append(path)
+    return dict(sorted(found.items()))
 
 
 class StaleCatalogError(LogReadError):
