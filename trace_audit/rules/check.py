@@ -94,7 +94,7 @@ def _read_rows(
     read_hi = None if hi is None else hi + future_ns
     for cycle in log.iter_cycles(read_lo, read_hi):
         gap = step(cycle)
-        decision = read_decision(cycle)
+        decision = read_decision(cycle, with_tree=False)  # no signal reads the tree
         rows.append(
             SignalRow(
                 cycle.cycle,
