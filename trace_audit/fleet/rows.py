@@ -71,6 +71,11 @@ def _text(value: Any) -> str | None:
     return None if value is None else str(value)
 
 
+def _linear(motion: Any) -> float | None:
+    """A planar ``Motion``'s linear m/s, as logged (None: no planar motion)."""
+    return _number(motion.get("linear")) if type(motion) is dict else None
+
+
 @dataclass(slots=True)
 class _Flat:
     """A list-valued column kept flat: every row's items in one list, and where each row
@@ -219,6 +224,8 @@ class SegmentRows:
                 len(action.get("counterfactuals") or ()),
                 _number(execution.get("deviation")),
                 _text(execution.get("deviation_unit")),
+                _linear(execution.get("intended")),
+                _linear(execution.get("actual")),
                 None if scenario == NO_SCENARIO else scenario,
                 score.et,
                 score.et_partial,

@@ -27,11 +27,12 @@ __all__ = [
 ]
 
 INDEX_FORMAT = "trace-fleet-index"
-INDEX_VERSION = 2
+INDEX_VERSION = 3
 """Bumped whenever a column is added, removed or changes meaning; an index of another
 version is rebuilt from the logs, not read. 2: the ``channels`` and ``checks`` tables,
 ``decisions.deviation_unit``, and ``day`` = ``run-<segment>`` on sim and monotonic clocks
-(1 put their rows under 1970-01-01)."""
+(1 put their rows under 1970-01-01). 3: ``decisions.intended_linear`` and
+``actual_linear``, a planar robot's linear motion (the rules' ``channel.speed.*``)."""
 
 PARTITION_COLUMNS = ("robot", "day")
 TABLES = ("decisions", "entities", "channels", "checks", "gaps", "segments")
@@ -96,6 +97,8 @@ def _decision_columns() -> _Columns:
         ("counterfactuals", pa.int32()),
         ("deviation", pa.float64()),
         ("deviation_unit", pa.string()),
+        ("intended_linear", pa.float64()),
+        ("actual_linear", pa.float64()),
         ("failed_checks", strings),
         ("flags", strings),
         ("nearest", pa.map_(pa.string(), pa.float64())),

@@ -6,9 +6,9 @@ time order within each clock run (the ``day`` partition: a UTC day on a wall clo
 orders as the times do, ``run-<segment>`` otherwise): ``decisions`` for the command, the
 factors, the nearest distance per class and the flags; ``channels`` and ``checks`` for the
 signals of those families; ``gaps`` for the gaps, never interpolated, as on the logs. What
-the index does not hold (a planar robot's motion, ``channel.speed.*``: it is not a channel
-and has no rows) is not guessed: a rule that reads it is not decidable, its reason
-``not_in_index``.
+a planar robot's linear motion (``channel.speed.*`` when no channel is named ``speed``)
+comes from ``decisions.intended_linear`` and ``actual_linear`` by the logs' own rule
+(``signals.planar_speed``).
 
 The SQL runs through a query function the caller gives (``query(sql, params) -> rows``),
 the fleet package's bounded, confined ``run_query`` (``trace_audit.fleet``, which stands on
@@ -28,7 +28,7 @@ from trace_audit.rules.formula import RulesError
 from trace_audit.rules.judge import RobotSignals, SignalRow, judge_groups, judge_robot
 from trace_audit.rules.results import CheckResult, GroupRules, RobotRules
 from trace_audit.rules.rulebook import Rule
-from trace_audit.rules.signals import command_signal
+from trace_audit.rules.signals import command_signal, planar_speed
 from trace_runtime.errors import UsageError
 from trace_runtime.gaps import Gap
 
@@ -44,10 +44,6 @@ NOT_WALL_CLOCK = "not a wall clock (the index does not name it)"
 """The clock name of a robot whose index rows are under ``run-`` partitions: its times are
 shown as seconds, as on a sim or monotonic log."""
 
-_PLANAR_SPEED = (
-    "signal not in the index (a planar robot's motion is not an actuator channel; "
-    "the index holds no speed: check the logs)"
-)
 _RUN_ORDER = "CASE WHEN starts_with(day, 'run-') THEN day ELSE '' END"
 """Clock runs in chain order; wall-clock days all in one, ordered by time."""
 
@@ -116,12 +112,10 @@ def robot_signals(query: IndexQuery, robot: str, rules: Sequence[Rule]) -> Robot
     wall = any(not str(s[4]).startswith("run-") for s in segments)
     clock = LogClock("system" if wall else NOT_WALL_CLOCK, start_ns)
     channels, logged = _channels(query, robot, names)
-    unavailable = {
-        n: _PLANAR_SPEED for n in names if n.startswith("channel.speed.") and "speed" not in logged
-    }
+    planar = "speed" not in logged and any(n.startswith("channel.speed.") for n in names)
     checks = _checks(query, robot, names)
     gaps = _gaps(query, robot)
-    columns, exprs, params = _decision_columns(names)
+    columns, exprs, params = _decision_columns(names, planar)
     rows: list[SignalRow] = []
     for values in query(
         f"SELECT {', '.join(exprs)} FROM decisions WHERE robot = ? "
@@ -134,7 +128,14 @@ def robot_signals(query: IndexQuery, robot: str, rules: Sequence[Rule]) -> Robot
         command = row["command"]
         signals: dict[str, float] = {}
         for name in names:
-            value = _signal(name, row, channels.get((*key, name)), checks.get((*key, name)))
+            channel = channels.get((*key, name))
+            if planar and name.startswith("channel.speed."):
+                channel = planar_speed(
+                    name.removeprefix("channel.speed."),
+                    row["intended_linear"],
+                    row["actual_linear"],
+                )
+            value = _signal(name, row, channel, checks.get((*key, name)))
             if value is not None:
                 signals[name] = value
         rows.append(
@@ -149,14 +150,15 @@ def robot_signals(query: IndexQuery, robot: str, rules: Sequence[Rule]) -> Robot
                 str(row["day"]),
             )
         )
-    return RobotSignals(robot, period_ns, clock, rows, unavailable)
+    return RobotSignals(robot, period_ns, clock, rows)
 
 
-def _decision_columns(names: Sequence[str]) -> tuple[list[str], list[str], list[Any]]:
+def _decision_columns(names: Sequence[str], planar: bool) -> tuple[list[str], list[str], list[Any]]:
     """What to select from ``decisions``: the names the row's values go by, their SQL, and
     its parameters. A ``nearest.<class>`` is the class's value in the row's ``nearest`` map
     (+inf when the class is not in it) and a ``flag.<name>`` whether ``flags`` holds it, both
-    taken out by DuckDB; the factors come whole (a factor is found by node or name)."""
+    taken out by DuckDB; the factors come whole (a factor is found by node or name);
+    ``planar``: the linear motion too."""
     columns = ["day", "segment", "cycle", "t_ns", "command"]
     exprs = list(columns)
     params: list[Any] = []
@@ -173,6 +175,9 @@ def _decision_columns(names: Sequence[str]) -> tuple[list[str], list[str], list[
     if any(n.startswith("factor.") for n in names):
         columns.append("factors")
         exprs.append("factors")
+    if planar:
+        columns += ["intended_linear", "actual_linear"]
+        exprs += ["intended_linear", "actual_linear"]
     return columns, exprs, params
 
 

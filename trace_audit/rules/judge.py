@@ -24,8 +24,8 @@ clock, and the signals it cannot give at all. docs/rules.md, "Gaps and not decid
 from __future__ import annotations
 
 import shlex
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 from trace_audit.log_time import LogClock
 from trace_audit.rules.formula import Formula
@@ -70,8 +70,6 @@ class RobotSignals:
     period_ns: int
     clock: LogClock
     rows: list[SignalRow]
-    unavailable: Mapping[str, str] = field(default_factory=dict)
-    """Signals the source cannot give on any row -> why (e.g. not in the index)."""
 
 
 @dataclass(slots=True)
@@ -123,9 +121,7 @@ def _result(
     if violations:
         outcome = Outcome.VIOLATED
     elif not decidable or any(
-        u.reason
-        in (UndecidedReason.GAP, UndecidedReason.MISSING_SIGNAL, UndecidedReason.NOT_IN_INDEX)
-        for u in undecided
+        u.reason in (UndecidedReason.GAP, UndecidedReason.MISSING_SIGNAL) for u in undecided
     ):
         outcome = Outcome.NOT_DECIDABLE
     else:
@@ -144,10 +140,6 @@ def _result(
 def _verdicts(formula: Formula, signals: RobotSignals) -> list[_Verdict]:
     """Each row's verdict: rtamt over each stretch, decidable rows only."""
     rows, period_ns = signals.rows, signals.period_ns
-    absent = [s for s in formula.signals if s in signals.unavailable]
-    if absent:  # the source cannot give it anywhere: nothing is judged
-        detail = f"{absent[0]}: {signals.unavailable[absent[0]]}"
-        return [_Verdict(None, UndecidedReason.NOT_IN_INDEX, detail) for _ in rows]
     past, future = formula.horizon.steps(period_ns)
     out: list[_Verdict] = []
     for start, stop in _stretches(formula, rows):

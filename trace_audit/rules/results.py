@@ -46,8 +46,6 @@ class UndecidedReason(StrEnum):
     """A cycle does not log a signal the rule reads."""
     LOG_START = "log_start"
     LOG_END = "log_end"
-    NOT_IN_INDEX = "not_in_index"
-    """The rule reads a signal the fleet index does not hold (``check --index``)."""
 
 
 @dataclass(frozen=True, slots=True)

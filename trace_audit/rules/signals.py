@@ -121,12 +121,18 @@ def _channel(decision: Decision, name: str, part: str) -> float | None:
             }.get(part)
     if name != "speed" or not execution.planar:
         return None
-    intended, actual = execution.intended[0], execution.actual[0]
+    return planar_speed(part, execution.intended[0], execution.actual[0])
+
+
+def planar_speed(part: str, intended: float | None, actual: float | None) -> float | None:
+    """``channel.speed.<part>`` of a planar record whose linear motion was ``intended`` and
+    ``actual`` (m/s, signed as logged): the speeds as magnitudes, the deviation
+    ``|actual - intended|``. The one rule for the logs and the fleet index."""
     if part == "intended":
         return abs(intended) if intended is not None else None
     if part == "actual":
         return abs(actual) if actual is not None else None
-    if intended is None or actual is None:
+    if part != "deviation" or intended is None or actual is None:
         return None
     return abs(actual - intended)
 
