@@ -36,11 +36,11 @@ class Rule:
     formula: Formula
 
 
-def read_rules(path: Path) -> tuple[Rule, ...]:
+def read_rules(path: str | Path) -> tuple[Rule, ...]:
     """The rules of the TOML file at ``path``; ``RulesError`` for a file that cannot be read
     or a rule that cannot be used."""
     try:
-        with path.open("rb") as f:
+        with Path(path).open("rb") as f:
             data = f.read(_MAX_FILE_BYTES + 1)
     except OSError as err:
         raise RulesError(f"{path}: cannot read the rules file ({err.strerror or err})") from err
