@@ -3,10 +3,10 @@
 How a rule ``always(body)`` is judged on one robot (docs/rules.md, "Gaps and not decidable"):
 the robot's cycles in the window are read in time order (``Selection``, ``each_robot``),
 plus as much log before and after as the rules' horizons reach, so that the window's edges
-are judged on real cycles. Each cycle's signals come from its ``Decision``
-(``read_decision``) and its perception (``signals.read_signals``), its gap from the one gap
-rule (``log_gaps.gap_stepper``). The rows are then judged by ``rules.judge``, the one
-evaluator, which the fleet index's rows go through too (``rules.index_check``).
+are judged on real cycles. Each cycle's command and signals come straight from its layers
+(``signals.read_signals``), its gap from the one gap rule (``log_gaps.gap_stepper``). The
+rows are then judged by ``rules.judge``, the one evaluator, which the fleet index's rows go
+through too (``rules.index_check``).
 """
 
 from __future__ import annotations
@@ -14,7 +14,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-from trace_audit.causal import read_decision
 from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log
 from trace_audit.log_time import LogClock, NotWallClockError, TimeArg
@@ -94,13 +93,13 @@ def _read_rows(
     read_hi = None if hi is None else hi + future_ns
     for cycle in log.iter_cycles(read_lo, read_hi):
         gap = step(cycle)
-        decision = read_decision(cycle, with_tree=False)  # no signal reads the tree
+        command, signals = read_signals(cycle, names)
         rows.append(
             SignalRow(
                 cycle.cycle,
                 cycle.t_ns,
-                decision.command,
-                read_signals(cycle, decision, names),
+                command,
+                signals,
                 gap,
                 (lo is None or cycle.t_ns >= lo) and (hi is None or cycle.t_ns <= hi),
                 path,

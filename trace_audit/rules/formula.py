@@ -23,7 +23,7 @@ import logging
 import math
 import re
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
@@ -111,10 +111,21 @@ class Formula:
     def evaluate(self, columns: Mapping[str, Sequence[float]], period_ns: int) -> list[float]:
         """rtamt's robustness of the body at each sample of ``columns`` (one value per
         signal per consecutive cycle), in discrete time at ``period_ns``."""
+        return self.monitor(period_ns)(columns)
+
+    def monitor(self, period_ns: int) -> Callable[[Mapping[str, Sequence[float]]], list[float]]:
+        """``evaluate`` at ``period_ns`` for many stretches: rtamt parses the formula once
+        (most of the cost of a short stretch); its offline evaluation keeps no state
+        between calls, so the one specification serves every stretch."""
+        spec = self._spec(period_ns)
+        return lambda columns: self._robustness(spec, columns, period_ns)
+
+    def _robustness(
+        self, spec: Any, columns: Mapping[str, Sequence[float]], period_ns: int
+    ) -> list[float]:
         n = len(next(iter(columns.values()))) if columns else 0
         if n == 0:
             return []
-        spec = self._spec(period_ns)
         # rtamt's offline evaluate fails on a single sample (it measures the sampling period
         # between samples: UnboundLocalError). A one-cycle stretch is given twice; the copy's
         # values are never read back, and the one cycle is decidable only when the horizon

@@ -142,6 +142,7 @@ def _verdicts(formula: Formula, signals: RobotSignals) -> list[_Verdict]:
     rows, period_ns = signals.rows, signals.period_ns
     past, future = formula.horizon.steps(period_ns)
     out: list[_Verdict] = []
+    monitor = None
     for start, stop in _stretches(formula, rows):
         if start == stop:  # a row without a signal the rule reads
             missing = next(s for s in formula.signals if s not in rows[start].signals)
@@ -149,7 +150,9 @@ def _verdicts(formula: Formula, signals: RobotSignals) -> list[_Verdict]:
             continue
         stretch = rows[start:stop]
         columns = {s: [r.signals[s] for r in stretch] for s in formula.signals}
-        robustness = formula.evaluate(columns, period_ns)
+        if monitor is None:
+            monitor = formula.monitor(period_ns)
+        robustness = monitor(columns)
         before = _boundary(rows, start, before=True)
         after = _boundary(rows, stop - 1, before=False)
         for i, value in enumerate(robustness):

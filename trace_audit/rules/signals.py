@@ -26,11 +26,11 @@ import re
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from trace_audit.causal import Decision, layer_with_defaults
 from trace_audit.causal.distances import entity_distances
 from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
 from trace_runtime.cycles import Cycle
-from trace_runtime.records import TOPIC_BELIEF, TOPIC_PERCEPTION
+from trace_runtime.flags import split_flags
+from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF, TOPIC_EXECUTION, TOPIC_PERCEPTION
 
 __all__ = [
     "FAMILIES",
@@ -39,6 +39,7 @@ __all__ = [
     "command_signal",
     "nearest_by_class",
     "nearest_signal",
+    "planar_speed",
     "read_signals",
     "signal_names",
 ]
@@ -69,59 +70,76 @@ def bad_signal(name: str) -> str | None:
     return None
 
 
-def read_signals(cycle: Cycle, decision: Decision, names: Iterable[str]) -> dict[str, float]:
-    """The value of each named signal in ``cycle`` (its ``decision`` already read); a signal
-    the cycle does not log is left out."""
+def read_signals(cycle: Cycle, names: Iterable[str]) -> tuple[str | None, dict[str, float]]:
+    """The command in force in ``cycle`` (None: no action logged) and the value of each
+    named signal; a signal the cycle does not log is left out.
+
+    Read straight from the layers' JSON, each parsed once, as leniently as the decision
+    view reads them (``trace_audit.causal.lenient``: a value of the wrong type is absent);
+    no schema default changes a signal, so none is filled in. ``tests/trace_audit/rules``
+    pins every family to the values of the ``Decision`` view."""
+    action = as_mapping(cycle.layer(TOPIC_ACTION))
+    command = as_str(action.get("command")) if action is not None else None
+    wanted = tuple(name.partition(".") for name in names)
+    families = {family for family, _, _ in wanted}
+    execution = (
+        as_mapping(cycle.layer(TOPIC_EXECUTION))
+        if families & {"channel", "check", "flag"}
+        else None
+    )
+    nearest = nearest_by_class(cycle) if "nearest" in families else None
     out: dict[str, float] = {}
-    nearest: dict[str, float] | None = None
-    for name in names:
-        family, _, rest = name.partition(".")
-        if family == "nearest":
-            if nearest is None:
-                nearest = nearest_by_class(cycle)
+    for (family, _, rest), name in zip(wanted, names, strict=True):
+        if family == "command":
+            value = command_signal(command, rest)
+        elif family == "nearest":
             value = None if nearest is None else nearest_signal(nearest, rest)
-        else:
-            value = _decision_signal(decision, family, rest)
+        elif family == "factor":
+            value = _factor_signal(action, rest)
+        elif execution is None:
+            value = None
+        elif family == "check":
+            passed = [
+                bool(c.get("passed"))
+                for c in mappings(execution.get("checks"))
+                if (as_str(c.get("rule")) or "?") == rest
+            ]
+            value = (1.0 if all(passed) else 0.0) if passed else None
+        elif family == "flag":
+            problems, _ = split_flags(execution.get("flags") or ())
+            value = 1.0 if rest in problems else 0.0
+        else:  # channel
+            channel, _, part = rest.rpartition(".")
+            value = _channel(execution, channel, part)
         if value is not None:
             out[name] = value
-    return out
+    return command, out
 
 
-def _decision_signal(decision: Decision, family: str, rest: str) -> float | None:
-    execution = decision.execution
-    if family == "command":
-        return command_signal(decision.command, rest)
-    if family == "factor":
-        for factor in decision.factors:
-            if rest in (factor.node, factor.name):
-                return _number(factor.value)
-        return None
-    if execution is None:
-        return None
-    if family == "check":
-        passed = [c.passed for c in execution.checks if c.rule == rest]
-        return (1.0 if all(passed) else 0.0) if passed else None
-    if family == "flag":
-        return 1.0 if rest in execution.problems else 0.0
-    if family == "channel":
-        channel, _, part = rest.rpartition(".")
-        return _channel(decision, channel, part)
+def _factor_signal(action: Mapping[str, Any] | None, wanted: str) -> float | None:
+    rationale = as_mapping(action.get("rationale")) if action is not None else None
+    for factor in mappings(rationale.get("factors") if rationale is not None else None):
+        if wanted in (as_str(factor.get("node")) or "", as_str(factor.get("name")) or ""):
+            value = factor.get("value")
+            return _number(value) if isinstance(value, int | float | bool) else None
     return None
 
 
-def _channel(decision: Decision, name: str, part: str) -> float | None:
-    execution = decision.execution
-    assert execution is not None
-    for channel in execution.channels:
-        if channel.name == name:
-            return {
-                "intended": channel.intended,
-                "actual": channel.actual,
-                "deviation": channel.deviation,
-            }.get(part)
-    if name != "speed" or not execution.planar:
+def _channel(execution: Mapping[str, Any], name: str, part: str) -> float | None:
+    for channel in mappings(execution.get("channels")):
+        if (as_str(channel.get("name")) or "?") == name:
+            return as_float(channel.get(part)) if part in _CHANNEL_PARTS else None
+    if name != "speed":
         return None
-    return planar_speed(part, execution.intended[0], execution.actual[0])
+    intended = as_mapping(execution.get("intended"))
+    actual = as_mapping(execution.get("actual"))
+    if intended is None and actual is None:
+        return None  # not a planar record
+    return planar_speed(
+        part,
+        as_float(intended.get("linear")) if intended is not None else None,
+        as_float(actual.get("linear")) if actual is not None else None,
+    )
 
 
 def planar_speed(part: str, intended: float | None, actual: float | None) -> float | None:
@@ -152,10 +170,10 @@ def nearest_signal(nearest: Mapping[str, float], cls: str) -> float:
 
 def nearest_by_class(cycle: Cycle) -> dict[str, float] | None:
     """Entity class -> nearest distance in metres this cycle (None: no perception logged)."""
-    perception = as_mapping(layer_with_defaults(cycle, TOPIC_PERCEPTION))
+    perception = as_mapping(cycle.layer(TOPIC_PERCEPTION))
     if perception is None:
         return None
-    distances = entity_distances(layer_with_defaults(cycle, TOPIC_BELIEF))
+    distances = entity_distances(cycle.layer(TOPIC_BELIEF))
     nearest: dict[str, float] = {}
     for entity in mappings(perception.get("entities")):
         cls = as_str(entity.get("class"))
