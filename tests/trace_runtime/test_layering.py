@@ -165,7 +165,7 @@ FLOORS: dict[str, list[set[str]]] = {
         # encodings: a record's bytes, an MCAP file's bytes, the warm and cold tier formats
         {
             "codec", "cycles", "seal_check", "mcap_records", "mcap_chunks", "mcap_file",
-            "tier_formats",
+            "tier_formats", "partial",
         },
         # reading: one segment, a robot's recordings, a log of many files
         {"reader", "recordings", "logset"},

@@ -42,6 +42,12 @@ from trace_runtime.clock import clock_restarted, is_wall_clock
 from trace_runtime.costs import TIMING_METADATA, CostHistogram
 from trace_runtime.cycles import Cycle
 from trace_runtime.gaps import Gap, continuity, find_gap
+from trace_runtime.partial import (
+    METRICS_ACTION,
+    METRICS_BELIEF,
+    METRICS_PERCEPTION,
+    read_layer,
+)
 from trace_runtime.reader import Segment, open_segment
 from trace_runtime.records import (
     TOPIC_ACTION,
@@ -156,10 +162,17 @@ class _Scanner:
         """Score one decision into its group's sums; list it when it fails."""
         window = self.window
         window.push(cycle.sensors)
-        # Each layer is parsed once: ET, DR and the seal check's evidence step share it.
-        action = cycle.layer(TOPIC_ACTION)
-        belief = cycle.layer(TOPIC_BELIEF)
-        perception = cycle.layer(TOPIC_PERCEPTION)
+        # Each layer is read once: ET, DR and the seal check's evidence step share it. Without
+        # a sink only the fields they read are decoded (trace_runtime.partial); a sink (the
+        # fleet index) is handed whole layers.
+        if self.sink is None:
+            action = read_layer(cycle, METRICS_ACTION)
+            belief = read_layer(cycle, METRICS_BELIEF)
+            perception = read_layer(cycle, METRICS_PERCEPTION)
+        else:
+            action = cycle.layer(TOPIC_ACTION)
+            belief = cycle.layer(TOPIC_BELIEF)
+            perception = cycle.layer(TOPIC_PERCEPTION)
         score = score_layers(action, belief, perception, window=window)
         if perception is not None and _may_cite_recording(cycle.payloads.get(TOPIC_PERCEPTION)):
             self._count_external(perception)
@@ -193,13 +206,19 @@ class _Scanner:
             return
         partial.failures_total += 1
         if len(partial.failures) < self.config.max_listed:
-            problems = (
-                ()
-                if full
-                else et_problems(
-                    trace_layers(cycle.cycle, cycle.t_ns, action, belief, perception, window=window)
+            problems: tuple[str, ...] | list[str] = ()
+            if not full:
+                # a listed chain names factors and nodes: the whole layers
+                problems = et_problems(
+                    trace_layers(
+                        cycle.cycle,
+                        cycle.t_ns,
+                        cycle.layer(TOPIC_ACTION),
+                        cycle.layer(TOPIC_BELIEF),
+                        cycle.layer(TOPIC_PERCEPTION),
+                        window=window,
+                    )
                 )
-            )
             partial.failures.append(
                 _failure(
                     cycle,
@@ -277,6 +296,8 @@ class _Scanner:
             cycle, expected, perception_json=parsed, sensor_digest=self.window.digest_of
         )
         integrity = [] if status.ok else integrity_problems(status)
+        if self.sink is None and status.state in _UNVOUCHED:
+            _parse_in_full(cycle)
         if status.state == "unsealed":
             return SealOutcome(integrity, False, 0.0, 0, None, 0, False)
         acc.sealed += 1
@@ -385,6 +406,21 @@ def _failure(
         score.et_partial,
         (*et, *(f"DR: {p}" for p in dr), *(f"integrity: {p}" for p in integrity)),
     )
+
+
+_UNVOUCHED = ("modified", "unsealed")
+"""Seal states in which the seal does not vouch for a cycle's layer bytes."""
+
+
+def _parse_in_full(cycle: Cycle) -> None:
+    """Parse the layers metrics read in full, in the order metrics read them, for the error
+    a message orjson refuses raises (``PayloadError``). The partial decode checks the syntax
+    of every byte but not the range of a number it skips (orjson refuses ``1e400``): where
+    the seal does not vouch for the bytes (damage, a crash's unsealed tail) this parse makes
+    such a message fail as it always did. Its values are not used: where both decodes
+    succeed, the partial one is this one's restricted to the keys metrics read."""
+    for topic in (TOPIC_ACTION, TOPIC_BELIEF, TOPIC_PERCEPTION):
+        cycle.layer(topic)
 
 
 def _may_cite_recording(perception: bytes | None) -> bool:
