@@ -6,10 +6,11 @@ with one too (``previous`` None). ``tail`` reads each robot's newest segment (th
 written, or the last one written), yields its decision changes, and with ``follow`` polls for
 what is new, moving on to the next segment when the logger rotates.
 
-What it remembers is bounded however long it runs: per robot, the segment it reads, the last
-cycle number and time read from it, its size when read, and the last command. A segment is
-re-read only when it grew, and then only from the last time read (the reader decodes the
-chunks from there). Whether a segment is being written is the writer lock's answer
+What it remembers is bounded however long it runs: per robot, the segment it reads and where
+in it the last complete record read ends (``trace_runtime.growing_file.GrowingSegment``), the
+last cycle number and time read, and the last command. Each poll reads only the bytes the
+logger appended since the last one, a chunk at a time; a chunk still being written is read
+at the next poll. Whether a segment is being written is the writer lock's answer
 (``trace_runtime.live_writers``), looked up, never taken: a segment without a footer whose
 writer is gone is shown as recovered, one whose writer holds its lock as live.
 """
@@ -31,6 +32,7 @@ from trace_audit.selection import Selection
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.gaps import GapFinder, SealedStamp
+from trace_runtime.growing_file import GrowingSegment, NotHotSegmentError
 from trace_runtime.live_writers import is_live
 from trace_runtime.logset import open_log, preferred_copies, segment_files_by_robot
 from trace_runtime.reader import RECOVERED_WARNING, Segment
@@ -146,7 +148,8 @@ class _Robot:
     clock: LogClock | None = None
     number: int = -1
     path: Path | None = None
-    size: int = -1
+    reader: GrowingSegment | None = None
+    """The segment followed (None once read whole: a warm or cold one, never appended to)."""
     status: SegmentStatus | None = None
     last_cycle: int | None = None
     last_t_ns: int | None = None
@@ -157,8 +160,9 @@ class _Robot:
 
 
 class _QuietRecovered(logging.Filter):
-    """Tail re-opens a growing segment; the state is its own event (``SegmentState``), so
-    the reader's once-a-file "recovered" warning is not repeated on every re-read."""
+    """The state of a segment is tail's own event (``SegmentState``): the reader's "recovered"
+    warning, logged when a copy of a segment is opened to choose between copies, is not
+    repeated beside it."""
 
     def filter(self, record: logging.LogRecord) -> bool:
         return record.msg != RECOVERED_WARNING
@@ -195,9 +199,8 @@ def tail(
             for name, numbered in _newest_segments(path, chosen).items():
                 robot = state.setdefault(name, _Robot(name))
                 yield from _read_robot(robot, numbered)
-            # A growing segment without a footer is re-read by scan (about 35 ms a minute of
-            # 10 Hz log): never poll faster than a pass takes, so a long segment costs at
-            # most half a core and a change still shows within two passes.
+            # A pass reads only what was appended; still, never poll faster than a pass
+            # takes (a burst of appended chunks, a slow disk): at most half a core.
             if not follow or stop.wait(max(poll_s, time.monotonic() - began)):
                 return
     finally:
@@ -231,7 +234,8 @@ def _read_robot(robot: _Robot, numbered: dict[int, list[Path]]) -> Iterator[Tail
         chosen = _copy_of(numbered[number])
         if chosen is None:
             continue
-        robot.number, robot.path, robot.size, robot.status = number, chosen, -1, None
+        robot.number, robot.path, robot.status = number, chosen, None
+        robot.reader = GrowingSegment(chosen)
         robot.last_cycle = robot.last_t_ns = None
         yield from _read_segment(robot, chosen)
 
@@ -251,49 +255,84 @@ def _copy_of(copies: list[Path]) -> Path | None:
 
 
 def _read_segment(robot: _Robot, path: Path) -> Iterator[TailEvent]:
-    """The decision changes written to ``path`` since it was last read, and its state when
-    that changed. A segment that has not grown is not re-opened: only its writer's lock is
-    looked at (a kill -9 turns it from live to recovered without a byte written)."""
+    """The decision changes appended to ``path`` since the last poll, and its state when
+    that changed: live while its writer holds the lock, finished once its footer is read,
+    recovered when the writer is gone without one (a kill -9 turns it from live to
+    recovered without a byte written)."""
+    reader = robot.reader
+    if reader is None:
+        return  # read whole already (a warm or cold segment): nothing is appended to it
+    if robot.status is None:
+        status = _status(robot, reader, path)
+        if status is None:
+            return  # removed, or moved away (compaction): the next poll finds what replaced it
+        robot.status = status
+        yield SegmentState(robot.name, path.name, status)
     try:
-        size = path.stat().st_size
-    except OSError:
-        return  # moved away (compaction) or removed: the next poll finds what replaced it
-    if size == robot.size:
-        if robot.status is SegmentStatus.LIVE and not is_live(path, robot.name):
-            robot.status = SegmentStatus.RECOVERED
-            yield SegmentState(robot.name, path.name, robot.status)
+        yield from _changes(robot, reader.poll(), reader)
+    except NotHotSegmentError:
+        robot.reader = None
+        yield from _read_whole(robot, path)
         return
+    except LogReadError:
+        return  # moved away, or unreadable past here: the next segment is read when it comes
+    status = _status(robot, reader, path)
+    if status is not None and status is not robot.status:
+        robot.status = status
+        yield SegmentState(robot.name, path.name, status)
+
+
+def _status(robot: _Robot, reader: GrowingSegment, path: Path) -> SegmentStatus | None:
+    """What the segment is now (None: it is gone). A writer that is gone is told from one
+    that just closed the file by its footer: recovered only without one."""
+    if reader.finished:
+        return SegmentStatus.FINISHED
+    if robot.status is SegmentStatus.RECOVERED:
+        return robot.status  # its writer is gone: no one appends to it again
+    if not path.exists():
+        return None
+    if is_live(path, robot.name):
+        return SegmentStatus.LIVE
+    if reader.has_footer():
+        # closed, and its lock let go, since the last read: finished as read at first
+        # sight, or at the next poll (which reads the rest of it first)
+        return SegmentStatus.FINISHED if robot.status is None else robot.status
+    return SegmentStatus.RECOVERED
+
+
+def _read_whole(robot: _Robot, path: Path) -> Iterator[TailEvent]:
+    """A warm or cold segment (rewritten whole by compaction): its changes, read once."""
     try:
         segment = Segment(path)
     except LogReadError:
-        return  # a header still being written; the next poll reads it
-    robot.size = size
-    status = (
-        SegmentStatus.FINISHED
-        if segment.finished
-        else SegmentStatus.LIVE
-        if segment.live
-        else SegmentStatus.RECOVERED
-    )
+        return
     if robot.clock is None:
         robot.clock = LogClock(segment.session.clock, segment.start_ns)
-    if status is not robot.status:
-        robot.status = status
-        yield SegmentState(robot.name, path.name, status)
+    if robot.status is not SegmentStatus.FINISHED:
+        robot.status = SegmentStatus.FINISHED
+        yield SegmentState(robot.name, path.name, robot.status)
     period_ns = segment.session.period_ns
-    yield from _changes(robot, segment.iter_cycles(start_ns=robot.last_t_ns), period_ns)
+    yield from _changes(robot, segment.iter_cycles(start_ns=robot.last_t_ns), None, period_ns)
 
 
 def _changes(
-    robot: _Robot, cycles: Iterator[Cycle], period_ns: int
+    robot: _Robot,
+    cycles: Iterator[Cycle],
+    reader: GrowingSegment | None,
+    period_ns: int = 0,
 ) -> Iterator[DecisionChange | LogGap]:
-    """The gaps and decision changes among sealed cycles not read before (by cycle number);
-    a cycle whose seal is not written yet is read again at the next poll."""
+    """The gaps and decision changes among sealed cycles not read before (by cycle number).
+    A followed segment's session and start are known once its first records are read:
+    before its first cycle comes."""
     for cycle in cycles:
         if not cycle.sealed:
-            continue  # its seal is not written yet (read again next poll) or was lost
+            continue  # its seal was lost (a cycle the logger never sealed)
         if robot.last_cycle is not None and cycle.cycle <= robot.last_cycle:
             continue
+        if reader is not None and reader.session is not None:
+            period_ns = reader.session.period_ns
+            if robot.clock is None:
+                robot.clock = LogClock(reader.session.clock, reader.start_ns or cycle.t_ns)
         robot.last_cycle, robot.last_t_ns = cycle.cycle, cycle.t_ns
         stamp = SealedStamp(cycle.cycle, cycle.t_ns, period_ns, seal_dropped(cycle))
         gap = robot.gaps.step(robot.name, stamp)
