@@ -6,7 +6,9 @@ uses (``trace_audit.selection``): ``robots`` (none: all of the log's) and a wind
 an ISO 8601 time on a wall clock). Rows run robot by robot (robots in order of name), each
 robot's in time order, and every row names its robot.
 
-- ``iter_decisions`` yields each cycle's ``Decision`` (``read_decision``, what the CLI renders).
+- ``iter_decisions`` yields each cycle's ``Decision`` (``read_decision``, what the CLI renders);
+  ``iter_decision_fields`` only what each decision chose and why, decoded from its action
+  message alone (``trace_runtime.partial.DecisionFields``), for walking long logs.
 - ``decision_table``, ``channel_table`` and ``check_table`` are columns of those decisions;
   ``entity_table`` the perceived entities; ``gap_table`` the gaps between sealed cycles by the
   one gap rule (``trace_runtime.gaps``). Column names are the fleet index's where it has the
@@ -36,16 +38,19 @@ from trace_runtime.cycles import Cycle
 from trace_runtime.errors import UsageError
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, check_tolerance
 from trace_runtime.logset import Log
+from trace_runtime.partial import DecisionFields, decision_fields
 from trace_runtime.records import TOPIC_PERCEPTION
 from trace_runtime.seal_check import verify_cycle
 
 __all__ = [
     "RobotDecision",
+    "RobotDecisionFields",
     "channel_table",
     "check_table",
     "decision_table",
     "entity_table",
     "gap_table",
+    "iter_decision_fields",
     "iter_decisions",
 ]
 
@@ -60,6 +65,14 @@ class RobotDecision(NamedTuple):
     decision: Decision
 
 
+class RobotDecisionFields(NamedTuple):
+    """One decision's own fields, its segment and the robot that made it."""
+
+    robot: str
+    segment: str
+    fields: DecisionFields
+
+
 def iter_decisions(
     source: LogSource, *, robots: Robots = (), start: TimeArg = None, end: TimeArg = None
 ) -> Iterator[RobotDecision]:
@@ -67,6 +80,20 @@ def iter_decisions(
     selection is checked here, before the first decision is read)."""
     cycles = _iter_selected(source, robots, start, end)
     return (RobotDecision(robot, read_decision(cycle)) for robot, cycle in cycles)
+
+
+def iter_decision_fields(
+    source: LogSource, *, robots: Robots = (), start: TimeArg = None, end: TimeArg = None
+) -> Iterator[RobotDecisionFields]:
+    """What each decision of the selected robots chose and why (``DecisionFields``: the
+    command, score, rationale, factors, and how many alternatives and counterfactuals),
+    decoded from its action message alone: no other layer, no tree, no ``Decision``. The
+    fast way to walk a long log's decisions (``iter_decisions`` builds every record of
+    each). Cycles without an action message are left out."""
+    for robot, cycle in _iter_selected(source, robots, start, end):
+        fields = decision_fields(cycle)
+        if fields is not None:
+            yield RobotDecisionFields(robot, cycle.segment, fields)
 
 
 def decision_table(

@@ -45,6 +45,7 @@ __all__ = [
     "DecisionFields",
     "FactorFields",
     "Shape",
+    "decision_fields",
     "read_layer",
 ]
 
@@ -177,7 +178,7 @@ class FactorFields(msgspec.Struct, frozen=True, gc=False):
     """A factor of a decision: its node, name, the value the policy saw and its unit."""
 
     node: str
-    value: str | bool | Int | float
+    value: str | bool | int | float
     name: str = ""
     unit: str | None = None
 
@@ -196,10 +197,12 @@ class DecisionFields(msgspec.Struct, frozen=True, gc=False):
     """What a decision chose and why, from its action message alone: the stamp, the command,
     its score, the rationale and its factors, and how many alternatives and counterfactuals
     were logged. Decoded without building the alternatives, counterfactuals or the tree.
-    A valid action gives every field as the ``ActionMessage`` model has it."""
+    A valid action gives every field as the ``ActionMessage`` model has it; what is not
+    read is not validated either (an alternative's score past a double's range, say, which
+    the model refuses)."""
 
-    cycle: Int
-    t_ns: Int
+    cycle: int
+    t_ns: int
     command: str
     rationale: _RationaleFields
     score: float | None = None
@@ -217,3 +220,28 @@ class DecisionFields(msgspec.Struct, frozen=True, gc=False):
 
 
 DECISION_FIELDS: Shape[DecisionFields] = Shape("decision fields", TOPIC_ACTION, DecisionFields)
+
+
+def decision_fields(cycle: Cycle) -> DecisionFields | None:
+    """A cycle's ``DecisionFields`` from its action message (None without one).
+
+    An action the fast path declines is validated by its model (``Cycle.action``, which
+    raises ``PayloadError`` for one that is not a valid action) and its fields taken from
+    it; a warm summary's pruned action gives what it kept, or None when that is not a
+    whole set of decision fields."""
+    data = cycle.payloads.get(TOPIC_ACTION)
+    if data is not None:
+        found = DECISION_FIELDS.decode(data)
+        if found is not None:
+            return found
+        model = cycle.action
+        assert model is not None
+        return msgspec.convert(model.model_dump(mode="json"), DecisionFields)
+    if cycle.summary is not None:
+        kept = cycle.summary.get(TOPIC_ACTION)
+        if isinstance(kept, dict):
+            try:
+                return msgspec.convert(kept, DecisionFields)
+            except msgspec.ValidationError:
+                return None
+    return None

@@ -32,6 +32,7 @@ from trace_runtime.partial import (
     MetricsBelief,
     MetricsPerception,
     Shape,
+    decision_fields,
     read_layer,
 )
 from trace_runtime.records import (
@@ -272,3 +273,18 @@ def test_decision_fields_are_the_action_models_fields(
         typed({"node": f.node, "value": f.value, "name": f.name, "unit": f.unit})
         for f in model.rationale.factors
     ]
+
+
+def test_decision_fields_of_an_action_the_shape_declines_come_from_the_model() -> None:
+    _p, _b, action, _e = synthetic_cycle(2)
+    data = encode_layer(2, 200, action, Action)
+    assert b'"truncated":false' in data
+    lax = data.replace(b'"truncated":false', b'"truncated":1')  # the model's lax bool
+    assert DECISION_FIELDS.decode(lax) is None
+    fields = decision_fields(Cycle(2, 200, {TOPIC_ACTION: lax}, segment="s.mcap"))
+    assert fields is not None and fields.truncated is True
+    assert fields.command == action.command and fields.cycle == 2
+    broken = Cycle(3, 300, {TOPIC_ACTION: b'{"cycle":3,"t_ns":300}'}, segment="s.mcap")
+    with pytest.raises(PayloadError, match="not a valid ActionMessage"):
+        decision_fields(broken)
+    assert decision_fields(Cycle(4, 400, {})) is None
