@@ -11,7 +11,7 @@ with the SDK's own message types, schemas and encoding (``foxglove-sdk``):
   log's x, y, z in the pose's own frame; nothing planar is assumed.
 - ``/foxglove/robot_pose`` (``foxglove.PoseInFrame``) where the robot logs its pose.
 - ``/foxglove/decisions`` (``foxglove.Log``): each decision change, its command, leading
-  factor and rationale.
+  factor and rationale (``name`` the robot, ``file`` the segment, ``line`` the cycle).
 - ``/foxglove/factors`` and ``/foxglove/actuators``: plain JSON numbers for the Plot panel
   (each factor by name; each actuator channel's intended, actual and deviation).
 - the ``/trace/*`` and ``/sensors/*`` channels, copied through: each message's bytes are the
@@ -162,6 +162,7 @@ class _Writer:
         self.mcap: Any = Writer(self.file)  # the mcap package ships no type hints
         self.mcap.start(profile=PROFILE, library="trace-audit foxglove export")
         session, source = _session(log, first)
+        self.robot = source.session.robot_id
         self.mcap.add_metadata(SESSION_METADATA, session)
         if source.session.first_cycle != first.cycle:
             # cut inside a segment: the chain starts at the seal before the window, and the
@@ -360,7 +361,7 @@ class _Writer:
                 timestamp=_stamp(self.fox, cycle.t_ns),
                 level=m.LogLevel.Info,
                 message=text,
-                name=cycle.segment.split("_")[0] if cycle.segment else "",
+                name=self.robot,  # the robot's id (it may hold "_", as a segment name does)
                 file=cycle.segment,
                 line=cycle.cycle,
             ),
