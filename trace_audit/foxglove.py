@@ -57,6 +57,8 @@ __all__ = [
     "TOPIC_ROBOT_POSE",
     "TOPIC_SCENE",
     "FoxgloveExport",
+    "FoxgloveMessage",
+    "FoxgloveView",
     "export_foxglove",
 ]
 
@@ -111,11 +113,11 @@ def export_foxglove(
     target = Path(out)
     if target.exists():
         raise StorageError(str(target), "exists; the export never overwrites a file")
-    fox = _sdk()
+    _sdk()
     cycles = list(log.iter_cycles(*window))
     if not cycles:
         raise UsageError("no cycle of the log falls in the window")
-    writer = _Writer(fox, target, log, cycles[0])
+    writer = _Writer(target, log, cycles[0])
     try:
         for cycle in cycles:
             writer.cycle(cycle)
@@ -143,83 +145,52 @@ def _stamp(fox: Any, t_ns: int) -> Any:
     return fox.messages.Timestamp(t_ns // 1_000_000_000, t_ns % 1_000_000_000)
 
 
-class _Writer:
-    """One export file: the SDK's messages and schemas, and the TRACE channels as logged.
+@dataclass(frozen=True, slots=True)
+class FoxgloveMessage:
+    """One message of the Foxglove view, ready for any sink: an MCAP file or a live server."""
 
-    The file is written with the reference ``mcap`` writer, not the SDK's ``open_mcap``: a
-    TRACE message's MCAP ``sequence`` is its cycle (PROFILE section 4), and the SDK's writer
-    numbers every channel's messages itself, which would break the copied log."""
+    topic: str
+    schema: tuple[str, str, bytes]
+    """(name, encoding, data) of its schema: the SDK's protobuf descriptors, or a JSON Schema."""
+    encoding: str
+    """The message encoding: ``protobuf`` (the SDK's types) or ``json`` (the plot numbers)."""
+    data: bytes
+    t_ns: int
 
-    def __init__(self, fox: Any, target: Path, log: Log, first: Cycle) -> None:
-        from mcap.writer import Writer
 
-        self.fox = fox
-        self.m = fox.messages
-        try:
-            self.file = target.open("xb")
-        except OSError as err:
-            raise StorageError(str(target), f"cannot write ({err.strerror or err})") from err
-        self.mcap: Any = Writer(self.file)  # the mcap package ships no type hints
-        self.mcap.start(profile=PROFILE, library="trace-audit foxglove export")
-        session, source = _session(log, first)
-        self.robot = source.session.robot_id
-        self.mcap.add_metadata(SESSION_METADATA, session)
-        if source.session.first_cycle != first.cycle:
-            # cut inside a segment: the chain starts at the seal before the window, and the
-            # file says so (PROFILE section 2.1, trace.excerpt), so verify notes the start
-            excerpt = {"source": source.path.name, "first_cycle": str(first.cycle)}
-            self.mcap.add_metadata(EXCERPT_METADATA, excerpt)
-        self.schemas: dict[str, int] = {}
-        self.channels: dict[str, int] = {}
+class FoxgloveView:
+    """What one robot's cycles, in order, show in Foxglove: each cycle's scene update and
+    pose, its decision change (if the command changed), its factors and actuator channels,
+    as ``FoxgloveMessage`` values. It remembers the last command and a bounded window of
+    sensor readings (what an entity's evidence refs are resolved against), so it can run
+    over a whole export or a live tail alike."""
+
+    def __init__(self, robot: str) -> None:
+        self.fox = _sdk()
+        self.m = self.fox.messages
+        self.robot = robot
         self.sensors = SensorWindow(DEFAULT_SENSOR_WINDOW)
         self.command: str | None = None
-        self.counts = {"cycles": 0, "scene": 0, "entities": 0, "changes": 0, "trace": 0}
-        self.counts["sensors"] = 0
-        self.span = (first.t_ns, first.t_ns)
-        self.last_xyz = (0.0, 0.0, 0.0)
+        self.cycles = self.scene_updates = self.entities = self.changes = 0
+        self._last_xyz = (0.0, 0.0, 0.0)
+        self._schemas: dict[type, tuple[str, str, bytes]] = {}
 
-    def _channel(self, topic: str, schema: tuple[str, str, bytes], encoding: str) -> int:
-        """The channel id of ``topic``, registered with ``schema`` (name, encoding, data)."""
-        channel = self.channels.get(topic)
-        if channel is None:
-            name, schema_encoding, data = schema
-            schema_id = self.schemas.get(name)
-            if schema_id is None:
-                schema_id = self.mcap.register_schema(name, schema_encoding, data)
-                self.schemas[name] = schema_id
-            channel = self.mcap.register_channel(topic, encoding, schema_id)
-            self.channels[topic] = channel
-        return channel
-
-    def _sdk_message(self, topic: str, message: Any, t_ns: int) -> None:
-        """A message of the SDK's own types, in its own schema and encoding (protobuf)."""
-        sdk = type(message).get_schema()
-        channel = self._channel(topic, (sdk.name, sdk.encoding, bytes(sdk.data)), sdk.encoding)
-        self.mcap.add_message(channel, t_ns, bytes(message.encode()), t_ns)
-
-    def _json(self, topic: str, value: dict[str, Any], t_ns: int) -> None:
-        schema = (topic.rsplit("/", 1)[-1], "jsonschema", orjson.dumps(_NUMBERS_SCHEMA))
-        channel = self._channel(topic, schema, "json")
-        self.mcap.add_message(channel, t_ns, orjson.dumps(value), t_ns)
-
-    def cycle(self, cycle: Cycle) -> None:
-        """Everything one cycle contributes: its TRACE messages, scene, decision, numbers."""
-        self.counts["cycles"] += 1
-        self.span = (self.span[0], cycle.t_ns)
-        self._copy(cycle)
+    def messages(self, cycle: Cycle) -> list[FoxgloveMessage]:
+        """Everything one cycle contributes to the view, in order."""
+        self.cycles += 1
         self.sensors.push(cycle.sensors)
-        self._scene(cycle)
+        out = self._scene(cycle)
         decision = read_decision(cycle, with_tree=False)
         command = command_of(cycle)
-        if self.counts["cycles"] == 1 or command != self.command:
-            self._decision(cycle, decision, command)
+        if self.cycles == 1 or command != self.command:
+            out.append(self._decision(cycle, decision, command))
         self.command = command
         numbers = {
             _PLOT_KEY.sub("_", f.label): as_float(f.value)
             for f in decision.factors
             if as_float(f.value) is not None
         }
-        self._json(TOPIC_FACTORS, numbers, cycle.t_ns)
+        out.append(_json(TOPIC_FACTORS, numbers, cycle.t_ns))
         execution = decision.execution
         if execution is not None:
             channels: dict[str, Any] = {"deviation": execution.deviation}
@@ -229,24 +200,38 @@ class _Writer:
                     "actual": channel.actual,
                     "deviation": channel.deviation,
                 }
-            self._json(TOPIC_ACTUATORS, channels, cycle.t_ns)
+            out.append(_json(TOPIC_ACTUATORS, channels, cycle.t_ns))
+        return out
 
-    def _copy(self, cycle: Cycle) -> None:
-        """The cycle's sensor readings and layer messages, their bytes as logged."""
-        for msg in cycle.sensors:
-            channel = self._channel(msg.topic, _logged_schema(msg.topic), "json")
-            self.mcap.add_message(channel, msg.log_time_ns, msg.data, msg.log_time_ns, msg.sequence)
-            self.counts["sensors"] += 1
-        seal = cycle.payloads.get(TOPIC_SEAL)
-        layers = [(t, d) for t, d in cycle.payloads.items() if t != TOPIC_SEAL]
-        # the seal closes its cycle, after every layer it covers
-        for topic, data in [*layers, *([(TOPIC_SEAL, seal)] if seal is not None else [])]:
-            channel = self._channel(topic, _logged_schema(topic), "json")
-            self.mcap.add_message(channel, cycle.t_ns, data, cycle.t_ns, cycle.cycle)
-            self.counts["trace"] += 1
-
-    def _scene(self, cycle: Cycle) -> None:
+    def channels(self) -> list[tuple[str, tuple[str, str, bytes], str]]:
+        """Every channel the view may write: (topic, schema, message encoding), so a live
+        sink can advertise them all before the first message."""
         m = self.m
+        typed = [
+            (TOPIC_SCENE, m.SceneUpdate),
+            (TOPIC_ROBOT_POSE, m.PoseInFrame),
+            (TOPIC_DECISIONS, m.Log),
+        ]
+        found = [(topic, self._schema(kind), "protobuf") for topic, kind in typed]
+        for topic in (TOPIC_FACTORS, TOPIC_ACTUATORS):
+            found.append((topic, _json_schema(topic), "json"))
+        return found
+
+    def _schema(self, kind: type) -> tuple[str, str, bytes]:
+        schema = self._schemas.get(kind)
+        if schema is None:
+            sdk = kind.get_schema()  # type: ignore[attr-defined]
+            schema = self._schemas[kind] = (sdk.name, sdk.encoding, bytes(sdk.data))
+        return schema
+
+    def _sdk_message(self, topic: str, message: Any, t_ns: int) -> FoxgloveMessage:
+        """A message of the SDK's own types, in its own schema and encoding (protobuf)."""
+        schema = self._schema(type(message))
+        return FoxgloveMessage(topic, schema, schema[1], bytes(message.encode()), t_ns)
+
+    def _scene(self, cycle: Cycle) -> list[FoxgloveMessage]:
+        m = self.m
+        out: list[FoxgloveMessage] = []
         stamp = _stamp(self.fox, cycle.t_ns)
         perception = as_mapping(layer_with_defaults(cycle, TOPIC_PERCEPTION)) or {}
         entities = []
@@ -254,21 +239,23 @@ class _Writer:
         if robot_pose is not None and (pose := self._pose(robot_pose)) is not None:
             frame = as_str(robot_pose.get("frame")) or ""
             entities.append(self._cube(stamp, frame, "robot", pose, colour=_ROBOT, label="robot"))
-            self._sdk_message(
-                TOPIC_ROBOT_POSE,
-                m.PoseInFrame(timestamp=stamp, frame_id=frame, pose=pose),
-                cycle.t_ns,
+            out.append(
+                self._sdk_message(
+                    TOPIC_ROBOT_POSE,
+                    m.PoseInFrame(timestamp=stamp, frame_id=frame, pose=pose),
+                    cycle.t_ns,
+                )
             )
         for entity in mappings(perception.get("entities")):
             shown = self._entity(stamp, entity)
             if shown is not None:
                 entities.append(shown)
-        self.counts["entities"] += len(entities)
+        self.entities += len(entities)
         everything = m.SceneEntityDeletion(timestamp=stamp, type=m.SceneEntityDeletionType.All)
-        self._sdk_message(
-            TOPIC_SCENE, m.SceneUpdate(deletions=[everything], entities=entities), cycle.t_ns
-        )
-        self.counts["scene"] += 1
+        update = m.SceneUpdate(deletions=[everything], entities=entities)
+        out.insert(0, self._sdk_message(TOPIC_SCENE, update, cycle.t_ns))
+        self.scene_updates += 1
+        return out
 
     def _entity(self, stamp: Any, entity: Mapping[str, Any]) -> Any:
         """A perceived entity as a cube and its label; None when it has no position."""
@@ -302,7 +289,7 @@ class _Writer:
         if any(v is None or not math.isfinite(v) for v in xyz):
             return None
         x, y, z = (float(v) for v in xyz if v is not None)
-        self.last_xyz = (x, y, z)
+        self._last_xyz = (x, y, z)
         q = pose.get("orientation")
         quat = [as_float(v) for v in q] if isinstance(q, list) and len(q) == 4 else []
         if len(quat) != 4 or any(v is None for v in quat):
@@ -325,7 +312,7 @@ class _Writer:
         m = self.m
         r, g, b, a = colour
         size = m.Vector3(x=_ENTITY_SIZE_M, y=_ENTITY_SIZE_M, z=_ENTITY_SIZE_M)
-        x, y, z = self.last_xyz  # of ``pose``: the SDK's messages do not read back
+        x, y, z = self._last_xyz  # of ``pose``: the SDK's messages do not read back
         above = m.Pose(
             position=m.Vector3(x=x, y=y, z=z + _ENTITY_SIZE_M),
             orientation=m.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
@@ -347,15 +334,16 @@ class _Writer:
             ],
         )
 
-    def _decision(self, cycle: Cycle, decision: Any, command: str | None) -> None:
+    def _decision(self, cycle: Cycle, decision: Any, command: str | None) -> FoxgloveMessage:
         m = self.m
-        was = "" if self.counts["cycles"] == 1 else f"{self.command} -> "
+        was = "" if self.cycles == 1 else f"{self.command} -> "
         text = f"cycle {cycle.cycle}: {was}{command}"
         if decision.leading is not None:
             text += f"; leading {decision.leading.label} = {decision.leading.shown}"
         if decision.rationale:
             text += f"; because {decision.rationale}"
-        self._sdk_message(
+        self.changes += 1
+        return self._sdk_message(
             TOPIC_DECISIONS,
             m.Log(
                 timestamp=_stamp(self.fox, cycle.t_ns),
@@ -367,7 +355,79 @@ class _Writer:
             ),
             cycle.t_ns,
         )
-        self.counts["changes"] += 1
+
+
+def _json_schema(topic: str) -> tuple[str, str, bytes]:
+    return topic.rsplit("/", 1)[-1], "jsonschema", orjson.dumps(_NUMBERS_SCHEMA)
+
+
+def _json(topic: str, value: dict[str, Any], t_ns: int) -> FoxgloveMessage:
+    return FoxgloveMessage(topic, _json_schema(topic), "json", orjson.dumps(value), t_ns)
+
+
+class _Writer:
+    """One export file: the view's messages, and the TRACE channels as logged.
+
+    The file is written with the reference ``mcap`` writer, not the SDK's ``open_mcap``: a
+    TRACE message's MCAP ``sequence`` is its cycle (PROFILE section 4), and the SDK's writer
+    numbers every channel's messages itself, which would break the copied log."""
+
+    def __init__(self, target: Path, log: Log, first: Cycle) -> None:
+        from mcap.writer import Writer
+
+        session, source = _session(log, first)
+        self.view = FoxgloveView(source.session.robot_id)
+        try:
+            self.file = target.open("xb")
+        except OSError as err:
+            raise StorageError(str(target), f"cannot write ({err.strerror or err})") from err
+        self.mcap: Any = Writer(self.file)  # the mcap package ships no type hints
+        self.mcap.start(profile=PROFILE, library="trace-audit foxglove export")
+        self.mcap.add_metadata(SESSION_METADATA, session)
+        if source.session.first_cycle != first.cycle:
+            # cut inside a segment: the chain starts at the seal before the window, and the
+            # file says so (PROFILE section 2.1, trace.excerpt), so verify notes the start
+            excerpt = {"source": source.path.name, "first_cycle": str(first.cycle)}
+            self.mcap.add_metadata(EXCERPT_METADATA, excerpt)
+        self.schemas: dict[str, int] = {}
+        self.channels: dict[str, int] = {}
+        self.trace_messages = self.sensor_messages = 0
+        self.span = (first.t_ns, first.t_ns)
+
+    def _channel(self, topic: str, schema: tuple[str, str, bytes], encoding: str) -> int:
+        """The channel id of ``topic``, registered with ``schema`` (name, encoding, data)."""
+        channel = self.channels.get(topic)
+        if channel is None:
+            name, schema_encoding, data = schema
+            schema_id = self.schemas.get(name)
+            if schema_id is None:
+                schema_id = self.mcap.register_schema(name, schema_encoding, data)
+                self.schemas[name] = schema_id
+            channel = self.mcap.register_channel(topic, encoding, schema_id)
+            self.channels[topic] = channel
+        return channel
+
+    def cycle(self, cycle: Cycle) -> None:
+        """Everything one cycle contributes: its TRACE messages, then its view."""
+        self.span = (self.span[0], cycle.t_ns)
+        self._copy(cycle)
+        for message in self.view.messages(cycle):
+            channel = self._channel(message.topic, message.schema, message.encoding)
+            self.mcap.add_message(channel, message.t_ns, message.data, message.t_ns)
+
+    def _copy(self, cycle: Cycle) -> None:
+        """The cycle's sensor readings and layer messages, their bytes as logged."""
+        for msg in cycle.sensors:
+            channel = self._channel(msg.topic, _logged_schema(msg.topic), "json")
+            self.mcap.add_message(channel, msg.log_time_ns, msg.data, msg.log_time_ns, msg.sequence)
+            self.sensor_messages += 1
+        seal = cycle.payloads.get(TOPIC_SEAL)
+        layers = [(t, d) for t, d in cycle.payloads.items() if t != TOPIC_SEAL]
+        # the seal closes its cycle, after every layer it covers
+        for topic, data in [*layers, *([(TOPIC_SEAL, seal)] if seal is not None else [])]:
+            channel = self._channel(topic, _logged_schema(topic), "json")
+            self.mcap.add_message(channel, cycle.t_ns, data, cycle.t_ns, cycle.cycle)
+            self.trace_messages += 1
 
     def close(self) -> None:
         try:
@@ -376,16 +436,16 @@ class _Writer:
             self.file.close()
 
     def result(self, path: str, robot: str) -> FoxgloveExport:
-        c = self.counts
+        view = self.view
         return FoxgloveExport(
             path,
             robot,
-            c["cycles"],
-            c["scene"],
-            c["entities"],
-            c["changes"],
-            c["trace"],
-            c["sensors"],
+            view.cycles,
+            view.scene_updates,
+            view.entities,
+            view.changes,
+            self.trace_messages,
+            self.sensor_messages,
             *self.span,
         )
 
