@@ -219,10 +219,10 @@ class IndexRows:
     index: str
     limits: QueryLimits
 
-    def __call__(self, sql: str, params: Sequence[Any]) -> list[tuple[Any, ...]]:
-        from trace_audit.fleet import run_query
+    def __call__(self, sql: str, params: Sequence[Any]) -> dict[str, Any]:
+        from trace_audit.fleet import query_columns
 
-        return run_query(self.index, sql, params, limits=self.limits).rows
+        return query_columns(self.index, sql, params, limits=self.limits)
 
 
 _STYLE = {"satisfied": "green", "violated": "bold red", "not_decidable": "yellow"}

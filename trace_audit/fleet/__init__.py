@@ -12,6 +12,7 @@ from trace_runtime.lazy import lazy_exports
 _EXPORTS = {
     "build_index": "trace_audit.fleet.index",
     "IndexReport": "trace_audit.fleet.index",
+    "query_columns": "trace_audit.fleet.query",
     "run_query": "trace_audit.fleet.query",
     "find_decisions": "trace_audit.fleet.query",
     "index_robots": "trace_audit.fleet.query",
@@ -29,6 +30,7 @@ __all__ = [
     "find_decisions",
     "index_metrics",
     "index_robots",
+    "query_columns",
     "run_query",
 ]
 
@@ -40,6 +42,7 @@ if TYPE_CHECKING:
         find_decisions,
         index_metrics,
         index_robots,
+        query_columns,
         run_query,
     )
 

@@ -43,6 +43,7 @@ __all__ = [
     "find_decisions",
     "index_metrics",
     "index_robots",
+    "query_columns",
     "run_query",
 ]
 
@@ -215,14 +216,69 @@ def run_query(
 
     Within ``limits`` (the defaults when None): a statement that runs too long, needs too
     much memory or gives too large a result is a ``UsageError`` naming the bound."""
-    import duckdb
-
     bounds = limits or QueryLimits()
     started = time.perf_counter()
+    result: QueryResult = _guarded(
+        index,
+        bounds,
+        lambda con: _run(con, sql, params, limit=limit, bounds=bounds, started=started),
+    )
+    return result
+
+
+def query_columns(
+    index: str | Path,
+    sql: str,
+    params: Sequence[Any] = (),
+    *,
+    limits: QueryLimits | None = None,
+) -> dict[str, Any]:
+    """One SQL statement's result as numpy columns by name (a NULL in a numeric column is
+    NaN, in a text column None), for readers of many rows (``check --index``): no Python
+    row is built. The bounds and errors of ``run_query``."""
+    bounds = limits or QueryLimits()
+
+    def fetch(con: duckdb.DuckDBPyConnection) -> dict[str, Any]:
+        columns = con.execute(sql, list(params)).fetchnumpy()
+        held = sum(_column_bytes(c) for c in columns.values())
+        if held > bounds.result_bytes:
+            raise UsageError(
+                f"SQL: the result holds more than {format_size(bounds.result_bytes)} "
+                "(select fewer rows or columns)"
+            )
+        return {name: _unmasked(c) for name, c in columns.items()}
+
+    columns: dict[str, Any] = _guarded(index, bounds, fetch)
+    return columns
+
+
+def _column_bytes(column: Any) -> int:
+    """What a fetched column holds: its array's bytes, a text or list value counted at
+    64 bytes (a Python object and its pointer; the values are not walked)."""
+    return int(column.size * 64 if column.dtype == object else column.nbytes)
+
+
+def _unmasked(column: Any) -> Any:
+    """DuckDB's masked array of a column with NULLs as a plain one: NaN in numbers (as
+    floats), None in anything else."""
+    import numpy as np
+
+    if not np.ma.isMaskedArray(column):
+        return column
+    if column.dtype.kind in "iufb":
+        return np.ma.filled(column.astype(np.float64), np.nan)
+    return np.ma.filled(column.astype(object), None)
+
+
+def _guarded(index: str | Path, bounds: QueryLimits, work: Any) -> Any:
+    """``work(con)`` on a confined session of ``index`` under its watchdog; DuckDB's
+    errors as the one-line errors of ``run_query``."""
+    import duckdb
+
     con = connect(index, limits=bounds)
     try:
         with watchdog(con, bounds):
-            return _run(con, sql, params, limit=limit, bounds=bounds, started=started)
+            return work(con)
     except (duckdb.Error, MemoryError) as err:
         refused = over_limit(err, bounds)
         if refused is not None:

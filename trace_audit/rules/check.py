@@ -18,7 +18,7 @@ from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log
 from trace_audit.log_time import LogClock, NotWallClockError, TimeArg
 from trace_audit.rules.formula import Horizon, RulesError
-from trace_audit.rules.judge import RobotSignals, SignalRow, judge_robot
+from trace_audit.rules.judge import RobotSignals, SignalColumns, judge_robot
 from trace_audit.rules.results import CheckResult, RobotRules
 from trace_audit.rules.rulebook import Rule
 from trace_audit.rules.signals import read_signals
@@ -59,8 +59,7 @@ def _check_robot(log: Log, rules: Sequence[Rule], selection: Selection, path: st
         raise RulesError(f"{log.first_robot}: the log declares no cycle period to judge rules at")
     lo, hi = selection.window(log)
     _overlaps(log, lo, hi)
-    rows = _read_rows(log, rules, lo, hi, path)
-    return judge_robot(RobotSignals(log.first_robot, period_ns, LogClock.of(log), rows), rules)
+    return judge_robot(_read_rows(log, rules, lo, hi, path), rules)
 
 
 def _overlaps(log: Log, lo: int | None, hi: int | None) -> None:
@@ -80,7 +79,7 @@ def _overlaps(log: Log, lo: int | None, hi: int | None) -> None:
 
 def _read_rows(
     log: Log, rules: Sequence[Rule], lo: int | None, hi: int | None, path: str
-) -> list[SignalRow]:
+) -> RobotSignals:
     """The robot's cycles in the window and the context the widest horizon needs."""
     horizon = Horizon()
     for rule in rules:
@@ -88,21 +87,12 @@ def _read_rows(
     past_ns, future_ns = horizon.span_ns(log.period_ns)
     names = tuple(dict.fromkeys(s for rule in rules for s in rule.formula.signals))
     step = gap_stepper(log)
-    rows: list[SignalRow] = []
+    rows = SignalColumns(names)
     read_lo = None if lo is None else lo - past_ns
     read_hi = None if hi is None else hi + future_ns
     for cycle in log.iter_cycles(read_lo, read_hi):
         gap = step(cycle)
         command, signals = read_signals(cycle, names)
-        rows.append(
-            SignalRow(
-                cycle.cycle,
-                cycle.t_ns,
-                command,
-                signals,
-                gap,
-                (lo is None or cycle.t_ns >= lo) and (hi is None or cycle.t_ns <= hi),
-                path,
-            )
-        )
-    return rows
+        judged = (lo is None or cycle.t_ns >= lo) and (hi is None or cycle.t_ns <= hi)
+        rows.add(cycle.cycle, cycle.t_ns, command, signals, gap, judged)
+    return rows.build(log.first_robot, log.period_ns, LogClock.of(log), path)

@@ -1,8 +1,9 @@
 """A rule's STL formula, parsed and evaluated by rtamt, and how far in time it looks.
 
-Nothing here evaluates STL itself: ``rtamt.StlDiscreteTimeSpecification`` parses the formula
-and computes its robustness, sample by sample, with the sampling period set to the log's.
-This module only
+``rtamt.StlDiscreteTimeSpecification`` parses the formula and defines its robustness in
+discrete time, with the sampling period set to the log's; rtamt's interpreter computes it
+sample by sample, and ``rules.vector`` computes the same values over whole columns for the
+operators it covers (pinned to rtamt by the tests). This module
 
 - checks the rule's shape: ``always(<body>)``, the body's temporal operators all bounded
   (``eventually[0:0.5]``, ``once[0:2]``, ``prev``, ``next``), so that every cycle's verdict
@@ -28,7 +29,11 @@ from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
 
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
 from trace_audit.rules.signals import FAMILIES, SIGNAL_PATTERN, bad_signal, signal_names
+from trace_audit.rules.vector import compile_columns
 from trace_runtime.errors import UsageError
 
 __all__ = ["Formula", "Horizon", "RulesError", "compile_formula", "rtamt_module"]
@@ -93,6 +98,13 @@ class Horizon:
         )
 
 
+ENGINES = ("auto", "rtamt")
+"""How ``Formula.monitor`` computes robustness (``check --engine``)."""
+
+Monitor = Callable[[Mapping[str, "ArrayLike"]], "NDArray[np.float64]"]
+"""A rule's robustness at each step of one stretch, from its columns by signal name."""
+
+
 @dataclass(frozen=True, slots=True)
 class Formula:
     """A rule's checked formula: the body under its ``always``, the signals it reads and
@@ -108,24 +120,44 @@ class Formula:
     origin: str = ""
     """The rules file the rule is read from (named in errors found at evaluation)."""
 
-    def evaluate(self, columns: Mapping[str, Sequence[float]], period_ns: int) -> list[float]:
+    def evaluate(
+        self, columns: Mapping[str, Sequence[float]], period_ns: int, *, engine: str = "auto"
+    ) -> list[float]:
         """rtamt's robustness of the body at each sample of ``columns`` (one value per
         signal per consecutive cycle), in discrete time at ``period_ns``."""
-        return self.monitor(period_ns)(columns)
+        return [float(v) for v in self.monitor(period_ns, engine=engine)(columns)]
 
-    def monitor(self, period_ns: int) -> Callable[[Mapping[str, Sequence[float]]], list[float]]:
+    def monitor(self, period_ns: int, *, engine: str = "auto") -> Monitor:
         """``evaluate`` at ``period_ns`` for many stretches: rtamt parses the formula once
-        (most of the cost of a short stretch); its offline evaluation keeps no state
-        between calls, so the one specification serves every stretch."""
+        (its offline evaluation keeps no state between calls, so the one specification
+        serves every stretch). ``engine``: ``auto`` computes rtamt's semantics over whole
+        columns where ``rules.vector`` covers the formula's operators, and has rtamt's own
+        interpreter evaluate the rest (and any stretch where a value is NaN, e.g. +inf
+        minus +inf, whose ordering rules differ); ``rtamt`` always asks rtamt."""
+        if engine not in ENGINES:
+            raise RulesError(f"unknown rules engine {engine!r} (use {', '.join(ENGINES)})")
         spec = self._spec(period_ns)
-        return lambda columns: self._robustness(spec, columns, period_ns)
+        columns_fn = compile_columns(spec.ast.specs[0], period_ns) if engine == "auto" else None
+        idents = {name: _ident(i) for i, name in enumerate(self.signals)}
 
-    def _robustness(
-        self, spec: Any, columns: Mapping[str, Sequence[float]], period_ns: int
-    ) -> list[float]:
+        def run(columns: Mapping[str, ArrayLike]) -> NDArray[np.float64]:
+            data = {idents[k]: np.asarray(v, dtype=np.float64) for k, v in columns.items()}
+            n = len(next(iter(data.values()))) if data else 0
+            if columns_fn is not None and n:
+                with np.errstate(all="ignore"):
+                    out = columns_fn(data, n) + 0.0  # + 0.0: no -0 robustness
+                if not np.isnan(out).any():
+                    return out
+            return np.array(self._robustness(spec, columns, period_ns), dtype=np.float64)
+
+        return run
+
+    def _robustness(self, spec: Any, given: Mapping[str, ArrayLike], period_ns: int) -> list[float]:
+        columns = {k: np.asarray(v, dtype=np.float64).tolist() for k, v in given.items()}
         n = len(next(iter(columns.values()))) if columns else 0
         if n == 0:
             return []
+        columns = {k: np.asarray(v, dtype=np.float64).tolist() for k, v in columns.items()}
         # rtamt's offline evaluate fails on a single sample (it measures the sampling period
         # between samples: UnboundLocalError). A one-cycle stretch is given twice; the copy's
         # values are never read back, and the one cycle is decidable only when the horizon

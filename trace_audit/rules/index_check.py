@@ -5,27 +5,31 @@ The index's tables (docs/fleet.md) are read with DuckDB, one robot at a time, it
 time order within each clock run (the ``day`` partition: a UTC day on a wall clock, which
 orders as the times do, ``run-<segment>`` otherwise): ``decisions`` for the command, the
 factors, the nearest distance per class and the flags; ``channels`` and ``checks`` for the
-signals of those families; ``gaps`` for the gaps, never interpolated, as on the logs. What
-a planar robot's linear motion (``channel.speed.*`` when no channel is named ``speed``)
+signals of those families; ``gaps`` for the gaps, never interpolated, as on the logs; a
+planar robot's linear motion (``channel.speed.*`` when no channel is named ``speed``)
 comes from ``decisions.intended_linear`` and ``actual_linear`` by the logs' own rule
 (``signals.planar_speed``).
 
-The SQL runs through a query function the caller gives (``query(sql, params) -> rows``),
-the fleet package's bounded, confined ``run_query`` (``trace_audit.fleet``, which stands on
-a floor above this one): nothing here opens a file. Given an ``Executor`` (a Dask
+The SQL runs through a query function the caller gives (``query(sql, params) -> columns``),
+the fleet package's bounded, confined ``query_columns`` (``trace_audit.fleet``, which stands
+on a floor above this one): nothing here opens a file. Given an ``Executor`` (a Dask
 cluster's, ``--scheduler``), each robot is one task (its rows read and judged on a worker,
 so the query function must pickle); the answers are kept in robot order, as locally.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import math
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Executor
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from trace_audit.log_time import LogClock
 from trace_audit.rules.formula import RulesError
-from trace_audit.rules.judge import RobotSignals, SignalRow, judge_groups, judge_robot
+from trace_audit.rules.judge import RobotSignals, judge_groups, judge_robot
 from trace_audit.rules.results import CheckResult, GroupRules, RobotRules
 from trace_audit.rules.rulebook import Rule
 from trace_audit.rules.signals import command_signal, planar_speed
@@ -34,8 +38,9 @@ from trace_runtime.gaps import Gap
 
 __all__ = ["BY_KEYS", "NOT_WALL_CLOCK", "IndexQuery", "check_index", "judge_index_robot"]
 
-IndexQuery = Callable[[str, Sequence[Any]], Sequence[Sequence[Any]]]
-"""Runs one SQL statement with parameters on the index; the rows."""
+IndexQuery = Callable[[str, Sequence[Any]], Mapping[str, Any]]
+"""Runs one SQL statement with parameters on the index; its result as numpy columns by
+name, NULL as NaN in numbers and None in text (``trace_audit.fleet.query_columns``)."""
 
 BY_KEYS = ("robot", "day")
 """What ``check --index --by`` groups by."""
@@ -46,9 +51,6 @@ shown as seconds, as on a sim or monotonic log."""
 
 _RUN_ORDER = "CASE WHEN starts_with(day, 'run-') THEN day ELSE '' END"
 """Clock runs in chain order; wall-clock days all in one, ordered by time."""
-
-Key = tuple[str, int, int]
-"""A row's place: (segment, cycle, t_ns)."""
 
 
 def check_index(
@@ -69,7 +71,9 @@ def check_index(
     for key in by:
         if key not in BY_KEYS:
             raise UsageError(f"cannot group rules by {key!r} (use {', '.join(BY_KEYS)})")
-    held = [str(row[0]) for row in query("SELECT DISTINCT robot FROM segments ORDER BY robot", [])]
+    held = [
+        str(r) for r in query("SELECT DISTINCT robot FROM segments ORDER BY robot", [])["robot"]
+    ]
     wanted = list(dict.fromkeys(robots)) or held
     missing = [repr(r) for r in wanted if r not in held]
     if missing:
@@ -100,110 +104,186 @@ def judge_index_robot(
 def robot_signals(query: IndexQuery, robot: str, rules: Sequence[Rule]) -> RobotSignals:
     """One robot's rows of the index, in time order, with the signals ``rules`` read."""
     names = tuple(dict.fromkeys(s for rule in rules for s in rule.formula.signals))
-    segments = query(
-        "SELECT segment, segment_path, period_ns, start_ns, day FROM segments WHERE robot = ?",
-        [robot],
+    segments = _rows(
+        query(
+            "SELECT segment, segment_path, period_ns, start_ns, day FROM segments WHERE robot = ?",
+            [robot],
+        )
     )
     paths = {str(s[0]): str(s[1]) for s in segments}
-    period_ns = max((int(s[2] or 0) for s in segments), default=0)
+    period_ns = max((int(s[2]) for s in segments if _present(s[2])), default=0)
     if period_ns <= 0:
         raise RulesError(f"{robot}: the index declares no cycle period to judge rules at")
-    start_ns = min((int(s[3]) for s in segments if s[3] is not None), default=0)
+    start_ns = min((int(s[3]) for s in segments if _present(s[3])), default=0)
     wall = any(not str(s[4]).startswith("run-") for s in segments)
     clock = LogClock("system" if wall else NOT_WALL_CLOCK, start_ns)
     channels, logged = _channels(query, robot, names)
     planar = "speed" not in logged and any(n.startswith("channel.speed.") for n in names)
     checks = _checks(query, robot, names)
-    gaps = _gaps(query, robot)
-    columns, exprs, params = _decision_columns(names, planar)
-    rows: list[SignalRow] = []
-    for values in query(
-        f"SELECT {', '.join(exprs)} FROM decisions WHERE robot = ? "
-        f"ORDER BY {_RUN_ORDER}, t_ns, cycle",
-        [*params, robot],
-    ):
-        row = dict(zip(columns, values, strict=True))
-        segment, cycle, t_ns = str(row["segment"]), int(row["cycle"]), int(row["t_ns"])
-        key = (segment, cycle, t_ns)
-        command = row["command"]
-        signals: dict[str, float] = {}
-        for name in names:
-            channel = channels.get((*key, name))
-            if planar and name.startswith("channel.speed."):
-                channel = planar_speed(
-                    name.removeprefix("channel.speed."),
-                    row["intended_linear"],
-                    row["actual_linear"],
-                )
-            value = _signal(name, row, channel, checks.get((*key, name)))
-            if value is not None:
-                signals[name] = value
-        rows.append(
-            SignalRow(
-                cycle,
-                t_ns,
-                None if command is None else str(command),
-                signals,
-                gaps.get(key),
-                True,
-                paths.get(segment, segment),
-                str(row["day"]),
-            )
-        )
-    return RobotSignals(robot, period_ns, clock, rows)
+    exprs, params = _decision_columns(names, planar)
+    data = query(
+        f"SELECT {', '.join(exprs)} FROM decisions d LEFT JOIN ({_GAPS}) g "
+        "ON g.segment = d.segment AND g.before_cycle = d.cycle AND g.before_t_ns = d.t_ns "
+        f"WHERE d.robot = ? ORDER BY {_RUN_ORDER}, d.t_ns, d.cycle",
+        [*params, robot, robot],
+    )
+    n = len(data["cycle"])
+    cycles = np.asarray(data["cycle"], dtype=np.int64)
+    t_ns = np.asarray(data["t_ns"], dtype=np.int64)
+    segment = data["segment"]
+    keys = (segment, cycles, t_ns)
+    values: dict[str, NDArray[np.float64]] = {}
+    for name in names:
+        family, _, rest = name.partition(".")
+        if family == "command":
+            values[name] = _indicator(data["command"], rest)
+        elif family in ("nearest", "flag"):
+            values[name] = np.asarray(data[name], dtype=np.float64)
+        elif family == "factor":
+            values[name] = _factor_values(data["factors"], rest)
+        elif planar and name.startswith("channel.speed."):
+            part = name.removeprefix("channel.speed.")
+            values[name] = _planar(part, data["intended_linear"], data["actual_linear"])
+        elif family == "channel":
+            values[name] = _by_key(channels, keys, name, n)
+        elif family == "check":
+            values[name] = _by_key(checks, keys, name, n)
+    return RobotSignals(
+        robot,
+        period_ns,
+        clock,
+        cycles,
+        t_ns,
+        data["command"].tolist(),
+        values,
+        np.ones(n, dtype=np.bool_),
+        [paths.get(str(s), str(s)) for s in segment.tolist()],
+        _gaps(robot, data),
+        data["day"].tolist(),
+    )
 
 
-def _decision_columns(names: Sequence[str], planar: bool) -> tuple[list[str], list[str], list[Any]]:
-    """What to select from ``decisions``: the names the row's values go by, their SQL, and
-    its parameters. A ``nearest.<class>`` is the class's value in the row's ``nearest`` map
-    (+inf when the class is not in it) and a ``flag.<name>`` whether ``flags`` holds it, both
-    taken out by DuckDB; the factors come whole (a factor is found by node or name);
-    ``planar``: the linear motion too."""
-    columns = ["day", "segment", "cycle", "t_ns", "command"]
-    exprs = list(columns)
+_GAPS = (
+    "SELECT DISTINCT ON (segment, before_cycle, before_t_ns) segment, after_cycle, "
+    "after_t_ns, before_cycle, before_t_ns, period_ns, gap_ns, missing_cycles, "
+    "declared_dropped FROM gaps WHERE robot = ?"
+)
+"""The robot's gaps, one for the row after each (segment, cycle, t_ns)."""
+
+
+def _rows(columns: Mapping[str, Any]) -> list[tuple[Any, ...]]:
+    """A small result's columns as rows."""
+    return list(zip(*(c.tolist() for c in columns.values()), strict=True))
+
+
+def _present(value: Any) -> bool:
+    return value is not None and not (isinstance(value, float) and math.isnan(value))
+
+
+def _decision_columns(names: Sequence[str], planar: bool) -> tuple[list[str], list[Any]]:
+    """What to select from ``decisions`` (``d``, its gap joined as ``g``) and the SQL's
+    parameters: the row's place, its command, each ``nearest.<class>`` as the class's value
+    in the ``nearest`` map (+inf when the class is not in it) and each ``flag.<name>`` as
+    whether ``flags`` holds it (0/1), both taken out by DuckDB under the signal's name; the
+    factors whole (a factor is found by node or name); ``planar``: the linear motion too;
+    the gap before the row (NULL ``after_cycle``: none)."""
+    exprs = ["d.day", "d.segment", "d.cycle", "d.t_ns", "d.command"]
     params: list[Any] = []
     for name in names:
         family, _, rest = name.partition(".")
         if family == "nearest":
-            exprs.append("coalesce(map_extract(nearest, ?)[1], 'inf'::DOUBLE)")
+            sql = "coalesce(map_extract(d.nearest, ?)[1], 'inf'::DOUBLE)"
         elif family == "flag":
-            exprs.append("coalesce(list_contains(flags, ?), false)")
+            sql = "coalesce(list_contains(d.flags, ?), false)::DOUBLE"
         else:
             continue
-        columns.append(name)
+        exprs.append(f'{sql} AS "{name}"')
         params.append(rest)
     if any(n.startswith("factor.") for n in names):
-        columns.append("factors")
-        exprs.append("factors")
+        exprs.append("d.factors")
     if planar:
-        columns += ["intended_linear", "actual_linear"]
-        exprs += ["intended_linear", "actual_linear"]
-    return columns, exprs, params
+        exprs += ["d.intended_linear", "d.actual_linear"]
+    exprs += [f"g.{c} AS gap_{c}" for c in _GAP_COLUMNS]
+    return exprs, params
 
 
-def _signal(
-    name: str, row: dict[str, Any], channel: float | None, check: float | None
-) -> float | None:
-    """One signal's value on one decision row (None: the row does not hold it)."""
-    family, _, rest = name.partition(".")
-    if family == "command":
-        command = row["command"]
-        return command_signal(None if command is None else str(command), rest)
-    if family == "nearest":
-        return float(row[name])
-    if family == "factor":
-        for factor in row["factors"] or ():
-            if rest in (factor.get("node"), factor.get("name")):
+_GAP_COLUMNS = (
+    "after_cycle",
+    "after_t_ns",
+    "period_ns",
+    "gap_ns",
+    "missing_cycles",
+    "declared_dropped",
+)
+
+
+def _indicator(commands: Any, action: str) -> NDArray[np.float64]:
+    """``command.<action>`` at each row (NaN: no command logged), by ``command_signal``."""
+    out = np.full(len(commands), np.nan)
+    for command in set(commands.tolist()):
+        value = command_signal(None if command is None else str(command), action)
+        if value is not None:
+            out[commands == command] = value
+    return out
+
+
+def _planar(part: str, intended: Any, actual: Any) -> NDArray[np.float64]:
+    """``channel.speed.<part>`` at each row, by ``planar_speed`` over the columns."""
+    i = np.asarray(intended, dtype=np.float64)
+    a = np.asarray(actual, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        return np.asarray(planar_speed(part, i, a), dtype=np.float64)
+
+
+def _factor_values(factors: Any, wanted: str) -> NDArray[np.float64]:
+    out = np.full(len(factors), np.nan)
+    for row, items in enumerate(factors.tolist()):
+        for factor in () if items is None else items:  # a list, or DuckDB's array of them
+            if wanted in (factor.get("node"), factor.get("name")):
                 value = factor.get("value")
-                return None if value is None else float(value)
-        return None
-    if family == "flag":
-        return 1.0 if row[name] else 0.0
-    if family == "check":
-        return check
-    if family == "channel":
-        return channel
-    return None
+                if value is not None:
+                    out[row] = float(value)
+                break
+    return out
+
+
+def _by_key(
+    found: Mapping[tuple[str, int, int, str], float],
+    keys: tuple[Any, NDArray[np.int64], NDArray[np.int64]],
+    name: str,
+    n: int,
+) -> NDArray[np.float64]:
+    """A channel or check signal at each row, from its values by (segment, cycle, t_ns)."""
+    out = np.full(n, np.nan)
+    if not found:
+        return out
+    segment, cycles, t_ns = (k.tolist() for k in keys)
+    for row in range(n):
+        value = found.get((segment[row], cycles[row], t_ns[row], name))
+        if value is not None:
+            out[row] = value
+    return out
+
+
+def _gaps(robot: str, data: Mapping[str, Any]) -> dict[int, Gap]:
+    """Row -> the gap that ends before it, from the joined ``gap_*`` columns."""
+    after = data["gap_after_cycle"]
+    rows = np.flatnonzero(~np.isnan(np.asarray(after, dtype=np.float64)))
+    out: dict[int, Gap] = {}
+    for row in rows.tolist():
+        dropped = data["gap_declared_dropped"][row]
+        out[row] = Gap(
+            robot,
+            int(after[row]),
+            int(data["gap_after_t_ns"][row]),
+            int(data["cycle"][row]),
+            int(data["t_ns"][row]),
+            int(data["gap_period_ns"][row]),
+            int(data["gap_gap_ns"][row]),
+            int(data["gap_missing_cycles"][row]),
+            None if not _present(dropped) else int(dropped),
+        )
+    return out
 
 
 def _channels(
@@ -221,16 +301,18 @@ def _channels(
     marks = ", ".join("?" for _ in wanted)
     out: dict[tuple[str, int, int, str], float] = {}
     logged: set[str] = set()
-    for segment, cycle, t_ns, channel, intended, actual, deviation in query(
-        "SELECT segment, cycle, t_ns, channel, intended, actual, deviation FROM channels "
-        f"WHERE robot = ? AND channel IN ({marks})",
-        [robot, *wanted],
+    for segment, cycle, t_ns, channel, intended, actual, deviation in _rows(
+        query(
+            "SELECT segment, cycle, t_ns, channel, intended, actual, deviation FROM channels "
+            f"WHERE robot = ? AND channel IN ({marks})",
+            [robot, *wanted],
+        )
     ):
         logged.add(str(channel))
         parts = {"intended": intended, "actual": actual, "deviation": deviation}
         for part, n in wanted[str(channel)]:
             key = (str(segment), int(cycle), int(t_ns), n)
-            if key not in out and parts[part] is not None:  # the first such channel, as logged
+            if key not in out and _present(parts[part]):  # the first such channel, as logged
                 out[key] = float(parts[part])
     return out, logged
 
@@ -244,29 +326,13 @@ def _checks(
         return {}
     marks = ", ".join("?" for _ in wanted)
     out: dict[tuple[str, int, int, str], float] = {}
-    for segment, cycle, t_ns, rule, passed in query(
-        "SELECT segment, cycle, t_ns, rule, passed FROM checks "
-        f"WHERE robot = ? AND rule IN ({marks})",
-        [robot, *wanted],
+    for segment, cycle, t_ns, rule, passed in _rows(
+        query(
+            "SELECT segment, cycle, t_ns, rule, passed FROM checks "
+            f"WHERE robot = ? AND rule IN ({marks})",
+            [robot, *wanted],
+        )
     ):
         key = (str(segment), int(cycle), int(t_ns), wanted[str(rule)])
         out[key] = min(out.get(key, 1.0), 1.0 if passed is True else 0.0)
-    return out
-
-
-def _gaps(query: IndexQuery, robot: str) -> dict[Key, Gap]:
-    """The robot's gaps by the row after each: (segment, cycle, t_ns)."""
-    out: dict[Key, Gap] = {}
-    for row in query(
-        "SELECT segment, after_cycle, after_t_ns, before_cycle, before_t_ns, period_ns, gap_ns, "
-        "missing_cycles, declared_dropped FROM gaps WHERE robot = ?",
-        [robot],
-    ):
-        after_cycle, after_t, before_cycle, before_t, period, gap_ns, missing = map(int, row[1:8])
-        dropped = None if row[8] is None else int(row[8])
-        gap = Gap(
-            robot, after_cycle, after_t, before_cycle, before_t, period, gap_ns, missing, dropped
-        )
-        segment = row[0]
-        out[(str(segment), gap.before_cycle, gap.before_t_ns)] = gap
     return out

@@ -2,10 +2,13 @@
 
 The one evaluator of ``check``, whatever the signals were read from: a log's cycles
 (``trace_audit.rules.check``) or the fleet index's rows (``trace_audit.rules.index_check``).
-Each source gives a robot's ``RobotSignals``: its rows in time order (each with its signal
-values, the gap that ends before it, whether it is inside the window, the path its
-``explain`` command names and its group, e.g. the index's day), the sampling period, the
-clock, and the signals it cannot give at all. docs/rules.md, "Gaps and not decidable":
+Each source gives a robot's ``RobotSignals``: its rows in time order as columns (cycle,
+time, command, each signal's values with NaN where the row does not log it, whether the
+row is inside the window, the path its ``explain`` command names and its group, e.g. the
+index's day), the gaps by the row each ends before, the sampling period and the clock.
+Rows are columns, not objects, so that a fleet's days of cycles are judged in numpy; only
+what is reported (violations, undecided stretches) becomes objects. docs/rules.md, "Gaps
+and not decidable":
 
 1. The rows are cut into *stretches*: a gap between two sealed cycles (the one gap rule)
    ends a stretch, and so does a row that does not hold a signal the rule reads (it is
@@ -24,8 +27,11 @@ clock, and the signals it cannot give at all. docs/rules.md, "Gaps and not decid
 from __future__ import annotations
 
 import shlex
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
 
 from trace_audit.log_time import LogClock
 from trace_audit.rules.formula import Formula
@@ -42,85 +48,145 @@ from trace_audit.rules.results import (
 from trace_audit.rules.rulebook import Rule
 from trace_runtime.gaps import Gap
 
-__all__ = ["RobotSignals", "SignalRow", "judge_groups", "judge_robot"]
-
-
-@dataclass(frozen=True, slots=True)
-class SignalRow:
-    """One logged cycle as the rules read it."""
-
-    cycle: int
-    t_ns: int
-    command: str | None
-    signals: dict[str, float]
-    gap_before: Gap | None
-    judged: bool
-    """Inside the window (the cycles read around it only give context)."""
-    source: str
-    """The path ``trace-audit explain`` reads this cycle from."""
-    group: str = ""
-    """The group a ``--by`` table puts the row in (the index's ``day``)."""
+__all__ = ["RobotSignals", "SignalColumns", "judge_groups", "judge_robot"]
 
 
 @dataclass(frozen=True, slots=True)
 class RobotSignals:
-    """One robot's rows, in time order, and what judging them needs."""
+    """One robot's rows, in time order, as columns, and what judging them needs."""
 
     robot: str
     period_ns: int
     clock: LogClock
-    rows: list[SignalRow]
+    cycles: NDArray[np.int64]
+    t_ns: NDArray[np.int64]
+    commands: Sequence[str | None]
+    """The decision in force at each row (None: no action logged)."""
+    values: Mapping[str, NDArray[np.float64]]
+    """Signal name -> its value at each row, NaN where the row does not log it; a signal
+    no row logs may be absent."""
+    judged: NDArray[np.bool_]
+    """Inside the window (the rows read around it only give context)."""
+    sources: Sequence[str]
+    """The path ``trace-audit explain`` reads each row from."""
+    gaps: Mapping[int, Gap] = field(default_factory=dict)
+    """Row -> the gap that ends before it."""
+    groups: Sequence[str] = ()
+    """The group a ``--by`` table puts each row in (the index's ``day``); empty: none."""
+
+    def __len__(self) -> int:
+        return len(self.cycles)
+
+    def column(self, name: str) -> NDArray[np.float64]:
+        """A signal's values (all NaN when no row logs it)."""
+        values = self.values.get(name)
+        return np.full(len(self), np.nan) if values is None else values
 
 
-@dataclass(slots=True)
+class SignalColumns:
+    """``RobotSignals`` built one row at a time (a log's cycles, read in order)."""
+
+    def __init__(self, names: Sequence[str]) -> None:
+        self.names = tuple(names)
+        self.cycles: list[int] = []
+        self.t_ns: list[int] = []
+        self.commands: list[str | None] = []
+        self.values: dict[str, list[float]] = {name: [] for name in self.names}
+        self.judged: list[bool] = []
+        self.gaps: dict[int, Gap] = {}
+
+    def add(  # noqa: PLR0917 - one row's columns, in the order RobotSignals keeps them
+        self,
+        cycle: int,
+        t_ns: int,
+        command: str | None,
+        signals: Mapping[str, float],
+        gap_before: Gap | None,
+        judged: bool,
+    ) -> None:
+        if gap_before is not None:
+            self.gaps[len(self.cycles)] = gap_before
+        self.cycles.append(cycle)
+        self.t_ns.append(t_ns)
+        self.commands.append(command)
+        for name, column in self.values.items():
+            column.append(signals.get(name, np.nan))
+        self.judged.append(judged)
+
+    def build(self, robot: str, period_ns: int, clock: LogClock, source: str) -> RobotSignals:
+        n = len(self.cycles)
+        return RobotSignals(
+            robot,
+            period_ns,
+            clock,
+            np.array(self.cycles, dtype=np.int64),
+            np.array(self.t_ns, dtype=np.int64),
+            self.commands,
+            {name: np.array(v, dtype=np.float64) for name, v in self.values.items()},
+            np.array(self.judged, dtype=np.bool_),
+            [source] * n,
+            self.gaps,
+        )
+
+
+@dataclass(frozen=True, slots=True)
 class _Verdict:
-    """One row's verdict for a rule: its robustness when decidable, else why not."""
+    """Why rows cannot be judged: the reason, its detail, and the gap it touches."""
 
-    robustness: float | None
-    reason: UndecidedReason | None = None
+    reason: UndecidedReason
     detail: str = ""
     gap: Gap | None = None
 
 
+@dataclass(frozen=True, slots=True)
+class _Verdicts:
+    """Each row's verdict for one rule: its robustness where ``kind`` is -1 (decidable),
+    else ``kinds[kind]`` says why not."""
+
+    robustness: NDArray[np.float64]
+    kind: NDArray[np.int32]
+    kinds: list[_Verdict]
+
+
 def judge_robot(signals: RobotSignals, rules: Sequence[Rule]) -> RobotRules:
     """Every rule over one robot's rows."""
-    judged = [r.judged for r in signals.rows]
+    judged = signals.judged
     results = tuple(
         _result(rule.formula, signals, _verdicts(rule.formula, signals), judged) for rule in rules
     )
-    return RobotRules(signals.robot, signals.period_ns, sum(judged), results, signals.clock)
+    return RobotRules(signals.robot, signals.period_ns, int(judged.sum()), results, signals.clock)
 
 
 def judge_groups(signals: RobotSignals, rules: Sequence[Rule]) -> tuple[GroupRules, ...]:
     """Every rule over each group of one robot's judged rows (in order of first row): the
     same verdicts as ``judge_robot``, summed within the group."""
-    groups = list(dict.fromkeys(r.group for r in signals.rows if r.judged))
+    if not signals.groups:
+        return ()
+    labels = np.asarray(signals.groups, dtype=object)
+    judged = signals.judged
+    groups = list(dict.fromkeys(labels[judged].tolist()))
     verdicts = [_verdicts(rule.formula, signals) for rule in rules]
     out: list[GroupRules] = []
     for group in groups:
-        mask = [r.judged and r.group == group for r in signals.rows]
+        mask = judged & (labels == group)
         results = tuple(
             GroupRule.of(_result(rule.formula, signals, v, mask))
             for rule, v in zip(rules, verdicts, strict=True)
         )
-        out.append(GroupRules(signals.robot, group, sum(mask), results))
+        out.append(GroupRules(signals.robot, group, int(mask.sum()), results))
     return tuple(out)
 
 
 def _result(
-    formula: Formula, signals: RobotSignals, verdicts: list[_Verdict], judged: list[bool]
+    formula: Formula, signals: RobotSignals, verdicts: _Verdicts, judged: NDArray[np.bool_]
 ) -> RuleResult:
-    rows = signals.rows
-    decidable = [
-        v.robustness
-        for v, j in zip(verdicts, judged, strict=True)
-        if j and v.robustness is not None
-    ]
-    violations = _violations(rows, verdicts, judged, signals.clock, signals.robot)
-    undecided = _undecided(rows, verdicts, judged, signals.clock)
+    decidable_rows = judged & (verdicts.kind < 0)
+    decidable = verdicts.robustness[decidable_rows]
+    violations = _violations(signals, verdicts, decidable_rows)
+    undecided = _undecided(signals, verdicts, judged)
     if violations:
         outcome = Outcome.VIOLATED
-    elif not decidable or any(
+    elif not len(decidable) or any(
         u.reason in (UndecidedReason.GAP, UndecidedReason.MISSING_SIGNAL) for u in undecided
     ):
         outcome = Outcome.NOT_DECIDABLE
@@ -130,78 +196,94 @@ def _result(
         formula.rule,
         formula.stl,
         outcome,
-        min(decidable) if decidable else None,
+        _lowest(decidable),
         len(decidable),
         violations,
         undecided,
     )
 
 
-def _verdicts(formula: Formula, signals: RobotSignals) -> list[_Verdict]:
-    """Each row's verdict: rtamt over each stretch, decidable rows only."""
-    rows, period_ns = signals.rows, signals.period_ns
-    past, future = formula.horizon.steps(period_ns)
-    out: list[_Verdict] = []
+def _lowest(values: NDArray[np.float64]) -> float | None:
+    if not len(values):
+        return None
+    if np.isnan(values).any():  # as Python's min over the rows in order would answer
+        return float(min(values.tolist()))
+    return float(values.min())
+
+
+def _verdicts(formula: Formula, signals: RobotSignals) -> _Verdicts:
+    """Each row's verdict: rtamt's semantics over each stretch, decidable rows only."""
+    n = len(signals)
+    past, future = formula.horizon.steps(signals.period_ns)
+    robustness = np.full(n, np.nan)
+    kind = np.full(n, -1, dtype=np.int32)
+    kinds: list[_Verdict] = []
+    columns = {s: signals.column(s) for s in formula.signals}
+    missing = np.zeros(n, dtype=np.bool_)
+    for values in columns.values():
+        missing |= np.isnan(values)
     monitor = None
-    for start, stop in _stretches(formula, rows):
+    for start, stop in _stretches(signals, missing):
         if start == stop:  # a row without a signal the rule reads
-            missing = next(s for s in formula.signals if s not in rows[start].signals)
-            out.append(_Verdict(None, UndecidedReason.MISSING_SIGNAL, f"{missing} not logged"))
+            lacking = next(s for s in formula.signals if np.isnan(columns[s][start]))
+            kind[start] = len(kinds)
+            kinds.append(_Verdict(UndecidedReason.MISSING_SIGNAL, f"{lacking} not logged"))
             continue
-        stretch = rows[start:stop]
-        columns = {s: [r.signals[s] for r in stretch] for s in formula.signals}
         if monitor is None:
-            monitor = formula.monitor(period_ns)
-        robustness = monitor(columns)
-        before = _boundary(rows, start, before=True)
-        after = _boundary(rows, stop - 1, before=False)
-        for i, value in enumerate(robustness):
-            if i < past:
-                out.append(_Verdict(None, *before))
-            elif i >= len(stretch) - future:
-                out.append(_Verdict(None, *after))
-            else:
-                out.append(_Verdict(value))
-    return out
+            monitor = formula.monitor(signals.period_ns)
+        robustness[start:stop] = monitor({s: v[start:stop] for s, v in columns.items()})
+        length = stop - start
+        head = min(past, length)
+        if head:
+            kind[start : start + head] = len(kinds)
+            kinds.append(_boundary(signals, missing, start, before=True))
+        tail = min(future, length)
+        if tail:
+            kind[max(stop - tail, start + head) : stop] = len(kinds)
+            kinds.append(_boundary(signals, missing, stop - 1, before=False))
+    return _Verdicts(robustness, kind, kinds)
 
 
-def _stretches(formula: Formula, rows: list[SignalRow]) -> list[tuple[int, int]]:
-    """Row ranges ``[start, stop)`` of the stretches; a row missing a signal is its own
-    empty range ``(i, i)``."""
+def _stretches(signals: RobotSignals, missing: NDArray[np.bool_]) -> list[tuple[int, int]]:
+    """Row ranges ``[start, stop)`` of the stretches, in order; a row missing a signal is
+    its own empty range ``(i, i)``."""
+    n = len(signals)
+    cuts = set(signals.gaps)
+    lacking = np.flatnonzero(missing).tolist()
+    cuts.update(lacking)
+    cuts.update(i + 1 for i in lacking)
     out: list[tuple[int, int]] = []
+    lacks = set(lacking)
     start = 0
-    for i, row in enumerate(rows):
-        complete = all(s in row.signals for s in formula.signals)
-        if row.gap_before is not None or not complete:
-            if start < i:
-                out.append((start, i))
-            start = i
-        if not complete:
-            out.append((i, i))
-            start = i + 1
-    if start < len(rows):
-        out.append((start, len(rows)))
+    for cut in sorted(c for c in cuts if 0 < c <= n):
+        if start < cut:
+            out.append((start, cut) if start not in lacks else (start, start))
+        start = cut
+    if start < n:
+        out.append((start, n) if start not in lacks else (start, start))
     return out
 
 
 def _boundary(
-    rows: list[SignalRow], i: int, *, before: bool
-) -> tuple[UndecidedReason, str, Gap | None]:
+    signals: RobotSignals, missing: NDArray[np.bool_], i: int, *, before: bool
+) -> _Verdict:
     """What ends the stretch at row ``i``, on the side asked: a gap, a row without a signal,
     or the end of what the log holds."""
     if before:
-        gap = rows[i].gap_before
+        gap = signals.gaps.get(i)
         if gap is not None:
-            return UndecidedReason.GAP, _gap_detail(gap), gap
+            return _Verdict(UndecidedReason.GAP, _gap_detail(gap), gap)
         if i == 0:
-            return UndecidedReason.LOG_START, "the horizon reaches before the log's start", None
-        return UndecidedReason.MISSING_SIGNAL, f"cycle {rows[i - 1].cycle} lacks a signal", None
-    if i + 1 == len(rows):
-        return UndecidedReason.LOG_END, "the horizon reaches past the log's end", None
-    gap = rows[i + 1].gap_before
+            return _Verdict(UndecidedReason.LOG_START, "the horizon reaches before the log's start")
+        cycle = int(signals.cycles[i - 1])
+        return _Verdict(UndecidedReason.MISSING_SIGNAL, f"cycle {cycle} lacks a signal")
+    if i + 1 == len(signals):
+        return _Verdict(UndecidedReason.LOG_END, "the horizon reaches past the log's end")
+    gap = signals.gaps.get(i + 1)
     if gap is not None:
-        return UndecidedReason.GAP, _gap_detail(gap), gap
-    return UndecidedReason.MISSING_SIGNAL, f"cycle {rows[i + 1].cycle} lacks a signal", None
+        return _Verdict(UndecidedReason.GAP, _gap_detail(gap), gap)
+    cycle = int(signals.cycles[i + 1])
+    return _Verdict(UndecidedReason.MISSING_SIGNAL, f"cycle {cycle} lacks a signal")
 
 
 def _gap_detail(gap: Gap) -> str:
@@ -213,42 +295,36 @@ def _gap_detail(gap: Gap) -> str:
 
 
 def _violations(
-    rows: list[SignalRow],
-    verdicts: list[_Verdict],
-    judged: list[bool],
-    clock: LogClock,
-    robot: str,
+    signals: RobotSignals, verdicts: _Verdicts, decidable: NDArray[np.bool_]
 ) -> tuple[Violation, ...]:
     """Runs of consecutive judged rows (no gap between) with negative robustness."""
-    runs: list[list[int]] = []
-    for i, (row, v) in enumerate(zip(rows, verdicts, strict=True)):
-        bad = judged[i] and v.robustness is not None and v.robustness < 0
-        if not bad:
-            continue
-        if runs and runs[-1][-1] == i - 1 and row.gap_before is None:
-            runs[-1].append(i)
-        else:
-            runs.append([i])
+    bad = np.flatnonzero(decidable & (verdicts.robustness < 0))
+    if not len(bad):
+        return ()
+    gaps = signals.gaps
+    breaks = [k for k in range(1, len(bad)) if bad[k] != bad[k - 1] + 1 or int(bad[k]) in gaps]
     out: list[Violation] = []
-    for run in runs:
-        first, last = rows[run[0]], rows[run[-1]]
-        lowest = min(verdicts[i].robustness or 0.0 for i in run)
+    robot, clock = signals.robot, signals.clock
+    for lo, hi in zip([0, *breaks], [*breaks, len(bad)], strict=True):
+        first, last = int(bad[lo]), int(bad[hi - 1])
+        source, cycle = signals.sources[first], int(signals.cycles[first])
         explain = (
-            f"trace-audit explain {shlex.quote(first.source)} --cycle {first.cycle} "
+            f"trace-audit explain {shlex.quote(source)} --cycle {cycle} "
             f"--robot {shlex.quote(robot)}"
         )
+        first_ns, last_ns = int(signals.t_ns[first]), int(signals.t_ns[last])
         out.append(
             Violation(
                 robot,
-                first.t_ns,
-                last.t_ns,
-                clock.arg(first.t_ns),
-                clock.arg(last.t_ns),
-                first.cycle,
-                last.cycle,
-                len(run),
-                lowest,
-                first.command,
+                first_ns,
+                last_ns,
+                clock.arg(first_ns),
+                clock.arg(last_ns),
+                cycle,
+                int(signals.cycles[last]),
+                hi - lo,
+                float(verdicts.robustness[bad[lo:hi]].min()),
+                signals.commands[first],
                 explain,
             )
         )
@@ -256,17 +332,23 @@ def _violations(
 
 
 def _undecided(
-    rows: list[SignalRow], verdicts: list[_Verdict], judged: list[bool], clock: LogClock
+    signals: RobotSignals, verdicts: _Verdicts, judged: NDArray[np.bool_]
 ) -> tuple[Undecided, ...]:
     """Stretches of judged rows that cannot be judged, joined with the gap they touch; every
     gap inside the window is one (its cycles were never logged)."""
+    n = len(signals)
+    kind = verdicts.kind
+    rows = set(np.flatnonzero(judged & (kind >= 0)).tolist())
+    rows.update(i for i in signals.gaps if i < n)
     groups: list[tuple[_Verdict, list[int]]] = []
-    for i, (row, v) in enumerate(zip(rows, verdicts, strict=True)):
-        gap = row.gap_before if (judged[i] or (i and judged[i - 1])) else None
+    for i in sorted(rows):
+        gap_before = signals.gaps.get(i)
+        gap = gap_before if (judged[i] or (i and judged[i - 1])) else None
         if gap is not None and not (groups and groups[-1][0].gap is gap):
-            groups.append((_Verdict(None, UndecidedReason.GAP, _gap_detail(gap), gap), []))
-        if not judged[i] or v.reason is None:
+            groups.append((_Verdict(UndecidedReason.GAP, _gap_detail(gap), gap), []))
+        if not judged[i] or kind[i] < 0:
             continue
+        v = verdicts.kinds[kind[i]]
         last = groups[-1] if groups else None
         if (
             last is not None
@@ -277,17 +359,17 @@ def _undecided(
             last[1].append(i)
         else:
             groups.append((v, [i]))
-    return tuple(_stretch(rows, v, members, clock) for v, members in groups)
+    return tuple(_stretch(signals, v, members) for v, members in groups)
 
 
-def _stretch(rows: list[SignalRow], v: _Verdict, members: list[int], clock: LogClock) -> Undecided:
-    times = [rows[i].t_ns for i in members]
-    cycles = [rows[i].cycle for i in members]
+def _stretch(signals: RobotSignals, v: _Verdict, members: list[int]) -> Undecided:
+    times = signals.t_ns[members].tolist() if members else []
+    cycles = signals.cycles[members].tolist() if members else []
     gap = v.gap
     if gap is not None:  # the gap's own, unlogged, cycles belong to the stretch
         times += [gap.after_t_ns + gap.period_ns, gap.before_t_ns - gap.period_ns]
         cycles += [gap.after_cycle + 1, gap.before_cycle - 1]
-    assert v.reason is not None
+    clock = signals.clock
     return Undecided(
         v.reason,
         v.detail,

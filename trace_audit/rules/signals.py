@@ -135,23 +135,31 @@ def _channel(execution: Mapping[str, Any], name: str, part: str) -> float | None
     actual = as_mapping(execution.get("actual"))
     if intended is None and actual is None:
         return None  # not a planar record
-    return planar_speed(
-        part,
-        as_float(intended.get("linear")) if intended is not None else None,
-        as_float(actual.get("linear")) if actual is not None else None,
-    )
-
-
-def planar_speed(part: str, intended: float | None, actual: float | None) -> float | None:
-    """``channel.speed.<part>`` of a planar record whose linear motion was ``intended`` and
-    ``actual`` (m/s, signed as logged): the speeds as magnitudes, the deviation
-    ``|actual - intended|``. The one rule for the logs and the fleet index."""
-    if part == "intended":
-        return abs(intended) if intended is not None else None
-    if part == "actual":
-        return abs(actual) if actual is not None else None
-    if part != "deviation" or intended is None or actual is None:
+    if part not in _CHANNEL_PARTS:
         return None
+    value = planar_speed(
+        part,
+        _linear(intended),
+        _linear(actual),
+    )
+    return None if math.isnan(value) else value
+
+
+def _linear(motion: Mapping[str, Any] | None) -> float:
+    value = as_float(motion.get("linear")) if motion is not None else None
+    return math.nan if value is None else value
+
+
+def planar_speed(part: str, intended: Any, actual: Any) -> Any:
+    """``channel.speed.<part>`` (``intended``, ``actual`` or ``deviation``) of a planar
+    record whose linear motion was ``intended`` and ``actual`` (m/s, signed as logged, NaN
+    when not logged): the speeds as magnitudes, the deviation ``|actual - intended|``; NaN
+    when what it needs is not logged. Elementwise over numpy columns too: the one rule for
+    a log's cycles and the fleet index's rows."""
+    if part == "intended":
+        return abs(intended)
+    if part == "actual":
+        return abs(actual)
     return abs(actual - intended)
 
 

@@ -30,6 +30,7 @@ stretch = st.integers(min_value=1, max_value=30).flatmap(
 @settings(max_examples=25, deadline=None)
 @given(st.lists(stretch, min_size=1, max_size=6))
 def test_a_reused_monitor_answers_each_stretch_as_a_fresh_one(stretches: list) -> None:
-    monitor = FORMULA.monitor(PERIOD_NS)
-    for columns in stretches:
-        assert monitor(columns) == FORMULA.evaluate(columns, PERIOD_NS)
+    for engine in ("rtamt", "auto"):
+        monitor = FORMULA.monitor(PERIOD_NS, engine=engine)
+        for columns in stretches:
+            assert monitor(columns).tolist() == FORMULA.evaluate(columns, PERIOD_NS, engine=engine)

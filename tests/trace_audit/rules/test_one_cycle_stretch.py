@@ -48,4 +48,4 @@ def test_an_rtamt_failure_is_one_line_not_a_traceback(monkeypatch: pytest.Monkey
 
     monkeypatch.setattr(module.Formula, "_spec", lambda self, period_ns: Boom())
     with pytest.raises(RulesError, match=r"rule 'r'.*rtamt"):
-        formula.evaluate({"channel.speed.actual": [1.0, 2.0]}, PERIOD_NS)
+        formula.evaluate({"channel.speed.actual": [1.0, 2.0]}, PERIOD_NS, engine="rtamt")
