@@ -60,6 +60,9 @@ __all__ = [
     "FoxgloveMessage",
     "FoxgloveView",
     "export_foxglove",
+    "logged_schema",
+    "require_sdk",
+    "view_channels",
 ]
 
 TOPIC_SCENE = "/foxglove/scene"
@@ -113,7 +116,7 @@ def export_foxglove(
     target = Path(out)
     if target.exists():
         raise StorageError(str(target), "exists; the export never overwrites a file")
-    _sdk()
+    require_sdk()
     cycles = list(log.iter_cycles(*window))
     if not cycles:
         raise UsageError("no cycle of the log falls in the window")
@@ -129,7 +132,8 @@ def export_foxglove(
     return writer.result(str(target), log.first_robot)
 
 
-def _sdk() -> Any:
+def require_sdk() -> Any:
+    """The ``foxglove`` package (the SDK); ``UsageError`` naming the extra when missing."""
     try:
         import foxglove
         import foxglove.channels
@@ -166,7 +170,7 @@ class FoxgloveView:
     over a whole export or a live tail alike."""
 
     def __init__(self, robot: str) -> None:
-        self.fox = _sdk()
+        self.fox = require_sdk()
         self.m = self.fox.messages
         self.robot = robot
         self.sensors = SensorWindow(DEFAULT_SENSOR_WINDOW)
@@ -203,19 +207,12 @@ class FoxgloveView:
             out.append(_json(TOPIC_ACTUATORS, channels, cycle.t_ns))
         return out
 
-    def channels(self) -> list[tuple[str, tuple[str, str, bytes], str]]:
-        """Every channel the view may write: (topic, schema, message encoding), so a live
-        sink can advertise them all before the first message."""
-        m = self.m
-        typed = [
-            (TOPIC_SCENE, m.SceneUpdate),
-            (TOPIC_ROBOT_POSE, m.PoseInFrame),
-            (TOPIC_DECISIONS, m.Log),
-        ]
-        found = [(topic, self._schema(kind), "protobuf") for topic, kind in typed]
-        for topic in (TOPIC_FACTORS, TOPIC_ACTUATORS):
-            found.append((topic, _json_schema(topic), "json"))
-        return found
+    def skip(self, cycle: Cycle) -> None:
+        """Pass over a cycle no one is shown (a live view without a client): what the next
+        cycles need is remembered (the command, the sensor window), nothing is built."""
+        self.cycles += 1
+        self.sensors.push(cycle.sensors)
+        self.command = command_of(cycle)
 
     def _schema(self, kind: type) -> tuple[str, str, bytes]:
         schema = self._schemas.get(kind)
@@ -357,6 +354,24 @@ class FoxgloveView:
         )
 
 
+def view_channels() -> list[tuple[str, tuple[str, str, bytes], str]]:
+    """Every channel the view may write: (topic, schema, message encoding), so a live sink
+    can advertise them all before the first message."""
+    m = require_sdk().messages
+    typed = [
+        (TOPIC_SCENE, m.SceneUpdate),
+        (TOPIC_ROBOT_POSE, m.PoseInFrame),
+        (TOPIC_DECISIONS, m.Log),
+    ]
+    found = []
+    for topic, kind in typed:
+        sdk = kind.get_schema()
+        found.append((topic, (sdk.name, sdk.encoding, bytes(sdk.data)), "protobuf"))
+    for topic in (TOPIC_FACTORS, TOPIC_ACTUATORS):
+        found.append((topic, _json_schema(topic), "json"))
+    return found
+
+
 def _json_schema(topic: str) -> tuple[str, str, bytes]:
     return topic.rsplit("/", 1)[-1], "jsonschema", orjson.dumps(_NUMBERS_SCHEMA)
 
@@ -418,14 +433,14 @@ class _Writer:
     def _copy(self, cycle: Cycle) -> None:
         """The cycle's sensor readings and layer messages, their bytes as logged."""
         for msg in cycle.sensors:
-            channel = self._channel(msg.topic, _logged_schema(msg.topic), "json")
+            channel = self._channel(msg.topic, logged_schema(msg.topic), "json")
             self.mcap.add_message(channel, msg.log_time_ns, msg.data, msg.log_time_ns, msg.sequence)
             self.sensor_messages += 1
         seal = cycle.payloads.get(TOPIC_SEAL)
         layers = [(t, d) for t, d in cycle.payloads.items() if t != TOPIC_SEAL]
         # the seal closes its cycle, after every layer it covers
         for topic, data in [*layers, *([(TOPIC_SEAL, seal)] if seal is not None else [])]:
-            channel = self._channel(topic, _logged_schema(topic), "json")
+            channel = self._channel(topic, logged_schema(topic), "json")
             self.mcap.add_message(channel, cycle.t_ns, data, cycle.t_ns, cycle.cycle)
             self.trace_messages += 1
 
@@ -450,7 +465,7 @@ class _Writer:
         )
 
 
-def _logged_schema(topic: str) -> tuple[str, str, bytes]:
+def logged_schema(topic: str) -> tuple[str, str, bytes]:
     """The schema the logger gives a topic (``trace_runtime.schemas``): the export's TRACE
     channels are the hot tier's, whatever tier the log was read from."""
     name = schema_name(topic) if topic.startswith("/trace/") else SENSOR_SCHEMA_NAME

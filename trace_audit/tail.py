@@ -20,7 +20,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
@@ -157,6 +157,7 @@ class _Robot:
     seen_any: bool = False
     gaps: GapFinder = field(default_factory=GapFinder)
     """The one gap rule, remembering this robot's last sealed cycle (across rotations)."""
+    on_cycle: Callable[[str, Cycle], None] | None = None
 
 
 class _QuietRecovered(logging.Filter):
@@ -175,10 +176,13 @@ def tail(
     follow: bool = False,
     poll_s: float = DEFAULT_POLL_S,
     stop: threading.Event | None = None,
+    on_cycle: Callable[[str, Cycle], None] | None = None,
 ) -> Iterator[TailEvent]:
     """Each robot's decision changes from its newest segment on, as ``SegmentState`` and
     ``DecisionChange`` events; with ``follow``, polling every ``poll_s`` for what is new
-    until ``stop`` is set (without, once through what is written so far).
+    until ``stop`` is set (without, once through what is written so far). ``on_cycle`` is
+    given every sealed cycle read, with its robot, before the events it makes (the live
+    Foxglove view, ``foxglove_live``, shows each one).
 
     ``robots`` selects robots (``selection.Selection``; one not in the log is a
     ``UsageError``); none follows every robot, including robots that start logging later."""
@@ -197,7 +201,7 @@ def tail(
         while True:
             began = time.monotonic()
             for name, numbered in _newest_segments(path, chosen).items():
-                robot = state.setdefault(name, _Robot(name))
+                robot = state.setdefault(name, _Robot(name, on_cycle=on_cycle))
                 yield from _read_robot(robot, numbered)
             # A pass reads only what was appended; still, never poll faster than a pass
             # takes (a burst of appended chunks, a slow disk): at most half a core.
@@ -334,6 +338,8 @@ def _changes(
             if robot.clock is None:
                 robot.clock = LogClock(reader.session.clock, reader.start_ns or cycle.t_ns)
         robot.last_cycle, robot.last_t_ns = cycle.cycle, cycle.t_ns
+        if robot.on_cycle is not None:
+            robot.on_cycle(robot.name, cycle)
         stamp = SealedStamp(cycle.cycle, cycle.t_ns, period_ns, seal_dropped(cycle))
         gap = robot.gaps.step(robot.name, stamp)
         if gap is not None:

@@ -191,7 +191,7 @@ FLOORS: dict[str, list[set[str]]] = {
         {"metrics", "explain", "export", "timeline", "info", "verify", "doctor", "layers", "rules"}
         | {"tail"},
         # what is built from the answers: the fleet index, the incident report, the Foxglove view
-        {"fleet", "report", "foxglove"},
+        {"fleet", "report", "foxglove", "foxglove_live"},
         {"cli"},
         {""},
     ],

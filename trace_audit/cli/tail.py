@@ -20,6 +20,7 @@ from trace_audit.cli.options import JsonOption, PlainOption, RobotsOption
 if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
     from collections.abc import Sequence
 
+    from trace_audit.foxglove_live import LiveView
     from trace_audit.tail import TailEvent
 
 __all__ = ["event_json", "event_line", "tail_command"]
@@ -31,18 +32,28 @@ cycle whose command differs from the robot's previous cycle's: its time, the cha
 leading factor and the rationale. A segment being written is shown as live (its writer holds
 its lock), one whose writer died as recovered. --follow keeps watching, following the logger
 to its next segment when it rotates, until Ctrl-C; without it, tail prints the changes
-written so far and exits. --json prints one JSON object a line.
+written so far and exits. --json prints one JSON object a line. Each poll reads only what
+the logger appended since the last one.
+
+--foxglove also serves the robot live to Foxglove (the export's channels: scene, pose,
+decision changes, factor and actuator plots, the /trace and sensor channels) over the
+Foxglove WebSocket protocol, on 127.0.0.1 (--host) and port 8765 (--port; 0: any free port),
+and prints the address on stderr; in Foxglove, Open connection, Foxglove WebSocket, that
+address. It implies --follow and shows one robot (--robot, or the root's only one); it needs
+the look extra. docs/foxglove.md.
 
 [bold]Examples[/bold]:
 
   trace-audit tail logs/ --follow
 
   trace-audit tail logs/ --robot amr-7 --follow --json
+
+  trace-audit tail logs/ --robot amr-7 --foxglove --port 8765
 """
 
 
 @app.command("tail", help=help_text(_TAIL_HELP))
-def tail_command(
+def tail_command(  # noqa: PLR0917 - typer maps each parameter to an option
     root: Annotated[
         Path,
         typer.Argument(help="A log root (the folder a robot logs into).", show_default=False),
@@ -53,25 +64,53 @@ def tail_command(
     robot: RobotsOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,  # the lines are plain text already; accepted like elsewhere
+    foxglove: Annotated[
+        bool,
+        typer.Option(
+            "--foxglove",
+            help="Also serve the robot live to Foxglove over WebSocket (implies --follow).",
+        ),
+    ] = False,
+    host: Annotated[
+        str, typer.Option("--host", help="--foxglove: the address to listen on.")
+    ] = "127.0.0.1",
+    port: Annotated[
+        int,
+        typer.Option("--port", min=0, max=65535, help="--foxglove: the port (0: any free one)."),
+    ] = 8765,
 ) -> None:
-    guarded(lambda: _run(root, robot or (), follow=follow, json_out=json_out))
+    live = (host, port) if foxglove else None
+    guarded(lambda: _run(root, robot or (), follow=follow, json_out=json_out, live=live))
 
 
-def _run(root: Path, robots: Sequence[str], *, follow: bool, json_out: bool) -> None:
+def _run(
+    root: Path,
+    robots: Sequence[str],
+    *,
+    follow: bool,
+    json_out: bool,
+    live: tuple[str, int] | None = None,
+) -> None:
     """Print each event as it comes; SIGINT sets the stop flag the poll waits on, so the
-    loop ends between reads, never with a traceback."""
+    loop ends between reads, never with a traceback. ``live``: (host, port) of the Foxglove
+    view to serve while following."""
     import threading
 
     from trace_audit.tail import tail
 
+    view = None
+    if live is not None:
+        view = _serve(root, tuple(robots), *live)
+        follow = True
     stop = threading.Event()
 
     def interrupted(_signum: int, _frame: Any) -> None:
         stop.set()
 
     previous = signal.signal(signal.SIGINT, interrupted)
+    on_cycle = view.cycle if view is not None else None
     try:
-        for event in tail(root, robots=robots, follow=follow, stop=stop):
+        for event in tail(root, robots=robots, follow=follow, stop=stop, on_cycle=on_cycle):
             if stop.is_set():
                 break
             _print(event_json(event) if json_out else event_line(event), json_out=json_out)
@@ -79,6 +118,27 @@ def _run(root: Path, robots: Sequence[str], *, follow: bool, json_out: bool) -> 
         sys.stderr.close()
     finally:
         signal.signal(signal.SIGINT, previous)
+        if view is not None:
+            view.close()
+
+
+def _serve(root: Path, robots: tuple[str, ...], host: str, port: int) -> LiveView:
+    """Start the live Foxglove view (the root checked first, as tail checks it) and say on
+    stderr where it listens."""
+    from trace_audit.foxglove_live import LiveView, live_robot
+    from trace_runtime.errors import LogReadError
+
+    if not root.exists():
+        raise LogReadError(str(root), "no such file or directory")
+    robot = live_robot(root, robots) if root.is_dir() else None
+    view = LiveView(robot=robot, host=host, port=port)
+    shown = robot or "the first robot to log"
+    sys.stderr.write(
+        f"trace-audit: Foxglove live view of {shown} on {view.url} "
+        "(Foxglove: Open connection, Foxglove WebSocket)\n"
+    )
+    sys.stderr.flush()
+    return view
 
 
 def _print(value: Any, *, json_out: bool) -> None:
