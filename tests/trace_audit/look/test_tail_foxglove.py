@@ -177,3 +177,15 @@ def test_a_taken_port_is_a_usage_error_in_one_line(tmp_path: Path) -> None:
             err.reader.join(10)
     assert second.returncode == 2, second.stderr
     assert second.stderr.count("\n") == 1 and "Address already in use" in second.stderr
+
+
+def test_a_root_of_several_robots_needs_robot_for_the_live_view(tmp_path: Path) -> None:
+    from tests.outside import cli
+    from tests.trace_audit.conftest import write_log
+
+    root = tmp_path / "root"
+    write_log(root, robot_id="amr-1")
+    write_log(root, robot_id="amr-2")
+    done = cli("tail", root, "--foxglove", "--port", "0")
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count("\n") == 1 and "choose one with --robot" in done.stderr
