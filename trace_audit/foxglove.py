@@ -117,11 +117,13 @@ def export_foxglove(
     if target.exists():
         raise StorageError(str(target), "exists; the export never overwrites a file")
     require_sdk()
-    cycles = list(log.iter_cycles(*window))
-    if not cycles:
+    cycles = log.iter_cycles(*window)  # one cycle at a time: an hour's export stays small
+    first = next(cycles, None)
+    if first is None:
         raise UsageError("no cycle of the log falls in the window")
-    writer = _Writer(target, log, cycles[0])
+    writer = _Writer(target, log, first)
     try:
+        writer.cycle(first)
         for cycle in cycles:
             writer.cycle(cycle)
     except BaseException:
