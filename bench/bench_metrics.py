@@ -1,6 +1,7 @@
 """Metrics benchmark: ``trace-audit metrics`` against a bare ``mcap`` read + orjson parse.
 
     .venv/bin/python bench/bench_metrics.py [--hours 2] [--repeats 5] [--log DIR]
+        [--anchor all|trace] [--vs TREE] [--no-jobs]
 
 Budgets (DESIGN.md): metrics >= 2x a bare read + JSON parse of the same log; linear in
 workers up to the cores available (2 workers >= 1.7x one on a multi-segment root).
@@ -13,9 +14,14 @@ Every variant runs as a whole process (interpreter start, imports, opening the l
 as a user runs it, in rounds so that a load change on a shared machine hits all alike:
 
 1. anchor: the ``mcap`` library's reader over every segment file, ``orjson.loads`` of every
-   message (layers, seals and sensor readings): naively parsing everything;
+   message (layers, seals and sensor readings): naively parsing everything; with
+   ``--anchor trace``, of every ``/trace`` message only: the shared anchor of
+   ``../shared/bench/perf_ratio.py`` (what any metrics implementation must parse);
 2. ``trace-audit metrics ROOT --json``: one process;
-3. ``trace-audit metrics ROOT --json --jobs 2``: segments spread over two processes.
+3. ``trace-audit metrics ROOT --json --jobs 2``: segments spread over two processes
+   (left out with ``--no-jobs``);
+4. with ``--vs TREE``: the same one-process ``metrics`` from another checkout (``git
+   archive REV | tar -x -C TREE``), so a change is measured against its parent in one run.
 
 Reported: medians of wall time and of CPU time (the process and its children), cycles/s,
 and the ratios metrics / anchor (CPU, and wall) and 2 workers / 1 (wall). CPU ratios are
@@ -55,6 +61,17 @@ for path in sorted(Path(sys.argv[1]).rglob("*.mcap")):
 print(cycles)
 """
 
+TRACE_ANCHOR = """
+import glob, sys, orjson
+from mcap.reader import make_reader
+n = 0
+for p in sorted(glob.glob(sys.argv[1] + "/*/*.mcap")):
+    with open(p, "rb") as f:
+        for _, c, m in make_reader(f).iter_messages():
+            if c.topic.startswith("/trace/"):
+                orjson.loads(m.data); n += 1
+"""
+
 METRICS = "import sys; from trace_audit.cli import main; sys.exit(main())"
 
 
@@ -82,6 +99,7 @@ class Variant:
     argv: list[str]
     walls: list[float]
     cpus: list[float]
+    tree: Path = REPO
 
     def median_wall(self) -> float:
         return statistics.median(self.walls)
@@ -97,9 +115,9 @@ def _children_cpu() -> float:
 
 def measure(variant: Variant) -> None:
     """Run the variant's process once; record its wall and CPU seconds."""
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    env = {**os.environ, "PYTHONPATH": str(variant.tree)}
     cpu, wall = _children_cpu(), time.perf_counter()
-    subprocess.run(variant.argv, check=True, stdout=subprocess.DEVNULL, env=env, cwd=REPO)
+    subprocess.run(variant.argv, check=True, stdout=subprocess.DEVNULL, env=env, cwd=variant.tree)
     variant.walls.append(time.perf_counter() - wall)
     variant.cpus.append(_children_cpu() - cpu)
 
@@ -114,22 +132,37 @@ def main() -> int:
         default=Path("/tmp/trace-bench-metrics"),
         help="where the sim log root is built and kept",
     )
+    parser.add_argument(
+        "--anchor",
+        choices=("all", "trace"),
+        default="all",
+        help="parse every message (all, default) or every /trace message (trace: the "
+        "shared anchor of ../shared/bench/perf_ratio.py)",
+    )
+    parser.add_argument(
+        "--vs", type=Path, help="another checkout whose one-process metrics run beside ours"
+    )
+    parser.add_argument("--no-jobs", action="store_true", help="leave out the --jobs 2 run")
     args = parser.parse_args()
 
     root = args.log / f"{args.hours:g}h"
     cycles = build_log(root, args.hours)
     segments = sorted(root.rglob("*.mcap"))
     py = sys.executable
+    anchor_code, anchor_label = (
+        (TRACE_ANCHOR, "anchor: mcap reader + orjson, /trace msgs")
+        if args.anchor == "trace"
+        else (ANCHOR, "anchor: mcap reader + orjson, all msgs")
+    )
+    one_process = [py, "-c", METRICS, "metrics", str(root), "--json"]
     variants = [
-        Variant("anchor: mcap reader + orjson, all msgs", [py, "-c", ANCHOR, str(root)], [], []),
-        Variant("metrics, 1 process", [py, "-c", METRICS, "metrics", str(root), "--json"], [], []),
-        Variant(
-            "metrics --jobs 2",
-            [py, "-c", METRICS, "metrics", str(root), "--json", "--jobs", "2"],
-            [],
-            [],
-        ),
+        Variant(anchor_label, [py, "-c", anchor_code, str(root)], [], []),
+        Variant("metrics, 1 process", one_process, [], []),
     ]
+    if not args.no_jobs:
+        variants.append(Variant("metrics --jobs 2", [*one_process, "--jobs", "2"], [], []))
+    if args.vs is not None:
+        variants.append(Variant(f"vs: metrics of {args.vs}", one_process, [], [], args.vs))
     print(
         f"log: {root} ({cycles} cycles, {len(segments)} segments, "
         f"{sum(p.stat().st_size for p in segments) / 1e6:.1f} MB); "
@@ -139,7 +172,8 @@ def main() -> int:
     loads = []
     for round_no in range(args.repeats):
         # Rotate the order each round: no variant always runs first or after the same one.
-        for variant in variants[round_no % 3 :] + variants[: round_no % 3]:
+        turn = round_no % len(variants)
+        for variant in variants[turn:] + variants[:turn]:
             measure(variant)
         loads.append(os.getloadavg()[0])
         print(
@@ -156,12 +190,23 @@ def main() -> int:
             f"{v.label:<42} {v.median_wall():>7.2f} {v.median_cpu():>7.2f}"
             f" {cycles / v.median_wall():>14,.0f} {cycles / v.median_cpu():>13,.0f}"
         )
-    anchor, one, two = variants
+    anchor, one = variants[0], variants[1]
     print()
     print(
         f"metrics / anchor, 1 process:  cpu {anchor.median_cpu() / one.median_cpu():.2f}x, "
-        f"wall {anchor.median_wall() / one.median_wall():.2f}x   (budget >= 2x)"
+        f"wall {anchor.median_wall() / one.median_wall():.2f}x   (budget >= 2x; "
+        f"load average {statistics.median(loads):.2f})"
     )
+    if args.vs is not None:
+        other = variants[-1]
+        print(
+            f"{args.vs} / anchor:  cpu {anchor.median_cpu() / other.median_cpu():.2f}x, "
+            f"wall {anchor.median_wall() / other.median_wall():.2f}x; ours / theirs, cpu "
+            f"{other.median_cpu() / one.median_cpu():.2f}x faster"
+        )
+    if args.no_jobs:
+        return 0
+    two = variants[2]
     print(
         f"2 workers / 1, wall:          {one.median_wall() / two.median_wall():.2f}x over "
         f"{len(segments)} segments   (budget >= 1.7x; "
