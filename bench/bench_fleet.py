@@ -206,11 +206,29 @@ def synthesize(real: Path, out: Path, robot_days: int) -> int:
                 f"COPY (SELECT {columns} FROM {source}, range({per_day}) h(h) "
                 f"ORDER BY h.h, b.i) TO '{target}' (FORMAT parquet, COMPRESSION zstd)"
             )
+        # One segments row a robot, the real first one's with this robot's names and times:
+        # what a reader of the segments table (check --index: period, start) needs.
+        target = out / "segments" / f"robot={robot}" / f"day={day}" / "synthetic.parquet"
+        target.parent.mkdir(parents=True, exist_ok=True)
+        renamed = {
+            "segment": f"'{robot}_000000.mcap'",
+            "segment_path": f"'/fleet/{robot}/hot/{robot}_000000.mcap'",
+            "start_ns": str(day0_ns),
+            "end_ns": str(day0_ns + (block * per_day - 1) * 100_000_000),
+            "first_cycle": "0",
+            "last_cycle": str(block * per_day - 1),
+            "cycles": str(block * per_day),
+        }
+        columns = ", ".join(f"{renamed.get(c, c)} AS {c}" for c in schema("segments").names)
+        con.execute(
+            f"COPY (SELECT {columns} FROM (SELECT * FROM segments ORDER BY robot, number "
+            f"LIMIT 1)) TO '{target}' (FORMAT parquet, COMPRESSION zstd)"
+        )
         written += block * per_day
         segments[f"{robot}/synthetic"] = {
             "files": [  # the views read the files a manifest lists
                 f"{table}/robot={robot}/day={day}/synthetic.parquet"
-                for table in ("decisions", "entities")
+                for table in ("decisions", "entities", "segments")
             ],
             "decisions": block * per_day,
         }

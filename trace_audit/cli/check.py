@@ -10,9 +10,9 @@ bounded ``run_query``) and renders the typed result: rich on a terminal, plain t
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Sequence
 from concurrent.futures import Executor
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -182,15 +182,19 @@ def _check_index(
             f"the index was built with gap_tolerance {built}, not the rules' "
             f"{DEFAULT_GAP_TOLERANCE}: its gaps are not the rules' (rebuild it)"
         )
-    return check_index(
-        IndexRows(str(index.absolute()), limits),  # absolute: the workers' directory may differ
-        rules,
-        robots=tuple(robots),
-        by=by,
-        index=str(index),
-        rules_file=str(rules_path),
-        executor=executor,
-    )
+    rows = IndexRows(str(index.absolute()), limits)  # absolute: workers' directory may differ
+    try:
+        return check_index(
+            rows,
+            rules,
+            robots=tuple(robots),
+            by=by,
+            index=str(index),
+            rules_file=str(rules_path),
+            executor=executor,
+        )
+    finally:
+        rows.close()
 
 
 def check_json(result: CheckResult) -> Any:
@@ -211,18 +215,39 @@ def _finite(value: Any) -> Any:
     return value
 
 
-@dataclass(frozen=True, slots=True)
 class IndexRows:
-    """The rules' query function over one index: the fleet's bounded ``run_query``; a
-    plain object, so that it travels to a Dask worker (``--scheduler``)."""
+    """The rules' query function over one index: the fleet's bounded, confined
+    ``ColumnSession``, one a thread, opened on first use. It pickles as the index's path
+    and bounds alone, so that it travels to a Dask worker (``--scheduler``), which opens
+    its own."""
 
-    index: str
-    limits: QueryLimits
+    def __init__(self, index: str, limits: QueryLimits) -> None:
+        self.index = index
+        self.limits = limits
+        self._local = threading.local()
 
     def __call__(self, sql: str, params: Sequence[Any]) -> dict[str, Any]:
-        from trace_audit.fleet import query_columns
+        session = getattr(self._local, "session", None)
+        if session is None:
+            from trace_audit.fleet import ColumnSession
 
-        return query_columns(self.index, sql, params, limits=self.limits)
+            session = self._local.session = ColumnSession(self.index, self.limits)
+        columns: dict[str, Any] = session(sql, params)
+        return columns
+
+    def close(self) -> None:
+        """Close this thread's session (the others close with their threads' process)."""
+        session = getattr(self._local, "session", None)
+        if session is not None:
+            session.close()
+            self._local.session = None
+
+    def __getstate__(self) -> tuple[str, QueryLimits]:
+        return self.index, self.limits
+
+    def __setstate__(self, state: tuple[str, QueryLimits]) -> None:
+        self.index, self.limits = state
+        self._local = threading.local()
 
 
 _STYLE = {"satisfied": "green", "violated": "bold red", "not_decidable": "yellow"}

@@ -12,7 +12,7 @@ from trace_runtime.lazy import lazy_exports
 _EXPORTS = {
     "build_index": "trace_audit.fleet.index",
     "IndexReport": "trace_audit.fleet.index",
-    "query_columns": "trace_audit.fleet.query",
+    "ColumnSession": "trace_audit.fleet.query",
     "run_query": "trace_audit.fleet.query",
     "find_decisions": "trace_audit.fleet.query",
     "index_robots": "trace_audit.fleet.query",
@@ -23,6 +23,7 @@ _EXPORTS = {
 }
 
 __all__ = [
+    "ColumnSession",
     "IndexReport",
     "QueryResult",
     "build_index",
@@ -30,7 +31,6 @@ __all__ = [
     "find_decisions",
     "index_metrics",
     "index_robots",
-    "query_columns",
     "run_query",
 ]
 
@@ -38,11 +38,11 @@ if TYPE_CHECKING:
     from trace_audit.fleet.cluster import dask_executor
     from trace_audit.fleet.index import IndexReport, build_index
     from trace_audit.fleet.query import (
+        ColumnSession,
         QueryResult,
         find_decisions,
         index_metrics,
         index_robots,
-        query_columns,
         run_query,
     )
 

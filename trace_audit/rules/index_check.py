@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from trace_audit.log_time import LogClock
 from trace_audit.rules.formula import RulesError
-from trace_audit.rules.judge import RobotSignals, judge_groups, judge_robot
+from trace_audit.rules.judge import Labels, RobotSignals, judge_groups, judge_robot
 from trace_audit.rules.results import CheckResult, GroupRules, RobotRules
 from trace_audit.rules.rulebook import Rule
 from trace_audit.rules.signals import command_signal, planar_speed
@@ -120,23 +120,40 @@ def robot_signals(query: IndexQuery, robot: str, rules: Sequence[Rule]) -> Robot
     channels, logged = _channels(query, robot, names)
     planar = "speed" not in logged and any(n.startswith("channel.speed.") for n in names)
     checks = _checks(query, robot, names)
+    texts = {
+        column: [
+            str(v)
+            for v in query(
+                f"SELECT DISTINCT {column} AS v FROM decisions WHERE robot = ? ORDER BY v",
+                [robot],
+            )["v"].tolist()
+            if v is not None
+        ]
+        for column in ("segment", "command", "day")
+    }
     exprs, params = _decision_columns(names, planar)
     data = query(
-        f"SELECT {', '.join(exprs)} FROM decisions d LEFT JOIN ({_GAPS}) g "
+        f"SELECT {', '.join(exprs)}, "
+        + ", ".join(f"coalesce(list_position(?::VARCHAR[], d.{c}), 0) AS {c}_code" for c in texts)
+        + f" FROM decisions d LEFT JOIN ({_GAPS}) g "
         "ON g.segment = d.segment AND g.before_cycle = d.cycle AND g.before_t_ns = d.t_ns "
         f"WHERE d.robot = ? ORDER BY {_RUN_ORDER}, d.t_ns, d.cycle",
-        [*params, robot, robot],
+        [*params, *texts.values(), robot, robot],
     )
+    labels = {  # code 0: NULL (a command not logged)
+        c: Labels(np.asarray(data[f"{c}_code"], dtype=np.int64), (None, *names_))
+        for c, names_ in texts.items()
+    }
     n = len(data["cycle"])
     cycles = np.asarray(data["cycle"], dtype=np.int64)
     t_ns = np.asarray(data["t_ns"], dtype=np.int64)
-    segment = data["segment"]
+    segment = labels["segment"]
     keys = (segment, cycles, t_ns)
     values: dict[str, NDArray[np.float64]] = {}
     for name in names:
         family, _, rest = name.partition(".")
         if family == "command":
-            values[name] = _indicator(data["command"], rest)
+            values[name] = _indicator(labels["command"], rest)
         elif family in ("nearest", "flag"):
             values[name] = np.asarray(data[name], dtype=np.float64)
         elif family == "factor":
@@ -154,12 +171,12 @@ def robot_signals(query: IndexQuery, robot: str, rules: Sequence[Rule]) -> Robot
         clock,
         cycles,
         t_ns,
-        data["command"].tolist(),
+        labels["command"],
         values,
         np.ones(n, dtype=np.bool_),
-        [paths.get(str(s), str(s)) for s in segment.tolist()],
+        Labels(segment.codes, tuple(s and paths.get(s, s) for s in segment.names)),
         _gaps(robot, data),
-        data["day"].tolist(),
+        labels["day"],
     )
 
 
@@ -187,7 +204,7 @@ def _decision_columns(names: Sequence[str], planar: bool) -> tuple[list[str], li
     whether ``flags`` holds it (0/1), both taken out by DuckDB under the signal's name; the
     factors whole (a factor is found by node or name); ``planar``: the linear motion too;
     the gap before the row (NULL ``after_cycle``: none)."""
-    exprs = ["d.day", "d.segment", "d.cycle", "d.t_ns", "d.command"]
+    exprs = ["d.cycle", "d.t_ns"]
     params: list[Any] = []
     for name in names:
         family, _, rest = name.partition(".")
@@ -217,14 +234,11 @@ _GAP_COLUMNS = (
 )
 
 
-def _indicator(commands: Any, action: str) -> NDArray[np.float64]:
+def _indicator(commands: Labels, action: str) -> NDArray[np.float64]:
     """``command.<action>`` at each row (NaN: no command logged), by ``command_signal``."""
-    out = np.full(len(commands), np.nan)
-    for command in set(commands.tolist()):
-        value = command_signal(None if command is None else str(command), action)
-        if value is not None:
-            out[commands == command] = value
-    return out
+    per_code = [command_signal(c, action) for c in commands.names]
+    table = np.array([np.nan if v is None else v for v in per_code], dtype=np.float64)
+    return table[commands.codes]
 
 
 def _planar(part: str, intended: Any, actual: Any) -> NDArray[np.float64]:
@@ -249,7 +263,7 @@ def _factor_values(factors: Any, wanted: str) -> NDArray[np.float64]:
 
 def _by_key(
     found: Mapping[tuple[str, int, int, str], float],
-    keys: tuple[Any, NDArray[np.int64], NDArray[np.int64]],
+    keys: tuple[Labels, NDArray[np.int64], NDArray[np.int64]],
     name: str,
     n: int,
 ) -> NDArray[np.float64]:
@@ -257,9 +271,10 @@ def _by_key(
     out = np.full(n, np.nan)
     if not found:
         return out
-    segment, cycles, t_ns = (k.tolist() for k in keys)
+    segments, codes = keys[0].names, keys[0].codes.tolist()
+    cycles, t_ns = keys[1].tolist(), keys[2].tolist()
     for row in range(n):
-        value = found.get((segment[row], cycles[row], t_ns[row], name))
+        value = found.get((str(segments[codes[row]]), cycles[row], t_ns[row], name))
         if value is not None:
             out[row] = value
     return out

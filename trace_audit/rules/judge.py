@@ -48,7 +48,29 @@ from trace_audit.rules.results import (
 from trace_audit.rules.rulebook import Rule
 from trace_runtime.gaps import Gap
 
-__all__ = ["RobotSignals", "SignalColumns", "judge_groups", "judge_robot"]
+__all__ = ["Labels", "RobotSignals", "SignalColumns", "judge_groups", "judge_robot"]
+
+
+@dataclass(frozen=True, slots=True)
+class Labels:
+    """A text column as codes into its distinct values (a fleet's days of rows without a
+    Python string a row): row ``i`` reads ``names[codes[i]]``."""
+
+    codes: NDArray[np.int64]
+    names: tuple[str | None, ...]
+
+    def __getitem__(self, row: int) -> str | None:
+        return self.names[int(self.codes[row])]
+
+    @classmethod
+    def of(cls, values: Sequence[str | None]) -> Labels:
+        index: dict[str | None, int] = {}
+        codes = [index.setdefault(v, len(index)) for v in values]
+        return cls(np.array(codes, dtype=np.int64), tuple(index))
+
+    @classmethod
+    def same(cls, value: str, n: int) -> Labels:
+        return cls(np.zeros(n, dtype=np.int64), (value,))
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,19 +82,19 @@ class RobotSignals:
     clock: LogClock
     cycles: NDArray[np.int64]
     t_ns: NDArray[np.int64]
-    commands: Sequence[str | None]
+    commands: Labels
     """The decision in force at each row (None: no action logged)."""
     values: Mapping[str, NDArray[np.float64]]
     """Signal name -> its value at each row, NaN where the row does not log it; a signal
     no row logs may be absent."""
     judged: NDArray[np.bool_]
     """Inside the window (the rows read around it only give context)."""
-    sources: Sequence[str]
+    sources: Labels
     """The path ``trace-audit explain`` reads each row from."""
     gaps: Mapping[int, Gap] = field(default_factory=dict)
     """Row -> the gap that ends before it."""
-    groups: Sequence[str] = ()
-    """The group a ``--by`` table puts each row in (the index's ``day``); empty: none."""
+    groups: Labels | None = None
+    """The group a ``--by`` table puts each row in (the index's ``day``); None: none."""
 
     def __len__(self) -> int:
         return len(self.cycles)
@@ -121,10 +143,10 @@ class SignalColumns:
             clock,
             np.array(self.cycles, dtype=np.int64),
             np.array(self.t_ns, dtype=np.int64),
-            self.commands,
+            Labels.of(self.commands),
             {name: np.array(v, dtype=np.float64) for name, v in self.values.items()},
             np.array(self.judged, dtype=np.bool_),
-            [source] * n,
+            Labels.same(source, n),
             self.gaps,
         )
 
@@ -160,20 +182,20 @@ def judge_robot(signals: RobotSignals, rules: Sequence[Rule]) -> RobotRules:
 def judge_groups(signals: RobotSignals, rules: Sequence[Rule]) -> tuple[GroupRules, ...]:
     """Every rule over each group of one robot's judged rows (in order of first row): the
     same verdicts as ``judge_robot``, summed within the group."""
-    if not signals.groups:
+    if signals.groups is None:
         return ()
-    labels = np.asarray(signals.groups, dtype=object)
-    judged = signals.judged
-    groups = list(dict.fromkeys(labels[judged].tolist()))
+    codes, judged = signals.groups.codes, signals.judged
+    present, first = np.unique(codes[judged], return_index=True)
     verdicts = [_verdicts(rule.formula, signals) for rule in rules]
     out: list[GroupRules] = []
-    for group in groups:
-        mask = judged & (labels == group)
+    for code in present[np.argsort(first)].tolist():  # in order of first row
+        mask = judged & (codes == code)
         results = tuple(
             GroupRule.of(_result(rule.formula, signals, v, mask))
             for rule, v in zip(rules, verdicts, strict=True)
         )
-        out.append(GroupRules(signals.robot, group, int(mask.sum()), results))
+        group = signals.groups.names[code]
+        out.append(GroupRules(signals.robot, str(group), int(mask.sum()), results))
     return tuple(out)
 
 
@@ -307,7 +329,7 @@ def _violations(
     robot, clock = signals.robot, signals.clock
     for lo, hi in zip([0, *breaks], [*breaks, len(bad)], strict=True):
         first, last = int(bad[lo]), int(bad[hi - 1])
-        source, cycle = signals.sources[first], int(signals.cycles[first])
+        source, cycle = str(signals.sources[first]), int(signals.cycles[first])
         explain = (
             f"trace-audit explain {shlex.quote(source)} --cycle {cycle} "
             f"--robot {shlex.quote(robot)}"
