@@ -119,6 +119,15 @@ def check_command(  # noqa: PLR0917 - typer maps each parameter to an option
     memory_limit: MemoryLimitOption = None,
     timeout: SqlTimeoutOption = None,
     scheduler: SchedulerOption = None,
+    engine: Annotated[
+        str,
+        typer.Option(
+            "--engine",
+            help="auto: rtamt's semantics over whole columns where TRACE covers the "
+            "formula's operators (rtamt's interpreter for the rest); rtamt: rtamt's "
+            "interpreter alone, sample by sample (the reference; slower).",
+        ),
+    ] = "auto",
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
@@ -129,13 +138,15 @@ def check_command(  # noqa: PLR0917 - typer maps each parameter to an option
             assert log is not None
             if any(o is not None for o in (by, memory_limit, timeout, scheduler)):
                 raise UsageError("--by, --memory-limit, --timeout and --scheduler need --index")
-            return _check(log, rules, robot or (), start, end)
+            return _check(log, rules, robot or (), start, end, engine=engine)
         if start is not None or end is not None:
             raise UsageError("--from/--to are not supported with --index (check the logs)")
         keys = [k.strip() for k in (by or "").split(",") if k.strip()]
         limits = sql_limits(memory_limit, timeout)
         with cluster(scheduler) as executor:
-            return _check_index(index, rules, robot or (), keys, limits, executor=executor)
+            return _check_index(
+                index, rules, robot or (), keys, limits, executor=executor, engine=engine
+            )
 
     result = guarded(run)
     emit(result, check_doc, json_out=json_out, plain=plain, to_json=check_json)
@@ -149,12 +160,22 @@ def _check(
     robots: list[str] | tuple[str, ...],
     start: str | None,
     end: str | None,
+    *,
+    engine: str,
 ) -> CheckResult:
-    from trace_audit.rules import check_rules, read_rules
+    from trace_audit.rules import ENGINES, check_rules, read_rules
 
+    if engine not in ENGINES:
+        raise UsageError(f"--engine is one of {', '.join(ENGINES)}, got {engine!r}")
     rules = read_rules(rules_path)  # before the log: a bad rule is exit 2 without a read
     return check_rules(
-        source, rules, robots=tuple(robots), start=start, end=end, rules_file=str(rules_path)
+        source,
+        rules,
+        robots=tuple(robots),
+        start=start,
+        end=end,
+        rules_file=str(rules_path),
+        engine=engine,
     )
 
 
@@ -166,12 +187,15 @@ def _check_index(
     limits: QueryLimits,
     *,
     executor: Executor | None = None,
+    engine: str = "auto",
 ) -> CheckResult:
     from trace_audit.fleet.folder import load_manifest
-    from trace_audit.rules import check_index, read_rules
+    from trace_audit.rules import ENGINES, check_index, read_rules
     from trace_runtime.errors import LogReadError
     from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE
 
+    if engine not in ENGINES:
+        raise UsageError(f"--engine is one of {', '.join(ENGINES)}, got {engine!r}")
     rules = read_rules(rules_path)  # before the index: a bad rule is exit 2 without a read
     manifest = load_manifest(index)
     if manifest is None:
@@ -192,6 +216,7 @@ def _check_index(
             index=str(index),
             rules_file=str(rules_path),
             executor=executor,
+            engine=engine,
         )
     finally:
         rows.close()

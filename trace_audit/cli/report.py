@@ -34,8 +34,10 @@ around t with the decision thresholds and the commands as coloured bands, the sc
 robot perceived with the evidence behind each entity, the causal chain as a graph (broken
 links marked with their reason), the alternatives, counterfactuals and decision tree, the
 execution (intended vs actual), the auditability scores of the decision and of the window,
-and the commands that regenerate each section. Numbers are those of explain, timeline,
-metrics and verify; the page loads nothing from the network (figures are inline SVG).
+with --rules the safety rules judged over the window (as check: outcome, robustness, each
+violation and its explain command), and the commands that regenerate each section.
+Numbers are those of explain, timeline, metrics, verify and check; the page loads nothing
+from the network (figures are inline SVG).
 
 The window runs from 2/3 of --window before t to 1/3 after it, within the log. Integrity
 findings are shown in the report and do not change the exit code (use verify for that).
@@ -47,6 +49,8 @@ findings are shown in the report and do not change the exit code (use verify for
   trace-audit report logs/ --t +600 --window 60s --key keys/robot.pub
 
   trace-audit report run.mcap --cycle 200 --json
+
+  trace-audit report logs/ --t 21.3 --rules docs/rules/warehouse.toml
 """
 
 
@@ -69,6 +73,14 @@ def report_command(  # noqa: PLR0917 - typer maps each parameter to an option
         Path | None, key_option("The robot's Ed25519 public key, to check checkpoint signatures.")
     ] = None,
     evidence: EvidenceOption = None,
+    rules: Annotated[
+        Path | None,
+        typer.Option(
+            "--rules",
+            help="Safety rules (TOML, as check takes them) to judge over the window.",
+            show_default=False,
+        ),
+    ] = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
@@ -77,6 +89,12 @@ def report_command(  # noqa: PLR0917 - typer maps each parameter to an option
 
     def run() -> tuple[IncidentReport, Path]:
         public = load_public_key(key) if key is not None else None
+        if rules is not None:
+            from trace_audit.rules import read_rules
+
+            rulebook = read_rules(rules)  # before the log: a bad rule is exit 2 without a read
+        else:
+            rulebook = ()
         report = build_report(
             log,
             t=t,
@@ -86,6 +104,8 @@ def report_command(  # noqa: PLR0917 - typer maps each parameter to an option
             evidence=evidence or (),
             robots=robot or (),
             key_path=key,
+            rules=rulebook,
+            rules_path=rules,
         )
         return report, write_report(report, out)
 
@@ -104,7 +124,7 @@ def _status() -> Any:
 
 
 def _summary(report: IncidentReport, written: Path) -> dict[str, Any]:
-    from trace_audit.report.page import SECTIONS
+    from trace_audit.report.page import sections_of
 
     data = report.data
     e = data.explanation
@@ -129,7 +149,18 @@ def _summary(report: IncidentReport, written: Path) -> dict[str, Any]:
         "anchored": verdict.anchored,
         "anchored_through": verdict.anchored_through,
         "unanchored_cycles": list(verdict.unanchored) if verdict.unanchored else None,
-        "sections": [section for section, _ in SECTIONS],
+        "sections": sections_of(data),
+        "rules": None
+        if data.rules is None
+        else [
+            {
+                "rule": r.rule,
+                "outcome": str(r.outcome),
+                "robustness": r.robustness,
+                "violations": len(r.violations),
+            }
+            for r in data.rules.rules
+        ],
     }
 
 
@@ -154,10 +185,20 @@ def _summary_doc(summary: dict[str, Any]) -> Doc:
                 f"{summary['cycles_in_window']} cycles",
             ),
             ("Integrity", integrity),
+            *([("Rules", _rules_line(summary["rules"]))] if summary["rules"] is not None else []),
             ("Size", f"{summary['size_bytes'] / 1024:.0f} KiB"),
         ]
     )
     return doc
+
+
+def _rules_line(rules: list[dict[str, Any]]) -> Seg:
+    broken = [r["rule"] for r in rules if r["outcome"] == "violated"]
+    if broken:
+        return Seg(f"VIOLATED in the window: {', '.join(broken)}", "bold red")
+    undecided = sum(r["outcome"] == "not_decidable" for r in rules)
+    text = f"{len(rules) - undecided} of {len(rules)} satisfied"
+    return Seg(text + (f", {undecided} not decidable" if undecided else ""), "green")
 
 
 def _integrity_line(summary: dict[str, Any]) -> Seg:

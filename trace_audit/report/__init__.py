@@ -18,6 +18,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from trace_audit.log_time import TimeArg
 from trace_audit.report.data import (
@@ -29,6 +30,9 @@ from trace_audit.report.data import (
     parse_window,
 )
 from trace_runtime.errors import UsageError
+
+if TYPE_CHECKING:
+    from trace_audit.rules import Rule
 from trace_runtime.keys import PublicKey
 
 __all__ = [
@@ -67,9 +71,12 @@ def build_report(
     command_name: str = "trace-audit",
     robots: Sequence[str] = (),
     key_path: str | Path | None = None,
+    rules: Sequence[Rule] = (),
+    rules_path: str | Path | None = None,
 ) -> IncidentReport:
     """The incident report of the decision in force at ``t`` (or cycle ``cycle``) of one
-    robot (``robots`` as ``explain`` takes them); ``key_path``: where ``key`` came from."""
+    robot (``robots`` as ``explain`` takes them); ``key_path``: where ``key`` came from;
+    ``rules`` (read from ``rules_path``): safety rules judged over the window."""
     try:
         import matplotlib  # noqa: F401 - the report extra
     except ImportError as err:
@@ -85,6 +92,8 @@ def build_report(
         evidence=evidence,
         robots=robots,
         key_path=key_path,
+        rules=rules,
+        rules_path=rules_path,
     )
     return IncidentReport(data, render_page(data, command_name=command_name))
 

@@ -36,6 +36,7 @@ from trace_audit.explain import Explanation, explain
 from trace_audit.log_source import as_log
 from trace_audit.log_time import TimeArg
 from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
+from trace_audit.rules import RobotRules, Rule, check_rules
 from trace_audit.timeline import Timeline, timeline
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import UsageError
@@ -212,6 +213,10 @@ class ReportData:
     """The public key file given (``--key``), as the investigator named it."""
     robot_option: str | None = None
     """The decision's robot when the log holds others: the page's commands name it."""
+    rules: RobotRules | None = None
+    """The safety rules given (``--rules``) judged over the window, on the decision's robot."""
+    rules_path: str | None = None
+    """The rules file given, as the investigator named it."""
 
     @property
     def decision(self) -> Decision:
@@ -258,6 +263,8 @@ def gather_report(
     evidence: Sequence[str | Path] = (),
     robots: Sequence[str] = (),
     key_path: str | Path | None = None,
+    rules: Sequence[Rule] = (),
+    rules_path: str | Path | None = None,
 ) -> ReportData:
     """Gather the report of the decision in force at ``t`` (or cycle ``cycle``) in a log.
 
@@ -265,7 +272,8 @@ def gather_report(
     refs may name; explain, metrics and verify resolve and digest-check them there.
     ``robots`` as ``explain`` takes them: the report is of one robot's decision, and its
     window, metrics and integrity are that robot's. ``key_path``: where ``key`` was read
-    from, for the page's Reproduce commands."""
+    from, for the page's Reproduce commands. ``rules`` (read from ``rules_path``): safety
+    rules judged over the window (``check``), shown in their own section."""
     if not 0 < window_s <= MAX_WINDOW_S:
         raise UsageError(f"window must be in (0, {MAX_WINDOW_S:.0f}] s, got {window_s}")
     given = as_log(path)
@@ -292,6 +300,7 @@ def gather_report(
         (s.session for s in log.segments if s.path.name == result.decision.segment),
         log.segments[0].session,
     )
+    judged = check_rules(log, rules, start=start, end=end).robots[0] if rules else None
     return ReportData(
         path=str(path),
         explanation=result,
@@ -314,6 +323,8 @@ def gather_report(
         evidence=tuple(str(e) for e in evidence),
         not_retained=_not_retained(result),
         window_inputs=inputs,
+        rules=judged,
+        rules_path=None if rules_path is None else str(rules_path),
     )
 
 

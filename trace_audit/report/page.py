@@ -24,13 +24,18 @@ from trace_audit.report.decision_sections import (
     summary_section,
 )
 from trace_audit.report.markup import command_badge
-from trace_audit.report.trust_sections import auditability_section, integrity_section
+from trace_audit.report.trust_sections import (
+    auditability_section,
+    integrity_section,
+    rules_section,
+)
 
-__all__ = ["SECTIONS", "render_page"]
+__all__ = ["SECTIONS", "render_page", "sections_of"]
 
 SECTIONS = (
     ("summary", "Summary"),
     ("integrity", "Integrity of the record"),
+    ("rules", "Safety rules over the window"),
     ("factors", "Factors over time"),
     ("scene", "The scene at the decision"),
     ("causal", "The causal chain"),
@@ -39,7 +44,14 @@ SECTIONS = (
     ("auditability", "Auditability"),
     ("reproduce", "Reproduce"),
 )
-"""Section ids and headings, in page order (the tests check every one is there)."""
+"""Section ids and headings, in page order (the tests check every one is there); ``rules``
+only when rules were given (``sections_of``)."""
+
+
+def sections_of(data: ReportData) -> list[str]:
+    """The ids of the sections ``data``'s page holds, in order."""
+    return [s for s, _ in SECTIONS if s != "rules" or data.rules is not None]
+
 
 _CSS = """
 :root { --ink:#1d1d1f; --muted:#5f6368; --line:#d8d8d8; --bad:#c0392b; --ok:#1e7b34;
@@ -99,6 +111,7 @@ def render_page(data: ReportData, *, command_name: str = "trace-audit") -> str:
         _header(data),
         _section("summary", summary_section(data)),
         _section("integrity", integrity_section(data)),
+        *([_section("rules", rules_section(data))] if data.rules is not None else []),
         _section("factors", factors_section(data)),
         _section("scene", scene_section(data)),
         _section("causal", causal_section(data)),
@@ -197,9 +210,21 @@ def _reproduce(data: ReportData, command_name: str) -> str:
             f"{command_name} metrics {window} --start {start} --end {end} --failures{given}",
         ),
         ("Causal graph as Graphviz", f"{command_name} export {log} {at} --format dot"),
+        *(
+            [
+                (
+                    "Safety rules over the window",
+                    f"{command_name} check {log}{robot} --rules "
+                    f"{shlex.quote(data.rules_path or 'RULES.toml')} --from {start} --to {end}",
+                )
+            ]
+            if data.rules is not None
+            else []
+        ),
         (
             "This report",
-            f"{command_name} report {log} {at} --window {data.window_s:g}s{key}{given}",
+            f"{command_name} report {log} {at} --window {data.window_s:g}s{key}{given}"
+            + (f" --rules {shlex.quote(data.rules_path)}" if data.rules_path else ""),
         ),
     ]
     return "".join(

@@ -14,7 +14,61 @@ from trace_audit.report.data import ReportData
 from trace_audit.report.markup import html_fields, html_problems, html_table
 from trace_runtime.verification import Finding
 
-__all__ = ["auditability_section", "integrity_section"]
+__all__ = ["auditability_section", "integrity_section", "rules_section"]
+
+_OUTCOMES = {
+    "satisfied": '<span class="verdict pass">satisfied</span>',
+    "violated": '<span class="verdict fail">VIOLATED</span>',
+    "not_decidable": '<span class="verdict warn">not decidable</span>',
+}
+
+
+def rules_section(data: ReportData) -> str:
+    """Each safety rule given, judged over the window on the decision's robot (``check``):
+    its outcome and robustness, and each violation with the decision in force."""
+    judged = data.rules
+    assert judged is not None  # the page holds this section only when rules were given
+    clock = data.explanation.log_clock
+    rows = []
+    for rule in judged.rules:
+        robustness = "" if rule.robustness is None else f"{rule.robustness:.4g}"
+        rows.append(
+            [
+                f"<code>{escape(rule.rule)}</code><br><small>{escape(rule.stl)}</small>",
+                _OUTCOMES[str(rule.outcome)],
+                robustness,
+                str(rule.decidable_cycles),
+                str(len(rule.violations)),
+            ]
+        )
+    table = html_table(
+        ["rule", "outcome", "robustness", "cycles judged", "violations"], rows, {2, 3, 4}
+    )
+    violations = [
+        [
+            f"<code>{escape(rule.rule)}</code>",
+            f"{escape(clock.show(v.start_ns))} – {escape(clock.show(v.end_ns))}",
+            f"{v.first_cycle}–{v.last_cycle}",
+            f"{v.robustness:.4g}",
+            escape(v.command or "none"),
+            f"<code>{escape(v.explain)}</code>",
+        ]
+        for rule in judged.rules
+        for v in rule.violations
+    ]
+    listed = (
+        html_table(["rule", "when", "cycles", "robustness", "decision", "explain"], violations, {3})
+        if violations
+        else "<p>No rule is violated in the window.</p>"
+    )
+    source = escape(data.rules_path or "the rules given")
+    return (
+        f"<p>The rules of {source}, judged over the window ({judged.cycles} cycles; a rule's "
+        "robustness is how far the worst cycle is from breaking it, negative when broken; "
+        "a window over a gap or the log's edge is not decidable). docs/rules.md.</p>"
+        + table
+        + listed
+    )
 
 
 def integrity_section(data: ReportData) -> str:

@@ -12,7 +12,7 @@ over a fleet index's rows. docs/rules.md.
 from __future__ import annotations
 
 from trace_audit.rules.check import check_rules
-from trace_audit.rules.formula import Formula, Horizon, RulesError, compile_formula
+from trace_audit.rules.formula import ENGINES, Formula, Horizon, RulesError, compile_formula
 from trace_audit.rules.index_check import IndexQuery, check_index
 from trace_audit.rules.results import (
     CheckResult,
@@ -29,6 +29,7 @@ from trace_audit.rules.rulebook import Rule, parse_rules, read_rules
 from trace_audit.rules.signals import FAMILIES, read_signals, signal_names
 
 __all__ = [
+    "ENGINES",
     "FAMILIES",
     "CheckResult",
     "Formula",

@@ -18,7 +18,7 @@ from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log
 from trace_audit.log_time import LogClock, NotWallClockError, TimeArg
 from trace_audit.rules.formula import Horizon, RulesError
-from trace_audit.rules.judge import RobotSignals, SignalColumns, judge_robot
+from trace_audit.rules.judge import RobotSignals, SignalColumns, judge
 from trace_audit.rules.results import CheckResult, RobotRules
 from trace_audit.rules.rulebook import Rule
 from trace_audit.rules.signals import read_signals
@@ -38,8 +38,10 @@ def check_rules(
     start: TimeArg = None,
     end: TimeArg = None,
     rules_file: str = "",
+    engine: str = "auto",
 ) -> CheckResult:
-    """Every rule over each selected robot of ``source`` in the window ``start``..``end``."""
+    """Every rule over each selected robot of ``source`` in the window ``start``..``end``;
+    ``engine`` as ``Formula.monitor`` takes it (``rtamt``: rtamt's interpreter alone)."""
     if not rules:
         raise RulesError(f"{rules_file or 'the rules'}: no rules to check")
     selection = Selection(tuple(robots), start, end)
@@ -47,19 +49,21 @@ def check_rules(
     path = str(source) if isinstance(source, str | Path) else str(log.root)
     answers = per_robot(
         log,
-        lambda one: _check_robot(one, rules, selection, path),
+        lambda one: _check_robot(one, rules, selection, path, engine),
         skip=(TimeOutOfRangeError, NotWallClockError, WindowOutsideLogError),
     )
     return CheckResult(path, rules_file, tuple(answers))
 
 
-def _check_robot(log: Log, rules: Sequence[Rule], selection: Selection, path: str) -> RobotRules:
+def _check_robot(
+    log: Log, rules: Sequence[Rule], selection: Selection, path: str, engine: str
+) -> RobotRules:
     period_ns = log.period_ns
     if period_ns <= 0:
         raise RulesError(f"{log.first_robot}: the log declares no cycle period to judge rules at")
     lo, hi = selection.window(log)
     _overlaps(log, lo, hi)
-    return judge_robot(_read_rows(log, rules, lo, hi, path), rules)
+    return judge(_read_rows(log, rules, lo, hi, path), rules, engine=engine)[0]
 
 
 def _overlaps(log: Log, lo: int | None, hi: int | None) -> None:

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from trace_audit.log_time import LogClock
 from trace_audit.rules.formula import RulesError
-from trace_audit.rules.judge import Labels, RobotSignals, judge_groups, judge_robot
+from trace_audit.rules.judge import Labels, RobotSignals, judge
 from trace_audit.rules.results import CheckResult, GroupRules, RobotRules
 from trace_audit.rules.rulebook import Rule
 from trace_audit.rules.signals import command_signal, planar_speed
@@ -62,10 +62,11 @@ def check_index(
     index: str = "",
     rules_file: str = "",
     executor: Executor | None = None,
+    engine: str = "auto",
 ) -> CheckResult:
     """Every rule over each selected robot of the index ``query`` reads; with ``by`` naming
     ``day``, also per robot and day (``CheckResult.groups``). ``executor``: one task a
-    robot on it (None: one after the other here)."""
+    robot on it (None: one after the other here). ``engine`` as ``check_rules``'."""
     if not rules:
         raise RulesError(f"{rules_file or 'the rules'}: no rules to check")
     for key in by:
@@ -81,10 +82,10 @@ def check_index(
         raise UsageError(f"robot {', '.join(missing)} is not in this index; it holds {holds}")
     by_day = "day" in by
     if executor is None:
-        judged = [judge_index_robot(query, robot, tuple(rules), by_day) for robot in wanted]
+        judged = [judge_index_robot(query, robot, tuple(rules), by_day, engine) for robot in wanted]
     else:
         tasks = [
-            executor.submit(judge_index_robot, query, robot, tuple(rules), by_day)
+            executor.submit(judge_index_robot, query, robot, tuple(rules), by_day, engine)
             for robot in wanted
         ]
         judged = [task.result() for task in tasks]
@@ -94,11 +95,11 @@ def check_index(
 
 
 def judge_index_robot(
-    query: IndexQuery, robot: str, rules: tuple[Rule, ...], by_day: bool
+    query: IndexQuery, robot: str, rules: tuple[Rule, ...], by_day: bool, engine: str = "auto"
 ) -> tuple[RobotRules, tuple[GroupRules, ...]]:
     """One robot of the index judged (and, ``by_day``, per day): one task of a fan-out."""
     signals = robot_signals(query, robot, rules)
-    return judge_robot(signals, rules), judge_groups(signals, rules) if by_day else ()
+    return judge(signals, rules, by_group=by_day, engine=engine)
 
 
 def robot_signals(query: IndexQuery, robot: str, rules: Sequence[Rule]) -> RobotSignals:

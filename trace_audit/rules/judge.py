@@ -48,7 +48,7 @@ from trace_audit.rules.results import (
 from trace_audit.rules.rulebook import Rule
 from trace_runtime.gaps import Gap
 
-__all__ = ["Labels", "RobotSignals", "SignalColumns", "judge_groups", "judge_robot"]
+__all__ = ["Labels", "RobotSignals", "SignalColumns", "judge"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -170,23 +170,28 @@ class _Verdicts:
     kinds: list[_Verdict]
 
 
-def judge_robot(signals: RobotSignals, rules: Sequence[Rule]) -> RobotRules:
-    """Every rule over one robot's rows."""
+def judge(
+    signals: RobotSignals, rules: Sequence[Rule], *, by_group: bool = False, engine: str = "auto"
+) -> tuple[RobotRules, tuple[GroupRules, ...]]:
+    """Every rule over one robot's rows, and (``by_group``) over each group of its judged
+    rows in order of first row: the same verdicts, summed within the group. ``engine`` as
+    ``Formula.monitor`` takes it."""
+    verdicts = [_verdicts(rule.formula, signals, engine) for rule in rules]
     judged = signals.judged
     results = tuple(
-        _result(rule.formula, signals, _verdicts(rule.formula, signals), judged) for rule in rules
+        _result(rule.formula, signals, v, judged) for rule, v in zip(rules, verdicts, strict=True)
     )
-    return RobotRules(signals.robot, signals.period_ns, int(judged.sum()), results, signals.clock)
+    robot = RobotRules(signals.robot, signals.period_ns, int(judged.sum()), results, signals.clock)
+    return robot, _groups(signals, rules, verdicts) if by_group else ()
 
 
-def judge_groups(signals: RobotSignals, rules: Sequence[Rule]) -> tuple[GroupRules, ...]:
-    """Every rule over each group of one robot's judged rows (in order of first row): the
-    same verdicts as ``judge_robot``, summed within the group."""
+def _groups(
+    signals: RobotSignals, rules: Sequence[Rule], verdicts: list[_Verdicts]
+) -> tuple[GroupRules, ...]:
     if signals.groups is None:
         return ()
     codes, judged = signals.groups.codes, signals.judged
     present, first = np.unique(codes[judged], return_index=True)
-    verdicts = [_verdicts(rule.formula, signals) for rule in rules]
     out: list[GroupRules] = []
     for code in present[np.argsort(first)].tolist():  # in order of first row
         mask = judged & (codes == code)
@@ -233,7 +238,7 @@ def _lowest(values: NDArray[np.float64]) -> float | None:
     return float(values.min())
 
 
-def _verdicts(formula: Formula, signals: RobotSignals) -> _Verdicts:
+def _verdicts(formula: Formula, signals: RobotSignals, engine: str) -> _Verdicts:
     """Each row's verdict: rtamt's semantics over each stretch, decidable rows only."""
     n = len(signals)
     past, future = formula.horizon.steps(signals.period_ns)
@@ -252,7 +257,7 @@ def _verdicts(formula: Formula, signals: RobotSignals) -> _Verdicts:
             kinds.append(_Verdict(UndecidedReason.MISSING_SIGNAL, f"{lacking} not logged"))
             continue
         if monitor is None:
-            monitor = formula.monitor(signals.period_ns)
+            monitor = formula.monitor(signals.period_ns, engine=engine)
         robustness[start:stop] = monitor({s: v[start:stop] for s, v in columns.items()})
         length = stop - start
         head = min(past, length)

@@ -112,3 +112,11 @@ def test_a_policy_blind_to_people_breaks_them_where_the_log_shows(
     assert first.explain == (
         f"trace-audit explain {root} --cycle {first.first_cycle} --robot amr-01"
     )
+
+
+def test_rtamt_alone_gives_the_same_answer(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(sim.decision, "evaluate", _blind_policy)
+    root = tmp_path / "blind"
+    run(RunConfig(out=root, total_cycles=600, seed=2))  # faults on: gaps and missing sensors
+    rules = read_rules(RULES)
+    assert check_rules(root, rules, engine="rtamt") == check_rules(root, rules)
