@@ -105,9 +105,12 @@ def verifier_key(name: str, public_key_raw: bytes, sig_type: int = ED25519) -> s
 def _b64decode(text: str) -> bytes:
     """Standard base64 with padding (RFC 4648 section 4), nothing outside its alphabet."""
     try:
-        return base64.b64decode(text.encode("ascii"), validate=True)
+        raw = base64.b64decode(text.encode("ascii"), validate=True)
     except (binascii.Error, UnicodeEncodeError, ValueError) as err:
         raise NoteError("not standard base64") from err
+    if (len(raw) + 2) // 3 * 4 != len(text):  # e.g. "AAAA====": padding beyond the data
+        raise NoteError("not standard base64")
+    return raw
 
 
 def _cosignature_prefix(timestamp: int) -> bytes:

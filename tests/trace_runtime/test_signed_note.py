@@ -12,6 +12,8 @@ import hashlib
 
 import pytest
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from trace_runtime.keys import Ed25519Signer
 from trace_runtime.signed_note import (
@@ -179,6 +181,7 @@ MALFORMED = [
     (PETER_TEXT + "\n" + "— PeterNeumann AAAA\n", "too short"),
     (PETER_TEXT + "\n" + "— PeterNeumann AAAAAAA\n", "base64"),
     (PETER_TEXT + "\n" + "— PeterNeumann AAAAAAAA!\n", "base64"),
+    (PETER_TEXT + "\n" + "— PeterNeumann AAAAAAAA====\n", "base64"),
     (PETER_TEXT + "\n" + PETER_SIG + PETER_SIG.replace(" x", "  x"), "base64"),
 ]
 
@@ -413,3 +416,24 @@ def test_cosigning_needs_a_cosigner_a_timestamp_and_a_checkpoint() -> None:
         cosignature_line("not a checkpoint\n", witness, 1)
     with pytest.raises(NoteError):
         cosignature_line(SOFA_BODY, witness, -1)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.data())
+def test_any_mangled_note_opens_or_is_a_note_error(data: st.DataObject) -> None:
+    """Hostile bytes: a verified note, or a NoteError; never another exception."""
+    note = bytearray((PETER_NOTE + PETER_SIG.replace("Peter", "Other")).encode())
+    for _ in range(data.draw(st.integers(1, 4))):
+        at = data.draw(st.integers(0, len(note) - 1))
+        op = data.draw(st.sampled_from(["flip", "drop", "insert"]))
+        if op == "flip":
+            note[at] ^= 1 << data.draw(st.integers(0, 7))
+        elif op == "drop":
+            del note[at]
+        else:
+            note.insert(at, data.draw(st.sampled_from(b"\n \x00+=A\xe2\x80\x94")))
+    try:
+        opened = open_note(bytes(note), [_peter().verifier])
+    except NoteError:
+        return
+    assert opened.verified[0].name == "PeterNeumann"
