@@ -300,3 +300,57 @@ def test_consistency_proofs_check_in_tlog(ask: Ask) -> None:
     assert all(err != "" for err in answer["trees"][len(checks) :])
     assert [[unb64(h) for h in p] for p in answer["prove_trees"]] == proofs
     assert len(checks) > 800
+
+
+def _mangled_notes(count: int) -> list[bytes]:
+    """A signed note (one known signature, one unknown), mangled at random: bits flipped,
+    bytes dropped, and note syntax (newlines, spaces, dashes, pluses, padding) inserted."""
+    signer = note_signer("example.com/robots/amr-1", b"\x01" * 32)
+    other = note_signer("other.example/k", b"\x02" * 32)
+    base = (sign_note(TEXTS[0], signer) + other.signature_line(TEXTS[0])).encode()
+    pieces = [b"\n", b" ", b"\xe2\x80\x94 ", b"+", b"=", b"A", b"\xc2\xa0", b"\x00", b"\xff"]
+    rng = random.Random(6)
+    notes = []
+    for _ in range(count):
+        note = bytearray(base)
+        for _ in range(rng.randint(1, 3)):
+            at = rng.randrange(len(note))
+            op = rng.choice(("flip", "drop", "insert"))
+            if op == "flip":
+                note[at] ^= 1 << rng.randrange(8)
+            elif op == "drop":
+                del note[at]
+            else:
+                note[at:at] = rng.choice(pieces)
+        notes.append(bytes(note))
+    return notes
+
+
+def test_mangled_notes_open_exactly_when_go_opens_them(ask: Ask) -> None:
+    """Differential: each mangled note opens in Python if and only if it opens in Go, with
+    the same text and the same verified key."""
+    signer = note_signer("example.com/robots/amr-1", b"\x01" * 32)
+    notes = [n for n in _mangled_notes(600) if _is_utf8(n)]
+    answers = ask({"open": [{"note": n.decode(), "vkeys": [signer.vkey]} for n in notes]})["open"]
+    opened_somewhere = 0
+    for note, answer in zip(notes, answers, strict=True):
+        try:
+            opened = open_note(note, [signer.verifier])
+        except NoteError as err:
+            assert answer["error"] != "", f"Go opened what Python refused ({err}): {note!r}"
+            continue
+        assert answer["error"] == "", f"Python opened what Go refused: {note!r}"
+        assert answer["text"] == opened.text
+        assert answer["verified"] == [f"{s.name}+{s.key_id:08x}" for s in opened.verified]
+        opened_somewhere += 1
+    assert opened_somewhere > 10
+
+
+def _is_utf8(data: bytes) -> bool:
+    """JSON carries text: invalid UTF-8 cannot reach the oracle as it is (both refuse it,
+    which test_signed_note checks on the Python side)."""
+    try:
+        data.decode()
+    except UnicodeDecodeError:
+        return False
+    return True
