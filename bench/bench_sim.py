@@ -16,15 +16,16 @@ Measured in one invocation, each figure the median of ``--runs`` (default 3):
    tapped run, replayed through a fresh ``AuditLogger`` with the same configuration
    (synchronous, same batch, same garbage-collector settings as ``sim.run``).
 4. the simulator alone, derived: 1 / (1/total - 1/logger), on CPU time (a cross-check of 2).
-   With ``--vs TREE`` (another checkout, e.g. the tree before a change), the simulator alone
-   of this tree and of TREE, each in a fresh child process, in turn, ``--runs`` pairs: the
-   medians and the median of the pairwise ratios.
+   With ``--vs TREE`` (another checkout, e.g. the tree before a change), the simulator +
+   logger and the simulator alone of this tree and of TREE, each in a fresh child process,
+   in turn, ``--runs`` rounds: the medians and the median of the pairwise ratios.
 5. where the time goes, CPU microseconds per cycle: the simulator's stages, from a run with
    thin timing wrappers; the logger's parts, each timed on its own on the captured records
    (validation, canonical encoding, sensor refs, seals, chunk writing); the rest of the
    logger is its bookkeeping (the replay total minus those parts).
 
-Run: ``.venv/bin/python bench/bench_sim.py [--cycles 20000] [--runs 3] [--batch 50] [--vs TREE]``
+Run: ``.venv/bin/python bench/bench_sim.py [--cycles 20000] [--runs 3] [--batch 50] [--vs TREE
+[--vs-only]]``
 """
 
 from __future__ import annotations
@@ -196,34 +197,49 @@ def _sim_only(config: RunConfig) -> float:
         names["AuditLogger"] = AuditLogger
 
 
-def _child_sim_only(tree: Path, cycles: int, seed: int, faults: str, batch: int) -> float:
-    """CPU seconds of ``_sim_only`` on ``cycles`` cycles, in a fresh process importing ``sim``
-    (and ``trace_runtime``) from ``tree``."""
+def _run_cpu(config: RunConfig) -> float:
+    """CPU seconds of ``sim.run(config)``, simulator and logger."""
+    start = time.process_time()
+    run(config)
+    return time.process_time() - start
+
+
+def _child(tree: Path, what: str, args: argparse.Namespace) -> float:
+    """CPU seconds of one measurement (``what``: ``sim`` alone, or ``full``, simulator and
+    logger) on ``--cycles`` cycles, in a fresh process importing ``sim`` (and
+    ``trace_runtime``) from ``tree``."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    argv = [sys.executable, __file__, "--child-sim-only", str(cycles), "--seed", str(seed)]
-    argv += ["--faults", faults, "--batch", str(batch)]
+    argv = [sys.executable, __file__, "--child", what, "--cycles", str(args.cycles)]
+    argv += ["--seed", str(args.seed), "--faults", args.faults, "--batch", str(args.batch)]
     done = subprocess.run(argv, env=env, cwd=tree, capture_output=True, text=True, check=True)
     return float(done.stdout.split()[-1])
 
 
 def _compare_trees(vs: Path, args: argparse.Namespace) -> None:
-    """Print the simulator alone of this tree against ``vs``, in child processes in turn."""
+    """Print the simulator + logger, and the simulator alone, of this tree against ``vs``:
+    ``--runs`` rounds of child processes in turn (this tree, then ``vs``; full, then sim
+    alone), the medians and the median of the pairwise ratios."""
     here = Path(__file__).resolve().parents[1]
-    ours, theirs = [], []
-    for _ in range(args.runs):
-        ours.append(_child_sim_only(here, args.cycles, args.seed, args.faults, args.batch))
-        theirs.append(_child_sim_only(vs, args.cycles, args.seed, args.faults, args.batch))
-    ratios = sorted(t / o for o, t in zip(ours, theirs, strict=True))
     n = args.cycles
+    times: dict[tuple[str, str], list[float]] = defaultdict(list)
+    for _ in range(args.runs):
+        for what in ("full", "sim"):
+            times["ours", what].append(_child(here, what, args))
+            times["theirs", what].append(_child(vs, what, args))
     print(
-        f"sim alone, this tree vs {vs} ({args.runs} pairs of child processes in turn, "
-        f"{n:,} cycles each)"
+        f"this tree vs {vs} ({args.runs} rounds of child processes in turn, "
+        f"{n:,} cycles each, CPU time, medians)"
     )
-    print(
-        f"  this tree {1e6 * statistics.median(ours) / n:6.0f} us a cycle   "
-        f"{vs.name} {1e6 * statistics.median(theirs) / n:6.0f} us a cycle   "
-        f"speed-up {statistics.median(ratios):.2f}x (pairs {', '.join(f'{r:.2f}' for r in ratios)})"
-    )
+    for what, label in (("full", "sim + logger"), ("sim", "sim alone")):
+        ours, theirs = times["ours", what], times["theirs", what]
+        ratios = sorted(t / o for o, t in zip(ours, theirs, strict=True))
+        print(
+            f"  {label:13s} this tree {n / statistics.median(ours):7,.0f} cycles/s "
+            f"({1e6 * statistics.median(ours) / n:4.0f} us)   {vs.name} "
+            f"{n / statistics.median(theirs):7,.0f} cycles/s "
+            f"({1e6 * statistics.median(theirs) / n:4.0f} us)   speed-up "
+            f"{statistics.median(ratios):.2f}x (pairs {', '.join(f'{r:.2f}' for r in ratios)})"
+        )
     print()
 
 
@@ -373,23 +389,28 @@ def main() -> None:
     parser.add_argument("--faults", choices=("on", "off"), default="on")
     parser.add_argument("--replay-cycles", type=int, default=5_000)
     parser.add_argument("--vs", type=Path, help="another checkout to compare the simulator with")
-    parser.add_argument("--child-sim-only", type=int, help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--vs-only", action="store_true", help="with --vs: only the comparison of the two trees"
+    )
+    parser.add_argument("--child", choices=("sim", "full"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     faults = FaultRates() if args.faults == "on" else FaultRates.off()
     n, batch = args.cycles, args.batch
-    if args.child_sim_only is not None:  # one measurement for --vs, in this process
+    if args.child is not None:  # one measurement for --vs, in this process
         with tempfile.TemporaryDirectory() as tmp:
             config = RunConfig(
                 out=Path(tmp) / "sim.mcap",
-                total_cycles=args.child_sim_only,
+                total_cycles=n,
                 seed=args.seed,
                 faults=faults,
                 batch_cycles=batch,
             )
-            print(_sim_only(config))
+            print(_sim_only(config) if args.child == "sim" else _run_cpu(config))
         return
     if args.vs is not None:
         _compare_trees(args.vs.resolve(), args)
+        if args.vs_only:
+            return
 
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
