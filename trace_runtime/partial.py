@@ -35,13 +35,17 @@ from typing import Annotated, Any, Generic, TypedDict, TypeVar
 import msgspec
 
 from trace_runtime.cycles import Cycle, parse_json
-from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF, TOPIC_PERCEPTION
+from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF, TOPIC_EXECUTION, TOPIC_PERCEPTION
 
 __all__ = [
     "DECISION_FIELDS",
     "METRICS_ACTION",
     "METRICS_BELIEF",
     "METRICS_PERCEPTION",
+    "RULES_ACTION",
+    "RULES_BELIEF",
+    "RULES_EXECUTION",
+    "RULES_PERCEPTION",
     "DecisionFields",
     "FactorFields",
     "Shape",
@@ -169,6 +173,87 @@ METRICS_BELIEF: Shape[MetricsBelief] = Shape("metrics belief", TOPIC_BELIEF, Met
 METRICS_PERCEPTION: Shape[MetricsPerception] = Shape(
     "metrics perception", TOPIC_PERCEPTION, MetricsPerception
 )
+
+
+# --- rules: what the signals of ``trace-audit check`` read -----------------------------------
+
+Number = int | float
+"""A JSON number as orjson gives it: an int, or a float (never coerced to one)."""
+
+_RulesEntity = TypedDict("_RulesEntity", {"id": str, "class": str}, total=False)
+
+
+class RulesPerception(TypedDict, total=False):
+    """Each perceived entity's id and class (``nearest.<class>``)."""
+
+    entities: list[_RulesEntity]
+
+
+class _RulesNode(TypedDict, total=False):
+    id: str
+    kind: str
+    label: str
+    unit: str | None
+    value: Number | str | bool | None
+
+
+class RulesBelief(TypedDict, total=False):
+    """The distance nodes and the edges from entities to them (``nearest.<class>``)."""
+
+    nodes: list[_RulesNode]
+    edges: list[_Edge]
+
+
+class _RulesFactor(TypedDict, total=False):
+    node: str
+    name: str
+    value: Number | str | bool | None
+
+
+class _RulesRationale(TypedDict, total=False):
+    factors: list[_RulesFactor]
+
+
+class RulesAction(TypedDict, total=False):
+    """The command and the factors' values (``command.*``, ``factor.*``)."""
+
+    command: str
+    rationale: _RulesRationale
+
+
+class _Motion(TypedDict, total=False):
+    linear: Number
+
+
+class _Check(TypedDict, total=False):
+    rule: str
+    passed: bool
+
+
+class _Channel(TypedDict, total=False):
+    name: str
+    intended: Number | None
+    actual: Number | None
+    deviation: Number | None
+
+
+class RulesExecution(TypedDict, total=False):
+    """The planar motion, the checks, the flags and the actuator channels
+    (``channel.*``, ``check.*``, ``flag.*``)."""
+
+    intended: _Motion | None
+    actual: _Motion | None
+    checks: list[_Check]
+    flags: list[str]
+    channels: list[_Channel]
+
+
+RULES_PERCEPTION: Shape[RulesPerception] = Shape(
+    "rules perception", TOPIC_PERCEPTION, RulesPerception
+)
+RULES_BELIEF: Shape[RulesBelief] = Shape("rules belief", TOPIC_BELIEF, RulesBelief)
+RULES_ACTION: Shape[RulesAction] = Shape("rules action", TOPIC_ACTION, RulesAction)
+RULES_EXECUTION: Shape[RulesExecution] = Shape("rules execution", TOPIC_EXECUTION, RulesExecution)
 
 
 # --- a decision's own fields, for the library's iteration -----------------------------------

@@ -18,7 +18,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from tests.trace_runtime.test_records import actions, beliefs, perceptions
+from tests.trace_runtime.test_records import actions, beliefs, executions, perceptions
 from trace_runtime.codec import encode_layer
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import PayloadError
@@ -27,10 +27,18 @@ from trace_runtime.partial import (
     METRICS_ACTION,
     METRICS_BELIEF,
     METRICS_PERCEPTION,
+    RULES_ACTION,
+    RULES_BELIEF,
+    RULES_EXECUTION,
+    RULES_PERCEPTION,
     DecisionFields,
     MetricsAction,
     MetricsBelief,
     MetricsPerception,
+    RulesAction,
+    RulesBelief,
+    RulesExecution,
+    RulesPerception,
     Shape,
     decision_fields,
     read_layer,
@@ -61,8 +69,10 @@ def project(kind: Any, value: Any) -> Any:
     if origin in (typing.Union, types.UnionType):
         if value is None:
             return None
-        (inner,) = [a for a in typing.get_args(kind) if a is not type(None)]
-        return project(inner, value)
+        inner = [a for a in typing.get_args(kind) if a is not type(None)]
+        if len(inner) > 1:  # a union of scalars (a number, a text, a flag): as parsed
+            return value
+        return project(inner[0], value)
     if origin is list:
         (inner,) = typing.get_args(kind)
         return [project(inner, v) for v in value]
@@ -82,6 +92,10 @@ _KINDS: dict[Shape[Any], type] = {
     METRICS_ACTION: MetricsAction,
     METRICS_BELIEF: MetricsBelief,
     METRICS_PERCEPTION: MetricsPerception,
+    RULES_PERCEPTION: RulesPerception,
+    RULES_BELIEF: RulesBelief,
+    RULES_ACTION: RulesAction,
+    RULES_EXECUTION: RulesExecution,
 }
 
 
@@ -117,6 +131,27 @@ def test_every_valid_record_decodes_to_the_full_parse_of_its_fields(
     fast = shape.decode(data)
     assert fast is not None, data  # a valid record never needs the full parse
     assert typed(fast) == typed(project(_KINDS[shape], orjson.loads(data)))
+
+
+_RULES = st.one_of(
+    st.tuples(st.just(RULES_PERCEPTION), perceptions),
+    st.tuples(st.just(RULES_BELIEF), beliefs),
+    st.tuples(st.just(RULES_ACTION), actions),
+    st.tuples(st.just(RULES_EXECUTION), executions),
+)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(record=_RULES, cycle=st.integers(0, 2**40), t_ns=st.integers(0, 2**62))
+def test_every_valid_record_gives_the_rules_the_full_parse_of_their_fields(
+    record: tuple[Shape[Any], Any], cycle: int, t_ns: int
+) -> None:
+    shape, value = record
+    data = encode_layer(cycle, t_ns, value)
+    fast = shape.decode(data)
+    assert fast is not None, data  # a valid record never needs the full parse
+    assert typed(fast) == typed(project(_KINDS[shape], orjson.loads(data)))
+    check_shape(shape, data)
 
 
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -30,7 +30,13 @@ from trace_audit.causal.distances import entity_distances
 from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
 from trace_runtime.cycles import Cycle
 from trace_runtime.flags import split_flags
-from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF, TOPIC_EXECUTION, TOPIC_PERCEPTION
+from trace_runtime.partial import (
+    RULES_ACTION,
+    RULES_BELIEF,
+    RULES_EXECUTION,
+    RULES_PERCEPTION,
+    read_layer,
+)
 
 __all__ = [
     "FAMILIES",
@@ -74,16 +80,17 @@ def read_signals(cycle: Cycle, names: Iterable[str]) -> tuple[str | None, dict[s
     """The command in force in ``cycle`` (None: no action logged) and the value of each
     named signal; a signal the cycle does not log is left out.
 
-    Read straight from the layers' JSON, each parsed once, as leniently as the decision
-    view reads them (``trace_audit.causal.lenient``: a value of the wrong type is absent);
-    no schema default changes a signal, so none is filled in. ``tests/trace_audit/rules``
-    pins every family to the values of the ``Decision`` view."""
-    action = as_mapping(cycle.layer(TOPIC_ACTION))
+    Read straight from the layers' bytes, only the fields the signals read
+    (``trace_runtime.partial``'s rules shapes, the full JSON where a shape declines), as
+    leniently as the decision view reads them (``trace_audit.causal.lenient``: a value of
+    the wrong type is absent); no schema default changes a signal, so none is filled in.
+    ``tests/trace_audit/rules`` pins every family to the values of the ``Decision`` view."""
+    action = as_mapping(read_layer(cycle, RULES_ACTION))
     command = as_str(action.get("command")) if action is not None else None
     wanted = tuple(name.partition(".") for name in names)
     families = {family for family, _, _ in wanted}
     execution = (
-        as_mapping(cycle.layer(TOPIC_EXECUTION))
+        as_mapping(read_layer(cycle, RULES_EXECUTION))
         if families & {"channel", "check", "flag"}
         else None
     )
@@ -178,10 +185,10 @@ def nearest_signal(nearest: Mapping[str, float], cls: str) -> float:
 
 def nearest_by_class(cycle: Cycle) -> dict[str, float] | None:
     """Entity class -> nearest distance in metres this cycle (None: no perception logged)."""
-    perception = as_mapping(cycle.layer(TOPIC_PERCEPTION))
+    perception = as_mapping(read_layer(cycle, RULES_PERCEPTION))
     if perception is None:
         return None
-    distances = entity_distances(cycle.layer(TOPIC_BELIEF))
+    distances = entity_distances(read_layer(cycle, RULES_BELIEF))
     nearest: dict[str, float] = {}
     for entity in mappings(perception.get("entities")):
         cls = as_str(entity.get("class"))
