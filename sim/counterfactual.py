@@ -85,6 +85,16 @@ def probe(
         intervene(v, plan, node, x)
         return choose(inp, v)
 
+    def again(command: str) -> str:
+        # A run of a (node, x) this search ran before: charged to the budget like any run,
+        # but not run again. Its answer depends only on (node, x) and the base values: each
+        # run sets the node and recomputes all of its descendants, and touches nothing else.
+        nonlocal spent
+        spent += 1
+        if spent > budget:
+            raise BudgetExhaustedError(f"counterfactual probing exceeded {budget} evaluations")
+        return command
+
     spent = 1
     base = choose(inp, v)
     found: list[Found] = []
@@ -101,7 +111,7 @@ def probe(
         lo_d, hi_d, tol = domain_of(node)
         c = float(current)
         for end in (hi_d, lo_d):
-            hit = _search(run, node, c, end, tol=tol, base=base)
+            hit = _search(run, again, node, c, end, tol=tol, base=base)
             if hit is not None:
                 found.append(hit)
         v.update(base_values)
@@ -109,16 +119,28 @@ def probe(
 
 
 def _search(
-    run: Callable[[str, float], str], node: str, c: float, end: float, *, tol: float, base: str
+    run: Callable[[str, float], str],
+    again: Callable[[str], str],
+    node: str,
+    c: float,
+    end: float,
+    *,
+    tol: float,
+    base: str,
 ) -> Found | None:
+    """Walk from ``c`` towards ``end`` for a value that changes the choice, then bisect to
+    its threshold. ``again(answer)`` stands for a ``run`` of a value already run: the budget
+    spent, and so where it runs out, is that of running it again."""
     if abs(end - c) <= tol:
         return None
     up = end > c
     prev = c
     flip: float | None = None
+    gives = base
     for k in range(1, _GRID + 1):
         x = c + (end - c) * k / _GRID
-        if run(node, x) != base:
+        gives = run(node, x)
+        if gives != base:
             flip = x
             break
         prev = x
@@ -127,21 +149,29 @@ def _search(
     same, other = prev, flip
     while abs(other - same) > tol:
         mid = 0.5 * (same + other)
-        if run(node, mid) == base:
+        got = run(node, mid)
+        if got == base:
             same = mid
         else:
-            other = mid
-    would = run(node, other)
+            other, gives = mid, got
+    would = again(gives)  # ``other`` was run last as the flip or a midpoint
     snapped = round(other, 2)
+    at_snapped: str | None = None
     if up:
-        if snapped > c and run(node, snapped) == would:
-            return Found(node, ">=", snapped, would)
-        if run(node, snapped) == base and run(node, snapped + STRICT_EPS) == would:
+        if snapped > c:
+            at_snapped = run(node, snapped)
+            if at_snapped == would:
+                return Found(node, ">=", snapped, would)
+        at_snapped = run(node, snapped) if at_snapped is None else again(at_snapped)
+        if at_snapped == base and run(node, snapped + STRICT_EPS) == would:
             return Found(node, ">", snapped, would)
         return Found(node, ">=", other, would)
-    if snapped < c and snapped >= 0.0 and run(node, snapped) == would:
-        return Found(node, "<=", snapped, would)
-    if run(node, snapped) == base and run(node, snapped - STRICT_EPS) == would:
+    if snapped < c and snapped >= 0.0:
+        at_snapped = run(node, snapped)
+        if at_snapped == would:
+            return Found(node, "<=", snapped, would)
+    at_snapped = run(node, snapped) if at_snapped is None else again(at_snapped)
+    if at_snapped == base and run(node, snapped - STRICT_EPS) == would:
         return Found(node, "<", snapped, would)
     return Found(node, "<=", other, would)
 
