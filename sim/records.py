@@ -102,6 +102,7 @@ def perception_record(
             }
         )
     ox, oy, h = pose
+    heading = _quat(h)  # the corridor's orientation and the robot's
     c = out.corridor
     ahead = min(c.clearance, c.length)
     entities.append(
@@ -114,7 +115,7 @@ def perception_record(
                     round(oy + ahead * math.sin(h), 3),
                     0.0,
                 ),
-                "orientation": _quat(h),
+                "orientation": heading,
             },
             "confidence": {"corridor": 0.99},
             "evidence": _evidence(c.evidence, corrupt.get("corridor")),
@@ -125,7 +126,7 @@ def perception_record(
         "sensors_used": list(out.sensors_used),
         "sensors_unavailable": list(out.sensors_unavailable),
         # where the robot itself was: the incident report's scene places it by this
-        "robot_pose": {"position": (round(ox, 3), round(oy, 3), 0.0), "orientation": _quat(h)},
+        "robot_pose": {"position": (round(ox, 3), round(oy, 3), 0.0), "orientation": heading},
     }
 
 

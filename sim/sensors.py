@@ -261,7 +261,8 @@ def _static_ranges(rays: _Rays, ox: float, oy: float) -> np.ndarray:
     hit = np.minimum(t[1], table.y_out) >= t_in
     if not table.ahead:
         hit &= t_in > 0.0
-    best: np.ndarray = np.where(hit, t_in, np.inf).min(axis=0)
+    # ufunc reduce, not ndarray.min: the same minimum without numpy's Python-level wrapper
+    best: np.ndarray = np.minimum.reduce(np.where(hit, t_in, np.inf), axis=0)
     rays.last = (ox, best)
     return best
 
@@ -411,7 +412,7 @@ _US_BEAMS = slice(beam_of(-US_HALF_ANGLE), beam_of(US_HALF_ANGLE) + 1)
 
 def range_ultrasonic(truth_ranges: np.ndarray, rng: np.random.Generator) -> float | None:
     """Nearest echo in the forward cone, or None beyond range."""
-    nearest = float(truth_ranges[_US_BEAMS].min())
+    nearest = float(np.minimum.reduce(truth_ranges[_US_BEAMS]))
     if nearest > US_RANGE_MAX:
         return None
     return max(0.02, nearest + float(rng.normal(0.0, US_NOISE_M)))
