@@ -31,7 +31,9 @@ _EXPORTS = {
     "per_robot": "trace_audit.selection",
     "LogClock": "trace_audit.log_time",
     "iter_decisions": "trace_audit.layers",
+    "iter_decision_fields": "trace_audit.layers",
     "RobotDecision": "trace_audit.layers",
+    "RobotDecisionFields": "trace_audit.layers",
     "decision_table": "trace_audit.layers",
     "entity_table": "trace_audit.layers",
     "channel_table": "trace_audit.layers",
@@ -72,6 +74,7 @@ __all__ = [
     "MetricsConfig",
     "MetricsReport",
     "RobotDecision",
+    "RobotDecisionFields",
     "Selection",
     "SeveralRobotsError",
     "Timeline",
@@ -88,6 +91,7 @@ __all__ = [
     "explain",
     "export_decision",
     "gap_table",
+    "iter_decision_fields",
     "iter_decisions",
     "log_info",
     "open_log",
@@ -110,11 +114,13 @@ if TYPE_CHECKING:
     from trace_audit.info import LogInfo, log_info
     from trace_audit.layers import (
         RobotDecision,
+        RobotDecisionFields,
         channel_table,
         check_table,
         decision_table,
         entity_table,
         gap_table,
+        iter_decision_fields,
         iter_decisions,
     )
     from trace_audit.log_time import LogClock
