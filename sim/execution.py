@@ -168,16 +168,12 @@ class Actuator:
 
     def _move(self, want_v: float, want_w: float) -> tuple[float, float]:
         """One period of lag and noise towards (``want_v``, ``want_w``): the new (v, w)."""
-        noise = self.rng.normal(0.0, 1.0, 2)
-        v = self.linear + self._alpha * (want_v - self.linear) + NOISE_LINEAR * float(noise[0])
+        noise = self.rng.normal(0.0, 1.0, 2).tolist()
+        v = self.linear + self._alpha * (want_v - self.linear) + NOISE_LINEAR * noise[0]
         # Turning noise comes from the wheels' speed control: a robot held still on its
         # brakes does not turn (else it would drift in heading through a long STOP).
         moving = min(1.0, (abs(self.linear) + abs(want_v) + abs(want_w)) / TURN_NOISE_FULL)
-        w = (
-            self.angular
-            + self._alpha * (want_w - self.angular)
-            + NOISE_ANGULAR * moving * float(noise[1])
-        )
+        w = self.angular + self._alpha * (want_w - self.angular) + NOISE_ANGULAR * moving * noise[1]
         v = max(0.0, v)
         self.linear, self.angular = v, w
         return v, w

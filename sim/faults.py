@@ -62,20 +62,21 @@ class FaultInjector:
         self.rng = rng
 
     def draw_cycle(self) -> CycleFaults:
-        u = self.rng.random(6)
+        # As Python floats: the same doubles, compared without a numpy scalar each (~1 us).
+        u = self.rng.random(6).tolist()
         r = self.rates
         return CycleFaults(
-            lidar_down=bool(u[0] < r.lidar_unavailable),
-            camera_down=bool(u[1] < r.camera_unavailable),
-            edge_failure=bool(u[2] < r.edge_write_failure),
-            truncate=bool(u[3] < r.rationale_truncation),
-            cf_timeout=bool(u[4] < r.counterfactual_timeout),
-            write_timeout=bool(u[5] < r.audit_write_timeout),
+            lidar_down=u[0] < r.lidar_unavailable,
+            camera_down=u[1] < r.camera_unavailable,
+            edge_failure=u[2] < r.edge_write_failure,
+            truncate=u[3] < r.rationale_truncation,
+            cf_timeout=u[4] < r.counterfactual_timeout,
+            write_timeout=u[5] < r.audit_write_timeout,
         )
 
     def corrupt_entity(self) -> str | None:
         """None, or how this entity's evidence link is corrupted: ``null`` or ``dangling``."""
-        u = self.rng.random(2)
+        u = self.rng.random(2).tolist()
         if u[0] >= self.rates.evidence_corruption:
             return None
         return "null" if u[1] < 0.5 else "dangling"
