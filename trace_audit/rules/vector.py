@@ -33,6 +33,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from trace_runtime.errors import TraceError
+
 __all__ = ["Columns", "compile_columns"]
 
 Columns = Callable[[Mapping[str, NDArray[np.float64]], int], NDArray[np.float64]]
@@ -70,7 +72,7 @@ _STEPS = {
 }
 
 
-class _UnsupportedError(Exception):
+class _UnsupportedError(TraceError):
     """An operator this module does not compute: rtamt evaluates the formula."""
 
 
