@@ -13,7 +13,7 @@ Constructing a model with bad fields raises ``RecordError`` (a ``TraceError``).
 from __future__ import annotations
 
 import inspect
-from typing import Any, Literal, TypeVar
+from typing import Annotated, Any, Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, GetJsonSchemaHandler, ValidationError
 from pydantic.json_schema import JsonSchemaValue
@@ -22,10 +22,10 @@ from pydantic_core import CoreSchema
 from trace_runtime.errors import RecordError
 
 PROFILE = "trace"
-PROFILE_VERSION = "1.1"
+PROFILE_VERSION = "1.2"
 """Major.minor (schemas/PROFILE.md §10). Minor revisions only add optional fields: every
 version 1 log is read as before, and a version 1 reader reads 1.1 logs (ignoring what it
-does not know)."""
+does not know). 1.2 adds each robot's Merkle tree to its checkpoints."""
 
 TOPIC_PERCEPTION = "/trace/perception"
 TOPIC_BELIEF = "/trace/belief"
@@ -494,6 +494,10 @@ class Checkpoint(_Stamp):
     so the checkpoint vouches for every cycle the chain reaches back to. A checkpoint is not
     part of any cycle. The signature is Ed25519 over ``trace_runtime.integrity.signing_bytes``
     (see docs/integrity.md); both it and ``key_id`` are null when the logger has no key.
+
+    Profile 1.2 adds the robot's Merkle tree through the head seal (``tree_size``, ``root``,
+    ``range``) and the same statement as a C2SP tlog checkpoint (``origin``, ``note``), so any
+    signed-note verifier checks it; all null in 1.0/1.1 checkpoints.
     """
 
     robot_id: str = Field(min_length=1, description="the robot whose chain this is")
@@ -506,6 +510,33 @@ class Checkpoint(_Stamp):
         default=None, description="sha256 hex of the raw 32-byte Ed25519 public key"
     )
     signature: str | None = Field(default=None, description="Ed25519 signature, hex")
+    tree_size: int | None = Field(
+        default=None,
+        ge=0,
+        description="leaves of the robot's Merkle tree (its seals from genesis) through the "
+        "head seal (profile 1.2)",
+    )
+    root: str | None = Field(
+        default=None,
+        pattern=r"^[0-9a-f]{64}$",
+        description="RFC 6962 root hash of that tree, lowercase hex (profile 1.2)",
+    )
+    range: list[Annotated[str, Field(pattern=r"^[0-9a-f]{64}$")]] | None = Field(
+        default=None,
+        max_length=64,
+        description="the tree's compact range at tree_size: the roots of its complete "
+        "subtrees, largest first, hex; what a restarted writer continues from (profile 1.2)",
+    )
+    origin: str | None = Field(
+        default=None,
+        min_length=1,
+        description="the C2SP checkpoint origin naming the robot's log (profile 1.2)",
+    )
+    note: str | None = Field(
+        default=None,
+        description="the C2SP signed note of (origin, tree_size, root), signed with the "
+        "checkpoint key under the key name origin; null when unsigned (profile 1.2)",
+    )
 
 
 MESSAGE_MODELS[TOPIC_CHECKPOINT] = Checkpoint

@@ -168,7 +168,7 @@ FLOORS: dict[str, list[set[str]]] = {
             "tier_formats", "partial",
         },
         # reading: one segment, a robot's recordings, a log of many files
-        {"reader", "recordings", "logset", "growing_file"},
+        {"reader", "recordings", "logset", "growing_file", "chain_tree"},
         # writing: the logger a robot embeds, and its test double
         {
             "segment_writer", "logger_config", "cycle_builder", "handover", "writer_lock",
