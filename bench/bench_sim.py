@@ -21,8 +21,8 @@ Measured in one invocation, each figure the median of ``--runs`` (default 3):
    in turn, ``--runs`` rounds: the medians and the median of the pairwise ratios.
 5. where the time goes, CPU microseconds per cycle: the simulator's stages, from a run with
    thin timing wrappers; the logger's parts, each timed on its own on the captured records
-   (validation, canonical encoding, sensor refs, seals, chunk writing); the rest of the
-   logger is its bookkeeping (the replay total minus those parts).
+   (check_layer as the builder calls it, the writer's encoding, sensor refs, seals, chunk
+   writing); the rest of the logger is its bookkeeping (the replay total minus those parts).
 
 Run: ``.venv/bin/python bench/bench_sim.py [--cycles 20000] [--runs 3] [--batch 50] [--vs TREE
 [--vs-only]]``
@@ -51,8 +51,8 @@ from sim.perception import Perceiver
 from sim.runner import few_collections
 from trace_runtime import AuditLogger, CycleBuilder, LoggerConfig, LoggerStats, SessionInfo
 from trace_runtime.chain import digest
-from trace_runtime.codec import encode_json, encode_layer, encode_seal_fields
-from trace_runtime.records import GENESIS, LAYER_MODELS, EvidenceRef, validate_record
+from trace_runtime.codec import check_layer, encode_checked, encode_json, encode_seal_fields
+from trace_runtime.records import GENESIS, LAYER_MODELS, EvidenceRef
 from trace_runtime.segment_writer import OutMessage, SegmentWriter
 
 BUDGET = 5_000
@@ -276,25 +276,28 @@ def _cpu(fn: Callable[[], object], runs: int) -> float:
 
 def _logger_parts(cycles: list[Captured], batch: int, runs: int) -> dict[str, float]:
     """CPU seconds of each part of the logger's work on ``cycles``, each timed on its own."""
-    models = [
-        [(topic, validate_record(LAYER_MODELS[topic], rec)) for topic, rec in cap.layers]
-        for cap in cycles
+    # What CycleBuilder does with a layer record (check_layer: a plain dict is validated by
+    # the msgspec mirror, or by pydantic when it holds a model, and encoded at once; a built
+    # record is kept), then what the writer does with the value (encode_checked).
+    checked = [
+        [(topic, check_layer(LAYER_MODELS[topic], k, cap.t_ns, rec)) for topic, rec in cap.layers]
+        for k, cap in enumerate(cycles)
     ]
     encoded = [
-        [(topic, encode_layer(k, cap.t_ns, m)) for topic, m in layers]
-        for k, (cap, layers) in enumerate(zip(cycles, models, strict=True))
+        [(topic, encode_checked(k, cap.t_ns, LAYER_MODELS[topic], v)) for topic, v in layers]
+        for k, (cap, layers) in enumerate(zip(cycles, checked, strict=True))
     ]
     sensor_data = [[(t, encode_json(p)) for t, p in cap.sensors] for cap in cycles]
 
     def validate() -> None:
-        for cap in cycles:
+        for k, cap in enumerate(cycles):
             for topic, rec in cap.layers:
-                validate_record(LAYER_MODELS[topic], rec)
+                check_layer(LAYER_MODELS[topic], k, cap.t_ns, rec)
 
     def encode() -> None:
-        for k, (cap, layers) in enumerate(zip(cycles, models, strict=True)):
-            for _, m in layers:
-                encode_layer(k, cap.t_ns, m)
+        for k, (cap, layers) in enumerate(zip(cycles, checked, strict=True)):
+            for topic, v in layers:
+                encode_checked(k, cap.t_ns, LAYER_MODELS[topic], v)
 
     def sensor_refs() -> None:  # what CycleBuilder.sensor does per reading
         for cap in cycles:
@@ -324,8 +327,8 @@ def _logger_parts(cycles: list[Captured], batch: int, runs: int) -> dict[str, fl
             writer.write_batch(messages)
 
     return {
-        "validation (pydantic, 4 records)": _cpu(validate, runs),
-        "canonical encoding (4 records)": _cpu(encode, runs),
+        "layer records: check_layer (validate, encode dicts)": _cpu(validate, runs),
+        "writer: encode_checked (encodes built records)": _cpu(encode, runs),
         "sensor refs (encode, sha256, EvidenceRef)": _cpu(sensor_refs, runs),
         "seals (digests, seal bytes)": _cpu(seals, runs),
         "chunk writing (pack, zstd, write)": _cpu(chunks, runs),
@@ -345,7 +348,7 @@ _STAGES: tuple[tuple[Any, str, str], ...] = (
     (runner, "execution_record", "records: execution"),
     (runner._Pipeline, "_audit_faults", "audit-trail fault injection"),
     (CycleBuilder, "sensor", "logger: sensor()"),
-    (CycleBuilder, "_add", "logger: layer records (validation)"),
+    (CycleBuilder, "_add", "logger: layer records (check_layer)"),
     (CycleBuilder, "commit", "logger: commit (encode, seal, write)"),
 )
 
