@@ -32,10 +32,12 @@ from trace_runtime.checkpoints import encode_checkpoint, make_checkpoint
 from trace_runtime.codec import EncodedLayer, digest_keeping_gil, encode_layer, encode_seal_fields
 from trace_runtime.costs import TIMING_METADATA, CostHistogram
 from trace_runtime.cycle_builder import COST_SAMPLE_EVERY
+from trace_runtime.errors import UsageError
 from trace_runtime.handover import PendingCycle
-from trace_runtime.keys import Signer
+from trace_runtime.keys import PublicKey, Signer
 from trace_runtime.logger_config import LoggerConfig, LoggerStats, default_opener
-from trace_runtime.records import LAYER_MODELS, TOPIC_CHECKPOINT, TOPIC_SEAL
+from trace_runtime.merkle import EMPTY_ROOT, CompactRange, leaf_hash
+from trace_runtime.records import GENESIS, LAYER_MODELS, TOPIC_CHECKPOINT, TOPIC_SEAL
 from trace_runtime.segment_names import rotated_segment_name, segment_name
 from trace_runtime.segment_writer import (
     MessageFields,
@@ -44,6 +46,7 @@ from trace_runtime.segment_writer import (
     SegmentWriter,
 )
 from trace_runtime.session import SessionInfo
+from trace_runtime.signed_note import NoteError, NoteSigner, format_checkpoint
 from trace_runtime.writer_lock import WriterLock
 
 __all__ = ["CLOSE_METADATA", "ChainWriter"]
@@ -94,7 +97,50 @@ class ChainWriter:
         self._costs = CostHistogram()  # this segment's per-cycle control-thread costs
         self.session = session
         self.prev_seal = session.prev_seal
+        self.origin = config.origin or f"trace.local/{session.robot_id}"
+        """The C2SP origin of the robot's checkpoints and the key name of their notes."""
+        try:
+            format_checkpoint(self.origin, 0, EMPTY_ROOT)
+        except NoteError as err:
+            raise UsageError(f"LoggerConfig.origin {self.origin!r} cannot be one: {err}") from err
+        self._note_signer = self._make_note_signer(signer)
+        self.tree: CompactRange | None = self._first_tree(path, session)
+        """The robot's Merkle tree through ``prev_seal`` (profile 1.2); None when it could not
+        be resumed (checkpoints then carry no tree, counted in ``stats.tree_failures``)."""
         self.open_segment(session)
+
+    def _make_note_signer(self, signer: Signer | None) -> NoteSigner | None:
+        """The checkpoint key as a C2SP note signer named ``origin``: it needs the public
+        key, which ``Ed25519Signer`` has and another ``Signer`` may (``public_key``)."""
+        if signer is None:
+            return None
+        public = getattr(signer, "public_key", None)
+        if not isinstance(public, PublicKey):
+            self.report_once(
+                "note",
+                "the checkpoint signer has no public_key: checkpoint notes (the signed tree) "
+                "are not written",
+            )
+            return None
+        return NoteSigner(self.origin, signer, public.raw)
+
+    def _first_tree(self, path: Path, session: SessionInfo) -> CompactRange | None:
+        """The tree the first segment continues: empty at genesis, else resumed from the
+        root (``resume.resume_tree``) once, at start."""
+        if session.prev_seal == GENESIS:
+            return CompactRange()
+        if not self.is_root:
+            return None
+        from trace_runtime.resume import resume_tree  # reads the root; only when resuming
+
+        tree = resume_tree(path, session.robot_id, session.prev_seal)
+        if tree is None:
+            self.report_once(
+                "tree",
+                "the robot's Merkle tree could not be resumed from the log (its chain could "
+                "not be followed to the last seal): checkpoints are written without it",
+            )
+        return tree
 
     @property
     def segment(self) -> SegmentWriter | None:
@@ -120,6 +166,8 @@ class ChainWriter:
     def write_batch(self, batch: list[PendingCycle]) -> None:
         """Seal and write cycles, one caller at a time (``WriterThread`` holds its lock).
         Swallows every failure."""
+        tree = self.tree
+        saved = tree.state() if tree is not None else None  # a dropped batch takes its leaves
         try:
             self.check_storage()
             self._maybe_rotate(batch[0].t_ns)
@@ -133,6 +181,7 @@ class ChainWriter:
         except SegmentWriteError as err:
             if not err.kept:
                 self._lose(batch, err, abandon=not err.rolled_back)
+                self._restore_tree(saved)
                 return
             # The batch is in the file, the segment can take no more: the batch counts as
             # written, and the next segment continues the chain from its last seal.
@@ -141,6 +190,7 @@ class ChainWriter:
             self._segment = None
         except Exception as err:
             self._lose(batch, err, abandon=True)
+            self._restore_tree(saved)
             return
         self.prev_seal = last_seal
         self.undeclared = 0
@@ -154,6 +204,11 @@ class ChainWriter:
             if pending.cost_ns >= 0:  # -1: not a timed cycle
                 self._costs.add(pending.cost_ns)
         self._maybe_sync()
+
+    def _restore_tree(self, saved: tuple[int, list[bytes]] | None) -> None:
+        """A batch that is not on disk leaves no leaves in the tree."""
+        if saved is not None:
+            self.tree = CompactRange.restore(*saved)
 
     def _seal(
         self, segment: SegmentWriter, batch: list[PendingCycle]
@@ -171,6 +226,8 @@ class ChainWriter:
         channel = segment.channel
         layer_channels = {topic: channel(topic) for topic in LAYER_MODELS}
         seal_channel = channel(TOPIC_SEAL)
+        tree = self.tree
+        grow = tree.append if tree is not None else None
         for index, pending in enumerate(batch):
             cycle, t_ns = pending.cycle, pending.t_ns
             for topic, sequence, log_time, data in pending.sensors:
@@ -186,6 +243,8 @@ class ChainWriter:
             data = encode_seal_fields(cycle, t_ns, digests, prev, carried + pending.dropped_before)
             append((seal_channel, cycle, t_ns, data))
             prev = digest(data)
+            if grow is not None:
+                grow(leaf_hash(data))  # the seal's leaf: one hash, and one node amortised
             carried = 0
             if self._checkpoint_due(t_ns):
                 sealed = self._sealed_in_segment + index + 1
@@ -364,8 +423,11 @@ class ChainWriter:
         When signing fails (an HSM gone) the checkpoint is written unsigned: it still
         anchors the chain head and marks a closed segment, and verify reports it unsigned.
         """
+        tree = self.tree
         build = functools.partial(
             make_checkpoint,
+            tree=tree,
+            origin=self.origin if tree is not None else None,
             robot_id=self.session.robot_id,
             segment=self.session.segment,
             first_cycle=self.session.first_cycle,
@@ -376,8 +438,10 @@ class ChainWriter:
             final=final,
         )
         try:
+            if tree is None:
+                self.stats.tree_failures += 1
             try:
-                checkpoint = build(signer=self._signer)
+                checkpoint = build(signer=self._signer, note_signer=self._note_signer)
             except Exception as err:
                 if self._signer is None:
                     raise

@@ -16,7 +16,18 @@ import orjson
 
 from trace_runtime.errors import RecordError
 from trace_runtime.keys import PublicKey, Signer
+from trace_runtime.merkle import CompactRange
 from trace_runtime.records import TOPIC_CHECKPOINT, Checkpoint, validate_record
+from trace_runtime.signed_note import (
+    NoteError,
+    NoteSigner,
+    NoteVerifier,
+    UnverifiedNoteError,
+    format_checkpoint,
+    open_note,
+    parse_checkpoint,
+    sign_note,
+)
 
 if TYPE_CHECKING:
     from trace_runtime.cycles import RawMessage
@@ -25,7 +36,9 @@ if TYPE_CHECKING:
 __all__ = [
     "CHECKPOINT_FORMAT",
     "CheckpointState",
+    "NoteState",
     "check_checkpoint",
+    "check_note",
     "decode_checkpoint",
     "encode_checkpoint",
     "iter_checkpoints",
@@ -34,7 +47,9 @@ __all__ = [
 ]
 
 CHECKPOINT_FORMAT = "trace-checkpoint/1"
-"""First line of the signed bytes; bumped if the signed fields ever change."""
+"""First line of the signed bytes; bumped if the signed fields ever change. Profile 1.2 keeps
+it: the tree fields are signed by the checkpoint's C2SP note, so a verifier that knows only
+these bytes checks a 1.2 checkpoint's head signature as before."""
 
 
 def signing_bytes(checkpoint: Checkpoint) -> bytes:
@@ -72,8 +87,41 @@ def make_checkpoint(
     head: str,
     final: bool = False,
     signer: Signer | None = None,
+    tree: CompactRange | None = None,
+    origin: str | None = None,
+    note_signer: NoteSigner | None = None,
+    tree_size: int | None = None,
+    root: str | None = None,
+    range: list[str] | None = None,
+    note: str | None = None,
 ) -> Checkpoint:
-    """Build a checkpoint of the chain head; signed when ``signer`` is given."""
+    """Build a checkpoint of the chain head; signed when ``signer`` is given.
+
+    Profile 1.2: ``tree`` is the robot's tree through the head seal and ``origin`` its C2SP
+    origin; with a ``note_signer`` (the same key, named ``origin``) the checkpoint carries
+    the signed C2SP note of (origin, tree size, root). The signature over ``signing_bytes``
+    is unchanged (``trace-checkpoint/1``): the note is what signs the tree. The tree's fields
+    may also be given as they are stated (``tree_size``, ``root``, ``range``, ``note``).
+    """
+    tree_fields: dict[str, object] = {
+        "tree_size": tree_size,
+        "root": root,
+        "range": range,
+        "origin": origin,
+        "note": note,
+    }
+    if tree is not None:
+        if origin is None:
+            raise ValueError("a checkpoint with a tree names its origin")
+        root_hash = tree.root()
+        tree_fields.update(
+            tree_size=tree.size, root=root_hash.hex(), range=[h.hex() for h in tree.hashes]
+        )
+        if note_signer is not None:
+            if note_signer.name != origin:
+                raise ValueError("a checkpoint's note is signed under the key name origin")
+            text = format_checkpoint(origin, tree.size, root_hash)
+            tree_fields["note"] = sign_note(text, note_signer)
     body = Checkpoint(
         cycle=cycle,
         t_ns=t_ns,
@@ -84,6 +132,7 @@ def make_checkpoint(
         head=head,
         final=final,
         key_id=None if signer is None else signer.key_id,
+        **tree_fields,
     )
     if signer is None:
         return body
@@ -123,6 +172,48 @@ def check_checkpoint(checkpoint: Checkpoint, key: PublicKey | None) -> Checkpoin
     except ValueError:
         return "bad_signature"
     return "valid" if key.verify(signature, signing_bytes(checkpoint)) else "bad_signature"
+
+
+NoteState = Literal["valid", "unchecked", "unsigned", "bad_signature", "key_mismatch", "mismatch"]
+"""A 1.2 checkpoint's note: ``valid`` (signed by the expected key under the name ``origin``),
+``unchecked`` (no key to check against), ``unsigned`` (a key was expected, there is no note),
+``key_mismatch`` (no signature by that key under that name), ``bad_signature`` (it names the
+key but does not verify, or is no signed note at all), ``mismatch`` (its body is not
+exactly the checkpoint's origin, tree size and root)."""
+
+
+def check_note(checkpoint: Checkpoint, key: PublicKey | None) -> NoteState:
+    """Check a 1.2 checkpoint's C2SP note: its body states the checkpoint's own tree (checked
+    with or without a key) and, given the robot's public key, it verifies under the key name
+    ``origin`` with any signed-note verifier's rules (``signed_note.open_note``)."""
+    c = checkpoint
+    if c.note is None:
+        return "unchecked" if key is None else "unsigned"
+    if c.origin is None or c.tree_size is None or c.root is None:
+        return "mismatch"
+    split = c.note.rfind("\n\n")
+    try:
+        body = parse_checkpoint(c.note[: split + 1]) if split >= 0 else None
+    except NoteError:
+        body = None
+    if body is None:
+        return "bad_signature"
+    if (body.origin, body.size, body.root.hex(), body.extensions) != (
+        c.origin,
+        c.tree_size,
+        c.root,
+        (),
+    ):
+        return "mismatch"
+    if key is None:
+        return "unchecked"
+    try:
+        opened = open_note(c.note, [NoteVerifier.of(c.origin, key.raw)])
+    except UnverifiedNoteError:
+        return "key_mismatch"
+    except NoteError:
+        return "bad_signature"
+    return "valid" if opened.text == body.body() else "mismatch"
 
 
 def iter_checkpoints(segment: Segment) -> Iterator[RawMessage]:

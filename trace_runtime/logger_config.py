@@ -50,7 +50,13 @@ class LoggerConfig:
     batched into chunks; one is always written when a segment closes. None: only then."""
     checkpoint_key: str | Path | Signer | None = None
     """Sign checkpoints: an Ed25519 private key file (``trace-audit keygen``) or a ``Signer``.
-    None writes unsigned checkpoints (chain-head anchors only)."""
+    None writes unsigned checkpoints (chain-head anchors only). A ``Signer`` that also has a
+    ``public_key`` (a ``keys.PublicKey``, as ``Ed25519Signer`` has) signs each checkpoint's
+    C2SP note too (profile 1.2); one without gives checkpoints whose tree is unsigned."""
+    origin: str | None = None
+    """The C2SP checkpoint origin naming this robot's log, and the key name its notes are
+    signed under (e.g. ``fleet.example.com/amr-7``; no spaces, no ``+``). None:
+    ``trace.local/<robot_id>``."""
 
 
 @dataclass(slots=True)
@@ -71,6 +77,9 @@ class LoggerStats:
     bytes_written: int = 0
     checkpoints: int = 0
     checkpoint_failures: int = 0
+    tree_failures: int = 0
+    """Checkpoints written without their Merkle tree: the tree could not be resumed at start
+    (the chain on disk could not be followed to its last seal) or computed."""
 
     @property
     def dropped(self) -> int:

@@ -5,6 +5,10 @@ The segments are the log's own (``logset.robot_segment_files``), and of a segmen
 several copies (one mid-compaction in two tiers, a copy cut short beside its original) the
 copy every reader reads comes first (``logset.best_copy_first``). It runs at logger start-up, so
 it reads only what it needs: names, then the newest segment's last seal (from its end).
+
+The robot's Merkle tree (profile 1.2) goes on too (``resume_tree``): from the newest
+checkpoint's compact range plus the seals after it (a crashed segment has some), or, when the
+chain has no 1.2 checkpoint yet, from all its seals, once.
 """
 
 from __future__ import annotations
@@ -12,11 +16,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import NamedTuple
 
+from trace_runtime.chain_tree import tree_through
+from trace_runtime.errors import TraceError
 from trace_runtime.logset import best_copy_first, open_segments, robot_segment_files
+from trace_runtime.merkle import CompactRange
 from trace_runtime.reader import Segment, last_seal
 from trace_runtime.records import GENESIS
 
-__all__ = ["ResumePoint", "resume_point"]
+__all__ = ["ResumePoint", "resume_point", "resume_tree"]
 
 
 class ResumePoint(NamedTuple):
@@ -51,6 +58,19 @@ def resume_point(root: Path, robot_id: str) -> ResumePoint:
                 seal, seal_digest = found
                 return ResumePoint(seal.cycle + 1, seal_digest, next_segment)
     return ResumePoint(0, GENESIS, next_segment)
+
+
+def resume_tree(root: Path, robot_id: str, prev_seal: str) -> CompactRange | None:
+    """The robot's tree through the seal ``prev_seal`` names (``ResumePoint.prev_seal``):
+    the newest 1.2 checkpoint's ``range`` before it plus the seals after that checkpoint,
+    in its segment and any later ones (``chain_tree.tree_through``). None when the chain on
+    disk cannot be followed to that seal; never raises (a robot starts logging regardless)."""
+    if prev_seal == GENESIS:
+        return CompactRange()
+    try:
+        return tree_through(root, robot_id, prev_seal)
+    except (TraceError, OSError):
+        return None
 
 
 def _copies_best_first(files: list[Path]) -> list[Path] | list[Segment]:
