@@ -4,16 +4,22 @@ must end with its closing checkpoint, and nothing may follow it.
 
 A checkpoint that matches (and, with a key, verifies) is an ``Anchor``: it vouches for every
 cycle up to it.
+
+Profile 1.2 checkpoints also state the robot's Merkle tree through their head seal; the
+``TreeCheck`` recomputes it from the seals (a compact range carried along the robot's chain)
+and checks each one's size, root, range and C2SP note.
 """
 
 from __future__ import annotations
 
 import bisect
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-from trace_runtime.checkpoints import CheckpointState, check_checkpoint
+from trace_runtime.chain_tree import checkpoint_range, has_tree
+from trace_runtime.checkpoints import CheckpointState, NoteState, check_checkpoint, check_note
 from trace_runtime.gaps import CycleRange
 from trace_runtime.keys import PublicKey
+from trace_runtime.merkle import CompactRange
 from trace_runtime.reader import Segment
 from trace_runtime.records import Checkpoint
 from trace_runtime.session import TIER_METADATA
@@ -21,7 +27,7 @@ from trace_runtime.verification.report import FindingKind
 from trace_runtime.verification.scan import Anchor, SealScan
 from trace_runtime.verification.sink import SegmentReporter
 
-__all__ = ["CheckpointCheck", "ReadCheckpoint"]
+__all__ = ["CheckpointCheck", "ReadCheckpoint", "TreeCheck"]
 
 ReadCheckpoint = tuple[int, int, Checkpoint | None]
 """A checkpoint message as read: (log time, MCAP sequence, the record or None if invalid)."""
@@ -43,6 +49,8 @@ class CheckpointCheck:
     checkpoints: int = 0
     valid: int = 0
     anchor: Anchor | None = None
+    vouching: list[Checkpoint] = field(default_factory=list)
+    """The checkpoints that matched (and verified): each an anchor candidate."""
 
     def run(self, read: list[ReadCheckpoint]) -> None:
         """Check every checkpoint read from the segment, then how the segment ends."""
@@ -110,6 +118,7 @@ class CheckpointCheck:
         if problems or state not in ("valid", "unchecked"):
             return False
         self.valid += 1
+        self.vouching.append(c)
         if self.anchor is None or c.cycle >= self.anchor.cycle:
             self.anchor = Anchor(c.cycle, c.t_ns)
         return True
@@ -233,3 +242,128 @@ def _closed_by_logger(segment: Segment) -> bool | None:
 
     value = segment.metadata.get(TIER_METADATA, {}).get("source_finished")
     return None if value is None else value == "true"
+
+
+_NOTE_PROBLEMS: dict[NoteState, tuple[FindingKind, str]] = {
+    "mismatch": ("tree_mismatch", "its C2SP note states another tree than the checkpoint"),
+    "bad_signature": ("bad_signature", "its C2SP note does not verify"),
+    "key_mismatch": ("key_mismatch", "its C2SP note is not signed by the given key"),
+    "unsigned": ("unsigned_checkpoint", "its tree is not signed (no C2SP note)"),
+}
+
+
+class TreeCheck:
+    """One segment's 1.2 checkpoints against the robot's Merkle tree (PROFILE §6).
+
+    ``leaves`` are the leaf hashes of the segment's seals in reading order (one per position
+    of ``scan.num``); ``entry`` the tree before the segment's first seal, None when it is not
+    known (the log starts after the robot's genesis, a segment is missing): then the first
+    1.2 checkpoint whose range agrees with its own root is taken as the tree at its head, as
+    a restarted logger takes it. The tree is followed only along a chain that otherwise
+    verifies (in order, nothing damaged or modified): there the other findings say what is
+    wrong, and the tree is taken up again at the next checkpoint. ``exit`` is the tree after
+    the segment's last seal (None when not known).
+    """
+
+    def __init__(
+        self,
+        report: SegmentReporter,
+        scan: SealScan,
+        key: PublicKey | None,
+        leaves: list[bytes],
+        entry: CompactRange | None,
+    ) -> None:
+        self.report = report
+        self.scan = scan
+        self.key = key
+        self.leaves = leaves
+        self.entry = entry
+        self.exit: CompactRange | None = None
+        self.rejected: set[int] = set()
+        """Cycles of checkpoints whose tree or note is wrong: they vouch for nothing."""
+
+    def run(self, read: list[ReadCheckpoint], vouched: CheckpointCheck) -> None:
+        """Check every 1.2 checkpoint; checkpoints with a problem stop vouching (``vouched``'s
+        count and anchor are set again without them)."""
+        trees = [c for _, _, c in read if c is not None and has_tree(c)]
+        for c in trees:
+            self._note(c)
+        self._tree(trees)
+        if self.rejected:
+            kept = [c for c in vouched.vouching if c.cycle not in self.rejected]
+            vouched.valid -= len(vouched.vouching) - len(kept)
+            vouched.vouching = kept
+            newest = max(kept, key=lambda c: c.cycle, default=None)
+            vouched.anchor = None if newest is None else Anchor(newest.cycle, newest.t_ns)
+
+    def _follows_chain(self) -> bool:
+        scan = self.scan
+        num = scan.num
+        return (
+            len(self.leaves) == len(num)
+            and all(scan.link_ok)
+            and not scan.damaged
+            and not scan.bad_positions
+            and all(num[i] < num[i + 1] for i in range(len(num) - 1))
+        )
+
+    def _tree(self, trees: list[Checkpoint]) -> None:
+        if not self._follows_chain():
+            return  # exit stays unknown: taken up again at the next segment's checkpoint
+        position = {cycle: i for i, cycle in enumerate(self.scan.num)}
+        at = sorted(
+            ((position[c.cycle], c) for c in trees if c.cycle in position), key=lambda pc: pc[0]
+        )
+        tree = None if self.entry is None else CompactRange.restore(*self.entry.state())
+        leaves, next_leaf = self.leaves, 0
+        for p, c in at:
+            if tree is None:
+                tree = checkpoint_range(c)
+                if tree is None:
+                    self._mismatch(c, "its range does not make its root at its tree size")
+                next_leaf = p + 1
+                continue
+            while next_leaf <= p:
+                tree.append(leaves[next_leaf])
+                next_leaf += 1
+            self._compare(c, tree)
+        if tree is not None:
+            for leaf in leaves[next_leaf:]:
+                tree.append(leaf)
+        self.exit = tree
+
+    def _compare(self, c: Checkpoint, tree: CompactRange) -> None:
+        root = tree.root().hex()
+        if c.tree_size != tree.size or c.root != root:
+            self._mismatch(
+                c,
+                f"it states tree size {c.tree_size} with root {(c.root or '?')[:16]}…, the "
+                f"robot's seals give size {tree.size} with root {root[:16]}…",
+            )
+        elif c.range != [h.hex() for h in tree.hashes]:
+            self._mismatch(c, "its compact range differs from the tree of the robot's seals")
+
+    def _mismatch(self, c: Checkpoint, message: str) -> None:
+        self.rejected.add(c.cycle)
+        self.report.finding(
+            "tree_mismatch",
+            f"checkpoint at cycle {c.cycle}: {message}",
+            CycleRange(c.cycle, c.cycle, c.t_ns, c.t_ns),
+        )
+
+    def _note(self, c: Checkpoint) -> None:
+        """The note against the checkpoint, when its head signature (if any) is in order:
+        a checkpoint already reported unsigned or badly signed is not reported twice."""
+        if check_checkpoint(c, self.key) not in ("valid", "unchecked"):
+            return
+        state = check_note(c, self.key)
+        problem = _NOTE_PROBLEMS.get(state)
+        if problem is None:
+            return
+        kind, message = problem
+        self.rejected.add(c.cycle)
+        self.report.finding(
+            kind,
+            f"checkpoint at cycle {c.cycle}: {message}",
+            CycleRange(c.cycle, c.cycle, c.t_ns, c.t_ns),
+        )

@@ -43,8 +43,11 @@ FindingKind = Literal[
     "key_mismatch",
     "unsigned_checkpoint",
     "damaged",
+    "tree_mismatch",
 ]
-"""What a finding says happened; every kind makes ``verify`` exit 1."""
+"""What a finding says happened; every kind makes ``verify`` exit 1. ``tree_mismatch``: a
+profile 1.2 checkpoint states another Merkle tree (size, root, range) than the robot's seals
+give, or its C2SP note states another tree than the checkpoint."""
 
 NoteKind = Literal[
     "declared_gap",

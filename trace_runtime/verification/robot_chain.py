@@ -3,26 +3,32 @@ every copy of a segment), the notes no single segment can tell (where the chain 
 clock restart between segments, cycles no checkpoint vouches for yet), and the fan-out of
 one task per robot over an executor.
 
+Along each chain the robot's Merkle tree (profile 1.2) is carried from segment to segment, so
+each 1.2 checkpoint's tree is recomputed from the seals (``checkpoint_check.TreeCheck``).
+
 ``verify(log, key=)`` takes a ``logset.Log`` (which copy of a segment is read and which
 files could not be read are decided there) and returns a ``VerifyReport``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 
 from trace_runtime.clock import clock_restarted
+from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError
 from trace_runtime.gaps import CycleRange
 from trace_runtime.keys import PublicKey
 from trace_runtime.logset import FileProblem, Log, copy_rank, cut_short_copy
+from trace_runtime.merkle import CompactRange, leaf_hash
 from trace_runtime.reader import Segment
 from trace_runtime.recordings import Recordings
-from trace_runtime.records import GENESIS
+from trace_runtime.records import GENESIS, TOPIC_SEAL
 from trace_runtime.session import EXCERPT_METADATA
+from trace_runtime.verification.checkpoint_check import CheckpointCheck, TreeCheck
 from trace_runtime.verification.report import (
     Finding,
     RobotSummary,
@@ -147,6 +153,8 @@ class _RobotChain:
         self.tail: ChainTail | None = None
         self.previous: int | None = None
         self.anchor: Anchor | None = None
+        self.tree: CompactRange | None = None
+        """The robot's Merkle tree through the chain so far; None where it is not known."""
 
     def walk(self, segments: Sequence[Segment]) -> RobotSummary:
         """Verify every segment (each in every copy) and return the robot's summary."""
@@ -170,7 +178,8 @@ class _RobotChain:
         """One segment number: each copy checked from where the chain stands, then the
         robot's range, anchor and tail moved on past it."""
         entry, entry_cycle = self._entry(number, copies[0])
-        results = self._check_copies(number, copies, entry, entry_cycle)
+        entry_tree = self._entry_tree(number, copies[0], entry)
+        results = self._check_copies(number, copies, entry, entry_cycle, entry_tree)
         if len(copies) > 1:
             self._compare_copies(number, copies, results)
         main = results[0]
@@ -188,7 +197,16 @@ class _RobotChain:
         self._note_restart(number, copies[0], summary)
         if main.tail is not None:
             self.tail = main.tail  # an empty segment (killed before its first write) passes it on
+        self.tree = main.exit_tree
         self.previous = number
+
+    def _entry_tree(self, number: int, first: Segment, entry: str | None) -> CompactRange | None:
+        """The tree before segment ``number``'s first seal: empty at the robot's genesis,
+        the previous segment's at the end of it, None where the chain was not followed."""
+        if self.previous is None:
+            at_genesis = number == 0 and entry == GENESIS and first.session.prev_seal == GENESIS
+            return CompactRange() if at_genesis else None
+        return self.tree if entry is not None else None
 
     def _entry(self, number: int, first: Segment) -> tuple[str | None, int | None]:
         """The seal digest segment ``number``'s first seal must name, and the cycle it sealed
@@ -243,19 +261,25 @@ class _RobotChain:
         return tail.digest, tail.cycle
 
     def _check_copies(
-        self, number: int, copies: list[Segment], entry: str | None, entry_cycle: int | None
-    ) -> list[SegmentCheck]:
-        results: list[SegmentCheck] = []
+        self,
+        number: int,
+        copies: list[Segment],
+        entry: str | None,
+        entry_cycle: int | None,
+        entry_tree: CompactRange | None,
+    ) -> list[_TreeSegmentCheck]:
+        results: list[_TreeSegmentCheck] = []
         prev_seal = copies[0].session.prev_seal
         for n, copy in enumerate(copies):
             # Further copies report their findings; their notes would repeat the first's.
-            check = SegmentCheck(
+            check = _TreeSegmentCheck(
                 copy,
                 entry,
                 entry_cycle,
                 self.key,
                 self.sink if n == 0 else self.sink.quiet(),
                 recordings=self.recordings,
+                entry_tree=entry_tree,
             )
             check.run()
             check.summary.copy = n > 0
@@ -274,7 +298,7 @@ class _RobotChain:
         return results
 
     def _compare_copies(
-        self, number: int, copies: list[Segment], results: list[SegmentCheck]
+        self, number: int, copies: list[Segment], results: list[_TreeSegmentCheck]
     ) -> None:
         """Several copies of one segment: noted, and a finding when they fork."""
         first = copies[0]
@@ -350,6 +374,46 @@ class _RobotChain:
                 ),
             )
         )
+
+
+class _TreeSegmentCheck(SegmentCheck):
+    """A segment's check that also follows the robot's Merkle tree: it keeps each seal's
+    leaf hash as the cycles are read (one pass, no second read) and checks the segment's 1.2
+    checkpoints against the tree (``TreeCheck``) before the segment is summarised, so its
+    findings count in the segment's verdict and a checkpoint with a wrong tree vouches for
+    nothing. ``exit_tree`` is the tree after the segment's last seal."""
+
+    def __init__(
+        self,
+        segment: Segment,
+        entry: str | None,
+        entry_cycle: int | None,
+        key: PublicKey | None,
+        sink: FindingSink,
+        *,
+        recordings: Recordings | None = None,
+        entry_tree: CompactRange | None = None,
+    ) -> None:
+        super().__init__(segment, entry, entry_cycle, key, sink, recordings=recordings)
+        self.entry_tree = entry_tree
+        self.exit_tree: CompactRange | None = None
+        self.leaves: list[bytes] = []
+
+    def _iter_cycles_resuming(self) -> Iterator[Cycle]:
+        append = self.leaves.append
+        for cycle in super()._iter_cycles_resuming():
+            data = cycle.payloads.get(TOPIC_SEAL)
+            if data is not None:
+                append(leaf_hash(data))
+            yield cycle
+
+    def _summarise(self, checkpoints: CheckpointCheck) -> None:
+        tree = TreeCheck(self.report, self.scan, self.key, self.leaves, self.entry_tree)
+        tree.run(self.checkpoints, checkpoints)
+        self.anchor = checkpoints.anchor
+        self.exit_tree = tree.exit
+        self.leaves = []  # the tree keeps what it needs
+        super()._summarise(checkpoints)
 
 
 def _count_after(segments: list[SegmentSummary], robot_id: str, after: int) -> int:
