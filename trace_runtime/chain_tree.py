@@ -211,12 +211,14 @@ def _newest_tree_checkpoint(
             if message.topic == TOPIC_SEAL and not seen_head:
                 seen_head = digest(message.data) == head
                 continue
-            if message.topic != TOPIC_CHECKPOINT or not seen_head:
+            if message.topic != TOPIC_CHECKPOINT:
                 continue
             try:
                 checkpoint = decode_checkpoint(message.data)
             except RecordError:
                 continue
+            if not seen_head and checkpoint.head != head:
+                continue  # written after the seal the chain goes on from
             compact = checkpoint_range(checkpoint)
             if compact is not None:
                 return checkpoint, compact
@@ -239,6 +241,8 @@ def _extend(
     """Append the leaves of ``parts`` (oldest first) up to and including the seal ``head``,
     each seal naming the one before it (the first, ``start``, when given); None when a link
     breaks or ``head`` is not reached."""
+    if start == head:
+        return compact  # the checkpoint names the seal the chain goes on from
     previous = start
     for part in parts:
         for leaf in part:

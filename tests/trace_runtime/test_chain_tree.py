@@ -396,3 +396,23 @@ def test_go_opens_the_notes_and_hashes_the_same_tree(
         assert (body.origin, body.size, body.root.hex()) == (origin, c.tree_size, c.root)
     assert [unb64(r).hex() for r in answer["roots"]] == [c.root for c in checkpoints]
     assert [unb64(h) for h in answer["record_hashes"]] == [leaf_hash(s) for s in seals]
+
+
+def test_a_tree_that_cannot_be_resumed_leaves_checkpoints_without_one(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The chain on disk cannot be followed to its last seal: the logger still logs, its
+    checkpoints carry no tree, the stats count them, and verify finds nothing to object."""
+    from trace_runtime import resume
+
+    signer = Ed25519Signer.generate()
+    root = tmp_path / "root"
+    with AuditLogger(root, robot_id="r", config=_config(signer)) as logger:
+        log_cycles(logger, range(8))
+    monkeypatch.setattr(resume, "tree_through", lambda *_: None)
+    with AuditLogger(root, robot_id="r", config=_config(signer)) as logger:
+        log_cycles(logger, range(8, 20))
+    assert logger.stats.tree_failures == logger.stats.checkpoints > 0
+    _seals, checkpoints = _plain_read(root)
+    assert checkpoints[-1].tree_size is None and checkpoints[-1].signature is not None
+    assert verify(open_log(root), key=signer.public_key).ok
