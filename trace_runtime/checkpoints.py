@@ -9,6 +9,7 @@ signed bytes (``signing_bytes``) are specified in docs/integrity.md.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Literal
 
@@ -191,29 +192,31 @@ def check_note(checkpoint: Checkpoint, key: PublicKey | None) -> NoteState:
         return "unchecked" if key is None else "unsigned"
     if c.origin is None or c.tree_size is None or c.root is None:
         return "mismatch"
-    split = c.note.rfind("\n\n")
-    try:
-        body = parse_checkpoint(c.note[: split + 1]) if split >= 0 else None
-    except NoteError:
-        body = None
-    if body is None:
-        return "bad_signature"
-    if (body.origin, body.size, body.root.hex(), body.extensions) != (
-        c.origin,
-        c.tree_size,
-        c.root,
-        (),
-    ):
-        return "mismatch"
     if key is None:
-        return "unchecked"
+        split = c.note.rfind("\n\n")
+        if split < 0:
+            return "bad_signature"
+        text = c.note[: split + 1]
+    else:
+        try:
+            text = open_note(c.note, [_note_verifier(c.origin, key.raw)]).text
+        except UnverifiedNoteError:
+            return "key_mismatch"
+        except NoteError:
+            return "bad_signature"
     try:
-        opened = open_note(c.note, [NoteVerifier.of(c.origin, key.raw)])
-    except UnverifiedNoteError:
-        return "key_mismatch"
+        body = parse_checkpoint(text)
     except NoteError:
         return "bad_signature"
-    return "valid" if opened.text == body.body() else "mismatch"
+    stated = (body.origin, body.size, body.root.hex(), body.extensions)
+    if stated != (c.origin, c.tree_size, c.root, ()):
+        return "mismatch"
+    return "unchecked" if key is None else "valid"
+
+
+@functools.lru_cache(maxsize=64)
+def _note_verifier(origin: str, raw: bytes) -> NoteVerifier:
+    return NoteVerifier.of(origin, raw)
 
 
 def iter_checkpoints(segment: Segment) -> Iterator[RawMessage]:

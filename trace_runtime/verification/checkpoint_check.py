@@ -286,8 +286,12 @@ class TreeCheck:
         """Check every 1.2 checkpoint; checkpoints with a problem stop vouching (``vouched``'s
         count and anchor are set again without them)."""
         trees = [c for _, _, c in read if c is not None and has_tree(c)]
+        # A checkpoint already found unsigned, badly signed or not matching is not
+        # reported twice: only those that vouch have their note checked.
+        vouching = {id(c) for c in vouched.vouching}
         for c in trees:
-            self._note(c)
+            if id(c) in vouching:
+                self._note(c)
         self._tree(trees)
         if self.rejected:
             kept = [c for c in vouched.vouching if c.cycle not in self.rejected]
@@ -352,10 +356,7 @@ class TreeCheck:
         )
 
     def _note(self, c: Checkpoint) -> None:
-        """The note against the checkpoint, when its head signature (if any) is in order:
-        a checkpoint already reported unsigned or badly signed is not reported twice."""
-        if check_checkpoint(c, self.key) not in ("valid", "unchecked"):
-            return
+        """The note against the checkpoint (whose head and signature are in order)."""
         state = check_note(c, self.key)
         problem = _NOTE_PROBLEMS.get(state)
         if problem is None:
