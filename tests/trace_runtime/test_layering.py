@@ -160,7 +160,7 @@ FLOORS: dict[str, list[set[str]]] = {
         {
             "errors", "lazy", "costs", "clock", "flags", "segment_names", "read_limits",
             "gaps", "records", "session", "schemas", "chain", "keys", "checkpoints",
-            "boundary", "live_writers", "merkle", "signed_note",
+            "boundary", "live_writers", "merkle", "signed_note", "witness_protocol", "witnessed",
         },
         # encodings: a record's bytes, an MCAP file's bytes, the warm and cold tier formats
         {
