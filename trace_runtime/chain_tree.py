@@ -24,7 +24,7 @@ from trace_runtime.chain import digest
 from trace_runtime.checkpoints import decode_checkpoint
 from trace_runtime.errors import LogReadError, RecordError, TraceError
 from trace_runtime.logset import Log, best_copy_first, open_segments, robot_segment_files
-from trace_runtime.merkle import CompactRange, MerkleError, leaf_hash
+from trace_runtime.merkle import CompactRange, MerkleError, leaf_hash, node_hash, root_of
 from trace_runtime.reader import Segment
 from trace_runtime.records import GENESIS, TOPIC_CHECKPOINT, TOPIC_SEAL, Checkpoint
 
@@ -32,6 +32,7 @@ __all__ = [
     "ChainTreeError",
     "SealLeaf",
     "checkpoint_range",
+    "consistency_proof_from",
     "has_tree",
     "robot_leaves",
     "robot_seal_leaves",
@@ -142,6 +143,54 @@ def checkpoint_range(checkpoint: Checkpoint) -> CompactRange | None:
 def tree_fields(compact: CompactRange) -> tuple[int, str, list[str]]:
     """A tree as a checkpoint states it: ``(tree_size, root hex, range as hex)``."""
     return compact.size, compact.root().hex(), [h.hex() for h in compact.hashes]
+
+
+def consistency_proof_from(old: CompactRange, new_leaves: Sequence[bytes]) -> list[bytes]:
+    """The RFC 9162 consistency proof from the tree of ``old.size`` leaves to the tree with
+    ``new_leaves`` appended, from what a writer keeps: the old tree's compact range and the
+    leaf hashes since (every hash of the proof below ``old.size`` is a subtree root of that
+    range, every one above it is made of the new leaves). Equal to
+    ``merkle.consistency_proof(old.size, all_leaves)``; empty when ``old.size`` is 0 or
+    nothing was appended."""
+    m = old.size
+    n = m + len(new_leaves)
+    if m in (0, n):
+        return []
+    nodes: dict[tuple[int, int], bytes] = {}
+    lo = 0
+    for h in old.hashes:  # largest first: the binary digits of m, high to low
+        width = 1 << ((m - lo).bit_length() - 1)
+        nodes[(lo, lo + width)] = h
+        lo += width
+
+    def subtree(a: int, b: int) -> bytes:
+        if a >= m:
+            return root_of(new_leaves[a - m : b - m])
+        found = nodes.get((a, b))
+        if found is not None:
+            return found
+        half = 1 << ((b - a - 1).bit_length() - 1)  # not reached for a proof: kept exact
+        return node_hash(subtree(a, a + half), subtree(a + half, b))
+
+    path: list[bytes] = []
+    a, b, k_m, whole = 0, n, m, True
+    while True:
+        size = b - a
+        if k_m == size:
+            if not whole:
+                path.append(subtree(a, b))
+            break
+        k = 1 << ((size - 1).bit_length() - 1)
+        if k_m <= k:
+            path.append(subtree(a + k, b))
+            b = a + k
+        else:
+            path.append(subtree(a, a + k))
+            a += k
+            k_m -= k
+            whole = False
+    path.reverse()
+    return path
 
 
 # --- the tree through a seal, for a logger that resumes a chain -------------------------------

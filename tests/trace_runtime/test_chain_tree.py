@@ -416,3 +416,18 @@ def test_a_tree_that_cannot_be_resumed_leaves_checkpoints_without_one(
     _seals, checkpoints = _plain_read(root)
     assert checkpoints[-1].tree_size is None and checkpoints[-1].signature is not None
     assert verify(open_log(root), key=signer.public_key).ok
+
+
+def test_a_consistency_proof_from_the_old_range_and_the_new_leaves_is_the_rfcs() -> None:
+    """What a logger keeps for its witness (the range at the witness's size and the leaves
+    since) proves every old size against every new one, as the full leaf list does."""
+    from trace_runtime.chain_tree import consistency_proof_from
+    from trace_runtime.merkle import consistency_proof
+
+    leaves = [leaf_hash(b"seal %d" % i) for i in range(90)]
+    for n in range(91):
+        for m in range(n + 1):
+            old = CompactRange()
+            for leaf in leaves[:m]:
+                old.append(leaf)
+            assert consistency_proof_from(old, leaves[m:n]) == consistency_proof(m, leaves[:n])
