@@ -189,7 +189,7 @@ FLOORS: dict[str, list[set[str]]] = {
         {"causal", "chains"},
         # the questions an investigator asks of a log
         {"metrics", "explain", "export", "timeline", "info", "verify", "doctor", "layers", "rules"}
-        | {"tail"},
+        | {"tail", "witness", "proof"},
         # what is built from the answers: the fleet index, the incident report, the Foxglove view
         {"fleet", "report", "foxglove", "foxglove_live"},
         {"cli"},

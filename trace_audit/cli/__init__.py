@@ -21,6 +21,7 @@ from trace_audit.cli import (  # noqa: F401 - each module registers its commands
     tail,
     timeline,
     why,
+    witness,
 )
 from trace_audit.cli.app import EXIT_USAGE, app, claim_process
 from trace_audit.cli.typer_compat import TyperException, usage_error_line
@@ -31,6 +32,7 @@ _LISTED = (
     *("doctor", "check", "index", "query", "find", "verify", "keygen"),
     *("explain", "why", "timeline", "tail", "info", "export"),
     *("metrics", "report", "compact", "catalog"),
+    *("witness", "prove", "verify-proof"),
 )
 """The commands in the order ``trace-audit --help`` lists them: checks and the fleet first,
 then one decision's investigation, then measures, reports and storage."""

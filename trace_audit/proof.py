@@ -1,0 +1,289 @@
+"""A proof bundle: one decision cycle, checkable without the log (``trace-audit prove`` and
+``trace-audit verify-proof``; the format is in docs/integrity.md, "Proof bundles").
+
+A bundle holds the cycle's stored messages (base64 of their bytes, with their topics), its
+seal, the seal's leaf index in the robot's RFC 6962 tree, the inclusion proof of that leaf
+in the tree of the newest signed profile 1.2 checkpoint (a cosigned one where the root's
+witness store holds one that covers it), and that checkpoint's note. ``check_bundle``
+checks, in order: each message's digest against the seal, the seal's leaf in the tree
+(inclusion proof to the note's root), the note's signature by the robot's key under its
+origin and, given a witness key, the witness's cosignature.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import orjson
+
+from trace_runtime.boundary import read_side_file
+from trace_runtime.chain_tree import robot_seal_leaves
+from trace_runtime.clock import iso_utc
+from trace_runtime.errors import LogReadError, UsageError
+from trace_runtime.keys import PublicKey
+from trace_runtime.logset import Log, open_log
+from trace_runtime.merkle import inclusion_proof, leaf_hash, root_of, verify_inclusion
+from trace_runtime.records import TOPIC_SEAL
+from trace_runtime.signed_note import (
+    COSIGNATURE,
+    NoteError,
+    NoteVerifier,
+    open_note,
+    parse_checkpoint,
+)
+from trace_runtime.witnessed import read_cosigned
+
+__all__ = [
+    "BUNDLE_FORMAT",
+    "MAX_BUNDLE_BYTES",
+    "BundleCheck",
+    "check_bundle",
+    "make_bundle",
+    "read_bundle",
+]
+
+BUNDLE_FORMAT = "trace-proof/1"
+MAX_BUNDLE_BYTES = 16 << 20
+
+
+def _b64(data: bytes) -> str:
+    return base64.b64encode(data).decode()
+
+
+def make_bundle(
+    log_path: str | Path, cycle: int, *, robot: str | None = None, sensors: bool = False
+) -> dict[str, Any]:
+    """The proof bundle of ``cycle`` of ``robot`` (the log's only robot when None)."""
+    from trace_audit.witness.push import robot_checkpoints
+
+    log = open_log(log_path)
+    robot_id = robot or _only_robot(log)
+    one = log.of_robots([robot_id])
+    found = one.get_cycle(cycle)
+    if found is None or TOPIC_SEAL not in found.payloads:
+        raise UsageError(f"robot {robot_id} has no sealed cycle {cycle} in {log_path}")
+    seal = found.payloads[TOPIC_SEAL]
+    leaves = robot_seal_leaves(log, robot_id)
+    hashes = [s.leaf for s in leaves]
+    index = next((i for i, s in enumerate(leaves) if s.cycle == cycle), None)
+    if index is None or hashes[index] != leaf_hash(seal):
+        raise UsageError(f"cycle {cycle}'s seal is not a leaf of robot {robot_id}'s tree here")
+    note, size, cosigned = _covering_note(log, robot_id, index, hashes, robot_checkpoints)
+    root = root_of(hashes[:size])
+    messages = [
+        {"topic": topic, "data": _b64(data)}
+        for topic, data in sorted(found.payloads.items())
+        if topic != TOPIC_SEAL
+    ]
+    bundle: dict[str, Any] = {
+        "format": BUNDLE_FORMAT,
+        "robot_id": robot_id,
+        "cycle": cycle,
+        "t_ns": found.t_ns,
+        "messages": messages,
+        "seal": _b64(seal),
+        "leaf_index": index,
+        "tree_size": size,
+        "root": root.hex(),
+        "inclusion": [_b64(h) for h in inclusion_proof(index, hashes[:size])],
+        "note": note,
+        "cosigned": cosigned,
+    }
+    if sensors:
+        bundle["sensors"] = [
+            {"topic": m.topic, "log_time_ns": m.log_time_ns, "data": _b64(m.data)}
+            for m in found.sensors
+        ]
+    return bundle
+
+
+def _only_robot(log: Log) -> str:
+    robots = log.robots
+    if len(robots) != 1:
+        raise UsageError(f"the log holds {len(robots)} robots: name one with --robot")
+    return robots[0]
+
+
+def _covering_note(
+    log: Log, robot: str, index: int, hashes: list[bytes], robot_checkpoints: Any
+) -> tuple[str, int, bool]:
+    """The note of a tree covering leaf ``index``: the smallest cosigned one in the root's
+    store that matches the seals, else the robot's newest signed checkpoint."""
+    for record in sorted(read_cosigned(log.root, robot), key=lambda r: r.tree_size):
+        fits = index < record.tree_size <= len(hashes)
+        if fits and root_of(hashes[: record.tree_size]).hex() == record.root:
+            return record.note, record.tree_size, True
+    for checkpoint in reversed(robot_checkpoints(log, robot)):
+        size = checkpoint.tree_size or 0
+        if size > index and size <= len(hashes) and checkpoint.root == root_of(hashes[:size]).hex():
+            return checkpoint.note or "", size, False
+    raise UsageError(
+        f"no signed profile 1.2 checkpoint of robot {robot} covers leaf {index} yet "
+        "(a later checkpoint is needed)"
+    )
+
+
+@dataclass(slots=True)
+class BundleCheck:
+    """What ``check_bundle`` found: each step in order, ``ok`` when all passed."""
+
+    path: str
+    robot_id: str = ""
+    cycle: int | None = None
+    t_ns: int | None = None
+    tree_size: int | None = None
+    leaf_index: int | None = None
+    origin: str = ""
+    steps: list[tuple[str, bool, str]] = field(default_factory=list)
+    witness: str | None = None
+    witnessed_at: str | None = None
+    ok: bool = False
+
+
+def read_bundle(path: str | Path) -> dict[str, Any]:
+    data = read_side_file(Path(path), limit=MAX_BUNDLE_BYTES)
+    if data is None:
+        raise LogReadError(str(path), "no such proof bundle")
+    try:
+        value = orjson.loads(data)
+    except orjson.JSONDecodeError as err:
+        raise LogReadError(str(path), f"not a proof bundle: not JSON ({err})") from err
+    if not isinstance(value, dict) or value.get("format") != BUNDLE_FORMAT:
+        raise LogReadError(str(path), f"not a proof bundle (format {BUNDLE_FORMAT})")
+    return value
+
+
+class _BadBundleError(Exception):
+    pass
+
+
+def _field(bundle: dict[str, Any], name: str, kind: type) -> Any:
+    value = bundle.get(name)
+    if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
+        raise _BadBundleError(f"field {name} is missing or not {kind.__name__}")
+    return value
+
+
+def _unb64(text: object, what: str) -> bytes:
+    if not isinstance(text, str):
+        raise _BadBundleError(f"{what} is not base64 text")
+    try:
+        data = base64.b64decode(text, validate=True)
+    except (binascii.Error, ValueError) as err:
+        raise _BadBundleError(f"{what} is not base64") from err
+    if _b64(data) != text:
+        raise _BadBundleError(f"{what} is not canonical base64")
+    return data
+
+
+def check_bundle(
+    bundle: dict[str, Any],
+    key: PublicKey,
+    *,
+    witness_key: NoteVerifier | None = None,
+    path: str = "",
+) -> BundleCheck:
+    """Check a bundle (see the module doc); never raises for what the bundle holds."""
+    result = BundleCheck(path)
+    try:
+        _check(bundle, key, witness_key, result)
+    except _BadBundleError as err:
+        result.steps.append(("bundle", False, str(err)))
+    result.ok = bool(result.steps) and all(ok for _name, ok, _detail in result.steps)
+    return result
+
+
+def _check(
+    bundle: dict[str, Any], key: PublicKey, witness_key: NoteVerifier | None, r: BundleCheck
+) -> None:
+    r.robot_id = _field(bundle, "robot_id", str)
+    r.cycle = _field(bundle, "cycle", int)
+    r.t_ns = _field(bundle, "t_ns", int)
+    seal_bytes = _unb64(bundle.get("seal"), "seal")
+    try:
+        seal = orjson.loads(seal_bytes)
+    except orjson.JSONDecodeError as err:
+        raise _BadBundleError("the seal is not JSON") from err
+    digests = seal.get("digests") if isinstance(seal, dict) else None
+    if not isinstance(digests, dict):
+        raise _BadBundleError("the seal has no digests")
+    if seal.get("cycle") != r.cycle or seal.get("t_ns") != r.t_ns:
+        r.steps.append(("digests", False, "the seal is of another cycle or time"))
+        return
+    messages = _field(bundle, "messages", list)
+    given: dict[str, bytes] = {}
+    for m in messages:
+        if not isinstance(m, dict) or not isinstance(m.get("topic"), str):
+            raise _BadBundleError("a message has no topic")
+        if m["topic"] in given:
+            raise _BadBundleError(f"two messages on {m['topic']}")
+        given[m["topic"]] = _unb64(m.get("data"), f"message {m['topic']}")
+    wrong = sorted(t for t, d in given.items() if digests.get(t) != hashlib.sha256(d).hexdigest())
+    absent = sorted(set(digests) - set(given))
+    if wrong or absent:
+        detail = "; ".join(
+            part
+            for part in (
+                f"digest differs: {', '.join(wrong)}" if wrong else "",
+                f"sealed but absent: {', '.join(absent)}" if absent else "",
+            )
+            if part
+        )
+        r.steps.append(("digests", False, detail))
+        return
+    r.steps.append(("digests", True, f"{len(given)} message(s) match the seal"))
+    r.leaf_index = _field(bundle, "leaf_index", int)
+    r.tree_size = _field(bundle, "tree_size", int)
+    root_hex = _field(bundle, "root", str)
+    try:
+        root = bytes.fromhex(root_hex)
+    except ValueError as err:
+        raise _BadBundleError("the root is not hex") from err
+    proof = [_unb64(h, "an inclusion hash") for h in _field(bundle, "inclusion", list)]
+    if not verify_inclusion(r.leaf_index, r.tree_size, leaf_hash(seal_bytes), proof, root):
+        r.steps.append(("inclusion", False, "the seal is not leaf of the tree at that root"))
+        return
+    r.steps.append(
+        ("inclusion", True, f"leaf {r.leaf_index} of {r.tree_size}, {len(proof)} hash(es)")
+    )
+    note = _field(bundle, "note", str)
+    split = note.rfind("\n\n")
+    try:
+        body = parse_checkpoint(note[: split + 1] if split >= 0 else note)
+    except NoteError as err:
+        r.steps.append(("note", False, f"not a checkpoint note: {err}"))
+        return
+    r.origin = body.origin
+    if (body.size, body.root) != (r.tree_size, root):
+        r.steps.append(("note", False, "the note states another tree than the proof's"))
+        return
+    verifiers = [NoteVerifier.of(body.origin, key.raw)]
+    if witness_key is not None:
+        verifiers.append(witness_key)
+    try:
+        opened = open_note(note, verifiers)
+    except NoteError as err:
+        r.steps.append(("note", False, f"the note does not verify: {err}"))
+        return
+    if opened.verified_by(verifiers[0]) is None:
+        r.steps.append(("note", False, f"not signed by the robot's key under {body.origin}"))
+        return
+    r.steps.append(("note", True, f"signed by the robot's key under {body.origin}"))
+    if witness_key is None:
+        return
+    if witness_key.sig_type != COSIGNATURE:
+        raise _BadBundleError("the witness key is not a cosignature key")
+    sig = opened.verified_by(witness_key)
+    if sig is None or sig.timestamp is None:
+        r.steps.append(("cosignature", False, f"no cosignature by {witness_key.name}"))
+        return
+    r.witness = witness_key.name
+    r.witnessed_at = iso_utc(sig.timestamp * 1_000_000_000)
+    r.steps.append(
+        ("cosignature", True, f"by {witness_key.name}: logged no later than {r.witnessed_at}")
+    )

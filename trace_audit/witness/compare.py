@@ -1,0 +1,347 @@
+"""The witnessed state of a log's robots against the log itself (``verify --witness``).
+
+A witness's cosignature on (origin, size N, root R) at time T says: by T, the robot had
+logged at least N seals, and the first N give root R. So a log whose robot's tree now ends
+before N has lost its newest cycles (``truncated_tail``: the newest segments deleted, the
+newest cut short, the root rolled back to an older copy), and one whose first N seals give
+another root was rewritten (``fork``). A clean comparison bounds time from outside the
+robot: cycles up to the one of seal N were logged no later than T.
+
+Where the witnessed state comes from (``source``):
+
+- ``http(s)://...``: a witness's ``GET /checkpoint/<origin>`` (our extension), per robot;
+- ``local``: the root's own store of cosigned checkpoints (``<root>/witness/*.jsonl``);
+- a file path: a file holding cosigned checkpoint note(s), one after another.
+
+With the robot's key (``--key``) each witnessed note must carry the robot's signature under
+its origin; with the witness's verifier key (``--witness-key``) its cosignature must verify:
+a witnessed note that fails either is a ``bad_signature`` finding and vouches for nothing.
+"""
+
+from __future__ import annotations
+
+import urllib.error
+import urllib.parse
+import urllib.request
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import cast
+
+from trace_runtime.boundary import read_side_file
+from trace_runtime.chain_tree import ChainTreeError, SealLeaf, robot_seal_leaves
+from trace_runtime.clock import iso_utc
+from trace_runtime.errors import LogReadError, UsageError
+from trace_runtime.gaps import CycleRange
+from trace_runtime.keys import PublicKey
+from trace_runtime.logset import Log
+from trace_runtime.merkle import CompactRange
+from trace_runtime.signed_note import (
+    MAX_NOTE_BYTES,
+    NoteError,
+    NoteVerifier,
+    open_note,
+    parse_checkpoint,
+)
+from trace_runtime.verification import Finding, FindingKind
+from trace_runtime.witnessed import read_cosigned
+
+__all__ = [
+    "WitnessBound",
+    "WitnessReport",
+    "Witnessed",
+    "compare_witnessed",
+    "read_witnessed",
+    "robot_origin",
+]
+
+_DASH = "\u2014 "
+
+
+@dataclass(frozen=True, slots=True)
+class Witnessed:
+    """One cosigned checkpoint: what the witness saw and when (its cosignature's time)."""
+
+    origin: str
+    tree_size: int
+    root: bytes
+    witness: str
+    timestamp: int
+    note: str
+    source: str
+
+
+@dataclass(frozen=True, slots=True)
+class WitnessBound:
+    """An external time bound: cycles up to ``cycle`` were logged no later than ``time``."""
+
+    robot_id: str
+    witness: str
+    tree_size: int
+    cycle: int
+    t_ns: int
+    timestamp: int
+    time: str
+    cosignature_checked: bool
+
+
+@dataclass(slots=True)
+class WitnessReport:
+    """What ``verify --witness`` adds: its findings, the time bounds, and what it read."""
+
+    source: str
+    findings: list[Finding] = field(default_factory=list)
+    bounds: list[WitnessBound] = field(default_factory=list)
+    witnessed: int = 0
+    unmatched: list[str] = field(default_factory=list)
+    """Robots (or origins) with no witnessed checkpoint to compare, and why."""
+    witness_key: str | None = None
+
+
+def _cosignatures(note: str) -> list[tuple[str, int]]:
+    """(key name, stated time) of every cosignature-shaped line of a note (unverified)."""
+    import base64
+    import binascii
+
+    found = []
+    block = note[note.rfind("\n\n") + 2 :] if "\n\n" in note else ""
+    for line in block.splitlines():
+        if not line.startswith(_DASH):
+            continue
+        name, _, b64 = line[len(_DASH) :].partition(" ")
+        try:
+            raw = base64.b64decode(b64, validate=True)
+        except (binascii.Error, ValueError):
+            continue
+        if len(raw) == 4 + 8 + 64:
+            found.append((name, int.from_bytes(raw[4:12], "big")))
+    return found
+
+
+def _parse_witnessed(note: str, source: str) -> Witnessed:
+    split = note.rfind("\n\n")
+    if split < 0:
+        raise NoteError("not a signed note")
+    body = parse_checkpoint(note[: split + 1])
+    cosigs = _cosignatures(note)
+    if not cosigs:
+        raise NoteError("no cosignature on the checkpoint")
+    name, stamp = cosigs[-1]
+    return Witnessed(body.origin, body.size, body.root, name, stamp, note, source)
+
+
+def _split_notes(text: str) -> list[str]:
+    """Notes one after another in a file: each ends where a signature block is followed by
+    a line that is not a signature."""
+    notes: list[str] = []
+    current: list[str] = []
+    in_block = False
+    for line in text.splitlines(keepends=True):
+        if in_block and not line.startswith(_DASH):
+            notes.append("".join(current))
+            current, in_block = [], False
+            if line == "\n":
+                continue
+        current.append(line)
+        if line == "\n" and current[:-1]:
+            in_block = True
+    if current:
+        notes.append("".join(current))
+    return [n for n in notes if n.strip()]
+
+
+def _fetch(url: str, origin: str, timeout_s: float) -> str | None:
+    address = url.rstrip("/") + "/checkpoint/" + urllib.parse.quote(origin, safe="/")
+    try:
+        with urllib.request.urlopen(address, timeout=timeout_s) as response:
+            data = response.read(MAX_NOTE_BYTES + 1)
+    except urllib.error.HTTPError as err:
+        err.close()
+        if err.code == 404:
+            return None
+        raise UsageError(f"witness {url}: HTTP {err.code} for {origin}") from err
+    except (urllib.error.URLError, OSError, ValueError) as err:
+        raise UsageError(f"witness {url} cannot be reached: {getattr(err, 'reason', err)}") from err
+    if len(data) > MAX_NOTE_BYTES:
+        raise UsageError(f"witness {url}: an answer over {MAX_NOTE_BYTES} bytes")
+    return str(data.decode("utf-8", "replace"))
+
+
+def robot_origin(log: Log, robot: str) -> str:
+    """The origin a robot's 1.2 checkpoints name (``trace.local/<robot>`` when none does)."""
+    from trace_audit.witness.push import robot_checkpoints
+
+    checkpoints = robot_checkpoints(log, robot)
+    origin = checkpoints[-1].origin if checkpoints else None
+    return origin or f"trace.local/{robot}"
+
+
+def read_witnessed(
+    log: Log, source: str, *, timeout_s: float = 5.0
+) -> tuple[dict[str, list[Witnessed]], list[str]]:
+    """The witnessed checkpoints for each robot of ``log`` from ``source`` (see the module
+    doc), and the unreadable entries (one line each). A witness that cannot be reached is a
+    ``UsageError``; a file that cannot be read a ``LogReadError``."""
+    origins = {robot_origin(log, robot): robot for robot in log.robots}
+    found: dict[str, list[Witnessed]] = {robot: [] for robot in log.robots}
+    problems: list[str] = []
+    notes: list[tuple[str, str]] = []
+    if source.startswith(("http://", "https://")):
+        for origin in origins:
+            note = _fetch(source, origin, timeout_s)
+            if note is not None:
+                notes.append((note, f"{source} GET /checkpoint/{origin}"))
+    elif source == "local":
+        for robot in log.robots:
+            for record in read_cosigned(log.root, robot):
+                notes.append((record.note, f"{log.root}/witness/{robot}.jsonl"))
+    else:
+        data = read_side_file(Path(source), limit=16 << 20)
+        if data is None:
+            raise LogReadError(source, "no such witness file")
+        notes += [(n, source) for n in _split_notes(data.decode("utf-8", "replace"))]
+    for note, where in notes:
+        try:
+            witnessed = _parse_witnessed(note, where)
+        except NoteError as err:
+            problems.append(f"{where}: not a cosigned checkpoint ({err})")
+            continue
+        owner = origins.get(witnessed.origin)
+        if owner is None:
+            problems.append(f"{where}: origin {witnessed.origin} names no robot of this log")
+            continue
+        found[owner].append(witnessed)
+    return found, problems
+
+
+def _finding(kind: str, robot: str, message: str, leaf: SealLeaf | None = None) -> Finding:
+    where = CycleRange(leaf.cycle, leaf.cycle, leaf.t_ns, leaf.t_ns) if leaf else CycleRange()
+    return Finding(kind=cast(FindingKind, kind), message=message, robot_id=robot, where=where)
+
+
+def _check_signatures(
+    w: Witnessed, key: PublicKey | None, witness_key: NoteVerifier | None
+) -> tuple[str | None, int | None]:
+    """(problem, verified cosignature time)."""
+    verifiers: list[NoteVerifier] = []
+    if key is not None:
+        verifiers.append(NoteVerifier.of(w.origin, key.raw))
+    if witness_key is not None:
+        verifiers.append(witness_key)
+    if not verifiers:
+        return None, None
+    try:
+        opened = open_note(w.note, verifiers)
+    except NoteError as err:
+        return f"does not verify: {err}", None
+    for v in verifiers:
+        sig = opened.verified_by(v)
+        if sig is None:
+            whose = "the robot's key" if v.sig_type == 1 else f"witness key {v.name}"
+            return f"carries no signature by {whose}", None
+    if witness_key is not None:
+        sig = opened.verified_by(witness_key)
+        return None, sig.timestamp if sig else None
+    return None, None
+
+
+def compare_witnessed(
+    log: Log,
+    source: str,
+    *,
+    key: PublicKey | None = None,
+    witness_key: NoteVerifier | None = None,
+    timeout_s: float = 5.0,
+) -> WitnessReport:
+    """Compare each robot's log with what the witness saw (see the module doc)."""
+    report = WitnessReport(source, witness_key=witness_key.vkey if witness_key else None)
+    found, problems = read_witnessed(log, source, timeout_s=timeout_s)
+    report.unmatched += problems
+    for robot in log.robots:
+        entries = found.get(robot, [])
+        if not entries:
+            report.unmatched.append(f"{robot}: no witnessed checkpoint")
+            continue
+        trusted: list[tuple[Witnessed, int]] = []
+        for w in entries:
+            problem, stamp = _check_signatures(w, key, witness_key)
+            if problem is not None:
+                report.findings.append(
+                    _finding(
+                        "bad_signature",
+                        robot,
+                        f"the witnessed checkpoint of size {w.tree_size} from {w.source} "
+                        f"{problem}; it vouches for nothing",
+                    )
+                )
+                continue
+            trusted.append((w, stamp if stamp is not None else w.timestamp))
+        report.witnessed += len(trusted)
+        if trusted:
+            _compare_robot(log, robot, trusted, report, checked=witness_key is not None)
+    return report
+
+
+def _compare_robot(
+    log: Log,
+    robot: str,
+    entries: list[tuple[Witnessed, int]],
+    report: WitnessReport,
+    *,
+    checked: bool,
+) -> None:
+    try:
+        leaves = robot_seal_leaves(log, robot)
+    except ChainTreeError as err:
+        report.unmatched.append(f"{robot}: its tree cannot be read here ({err.reason})")
+        return
+    entries = sorted(entries, key=lambda e: (e[0].tree_size, e[1]))
+    n = len(leaves)
+    last = leaves[-1] if leaves else None
+    tree = CompactRange()
+    at = 0
+    best: tuple[Witnessed, int] | None = None
+    for w, stamp in entries:
+        when = iso_utc(stamp * 1_000_000_000)
+        if w.tree_size > n:
+            report.findings.append(
+                _finding(
+                    "truncated_tail",
+                    robot,
+                    f"witness {w.witness} cosigned a tree of {w.tree_size} seals at {when}, "
+                    f"but this log holds {n}: the newest {w.tree_size - n} cycle(s) "
+                    "were removed",
+                    last,
+                )
+            )
+            continue
+        while at < w.tree_size:
+            tree.append(leaves[at].leaf)
+            at += 1
+        if tree.root() != w.root:
+            report.findings.append(
+                _finding(
+                    "fork",
+                    robot,
+                    f"witness {w.witness} cosigned another tree of size {w.tree_size} at "
+                    f"{when}: the log's first {w.tree_size} seals were rewritten",
+                    leaves[w.tree_size - 1] if w.tree_size else None,
+                )
+            )
+            continue
+        if best is None or w.tree_size >= best[0].tree_size:
+            best = (w, stamp)
+    if best is not None and best[0].tree_size:
+        w, stamp = best
+        leaf = leaves[w.tree_size - 1]
+        report.bounds.append(
+            WitnessBound(
+                robot,
+                w.witness,
+                w.tree_size,
+                leaf.cycle,
+                leaf.t_ns,
+                stamp,
+                iso_utc(stamp * 1_000_000_000),
+                checked,
+            )
+        )
