@@ -35,7 +35,13 @@ from typing import Annotated, Any, Generic, TypedDict, TypeVar
 import msgspec
 
 from trace_runtime.cycles import Cycle, parse_json
-from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF, TOPIC_EXECUTION, TOPIC_PERCEPTION
+from trace_runtime.records import (
+    TOPIC_ACTION,
+    TOPIC_BELIEF,
+    TOPIC_EXECUTION,
+    TOPIC_PERCEPTION,
+    TOPIC_SEAL,
+)
 
 __all__ = [
     "DECISION_FIELDS",
@@ -46,8 +52,10 @@ __all__ = [
     "RULES_BELIEF",
     "RULES_EXECUTION",
     "RULES_PERCEPTION",
+    "SEAL_FIELDS",
     "DecisionFields",
     "FactorFields",
+    "SealFields",
     "Shape",
     "decision_fields",
     "read_layer",
@@ -173,6 +181,26 @@ METRICS_BELIEF: Shape[MetricsBelief] = Shape("metrics belief", TOPIC_BELIEF, Met
 METRICS_PERCEPTION: Shape[MetricsPerception] = Shape(
     "metrics perception", TOPIC_PERCEPTION, MetricsPerception
 )
+
+
+# --- the seal check: a seal's own fields ----------------------------------------------------
+
+
+class SealFields(msgspec.Struct, frozen=True, gc=False, forbid_unknown_fields=True):
+    """A seal as the seal check reads it (``seal_check``): every field a seal has, typed as
+    the check requires (``cycle``, ``t_ns`` and ``dropped`` integers, ``digests`` strings
+    keyed by strings, ``prev`` a string). A key the seal record does not have is refused
+    rather than skipped, so nothing of a seal goes unread (a skipped ``1e400`` would pass
+    here where orjson refuses the record); a refusal takes the full parse."""
+
+    cycle: Int
+    t_ns: Int
+    digests: dict[str, str]
+    prev: str
+    dropped: Int = 0
+
+
+SEAL_FIELDS: Shape[SealFields] = Shape("seal fields", TOPIC_SEAL, SealFields)
 
 
 # --- rules: what the signals of ``trace-audit check`` read -----------------------------------

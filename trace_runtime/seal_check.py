@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import orjson
 
 from trace_runtime.chain import digest
+from trace_runtime.partial import METRICS_PERCEPTION, SEAL_FIELDS
 from trace_runtime.records import LAYER_TOPICS, TOPIC_PERCEPTION, TOPIC_SEAL
 
 if TYPE_CHECKING:
@@ -85,6 +86,17 @@ class SealStatus:
 
 
 def _parse_seal(data: bytes) -> tuple[int, int, dict[str, str], str, int] | None:
+    """The seal's (cycle, t_ns, digests, prev, dropped), or None when it is not a valid
+    seal record. The seal's shape (``partial.SEAL_FIELDS``) reads it straight from the
+    bytes; what the shape declines takes the full parse (``_parse_seal_in_full``), which
+    decides alone what is valid (the shape is pinned to it by property tests)."""
+    fields_ = SEAL_FIELDS.decode(data)
+    if fields_ is not None:
+        return fields_.cycle, fields_.t_ns, fields_.digests, fields_.prev, fields_.dropped
+    return _parse_seal_in_full(data)
+
+
+def _parse_seal_in_full(data: bytes) -> tuple[int, int, dict[str, str], str, int] | None:
     try:
         value = orjson.loads(data)
     except orjson.JSONDecodeError:
@@ -155,9 +167,14 @@ def verify_cycle(
     if perception is not None and TOPIC_PERCEPTION not in modified:
         # Sensor readings are not sealed themselves: the evidence refs that name them carry
         # their digests, and the refs are sealed with the perception message.
-        checked, unresolved, bad, uncited = _check_evidence(
-            cycle, perception, perception_json, external, sensor_digest
-        )
+        if perception_json is None and TOPIC_PERCEPTION in digests:
+            checked, unresolved, bad, uncited = _check_evidence_shape(
+                cycle, perception, external, sensor_digest
+            )
+        else:
+            found = _check_evidence(cycle, perception, perception_json, external, sensor_digest)
+            assert found is not None  # whole=True: never None
+            checked, unresolved, bad, uncited = found
     if modified or missing or extra:
         problems += _layer_problems(modified, missing, extra)
 
@@ -184,6 +201,28 @@ def verify_cycle(
         tuple(external),
         detail,
     )
+
+
+def _check_evidence_shape(
+    cycle: Cycle,
+    perception: bytes,
+    external: list[Any],
+    sensor_digest: Callable[[RawMessage], str] | None,
+) -> tuple[int, int, list[str], int]:
+    """``_check_evidence`` of a perception whose bytes match its seal, its entities' refs
+    read as the metrics' perception shape (ids and refs only) rather than the whole JSON.
+
+    A ref into an external recording is handed on whole (``SealStatus.external``), so a
+    perception holding one is read again in full, as is one the shape declines. Only a
+    sealed, matching perception is read this way: its bytes are the ones its writer sealed."""
+    shaped = METRICS_PERCEPTION.decode(perception)
+    if shaped is not None:
+        found = _check_evidence(cycle, perception, shaped, None, sensor_digest, whole=False)
+        if found is not None:
+            return found
+    checked = _check_evidence(cycle, perception, None, external, sensor_digest)
+    assert checked is not None
+    return checked
 
 
 def _compare_layers(
@@ -251,12 +290,16 @@ def _check_evidence(
     parsed: Any = None,
     external: list[Any] | None = None,
     sensor_digest: Callable[[RawMessage], str] | None = None,
-) -> tuple[int, int, list[str], int]:
+    *,
+    whole: bool = True,
+) -> tuple[int, int, list[str], int] | None:
     """Check the evidence refs that carry a digest against the cycle's sensor messages.
 
     Returns (refs checked, refs unresolved, readings that differ, readings no ref cites).
     Refs into an external recording are not looked for in the cycle: they are appended to
-    ``external`` (when given) for the caller to check against the recording.
+    ``external`` (when given) for the caller to check against the recording. With
+    ``whole=False`` (``parsed`` holds only the shape's fields of each ref) a ref into an
+    external recording gives None instead: the caller reads the whole perception.
     """
     try:
         value = parsed if parsed is not None else orjson.loads(perception)
@@ -275,6 +318,8 @@ def _check_evidence(
             if not ref:
                 continue
             if isinstance(ref.get("recording"), str):
+                if not whole:
+                    return None
                 if external is not None:
                     external.append(ref)
                 continue

@@ -31,6 +31,7 @@ from trace_runtime.partial import (
     RULES_BELIEF,
     RULES_EXECUTION,
     RULES_PERCEPTION,
+    SEAL_FIELDS,
     DecisionFields,
     MetricsAction,
     MetricsBelief,
@@ -52,6 +53,7 @@ from trace_runtime.records import (
     Belief,
     Perception,
 )
+from trace_runtime.seal_check import _parse_seal, _parse_seal_in_full
 from trace_runtime.testing import synthetic_cycle
 
 SHAPES: dict[str, tuple[Shape[Any], type]] = {
@@ -323,3 +325,96 @@ def test_decision_fields_of_an_action_the_shape_declines_come_from_the_model() -
     with pytest.raises(PayloadError, match="not a valid ActionMessage"):
         decision_fields(broken)
     assert decision_fields(Cycle(4, 400, {})) is None
+
+
+# --- the seal check's seal shape ----------------------------------------------------------
+
+_HEX = st.text("0123456789abcdef", min_size=64, max_size=64)
+_TOPICS = st.sampled_from(
+    ["/trace/perception", "/trace/belief", "/trace/action", "/trace/execution", "/trace/x"]
+)
+seals = st.fixed_dictionaries(
+    {
+        "cycle": st.integers(0, 2**63 - 1),
+        "t_ns": st.integers(0, 2**63 - 1),
+        "digests": st.dictionaries(_TOPICS, _HEX, max_size=5),
+        "prev": _HEX,
+    },
+    optional={"dropped": st.integers(0, 2**40)},
+)
+
+
+def check_seal(data: bytes) -> None:
+    """The seal's shape gives exactly the full parse's fields (same types, same key order),
+    or declines; it never accepts a seal the full parse refuses."""
+    fast = SEAL_FIELDS.decode(data)
+    full = _parse_seal_in_full(data)
+    if fast is None:
+        return
+    got = (fast.cycle, fast.t_ns, fast.digests, fast.prev, fast.dropped)
+    assert full is not None, (data, got)
+    assert typed(list(got)) == typed(list(full)), data
+    assert list(got[2]) == list(full[2])  # the digests' order: the order problems are named in
+
+
+@settings(max_examples=300, deadline=None)
+@given(seal=seals)
+def test_every_valid_seal_decodes_to_the_full_parse(seal: dict[str, Any]) -> None:
+    data = orjson.dumps(seal)
+    fast = SEAL_FIELDS.decode(data)
+    assert fast is not None, data  # a valid seal never needs the full parse
+    check_seal(data)
+    assert _parse_seal(data) == _parse_seal_in_full(data)
+
+
+@settings(max_examples=400, deadline=None)
+@given(
+    seal=seals,
+    edits=st.lists(st.tuples(st.integers(0, 1_000), st.integers(0, 255)), min_size=1, max_size=3),
+)
+def test_a_damaged_seal_decodes_to_the_full_parse_or_not_at_all(
+    seal: dict[str, Any], edits: list[tuple[int, int]]
+) -> None:
+    data = bytearray(orjson.dumps(seal))
+    for at, byte in edits:
+        data[at % len(data)] = byte
+    check_seal(bytes(data))
+    assert _parse_seal(bytes(data)) == _parse_seal_in_full(bytes(data))
+
+
+@settings(max_examples=400, deadline=None)
+@given(seal=seals, token=JSON_TOKENS, nth=st.integers(0, 20))
+def test_a_seal_value_swapped_for_an_odd_one_decodes_as_the_full_parse(
+    seal: dict[str, Any], token: bytes, nth: int
+) -> None:
+    data = orjson.dumps(seal)
+    colons = [i for i, b in enumerate(data) if b == ord(":")]
+    at = colons[nth % len(colons)] + 1
+    _, end = _value_end(data, at)
+    swapped = data[:at] + token + data[end:]
+    check_seal(swapped)
+    assert _parse_seal(swapped) == _parse_seal_in_full(swapped)
+
+
+@pytest.mark.parametrize(
+    "data",
+    [
+        b'{"cycle":1,"t_ns":2,"digests":{},"prev":"p","dropped":0,"extra":1e400}',
+        b'{"cycle":1,"t_ns":2,"digests":{},"prev":"p","note":"x"}',
+        b'{"cycle":1,"cycle":2,"t_ns":2,"digests":{"/a":"1","/b":"2","/a":"3"},"prev":"p"}',
+        b'{"cycle":true,"t_ns":2,"digests":{},"prev":"p"}',
+        b'{"cycle":1.0,"t_ns":2,"digests":{},"prev":"p"}',
+        b'{"cycle":1e2,"t_ns":2,"digests":{},"prev":"p"}',
+        b'{"cycle":18446744073709551615,"t_ns":2,"digests":{},"prev":"p"}',
+        b'{"cycle":1,"t_ns":2,"digests":{},"prev":"p","dropped":null}',
+        b'{"cycle":1,"t_ns":2,"digests":{"/a":null},"prev":"p"}',
+        b'{"cycle":1,"t_ns":2,"prev":"p"}',
+        b'{"cycle":1,"t_ns":2,"digests":{},"prev":"\xff"}',
+        b'{"cycle":1,"t_ns":2,"digests":{},"prev":"\\ud800"}',
+        b'[1,2,{},"p",0]',
+        b' {"cycle":1,"t_ns":2,"digests":{},"prev":"p"} ',
+    ],
+)
+def test_odd_seals_read_as_the_full_parse_reads_them(data: bytes) -> None:
+    check_seal(data)
+    assert _parse_seal(data) == _parse_seal_in_full(data)

@@ -3,9 +3,12 @@ link, an unsealed cycle, a warm summary cycle."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
+import orjson
 import pytest
 
 from tests.trace_runtime.test_checkpoints import _sync, _write
@@ -75,3 +78,75 @@ def test_a_summary_cycle_verifies_its_seal_not_its_payloads(cycles: list[Cycle])
     assert set(status.summarised) == set(second.digests())
     assert status.describe() == "summarised (chain verified, payloads not retained)"
     assert verify_cycle(summary, GENESIS).state == "broken_link"
+
+
+# --- the evidence step read as a shape -----------------------------------------------------
+
+
+def _resealed(cycle: Cycle, perception: Any) -> Cycle:
+    """``cycle`` with another perception message and a seal naming its digest."""
+    data = perception if isinstance(perception, bytes) else json.dumps(perception).encode()
+    seal = orjson.loads(cycle.payloads[TOPIC_SEAL])
+    seal["digests"][TOPIC_PERCEPTION] = digest(data)
+    payloads = {**cycle.payloads, TOPIC_PERCEPTION: data, TOPIC_SEAL: orjson.dumps(seal)}
+    return replace(cycle, payloads=payloads)
+
+
+def _ref_variants(cycle: Cycle) -> list[Any]:
+    """Perceptions that exercise every branch of the evidence step (and the shape's refusals)."""
+    value = orjson.loads(cycle.payloads[TOPIC_PERCEPTION])
+    ref = value["entities"][0]["evidence"][0]["ref"]
+
+    def with_refs(*refs: Any) -> Any:
+        entity = {**value["entities"][0], "evidence": [{"sensor": "x", "ref": r} for r in refs]}
+        return {**value, "entities": [entity, {"id": "bare"}, {"id": "empty", "evidence": []}]}
+
+    external = {**ref, "recording": "camera.mcap", "topic": "/image", "sequence": None}
+    return [
+        value,
+        with_refs(ref, ref),
+        with_refs({**ref, "sequence": None}),
+        with_refs({**ref, "sequence": 99}, {**ref, "sequence": 99, "log_time_ns": 5}),
+        with_refs({**ref, "digest": "0" * 64}, {**ref, "digest": None}, None, {}),
+        with_refs({**ref, "topic": "/sensors/none"}),
+        with_refs(ref, external),
+        with_refs(external, {**external, "recording": "other.mcap"}),
+        with_refs({**ref, "digest": 7}),  # a type the shape refuses: the full parse
+        with_refs({**ref, "sequence": 2**70}),  # past int64: the full parse
+        {**value, "entities": None},
+        {**value, "entities": [1, 2]},
+        [value],
+        b'{"entities":[{"id":"a","evidence":[{"ref":{"topic":"\\u002fsensors/lidar"}}]}]}',
+        b"not json",
+    ]
+
+
+def _outcome(check: Any) -> Any:
+    try:
+        return check()
+    except Exception as err:  # the test compares what each path raises
+        return type(err)
+
+
+def test_the_evidence_shape_gives_the_whole_parse_status(cycles: list[Cycle]) -> None:
+    """A sealed perception's refs read as the metrics' shape give exactly the status the whole
+    JSON gives (``perception_json`` handed in is the old path), external refs whole."""
+    cycle = cycles[1]
+    (sensor,) = cycle.sensors
+    forged = RawMessage(sensor.topic, sensor.sequence, sensor.log_time_ns, b'{"ranges":[9]}')
+    for perception in _ref_variants(cycle):
+        for sensors in (cycle.sensors, [forged], []):
+            case = replace(_resealed(cycle, perception), sensors=sensors)
+            data = case.payloads[TOPIC_PERCEPTION]
+            try:
+                whole = orjson.loads(data)
+            except orjson.JSONDecodeError:
+                whole = None
+            got = _outcome(lambda: verify_cycle(case))  # noqa: B023 - called at once
+            if whole is not None:
+                assert got == _outcome(lambda: verify_cycle(case, perception_json=whole)), data  # noqa: B023
+            if isinstance(got, type):
+                continue  # what the whole parse raises (entities that are not objects), as before
+            assert got.state == "verified", got
+            if b"camera.mcap" in data:
+                assert got.external and all("recording" in r for r in got.external)
