@@ -48,6 +48,12 @@ __all__ = [
 ]
 
 BUNDLE_FORMAT = "trace-proof/1"
+BUNDLE_FIELDS = frozenset(
+    {"format", "cycle", "t_ns", "messages", "seal", "leaf_index", "tree_size", "root"}
+    | {"inclusion", "note", "cosigned"}
+)
+"""Every field of a bundle, all required; any other is refused (nothing in a bundle goes
+unchecked: the robot is named by the note's origin, which the robot's key signs)."""
 MAX_BUNDLE_BYTES = 16 << 20
 
 
@@ -55,9 +61,7 @@ def _b64(data: bytes) -> str:
     return base64.b64encode(data).decode()
 
 
-def make_bundle(
-    log_path: str | Path, cycle: int, *, robot: str | None = None, sensors: bool = False
-) -> dict[str, Any]:
+def make_bundle(log_path: str | Path, cycle: int, *, robot: str | None = None) -> dict[str, Any]:
     """The proof bundle of ``cycle`` of ``robot`` (the log's only robot when None)."""
     from trace_audit.witness.push import robot_checkpoints
 
@@ -80,9 +84,8 @@ def make_bundle(
         for topic, data in sorted(found.payloads.items())
         if topic != TOPIC_SEAL
     ]
-    bundle: dict[str, Any] = {
+    return {
         "format": BUNDLE_FORMAT,
-        "robot_id": robot_id,
         "cycle": cycle,
         "t_ns": found.t_ns,
         "messages": messages,
@@ -94,12 +97,6 @@ def make_bundle(
         "note": note,
         "cosigned": cosigned,
     }
-    if sensors:
-        bundle["sensors"] = [
-            {"topic": m.topic, "log_time_ns": m.log_time_ns, "data": _b64(m.data)}
-            for m in found.sensors
-        ]
-    return bundle
 
 
 def _only_robot(log: Log) -> str:
@@ -133,7 +130,6 @@ class BundleCheck:
     """What ``check_bundle`` found: each step in order, ``ok`` when all passed."""
 
     path: str
-    robot_id: str = ""
     cycle: int | None = None
     t_ns: int | None = None
     tree_size: int | None = None
@@ -201,7 +197,9 @@ def check_bundle(
 def _check(
     bundle: dict[str, Any], key: PublicKey, witness_key: NoteVerifier | None, r: BundleCheck
 ) -> None:
-    r.robot_id = _field(bundle, "robot_id", str)
+    if set(bundle) != BUNDLE_FIELDS:
+        odd = sorted(set(bundle) ^ BUNDLE_FIELDS)
+        raise _BadBundleError(f"fields missing or unknown: {', '.join(odd)}")
     r.cycle = _field(bundle, "cycle", int)
     r.t_ns = _field(bundle, "t_ns", int)
     seal_bytes = _unb64(bundle.get("seal"), "seal")
@@ -218,7 +216,11 @@ def _check(
     messages = _field(bundle, "messages", list)
     given: dict[str, bytes] = {}
     for m in messages:
-        if not isinstance(m, dict) or not isinstance(m.get("topic"), str):
+        if (
+            not isinstance(m, dict)
+            or set(m) != {"topic", "data"}
+            or not isinstance(m.get("topic"), str)
+        ):
             raise _BadBundleError("a message has no topic")
         if m["topic"] in given:
             raise _BadBundleError(f"two messages on {m['topic']}")
@@ -274,6 +276,10 @@ def _check(
         r.steps.append(("note", False, f"not signed by the robot's key under {body.origin}"))
         return
     r.steps.append(("note", True, f"signed by the robot's key under {body.origin}"))
+    cosigned = _field(bundle, "cosigned", bool)
+    if cosigned != (len(opened.verified) + len(opened.unverified) > 1):
+        r.steps.append(("note", False, "'cosigned' does not say what the note carries"))
+        return
     if witness_key is None:
         return
     if witness_key.sig_type != COSIGNATURE:

@@ -15,11 +15,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 from concurrent.futures import Executor
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from trace_audit.evidence import open_recordings
 from trace_audit.selection import Selection
 from trace_runtime.keys import PublicKey
 from trace_runtime.logset import open_log
+from trace_runtime.signed_note import NoteVerifier
 from trace_runtime.verification import (
     Finding,
     FindingKind,
@@ -30,6 +32,9 @@ from trace_runtime.verification import (
     verify,
 )
 
+if TYPE_CHECKING:
+    from trace_audit.witness.compare import WitnessReport
+
 __all__ = [
     "Finding",
     "FindingKind",
@@ -37,7 +42,9 @@ __all__ = [
     "RobotSummary",
     "SegmentSummary",
     "VerifyReport",
+    "add_witness",
     "verify_log",
+    "witness_check",
 ]
 
 
@@ -61,3 +68,30 @@ def verify_log(
     recordings = open_recordings(evidence)
     log = Selection(tuple(robots)).of(open_log(path))
     return verify(log, key=key, recordings=recordings, executor=executor)
+
+
+def witness_check(
+    path: str | Path,
+    source: str,
+    *,
+    key: PublicKey | None = None,
+    witness_key: NoteVerifier | None = None,
+    robots: Sequence[str] = (),
+) -> WitnessReport:
+    """``verify --witness``: the log's robots compared with what a witness cosigned
+    (``trace_audit.witness.compare``): ``source`` is a witness URL, a file of cosigned
+    checkpoint notes, or ``local`` (the root's own ``witness/`` store). Its findings
+    (``truncated_tail``, ``fork``, ``bad_signature``) belong in the verify report
+    (``add_witness``)."""
+    from trace_audit.witness.compare import compare_witnessed
+
+    log = Selection(tuple(robots)).of(open_log(path))
+    return compare_witnessed(log, source, key=key, witness_key=witness_key)
+
+
+def add_witness(report: VerifyReport, witness: WitnessReport) -> VerifyReport:
+    """The verify report with the witness comparison's findings added (not ok when any)."""
+    report.findings.extend(witness.findings)
+    if witness.findings:
+        report.ok = False
+    return report

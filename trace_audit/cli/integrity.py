@@ -30,6 +30,7 @@ from trace_audit.cli.output import emit, setup_logging
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
     from trace_audit.log_time import LogClock
     from trace_audit.verify import Finding, RobotSummary, SegmentSummary, VerifyReport
+    from trace_audit.witness.compare import WitnessReport
     from trace_runtime.keys import KeyPair
 
 _VERIFY_HELP = """Verify that a log is what the robot wrote: all of it, unaltered, in order.
@@ -95,6 +96,25 @@ def verify_command(
     ] = None,
     scheduler: SchedulerOption = None,
     robot: RobotsOption = None,
+    witness: Annotated[
+        str | None,
+        typer.Option(
+            "--witness",
+            help="Compare with what a witness cosigned: its URL, a file of cosigned checkpoint "
+            "notes, or 'local' (the root's witness/ store). A log that ends before the "
+            "witnessed tree is truncated_tail, one with another root a fork.",
+            show_default=False,
+        ),
+    ] = None,
+    witness_key: Annotated[
+        str | None,
+        typer.Option(
+            "--witness-key",
+            help="The witness's verifier key (witness vkey --cosignature): its cosignatures "
+            "are checked.",
+            show_default=False,
+        ),
+    ] = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
@@ -111,9 +131,89 @@ def verify_command(
             )
 
     report = guarded(run)
+    if witness is not None:
+        _verify_with_witness(
+            log,
+            report,
+            witness,
+            witness_key=witness_key,
+            key=key,
+            robot=robot,
+            json_out=json_out,
+            plain=plain,
+        )
+        return
     emit(report, verify_doc, json_out=json_out, plain=plain)
     if not report.ok:
         raise typer.Exit(EXIT_FINDINGS)
+
+
+def _verify_with_witness(
+    log: Path,
+    report: VerifyReport,
+    source: str,
+    *,
+    witness_key: str | None,
+    key: Path | None,
+    robot: list[str] | None,
+    json_out: bool,
+    plain: bool,
+) -> None:
+    """``verify --witness``: the report, the witness comparison's findings added to it, and
+    its time bounds shown beside the robot's clock (JSON: the report plus ``witness``)."""
+    from trace_audit.jsonout import to_jsonable
+    from trace_audit.verify import add_witness, witness_check
+    from trace_runtime.errors import UsageError
+    from trace_runtime.keys import load_public_key
+    from trace_runtime.signed_note import NoteError, parse_verifier_key
+
+    def run() -> WitnessReport:
+        try:
+            verifier = parse_verifier_key(witness_key) if witness_key else None
+        except NoteError as err:
+            raise UsageError(f"--witness-key: {err}") from err
+        public = load_public_key(key) if key is not None else None
+        return witness_check(log, source, key=public, witness_key=verifier, robots=robot or ())
+
+    witnessed = guarded(run)
+    add_witness(report, witnessed)
+
+    def to_json(r: VerifyReport) -> object:
+        return {**to_jsonable(r), "witness": to_jsonable(witnessed)}
+
+    def to_doc(r: VerifyReport) -> Doc:
+        doc = verify_doc(r)
+        _witness_section(doc, r, witnessed)
+        return doc
+
+    emit(report, to_doc, json_out=json_out, plain=plain, to_json=to_json)
+    if not report.ok:
+        raise typer.Exit(EXIT_FINDINGS)
+
+
+def _witness_section(doc: Doc, r: VerifyReport, w: WitnessReport) -> None:
+    clocks = _robot_clocks(r.robots)
+    doc.heading(f"Witness ({w.source})")
+    rows: list[tuple[str, str | Seg]] = [
+        (
+            "cosignatures",
+            f"checked with {w.witness_key.split('+')[0]}"
+            if w.witness_key
+            else Seg("not checked (no --witness-key)", "yellow"),
+        ),
+        ("witnessed checkpoints", str(w.witnessed)),
+    ]
+    for b in w.bounds:
+        rows.append(
+            (
+                f"{b.robot_id}: logged by",
+                f"cycles up to {b.cycle} (robot clock t = {fmt_t(b.t_ns, clocks.get(b.robot_id))}) "
+                f"were logged no later than {b.time} by witness {b.witness} "
+                f"(tree size {b.tree_size})",
+            )
+        )
+    rows += [("not compared", line) for line in w.unmatched]
+    doc.fields(rows)
 
 
 def verify_doc(r: VerifyReport) -> Doc:

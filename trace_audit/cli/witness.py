@@ -170,9 +170,6 @@ def prove_command(
         Path, typer.Option("--out", help="The bundle file to write.", show_default=False)
     ],
     robot: Annotated[str | None, robot_option("The robot (needed on a fleet root).")] = None,
-    sensors: Annotated[
-        bool, typer.Option("--sensors", help="Also carry the cycle's sensor readings.")
-    ] = False,
 ) -> None:
     import orjson
 
@@ -180,7 +177,7 @@ def prove_command(
     from trace_runtime.boundary import write_atomic
 
     setup_logging()
-    bundle = guarded(lambda: make_bundle(log, cycle, robot=robot, sensors=sensors))
+    bundle = guarded(lambda: make_bundle(log, cycle, robot=robot))
     data = orjson.dumps(bundle, option=orjson.OPT_INDENT_2) + b"\n"
     guarded(lambda: write_atomic(out, data))
     sys.stderr.write(
@@ -229,7 +226,7 @@ def _check_doc(r: BundleCheck) -> Doc:
     doc.title([f"Proof {r.path}: ", verdict])
     doc.fields(
         [
-            ("cycle", f"{r.cycle} of robot {r.robot_id} (t_ns {r.t_ns})"),
+            ("cycle", f"{r.cycle} (t_ns {r.t_ns})"),
             ("tree", f"leaf {r.leaf_index} of {r.tree_size} ({r.origin or '?'})"),
         ]
     )

@@ -300,19 +300,25 @@ def _compare_robot(
     tree = CompactRange()
     at = 0
     best: tuple[Witnessed, int] | None = None
+    beyond = [(w, stamp) for w, stamp in entries if w.tree_size > n]
+    if beyond:
+        w, stamp = beyond[-1]  # the largest tree witnessed: the most that was removed
+        others = (
+            f" ({len(beyond) - 1} other witnessed tree(s) also beyond it)" if beyond[1:] else ""
+        )
+        report.findings.append(
+            _finding(
+                "truncated_tail",
+                robot,
+                f"witness {w.witness} cosigned a tree of {w.tree_size} seals at "
+                f"{iso_utc(stamp * 1_000_000_000)}, but this log holds {n}: the newest "
+                f"{w.tree_size - n} cycle(s) were removed{others}",
+                last,
+            )
+        )
     for w, stamp in entries:
         when = iso_utc(stamp * 1_000_000_000)
         if w.tree_size > n:
-            report.findings.append(
-                _finding(
-                    "truncated_tail",
-                    robot,
-                    f"witness {w.witness} cosigned a tree of {w.tree_size} seals at {when}, "
-                    f"but this log holds {n}: the newest {w.tree_size - n} cycle(s) "
-                    "were removed",
-                    last,
-                )
-            )
             continue
         while at < w.tree_size:
             tree.append(leaves[at].leaf)
