@@ -103,13 +103,15 @@ def per_robot(
     ask: Callable[[Log], Answer],
     *,
     skip: type[Exception] | tuple[type[Exception], ...] = (),
+    skipped: list[tuple[str, Exception]] | None = None,
 ) -> list[Answer]:
     """``ask`` of each robot's log (``each_robot``), in order of name.
 
     A robot whose question raises ``skip`` (it has nothing to say: no cycle in the window,
-    never takes the action) is left out; when every robot is, the first one's error is
-    raised (on several robots, as a ``UsageError`` that says so and quotes the first), so a
-    question that no robot can answer fails as it would on one robot."""
+    never takes the action) is left out, and added to ``skipped`` (robot, error) when given;
+    when every robot is, the first one's error is raised (on several robots, as a
+    ``UsageError`` that says so and quotes the first), so a question that no robot can
+    answer fails as it would on one robot."""
     answers: list[Answer] = []
     errors: list[tuple[str, Exception]] = []
     robots = each_robot(log)
@@ -118,6 +120,8 @@ def per_robot(
             answers.append(ask(robot))
         except skip as err:
             errors.append((robot.first_robot, err))
+            if skipped is not None:
+                skipped.append((robot.first_robot, err))
     if not answers and errors:
         if len(robots) == 1:
             raise errors[0][1]

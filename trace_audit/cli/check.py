@@ -47,17 +47,21 @@ RULES.toml holds [[rule]] tables, each a name and an stl formula always(...) ove
 signals the log defines: command.<ACTION> (1 while in force), channel.<name>.intended,
 .actual or .deviation (planar robots: channel.speed.*), nearest.<class> (metres), factor.<name>,
 check.<rule> (1 passed, 0 failed) and flag.<name>. Times in formulas are seconds of log time;
-the rules are evaluated by rtamt in discrete time at the log's cycle period (docs/rules.md).
+the rules are evaluated with rtamt's semantics in discrete time at the log's cycle period
+(docs/rules.md).
 
 Each rule is judged per robot: satisfied, violated (with every violation interval, the
 decision in force and the command that explains it) or not decidable (a gap or a missing
 signal hides part of the window: never interpolated). Robustness is rtamt's: how far the
-worst cycle is from the rule's boundary, in the signals' units.
+worst cycle is from the rule's boundary, in the signals' units. A signal the robot's log
+never shows (a class never perceived, a command never in force, a flag never raised) is
+named under its rule, as a possible typo; a robot whose log the --from/--to window misses
+is named, not left out silently.
 
 With --index IDX instead of a log, the rules are judged over a fleet index (trace-audit
 index): the same evaluation and JSON, the signals read with DuckDB per robot in time order,
-the gaps from the index's gaps table. A rule reading a signal the index does not hold (a
-planar robot's channel.speed.*) is not decidable there. --by robot,day adds the table of
+the gaps from the index's gaps table (a planar robot's channel.speed.* from the decisions'
+linear motion). --by robot,day adds the table of
 outcomes and robustness minima per robot and day (on a sim clock, per run); --scheduler
 judges each robot as one task on a Dask cluster (the same JSON).
 
@@ -285,9 +289,13 @@ def check_doc(r: CheckResult) -> Doc:
     doc.title(["Rules ", f"{r.rules_file} over {r.path}"])
     for robot in r.robots:
         period = robot.period_ns / 1e9
-        doc.heading(f"{robot.robot}: {robot.cycles} cycles at {period:g} s")
+        cycles = f"{robot.cycles} cycle{'s' if robot.cycles != 1 else ''}"
+        doc.heading(f"{robot.robot}: {cycles} at {period:g} s")
         for rule in robot.rules:
             _rule_block(doc, robot, rule)
+    for skipped in r.skipped:
+        doc.heading(f"{skipped.robot}: not checked")
+        doc.line(Seg(skipped.reason, "yellow"), 2)
     if r.groups:
         _groups_table(doc, r.groups)
     return doc
@@ -334,6 +342,8 @@ def _rule_block(doc: Doc, robot: RobotRules, rule: RuleResult) -> None:
         2,
     )
     doc.line(rule.stl, 4)
+    for name in rule.unseen:
+        doc.line(Seg(f"note: the log never shows {name} (a typo?)", "yellow"), 4)
     clock = robot.clock
     for v in rule.violations:
         doc.line(

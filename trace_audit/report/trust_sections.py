@@ -61,14 +61,48 @@ def rules_section(data: ReportData) -> str:
         if violations
         else "<p>No rule is violated in the window.</p>"
     )
+    undecided = [
+        [
+            f"<code>{escape(rule.rule)}</code>",
+            f"{escape(clock.show(u.start_ns))} – {escape(clock.show(u.end_ns))}",
+            f"{u.first_cycle}–{u.last_cycle}",
+            escape(u.detail),
+        ]
+        for rule in judged.rules
+        for u in rule.undecided
+    ]
+    why = (
+        "<h3>Not decidable</h3>"
+        + html_table(["rule", "when", "cycles", "why"], undecided[:_LISTED], set())
+        + (
+            f"<p>… and {len(undecided) - _LISTED} more (<code>check --json</code> lists them "
+            "all).</p>"
+            if len(undecided) > _LISTED
+            else ""
+        )
+        if undecided
+        else ""
+    )
+    unseen = [(rule.rule, name) for rule in judged.rules for name in rule.unseen]
+    notes = "".join(
+        f'<p class="warn">Note: the window never shows <code>{escape(name)}</code>, read by '
+        f"<code>{escape(rule)}</code> (a typo?).</p>"
+        for rule, name in unseen
+    )
     source = escape(data.rules_path or "the rules given")
     return (
         f"<p>The rules of {source}, judged over the window ({judged.cycles} cycles; a rule's "
         "robustness is how far the worst cycle is from breaking it, negative when broken; "
         "a window over a gap or the log's edge is not decidable). docs/rules.md.</p>"
         + table
+        + notes
         + listed
+        + why
     )
+
+
+_LISTED = 20
+"""Not-decidable stretches shown on the page; the rest are counted."""
 
 
 def integrity_section(data: ReportData) -> str:

@@ -19,7 +19,7 @@ from trace_audit.log_source import LogSource, as_log
 from trace_audit.log_time import LogClock, NotWallClockError, TimeArg
 from trace_audit.rules.formula import Horizon, RulesError
 from trace_audit.rules.judge import RobotSignals, SignalColumns, judge
-from trace_audit.rules.results import CheckResult, RobotRules
+from trace_audit.rules.results import CheckResult, RobotRules, Skipped
 from trace_audit.rules.rulebook import Rule
 from trace_audit.rules.signals import read_signals
 from trace_audit.selection import Selection, per_robot
@@ -47,12 +47,15 @@ def check_rules(
     selection = Selection(tuple(robots), start, end)
     log = selection.of(as_log(source))
     path = str(source) if isinstance(source, str | Path) else str(log.root)
+    skipped: list[tuple[str, Exception]] = []
     answers = per_robot(
         log,
         lambda one: _check_robot(one, rules, selection, path, engine),
         skip=(TimeOutOfRangeError, NotWallClockError, WindowOutsideLogError),
+        skipped=skipped,
     )
-    return CheckResult(path, rules_file, tuple(answers))
+    left_out = tuple(Skipped(robot, str(err)) for robot, err in skipped)
+    return CheckResult(path, rules_file, tuple(answers), skipped=left_out)
 
 
 def _check_robot(

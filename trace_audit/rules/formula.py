@@ -216,8 +216,26 @@ def compile_formula(rule: str, stl: str, *, origin: str = "") -> Formula:
         raise RulesError(f"rule {rule!r}: unknown signal {unknown[0]!r} ({_SIGNALS_HELP})")
     if not names:
         raise RulesError(f"rule {rule!r}: the formula reads no signal")
+    _check_intervals(spec.ast.specs[0], rule)
     horizon = _horizon(spec.ast.specs[0], rule)
     return Formula(rule, stl, body, names, horizon, _bounds(spec.ast.specs[0]), origin)
+
+
+def _check_intervals(node: Any, rule: str) -> None:
+    """Every bounded operator's interval is ``[a:b]`` with ``0 <= a <= b`` (rtamt takes a
+    reversed or negative one and evaluates every cycle to an infinity)."""
+    kind = type(node).__name__
+    if kind in _BOUNDED:
+        begin = Fraction(node.begin) * _UNITS.get(str(node.begin_unit or ""), Fraction(1))
+        end = _end(node)
+        if begin < 0 or end < begin:
+            op = kind.removeprefix("Timed").lower()
+            raise RulesError(
+                f"rule {rule!r}: the interval of {op}[{float(begin):g}:{float(end):g}] must "
+                "be [a:b] with 0 <= a <= b (seconds)"
+            )
+    for child in node.children:
+        _check_intervals(child, rule)
 
 
 def _bounds(node: Any) -> tuple[tuple[str, Fraction], ...]:
@@ -243,6 +261,11 @@ def _body(rule: str, stl: str) -> str:
                 if not stl[i + 1 :].strip():
                     return stl[start.end() : i]
                 break
+    if stl.count("(") != stl.count(")"):
+        raise RulesError(
+            f"rule {rule!r}: unbalanced parentheses ({stl.count('(')} opened, "
+            f"{stl.count(')')} closed) in {stl.strip()!r}"
+        )
     raise RulesError(
         f"rule {rule!r}: a rule is always(<formula>), a requirement on every cycle "
         f"(got {stl.strip()!r})"

@@ -227,7 +227,27 @@ def _result(
         len(decidable),
         violations,
         undecided,
+        _unseen(formula, signals, judged),
     )
+
+
+def _unseen(formula: Formula, signals: RobotSignals, judged: NDArray[np.bool_]) -> tuple[str, ...]:
+    """The rule's signals the judged rows never show (``RuleResult.unseen``)."""
+    out: list[str] = []
+    if not judged.any():
+        return ()
+    for name in formula.signals:
+        values = signals.column(name)[judged]
+        family = name.partition(".")[0]
+        if family == "nearest":
+            seen = bool(np.isfinite(values).any())
+        elif family in ("command", "flag"):
+            seen = bool((values == 1.0).any())
+        else:
+            seen = not bool(np.isnan(values).all())
+        if not seen:
+            out.append(name)
+    return tuple(out)
 
 
 def _lowest(values: NDArray[np.float64]) -> float | None:

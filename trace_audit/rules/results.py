@@ -100,6 +100,18 @@ class RuleResult:
     decidable_cycles: int
     violations: tuple[Violation, ...]
     undecided: tuple[Undecided, ...]
+    unseen: tuple[str, ...] = field(default=(), metadata={OMIT_EMPTY: True})
+    """Signals the rule reads that the robot's rows never show: a class never perceived
+    (``nearest.*`` +inf throughout), a command never in force, a flag never raised, a
+    channel, check or factor never logged. Often a typo; the outcome does not change."""
+
+
+@dataclass(frozen=True, slots=True)
+class Skipped:
+    """A robot a check did not judge, and why (the window misses its log, its clock)."""
+
+    robot: str
+    reason: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -158,6 +170,8 @@ class CheckResult:
     robots: tuple[RobotRules, ...]
     groups: tuple[GroupRules, ...] = field(default=(), metadata={OMIT_EMPTY: True})
     """Per robot and day, with ``--by robot,day`` (``check --index``); empty otherwise."""
+    skipped: tuple[Skipped, ...] = field(default=(), metadata={OMIT_EMPTY: True})
+    """Robots of the log the window left nothing of, each with the reason."""
 
     @property
     def violated(self) -> bool:

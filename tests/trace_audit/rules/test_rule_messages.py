@@ -53,3 +53,49 @@ def test_a_bound_not_in_whole_cycles_names_the_file_the_bound_and_the_period(
     text = str(err.value)
     assert text.startswith("r.toml: rule 'r': ")
     assert "the bound 0.05 s" in text and "0.1 s" in text and "\n" not in text
+
+
+@pytest.mark.parametrize(
+    ("stl", "shown"),
+    [
+        ("always(eventually[0.5:0.2](command.STOP > 0.5))", "eventually[0.5:0.2]"),
+        ("always(eventually[-1:0](command.STOP > 0.5))", "eventually[-1:0]"),
+        ("always(once[0.3:0](command.STOP > 0.5))", "once[0.3:0]"),
+    ],
+)
+def test_a_reversed_or_negative_interval_is_refused(stl: str, shown: str) -> None:
+    with pytest.raises(RulesError) as err:
+        parse_rules(rule_text("r", stl), "r.toml")
+    assert f"the interval of {shown} must be [a:b] with 0 <= a <= b" in str(err.value)
+
+
+def test_an_unclosed_parenthesis_is_said_as_such() -> None:
+    with pytest.raises(RulesError, match=r"unbalanced parentheses \(2 opened, 0 closed\)"):
+        parse_rules(rule_text("r", "always(nearest.person > (1.0"), "r.toml")
+
+
+def test_a_signal_the_log_never_shows_is_named_under_its_rule(tmp_path: Path) -> None:
+    from sim.faults import FaultRates
+    from sim.runner import RunConfig, run
+
+    run(RunConfig(out=tmp_path / "run", total_cycles=300, seed=1, faults=FaultRates.off()))
+    text = rule_text("typo", "always(nearest.persn >= 0.5)") + rule_text(
+        "fine", "always(nearest.person >= 0.1 or command.STPO > 0.5)"
+    )
+    typo, fine = check_rules(tmp_path / "run", parse_rules(text)).robots[0].rules
+    assert typo.unseen == ("nearest.persn",) and typo.outcome.value == "satisfied"
+    assert fine.unseen == ("command.STPO",)
+
+
+def test_a_robot_the_window_misses_is_named_not_left_out(tmp_path: Path) -> None:
+    from sim.faults import FaultRates
+    from sim.runner import RunConfig, run
+
+    root = tmp_path / "root"
+    for robot, cycles in (("short", 100), ("long", 400)):
+        run(RunConfig(out=root, total_cycles=cycles, robot_id=robot, faults=FaultRates.off()))
+    rules = parse_rules(rule_text("r", "always(command.STOP < 2)"))
+    result = check_rules(root, rules, start="30")
+    assert [r.robot for r in result.robots] == ["long"]
+    (skipped,) = result.skipped
+    assert skipped.robot == "short" and "does not overlap" in skipped.reason
