@@ -24,6 +24,7 @@ import functools
 import logging
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
 
@@ -47,14 +48,21 @@ from trace_runtime.segment_writer import (
 )
 from trace_runtime.session import SessionInfo
 from trace_runtime.signed_note import NoteError, NoteSigner, format_checkpoint
+from trace_runtime.witness_protocol import Submitted, WitnessProtocolError, submit
+from trace_runtime.witnessed import append_cosigned
 from trace_runtime.writer_lock import WriterLock
 
-__all__ = ["CLOSE_METADATA", "ChainWriter"]
+__all__ = ["CLOSE_METADATA", "WITNESS_MAX_LEAVES", "ChainWriter", "WitnessFeed"]
 
 log = logging.getLogger("trace_runtime")
 
 CLOSE_METADATA = "trace.close"
 """Metadata a segment ends with when cycles were dropped after its last seal."""
+
+WITNESS_MAX_LEAVES = 1 << 20
+"""At most this many leaf hashes (32 MB, 29 h at 10 Hz) are kept since the size the witness
+last cosigned; past it the logger proves from its current size, and a witness further
+behind is caught up by ``trace-audit witness push``."""
 
 
 class ChainWriter:
@@ -107,6 +115,23 @@ class ChainWriter:
         self.tree: CompactRange | None = self._first_tree(path, session)
         """The robot's Merkle tree through ``prev_seal`` (profile 1.2); None when it could not
         be resumed (checkpoints then carry no tree, counted in ``stats.tree_failures``)."""
+        self._feed: WitnessFeed | None = None
+        if config.witness and self.tree is not None and self._note_signer is not None:
+            self._feed = WitnessFeed(
+                config.witness,
+                timeout_s=config.witness_timeout_s,
+                store_root=path if is_root else path.parent,
+                robot_id=session.robot_id,
+                tree=self.tree,
+                stats=stats,
+                report_once=self.report_once,
+            )
+        elif config.witness:
+            self.report_once(
+                "witness", "no checkpoint is submitted to the witness: it needs signed notes"
+            )
+        self._batch_leaves: list[bytes] = []  # this batch's leaves, for the witness feed
+        self._batch_notes: list[tuple[str, int]] = []  # its checkpoints' notes and sizes
         self.open_segment(session)
 
     def _make_note_signer(self, signer: Signer | None) -> NoteSigner | None:
@@ -168,6 +193,7 @@ class ChainWriter:
         Swallows every failure."""
         tree = self.tree
         saved = tree.state() if tree is not None else None  # a dropped batch takes its leaves
+        self._batch_leaves, self._batch_notes = [], []
         try:
             self.check_storage()
             self._maybe_rotate(batch[0].t_ns)
@@ -198,6 +224,12 @@ class ChainWriter:
         self._head = (batch[-1].cycle, batch[-1].t_ns)
         self._sealed_in_segment += len(batch)
         self.stats.checkpoints += checkpoints
+        feed = self._feed
+        if feed is not None:
+            feed.add_leaves(self._batch_leaves)
+            if self._batch_notes:
+                feed.offer(*self._batch_notes[-1])
+            feed.submit()
         if self._segment_start_ns is None:
             self._segment_start_ns = batch[0].t_ns
         for pending in batch:
@@ -228,6 +260,7 @@ class ChainWriter:
         seal_channel = channel(TOPIC_SEAL)
         tree = self.tree
         grow = tree.append if tree is not None else None
+        keep = self._batch_leaves.append if self._feed is not None else None
         for index, pending in enumerate(batch):
             cycle, t_ns = pending.cycle, pending.t_ns
             for topic, sequence, log_time, data in pending.sensors:
@@ -244,7 +277,10 @@ class ChainWriter:
             append((seal_channel, cycle, t_ns, data))
             prev = digest(data)
             if grow is not None:
-                grow(leaf_hash(data))  # the seal's leaf: one hash, and one node amortised
+                leaf = leaf_hash(data)  # the seal's leaf: one hash, and one node amortised
+                grow(leaf)
+                if keep is not None:
+                    keep(leaf)
             carried = 0
             if self._checkpoint_due(t_ns):
                 sealed = self._sealed_in_segment + index + 1
@@ -358,9 +394,11 @@ class ChainWriter:
     def _final_checkpoint(self, segment: SegmentWriter, cycle: int, t_ns: int) -> bool:
         """Write the segment's closing checkpoint (its last seal: ``cycle`` at ``t_ns``);
         whether it is in the file."""
+        self._batch_notes = []
         message = self._checkpoint_message(
             segment, cycle, t_ns, self.prev_seal, self._sealed_in_segment, final=True
         )
+        notes, self._batch_notes = self._batch_notes, []  # the batch's own come after
         if message is None:
             return False
         try:
@@ -376,6 +414,9 @@ class ChainWriter:
             self.report_once("checkpoint", f"could not write a checkpoint: {err}")
             return False
         self.stats.checkpoints += 1
+        if self._feed is not None and notes:
+            self._feed.offer(*notes[-1])
+            self._feed.submit()
         return True
 
     def _segment_path(self, session: SessionInfo) -> Path:
@@ -449,6 +490,8 @@ class ChainWriter:
                 self.report_once("sign", f"could not sign a checkpoint, wrote it unsigned: {err}")
                 checkpoint = build()
             data = encode_checkpoint(checkpoint)
+            if checkpoint.note is not None and checkpoint.tree_size is not None:
+                self._batch_notes.append((checkpoint.note, checkpoint.tree_size))
             return OutMessage(segment.channel(TOPIC_CHECKPOINT), cycle, t_ns, data)
         except Exception as err:  # the audit trail goes on without this checkpoint
             self.stats.checkpoint_failures += 1
@@ -495,3 +538,119 @@ def _give_up_header(stream: BinaryIO, path: Path, opened: tuple[int, int] | None
         there = os.lstat(path)
         if (there.st_dev, there.st_ino) == opened:
             os.unlink(path)
+
+
+class WitnessFeed:
+    """A robot's checkpoints submitted to a C2SP tlog-witness, from the writer thread.
+
+    It keeps the tree's compact range at ``witness_size`` (the size the witness last
+    cosigned, as far as the logger knows) and the leaf hashes since, which is all a
+    consistency proof from there needs (``chain_tree.consistency_proof_from``). Only the
+    newest checkpoint of a batch is submitted. 200: the cosigned note is appended to the
+    store beside the log (``witnessed.append_cosigned``) and the range moves up to that
+    size; 409: the witness's size is learnt and the next checkpoint is proved from it (when
+    the logger holds it: 0, or a size since its range); anything else is counted and retried
+    with the next checkpoint. At start the witness is taken to be at the resumed size.
+    """
+
+    def __init__(
+        self,
+        url: str,
+        *,
+        timeout_s: float,
+        store_root: Path,
+        robot_id: str,
+        tree: CompactRange,
+        stats: LoggerStats,
+        report_once: Callable[[str, str], None],
+    ) -> None:
+        self.url = url
+        self.timeout_s = timeout_s
+        self.store_root = store_root
+        self.robot_id = robot_id
+        self.stats = stats
+        self._report_once = report_once
+        self.base = CompactRange.restore(*tree.state())
+        self._since = bytearray()  # leaf hashes after base.size, 32 bytes each
+        self.witness_size: int = tree.size
+        self._pending: tuple[str, int] | None = None
+
+    def add_leaves(self, leaves: list[bytes]) -> None:
+        """Leaves now on disk, in order."""
+        if len(self._since) // 32 + len(leaves) > WITNESS_MAX_LEAVES:
+            self._advance(self.base.size + len(self._since) // 32)
+            self.witness_size = self.base.size
+        self._since += b"".join(leaves)
+
+    def offer(self, note: str, size: int) -> None:
+        """The newest checkpoint written (its note and tree size): the next to submit."""
+        self._pending = (note, size)
+
+    def submit(self) -> None:
+        """Submit the pending checkpoint, if any; never raises."""
+        pending, self._pending = self._pending, None
+        if pending is None:
+            return
+        note, size = pending
+        try:
+            proof = self._proof(size)
+            if proof is None:
+                self._failed(
+                    f"the witness holds size {self.witness_size}, which this logger cannot "
+                    "prove from (trace-audit witness push catches it up)"
+                )
+                return
+            result = submit(self.url, self.witness_size, proof, note, timeout_s=self.timeout_s)
+            self._answer(result, note, size)
+        except (WitnessProtocolError, OSError, ValueError) as err:
+            self._failed(f"could not submit a checkpoint to the witness: {err}")
+        except Exception as err:  # the store and the client are plug points: never the robot
+            self._failed(f"could not submit a checkpoint to the witness: {err}")
+
+    def _proof(self, size: int) -> list[bytes] | None:
+        old = self.witness_size
+        if old in (0, size):
+            return []
+        held = len(self._since) // 32
+        if old != self.base.size or not old < size <= old + held:
+            return None
+        from trace_runtime.chain_tree import consistency_proof_from  # the reading floor
+
+        since = self._since
+        leaves = [bytes(since[i : i + 32]) for i in range(0, (size - old) * 32, 32)]
+        return consistency_proof_from(self.base, leaves)
+
+    def _answer(self, result: Submitted, note: str, size: int) -> None:
+        if result.ok:
+            append_cosigned(
+                self.store_root, self.robot_id, note, result.cosignatures, witness_url=self.url
+            )
+            self.stats.witness_cosigned += 1
+            self._advance(size)
+            self.witness_size = size
+            return
+        if result.outcome == "conflict" and result.witness_size is not None:
+            learnt = result.witness_size
+            if self.base.size <= learnt <= self.base.size + len(self._since) // 32:
+                self._advance(learnt)
+            self.witness_size = learnt
+            self._failed(f"the witness holds size {learnt} (409); proving from there next")
+            return
+        self._failed(
+            f"the witness did not cosign ({result.outcome}"
+            f"{f' {result.status}' if result.status else ''}: {result.detail})"
+        )
+
+    def _advance(self, size: int) -> None:
+        """Move the kept range up to ``size`` (within the leaves held)."""
+        count = size - self.base.size
+        if count <= 0:
+            return
+        since = self._since
+        for i in range(0, count * 32, 32):
+            self.base.append(bytes(since[i : i + 32]))
+        del since[: count * 32]
+
+    def _failed(self, message: str) -> None:
+        self.stats.witness_failures += 1
+        self._report_once("witness", message)

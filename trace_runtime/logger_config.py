@@ -57,6 +57,15 @@ class LoggerConfig:
     """The C2SP checkpoint origin naming this robot's log, and the key name its notes are
     signed under (e.g. ``fleet.example.com/amr-7``; no spaces, no ``+``). None:
     ``trace.local/<robot_id>``."""
+    witness: str | None = None
+    """A C2SP tlog-witness (``http(s)://host:port``, e.g. ``trace-audit witness serve``):
+    after writing a checkpoint the writer thread submits its note there with a consistency
+    proof from the size the witness last cosigned, and stores the cosigned note beside the
+    log (``<root>/witness/<robot_id>.jsonl``). Failures are counted
+    (``LoggerStats.witness_failures``) and retried with the next checkpoint. Needs a
+    ``checkpoint_key`` (only signed notes are submitted)."""
+    witness_timeout_s: float = 2.0
+    """How long one submission may take; the writer thread waits at most this long."""
 
 
 @dataclass(slots=True)
@@ -77,6 +86,12 @@ class LoggerStats:
     bytes_written: int = 0
     checkpoints: int = 0
     checkpoint_failures: int = 0
+    witness_cosigned: int = 0
+    """Checkpoints the witness cosigned (stored beside the log)."""
+    witness_failures: int = 0
+    """Submissions that did not end in a stored cosignature: the witness unreachable or
+    refusing, a 409 (it holds another size; the next checkpoint is proved from there), a
+    size the logger cannot prove from, or a store that could not be written."""
     tree_failures: int = 0
     """Checkpoints written without their Merkle tree: the tree could not be resumed at start
     (the chain on disk could not be followed to its last seal) or computed."""
