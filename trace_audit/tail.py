@@ -185,13 +185,14 @@ def tail(
     Foxglove view, ``foxglove_live``, shows each one).
 
     ``robots`` selects robots (``selection.Selection``; one not in the log is a
-    ``UsageError``); none follows every robot, including robots that start logging later."""
+    ``UsageError``, but followed it is waited for: tail is started before the robot boots);
+    none follows every robot, including robots that start logging later."""
     path = Path(root)
     if not path.exists():
         raise LogReadError(str(path), "no such file or directory")
     if not path.is_dir():
         raise UsageError(f"{path}: tail follows a log root (a folder), not one file")
-    chosen = _selected(path, robots)
+    chosen = tuple(dict.fromkeys(robots)) if follow else _selected(path, robots)
     stop = stop or threading.Event()
     state: dict[str, _Robot] = {}
     quiet = _QuietRecovered()

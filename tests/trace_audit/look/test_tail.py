@@ -240,3 +240,20 @@ def test_a_change_right_after_a_gap_is_shown_after_a_gap_line(tmp_path: Path) ->
     }
     kinds = [e["kind"] for e in events if e.get("cycle") == 40]
     assert kinds == ["gap", "change"]
+
+
+def test_a_robot_asked_for_is_waited_for_when_following(tmp_path: Path) -> None:
+    root = tmp_path / "root"
+    root.mkdir()
+    with _tail(root, "--robot", "r", "--follow") as follower:
+        out = _Lines(follower)
+        time.sleep(1.0)  # tail is up before the robot boots, and waits
+        assert follower.poll() is None
+        with _robot(root) as robot:
+            _log(robot, 1)
+            out.until("r_000000.mcap live", WITHIN_S)
+            first, _ = out.until("cycle 0 ", WITHIN_S)
+            assert "STOP" in first
+        follower.send_signal(signal.SIGINT)
+        assert follower.wait(10) == 0
+        out.reader.join(10)
