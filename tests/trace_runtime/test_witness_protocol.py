@@ -62,7 +62,7 @@ def test_malformed_bodies_are_one_error(body: bytes) -> None:
 def test_the_builder_refuses_what_the_parser_would() -> None:
     for bad in ((-1, [], NOTE), (1, [b"short"], NOTE), (1, [], b"no newline"), (True, [], NOTE)):
         with pytest.raises(WitnessProtocolError):
-            add_checkpoint_body(*bad)  # type: ignore[arg-type]
+            add_checkpoint_body(*bad)
 
 
 class _Fixed(BaseHTTPRequestHandler):
