@@ -242,10 +242,9 @@ def _check(
     r.leaf_index = _field(bundle, "leaf_index", int)
     r.tree_size = _field(bundle, "tree_size", int)
     root_hex = _field(bundle, "root", str)
-    try:
-        root = bytes.fromhex(root_hex)
-    except ValueError as err:
-        raise _BadBundleError("the root is not hex") from err
+    if len(root_hex) != 64 or not set(root_hex) <= set("0123456789abcdef"):
+        raise _BadBundleError("the root is not 64 lowercase hex digits")
+    root = bytes.fromhex(root_hex)
     proof = [_unb64(h, "an inclusion hash") for h in _field(bundle, "inclusion", list)]
     if not verify_inclusion(r.leaf_index, r.tree_size, leaf_hash(seal_bytes), proof, root):
         r.steps.append(("inclusion", False, "the seal is not leaf of the tree at that root"))
@@ -255,6 +254,8 @@ def _check(
     )
     note = _field(bundle, "note", str)
     split = note.rfind("\n\n")
+    for line in note[split + 2 :].splitlines() if split >= 0 else ():
+        _unb64(line.rpartition(" ")[2], "a note signature")  # canonical: one spelling only
     try:
         body = parse_checkpoint(note[: split + 1] if split >= 0 else note)
     except NoteError as err:
