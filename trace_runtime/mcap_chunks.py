@@ -59,9 +59,12 @@ class ChunkDecoder:
             self._zstd_context = zstandard.ZstdDecompressor()
         return self._zstd_context
 
-    def decode(self, data: bytes, offset: int, topics: dict[int, str]) -> list[RawMessage]:
+    def decode(
+        self, data: bytes, offset: int, topics: dict[int, str], only: str | None = None
+    ) -> list[RawMessage]:
         """The messages of the chunk record at ``offset`` of ``data``; a Channel record inside
-        the chunk adds its topic to ``topics``."""
+        the chunk adds its topic to ``topics``. ``only``: just the messages on that topic
+        (every record is still read and checked as for all of them: the same errors)."""
         opcode, length = RECORD_HEADER.unpack_from(data, offset)
         if opcode != OP_CHUNK:
             raise LogReadError(self._name, f"no chunk record at offset {offset}")
@@ -75,7 +78,7 @@ class ChunkDecoder:
         raw = self._decompress(compression, data[pos : pos + records_len], size, offset)
         if crc and zlib.crc32(raw) != crc:
             raise LogReadError(self._name, f"chunk at offset {offset} fails its CRC")
-        return self._records(raw, offset, self._limits.chunk_records(records_len), topics)
+        return self._records(raw, offset, self._limits.chunk_records(records_len), topics, only)
 
     def _decompress(self, compression: str, compressed: bytes, size: int, offset: int) -> bytes:
         """A chunk's records, never more than its declared size nor the limits."""
@@ -133,7 +136,7 @@ class ChunkDecoder:
         )
 
     def _records(
-        self, raw: bytes, offset: int, most: int, topics: dict[int, str]
+        self, raw: bytes, offset: int, most: int, topics: dict[int, str], only: str | None
     ) -> list[RawMessage]:
         # The innermost loop of every read (8-10 records a decision cycle): locals only,
         # the bounds checks written out. A message record's header and fixed fields are
@@ -159,6 +162,9 @@ class ChunkDecoder:
                         raise LogReadError(
                             self._name, f"chunk at offset {offset}: message on unknown channel"
                         )
+                    if only is not None and topic != only:
+                        pos = stop
+                        continue
                     message = new(RawMessage)
                     set_topic(message, topic)
                     set_sequence(message, sequence)
@@ -182,7 +188,8 @@ class ChunkDecoder:
                     raise LogReadError(
                         self._name, f"chunk at offset {offset}: message on unknown channel"
                     )
-                append(raw_message(topic, sequence, log_time, raw[body + 22 : pos]))
+                if only is None or topic == only:
+                    append(raw_message(topic, sequence, log_time, raw[body + 22 : pos]))
             elif opcode == OP_CHANNEL:
                 channel_id, _schema = struct.unpack_from("<HH", raw, body)
                 topic_name, _ = read_str(raw, body + 4)

@@ -559,24 +559,48 @@ class McapFile:
         if cached is not None:
             self._recent_chunks.move_to_end(offset)
             return cached
+        messages = self._decode_or_skip(offset, None)
         if offset in self._damaged:
-            return []
-        try:
-            messages = self._decode_chunk_uncached(offset)
-        except LogLimitError:
-            raise
-        except LogReadError as err:
-            self._skip_chunk(offset, err.reason)
-            return []
-        except DAMAGE as err:
-            # What ``damage_as_read_error`` would say, without entering a context manager
-            # for every chunk read (a chunk a cycle).
-            self._skip_chunk(offset, damage_reason(err))
-            return []
+            return messages
         self._recent_chunks[offset] = messages
         if len(self._recent_chunks) > _RECENT_CHUNKS:
             self._recent_chunks.popitem(last=False)
         return messages
+
+    def _decode_or_skip(self, offset: int, only: str | None) -> list[RawMessage]:
+        """The chunk's messages (``only``: on that topic), or none for a damaged chunk,
+        recorded in ``skipped_chunks`` (a limit hit is raised)."""
+        if offset in self._damaged:
+            return []
+        try:
+            if only is None:
+                return self._decode_chunk_uncached(offset)
+            return self._chunks.decode(self._data, offset, self.topics, only)
+        except LogLimitError:
+            raise
+        except LogReadError as err:
+            self._skip_chunk(offset, err.reason)
+        except DAMAGE as err:
+            # What ``damage_as_read_error`` would say, without entering a context manager
+            # for every chunk read (a chunk a cycle).
+            self._skip_chunk(offset, damage_reason(err))
+        return []
+
+    def topic_messages(self, topic: str) -> Iterator[RawMessage]:
+        """``[m for m in iter_messages() if m.topic == topic]``, one at a time, without
+        building the other messages: every chunk is still decoded and checked, and a
+        damaged one is skipped and recorded as ``chunk_messages`` does (a pass over a file
+        for one rare topic, e.g. its checkpoints, before its cycles are read)."""
+        for message in self.loose:
+            if message.topic == topic:
+                yield message
+        for offset in self.offsets_in_range(None, None):
+            cached = self._recent_chunks.get(offset)
+            if cached is not None:
+                self._recent_chunks.move_to_end(offset)
+                yield from (m for m in cached if m.topic == topic)
+            else:
+                yield from self._decode_or_skip(offset, topic)
 
     def clear_caches(self) -> None:
         """Forget the recently decoded chunks (to measure a first read)."""
