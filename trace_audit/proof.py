@@ -21,13 +21,14 @@ from typing import Any
 
 import orjson
 
+from trace_audit.witness.tree import LevelTree
 from trace_runtime.boundary import read_side_file
 from trace_runtime.chain_tree import robot_seal_leaves
 from trace_runtime.clock import iso_utc
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.keys import PublicKey
 from trace_runtime.logset import Log, open_log
-from trace_runtime.merkle import inclusion_proof, leaf_hash, root_of, verify_inclusion
+from trace_runtime.merkle import leaf_hash, verify_inclusion
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.signed_note import (
     COSIGNATURE,
@@ -77,8 +78,9 @@ def make_bundle(log_path: str | Path, cycle: int, *, robot: str | None = None) -
     index = next((i for i, s in enumerate(leaves) if s.cycle == cycle), None)
     if index is None or hashes[index] != leaf_hash(seal):
         raise UsageError(f"cycle {cycle}'s seal is not a leaf of robot {robot_id}'s tree here")
-    note, size, cosigned = _covering_note(log, robot_id, index, hashes, robot_checkpoints)
-    root = root_of(hashes[:size])
+    tree = LevelTree(hashes)
+    note, size, cosigned = _covering_note(log, robot_id, index, tree, robot_checkpoints)
+    root = tree.root(size)
     messages = [
         {"topic": topic, "data": _b64(data)}
         for topic, data in sorted(found.payloads.items())
@@ -93,7 +95,7 @@ def make_bundle(log_path: str | Path, cycle: int, *, robot: str | None = None) -
         "leaf_index": index,
         "tree_size": size,
         "root": root.hex(),
-        "inclusion": [_b64(h) for h in inclusion_proof(index, hashes[:size])],
+        "inclusion": [_b64(h) for h in tree.inclusion_proof(index, size)],
         "note": note,
         "cosigned": cosigned,
     }
@@ -107,17 +109,17 @@ def _only_robot(log: Log) -> str:
 
 
 def _covering_note(
-    log: Log, robot: str, index: int, hashes: list[bytes], robot_checkpoints: Any
+    log: Log, robot: str, index: int, tree: LevelTree, robot_checkpoints: Any
 ) -> tuple[str, int, bool]:
     """The note of a tree covering leaf ``index``: the smallest cosigned one in the root's
     store that matches the seals, else the robot's newest signed checkpoint."""
     for record in sorted(read_cosigned(log.root, robot), key=lambda r: r.tree_size):
-        fits = index < record.tree_size <= len(hashes)
-        if fits and root_of(hashes[: record.tree_size]).hex() == record.root:
+        fits = index < record.tree_size <= tree.size
+        if fits and tree.root(record.tree_size).hex() == record.root:
             return record.note, record.tree_size, True
     for checkpoint in reversed(robot_checkpoints(log, robot)):
         size = checkpoint.tree_size or 0
-        if size > index and size <= len(hashes) and checkpoint.root == root_of(hashes[:size]).hex():
+        if index < size <= tree.size and checkpoint.root == tree.root(size).hex():
             return checkpoint.note or "", size, False
     raise UsageError(
         f"no signed profile 1.2 checkpoint of robot {robot} covers leaf {index} yet "

@@ -14,11 +14,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from trace_audit.witness.tree import LevelTree
 from trace_runtime.chain_tree import robot_leaves
 from trace_runtime.checkpoints import decode_checkpoint, iter_checkpoints
 from trace_runtime.errors import RecordError
 from trace_runtime.logset import Log, open_log
-from trace_runtime.merkle import consistency_proof, root_of
 from trace_runtime.records import Checkpoint
 from trace_runtime.witness_protocol import submit
 from trace_runtime.witnessed import append_cosigned
@@ -89,13 +89,13 @@ def _push_robot(log: Log, root: Path, robot: str, witness: str, timeout_s: float
     if not checkpoints:
         result.problems.append("no signed profile 1.2 checkpoint to submit")
         return result
-    leaves = robot_leaves(log, robot)
+    tree = LevelTree(robot_leaves(log, robot))
     result.origin = checkpoints[-1].origin or ""
     known = 0  # the size the witness is believed to hold: found out from its first 409
     for checkpoint in checkpoints:
         size = checkpoint.tree_size or 0
         note = checkpoint.note or ""
-        if size > len(leaves) or root_of(leaves[:size]).hex() != checkpoint.root:
+        if size > tree.size or tree.root(size).hex() != checkpoint.root:
             result.problems.append(f"checkpoint of size {size} does not match the seals: not sent")
             continue
         if size < known:
@@ -103,7 +103,7 @@ def _push_robot(log: Log, root: Path, robot: str, witness: str, timeout_s: float
             continue
         for _attempt in range(2):
             answer = submit(
-                witness, known, consistency_proof(known, leaves[:size]), note, timeout_s=timeout_s
+                witness, known, tree.consistency_proof(known, size), note, timeout_s=timeout_s
             )
             if answer.outcome == "conflict" and answer.witness_size is not None:
                 if answer.witness_size == known:  # same size, another root: a fork
@@ -111,9 +111,9 @@ def _push_robot(log: Log, root: Path, robot: str, witness: str, timeout_s: float
                     break
                 known = answer.witness_size
                 result.witness_size = known
-                if known > len(leaves):
+                if known > tree.size:
                     result.problems.append(
-                        f"the witness holds size {known}, beyond this log's {len(leaves)} "
+                        f"the witness holds size {known}, beyond this log's {tree.size} "
                         "seals: the log has lost its newest cycles"
                     )
                     return result
