@@ -30,7 +30,7 @@ from typing import cast
 from trace_runtime.boundary import read_side_file
 from trace_runtime.chain_tree import ChainTreeError, SealLeaf, robot_seal_leaves
 from trace_runtime.clock import iso_utc
-from trace_runtime.errors import LogReadError, UsageError
+from trace_runtime.errors import LogReadError
 from trace_runtime.gaps import CycleRange
 from trace_runtime.keys import PublicKey
 from trace_runtime.logset import Log
@@ -158,11 +158,12 @@ def _fetch(url: str, origin: str, timeout_s: float) -> str | None:
         err.close()
         if err.code == 404:
             return None
-        raise UsageError(f"witness {url}: HTTP {err.code} for {origin}") from err
+        raise LogReadError(url, f"the witness answered HTTP {err.code} for {origin}") from err
     except (urllib.error.URLError, OSError, ValueError) as err:
-        raise UsageError(f"witness {url} cannot be reached: {getattr(err, 'reason', err)}") from err
+        reason = getattr(err, "reason", err)
+        raise LogReadError(url, f"the witness cannot be reached ({reason})") from err
     if len(data) > MAX_NOTE_BYTES:
-        raise UsageError(f"witness {url}: an answer over {MAX_NOTE_BYTES} bytes")
+        raise LogReadError(url, f"the witness's answer is over {MAX_NOTE_BYTES} bytes")
     return str(data.decode("utf-8", "replace"))
 
 
@@ -179,8 +180,8 @@ def read_witnessed(
     log: Log, source: str, *, timeout_s: float = 5.0
 ) -> tuple[dict[str, list[Witnessed]], list[str]]:
     """The witnessed checkpoints for each robot of ``log`` from ``source`` (see the module
-    doc), and the unreadable entries (one line each). A witness that cannot be reached is a
-    ``UsageError``; a file that cannot be read a ``LogReadError``."""
+    doc), and the unreadable entries (one line each). A witness that cannot be reached, or a
+    file that cannot be read, is a ``LogReadError`` (exit 3)."""
     origins = {robot_origin(log, robot): robot for robot in log.robots}
     found: dict[str, list[Witnessed]] = {robot: [] for robot in log.robots}
     problems: list[str] = []

@@ -149,3 +149,17 @@ def test_a_forged_witnessed_note_vouches_for_nothing(
     code, report = verify(root, keys, "--witness", str(path), "--witness-key",
                           keys.witness_verifier.vkey)  # fmt: skip
     assert code == 1 and [f["kind"] for f in report["findings"]] == ["bad_signature"]
+
+
+def test_an_unreachable_witness_is_unreadable_input(pushed: Pushed, keys: Keys) -> None:
+    import socket
+
+    root, _older, _w = pushed
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    done = run_cli("verify", str(root), "--witness", f"http://127.0.0.1:{port}")
+    assert done.returncode == 3 and done.stderr.count("\n") == 1, done.stderr
+    assert run_cli("verify", str(root), "--witness", str(root / "no.note")).returncode == 3
+    bad_key = run_cli("verify", str(root), "--witness", "local", "--witness-key", "nope")
+    assert bad_key.returncode == 2
