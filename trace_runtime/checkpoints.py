@@ -220,7 +220,6 @@ def _note_verifier(origin: str, raw: bytes) -> NoteVerifier:
 
 
 def iter_checkpoints(segment: Segment) -> Iterator[RawMessage]:
-    """The raw ``/trace/checkpoint`` messages of a segment, in reading order."""
-    for message in segment.iter_messages():
-        if message.topic == TOPIC_CHECKPOINT:
-            yield message
+    """The raw ``/trace/checkpoint`` messages of a segment, in reading order (without
+    building the segment's other messages: ``McapFile.topic_messages``)."""
+    yield from segment.topic_messages(TOPIC_CHECKPOINT)
