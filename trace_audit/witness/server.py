@@ -144,6 +144,7 @@ def _handler(witness: Witness) -> type[BaseHTTPRequestHandler]:
     class Handler(BaseHTTPRequestHandler):
         server_version = "trace-witness/1"
         protocol_version = "HTTP/1.1"
+        timeout = 10  # seconds a connection may stall: a slow client does not hold a thread
 
         def _send(self, answer: Answer) -> None:
             self.send_response(answer.status)
