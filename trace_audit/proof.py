@@ -25,7 +25,7 @@ from trace_audit.witness.tree import LevelTree
 from trace_runtime.boundary import read_side_file
 from trace_runtime.chain_tree import robot_seal_leaves
 from trace_runtime.clock import iso_utc
-from trace_runtime.errors import LogReadError, UsageError
+from trace_runtime.errors import LogReadError, TraceError, UsageError
 from trace_runtime.keys import PublicKey
 from trace_runtime.logset import Log, open_log
 from trace_runtime.merkle import leaf_hash, verify_inclusion
@@ -156,8 +156,8 @@ def read_bundle(path: str | Path) -> dict[str, Any]:
     return value
 
 
-class _BadBundleError(Exception):
-    pass
+class _BadBundleError(TraceError):
+    """A bundle not of the documented shape (reported as a failed step, never raised out)."""
 
 
 def _field(bundle: dict[str, Any], name: str, kind: type) -> Any:

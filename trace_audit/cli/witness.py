@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -40,7 +41,7 @@ robot's (for serve --log) or, with --cosignature, a witness's (for verify --witn
 
   trace-audit witness vkey --key amr-7.pub --origin trace.local/amr-7
 
-  trace-audit witness serve --listen 0.0.0.0:7380 --state /var/lib/witness --key w.key --log VKEY
+  trace-audit witness serve --state st --key w.key --log VKEY
 
   trace-audit witness push /data/amr-7 --witness http://witness:7380
 """
@@ -170,6 +171,8 @@ def prove_command(
         Path, typer.Option("--out", help="The bundle file to write.", show_default=False)
     ],
     robot: Annotated[str | None, robot_option("The robot (needed on a fleet root).")] = None,
+    json_out: JsonOption = False,
+    plain: PlainOption = False,
 ) -> None:
     import orjson
 
@@ -180,11 +183,38 @@ def prove_command(
     bundle = guarded(lambda: make_bundle(log, cycle, robot=robot))
     data = orjson.dumps(bundle, option=orjson.OPT_INDENT_2) + b"\n"
     guarded(lambda: write_atomic(out, data))
-    sys.stderr.write(
-        f"trace-audit: wrote {out} ({len(data):,} bytes; leaf {bundle['leaf_index']} of "
-        f"{bundle['tree_size']}, {len(bundle['inclusion'])} proof hashes"
-        f"{', cosigned' if bundle['cosigned'] else ''})\n"
+    written = Written(
+        str(out), len(data), bundle["cycle"], bundle["leaf_index"], bundle["tree_size"],
+        len(bundle["inclusion"]), bundle["cosigned"],
+    )  # fmt: skip
+    emit(written, _written_doc, json_out=json_out, plain=plain)
+
+
+@dataclass(frozen=True, slots=True)
+class Written:
+    """What ``prove`` wrote."""
+
+    path: str
+    bytes: int
+    cycle: int
+    leaf_index: int
+    tree_size: int
+    proof_hashes: int
+    cosigned: bool
+
+
+def _written_doc(w: Written) -> Doc:
+    doc = Doc()
+    doc.title(f"Wrote proof bundle {w.path}")
+    doc.fields(
+        [
+            ("size", f"{w.bytes:,} bytes"),
+            ("cycle", str(w.cycle)),
+            ("tree", f"leaf {w.leaf_index} of {w.tree_size}, {w.proof_hashes} proof hashes"),
+            ("checkpoint", "signed and cosigned" if w.cosigned else "signed (not cosigned)"),
+        ]
     )
+    return doc
 
 
 @app.command("verify-proof", help=help_text(_VERIFY_PROOF_HELP))

@@ -27,7 +27,7 @@ def proved(
     bundle = tmp_path / "cycle-37.json"
     made = run_cli("prove", str(root), "--cycle", "37", "--out", str(bundle))
     assert made.returncode == 0, made.stderr
-    assert "cosigned" in made.stderr
+    assert "signed and cosigned" in made.stdout
     return root, bundle
 
 
