@@ -115,6 +115,12 @@ times are ns since the Unix epoch), with seconds a sim clock starting there (the
 a sim clock from 0):
 
   trace-sim run --robot-id amr-3 --start 2026-05-04T06:00:00Z --out fleet/
+
+--key signs the robot's checkpoints with a key from trace-audit keygen; --witness URL has
+its logger submit each checkpoint to a witness (trace-audit witness serve):
+
+  trace-sim run --duration 10m --key keys/trace-ed25519.key \\
+      --witness http://127.0.0.1:8080 --out logs/
 """
 
 
@@ -168,6 +174,21 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
             "a wall clock) or seconds (a sim clock); default a sim clock from 0",
         ),
     ] = None,
+    key: Annotated[
+        Path | None,
+        typer.Option(
+            "--key",
+            metavar="PATH",
+            help="the robot's private key (trace-audit keygen): checkpoints signed",
+        ),
+    ] = None,
+    witness: Annotated[
+        str | None,
+        typer.Option(
+            metavar="URL",
+            help="a witness (trace-audit witness serve) the logger submits checkpoints to",
+        ),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="print the summary as JSON")] = False,
 ) -> None:
     """Simulate scenarios and write the TRACE log plus a fault ground-truth sidecar."""
@@ -193,6 +214,8 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
             robot_id=robot_id,
             start_ns=start_ns,
             clock=clock,
+            checkpoint_key=key,
+            witness=witness,
         )
         result = run(config) if as_json else _run_with_progress(config)
     except SimUsageError as err:

@@ -105,6 +105,10 @@ class RunConfig:
     audit: bool = True
     """False: the same loop with a ``NullLogger`` (nothing written), to measure what logging
     costs per cycle. The ground-truth sidecar is still written."""
+    checkpoint_key: Path | None = None
+    """The robot's private key file: checkpoints signed (``LoggerConfig.checkpoint_key``)."""
+    witness: str | None = None
+    """A witness's URL the logger submits each checkpoint to (``LoggerConfig.witness``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -315,6 +319,8 @@ def _open_outputs(
                     fsync_interval_s=None,
                     opener=opener,
                     batch_cycles=config.batch_cycles,
+                    checkpoint_key=config.checkpoint_key,
+                    witness=config.witness,
                 ),
             )
         )

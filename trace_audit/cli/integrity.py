@@ -43,7 +43,8 @@ hot, warm and cold segments and on segments recovered after a crash.
 Findings (exit 1), each located by robot, segment, cycles and time: modified record,
 evidence mismatch, missing / inserted / reordered cycles, unsealed cycle, undeclared gap,
 truncated segment, missing segment, checkpoint mismatch, bad signature, key mismatch,
-unsigned checkpoint, damaged segment.
+unsigned checkpoint, damaged segment, tree mismatch (a profile 1.2 checkpoint's Merkle tree),
+and with --witness truncated tail and fork.
 
 Not findings, reported as notes: cycles the logger declared dropped, warm summary cycles
 (chain verified, payloads not retained), cycles after the last checkpoint of a crashed

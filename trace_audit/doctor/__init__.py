@@ -44,6 +44,7 @@ _FINDING_RULES = {
     "bad_signature": "checkpoint",
     "key_mismatch": "checkpoint",
     "unsigned_checkpoint": "checkpoint",
+    "tree_mismatch": "checkpoint",
     "damaged": "readable",
 }
 # "unsealed" is left out: the content checks report layer messages without a seal (the

@@ -25,7 +25,6 @@ import urllib.parse
 import urllib.request
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import cast
 
 from trace_runtime.boundary import read_side_file
 from trace_runtime.chain_tree import ChainTreeError, SealLeaf, robot_seal_leaves
@@ -214,9 +213,11 @@ def read_witnessed(
     return found, problems
 
 
-def _finding(kind: str, robot: str, message: str, leaf: SealLeaf | None = None) -> Finding:
+def _finding(
+    kind: FindingKind, robot: str, message: str, leaf: SealLeaf | None = None
+) -> Finding:
     where = CycleRange(leaf.cycle, leaf.cycle, leaf.t_ns, leaf.t_ns) if leaf else CycleRange()
-    return Finding(kind=cast(FindingKind, kind), message=message, robot_id=robot, where=where)
+    return Finding(kind=kind, message=message, robot_id=robot, where=where)
 
 
 def _check_signatures(

@@ -44,10 +44,14 @@ FindingKind = Literal[
     "unsigned_checkpoint",
     "damaged",
     "tree_mismatch",
+    "truncated_tail",
+    "fork",
 ]
 """What a finding says happened; every kind makes ``verify`` exit 1. ``tree_mismatch``: a
 profile 1.2 checkpoint states another Merkle tree (size, root, range) than the robot's seals
-give, or its C2SP note states another tree than the checkpoint."""
+give, or its C2SP note states another tree than the checkpoint. ``truncated_tail`` and
+``fork`` come from a witness (``verify --witness``): the robot's tree ends before the size a
+witness cosigned, or differs from it at that size."""
 
 NoteKind = Literal[
     "declared_gap",
