@@ -213,9 +213,7 @@ def read_witnessed(
     return found, problems
 
 
-def _finding(
-    kind: FindingKind, robot: str, message: str, leaf: SealLeaf | None = None
-) -> Finding:
+def _finding(kind: FindingKind, robot: str, message: str, leaf: SealLeaf | None = None) -> Finding:
     where = CycleRange(leaf.cycle, leaf.cycle, leaf.t_ns, leaf.t_ns) if leaf else CycleRange()
     return Finding(kind=kind, message=message, robot_id=robot, where=where)
 
