@@ -15,7 +15,7 @@ answer False, never raise, whatever they are handed.
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 
 from trace_runtime.errors import TraceError
 
@@ -24,7 +24,9 @@ __all__ = [
     "HASH_SIZE",
     "CompactRange",
     "MerkleError",
+    "consistency_path",
     "consistency_proof",
+    "inclusion_path",
     "inclusion_proof",
     "leaf_hash",
     "node_hash",
@@ -155,7 +157,12 @@ def root_of(leaf_hashes: Iterable[bytes]) -> bytes:
 
 def inclusion_proof(index: int, leaf_hashes: Sequence[bytes]) -> list[bytes]:
     """RFC 9162 section 2.1.3.1: the audit path of leaf ``index``, nearest the leaf first."""
-    size = len(leaf_hashes)
+    return inclusion_path(index, len(leaf_hashes), lambda lo, hi: _range_root(leaf_hashes, lo, hi))
+
+
+def inclusion_path(index: int, size: int, subtree: Callable[[int, int], bytes]) -> list[bytes]:
+    """``inclusion_proof`` in a tree of ``size`` leaves whose subtree roots (over leaves
+    ``lo`` to ``hi``) ``subtree`` gives: the one walk for any store of the tree's nodes."""
     if not 0 <= index < size:
         raise MerkleError(f"leaf {index} is not in a tree of {size} leaves")
     path: list[bytes] = []  # collected from the root down, returned from the leaf up
@@ -163,10 +170,10 @@ def inclusion_proof(index: int, leaf_hashes: Sequence[bytes]) -> list[bytes]:
     while hi - lo > 1:
         k = _split(hi - lo)
         if index < lo + k:
-            path.append(_range_root(leaf_hashes, lo + k, hi))
+            path.append(subtree(lo + k, hi))
             hi = lo + k
         else:
-            path.append(_range_root(leaf_hashes, lo, lo + k))
+            path.append(subtree(lo, lo + k))
             lo += k
     path.reverse()
     return path
@@ -175,7 +182,14 @@ def inclusion_proof(index: int, leaf_hashes: Sequence[bytes]) -> list[bytes]:
 def consistency_proof(old_size: int, leaf_hashes: Sequence[bytes]) -> list[bytes]:
     """RFC 9162 section 2.1.4.1: the proof that the tree of ``old_size`` leaves is a prefix
     of the tree over all ``leaf_hashes``. Empty when ``old_size`` is 0 or the whole tree."""
-    size = len(leaf_hashes)
+    return consistency_path(
+        old_size, len(leaf_hashes), lambda lo, hi: _range_root(leaf_hashes, lo, hi)
+    )
+
+
+def consistency_path(old_size: int, size: int, subtree: Callable[[int, int], bytes]) -> list[bytes]:
+    """``consistency_proof`` in a tree of ``size`` leaves whose subtree roots ``subtree``
+    gives (as ``inclusion_path``)."""
     if not 0 <= old_size <= size:
         raise MerkleError(f"a tree of {size} leaves has no prefix of {old_size}")
     if old_size in (0, size):
@@ -186,14 +200,14 @@ def consistency_proof(old_size: int, leaf_hashes: Sequence[bytes]) -> list[bytes
         n = hi - lo
         if m == n:
             if not whole:
-                path.append(_range_root(leaf_hashes, lo, hi))
+                path.append(subtree(lo, hi))
             break
         k = _split(n)
         if m <= k:
-            path.append(_range_root(leaf_hashes, lo + k, hi))
+            path.append(subtree(lo + k, hi))
             hi = lo + k
         else:
-            path.append(_range_root(leaf_hashes, lo, lo + k))
+            path.append(subtree(lo, lo + k))
             lo += k
             m -= k
             whole = False

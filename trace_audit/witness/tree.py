@@ -12,7 +12,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from trace_runtime.merkle import EMPTY_ROOT, MerkleError, node_hash
+from trace_runtime.merkle import (
+    EMPTY_ROOT,
+    MerkleError,
+    consistency_path,
+    inclusion_path,
+    node_hash,
+)
 
 __all__ = ["LevelTree"]
 
@@ -51,43 +57,12 @@ class LevelTree:
 
     def inclusion_proof(self, index: int, size: int) -> list[bytes]:
         """RFC 9162 §2.1.3.1: leaf ``index`` in the tree of ``size`` leaves."""
-        if not 0 <= index < size <= self.size:
+        if size > self.size:
             raise MerkleError(f"leaf {index} is not in a tree of {size} leaves")
-        path: list[bytes] = []
-        lo, hi = 0, size
-        while hi - lo > 1:
-            k = _split(hi - lo)
-            if index < lo + k:
-                path.append(self._range(lo + k, hi))
-                hi = lo + k
-            else:
-                path.append(self._range(lo, lo + k))
-                lo += k
-        path.reverse()
-        return path
+        return inclusion_path(index, size, self._range)
 
     def consistency_proof(self, old_size: int, size: int) -> list[bytes]:
         """RFC 9162 §2.1.4.1: the tree of ``old_size`` leaves is a prefix of ``size``'s."""
-        if not 0 <= old_size <= size <= self.size:
+        if size > self.size:
             raise MerkleError(f"a tree of {size} leaves has no prefix of {old_size}")
-        if old_size in (0, size):
-            return []
-        path: list[bytes] = []
-        lo, hi, m, whole = 0, size, old_size, True
-        while True:
-            n = hi - lo
-            if m == n:
-                if not whole:
-                    path.append(self._range(lo, hi))
-                break
-            k = _split(n)
-            if m <= k:
-                path.append(self._range(lo + k, hi))
-                hi = lo + k
-            else:
-                path.append(self._range(lo, lo + k))
-                lo += k
-                m -= k
-                whole = False
-        path.reverse()
-        return path
+        return consistency_path(old_size, size, self._range)
