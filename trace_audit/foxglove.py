@@ -397,7 +397,7 @@ class _Writer:
         try:
             self.file = target.open("xb")
         except OSError as err:
-            raise StorageError(str(target), f"cannot write ({err.strerror or err})") from err
+            raise StorageError(str(target), err.strerror or str(err)) from err
         self.mcap: Any = Writer(self.file)  # the mcap package ships no type hints
         self.mcap.start(profile=PROFILE, library="trace-audit foxglove export")
         self.mcap.add_metadata(SESSION_METADATA, session)
