@@ -37,13 +37,14 @@ import orjson
 
 from trace_audit.causal import layer_with_defaults, read_decision
 from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
-from trace_audit.cycle_fields import command_of
+from trace_audit.cycle_fields import command_of, seal_dropped
 from trace_audit.log_source import LogSource, require_cycles
 from trace_audit.log_time import TimeArg
 from trace_audit.selection import Selection
 from trace_audit.sensor_window import DEFAULT_SENSOR_WINDOW, SensorWindow
 from trace_runtime.cycles import Cycle
 from trace_runtime.errors import StorageError, UsageError
+from trace_runtime.gaps import GapFinder, SealedStamp
 from trace_runtime.logset import Log
 from trace_runtime.reader import Segment
 from trace_runtime.records import PROFILE, TOPIC_PERCEPTION, TOPIC_SEAL
@@ -171,8 +172,11 @@ class FoxgloveView:
     sensor readings (what an entity's evidence refs are resolved against), so it can run
     over a whole export or a live tail alike."""
 
-    def __init__(self, robot: str) -> None:
+    def __init__(self, robot: str, period_ns: int = 0) -> None:
         self.fox = require_sdk()
+        self.period_ns = period_ns
+        """The cycle period gaps are found at (``trace_runtime.gaps``); 0: none shown."""
+        self.gaps = GapFinder()
         self.m = self.fox.messages
         self.robot = robot
         self.sensors = SensorWindow(DEFAULT_SENSOR_WINDOW)
@@ -185,7 +189,10 @@ class FoxgloveView:
         """Everything one cycle contributes to the view, in order."""
         self.cycles += 1
         self.sensors.push(cycle.sensors)
+        gap = self._gap(cycle)
         out = self._scene(cycle)
+        if gap is not None:
+            out.append(gap)
         decision = read_decision(cycle, with_tree=False)
         command = command_of(cycle)
         if self.cycles == 1 or command != self.command:
@@ -214,6 +221,7 @@ class FoxgloveView:
         cycles need is remembered (the command, the sensor window), nothing is built."""
         self.cycles += 1
         self.sensors.push(cycle.sensors)
+        self._gap(cycle)
         self.command = command_of(cycle)
 
     def _schema(self, kind: type) -> tuple[str, str, bytes]:
@@ -333,6 +341,31 @@ class FoxgloveView:
             ],
         )
 
+    def _gap(self, cycle: Cycle) -> FoxgloveMessage | None:
+        """A warning in the Log panel when cycles are missing before this one (the one gap
+        rule), so a decision change after it does not read as a direct one (as ``tail``)."""
+        stamp = SealedStamp(cycle.cycle, cycle.t_ns, self.period_ns, seal_dropped(cycle))
+        gap = self.gaps.step(self.robot, stamp)
+        if gap is None:
+            return None
+        n = gap.missing_cycles
+        text = (
+            f"GAP after cycle {gap.after_cycle}: {n} cycle{'s' if n != 1 else ''} "
+            f"({gap.gap_ns / 1e9:.3f} s) not logged"
+        )
+        return self._sdk_message(
+            TOPIC_DECISIONS,
+            self.m.Log(
+                timestamp=_stamp(self.fox, cycle.t_ns),
+                level=self.m.LogLevel.Warning,
+                message=text,
+                name=self.robot,
+                file=cycle.segment,
+                line=cycle.cycle,
+            ),
+            cycle.t_ns,
+        )
+
     def _decision(self, cycle: Cycle, decision: Any, command: str | None) -> FoxgloveMessage:
         m = self.m
         was = "" if self.cycles == 1 else f"{self.command} -> "
@@ -393,7 +426,7 @@ class _Writer:
         from mcap.writer import Writer
 
         session, source = _session(log, first)
-        self.view = FoxgloveView(source.session.robot_id)
+        self.view = FoxgloveView(source.session.robot_id, source.session.period_ns)
         try:
             self.file = target.open("xb")
         except OSError as err:

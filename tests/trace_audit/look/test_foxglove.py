@@ -205,3 +205,19 @@ def test_an_excerpt_with_a_cycle_changed_is_still_found(tmp_path: Path) -> None:
         writer.finish()
     code, findings, _ = _verified(tampered)
     assert code == 1 and any(f.get("first_cycle") == 30 for f in findings), findings
+
+
+def test_a_gap_is_a_warning_in_the_log_panel_before_the_change_after_it(tmp_path: Path) -> None:
+    # cycles 20..39 dropped (2 s at 10 Hz); cycle 40 is the first STOP
+    log = write_log(tmp_path / "root", skip=lambda i: 20 <= i < 40)
+    out = tmp_path / "view.mcap"
+    _export(log, out)
+    with out.open("rb") as f:
+        entries = [
+            m.data
+            for _, channel, m in make_reader(f).iter_messages()
+            if channel.topic == "/foxglove/decisions"
+        ]
+    (gap,) = [i for i, data in enumerate(entries) if b"GAP after cycle 19: 20 cycles" in data]
+    assert b"cycle 40: " in entries[gap + 1]  # the change after it comes next
+    assert b"2.000 s) not logged" in entries[gap]
