@@ -119,8 +119,7 @@ a sim clock from 0):
 --key signs the robot's checkpoints with a key from trace-audit keygen; --witness URL has
 its logger submit each checkpoint to a witness (trace-audit witness serve):
 
-  trace-sim run --duration 10m --key keys/trace-ed25519.key \\
-      --witness http://127.0.0.1:8080 --out logs/
+  trace-sim run --key robot.key --witness http://127.0.0.1:8080 --out logs/
 """
 
 
