@@ -24,7 +24,14 @@ from trace_runtime.chain import digest
 from trace_runtime.checkpoints import decode_checkpoint
 from trace_runtime.errors import LogReadError, RecordError, TraceError
 from trace_runtime.logset import Log, best_copy_first, open_segments, robot_segment_files
-from trace_runtime.merkle import CompactRange, MerkleError, leaf_hash, node_hash, root_of
+from trace_runtime.merkle import (
+    CompactRange,
+    MerkleError,
+    consistency_path,
+    leaf_hash,
+    node_hash,
+    root_of,
+)
 from trace_runtime.reader import Segment
 from trace_runtime.records import GENESIS, TOPIC_CHECKPOINT, TOPIC_SEAL, Checkpoint
 
@@ -172,25 +179,7 @@ def consistency_proof_from(old: CompactRange, new_leaves: Sequence[bytes]) -> li
         half = 1 << ((b - a - 1).bit_length() - 1)  # not reached for a proof: kept exact
         return node_hash(subtree(a, a + half), subtree(a + half, b))
 
-    path: list[bytes] = []
-    a, b, k_m, whole = 0, n, m, True
-    while True:
-        size = b - a
-        if k_m == size:
-            if not whole:
-                path.append(subtree(a, b))
-            break
-        k = 1 << ((size - 1).bit_length() - 1)
-        if k_m <= k:
-            path.append(subtree(a + k, b))
-            b = a + k
-        else:
-            path.append(subtree(a, a + k))
-            a += k
-            k_m -= k
-            whole = False
-    path.reverse()
-    return path
+    return consistency_path(m, n, subtree)
 
 
 # --- the tree through a seal, for a logger that resumes a chain -------------------------------
