@@ -134,27 +134,26 @@ def append_cosigned(
         timestamp,
         witness_url,
     )
-    _make_folder(path.parent)
+    _make_folder(Path(root))
     append_line(path, orjson.dumps(asdict(record)) + b"\n")
     return record
 
 
-def _make_folder(folder: Path) -> None:
+def _make_folder(root: Path) -> None:
+    """The root's witness folder, created when absent; checked as ``_folder_of`` checks
+    it, whether it was there, made here, or made by another writer meanwhile."""
+    if _folder_of(root) is not None:
+        return
+    folder = root / WITNESS_FOLDER
     try:
-        mode = os.lstat(folder).st_mode
-    except FileNotFoundError:
-        try:
-            folder.mkdir(mode=0o755)
-        except FileExistsError:
-            pass
-        except OSError as err:
-            raise StorageError(str(folder), f"cannot create it ({err.strerror or err})") from err
-        fsync_dir(folder.parent)
-        mode = os.lstat(folder).st_mode
+        folder.mkdir(mode=0o755)
+    except FileExistsError:
+        pass
     except OSError as err:
-        raise UnsafePathError(str(folder), f"cannot look at it ({err.strerror or err})") from err
-    if not stat.S_ISDIR(mode):
-        raise UnsafePathError(str(folder), "the witness store is not a folder (a link is refused)")
+        raise StorageError(str(folder), f"cannot create it ({err.strerror or err})") from err
+    fsync_dir(root)
+    if _folder_of(root) is None:  # gone again between the two looks
+        raise StorageError(str(folder), "cannot create it (removed as it was made)")
 
 
 def _folder_of(root: Path) -> Path | None:
