@@ -136,6 +136,10 @@ def check_command(  # noqa: PLR0917 - typer maps each parameter to an option
     plain: PlainOption = False,
 ) -> None:
     def run() -> CheckResult:
+        from trace_audit.rules import ENGINES
+
+        if engine not in ENGINES:  # before any read, for a log and an index alike
+            raise UsageError(f"--engine is one of {', '.join(ENGINES)}, got {engine!r}")
         if (index is None) == (log is None):
             raise UsageError("give either a log or --index INDEX")
         if index is None:
@@ -167,10 +171,8 @@ def _check(
     *,
     engine: str,
 ) -> CheckResult:
-    from trace_audit.rules import ENGINES, check_rules, read_rules
+    from trace_audit.rules import check_rules, read_rules
 
-    if engine not in ENGINES:
-        raise UsageError(f"--engine is one of {', '.join(ENGINES)}, got {engine!r}")
     rules = read_rules(rules_path)  # before the log: a bad rule is exit 2 without a read
     return check_rules(
         source,
@@ -194,12 +196,10 @@ def _check_index(
     engine: str = "auto",
 ) -> CheckResult:
     from trace_audit.fleet.folder import load_manifest
-    from trace_audit.rules import ENGINES, check_index, read_rules
+    from trace_audit.rules import check_index, read_rules
     from trace_runtime.errors import LogReadError
     from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE
 
-    if engine not in ENGINES:
-        raise UsageError(f"--engine is one of {', '.join(ENGINES)}, got {engine!r}")
     rules = read_rules(rules_path)  # before the index: a bad rule is exit 2 without a read
     manifest = load_manifest(index)
     if manifest is None:
