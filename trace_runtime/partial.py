@@ -186,6 +186,14 @@ METRICS_PERCEPTION: Shape[MetricsPerception] = Shape(
 # --- the seal check: a seal's own fields ----------------------------------------------------
 
 
+class SensorCoverFields(msgspec.Struct, frozen=True, gc=False, forbid_unknown_fields=True):
+    """A seal's ``sensors`` (profile 1.3): how many sensor readings the cycle logged and the
+    digest over them (``trace_runtime.chain.sensor_cover``)."""
+
+    count: Int
+    digest: str
+
+
 class SealFields(msgspec.Struct, frozen=True, gc=False, forbid_unknown_fields=True):
     """A seal as the seal check reads it (``seal_check``): every field a seal has, typed as
     the check requires (``cycle``, ``t_ns`` and ``dropped`` integers, ``digests`` strings
@@ -198,6 +206,7 @@ class SealFields(msgspec.Struct, frozen=True, gc=False, forbid_unknown_fields=Tr
     digests: dict[str, str]
     prev: str
     dropped: Int = 0
+    sensors: SensorCoverFields | None = None
 
 
 SEAL_FIELDS: Shape[SealFields] = Shape("seal fields", TOPIC_SEAL, SealFields)
