@@ -1,10 +1,11 @@
 """The cold tier's format: a lossless columnar codec for blocks of cycles, stored inside MCAP.
 
 ``format`` holds the constants and the error; ``columns`` the byte coding of streams and
-columns; ``encode`` the encoder; ``decode`` a whole-block decode; ``seek`` a partial one
-(one cycle); ``cache`` the ``BlockCache`` that owns what decoding keeps between blocks
-(decoded blocks, compiled shapes, a decompressor per thread); ``blocks`` the block stream of
-a segment and the reader's assembler.
+columns; ``sensors`` the rule a seal's sensors digest is derived by; ``encode`` the
+encoder; ``decode`` a whole-block decode; ``seek`` a partial one (one cycle); ``cache`` the
+``BlockCache`` that owns what decoding keeps between blocks (decoded blocks, compiled
+shapes, a decompressor per thread); ``blocks`` the block stream of a segment and the
+reader's assembler.
 """
 
 from __future__ import annotations

@@ -27,10 +27,12 @@ from trace_runtime.tier_formats.cold.format import (
     JSON,
     LENGTHS,
     NULLABLE,
+    SENSORS,
     STR,
     ColdFormatError,
     ColumnKey,
 )
+from trace_runtime.tier_formats.cold.sensors import DERIVED
 from trace_runtime.tier_formats.shapes import Shape
 
 SCALES = tuple(10.0**k for k in range(23))
@@ -172,6 +174,12 @@ def decode_column(codec: str, param: Any, data: bytes, count: int | None = None)
             pending = iter(literals)
             offsets = [x if x else next(pending) for x in offsets]
         return offsets
+    if codec == SENSORS:
+        (literals,) = param
+        if data.count(0) != len(literals) or data.count(1) + len(literals) != len(data):
+            raise ColdFormatError("a sensors column's flags disagree with its literals")
+        pending = iter(literals)
+        return [DERIVED if flag else next(pending) for flag in data]
     if codec == BOOL:
         return [b != 0 for b in data]
     if codec == JSON:

@@ -29,13 +29,15 @@ from trace_runtime.tier_formats.cold.columns import (
 )
 from trace_runtime.tier_formats.cold.format import (
     CONST,
-    DIGEST,
     FLAT,
     LENGTHS,
+    REFERENCES,
+    SENSORS,
     BuildBudget,
     ColdFormatError,
     ColumnKey,
 )
+from trace_runtime.tier_formats.cold.sensors import DERIVED, SensorCovers
 from trace_runtime.tier_formats.shapes import Shape, ShapeCache
 
 
@@ -66,6 +68,10 @@ class BlockStreams:
     raw_body: bytes
     shapes: list[tuple[int, Shape]]
     columns_at: int
+
+    def covers(self) -> SensorCovers:
+        """Which messages are each cycle's readings (for derived sensors digests)."""
+        return SensorCovers(self.topic_names, self.topic_ids, self.sequences, self.times)
 
     @classmethod
     def read(cls, body: bytes, cache: ShapeCache) -> BlockStreams:
@@ -154,7 +160,8 @@ def decode_body(
         built[index] = 1
     waiting = _build_plain_groups(shapes, positions, reader, datas, built, budget=budget)
     hexes: dict[int, str] = known_digests if known_digests is not None else {}
-    _build_waiting_groups(waiting, positions, datas, built, hexes, budget=budget)
+    refs = _References(datas, built, hexes, streams.covers() if reader.covers else None, budget)
+    _build_waiting_groups(waiting, positions, refs, budget=budget)
     topics = list(map(streams.topic_names.__getitem__, streams.topic_ids))
     messages = list(map(RawMessage, topics, streams.sequences, streams.times, datas))
     plain = [int(p) for p in header.get("plain", [])]
@@ -173,8 +180,9 @@ def _read_columns(
             reader.constants[key] = param  # no body: one value, repeated for every row
         else:
             reader.columns[key] = decode_column(codec, param, body[pos:end])
-        if codec == DIGEST:
+        if codec in REFERENCES:
             reader.digests.add(key)
+        reader.covers = reader.covers or codec == SENSORS
         pos += size
     return reader
 
@@ -222,9 +230,7 @@ def _build_plain_groups(
 def _build_waiting_groups(
     waiting: list[_Waiting],
     positions: list[list[int]],
-    datas: list[bytes],
-    built: bytearray,
-    hexes: dict[int, str],
+    refs: _References,
     *,
     budget: BuildBudget,
 ) -> None:
@@ -233,11 +239,10 @@ def _build_waiting_groups(
     in message order. Each message's bytes are charged to ``budget``."""
     dumps = orjson.dumps
     spend = budget.spend
+    datas, built = refs.datas, refs.built
     sequential = []
     for group, shape, rows_list, slots in waiting:
-        filled = _fill_digests(
-            positions[group], rows_list, slots, datas=datas, built=built, hexes=hexes
-        )
+        filled = _fill_digests(positions[group], rows_list, slots, refs)
         if filled is None:
             sequential.append((group, shape, iter(rows_list), slots))
             continue
@@ -251,10 +256,13 @@ def _build_waiting_groups(
         for index, (_group, shape, rows_left, digest_slots) in order:
             row = list(next(rows_left))
             for slot in digest_slots:
-                back = row[slot]
-                if type(back) is int:
-                    row[slot] = hex_of(datas, hexes, index - back)
+                # in message order, every message before this one is built
+                resolved = refs.resolve(index, row[slot])
+                if resolved is _UNBUILT:
+                    raise ColdFormatError("a digest reference points at an unbuilt message")
+                row[slot] = resolved
             data = datas[index] = dumps(budget.compiled(shape)(row))
+            built[index] = 1
             spend(len(data))
 
 
@@ -267,6 +275,8 @@ class _ColumnReader:
         self.columns: dict[ColumnKey, list[Any]] = {}
         self.constants: dict[ColumnKey, Any] = {}
         self.digests: set[ColumnKey] = set()
+        self.covers = False
+        """Whether a column holds derived sensors digests."""
         self._taken: dict[ColumnKey, int] = {}
 
     def take(self, key: ColumnKey, count: int) -> list[Any]:
@@ -320,27 +330,59 @@ class _ColumnReader:
 
 
 def _fill_digests(
-    positions: list[int],
-    rows: list[Sequence[Any]],
-    slots: list[int],
-    *,
-    datas: list[bytes],
-    built: bytearray,
-    hexes: dict[int, str],
+    positions: list[int], rows: list[Sequence[Any]], slots: list[int], refs: _References
 ) -> list[Sequence[Any]] | None:
     """Rows with their digest references resolved, or None if one points at an unbuilt message."""
     out: list[Sequence[Any]] = []
+    resolve = refs.resolve
     for index, row in zip(positions, rows, strict=True):
         fixed = list(row)
         for slot in slots:
-            back = fixed[slot]
-            if type(back) is int:
-                at = index - back
-                if at < 0 or not built[at]:
-                    return None
-                fixed[slot] = hex_of(datas, hexes, at)
+            resolved = resolve(index, fixed[slot])
+            if resolved is _UNBUILT:
+                return None
+            fixed[slot] = resolved
         out.append(fixed)
     return out
+
+
+_UNBUILT = object()
+"""What a reference resolves to while the message it names is not built yet."""
+
+
+class _References:
+    """Resolves the values of a block's reference columns as its messages are built: a
+    back-reference (an int) to the digest of the message it points at, a derived sensors
+    digest (``DERIVED``) to the cover of its cycle's readings; a literal is itself."""
+
+    __slots__ = ("budget", "built", "covers", "datas", "hexes")
+
+    def __init__(
+        self,
+        datas: list[bytes],
+        built: bytearray,
+        hexes: dict[int, str],
+        covers: SensorCovers | None,
+        budget: BuildBudget,
+    ) -> None:
+        self.datas, self.built, self.hexes = datas, built, hexes
+        self.covers, self.budget = covers, budget
+
+    def resolve(self, index: int, value: Any) -> Any:
+        """``value`` at message ``index`` resolved, or ``_UNBUILT`` while what it names is
+        not built yet (a literal may be null)."""
+        if type(value) is int:
+            at = index - value
+            if at >= 0 and not self.built[at]:
+                return _UNBUILT
+            return hex_of(self.datas, self.hexes, at)  # refused there if before the block
+        if value is DERIVED and self.covers is not None:
+            cover = self.covers.cover(index, self._digest_if_built, self.budget.spend)
+            return _UNBUILT if cover is None else cover
+        return value
+
+    def _digest_if_built(self, at: int) -> str | None:
+        return hex_of(self.datas, self.hexes, at) if self.built[at] else None
 
 
 def hex_of(datas: list[bytes], cache: dict[int, str], at: int) -> str:

@@ -48,6 +48,11 @@ MAGIC = b"TCB\x01"
 # column codecs, as a block's header names them
 CONST, INT, DEC, F64, BOOL, STR, DIGEST, JSON = "c", "i", "d", "f", "b", "s", "h", "j"
 NULLABLE = "n"
+SENSORS = "r"
+"""Seals' sensors digests, each derived from the block's readings or a literal (a block
+using it is refused by decoders that predate it: an unknown codec)."""
+REFERENCES = frozenset({DIGEST, SENSORS})
+"""Codecs whose values are resolved from other messages of the block as it is built."""
 
 LENGTHS = -1
 """Last path element of a vector's lengths column (element columns end in the index)."""

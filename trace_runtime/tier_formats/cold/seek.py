@@ -15,13 +15,14 @@ from trace_runtime.tier_formats.cold.columns import counters, decode_column, pla
 from trace_runtime.tier_formats.cold.decode import BlockStreams, fitting, hex_of
 from trace_runtime.tier_formats.cold.format import (
     CONST,
-    DIGEST,
     FLAT,
     LENGTHS,
+    REFERENCES,
     BuildBudget,
     ColdFormatError,
     ColumnKey,
 )
+from trace_runtime.tier_formats.cold.sensors import DERIVED, SensorCovers
 from trace_runtime.tier_formats.shapes import ShapeCache
 
 
@@ -74,9 +75,10 @@ class PartialBlock:
                 self._constants[key] = param
             else:
                 self._specs[key] = (codec, param, pos, size)
-            if codec == DIGEST:
+            if codec in REFERENCES:
                 self._digest_keys.add(key)
             pos += size
+        self._covers: SensorCovers | None = None
         self._values: dict[ColumnKey, list[Any]] = {}
 
         # each message's row within its shape group
@@ -253,6 +255,9 @@ class PartialBlock:
                         if not 0 < back <= index:
                             raise ColdFormatError("a digest reference points outside the block")
                         needed[index - back] = 1
+                    elif back is DERIVED:
+                        for at in self._sensor_covers().readings(index):
+                            needed[at] = 1
         dumps = orjson.dumps
         hexes: dict[int, str] = {}
         built: list[bytes] = datas  # type: ignore[assignment]  # refs only reach built ones
@@ -269,6 +274,10 @@ class PartialBlock:
                     back = row[slot]
                     if type(back) is int:
                         row[slot] = hex_of(built, hexes, index - back)
+                    elif back is DERIVED:
+                        row[slot] = self._sensor_covers().cover(
+                            index, lambda at: hex_of(built, hexes, at), self._budget.spend
+                        )
             build = shape.build if shape.compiled else shape.build_uncompiled
             data = datas[index] = dumps(build(row))
             self._budget.spend(len(data))
@@ -277,6 +286,13 @@ class PartialBlock:
             RawMessage(names[self.topic_ids[i]], self.sequences[i], self.times[i], built[i])
             for i in range(first, last + 1)
         ]
+
+    def _sensor_covers(self) -> SensorCovers:
+        if self._covers is None:
+            self._covers = SensorCovers(
+                self.topic_names, self.topic_ids, self.sequences, self.times
+            )
+        return self._covers
 
     def _seals(self) -> list[int]:
         seal_id = self.topic_names.index(TOPIC_SEAL) if TOPIC_SEAL in self.topic_names else -1
