@@ -30,7 +30,9 @@ def sensor_line(topic: str, sequence: int, log_time_ns: int, data_digest: str) -
 
 def sensor_cover(lines: list[bytes]) -> tuple[int, str]:
     """A seal's ``sensors``: how many readings the cycle logged, and the SHA-256 hex of their
-    ``sensor_line``s concatenated in file order (``NO_SENSORS`` for none)."""
+    ``sensor_line``s concatenated in file order (``NO_SENSORS`` for none). The readings are
+    the cycle's messages on ``/sensors/`` topics (``records.SENSOR_PREFIX``, PROFILE §3):
+    other channels, which readers ignore (a Foxglove view beside the records), are not."""
     return len(lines), hashlib.sha256(b"".join(lines)).hexdigest()
 
 

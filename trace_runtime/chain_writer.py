@@ -28,7 +28,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
 
-from trace_runtime.chain import digest
+from trace_runtime.chain import NO_SENSORS, digest, sensor_cover, sensor_line
 from trace_runtime.checkpoints import encode_checkpoint, make_checkpoint
 from trace_runtime.codec import EncodedLayer, digest_keeping_gil, encode_layer, encode_seal_fields
 from trace_runtime.costs import TIMING_METADATA, CostHistogram
@@ -58,6 +58,10 @@ log = logging.getLogger("trace_runtime")
 
 CLOSE_METADATA = "trace.close"
 """Metadata a segment ends with when cycles were dropped after its last seal."""
+
+_NO_READINGS = (0, NO_SENSORS)
+"""The ``sensors`` of a cycle without readings: written too, so that readings added to such
+a cycle are found as surely as readings taken away from another."""
 
 WITNESS_MAX_LEAVES = 1 << 20
 """At most this many leaf hashes (32 MB, 29 h at 10 Hz) are kept since the size the witness
@@ -263,8 +267,10 @@ class ChainWriter:
         keep = self._batch_leaves.append if self._feed is not None else None
         for index, pending in enumerate(batch):
             cycle, t_ns = pending.cycle, pending.t_ns
-            for topic, sequence, log_time, data in pending.sensors:
+            lines: list[bytes] = []
+            for topic, sequence, log_time, data, data_digest in pending.sensors:
                 append((channel(topic), sequence, log_time, data))
+                lines.append(sensor_line(topic, sequence, log_time, data_digest))
             digests: dict[str, str] = {}
             for topic, record in pending.layers.items():
                 if isinstance(record, EncodedLayer):  # a dict, encoded on the control thread
@@ -273,7 +279,10 @@ class ChainWriter:
                     data = encode_layer(cycle, t_ns, record, LAYER_MODELS[topic])
                     digests[topic] = digest_keeping_gil(data)
                 append((layer_channels[topic], cycle, t_ns, data))
-            data = encode_seal_fields(cycle, t_ns, digests, prev, carried + pending.dropped_before)
+            cover = sensor_cover(lines) if lines else _NO_READINGS
+            data = encode_seal_fields(
+                cycle, t_ns, digests, prev, carried + pending.dropped_before, sensors=cover
+            )
             append((seal_channel, cycle, t_ns, data))
             prev = digest(data)
             if grow is not None:

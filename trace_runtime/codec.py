@@ -281,23 +281,34 @@ def _mirror_type(annotation: Any, metadata: list[Any] | tuple[Any, ...] = ()) ->
 
 
 def encode_seal(seal: Seal) -> bytes:
-    """Canonical bytes of a seal."""
-    return seal.model_dump_json(by_alias=True).encode()
+    """Canonical bytes of a seal (a seal before profile 1.3 has no ``sensors`` key)."""
+    exclude = {"sensors"} if seal.sensors is None else None
+    return seal.model_dump_json(by_alias=True, exclude=exclude).encode()
 
 
 def encode_seal_fields(
-    cycle: int, t_ns: int, digests: dict[str, str], prev: str, dropped: int
+    cycle: int,
+    t_ns: int,
+    digests: dict[str, str],
+    prev: str,
+    dropped: int,
+    *,
+    sensors: tuple[int, str] | None = None,
 ) -> bytes:
     """Canonical bytes of a seal built from its fields, without a model (the writer's hot
-    path). Byte-identical to ``encode_seal(Seal(...))``; a test holds the two together."""
+    path); ``sensors``: the (count, digest) of ``chain.sensor_cover``. Byte-identical to
+    ``encode_seal(Seal(...))``; a test holds the two together."""
     inner = b",".join(b'"%s":"%s"' % (t.encode(), d.encode()) for t, d in digests.items())
-    return b'{"cycle":%d,"t_ns":%d,"digests":{%s},"prev":"%s","dropped":%d}' % (
+    head = b'{"cycle":%d,"t_ns":%d,"digests":{%s},"prev":"%s","dropped":%d' % (
         cycle,
         t_ns,
         inner,
         prev.encode(),
         dropped,
     )
+    if sensors is None:
+        return head + b"}"
+    return head + b',"sensors":{"count":%d,"digest":"%s"}}' % (sensors[0], sensors[1].encode())
 
 
 def encode_json(value: Any) -> bytes:

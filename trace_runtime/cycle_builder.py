@@ -19,6 +19,7 @@ from pydantic import ValidationError
 
 from trace_runtime.codec import LayerValue, check_layer, digest_keeping_gil, encode_json
 from trace_runtime.errors import RecordError, UsageError
+from trace_runtime.handover import SensorReading
 from trace_runtime.records import (
     LAYER_MODELS,
     SENSOR_PREFIX,
@@ -80,7 +81,7 @@ class CycleBuilder:
         self.cycle = cycle
         self.t_ns = t_ns
         self._layers: dict[str, LayerValue] = {}
-        self._sensors: list[tuple[str, int, int, bytes]] = []
+        self._sensors: list[SensorReading] = []
         self._committed = False
         self._cost_ns = 0  # control-thread time spent in the logger for this cycle
 
@@ -95,12 +96,13 @@ class CycleBuilder:
         data = payload if isinstance(payload, bytes) else encode_json(payload)
         log_time = self.t_ns if t_ns is None else t_ns
         sequence = self._logger._next_sensor_sequence(topic)
-        self._sensors.append((topic, sequence, log_time, data))
+        data_digest = digest_keeping_gil(data)
+        self._sensors.append((topic, sequence, log_time, data, data_digest))
         fields = {
             "topic": topic,
             "log_time_ns": log_time,
             "sequence": sequence,
-            "digest": digest_keeping_gil(data),
+            "digest": data_digest,
         }
         try:
             # pydantic's validator itself: the same model as EvidenceRef(**fields), without

@@ -18,7 +18,11 @@ from dataclasses import dataclass
 
 from trace_runtime.codec import LayerValue
 
-__all__ = ["Handover", "PendingCycle", "Wakeup"]
+__all__ = ["Handover", "PendingCycle", "SensorReading", "Wakeup"]
+
+SensorReading = tuple[str, int, int, bytes, str]
+"""A sensor reading on its way to the writer: topic, sequence, log time, data, and the
+SHA-256 hex of the data (hashed once, on the control thread, for its evidence ref)."""
 
 
 @dataclass(slots=True)
@@ -29,7 +33,7 @@ class PendingCycle:
     cycle: int
     t_ns: int
     layers: dict[str, LayerValue]
-    sensors: list[tuple[str, int, int, bytes]]
+    sensors: list[SensorReading]
     dropped_before: int
     cost_ns: int
 

@@ -22,10 +22,11 @@ from pydantic_core import CoreSchema
 from trace_runtime.errors import RecordError
 
 PROFILE = "trace"
-PROFILE_VERSION = "1.2"
+PROFILE_VERSION = "1.3"
 """Major.minor (schemas/PROFILE.md §10). Minor revisions only add optional fields: every
 version 1 log is read as before, and a version 1 reader reads 1.1 logs (ignoring what it
-does not know). 1.2 adds each robot's Merkle tree to its checkpoints."""
+does not know). 1.2 adds each robot's Merkle tree to its checkpoints; 1.3 seals every
+sensor reading (the seal's ``sensors``)."""
 
 TOPIC_PERCEPTION = "/trace/perception"
 TOPIC_BELIEF = "/trace/belief"
@@ -454,12 +455,28 @@ class ExecutionMessage(_Stamp, Execution):
     """``/trace/execution``"""
 
 
+class SensorCover(_Record):
+    """A seal's ``sensors`` (profile 1.3): every sensor reading the cycle logged, cited by
+    evidence or not, so that a reading which detected nothing is in the chain too."""
+
+    count: int = Field(ge=0, description="the sensor messages of the cycle (PROFILE §5)")
+    digest: str = Field(
+        description="sha256 hex over their lines (UTF-8 length of the topic, ':', topic, "
+        "sequence, log time, sha256 hex of the data, each ended by a newline) in file "
+        "order (PROFILE §6)"
+    )
+
+
 class Seal(_Stamp):
     """``/trace/seal``: T_t, closing one cycle and linking it into the hash chain."""
 
     digests: dict[str, str] = Field(description="layer topic -> sha256 hex of its message data")
     prev: str = Field(description="sha256 hex of the previous seal's data; 64 zeros at genesis")
     dropped: int = Field(default=0, ge=0, description="cycles dropped since the previous seal")
+    sensors: SensorCover | None = Field(
+        default=None,
+        description="the cycle's sensor readings (profile 1.3; absent in earlier seals)",
+    )
 
 
 LayerRecord = Perception | Belief | Action | Execution

@@ -1,8 +1,9 @@
 """The one seal check: one cycle against its seal, beside the hash chain (``chain``).
 
 Each seal names the digests of its cycle's layer messages and the digest of the previous
-seal. ``verify_cycle`` recomputes them (and the digests of the sensor readings its evidence
-cites) and says what differs; every reader that shows whether a decision verifies asks it,
+seal, and from profile 1.3 a digest over all of the cycle's sensor readings. ``verify_cycle``
+recomputes them (and the digests of the sensor readings its evidence cites) and says what
+differs; every reader that shows whether a decision verifies asks it,
 and the whole-log verification (``trace_runtime.verification``) is built on it.
 """
 
@@ -14,9 +15,9 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import orjson
 
-from trace_runtime.chain import digest
+from trace_runtime.chain import digest, sensor_cover, sensor_line
 from trace_runtime.partial import METRICS_PERCEPTION, SEAL_FIELDS
-from trace_runtime.records import LAYER_TOPICS, TOPIC_PERCEPTION, TOPIC_SEAL
+from trace_runtime.records import LAYER_TOPICS, SENSOR_PREFIX, TOPIC_PERCEPTION, TOPIC_SEAL
 
 if TYPE_CHECKING:
     from trace_runtime.cycles import Cycle, RawMessage
@@ -37,9 +38,10 @@ class SealStatus:
     ``modified`` (a message differs from what the seal names, or the seal is malformed),
     ``broken_link`` (content matches, but the seal does not name ``prev_seal_digest``),
     ``unsealed`` (layer messages without a seal). ``seal_digest`` is what the next cycle's
-    seal must name as ``prev``. Sensor readings are not sealed themselves; the evidence refs
-    that name them (sealed with the perception message) carry their digests, and
-    ``evidence_mismatch`` lists the readings that differ from them.
+    seal must name as ``prev``. A 1.3 seal covers every sensor reading of its cycle (a reading
+    added, removed, changed or moved makes the cycle ``modified``); before 1.3 only the
+    evidence refs that name a reading (sealed with the perception message) carry its digest.
+    ``evidence_mismatch`` lists the readings that differ from their refs.
     """
 
     cycle: int
@@ -57,8 +59,8 @@ class SealStatus:
     evidence_unresolved: int = 0
     evidence_mismatch: tuple[str, ...] = ()
     sensors_uncited: int = 0
-    """Sensor readings in the cycle that no digest-carrying evidence ref names: the chain
-    does not cover them."""
+    """Sensor readings in the cycle that neither the seal (before profile 1.3) nor a
+    digest-carrying evidence ref covers: the chain does not cover them."""
     external: tuple[dict[str, Any], ...] = ()
     """Evidence refs naming a message in an external recording (PROFILE section 11), as
     JSON: sealed with the perception message, checked only against the recording itself
@@ -85,18 +87,25 @@ class SealStatus:
         return f"{self.state.replace('_', ' ')}: {self.detail}{evidence}"
 
 
-def _parse_seal(data: bytes) -> tuple[int, int, dict[str, str], str, int] | None:
-    """The seal's (cycle, t_ns, digests, prev, dropped), or None when it is not a valid
-    seal record. The seal's shape (``partial.SEAL_FIELDS``) reads it straight from the
-    bytes; what the shape declines takes the full parse (``_parse_seal_in_full``), which
-    decides alone what is valid (the shape is pinned to it by property tests)."""
+_SealParts = tuple[int, int, dict[str, str], str, int, tuple[int, str] | None]
+"""A seal's (cycle, t_ns, digests, prev, dropped, sensors): ``sensors`` is the (count,
+digest) of a 1.3 seal, None before."""
+
+
+def _parse_seal(data: bytes) -> _SealParts | None:
+    """The seal's parts, or None when it is not a valid seal record. The seal's shape
+    (``partial.SEAL_FIELDS``) reads it straight from the bytes; what the shape declines takes
+    the full parse (``_parse_seal_in_full``), which decides alone what is valid (the shape is
+    pinned to it by property tests)."""
     fields_ = SEAL_FIELDS.decode(data)
     if fields_ is not None:
-        return fields_.cycle, fields_.t_ns, fields_.digests, fields_.prev, fields_.dropped
+        cover = fields_.sensors
+        sensors = None if cover is None else (cover.count, cover.digest)
+        return fields_.cycle, fields_.t_ns, fields_.digests, fields_.prev, fields_.dropped, sensors
     return _parse_seal_in_full(data)
 
 
-def _parse_seal_in_full(data: bytes) -> tuple[int, int, dict[str, str], str, int] | None:
+def _parse_seal_in_full(data: bytes) -> _SealParts | None:
     try:
         value = orjson.loads(data)
     except orjson.JSONDecodeError:
@@ -116,7 +125,39 @@ def _parse_seal_in_full(data: bytes) -> tuple[int, int, dict[str, str], str, int
     for topic, named in digests.items():  # a loop, not all(...): no generator a cycle
         if not (isinstance(topic, str) and isinstance(named, str)):
             return None
-    return cycle, t_ns, digests, prev, dropped
+    cover = value.get("sensors")
+    if cover is None:
+        return cycle, t_ns, digests, prev, dropped, None
+    if not isinstance(cover, dict) or cover.keys() != {"count", "digest"}:
+        return None
+    count, readings = cover["count"], cover["digest"]
+    if type(count) is not int or not isinstance(readings, str):
+        return None
+    return cycle, t_ns, digests, prev, dropped, (count, readings)
+
+
+def _sensor_problem(
+    cycle: Cycle,
+    sealed: tuple[int, str],
+    hexes: dict[int, str],
+    sensor_digest: Callable[[RawMessage], str] | None,
+) -> str | None:
+    """What differs between the cycle's sensor readings and the (count, digest) its 1.3
+    seal covers them with; None when they match. ``hexes`` (id of a reading -> SHA-256 hex
+    of its data) is filled, so the evidence check hashes no reading twice."""
+    lines = []
+    for reading in cycle.sensors:
+        if not reading.topic.startswith(SENSOR_PREFIX):
+            continue  # a channel the profile does not define: readers ignore it (§10)
+        hexed = digest(reading.data) if sensor_digest is None else sensor_digest(reading)
+        hexes[id(reading)] = hexed
+        lines.append(sensor_line(reading.topic, reading.sequence, reading.log_time_ns, hexed))
+    count, readings = sensor_cover(lines)
+    if count != sealed[0]:
+        return f"the seal covers {sealed[0]} sensor reading(s), the log has {count}"
+    if readings != sealed[1]:
+        return "the cycle's sensor readings differ from the seal's sensors digest"
+    return None
 
 
 def verify_cycle(
@@ -152,7 +193,7 @@ def verify_cycle(
             modified=(TOPIC_SEAL,),
             detail="the seal is not a valid seal record",
         )
-    number, t_ns, digests, prev, dropped = parsed
+    number, t_ns, digests, prev, dropped, sealed_sensors = parsed
     problems: list[str] = []
     if number != cycle.cycle or t_ns != cycle.t_ns:
         problems.append(
@@ -161,6 +202,12 @@ def verify_cycle(
         )
     modified, missing, summarised, extra = _compare_layers(cycle, digests)
     checked, unresolved, uncited = 0, 0, len(cycle.sensors)
+    sensor_problem = None
+    if sealed_sensors is not None and cycle.summary is None:
+        # (a warm summary keeps only the readings its evidence cites: not checkable here)
+        hexes: dict[int, str] = {}
+        sensor_problem = _sensor_problem(cycle, sealed_sensors, hexes, sensor_digest)
+        sensor_digest = _digest_from(hexes, sensor_digest)
     bad: list[str] = []
     external: list[dict[str, Any]] = []
     perception = cycle.payloads.get(TOPIC_PERCEPTION)
@@ -175,8 +222,12 @@ def verify_cycle(
             found = _check_evidence(cycle, perception, perception_json, external, sensor_digest)
             assert found is not None  # whole=True: never None
             checked, unresolved, bad, uncited = found
+    if sealed_sensors is not None:
+        uncited = 0  # the seal covers every reading, cited or not
     if modified or missing or extra:
         problems += _layer_problems(modified, missing, extra)
+    if sensor_problem is not None:
+        problems.append(sensor_problem)
 
     link: Literal["ok", "broken", "unchecked"] = "unchecked"
     if prev_seal_digest is not None:
@@ -201,6 +252,15 @@ def verify_cycle(
         tuple(external),
         detail,
     )
+
+
+def _digest_from(
+    hexes: dict[int, str], given: Callable[[RawMessage], str] | None
+) -> Callable[[RawMessage], str]:
+    """A ``sensor_digest`` that answers from the readings hashed for the seal (``hexes``)."""
+    if given is None:
+        return lambda reading: hexes.get(id(reading)) or digest(reading.data)
+    return lambda reading: hexes.get(id(reading)) or given(reading)
 
 
 def _check_evidence_shape(

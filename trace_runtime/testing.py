@@ -20,7 +20,7 @@ from typing import Any, TypeVar
 
 import orjson
 
-from trace_runtime.chain import digest
+from trace_runtime.chain import digest, sensor_cover, sensor_line
 from trace_runtime.codec import EncodedLayer, LayerValue, encode_checked, encode_seal
 from trace_runtime.cycle_builder import CycleBuilder, next_cycle_time
 from trace_runtime.errors import UsageError
@@ -51,6 +51,7 @@ from trace_runtime.records import (
     Rationale,
     Region,
     Seal,
+    SensorCover,
     TreeEdge,
     TreeNode,
 )
@@ -62,6 +63,8 @@ class CapturedSensor:
     sequence: int
     log_time_ns: int
     data: bytes
+    digest: str
+    """The SHA-256 hex of ``data``."""
 
 
 @dataclass(slots=True)
@@ -145,12 +148,16 @@ class CaptureLogger:
             topic: encode_checked(builder.cycle, builder.t_ns, LAYER_MODELS[topic], record)
             for topic, record in layers.items()
         }
+        count, readings_digest = sensor_cover(
+            [sensor_line(topic, seq, at, hexed) for topic, seq, at, _, hexed in builder._sensors]
+        )
         seal = Seal(
             cycle=builder.cycle,
             t_ns=builder.t_ns,
             digests={topic: digest(data) for topic, data in payloads.items()},
             prev=self._prev_seal,
             dropped=self._dropped_since_seal,
+            sensors=SensorCover(count=count, digest=readings_digest),
         )
         seal_digest = digest(encode_seal(seal))
         sensors = [CapturedSensor(*sensor) for sensor in builder._sensors]

@@ -340,7 +340,10 @@ seals = st.fixed_dictionaries(
         "digests": st.dictionaries(_TOPICS, _HEX, max_size=5),
         "prev": _HEX,
     },
-    optional={"dropped": st.integers(0, 2**40)},
+    optional={
+        "dropped": st.integers(0, 2**40),
+        "sensors": st.fixed_dictionaries({"count": st.integers(0, 2**40), "digest": _HEX}),
+    },
 )
 
 
@@ -351,7 +354,8 @@ def check_seal(data: bytes) -> None:
     full = _parse_seal_in_full(data)
     if fast is None:
         return
-    got = (fast.cycle, fast.t_ns, fast.digests, fast.prev, fast.dropped)
+    cover = None if fast.sensors is None else (fast.sensors.count, fast.sensors.digest)
+    got = (fast.cycle, fast.t_ns, fast.digests, fast.prev, fast.dropped, cover)
     assert full is not None, (data, got)
     assert typed(list(got)) == typed(list(full)), data
     assert list(got[2]) == list(full[2])  # the digests' order: the order problems are named in
@@ -413,6 +417,13 @@ def test_a_seal_value_swapped_for_an_odd_one_decodes_as_the_full_parse(
         b'{"cycle":1,"t_ns":2,"digests":{},"prev":"\\ud800"}',
         b'[1,2,{},"p",0]',
         b' {"cycle":1,"t_ns":2,"digests":{},"prev":"p"} ',
+        b'{"cycle":1,"t_ns":2,"digests":{},"prev":"p","sensors":null}',
+        b'{"cycle":1,"t_ns":2,"digests":{},"prev":"p","sensors":{"count":1}}',
+        b'{"cycle":1,"t_ns":2,"digests":{},"prev":"p","sensors":{"count":1,"digest":"d","x":0}}',
+        b'{"cycle":1,"t_ns":2,"digests":{},"prev":"p","sensors":{"count":true,"digest":"d"}}',
+        b'{"cycle":1,"t_ns":2,"digests":{},"prev":"p","sensors":{"count":1.0,"digest":"d"}}',
+        b'{"cycle":1,"t_ns":2,"digests":{},"prev":"p","sensors":[1,"d"]}',
+        b'{"cycle":1,"t_ns":2,"digests":{},"prev":"p","sensors":{"count":1,"digest":"d","count":2}}',
     ],
 )
 def test_odd_seals_read_as_the_full_parse_reads_them(data: bytes) -> None:

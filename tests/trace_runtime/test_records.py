@@ -233,15 +233,26 @@ def test_entity_class_is_written_under_its_schema_name() -> None:
         st.text("0123456789abcdef", min_size=64, max_size=64),
     ),
     dropped=st.integers(0, 2**31),
+    sensors=st.none()
+    | st.tuples(st.integers(0, 2**31), st.text("0123456789abcdef", min_size=64, max_size=64)),
 )
 def test_the_writers_fast_seal_encoding_equals_the_models(
-    cycle: int, t_ns: int, digests: dict[str, str], dropped: int
+    cycle: int,
+    t_ns: int,
+    digests: dict[str, str],
+    dropped: int,
+    sensors: tuple[int, str] | None,
 ) -> None:
     from trace_runtime.codec import encode_seal, encode_seal_fields
-    from trace_runtime.records import GENESIS, Seal
+    from trace_runtime.records import GENESIS, Seal, SensorCover
 
-    seal = Seal(cycle=cycle, t_ns=t_ns, digests=digests, prev=GENESIS, dropped=dropped)
-    assert encode_seal_fields(cycle, t_ns, digests, GENESIS, dropped) == encode_seal(seal)
+    cover = None if sensors is None else SensorCover(count=sensors[0], digest=sensors[1])
+    seal = Seal(
+        cycle=cycle, t_ns=t_ns, digests=digests, prev=GENESIS, dropped=dropped, sensors=cover
+    )
+    fast = encode_seal_fields(cycle, t_ns, digests, GENESIS, dropped, sensors=sensors)
+    assert fast == encode_seal(seal)
+    assert (b'"sensors"' in fast) == (sensors is not None)  # a 1.2 seal keeps its bytes
 
 
 # --- the two ways in: built records and plain dicts give the same bytes -------------------------

@@ -54,7 +54,12 @@ def test_verify_cycle_names_what_differs(cycles: list[Cycle]) -> None:
     (sensor,) = cycle.sensors
     forged = RawMessage(sensor.topic, sensor.sequence, sensor.log_time_ns, b'{"ranges":[9]}')
     status = verify_cycle(replace(cycle, sensors=[forged]))
-    assert status.state == "verified" and not status.ok
+    assert status.state == "modified" and not status.ok  # the 1.3 seal covers the reading
+    assert "sensor readings differ from the seal's sensors digest" in status.describe()
+    assert status.evidence_mismatch == ("/sensors/lidar#1",)
+    before_1_3 = _without_sensor_cover(cycle)
+    status = verify_cycle(replace(before_1_3, sensors=[forged]))
+    assert status.state == "verified" and not status.ok  # its evidence ref alone names it
     assert status.evidence_mismatch == ("/sensors/lidar#1",)
 
     status = verify_cycle(cycle, digest(b"another seal"))
@@ -83,11 +88,20 @@ def test_a_summary_cycle_verifies_its_seal_not_its_payloads(cycles: list[Cycle])
 # --- the evidence step read as a shape -----------------------------------------------------
 
 
+def _without_sensor_cover(cycle: Cycle) -> Cycle:
+    """``cycle`` as a writer before profile 1.3 sealed it: no ``sensors`` in its seal."""
+    seal = orjson.loads(cycle.payloads[TOPIC_SEAL])
+    del seal["sensors"]
+    return replace(cycle, payloads={**cycle.payloads, TOPIC_SEAL: orjson.dumps(seal)})
+
+
 def _resealed(cycle: Cycle, perception: Any) -> Cycle:
-    """``cycle`` with another perception message and a seal naming its digest."""
+    """``cycle`` with another perception message and a seal naming its digest; the seal is
+    one of profile 1.2 (no ``sensors``), so its readings are covered by the evidence alone."""
     data = perception if isinstance(perception, bytes) else json.dumps(perception).encode()
     seal = orjson.loads(cycle.payloads[TOPIC_SEAL])
     seal["digests"][TOPIC_PERCEPTION] = digest(data)
+    seal.pop("sensors", None)
     payloads = {**cycle.payloads, TOPIC_PERCEPTION: data, TOPIC_SEAL: orjson.dumps(seal)}
     return replace(cycle, payloads=payloads)
 

@@ -50,8 +50,8 @@ T0_NS = 100_000_000_000
 PERIOD_NS = 100_000_000
 CYCLES = 60
 MUTATIONS = 240
-# Every situation cites the LiDAR scan it logs, so every sensor reading is covered.
-SITUATIONS = ("ped_far", "ped_close", "blocked", "ped_close", "ped_far")
+# A clear aisle's scan is cited by no evidence ref: the 1.3 seal alone covers it.
+SITUATIONS = ("ped_far", "ped_close", "blocked", "clear", "ped_close", "ped_far")
 
 
 def write_signed_log(
@@ -78,7 +78,10 @@ def write_signed_log(
         if skip is not None and skip(i):
             c.abort()
             continue
-        fill_cycle(c, situations[(i // 7) % len(situations)])
+        situation = situations[(i // 7) % len(situations)]
+        fill_cycle(c, situation)
+        if situation == "clear":
+            c.sensor("/sensors/radar", {"targets": []})  # saw nothing; no evidence cites it
         c.commit()
     logger.close()
     return path
@@ -341,7 +344,57 @@ def forge_and_recompute(d: Decoded, rng: random.Random, _: Signer) -> Expect:
     )
 
 
+def _uncited_reading(d: Decoded, rng: random.Random) -> tuple[Unit, int]:
+    """A cycle whose radar reading no evidence ref cites (a clear aisle), and its index."""
+    for index in rng.sample(d.cycles(), len(d.cycles())):
+        unit = d.units[index]
+        for at, message in enumerate(unit.messages):
+            if message.topic == "/sensors/radar":
+                return unit, at
+    raise AssertionError("the campaign's log has no uncited reading")
+
+
+def change_uncited_reading(d: Decoded, rng: random.Random, _: Signer) -> Expect:
+    """Change a reading no evidence cites: the radar "saw nothing", now it saw something."""
+    unit, at = _uncited_reading(d, rng)
+    reading = unit.messages[at]
+    changed = b'{"targets":[{"range":0.7}]}'
+    unit.messages[at] = replace(reading, data=changed)
+    return Expect(f"change uncited reading of cycle {unit.cycle}", CONTENT, unit.cycle)
+
+
+def delete_reading(d: Decoded, rng: random.Random, _: Signer) -> Expect:
+    unit, at = _uncited_reading(d, rng)
+    del unit.messages[at]
+    return Expect(f"delete uncited reading of cycle {unit.cycle}", CONTENT, unit.cycle)
+
+
+def add_reading(d: Decoded, rng: random.Random, _: Signer) -> Expect:
+    """Add a reading (with a fresh sequence number) to a cycle that did not log it."""
+    unit, at = _uncited_reading(d, rng)
+    reading = unit.messages[at]
+    added = replace(reading, sequence=reading.sequence + 10_000, data=b'{"targets":[]}')
+    unit.messages.insert(at, added)
+    return Expect(f"add a reading to cycle {unit.cycle}", CONTENT, unit.cycle)
+
+
+def move_reading(d: Decoded, rng: random.Random, _: Signer) -> Expect:
+    """Keep a reading's bytes, but file it under another sensor or another time."""
+    unit, at = _uncited_reading(d, rng)
+    reading = unit.messages[at]
+    if rng.random() < 0.5:
+        moved = replace(reading, topic="/sensors/sonar")
+    else:
+        moved = replace(reading, log_time_ns=reading.log_time_ns - PERIOD_NS // 3)
+    unit.messages[at] = moved
+    return Expect(f"move the reading of cycle {unit.cycle}", CONTENT, unit.cycle)
+
+
 MUTATIONS_BY_NAME: dict[str, Callable[[Decoded, random.Random, Signer], Expect]] = {
+    "change_uncited_reading": change_uncited_reading,
+    "delete_reading": delete_reading,
+    "add_reading": add_reading,
+    "move_reading": move_reading,
     "flip_byte": flip_byte,
     "delete_cycle": delete_cycle,
     "swap_cycles": swap_cycles,
