@@ -37,12 +37,22 @@ class Faults:
     no_session: bool = False
     lz4: bool = False
     clock_step_back_at: int | None = None  # from this cycle on, t_ns is 2.5 periods earlier
+    profile_version: str = "1.1"  # "1.3": every seal covers the cycle's sensor readings
+    radar: bool = False  # each cycle also logs a radar reading that no evidence ref cites
+    seal_without_sensors_at: int | None = None  # (1.3) this cycle's seal leaves 'sensors' out
 
 
 def _compact(value: object, spaced: bool = False) -> bytes:
     if spaced:
         return json.dumps(value).encode()
     return json.dumps(value, separators=(",", ":"), ensure_ascii=False).encode()
+
+
+def _sensor_line(topic: str, sequence: int, log_time: int, data: bytes) -> bytes:
+    """``<L>:<topic>\\n<sequence>\\n<log_time>\\n<data digest>\\n`` (PROFILE §6, ``sensors``)."""
+    name = topic.encode()
+    hexed = hashlib.sha256(data).hexdigest()
+    return str(len(name)).encode() + b":" + name + f"\n{sequence}\n{log_time}\n{hexed}\n".encode()
 
 
 def _layer(name: str, cycle: int, t_ns: int, distance: float, ref: dict[str, object]) -> dict:
@@ -105,6 +115,7 @@ def write_profile_log(path: Path, cycles: int = 30, faults: Faults = Faults()) -
             "trace.Sensor", "jsonschema", (SCHEMAS / "trace.Sensor.json").read_bytes()
         )
         range_channel = writer.register_channel("/sensors/range", "json", sensor_schema)
+        radar_channel = writer.register_channel("/sensors/radar", "json", sensor_schema)
         session = {
             "robot_id": "profile-bot",
             "period_ns": str(PERIOD_NS),
@@ -115,7 +126,7 @@ def write_profile_log(path: Path, cycles: int = 30, faults: Faults = Faults()) -
             "prev_seal": GENESIS,
             "first_cycle": "0",
             "tier": "hot",
-            "profile_version": "1.1",
+            "profile_version": faults.profile_version,
         }
         if not faults.no_session:
             writer.add_metadata("trace.session", session)
@@ -136,8 +147,18 @@ def write_profile_log(path: Path, cycles: int = 30, faults: Faults = Faults()) -
                 "digest": hashlib.sha256(reading).hexdigest(),
             }
 
-            def sensor(cycle: int = cycle, t_ns: int = t_ns, reading: bytes = reading) -> None:
+            lines: list[bytes] = []  # PROFILE §6: each reading's line, in file order
+
+            def sensor(
+                cycle: int = cycle, t_ns: int = t_ns, reading: bytes = reading, lines: list = lines
+            ) -> None:
                 writer.add_message(range_channel, t_ns, reading, t_ns, sequence=cycle)
+                lines.append(_sensor_line("/sensors/range", cycle, t_ns, reading))
+
+            if faults.radar:
+                echo = _compact({"targets": []})
+                writer.add_message(radar_channel, t_ns - 1, echo, t_ns - 1, sequence=cycle)
+                lines.append(_sensor_line("/sensors/radar", cycle, t_ns - 1, echo))
 
             late_sensor = faults.sensor_after_layers and cycle == 3
             if not late_sensor:
@@ -156,9 +177,17 @@ def write_profile_log(path: Path, cycles: int = 30, faults: Faults = Faults()) -
                     sensor()
             if faults.unsealed_tail and cycle == cycles - 1:
                 break
-            seal = _compact(
-                {"cycle": cycle, "t_ns": t_ns, "digests": digests, "prev": prev, "dropped": 0}
-            )
+            fields: dict[str, object] = {
+                "cycle": cycle,
+                "t_ns": t_ns,
+                "digests": digests,
+                "prev": prev,
+                "dropped": 0,
+            }
+            if faults.profile_version == "1.3" and faults.seal_without_sensors_at != cycle:
+                cover = hashlib.sha256(b"".join(lines)).hexdigest()
+                fields["sensors"] = {"count": len(lines), "digest": cover}
+            seal = _compact(fields)
             writer.add_message(channels["seal"], t_ns, seal, t_ns, sequence=cycle)
             prev = hashlib.sha256(seal).hexdigest()
             last_seal = (cycle, t_ns)

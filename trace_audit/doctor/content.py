@@ -105,6 +105,8 @@ class CycleCheck:
         self.window = SensorWindow(DEFAULT_SENSOR_WINDOW)
         self.checkpoints: list[tuple[int, bool]] = []  # (t_ns, final)
         self.first_t: int | None = None
+        self.seals_cover_sensors = False
+        """The segment's profile is 1.3 or later: each seal must carry ``sensors``."""
         self._chunk = 0  # the chunk of the message being checked (_OUTSIDE_CHUNKS: none)
 
     def damage(self) -> None:
@@ -146,6 +148,15 @@ class CycleCheck:
         elif topic in LAYER_TOPICS:
             self._layer(topic, value, stamp, offset)
         elif topic == TOPIC_SEAL:
+            if self.seals_cover_sensors and "sensors" not in value:
+                self.report.add(
+                    "seal-sensors",
+                    "a seal of a profile 1.3 segment has no 'sensors': its cycle's sensor "
+                    "readings are outside the chain",
+                    cycle=stamp[0],
+                    offset=offset,
+                    key="",
+                )
             self._seal(stamp, offset)
 
     def _sensor(self, topic: str, message: Message, offset: int) -> None:

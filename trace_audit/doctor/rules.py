@@ -95,7 +95,14 @@ RULES = _rules(
         "seal-chain",
         "§6",
         "MUST",
-        "each seal names its layer messages' digests and the previous seal",
+        "each seal names its layer messages' digests (from 1.3 its sensor readings too) and "
+        "the previous seal",
+    ),
+    (
+        "seal-sensors",
+        "§6",
+        "MUST",
+        "from profile 1.3, each seal covers its cycle's sensor readings ('sensors')",
     ),
     ("checkpoint", "§6", "MUST", "a checkpoint names the chain head it claims"),
     (

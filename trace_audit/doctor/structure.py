@@ -214,6 +214,7 @@ def _session_record(record: Metadata, seen: _Seen, report: SegmentDoctor, offset
         report.add("session", "trace.session comes after the first chunk", offset=offset)
     try:
         seen.session = SessionInfo.from_metadata(dict(record.metadata))
+        seen.content.seals_cover_sensors = _version(seen.session.profile_version) >= (1, 3)
     except ValueError as err:
         report.add("session-values", f"trace.session: {err}", offset=offset)
     missing = [k for k in _SESSION_KEYS if k not in record.metadata]
@@ -223,6 +224,14 @@ def _session_record(record: Metadata, seen: _Seen, report: SegmentDoctor, offset
             f"trace.session lacks {', '.join(missing)} (readers assume the defaults)",
             offset=offset,
         )
+
+
+def _version(text: str) -> tuple[int, ...]:
+    """A ``major.minor`` profile version as numbers; (0,) when it is not one."""
+    try:
+        return tuple(int(part) for part in text.split("."))
+    except ValueError:
+        return (0,)
 
 
 def _tier(seen: _Seen) -> str:

@@ -105,6 +105,34 @@ def test_each_deviation_breaks_exactly_its_rule(
     assert RULES[rule].level == "MUST"
 
 
+def test_a_1_3_log_from_the_profile_alone_seals_every_reading(tmp_path: Path) -> None:
+    """A writer that follows PROFILE §6's ``sensors`` text, radar readings no ref cites
+    included, conforms; a reading changed in it breaks the seal chain at its cycle."""
+    faults = Faults(profile_version="1.3", radar=True)
+    path = write_profile_log(tmp_path / "p.mcap", faults=faults)
+    report = doctor_log(path)
+    assert report.conforms, report.errors
+
+    def quieter(msg: RawMessage) -> bytes:
+        if msg.topic == "/sensors/radar" and msg.sequence == 7:
+            return b'{"targets":[{"range_m":0.6}]}'
+        return msg.data
+
+    report = doctor_log(rewrite_segment(path, tmp_path / "t.mcap", quieter))
+    [chain] = [p for p in report.errors if p.rule == "seal-chain"]
+    assert chain.cycle == 7 and "sensors digest" in chain.message
+
+
+def test_a_1_3_seal_without_sensors_breaks_the_seal_sensors_rule(tmp_path: Path) -> None:
+    faults = Faults(profile_version="1.3", seal_without_sensors_at=4)
+    report = doctor_log(write_profile_log(tmp_path / "p.mcap", faults=faults))
+    assert _broken(report) == {"seal-sensors"}
+    [problem] = report.errors
+    assert (problem.section, problem.cycle, RULES["seal-sensors"].level) == ("§6", 4, "MUST")
+    # The same seal in a 1.1 segment is what that profile asks for.
+    assert doctor_log(write_profile_log(tmp_path / "q.mcap", faults=Faults(radar=True))).conforms
+
+
 def test_lz4_chunks_are_a_note_not_a_broken_rule(tmp_path: Path) -> None:
     report = doctor_log(write_profile_log(tmp_path / "p.mcap", faults=Faults(lz4=True)))
     assert report.conforms
