@@ -1,11 +1,13 @@
 """A proof bundle: one decision cycle, checkable without the log (``trace-audit prove`` and
 ``trace-audit verify-proof``; the format is in docs/integrity.md, "Proof bundles").
 
-A bundle holds the cycle's stored messages (base64 of their bytes, with their topics), its
+A bundle holds the cycle's stored messages (base64 of their bytes, with their topics), the
+sensor readings its profile 1.3 seal covers (each with its topic, sequence and log time), its
 seal, the seal's leaf index in the robot's RFC 6962 tree, the inclusion proof of that leaf
 in the tree of the newest signed profile 1.2 checkpoint (a cosigned one where the root's
 witness store holds one that covers it), and that checkpoint's note. ``check_bundle``
-checks, in order: each message's digest against the seal, the seal's leaf in the tree
+checks, in order: each message's digest against the seal, the readings against the seal's
+``sensors``, the seal's leaf in the tree
 (inclusion proof to the note's root), the note's signature by the robot's key under its
 origin and, given a witness key, the witness's cosignature.
 """
@@ -23,6 +25,7 @@ import orjson
 
 from trace_audit.witness.tree import LevelTree
 from trace_runtime.boundary import read_side_file
+from trace_runtime.chain import sensor_cover, sensor_line
 from trace_runtime.chain_tree import robot_seal_leaves
 from trace_runtime.clock import iso_utc
 from trace_runtime.errors import LogReadError, TraceError, UsageError
@@ -48,13 +51,18 @@ __all__ = [
     "read_bundle",
 ]
 
-BUNDLE_FORMAT = "trace-proof/1"
-BUNDLE_FIELDS = frozenset(
+BUNDLE_FORMAT = "trace-proof/2"
+"""The format ``prove`` writes: ``trace-proof/1`` and the cycle's sensor readings."""
+BUNDLE_FORMATS = ("trace-proof/1", BUNDLE_FORMAT)
+_FIELDS_1 = frozenset(
     {"format", "cycle", "t_ns", "messages", "seal", "leaf_index", "tree_size", "root"}
     | {"inclusion", "note", "cosigned"}
 )
-"""Every field of a bundle, all required; any other is refused (nothing in a bundle goes
-unchecked: the robot is named by the note's origin, which the robot's key signs)."""
+BUNDLE_FIELDS = {"trace-proof/1": _FIELDS_1, BUNDLE_FORMAT: _FIELDS_1 | {"sensors"}}
+"""Every field of a bundle of each format, all required; any other is refused (nothing in a
+bundle goes unchecked: the robot is named by the note's origin, which the robot's key
+signs)."""
+_READING_FIELDS = frozenset({"topic", "sequence", "log_time_ns", "data"})
 MAX_BUNDLE_BYTES = 16 << 20
 
 
@@ -86,11 +94,22 @@ def make_bundle(log_path: str | Path, cycle: int, *, robot: str | None = None) -
         for topic, data in sorted(found.payloads.items())
         if topic != TOPIC_SEAL
     ]
+    covered = b'"sensors":{' in seal  # a 1.3 seal: the readings can be checked alone
+    sensors = [
+        {
+            "topic": m.topic,
+            "sequence": m.sequence,
+            "log_time_ns": m.log_time_ns,
+            "data": _b64(m.data),
+        }
+        for m in (found.sensors if covered else ())
+    ]
     return {
         "format": BUNDLE_FORMAT,
         "cycle": cycle,
         "t_ns": found.t_ns,
         "messages": messages,
+        "sensors": sensors,
         "seal": _b64(seal),
         "leaf_index": index,
         "tree_size": size,
@@ -151,7 +170,7 @@ def read_bundle(path: str | Path) -> dict[str, Any]:
         value = orjson.loads(data)
     except orjson.JSONDecodeError as err:
         raise LogReadError(str(path), f"not a proof bundle: not JSON ({err})") from err
-    if not isinstance(value, dict) or value.get("format") != BUNDLE_FORMAT:
+    if not isinstance(value, dict) or value.get("format") not in BUNDLE_FORMATS:
         raise LogReadError(str(path), f"not a proof bundle (format {BUNDLE_FORMAT})")
     return value
 
@@ -179,6 +198,34 @@ def _unb64(text: object, what: str) -> bytes:
     return data
 
 
+def _check_readings(bundle: dict[str, Any], seal: dict[str, Any], r: BundleCheck) -> bool:
+    """The bundle's sensor readings against the seal's ``sensors``: False when they differ."""
+    lines = []
+    for m in _field(bundle, "sensors", list):
+        if not isinstance(m, dict) or set(m) != _READING_FIELDS:
+            raise _BadBundleError("a sensor reading is not topic, sequence, log_time_ns, data")
+        topic, sequence, at = m["topic"], m["sequence"], m["log_time_ns"]
+        if not isinstance(topic, str) or not all(type(v) is int for v in (sequence, at)):
+            raise _BadBundleError("a sensor reading's topic, sequence or time is malformed")
+        hexed = hashlib.sha256(_unb64(m["data"], f"reading {topic}")).hexdigest()
+        lines.append(sensor_line(topic, sequence, at, hexed))
+    sealed = seal.get("sensors")
+    if sealed is None:
+        if lines:
+            raise _BadBundleError("sensor readings given for a seal that does not cover them")
+        r.steps.append(("sensors", True, "not covered by this seal (profile 1.2 or earlier)"))
+        return True
+    count, readings = sensor_cover(lines)
+    if not isinstance(sealed, dict) or (sealed.get("count"), sealed.get("digest")) != (
+        count,
+        readings,
+    ):
+        r.steps.append(("sensors", False, f"the {count} reading(s) differ from the seal's"))
+        return False
+    r.steps.append(("sensors", True, f"{count} sensor reading(s) match the seal"))
+    return True
+
+
 def check_bundle(
     bundle: dict[str, Any],
     key: PublicKey,
@@ -199,8 +246,11 @@ def check_bundle(
 def _check(
     bundle: dict[str, Any], key: PublicKey, witness_key: NoteVerifier | None, r: BundleCheck
 ) -> None:
-    if set(bundle) != BUNDLE_FIELDS:
-        odd = sorted(set(bundle) ^ BUNDLE_FIELDS)
+    expected = BUNDLE_FIELDS.get(bundle.get("format"))  # type: ignore[arg-type]
+    if expected is None:
+        raise _BadBundleError(f"the format is not one of {', '.join(BUNDLE_FORMATS)}")
+    if set(bundle) != expected:
+        odd = sorted(set(bundle) ^ expected)
         raise _BadBundleError(f"fields missing or unknown: {', '.join(odd)}")
     r.cycle = _field(bundle, "cycle", int)
     r.t_ns = _field(bundle, "t_ns", int)
@@ -241,6 +291,8 @@ def _check(
         r.steps.append(("digests", False, detail))
         return
     r.steps.append(("digests", True, f"{len(given)} message(s) match the seal"))
+    if "sensors" in bundle and not _check_readings(bundle, seal, r):
+        return
     r.leaf_index = _field(bundle, "leaf_index", int)
     r.tree_size = _field(bundle, "tree_size", int)
     root_hex = _field(bundle, "root", str)

@@ -36,6 +36,8 @@ def test_a_bundle_verifies_without_the_log(proved: tuple[Path, Path], keys: Keys
     data = json.loads(bundle.read_text())
     assert data["format"] == BUNDLE_FORMAT and data["cycle"] == 37 and data["cosigned"]
     assert data["leaf_index"] == 37 and data["tree_size"] > 37
+    [reading] = data["sensors"]  # the cycle's one LiDAR scan, covered by its 1.3 seal
+    assert (reading["topic"], reading["log_time_ns"]) == ("/sensors/lidar", data["t_ns"])
     moved = bundle.parent / "elsewhere.json"
     moved.write_bytes(bundle.read_bytes())
     import shutil
@@ -46,6 +48,7 @@ def test_a_bundle_verifies_without_the_log(proved: tuple[Path, Path], keys: Keys
                    "--plain")  # fmt: skip
     assert done.returncode == 0, done.stdout + done.stderr
     assert "VERIFIED" in done.stdout and "no later than" in done.stdout
+    assert "1 sensor reading(s) match the seal" in done.stdout
     wrong_key = run_cli("verify-proof", str(moved), "--key", str(keys.witness_pub))
     assert wrong_key.returncode == 1
     assert run_cli("verify-proof", str(root / "nothing.json"), "--key", str(keys.robot_pub)
@@ -76,3 +79,18 @@ def test_every_byte_changed_fails(proved: tuple[Path, Path], keys: Keys) -> None
             if verifies(bytes(changed)):
                 passed.append((i, flip, original[max(0, i - 20) : i + 20]))
     assert not passed, passed[:5]
+
+
+def test_a_bundle_of_the_first_format_still_verifies(proved: tuple[Path, Path], keys: Keys) -> None:
+    """``trace-proof/1`` (before the readings were carried) is checked as before; its
+    readings are simply not there to check."""
+    _root, bundle = proved
+    data = json.loads(bundle.read_text())
+    key, witness = load_public_key(keys.robot_pub), keys.witness_verifier
+    old = {k: v for k, v in data.items() if k != "sensors"} | {"format": "trace-proof/1"}
+    checked = check_bundle(old, key, witness_key=witness)
+    assert checked.ok and "sensors" not in [name for name, _ok, _detail in checked.steps]
+    mixed = {**data, "format": "trace-proof/1"}  # a /1 bundle with a field /1 does not have
+    assert not check_bundle(mixed, key, witness_key=witness).ok
+    quiet = {**data, "sensors": []}  # the reading left out: the seal counts one
+    assert not check_bundle(quiet, key, witness_key=witness).ok
