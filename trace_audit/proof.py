@@ -26,7 +26,7 @@ import orjson
 from trace_audit.witness.tree import LevelTree
 from trace_runtime.boundary import read_side_file
 from trace_runtime.chain import sensor_cover, sensor_line
-from trace_runtime.chain_tree import robot_seal_leaves
+from trace_runtime.chain_tree import prove_pass
 from trace_runtime.clock import iso_utc
 from trace_runtime.errors import LogReadError, TraceError, UsageError
 from trace_runtime.keys import PublicKey
@@ -76,17 +76,13 @@ def make_bundle(log_path: str | Path, cycle: int, *, robot: str | None = None) -
 
     log = open_log(log_path)
     robot_id = robot or _only_robot(log)
-    one = log.of_robots([robot_id])
-    found = one.get_cycle(cycle)
-    if found is None or TOPIC_SEAL not in found.payloads:
+    proved = prove_pass(log, robot_id, cycle)
+    found, index = proved.cycle, proved.index
+    if found is None or index is None:
         raise UsageError(f"robot {robot_id} has no sealed cycle {cycle} in {log_path}")
     seal = found.payloads[TOPIC_SEAL]
-    leaves = robot_seal_leaves(log, robot_id)
-    hashes = [s.leaf for s in leaves]
-    index = next((i for i, s in enumerate(leaves) if s.cycle == cycle), None)
-    if index is None or hashes[index] != leaf_hash(seal):
-        raise UsageError(f"cycle {cycle}'s seal is not a leaf of robot {robot_id}'s tree here")
-    tree = LevelTree(hashes)
+    tree = LevelTree(proved.leaves)
+    del proved
     note, size, cosigned = _covering_note(log, robot_id, index, tree, robot_checkpoints)
     root = tree.root(size)
     messages = [

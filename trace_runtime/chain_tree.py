@@ -22,6 +22,7 @@ import orjson
 
 from trace_runtime.chain import digest
 from trace_runtime.checkpoints import decode_checkpoint
+from trace_runtime.cycles import Cycle
 from trace_runtime.errors import LogReadError, RecordError, TraceError
 from trace_runtime.logset import Log, best_copy_first, open_segments, robot_segment_files
 from trace_runtime.merkle import (
@@ -37,10 +38,12 @@ from trace_runtime.records import GENESIS, TOPIC_CHECKPOINT, TOPIC_SEAL, Checkpo
 
 __all__ = [
     "ChainTreeError",
+    "ProvedCycle",
     "SealLeaf",
     "checkpoint_range",
     "consistency_proof_from",
     "has_tree",
+    "prove_pass",
     "robot_leaves",
     "robot_seal_leaves",
     "segment_seal_leaves",
@@ -97,6 +100,41 @@ def robot_seal_leaves(log: Log, robot: str) -> list[SealLeaf]:
     leaf indices would not be the tree's. Whether the seals themselves verify is ``verify``'s
     question; this reads them as stored.
     """
+    leaves: list[SealLeaf] = []
+    for segment in _genesis_chain(log, robot):
+        leaves.extend(segment_seal_leaves(segment))
+    return leaves
+
+
+@dataclass(slots=True)
+class ProvedCycle:
+    """What a proof of one cycle needs from one pass over the robot's chain: every leaf hash
+    (32 bytes each, nothing else kept: a 24 h log's tree is 28 MB), the cycle itself and its
+    leaf index (None when the chain holds no seal of it)."""
+
+    leaves: list[bytes]
+    cycle: Cycle | None = None
+    index: int | None = None
+
+
+def prove_pass(log: Log, robot: str, number: int) -> ProvedCycle:
+    """``robot_leaves`` and the sealed cycle ``number`` with its leaf index, in one read."""
+    out = ProvedCycle([])
+    leaves = out.leaves
+    for segment in _genesis_chain(log, robot):
+        for cycle in segment.iter_cycles():
+            data = cycle.payloads.get(TOPIC_SEAL)
+            if data is None:
+                continue
+            if cycle.cycle == number and out.cycle is None:
+                out.cycle, out.index = cycle, len(leaves)
+            leaves.append(leaf_hash(data))
+    return out
+
+
+def _genesis_chain(log: Log, robot: str) -> Iterator[Segment]:
+    """``robot``'s segments in chain order, from its genesis; ``ChainTreeError`` when the
+    chain does not start at genesis here or a segment number is missing."""
     segments = log.segments_of(robot)
     if not segments:
         raise ChainTreeError(str(log.root), f"the log holds no segment of robot {robot}")
@@ -107,7 +145,6 @@ def robot_seal_leaves(log: Log, robot: str) -> list[SealLeaf]:
             f"robot {robot}'s chain starts at segment {first.segment} here, not at its genesis: "
             "the leaf indices of its tree are not known",
         )
-    leaves: list[SealLeaf] = []
     expected = 0
     for segment in segments:
         number = segment.session.segment
@@ -117,8 +154,7 @@ def robot_seal_leaves(log: Log, robot: str) -> list[SealLeaf]:
                 f"segment(s) {expected}..{number - 1} of robot {robot} are missing",
             )
         expected = number + 1
-        leaves.extend(segment_seal_leaves(segment))
-    return leaves
+        yield segment
 
 
 def robot_leaves(log: Log, robot: str) -> list[bytes]:
