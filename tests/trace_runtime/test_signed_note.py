@@ -186,6 +186,16 @@ MALFORMED = [
 ]
 
 
+def test_a_signature_in_a_second_spelling_is_refused() -> None:
+    """A signature ending "nAN=" decodes to the bytes of "nAM=" (only unused bits differ);
+    accepted, one signature could arrive under two spellings and count as two lines."""
+    assert PETER_SIG.endswith("nAM=\n")
+    other = PETER_SIG.replace("nAM=\n", "nAN=\n")
+    with pytest.raises(NoteError, match="not canonical base64"):
+        open_note(PETER_NOTE.replace(PETER_SIG, other), [_peter().verifier])
+    assert len(open_note(PETER_NOTE, [_peter().verifier]).verified) == 1
+
+
 @pytest.mark.parametrize(("note", "message"), MALFORMED)
 def test_malformed_notes_are_one_line_errors(note: str, message: str) -> None:
     with pytest.raises(NoteError, match=message) as info:
@@ -300,7 +310,7 @@ BAD_CHECKPOINTS = [
     ("o\n5\nAAAA\n", "32 bytes"),
     (f"o\n5\n{ROOT64[:-1]}\n", "base64"),
     (f"o\n5\n{ROOT64.replace('/', '_')}\n", "base64"),
-    (f"o\n5\n{ROOT64[:-2]}J=\n", "32 bytes"),  # non-canonical trailing bits
+    (f"o\n5\n{ROOT64[:-2]}J=\n", "canonical base64"),  # unused bits set
     (f"o\n5\n{ROOT64}\t\n", "control"),
 ]
 
