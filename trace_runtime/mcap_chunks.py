@@ -139,25 +139,28 @@ class ChunkDecoder:
         self, raw: bytes, offset: int, most: int, topics: dict[int, str], only: str | None
     ) -> list[RawMessage]:
         # The innermost loop of every read (8-10 records a decision cycle): locals only,
-        # the bounds checks written out. A message record's header and fixed fields are
-        # read in one unpack (``_MESSAGE_HEAD``) and its ``RawMessage`` filled slot by slot
-        # here, without a call per message (``cycles.raw_message`` does the same).
+        # the bounds checks written out. Wherever 31 bytes remain, the record is read as a
+        # message in one unpack (``_MESSAGE_HEAD``: header and fixed fields), whatever its
+        # opcode, since nearly every record is one; its ``RawMessage`` is filled slot by slot
+        # here, without a call per message (``cycles.raw_message`` does the same). Anything
+        # else, or a message that does not fit, takes the general path below.
         messages: list[RawMessage] = []
         append = messages.append
         header = RECORD_HEADER.unpack_from
         message_head = _MESSAGE_HEAD.unpack_from
         fixed = MESSAGE_FIXED.unpack_from
+        topic_of = topics.get
         new, set_topic, set_sequence, set_log_time, set_data = _RAW_MESSAGE_SLOTS
         pos, end, count = 0, len(raw), 0
         while pos + 9 <= end:
-            if raw[pos] == OP_MESSAGE and pos + 31 <= end:
-                _op, length, channel_id, sequence, log_time, _publish = message_head(raw, pos)
+            if pos + 31 <= end:
+                opcode, length, channel_id, sequence, log_time, _publish = message_head(raw, pos)
                 stop = pos + 9 + length
-                if length >= 22 and stop <= end:  # else: the general path says what is wrong
+                if opcode == OP_MESSAGE and length >= 22 and stop <= end:
                     count += 1
                     if count > most:
                         raise self._flood(offset, most)
-                    topic = topics.get(channel_id)
+                    topic = topic_of(channel_id)
                     if topic is None:
                         raise LogReadError(
                             self._name, f"chunk at offset {offset}: message on unknown channel"

@@ -424,12 +424,18 @@ def _parse_in_full(cycle: Cycle) -> None:
 
 
 def _may_cite_recording(perception: bytes | None) -> bool:
-    """False only when the stored perception message cannot hold a ``recording`` key: the
-    word is not in its bytes and no escape (a backslash) could spell it otherwise. Most logs
-    cite no external recording, and two byte searches cost a fraction of walking every
+    """False only when the stored perception message cannot hold a ``recording`` key whose
+    value is a string (the only refs the tally counts): every ``recording`` in its bytes is
+    the key of a ``"recording":null`` and no escape (a backslash) could spell the word, or
+    a quote, otherwise. Most logs cite no external recording, and a writer may still give
+    every ref ``"recording":null``; two byte counts cost a fraction of walking every
     entity's evidence to find that out. (None: a warm summary cycle, whose parsed layer is
     walked.) A backslash, not ``\\u``: one byte is found by memchr, a pair is not."""
-    return perception is None or b"recording" in perception or b"\\" in perception
+    return (
+        perception is None
+        or b"\\" in perception
+        or perception.count(b"recording") != perception.count(b'"recording":null')
+    )
 
 
 def score_segment(
