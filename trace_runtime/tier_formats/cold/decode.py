@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import struct
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from itertools import accumulate, repeat
 from typing import Any
@@ -219,12 +219,22 @@ def _build_plain_groups(
         if slots:
             waiting.append((group, shape, list(rows), slots))
             continue
-        build = budget.compiled(shape)
+        build = _builder(shape, count, budget)
         for index, data in zip(positions[group], map(dumps, map(build, rows)), strict=True):
             spend(len(data))
             datas[index] = data
             built[index] = 1
     return waiting
+
+
+def _builder(shape: Shape, messages: int, budget: BuildBudget) -> Callable[[Any], Any]:
+    """How ``messages`` messages of ``shape`` are built: with its compiled code (compiling
+    charged to ``budget``) once the shape is used enough for compiling to pay, else by
+    walking its descriptor. A group of no messages (only a hostile block declares one) is
+    compiled, and charged, as any shape a block names."""
+    if not messages or shape.worth_compiling(messages):
+        return budget.compiled(shape)
+    return shape.walk_build
 
 
 def _build_waiting_groups(
@@ -246,7 +256,7 @@ def _build_waiting_groups(
         if filled is None:
             sequential.append((group, shape, iter(rows_list), slots))
             continue
-        build = budget.compiled(shape)
+        build = _builder(shape, len(filled), budget)
         for index, data in zip(positions[group], map(dumps, map(build, filled)), strict=True):
             spend(len(data))
             datas[index] = data
@@ -261,7 +271,7 @@ def _build_waiting_groups(
                 if resolved is _UNBUILT:
                     raise ColdFormatError("a digest reference points at an unbuilt message")
                 row[slot] = resolved
-            data = datas[index] = dumps(budget.compiled(shape)(row))
+            data = datas[index] = dumps(_builder(shape, 1, budget)(row))
             built[index] = 1
             spend(len(data))
 

@@ -292,7 +292,7 @@ class BlockEncoder:
         row: tuple[Any, ...] = ()
         for candidate in self._by_sig.get(sig, ()):
             try:
-                row = candidate.extract(value)
+                row = candidate.extract_row(value)
             except _MISMATCH:
                 continue
             shape = candidate
@@ -301,7 +301,7 @@ class BlockEncoder:
             shape = self._new_shape(value)
             if shape is not None:
                 new_shapes[msg.topic] += 1
-                row = shape.extract(value)
+                row = shape.extract_row(value)
                 if len(self._by_sig) >= SHAPE_CACHE_LIMIT:
                     self._by_sig.clear()
                 self._by_sig.setdefault(sig, []).insert(0, shape)
