@@ -2,10 +2,11 @@
 
 A seal's ``sensors.digest`` (``trace_runtime.chain.sensor_cover``) is 64 hex characters that
 look random to zstd, but it is a function of messages the block holds anyway: the readings
-(topics outside ``/trace/``) logged since the previous seal. The encoder stores it as
-*derived* when it equals that function of the block (one byte a seal, constant for an
-honest log) and as a literal otherwise, so a tampered seal still round-trips exactly.
-Encoder, whole decode and seek compute it here, from the same rule.
+(messages on ``/sensors/`` topics, ``records.SENSOR_PREFIX``, as ``seal_check`` counts them)
+logged since the previous seal. The encoder stores it as *derived* when it equals that
+function of the block (one byte a seal, constant for an honest log) and as a literal
+otherwise, so a tampered seal still round-trips exactly. Encoder, whole decode and seek
+compute it here, from the same rule.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from collections.abc import Callable, Sequence
 from typing import Final
 
 from trace_runtime.chain import sensor_cover, sensor_line
-from trace_runtime.records import TOPIC_SEAL
+from trace_runtime.records import SENSOR_PREFIX, TOPIC_SEAL
 
 _LINE_BYTES = 128
 """What each message a seal's cycle spans is charged when its cover is computed (a reading's
@@ -41,7 +42,7 @@ orjson refuses to serialise it, so one left unresolved can never become a messag
 
 class SensorCovers:
     """Which messages of a block are each cycle's readings: for a message at position i,
-    those not on a ``/trace/`` topic after the last seal before i (or the block's start: a
+    those on a ``/sensors/`` topic after the last seal before i (or the block's start: a
     block starts on a cycle boundary), in block order."""
 
     __slots__ = ("_is_reading", "_names", "_seals", "_sequences", "_times", "_topic_ids")
@@ -57,7 +58,7 @@ class SensorCovers:
         self._topic_ids = topic_ids
         self._sequences = sequences
         self._times = times
-        self._is_reading = [not name.startswith("/trace/") for name in topic_names]
+        self._is_reading = [name.startswith(SENSOR_PREFIX) for name in topic_names]
         seal_id = topic_names.index(TOPIC_SEAL) if TOPIC_SEAL in topic_names else -1
         self._seals = [i for i, topic_id in enumerate(topic_ids) if topic_id == seal_id]
 

@@ -3,8 +3,9 @@ it as derived from the block's own readings when it is, as a literal when it is 
 tampered seal still round-trips byte for byte), and a damaged sensors column is refused.
 
 The logs are built from the outside, message by message, as a 1.3 writer lays them out:
-readings, the layer messages, then the seal naming their digests, the previous seal and the
-cover of the cycle's readings (``trace_runtime.chain.sensor_cover``).
+readings (and a ``/tf`` message the profile does not define), the layer messages, then the
+seal naming their digests, the previous seal and the cover of the cycle's readings
+(``trace_runtime.chain.sensor_cover``).
 """
 
 from __future__ import annotations
@@ -56,6 +57,8 @@ def _log(
             at = t_ns - 5_000_000
             messages.append(RawMessage(topic, cycle, at, data))
             lines.append(sensor_line(topic, cycle, at, digest(data)))
+        if cycle % 4 == 1:  # a channel the profile does not define: no reading, seals ignore it
+            messages.append(RawMessage("/tf", cycle, t_ns - 1_000_000, b'{"x":%d}' % cycle))
         if cycle % 50 == 7:  # a checkpoint: stored beside the block, not one of the readings
             messages.append(RawMessage(TOPIC_CHECKPOINT, cycle, t_ns, b'{"cycle":%d}' % cycle))
         digests = {}
@@ -214,11 +217,12 @@ def _cycles(draw: st.DrawFn) -> list[RawMessage]:
     for cycle in range(draw(st.integers(min_value=0, max_value=12))):
         lines = []
         for _ in range(draw(st.integers(min_value=0, max_value=3))):
-            topic = draw(st.sampled_from([*_READINGS, "/trace/perception", TOPIC_CHECKPOINT]))
+            topics = [*_READINGS, "/trace/perception", TOPIC_CHECKPOINT, "/tf"]
+            topic = draw(st.sampled_from(topics))
             data = draw(st.sampled_from([b'{"r":1}', b'{"r":2.5}', b"\x00raw", b"[1,2]"]))
             at = draw(st.integers(min_value=0, max_value=2**40))
             messages.append(RawMessage(topic, cycle, at, data))
-            if not topic.startswith("/trace/"):
+            if topic.startswith("/sensors/"):
                 lines.append(sensor_line(topic, cycle, at, digest(data)))
         kind = draw(st.sampled_from(["cover", "cover", "other", "null", "absent", "pretty"]))
         cover = sensor_cover(lines)[1] if kind != "other" else digest(b"%d" % cycle)
