@@ -19,7 +19,7 @@ values, and shapes read from a file are validated before they are compiled.
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 import orjson
@@ -161,6 +161,7 @@ class Shape:
 def _take(desc: Descriptor, value: Any, out: list[Any]) -> None:
     """The leaves of ``value`` into ``out`` in slot order, checked as the compiled
     ``extract`` checks them (raises ``KeyError`` where it would)."""
+    children: Iterable[tuple[Any, Any]]
     if type(desc) is dict:
         if type(value) is not dict or tuple(value) != tuple(desc):
             raise KeyError
