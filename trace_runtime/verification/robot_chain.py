@@ -12,7 +12,7 @@ files could not be read are decided there) and returns a ``VerifyReport``.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
@@ -399,21 +399,16 @@ class _TreeSegmentCheck(SegmentCheck):
         self.exit_tree: CompactRange | None = None
         self.leaves: list[bytes] = []
 
-    def _iter_cycles_resuming(self) -> Iterator[Cycle]:
-        append = self.leaves.append
-        for cycle in super()._iter_cycles_resuming():
-            data = cycle.payloads.get(TOPIC_SEAL)
-            if data is not None:
-                append(leaf_hash(data))
-            yield cycle
+    def cycle_read(self, cycle: Cycle) -> None:
+        data = cycle.payloads.get(TOPIC_SEAL)
+        if data is not None:
+            self.leaves.append(leaf_hash(data))
 
-    def _summarise(self, checkpoints: CheckpointCheck) -> None:
+    def checkpoints_checked(self, checkpoints: CheckpointCheck) -> None:
         tree = TreeCheck(self.report, self.scan, self.key, self.leaves, self.entry_tree)
         tree.run(self.checkpoints, checkpoints)
-        self.anchor = checkpoints.anchor
         self.exit_tree = tree.exit
         self.leaves = []  # the tree keeps what it needs
-        super()._summarise(checkpoints)
 
 
 def _count_after(segments: list[SegmentSummary], robot_id: str, after: int) -> int:

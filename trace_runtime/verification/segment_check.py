@@ -83,9 +83,20 @@ class SegmentCheck:
         self._check_unsealed()
         checkpoints = CheckpointCheck(self.report, self.scan, self.segment, self.key)
         checkpoints.run(self.checkpoints)
+        self.checkpoints_checked(checkpoints)
         self.anchor = checkpoints.anchor
         self._summarise(checkpoints)
         self._notes()
+
+    # Extension points: a check of more than one segment (``robot_chain``) follows what it
+    # needs through these instead of a second read of the segment.
+
+    def cycle_read(self, cycle: Cycle) -> None:
+        """Called for each cycle the scan reads, in reading order; does nothing here."""
+
+    def checkpoints_checked(self, checkpoints: CheckpointCheck) -> None:
+        """Called once the segment's checkpoints are checked, before its summary, so
+        findings made here count in the segment's verdict; does nothing here."""
 
     def _summarise(self, checkpoints: CheckpointCheck) -> None:
         scan = self.scan
@@ -217,6 +228,7 @@ class SegmentCheck:
                     if last_t is not None and cycle.t_ns <= last_t and start is not None:
                         continue
                     last_t = cycle.t_ns
+                    self.cycle_read(cycle)
                     yield cycle
                 return
             except LogReadError as err:  # a damaged file is a finding, not a crash
