@@ -1,15 +1,16 @@
 """A proof bundle: one decision cycle, checkable without the log (``trace-audit prove`` and
 ``trace-audit verify-proof``; the format is in docs/integrity.md, "Proof bundles").
 
-A bundle holds the cycle's stored messages (base64 of their bytes, with their topics), the
-sensor readings its profile 1.3 seal covers (each with its topic, sequence and log time), its
-seal, the seal's leaf index in the robot's RFC 6962 tree, the inclusion proof of that leaf
-in the tree of the newest signed profile 1.2 checkpoint (a cosigned one where the root's
-witness store holds one that covers it), and that checkpoint's note. ``check_bundle``
-checks, in order: each message's digest against the seal, the readings against the seal's
-``sensors``, the seal's leaf in the tree
-(inclusion proof to the note's root), the note's signature by the robot's key under its
-origin and, given a witness key, the witness's cosignature.
+A bundle holds the cycle's stored messages (base64 of a raw DEFLATE stream of their bytes,
+with their topics), the sensor readings its profile 1.3 seal covers (each with its topic,
+sequence and log time), its seal, the seal's leaf index in the robot's RFC 6962 tree, the
+inclusion proof of that leaf in the tree of the newest signed profile 1.2 checkpoint (a
+cosigned one where the root's witness store holds one that covers it), and that
+checkpoint's note: about 8 KB at most on a 24 h simulator log. ``check_bundle`` checks, in
+order: each message's digest against the seal, the readings against the seal's
+``sensors``, the seal's leaf in the tree (inclusion proof to the note's root), the note's
+signature by the robot's key under its origin and, given a witness key, the witness's
+cosignature.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from __future__ import annotations
 import base64
 import binascii
 import hashlib
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -51,23 +53,36 @@ __all__ = [
     "read_bundle",
 ]
 
-BUNDLE_FORMAT = "trace-proof/2"
-"""The format ``prove`` writes: ``trace-proof/1`` and the cycle's sensor readings."""
-BUNDLE_FORMATS = ("trace-proof/1", BUNDLE_FORMAT)
+BUNDLE_FORMAT = "trace-proof/3"
+"""The format ``prove`` writes: ``trace-proof/2`` with each message's and reading's data
+deflated (a bundle of the largest simulator cycles 7 KB, not 24)."""
+BUNDLE_FORMATS = ("trace-proof/1", "trace-proof/2", BUNDLE_FORMAT)
 _FIELDS_1 = frozenset(
     {"format", "cycle", "t_ns", "messages", "seal", "leaf_index", "tree_size", "root"}
     | {"inclusion", "note", "cosigned"}
 )
-BUNDLE_FIELDS = {"trace-proof/1": _FIELDS_1, BUNDLE_FORMAT: _FIELDS_1 | {"sensors"}}
+BUNDLE_FIELDS = {
+    "trace-proof/1": _FIELDS_1,
+    "trace-proof/2": _FIELDS_1 | {"sensors"},
+    BUNDLE_FORMAT: _FIELDS_1 | {"sensors"},
+}
 """Every field of a bundle of each format, all required; any other is refused (nothing in a
 bundle goes unchecked: the robot is named by the note's origin, which the robot's key
 signs)."""
 _READING_FIELDS = frozenset({"topic", "sequence", "log_time_ns", "data"})
 MAX_BUNDLE_BYTES = 16 << 20
+MAX_INFLATED_BYTES = 64 << 20
+"""All of a bundle's data together, inflated: a bomb stops here."""
 
 
 def _b64(data: bytes) -> str:
     return base64.b64encode(data).decode()
+
+
+def _deflated(data: bytes) -> str:
+    """The base64 of a raw DEFLATE stream (RFC 1951: no zlib header, no checksum) of data."""
+    squeeze = zlib.compressobj(9, zlib.DEFLATED, -15)
+    return _b64(squeeze.compress(data) + squeeze.flush())
 
 
 def make_bundle(log_path: str | Path, cycle: int, *, robot: str | None = None) -> dict[str, Any]:
@@ -86,7 +101,7 @@ def make_bundle(log_path: str | Path, cycle: int, *, robot: str | None = None) -
     note, size, cosigned = _covering_note(log, robot_id, index, tree, robot_checkpoints)
     root = tree.root(size)
     messages = [
-        {"topic": topic, "data": _b64(data)}
+        {"topic": topic, "data": _deflated(data)}
         for topic, data in sorted(found.payloads.items())
         if topic != TOPIC_SEAL
     ]
@@ -96,7 +111,7 @@ def make_bundle(log_path: str | Path, cycle: int, *, robot: str | None = None) -
             "topic": m.topic,
             "sequence": m.sequence,
             "log_time_ns": m.log_time_ns,
-            "data": _b64(m.data),
+            "data": _deflated(m.data),
         }
         for m in (found.sensors if covered else ())
     ]
@@ -194,7 +209,50 @@ def _unb64(text: object, what: str) -> bytes:
     return data
 
 
-def _check_readings(bundle: dict[str, Any], seal: dict[str, Any], r: BundleCheck) -> bool:
+def _inflate_exactly(data: bytes, limit: int) -> bytes | None:
+    """What ``data`` inflates to when it is one whole raw DEFLATE stream with nothing after
+    it, of at most ``limit`` bytes; None otherwise."""
+    stream = zlib.decompressobj(-15)
+    try:
+        out = stream.decompress(data, limit + 1)
+    except zlib.error:
+        return None
+    if not stream.eof or stream.unused_data or stream.unconsumed_tail or len(out) > limit:
+        return None
+    return out
+
+
+class _DataReader:
+    """A bundle's message and reading data: base64 of the bytes (trace-proof/1 and /2), or
+    base64 of a raw DEFLATE stream of them (/3). A stream whose final byte has a set bit
+    that inflating ignores (its padding) is refused, so no byte of a bundle can change and
+    it still verify; another compressor's stream of the same bytes is accepted (the seal's
+    digests cover the bytes, not their compression)."""
+
+    def __init__(self, deflated: bool) -> None:
+        self.deflated = deflated
+        self.left = MAX_INFLATED_BYTES
+
+    def __call__(self, text: object, what: str) -> bytes:
+        data = _unb64(text, what)
+        if not self.deflated:
+            return data
+        out = _inflate_exactly(data, self.left)
+        if out is None:
+            raise _BadBundleError(f"{what} is not one raw DEFLATE stream within the bounds")
+        last = data[-1]
+        for bit in range(8):
+            if last >> bit & 1:
+                cleared = data[:-1] + bytes([last & ~(1 << bit)])
+                if _inflate_exactly(cleared, self.left) == out:
+                    raise _BadBundleError(f"{what}: the stream's padding bits are not zero")
+        self.left -= len(out)
+        return out
+
+
+def _check_readings(
+    bundle: dict[str, Any], seal: dict[str, Any], r: BundleCheck, read: _DataReader
+) -> bool:
     """The bundle's sensor readings against the seal's ``sensors``: False when they differ."""
     lines = []
     for m in _field(bundle, "sensors", list):
@@ -203,7 +261,7 @@ def _check_readings(bundle: dict[str, Any], seal: dict[str, Any], r: BundleCheck
         topic, sequence, at = m["topic"], m["sequence"], m["log_time_ns"]
         if not isinstance(topic, str) or not all(type(v) is int for v in (sequence, at)):
             raise _BadBundleError("a sensor reading's topic, sequence or time is malformed")
-        hexed = hashlib.sha256(_unb64(m["data"], f"reading {topic}")).hexdigest()
+        hexed = hashlib.sha256(read(m["data"], f"reading {topic}")).hexdigest()
         lines.append(sensor_line(topic, sequence, at, hexed))
     sealed = seal.get("sensors")
     if sealed is None:
@@ -262,6 +320,7 @@ def _check(
         r.steps.append(("digests", False, "the seal is of another cycle or time"))
         return
     messages = _field(bundle, "messages", list)
+    read = _DataReader(deflated=bundle["format"] == BUNDLE_FORMAT)
     given: dict[str, bytes] = {}
     for m in messages:
         if (
@@ -272,7 +331,7 @@ def _check(
             raise _BadBundleError("a message has no topic")
         if m["topic"] in given:
             raise _BadBundleError(f"two messages on {m['topic']}")
-        given[m["topic"]] = _unb64(m.get("data"), f"message {m['topic']}")
+        given[m["topic"]] = read(m.get("data"), f"message {m['topic']}")
     wrong = sorted(t for t, d in given.items() if digests.get(t) != hashlib.sha256(d).hexdigest())
     absent = sorted(set(digests) - set(given))
     if wrong or absent:
@@ -287,7 +346,7 @@ def _check(
         r.steps.append(("digests", False, detail))
         return
     r.steps.append(("digests", True, f"{len(given)} message(s) match the seal"))
-    if "sensors" in bundle and not _check_readings(bundle, seal, r):
+    if "sensors" in bundle and not _check_readings(bundle, seal, r, read):
         return
     r.leaf_index = _field(bundle, "leaf_index", int)
     r.tree_size = _field(bundle, "tree_size", int)

@@ -3,9 +3,12 @@ and checked without the log; every byte of the bundle changed makes it fail."""
 
 from __future__ import annotations
 
+import base64
 import json
+import zlib
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import orjson
 import pytest
@@ -81,16 +84,80 @@ def test_every_byte_changed_fails(proved: tuple[Path, Path], keys: Keys) -> None
     assert not passed, passed[:5]
 
 
-def test_a_bundle_of_the_first_format_still_verifies(proved: tuple[Path, Path], keys: Keys) -> None:
-    """``trace-proof/1`` (before the readings were carried) is checked as before; its
-    readings are simply not there to check."""
+def _plain(bundle: dict[str, Any]) -> dict[str, Any]:
+    """The bundle with each message's and reading's data as base64 of the bytes themselves
+    (trace-proof/1 and /2), inflated from the raw DEFLATE streams of /3."""
+
+    def inflated(item: dict[str, Any]) -> dict[str, Any]:
+        data = zlib.decompress(base64.b64decode(item["data"]), -15)
+        return {**item, "data": base64.b64encode(data).decode()}
+
+    return {
+        **bundle,
+        "messages": [inflated(m) for m in bundle["messages"]],
+        "sensors": [inflated(m) for m in bundle["sensors"]],
+    }
+
+
+def test_bundles_of_the_earlier_formats_still_verify(proved: tuple[Path, Path], keys: Keys) -> None:
+    """``trace-proof/1`` (before the readings were carried) and ``/2`` (before the data was
+    deflated) are checked as before; /1's readings are simply not there to check."""
     _root, bundle = proved
     data = json.loads(bundle.read_text())
     key, witness = load_public_key(keys.robot_pub), keys.witness_verifier
-    old = {k: v for k, v in data.items() if k != "sensors"} | {"format": "trace-proof/1"}
+    second = _plain(data) | {"format": "trace-proof/2"}
+    assert check_bundle(second, key, witness_key=witness).ok
+    assert not check_bundle({**data, "format": "trace-proof/2"}, key, witness_key=witness).ok
+    old = {k: v for k, v in second.items() if k != "sensors"} | {"format": "trace-proof/1"}
     checked = check_bundle(old, key, witness_key=witness)
     assert checked.ok and "sensors" not in [name for name, _ok, _detail in checked.steps]
-    mixed = {**data, "format": "trace-proof/1"}  # a /1 bundle with a field /1 does not have
+    mixed = {**second, "format": "trace-proof/1"}  # a /1 bundle with a field /1 does not have
     assert not check_bundle(mixed, key, witness_key=witness).ok
     quiet = {**data, "sensors": []}  # the reading left out: the seal counts one
     assert not check_bundle(quiet, key, witness_key=witness).ok
+
+
+def _rewrap(bundle: dict[str, Any], topic: str, stream: bytes) -> dict[str, Any]:
+    messages = [
+        {**m, "data": base64.b64encode(stream).decode()} if m["topic"] == topic else m
+        for m in bundle["messages"]
+    ]
+    return {**bundle, "messages": messages}
+
+
+def test_deflated_data_has_one_spelling(proved: tuple[Path, Path], keys: Keys) -> None:
+    """The same bytes deflated otherwise still verify (the digests cover the bytes), but a
+    stream with its padding bits set, a zlib header, trailing bytes or a bomb is refused."""
+    _root, bundle = proved
+    data = json.loads(bundle.read_text())
+    key, witness = load_public_key(keys.robot_pub), keys.witness_verifier
+    [action] = [m for m in data["messages"] if m["topic"] == "/trace/action"]
+    stream = base64.b64decode(action["data"])
+    raw = zlib.decompress(stream, -15)
+
+    fast = zlib.compressobj(1, zlib.DEFLATED, -15)
+    other = fast.compress(raw) + fast.flush()
+    assert other != stream
+    assert check_bundle(_rewrap(data, "/trace/action", other), key, witness_key=witness).ok
+
+    def inflates_whole(candidate: bytes) -> bool:
+        inflate = zlib.decompressobj(-15)
+        try:
+            out = inflate.decompress(candidate)
+        except zlib.error:
+            return False
+        return out == raw and inflate.eof and not inflate.unused_data
+
+    flipped = (stream[:-1] + bytes([stream[-1] | 1 << bit]) for bit in range(8))
+    padded = [bad for bad in flipped if bad != stream and inflates_whole(bad)]
+    assert padded  # the final byte of this deflate stream has unused bits
+    for bad in padded:
+        checked = check_bundle(_rewrap(data, "/trace/action", bad), key, witness_key=witness)
+        assert not checked.ok and "padding bits" in checked.steps[-1][2]
+
+    with_header = zlib.compress(raw)
+    bomb_maker = zlib.compressobj(9, zlib.DEFLATED, -15)
+    bomb = bomb_maker.compress(bytes(80 << 20)) + bomb_maker.flush()
+    for bad in (with_header, stream + b"\0", stream[:-3], bomb):
+        checked = check_bundle(_rewrap(data, "/trace/action", bad), key, witness_key=witness)
+        assert not checked.ok and "raw DEFLATE" in checked.steps[-1][2]
