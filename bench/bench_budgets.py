@@ -14,7 +14,8 @@
      other command's time over this one's);
    - ``iter_decision_fields`` over the root, decisions a second in one process (open
      included);
-   - cold size, bytes a cycle of the root's cold files after ``compact --tier cold``.
+   - cold size, bytes a cycle of the root's cold files after ``compact --tier cold``, and
+     their ratio to the same segments rewritten with the ``mcap`` Writer's defaults.
 
 The load average is printed before and after: read the ratios, the machine is shared.
 """
@@ -35,6 +36,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 ANCHOR = REPO.parent / "shared" / "bench" / "perf_ratio.py"
 BIN = Path(sys.executable).parent
+sys.path.insert(0, str(REPO))
+
+from bench_tiers import mcap_default_bytes  # noqa: E402
 
 # Each budget: its name, the target, and whether the figure is a ratio (higher is better)
 # or an absolute rate; cold size is the one where lower is better.
@@ -134,8 +138,9 @@ def own_budgets(work: Path, runs: int, sim: str) -> dict[str, float]:
     shutil.rmtree(cold, ignore_errors=True)
     shutil.copytree(root, cold)
     timed([ta, "compact", str(cold), "--tier", "cold", "--older-than", "0s", "--retention", "off"])
-    cold_bytes = sum(p.stat().st_size for p in (cold / "cold").rglob("*") if p.is_file())
+    cold_bytes = sum(p.stat().st_size for p in (cold / "cold").glob("*.mcap"))
     out["cold_bytes_per_cycle"] = round(cold_bytes / cycles, 1)
+    out["cold_vs_mcap_default"] = round(cold_bytes / mcap_default_bytes(root), 3)
     return out
 
 
