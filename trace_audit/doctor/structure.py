@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+import zstandard
 from mcap.exceptions import McapError
 from mcap.records import (
     Channel,
@@ -69,6 +70,9 @@ _TIER_TOPICS = {"warm": (SUMMARY_TOPIC,), "cold": (BLOCK_TOPIC, INDEX_TOPIC)}
 """Channels of the compacted tiers (PROFILE section 9), which section 3 does not list."""
 _DAMAGE = (McapError, struct.error, EOFError, ValueError, KeyError, UnicodeDecodeError)
 """What the mcap library raises on a damaged or cut record."""
+_CHUNK_DAMAGE = (*_DAMAGE, zstandard.ZstdError, RuntimeError)
+"""And on a chunk whose compressed bytes are damaged: its decompressors raise their own
+errors (zstd's ``ZstdError``, lz4's ``RuntimeError``) before any CRC is compared."""
 
 
 @dataclass(slots=True)
@@ -298,7 +302,7 @@ def _chunk(offset: int, chunk: Chunk, seen: _Seen) -> None:
         )
     try:
         records = breakup_chunk(chunk, validate_crc=True)
-    except _DAMAGE as err:
+    except _CHUNK_DAMAGE as err:
         report.add("readable", f"chunk does not decode ({err})", offset=offset)
         seen.content.damage()
         return

@@ -276,3 +276,29 @@ def test_messages_outside_chunks_cross_no_chunk_boundary(tmp_path: Path) -> None
     report = doctor_log(loose)
     assert report.conforms and not _problems(report, "cycle-in-chunk")
     assert report.segments[0].cycles == 100
+
+
+@pytest.mark.parametrize("lz4", [False, True])
+def test_a_chunk_whose_compressed_bytes_are_corrupt_is_a_problem_not_a_crash(
+    tmp_path: Path, lz4: bool
+) -> None:
+    """Bytes flipped inside a chunk's compressed data make the decompressor itself fail
+    (zstd: "Data corruption detected"; lz4: a RuntimeError), before any CRC is compared."""
+    from mcap.reader import make_reader
+
+    path = write_profile_log(tmp_path / "p.mcap", faults=Faults(lz4=lz4))
+    with path.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    chunk = summary.chunk_indexes[len(summary.chunk_indexes) // 2]
+    data = bytearray(path.read_bytes())
+    at = chunk.chunk_start_offset + chunk.chunk_length * 9 // 10  # in the compressed bytes
+    data[at : at + 24] = bytes(b ^ 0xFF for b in data[at : at + 24])
+    path.write_bytes(bytes(data))
+
+    report = doctor_log(path)
+    readable = [p.message for p in report.errors if p.rule == "readable"]
+    assert any("chunk does not decode" in message for message in readable), readable
+    done = CliRunner().invoke(app, ["doctor", str(path), "--json"])
+    assert done.exit_code == 1, done.exception
+    assert json.loads(done.stdout)["conforms"] is False
