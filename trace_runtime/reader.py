@@ -45,6 +45,10 @@ RECOVERED_WARNING = "%s: no footer (unfinished segment); recovered %d complete m
 """What opening a segment its logger did not close, and no longer writes, logs (once a file:
 callers that open one file twice filter on this message)."""
 
+ChunkRead = Callable[[int | None, Sequence[RawMessage]], None]
+"""What ``Segment.iter_cycles(chunk_read=...)`` is given: a chunk's file offset (None for the
+messages outside chunks) and its messages."""
+
 _MAX_LEAD_IN_CHUNKS = 4096
 """How far back a cycle's first messages are looked for (chunks of one message each hold a
 cycle of a few dozen messages; a run of thousands of chunks without a seal is damage)."""
@@ -228,10 +232,14 @@ class Segment(McapFile):
         cycles = [c for c in self._assemble(run) if c.t_ns <= t_ns]
         return cycles[-1] if cycles else None
 
-    def _iter_runs(self, offsets: Sequence[int]) -> Iterator[list[Cycle]]:
+    def _iter_runs(
+        self, offsets: Sequence[int], chunk_read: ChunkRead | None = None
+    ) -> Iterator[list[Cycle]]:
         """Cycles chunk by chunk, oldest first; what a chunk leaves open carries into the
         next without a second decode when the chunks follow each other in the file."""
         if self.loose:
+            if chunk_read is not None:
+                chunk_read(None, self.loose)
             yield self._assemble(self.loose)
         carried: list[RawMessage] = []
         previous: int | None = None
@@ -239,14 +247,28 @@ class Segment(McapFile):
         for offset in offsets:
             at = bisect.bisect_left(order, offset)
             follows = previous is not None and at > 0 and order[at - 1] == previous
+            if chunk_read is not None:
+                chunk_read(offset, self.chunk_messages(offset))  # decoded once: remembered
             cycles, carried = self._chunk_cycles(offset, carried if follows else None)
             yield cycles
             previous = offset
 
     def iter_cycles(
-        self, start_ns: int | None = None, end_ns: int | None = None, *, reverse: bool = False
+        self,
+        start_ns: int | None = None,
+        end_ns: int | None = None,
+        *,
+        reverse: bool = False,
+        chunk_read: ChunkRead | None = None,
     ) -> Iterator[Cycle]:
-        """Cycles with ``start_ns <= t_ns <= end_ns``, in chain order (or newest first)."""
+        """Cycles with ``start_ns <= t_ns <= end_ns``, in chain order (or newest first).
+
+        ``chunk_read`` (oldest first only) is given each chunk the read takes up, its file
+        offset and all its messages (a damaged one: none), before the chunk's cycles are
+        yielded, and first ``None`` and the messages outside chunks: a check that needs
+        messages no cycle holds (verify: the checkpoints) takes them from the same read."""
+        if reverse and chunk_read is not None:
+            raise ValueError("chunk_read is given chunks oldest first only")
         offsets = self.offsets_in_range(start_ns, end_ns)
         runs: Iterator[list[Cycle]]
         if reverse:
@@ -254,7 +276,7 @@ class Segment(McapFile):
             if self.loose:
                 runs = itertools.chain(runs, [self._assemble(self.loose)])
         else:
-            runs = self._iter_runs(offsets)
+            runs = self._iter_runs(offsets, chunk_read)
         for cycles in runs:
             for cycle in reversed(cycles) if reverse else cycles:
                 if (start_ns is None or cycle.t_ns >= start_ns) and (

@@ -7,16 +7,16 @@ sensors, a clock that stepped back, a recovered file).
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 
 from trace_runtime.checkpoints import decode_checkpoint, iter_checkpoints
-from trace_runtime.cycles import Cycle
+from trace_runtime.cycles import Cycle, RawMessage
 from trace_runtime.errors import LogReadError, RecordError
 from trace_runtime.gaps import CycleRange
 from trace_runtime.keys import PublicKey
 from trace_runtime.reader import Segment
 from trace_runtime.recordings import ExternalCheck, Recordings
-from trace_runtime.records import Checkpoint
+from trace_runtime.records import TOPIC_CHECKPOINT, Checkpoint
 from trace_runtime.seal_check import SealStatus, verify_cycle
 from trace_runtime.verification.checkpoint_check import CheckpointCheck, ReadCheckpoint
 from trace_runtime.verification.numbering import Numbering
@@ -69,14 +69,18 @@ class SegmentCheck:
         self.scan = SealScan()
         self.numbering = Numbering(self.report, self.scan, entry_cycle)
         self.checkpoints: list[ReadCheckpoint] = []
+        self._checkpoints_seen: dict[int | None, list[RawMessage]] = {}  # chunk -> its own
+        self._resumed = False  # the scan stepped over a chunk it could not read
+        self._seal_digests = bytearray()  # every sealed cycle's, 32 bytes each, scan order
+        self._skipped_before = len(segment.skipped_chunks)
         self.anchor: Anchor | None = None
         self.tail: ChainTail | None = None
         self.findings_before = len(sink.findings)
 
     def run(self) -> None:
         """Every pass over the segment, then its summary and the notes about it."""
-        self._read_checkpoints()
         self._scan_cycles()
+        self._take_checkpoints()
         self._report_absent_runs()
         self._report_damaged_chunks()
         self._check_structure()
@@ -177,14 +181,53 @@ class SegmentCheck:
             s.cycle_range,
         )
 
+    def _chunk_read(self, offset: int | None, messages: Sequence[RawMessage]) -> None:
+        """The scan's read of a chunk: its checkpoints are kept (no cycle holds them)."""
+        self._checkpoints_seen[offset] = [m for m in messages if m.topic == TOPIC_CHECKPOINT]
+
+    def _take_checkpoints(self) -> None:
+        """The segment's checkpoints in file order, as the scan met them; when the scan did
+        not read every chunk in one go (it stepped over one it could not read), from a read
+        of their own, as if it had come first. Then the chain heads they name."""
+        seen = self._checkpoints_seen
+        offsets = self.segment.offsets_in_range(None, None)
+        whole = not self._resumed and all(o in seen for o in offsets)
+        if whole and (None in seen or not self.segment.loose):
+            for message in (*seen.get(None, ()), *(m for o in offsets for m in seen[o])):
+                self._add_checkpoint(message)
+        else:
+            findings = self.sink.findings
+            after_scan = len(findings)
+            self._read_checkpoints()
+            # what this read finds is reported before the scan's findings, as it read first
+            moved = findings[after_scan:]
+            del findings[after_scan:]
+            findings[self.findings_before : self.findings_before] = moved
+        self._checkpoints_seen = {}
+        self._record_heads()
+
+    def _record_heads(self) -> None:
+        """Each seal digest at a cycle a checkpoint names, in reading order."""
+        wanted = {c.cycle for _, _, c in self.checkpoints if c is not None}
+        heads, digests = self.scan.heads, self._seal_digests
+        for position, number in enumerate(self.scan.num):
+            if number in wanted:
+                heads.setdefault(number, []).append(
+                    digests[32 * position : 32 * position + 32].hex()
+                )
+        self._seal_digests = bytearray()
+
+    def _add_checkpoint(self, message: RawMessage) -> None:
+        try:
+            checkpoint: Checkpoint | None = decode_checkpoint(message.data)
+        except RecordError:
+            checkpoint = None
+        self.checkpoints.append((message.log_time_ns, message.sequence, checkpoint))
+
     def _read_checkpoints(self) -> None:
         try:
             for message in iter_checkpoints(self.segment):
-                try:
-                    checkpoint: Checkpoint | None = decode_checkpoint(message.data)
-                except RecordError:
-                    checkpoint = None
-                self.checkpoints.append((message.log_time_ns, message.sequence, checkpoint))
+                self._add_checkpoint(message)
         except LogReadError as err:  # a damaged file is a finding, not a crash
             self.report.finding("damaged", f"cannot read the segment's checkpoints: {err}")
 
@@ -192,7 +235,10 @@ class SegmentCheck:
         """A chunk the reader stepped over (fails its CRC, does not decompress) is damage to
         the file, located by the chunk's time range and the cycles read around it."""
         scan = self.scan
-        for offset, reason in self.segment.skipped_chunks:
+        skipped = self.segment.skipped_chunks
+        # in file order, as a read of every chunk before the scan would have met them
+        found = sorted(skipped[self._skipped_before :], key=lambda chunk: chunk[0])
+        for offset, reason in [*skipped[: self._skipped_before], *found]:
             span = self.segment.chunk_span(offset)
             if span is None:
                 self.report.finding("damaged", f"part of the segment cannot be read: {reason}")
@@ -224,7 +270,7 @@ class SegmentCheck:
         while start not in tried:
             tried.add(start)
             try:
-                for cycle in self.segment.iter_cycles(start_ns=start):
+                for cycle in self.segment.iter_cycles(start_ns=start, chunk_read=self._chunk_read):
                     if last_t is not None and cycle.t_ns <= last_t and start is not None:
                         continue
                     last_t = cycle.t_ns
@@ -232,6 +278,7 @@ class SegmentCheck:
                     yield cycle
                 return
             except LogReadError as err:  # a damaged file is a finding, not a crash
+                self._resumed = True
                 after = last_t if last_t is not None else -1
                 self.report.finding(
                     "damaged",
@@ -245,7 +292,6 @@ class SegmentCheck:
 
     def _scan_cycles(self) -> None:
         scan = self.scan
-        wanted = {c.cycle for _, _, c in self.checkpoints if c is not None}
         expected = self.entry
         before: tuple[int, int] | None = None
         for cycle in self._iter_cycles_resuming():
@@ -269,8 +315,7 @@ class SegmentCheck:
                 self._check_entry(prev, cycle)
             expected = status.seal_digest
             scan.last_digest = status.seal_digest
-            if cycle.cycle in wanted:
-                scan.heads.setdefault(cycle.cycle, []).append(status.seal_digest)
+            self._seal_digests += bytes.fromhex(status.seal_digest)
             scan.uncited += status.sensors_uncited
             self._content_findings(status, position)
 
