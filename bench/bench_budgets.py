@@ -18,6 +18,9 @@
      their ratio to the same segments rewritten with the ``mcap`` Writer's defaults.
 
 The load average is printed before and after: read the ratios, the machine is shared.
+Every process runs with byte code written and read, as an installed user's does:
+``PYTHONDONTWRITEBYTECODE`` is dropped from the children's environment (with it set, every
+module changed since its ``.pyc`` is compiled again on each run).
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 ANCHOR = REPO.parent / "shared" / "bench" / "perf_ratio.py"
 BIN = Path(sys.executable).parent
+ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 sys.path.insert(0, str(REPO))
 
 from bench_tiers import mcap_default_bytes  # noqa: E402
@@ -55,6 +59,7 @@ TARGETS: dict[str, tuple[str, float]] = {
     "cold_bytes_per_cycle": ("cold size <= 172.5 B/cycle", 172.5),
 }
 LOWER_IS_BETTER = {"cold_bytes_per_cycle"}
+PACKAGES = ("trace_runtime", "trace_audit", "sim", "evaluation")
 
 ITER_FIELDS = r"""
 import sys, time
@@ -72,7 +77,7 @@ def load() -> str:
 def run(args: list[str], ok: tuple[int, ...] = (0,)) -> tuple[float, bytes]:
     """Wall seconds and stdout of one whole process, which must exit with a code in ``ok``."""
     start = time.perf_counter()
-    done = subprocess.run(args, check=False, capture_output=True)
+    done = subprocess.run(args, check=False, capture_output=True, env=ENV)
     elapsed = time.perf_counter() - start
     if done.returncode not in ok:
         sys.exit(f"{' '.join(args)}: exit {done.returncode}: {done.stderr.decode()[-400:]}")
@@ -88,7 +93,7 @@ def best(runs: int, work: Callable[[], float]) -> float:
 
 
 def shared_anchor(path: Path, runs: int, sim: str) -> dict[str, float]:
-    env = dict(os.environ, PERF_RUNS=str(runs), PERF_SIM=sim)
+    env = dict(ENV, PERF_RUNS=str(runs), PERF_SIM=sim)
     done = subprocess.run(
         [sys.executable, str(path)], check=False, cwd=REPO, env=env, capture_output=True, text=True
     )
@@ -127,7 +132,7 @@ def own_budgets(work: Path, runs: int, sim: str) -> dict[str, float]:
     def iterate() -> float:
         done = subprocess.run(
             [sys.executable, "-c", ITER_FIELDS, str(root)], capture_output=True, text=True,
-            check=True, cwd=REPO,
+            check=True, cwd=REPO, env=ENV,
         )  # fmt: skip
         n, seconds = done.stdout.split()
         return float(seconds) / int(n)
@@ -161,6 +166,10 @@ def main() -> None:
     if not args.anchor.is_file():
         sys.exit(f"the shared anchor {args.anchor} is not there (--anchor PATH)")
 
+    subprocess.run(
+        [sys.executable, "-m", "compileall", "-q", *(str(REPO / p) for p in PACKAGES)],
+        check=True, capture_output=True, env=ENV,
+    )  # fmt: skip
     before = load()
     figures = shared_anchor(args.anchor, args.runs, args.sim)
     with tempfile.TemporaryDirectory(prefix="trace-budgets-") as work:
