@@ -160,8 +160,8 @@ def _folder_of(root: Path) -> Path | None:
     folder = root / WITNESS_FOLDER
     try:
         mode = os.lstat(folder).st_mode
-    except FileNotFoundError:
-        return None
+    except (FileNotFoundError, NotADirectoryError):
+        return None  # no store, or ``root`` is a segment file: nothing beside it is its own
     except OSError as err:
         raise UnsafePathError(str(folder), f"cannot look at it ({err.strerror or err})") from err
     if not stat.S_ISDIR(mode):

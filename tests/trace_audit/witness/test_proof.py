@@ -161,3 +161,17 @@ def test_deflated_data_has_one_spelling(proved: tuple[Path, Path], keys: Keys) -
     for bad in (with_header, stream + b"\0", stream[:-3], bomb):
         checked = check_bundle(_rewrap(data, "/trace/action", bad), key, witness_key=witness)
         assert not checked.ok and "raw DEFLATE" in checked.steps[-1][2]
+
+
+def test_a_segment_file_proves_as_its_root_does(proved: tuple[Path, Path], keys: Keys) -> None:
+    """``prove`` takes "a log root or segment" (its help): a segment file has no witness
+    store beside it, so its bundle names the robot's own newest checkpoint."""
+    root, bundle = proved
+    [segment] = sorted((root / "hot").glob("*.mcap"))[:1]
+    alone = bundle.parent / "alone.json"
+    made = run_cli("prove", str(segment), "--cycle", "37", "--out", str(alone))
+    assert made.returncode == 0, made.stderr
+    data = json.loads(alone.read_text())
+    assert data["cycle"] == 37 and not data["cosigned"]
+    checked = run_cli("verify-proof", str(alone), "--key", str(keys.robot_pub))
+    assert checked.returncode == 0, checked.stdout + checked.stderr
