@@ -246,6 +246,32 @@ def write_atomic(path: Path, data: bytes) -> None:
     fsync_dir(path.parent)
 
 
+def write_new(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path``, which must not exist: a fresh sibling is written and
+    fsynced, then linked in under ``path`` (a name taken meanwhile, by anything, is never
+    replaced), and the folder fsynced. ``StorageError`` when the name is held."""
+    tmp, f = create_aside(path)
+    try:
+        with f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        try:
+            os.link(tmp, path, follow_symlinks=False)
+        except FileExistsError:
+            raise StorageError(str(path), "it exists, and is never overwritten") from None
+        except OSError:  # a filesystem without hard links: the same refusal, then a rename
+            if os.path.lexists(path):
+                raise StorageError(str(path), "it exists, and is never overwritten") from None
+            os.replace(tmp, path)
+    except OSError as err:
+        raise storage_error(path, err) from err
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)  # our own file, made just now under a name no one else holds
+    fsync_dir(path.parent)
+
+
 def remove_stale_partials(path: Path) -> None:
     """Remove the partial files of earlier ``write_atomic`` calls on ``path`` that were
     killed before their rename: named as ``create_aside`` names them, regular files, and
@@ -286,8 +312,12 @@ def create_aside(path: Path) -> tuple[Path, BinaryIO]:
     created exclusively: a link or file planted at a likely name is skipped, never followed."""
     for attempt in range(1000):
         tmp = path.with_name(f".{path.name}.{os.getpid()}.{attempt}.partial")
-        with contextlib.suppress(FileExistsError):
+        try:
             return tmp, create_exclusive(tmp)
+        except FileExistsError:
+            continue
+        except StorageError as err:  # the folder refuses: say so of the file asked for
+            raise StorageError(str(path), err.reason) from err
     raise StorageError(str(path), "no free name for a partial file beside it")
 
 

@@ -5,6 +5,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,7 +13,15 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from trace_audit.cli.app import EXIT_FINDINGS, EXIT_USAGE, app, fail, guarded, help_text
+from trace_audit.cli.app import (
+    EXIT_CANNOT_WRITE,
+    EXIT_FINDINGS,
+    EXIT_USAGE,
+    app,
+    fail,
+    guarded,
+    help_text,
+)
 from trace_audit.cli.doc import Column, Doc, Seg
 from trace_audit.cli.options import JsonOption, PlainOption, robot_option
 from trace_audit.cli.output import emit, setup_logging
@@ -51,7 +60,7 @@ _PROVE_HELP = """Write a proof bundle of one decision cycle: checkable without t
 The bundle (JSON, docs/integrity.md "Proof bundles") holds the cycle's messages and seal,
 the seal's inclusion proof in the robot's tree of the newest signed checkpoint that covers
 it (cosigned when the root's witness store holds one) and that checkpoint's note. Check it
-with verify-proof.
+with verify-proof. An existing --out file is never overwritten (exit 4).
 
 [bold]Examples[/bold]:
 
@@ -177,12 +186,14 @@ def prove_command(
     import orjson
 
     from trace_audit.proof import make_bundle
-    from trace_runtime.boundary import write_atomic
+    from trace_runtime.boundary import write_new
 
     setup_logging()
+    if os.path.lexists(out):  # before the log is read; write_new refuses it again at the end
+        fail(f"{out}: cannot write: it exists, and is never overwritten", EXIT_CANNOT_WRITE)
     bundle = guarded(lambda: make_bundle(log, cycle, robot=robot))
     data = orjson.dumps(bundle, option=orjson.OPT_INDENT_2) + b"\n"
-    guarded(lambda: write_atomic(out, data))
+    guarded(lambda: write_new(out, data))
     written = Written(
         str(out), len(data), bundle["cycle"], bundle["leaf_index"], bundle["tree_size"],
         len(bundle["inclusion"]), bundle["cosigned"],

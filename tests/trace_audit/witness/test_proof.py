@@ -175,3 +175,18 @@ def test_a_segment_file_proves_as_its_root_does(proved: tuple[Path, Path], keys:
     assert data["cycle"] == 37 and not data["cosigned"]
     checked = run_cli("verify-proof", str(alone), "--key", str(keys.robot_pub))
     assert checked.returncode == 0, checked.stdout + checked.stderr
+
+
+def test_prove_never_overwrites_and_names_the_file_it_could_not_write(
+    proved: tuple[Path, Path],
+) -> None:
+    root, bundle = proved
+    before = bundle.read_bytes()
+    again = run_cli("prove", str(root), "--cycle", "38", "--out", str(bundle))
+    assert again.returncode == 4 and bundle.read_bytes() == before
+    assert again.stderr.count("\n") == 1 and "never overwritten" in again.stderr
+    nowhere = bundle.parent / "no-such-folder" / "x.json"
+    missing = run_cli("prove", str(root), "--cycle", "38", "--out", str(nowhere))
+    assert missing.returncode == 4 and missing.stderr.count("\n") == 1
+    assert f"{nowhere}: cannot write" in missing.stderr and ".partial" not in missing.stderr
+    assert not list(bundle.parent.glob(".*.partial"))
