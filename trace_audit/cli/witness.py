@@ -265,12 +265,13 @@ def _check_doc(r: BundleCheck) -> Doc:
     doc = Doc()
     verdict = Seg("VERIFIED", "bold green") if r.ok else Seg("DOES NOT VERIFY", "bold red")
     doc.title([f"Proof {r.path}: ", verdict])
-    doc.fields(
-        [
-            ("cycle", f"{r.cycle} (t_ns {r.t_ns})"),
-            ("tree", f"leaf {r.leaf_index} of {r.tree_size} ({r.origin or '?'})"),
-        ]
-    )
+    fields = [("cycle", "not read" if r.cycle is None else f"{r.cycle} (t_ns {r.t_ns})")]
+    if r.leaf_index is None or r.tree_size is None:  # the check stopped before the tree
+        fields.append(("tree", "not reached"))
+    else:
+        tree = f"leaf {r.leaf_index} of {r.tree_size}"
+        fields.append(("tree", f"{tree} ({r.origin})" if r.origin else tree))
+    doc.fields(fields)
     doc.table(
         [Column("step"), Column("result"), Column("detail", wrap=True)],
         [[name, Seg("ok", "green") if ok else Seg("FAIL", "red"), d] for name, ok, d in r.steps],

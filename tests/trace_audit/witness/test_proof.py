@@ -190,3 +190,15 @@ def test_prove_never_overwrites_and_names_the_file_it_could_not_write(
     assert missing.returncode == 4 and missing.stderr.count("\n") == 1
     assert f"{nowhere}: cannot write" in missing.stderr and ".partial" not in missing.stderr
     assert not list(bundle.parent.glob(".*.partial"))
+
+
+def test_a_bundle_that_fails_before_its_tree_says_so(proved: tuple[Path, Path], keys: Keys) -> None:
+    _root, bundle = proved
+    data = json.loads(bundle.read_text())
+    first = data["messages"][0]
+    data["messages"][0] = {**first, "data": "A" + first["data"][1:]}
+    broken = bundle.parent / "broken.json"
+    broken.write_text(json.dumps(data))
+    done = run_cli("verify-proof", str(broken), "--key", str(keys.robot_pub), "--plain")
+    assert done.returncode == 1
+    assert "tree   not reached" in done.stdout and "None" not in done.stdout
