@@ -334,8 +334,8 @@ def _compare_robot(
                 )
             )
             continue
-        if best is None or w.tree_size >= best[0].tree_size:
-            best = (w, stamp)
+        if best is None or w.tree_size > best[0].tree_size:
+            best = (w, stamp)  # the largest tree, at the earliest time it was vouched for
     if best is not None and best[0].tree_size:
         w, stamp = best
         leaf = leaves[w.tree_size - 1]

@@ -163,3 +163,23 @@ def test_an_unreachable_witness_is_unreadable_input(pushed: Pushed, keys: Keys) 
     assert run_cli("verify", str(root), "--witness", str(root / "no.note")).returncode == 3
     bad_key = run_cli("verify", str(root), "--witness", "local", "--witness-key", "nope")
     assert bad_key.returncode == 2
+
+
+def test_the_bound_is_the_earliest_cosignature_of_the_largest_tree(
+    pushed: Pushed, keys: Keys
+) -> None:
+    """Pushed again later, the witness cosigns the same tree with a later time; the bound
+    ("logged no later than") is the earliest time a witness vouched for that tree."""
+    import time
+
+    root, _older, w = pushed
+    time.sleep(1.1)  # cosignature times are whole seconds
+    assert run_cli("witness", "push", str(root), "--witness", w.url).returncode == 0
+    store = (root / "witness" / "amr-7.jsonl").read_text().splitlines()
+    stored = [json.loads(line) for line in store if line]
+    stamps = sorted({r["timestamp"] for r in stored if r["tree_size"] == 300})
+    assert len(stamps) >= 2, stamps  # the same tree, cosigned twice
+    code, report = verify(root, keys, "--witness", "local")
+    assert code == 0
+    (bound,) = report["witness"]["bounds"]
+    assert (bound["tree_size"], bound["timestamp"]) == (300, stamps[0])
