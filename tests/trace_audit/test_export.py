@@ -56,3 +56,32 @@ def test_cli_writes_the_file(sample_log: Path, tmp_path: Path) -> None:
     assert out.read_text().startswith("digraph") and "wrote" in result.stderr
     bad = CliRunner().invoke(app, ["export", str(sample_log), "--t", "+4.5", "--format", "svg"])
     assert bad.exit_code == 2 and "unknown export format" in bad.stderr
+
+
+def test_exports_never_overwrite_and_reports_follow_no_link(
+    sample_log: Path, tmp_path: Path
+) -> None:
+    """The README: exit 4 for "an export's output that exists: exports never overwrite".
+    The incident report refreshes its page, but through a fresh sibling: a link at --out
+    is refused, and one planted where it used to write its partial (``.NAME.partial``) is
+    not followed; what either points at is left as it was."""
+    keep = tmp_path / "keep.txt"
+    keep.write_text("keep")
+    existing = tmp_path / "stop.dot"
+    existing.write_text("mine")
+    runner = CliRunner()
+    again = runner.invoke(
+        app, ["export", str(sample_log), "--t", "+4.5", "--format", "dot", "--out", str(existing)]
+    )
+    assert again.exit_code == 4 and "never overwritten" in again.stderr
+    assert existing.read_text() == "mine"
+    fresh = tmp_path / "fresh.html"
+    (tmp_path / ".fresh.html.partial").symlink_to(keep)
+    made = runner.invoke(app, ["report", str(sample_log), "--t", "+4.5", "--out", str(fresh)])
+    assert made.exit_code == 0, made.output
+    assert fresh.read_text().startswith("<!DOCTYPE html") and keep.read_text() == "keep"
+    linked = tmp_path / "linked.html"
+    linked.symlink_to(keep)
+    refused = runner.invoke(app, ["report", str(sample_log), "--t", "+4.5", "--out", str(linked)])
+    assert refused.exit_code in (3, 4) and keep.read_text() == "keep", refused.output
+    assert refused.stderr.count("\n") == 1 and "Traceback" not in refused.output

@@ -92,6 +92,7 @@ def export_command(
         _foxglove(log, out, robot or (), start, end, json_out=json_out)
         return
     from trace_audit.export import export_decision
+    from trace_runtime.boundary import write_new
 
     result = guarded(lambda: export_decision(log, t=t, cycle=cycle, fmt=fmt, robots=robot or ()))
     if json_out and out is None:
@@ -100,10 +101,7 @@ def export_command(
     if out is None:
         sys.stdout.write(result.text)
         return
-    try:
-        out.write_text(result.text, encoding="utf-8")
-    except OSError as err:
-        fail(f"{out}: cannot write ({err.strerror or err})", EXIT_USAGE)
+    guarded(lambda: write_new(out, result.text.encode("utf-8")))  # never over a file
     sys.stderr.write(
         f"trace-audit: wrote {out} ({result.format}: cycle {result.cycle}, "
         f"{result.nodes} nodes, {result.edges} edges, {result.undocumented} undocumented)\n"

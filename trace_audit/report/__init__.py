@@ -29,6 +29,7 @@ from trace_audit.report.data import (
     gather_report,
     parse_window,
 )
+from trace_runtime.boundary import write_atomic
 from trace_runtime.errors import UsageError
 
 if TYPE_CHECKING:
@@ -99,16 +100,13 @@ def build_report(
 
 
 def write_report(report: IncidentReport, out: str | Path) -> Path:
-    """Write the page to ``out`` (through a temporary file, so a reader never sees half a
-    report); ``UsageError`` when the path cannot be written."""
+    """Write the page to ``out`` (a new file, or a regular file it replaces: re-running a
+    report refreshes its page) through a fresh sibling under a name no one holds, renamed
+    over whole, so a reader never sees half a report and a link planted at ``out`` or
+    beside it is never followed. ``UsageError`` for a directory; ``UnsafePathError`` for a
+    link or FIFO at ``out``; ``StorageError`` when it cannot be written."""
     target = Path(out)
     if target.is_dir() or not target.name or target.name in (".", ".."):
         raise UsageError(f"--out names a directory ({target}): give the report's file name")
-    partial = target.with_name(f".{target.name}.partial")
-    try:
-        partial.write_text(report.html, encoding="utf-8")
-        partial.replace(target)
-    except OSError as err:
-        partial.unlink(missing_ok=True)
-        raise UsageError(f"cannot write the report to {target}: {err.strerror or err}") from err
+    write_atomic(target, report.html.encode("utf-8"))
     return target

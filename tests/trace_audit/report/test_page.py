@@ -312,7 +312,7 @@ def test_cli_errors_are_one_line_with_the_documented_code(sample_log: Path, tmp_
             2,
         ),
         (["report", tmp_path / "missing.mcap", "--t", "1"], 3),
-        (["report", sample_log, "--t", t_s(3), "--out", tmp_path / "no" / "dir" / "c.html"], 2),
+        (["report", sample_log, "--t", t_s(3), "--out", tmp_path / "no" / "dir" / "c.html"], 4),
         (["report", sample_log, "--t", t_s(3), "--out", "."], 2),  # a directory, not a file
         (["report", sample_log, "--t", t_s(3), "--out", tmp_path], 2),
     ]
