@@ -227,20 +227,34 @@ def create_exclusive(path: Path) -> BinaryIO:
     return os.fdopen(fd, "wb")
 
 
-def write_atomic(path: Path, data: bytes) -> None:
-    """Replace ``path`` with ``data``: write a fresh sibling, fsync it, rename it over, fsync
-    the folder. Refused when ``path`` is held by anything but a regular file."""
-    regular_file(path)
+def _written_aside(path: Path, data: bytes) -> Path:
+    """A fresh sibling of ``path`` (``create_aside``) holding ``data``, fsynced."""
     tmp, f = create_aside(path)
     try:
         with f:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
+    except OSError as err:
+        _unlink_own(tmp)
+        raise storage_error(path, err) from err
+    return tmp
+
+
+def _unlink_own(tmp: Path) -> None:
+    with contextlib.suppress(OSError):
+        os.unlink(tmp)  # our own file, made just now under a name no one else holds
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Replace ``path`` with ``data``: write a fresh sibling, fsync it, rename it over, fsync
+    the folder. Refused when ``path`` is held by anything but a regular file."""
+    regular_file(path)
+    tmp = _written_aside(path, data)
+    try:
         os.replace(tmp, path)
     except OSError as err:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)  # our own file, made just now under a name no one else holds
+        _unlink_own(tmp)
         raise storage_error(path, err) from err
     remove_stale_partials(path)
     fsync_dir(path.parent)
@@ -250,12 +264,8 @@ def write_new(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path``, which must not exist: a fresh sibling is written and
     fsynced, then linked in under ``path`` (a name taken meanwhile, by anything, is never
     replaced), and the folder fsynced. ``StorageError`` when the name is held."""
-    tmp, f = create_aside(path)
+    tmp = _written_aside(path, data)
     try:
-        with f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
         try:
             os.link(tmp, path, follow_symlinks=False)
         except FileExistsError:
@@ -267,8 +277,7 @@ def write_new(path: Path, data: bytes) -> None:
     except OSError as err:
         raise storage_error(path, err) from err
     finally:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)  # our own file, made just now under a name no one else holds
+        _unlink_own(tmp)
     fsync_dir(path.parent)
 
 
