@@ -77,16 +77,18 @@ def witness_check(
     key: PublicKey | None = None,
     witness_key: NoteVerifier | None = None,
     robots: Sequence[str] = (),
+    expected: Sequence[str] = (),
 ) -> WitnessReport:
     """``verify --witness``: the log's robots compared with what a witness cosigned
     (``trace_audit.witness.compare``): ``source`` is a witness URL, a file of cosigned
     checkpoint notes, or ``local`` (the root's own ``witness/`` store). Its findings
     (``truncated_tail``, ``fork``, ``bad_signature``) belong in the verify report
-    (``add_witness``)."""
+    (``add_witness``). ``expected``: robots (or origins) the witness is asked about even
+    when the log holds none of their segments (one deleted whole is a ``truncated_tail``)."""
     from trace_audit.witness.compare import compare_witnessed
 
     log = Selection(tuple(robots)).of(open_log(path))
-    return compare_witnessed(log, source, key=key, witness_key=witness_key)
+    return compare_witnessed(log, source, key=key, witness_key=witness_key, expected=expected)
 
 
 def add_witness(report: VerifyReport, witness: WitnessReport) -> VerifyReport:

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from trace_audit.cli.app import EXIT_FINDINGS, app, guarded, help_text
+from trace_audit.cli.app import EXIT_FINDINGS, EXIT_USAGE, app, fail, guarded, help_text
 from trace_audit.cli.doc import Column, Doc, Seg, fmt_duration, fmt_t
 from trace_audit.cli.options import (
     CheckedLogArgument,
@@ -44,7 +44,8 @@ Findings (exit 1), each located by robot, segment, cycles and time: modified rec
 evidence mismatch, missing / inserted / reordered cycles, unsealed cycle, undeclared gap,
 truncated segment, missing segment, checkpoint mismatch, bad signature, key mismatch,
 unsigned checkpoint, damaged segment, tree mismatch (a profile 1.2 checkpoint's Merkle tree),
-and with --witness truncated tail and fork.
+and with --witness truncated tail and fork. --witness asks about the robots the log holds;
+--expect names more (a fleet's robots), so one whose every segment was deleted is found.
 
 Not findings, reported as notes: cycles the logger declared dropped, warm summary cycles
 (chain verified, payloads not retained), cycles after the last checkpoint of a crashed
@@ -116,6 +117,16 @@ def verify_command(
             show_default=False,
         ),
     ] = None,
+    expect: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--expect",
+            help="With --witness: a robot (or its origin) the witness is asked about even if "
+            "the log holds none of its segments: one it cosigned a tree of is a "
+            "truncated_tail (every segment deleted). Repeat for a fleet's robots.",
+            show_default=False,
+        ),
+    ] = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
@@ -131,6 +142,8 @@ def verify_command(
                 log, key=public, evidence=evidence or (), executor=executor, robots=robot or ()
             )
 
+    if expect and witness is None:
+        fail("--expect asks a witness about robots: give --witness too", EXIT_USAGE)
     report = guarded(run)
     if witness is not None:
         _verify_with_witness(
@@ -140,6 +153,7 @@ def verify_command(
             witness_key=witness_key,
             key=key,
             robot=robot,
+            expect=expect or [],
             json_out=json_out,
             plain=plain,
         )
@@ -157,6 +171,7 @@ def _verify_with_witness(
     witness_key: str | None,
     key: Path | None,
     robot: list[str] | None,
+    expect: list[str],
     json_out: bool,
     plain: bool,
 ) -> None:
@@ -174,7 +189,9 @@ def _verify_with_witness(
         except NoteError as err:
             raise UsageError(f"--witness-key: {err}") from err
         public = load_public_key(key) if key is not None else None
-        return witness_check(log, source, key=public, witness_key=verifier, robots=robot or ())
+        return witness_check(
+            log, source, key=public, witness_key=verifier, robots=robot or (), expected=expect
+        )
 
     witnessed = guarded(run)
     add_witness(report, witnessed)

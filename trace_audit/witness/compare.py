@@ -16,6 +16,11 @@ Where the witnessed state comes from (``source``):
 With the robot's key (``--key``) each witnessed note must carry the robot's signature under
 its origin; with the witness's verifier key (``--witness-key``) its cosignature must verify:
 a witnessed note that fails either is a ``bad_signature`` finding and vouches for nothing.
+
+The robots compared are the log's, and the ones ``expected`` names (``verify --expect``): a
+robot the witness cosigned a tree of and the log holds no segment of has lost every cycle
+(its segments deleted), a ``truncated_tail``; without ``expected`` it is never asked about.
+Its notes are checked with the witness's key only (the robot's own key may be another).
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from __future__ import annotations
 import urllib.error
 import urllib.parse
 import urllib.request
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -175,14 +181,24 @@ def robot_origin(log: Log, robot: str) -> str:
     return origin or f"trace.local/{robot}"
 
 
+def expected_origin(name: str) -> tuple[str, str]:
+    """(robot, origin) of an ``--expect`` value: a robot id (origin ``trace.local/<id>``, the
+    logger's default) or an origin, whose last path element is the robot id."""
+    if "/" in name:
+        return name.rsplit("/", 1)[1], name
+    return name, f"trace.local/{name}"
+
+
 def read_witnessed(
-    log: Log, source: str, *, timeout_s: float = 5.0
+    log: Log, source: str, *, timeout_s: float = 5.0, absent: Sequence[tuple[str, str]] = ()
 ) -> tuple[dict[str, list[Witnessed]], list[str]]:
-    """The witnessed checkpoints for each robot of ``log`` from ``source`` (see the module
-    doc), and the unreadable entries (one line each). A witness that cannot be reached, or a
-    file that cannot be read, is a ``LogReadError`` (exit 3)."""
+    """The witnessed checkpoints for each robot of ``log`` and each (robot, origin) of
+    ``absent`` from ``source`` (see the module doc), and the unreadable entries (one line
+    each). A witness that cannot be reached, or a file that cannot be read, is a
+    ``LogReadError`` (exit 3)."""
     origins = {robot_origin(log, robot): robot for robot in log.robots}
-    found: dict[str, list[Witnessed]] = {robot: [] for robot in log.robots}
+    origins |= {origin: robot for robot, origin in absent}
+    found: dict[str, list[Witnessed]] = {robot: [] for robot in origins.values()}
     problems: list[str] = []
     notes: list[tuple[str, str]] = []
     if source.startswith(("http://", "https://")):
@@ -191,7 +207,7 @@ def read_witnessed(
             if note is not None:
                 notes.append((note, f"{source} GET /checkpoint/{origin}"))
     elif source == "local":
-        for robot in log.robots:
+        for robot in found:
             for record in read_cosigned(log.root, robot):
                 notes.append((record.note, f"{log.root}/witness/{robot}.jsonl"))
     else:
@@ -251,11 +267,17 @@ def compare_witnessed(
     key: PublicKey | None = None,
     witness_key: NoteVerifier | None = None,
     timeout_s: float = 5.0,
+    expected: Sequence[str] = (),
 ) -> WitnessReport:
-    """Compare each robot's log with what the witness saw (see the module doc)."""
+    """Compare each robot's log, and each ``expected`` robot the log lacks, with what the
+    witness saw (see the module doc)."""
     report = WitnessReport(source, witness_key=witness_key.vkey if witness_key else None)
-    found, problems = read_witnessed(log, source, timeout_s=timeout_s)
+    absent = [expected_origin(name) for name in expected]
+    absent = [(robot, origin) for robot, origin in absent if robot not in log.robots]
+    found, problems = read_witnessed(log, source, timeout_s=timeout_s, absent=absent)
     report.unmatched += problems
+    for robot, origin in absent:
+        _vanished(robot, origin, found.get(robot, []), witness_key, report)
     for robot in log.robots:
         entries = found.get(robot, [])
         if not entries:
@@ -279,6 +301,39 @@ def compare_witnessed(
         if trusted:
             _compare_robot(log, robot, trusted, report, checked=witness_key is not None)
     return report
+
+
+def _vanished(
+    robot: str,
+    origin: str,
+    entries: list[Witnessed],
+    witness_key: NoteVerifier | None,
+    report: WitnessReport,
+) -> None:
+    """An expected robot the log holds no segment of: any tree a witness cosigned of it
+    was removed whole."""
+    trusted: list[tuple[Witnessed, int]] = []
+    for w in entries:
+        problem, stamp = _check_signatures(w, None, witness_key)
+        if problem is None:
+            trusted.append((w, stamp if stamp is not None else w.timestamp))
+        else:
+            report.unmatched.append(f"{robot}: a witnessed checkpoint {problem}; not used")
+    report.witnessed += len(trusted)
+    grown = [(w, stamp) for w, stamp in trusted if w.tree_size > 0]
+    if not grown:
+        report.unmatched.append(f"{robot}: not in this log, and no witnessed tree of {origin}")
+        return
+    w, stamp = max(grown, key=lambda e: (e[0].tree_size, -e[1]))
+    report.findings.append(
+        _finding(
+            "truncated_tail",
+            robot,
+            f"witness {w.witness} cosigned a tree of {w.tree_size} seals of {origin} at "
+            f"{iso_utc(stamp * 1_000_000_000)}, but this log holds no segment of robot "
+            f"{robot}: all {w.tree_size} cycle(s) were removed",
+        )
+    )
 
 
 def _compare_robot(

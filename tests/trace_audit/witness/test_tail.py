@@ -25,7 +25,7 @@ Pushed = tuple[Path, Path, WitnessProcess]
 SITUATIONS = ("ped_far", "ped_close", "blocked", "clear")
 
 
-def write(root: Path, key: Path, cycles: range) -> None:
+def write(root: Path, key: Path, cycles: range, *, robot_id: str = "amr-7") -> None:
     """Cycles through the real logger: segments of 5 s, a signed checkpoint every second."""
     config = LoggerConfig(
         threaded=False,
@@ -34,7 +34,7 @@ def write(root: Path, key: Path, cycles: range) -> None:
         checkpoint_key=load_signer(key),
         max_segment_s=5.0,
     )
-    logger = AuditLogger(root, robot_id="amr-7", period_s=0.1, config=config)
+    logger = AuditLogger(root, robot_id=robot_id, period_s=0.1, config=config)
     for i in cycles:
         c = logger.cycle(T0_NS + i * PERIOD_NS)
         fill_cycle(c, SITUATIONS[(i // 7) % len(SITUATIONS)])
@@ -183,3 +183,37 @@ def test_the_bound_is_the_earliest_cosignature_of_the_largest_tree(
     assert code == 0
     (bound,) = report["witness"]["bounds"]
     assert (bound["tree_size"], bound["timestamp"]) == (300, stamps[0])
+
+
+def test_a_robot_deleted_whole_is_found_when_the_fleet_is_expected(
+    tmp_path: Path, keys: Keys, witness_process: Callable[..., WitnessProcess]
+) -> None:
+    """Two robots in one root, both witnessed; every segment of one (and its store file) is
+    deleted. verify --witness alone cannot know it existed; with the fleet's robots named
+    (--expect), the witness's tree of it is a truncated_tail."""
+    from trace_runtime.keys import load_public_key
+    from trace_runtime.signed_note import verifier_key
+
+    root = tmp_path / "fleet"
+    write(root, keys.robot_key, range(60))
+    write(root, keys.robot_key, range(60), robot_id="amr-9")
+    other = verifier_key("trace.local/amr-9", load_public_key(keys.robot_pub).raw)
+    w = witness_process(keys.robot_vkey, other)
+    assert run_cli("witness", "push", str(root), "--witness", w.url).returncode == 0
+    for segment in (root / "hot").glob("amr-9_*.mcap"):
+        segment.unlink()
+    (root / "witness" / "amr-9.jsonl").unlink()
+    vkey = keys.witness_verifier.vkey
+    code, alone = verify(root, keys, "--witness", w.url, "--witness-key", vkey)
+    assert code == 0 and not alone["findings"]  # the gap --expect closes
+    code, fleet = verify(root, keys, "--witness", w.url, "--witness-key", vkey,
+                         "--expect", "amr-7", "--expect", "trace.local/amr-9")  # fmt: skip
+    assert code == 1
+    [finding] = fleet["findings"]
+    assert (finding["kind"], finding["robot_id"]) == ("truncated_tail", "amr-9")
+    assert "60 seals of trace.local/amr-9" in finding["message"]
+    assert "holds no segment of robot amr-9" in finding["message"]
+    code, unknown = verify(root, keys, "--witness", w.url, "--expect", "amr-5")
+    assert code == 0 and any("amr-5" in u for u in unknown["witness"]["unmatched"])
+    usage = run_cli("verify", str(root), "--expect", "amr-9")
+    assert usage.returncode == 2 and "--witness" in usage.stderr
