@@ -36,7 +36,7 @@ from trace_runtime.cycle_builder import COST_SAMPLE_EVERY
 from trace_runtime.errors import UsageError
 from trace_runtime.handover import PendingCycle
 from trace_runtime.keys import PublicKey, Signer
-from trace_runtime.logger_config import LoggerConfig, LoggerStats, default_opener
+from trace_runtime.logger_config import LoggerConfig, LoggerStats, default_opener, default_origin
 from trace_runtime.merkle import EMPTY_ROOT, CompactRange, leaf_hash
 from trace_runtime.records import GENESIS, LAYER_MODELS, TOPIC_CHECKPOINT, TOPIC_SEAL
 from trace_runtime.segment_names import rotated_segment_name, segment_name
@@ -109,7 +109,7 @@ class ChainWriter:
         self._costs = CostHistogram()  # this segment's per-cycle control-thread costs
         self.session = session
         self.prev_seal = session.prev_seal
-        self.origin = config.origin or f"trace.local/{session.robot_id}"
+        self.origin = config.origin or default_origin(session.robot_id)
         """The C2SP origin of the robot's checkpoints and the key name of their notes."""
         try:
             format_checkpoint(self.origin, 0, EMPTY_ROOT)

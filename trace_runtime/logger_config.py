@@ -10,9 +10,14 @@ from typing import BinaryIO, Literal
 
 from trace_runtime.keys import Signer
 
-__all__ = ["LoggerConfig", "LoggerStats", "Opener", "default_opener"]
+__all__ = ["LoggerConfig", "LoggerStats", "Opener", "default_opener", "default_origin"]
 
 Opener = Callable[[Path], BinaryIO]
+
+
+def default_origin(robot_id: str) -> str:
+    """The checkpoint origin of a robot whose ``LoggerConfig.origin`` is None."""
+    return f"trace.local/{robot_id}"
 
 
 def default_opener(path: Path) -> BinaryIO:

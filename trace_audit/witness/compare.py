@@ -38,6 +38,7 @@ from trace_runtime.clock import iso_utc
 from trace_runtime.errors import LogReadError
 from trace_runtime.gaps import CycleRange
 from trace_runtime.keys import PublicKey
+from trace_runtime.logger_config import default_origin
 from trace_runtime.logset import Log
 from trace_runtime.merkle import CompactRange
 from trace_runtime.signed_note import (
@@ -178,7 +179,7 @@ def robot_origin(log: Log, robot: str) -> str:
 
     checkpoints = robot_checkpoints(log, robot)
     origin = checkpoints[-1].origin if checkpoints else None
-    return origin or f"trace.local/{robot}"
+    return origin or default_origin(robot)
 
 
 def expected_origin(name: str) -> tuple[str, str]:
@@ -186,7 +187,7 @@ def expected_origin(name: str) -> tuple[str, str]:
     logger's default) or an origin, whose last path element is the robot id."""
     if "/" in name:
         return name.rsplit("/", 1)[1], name
-    return name, f"trace.local/{name}"
+    return name, default_origin(name)
 
 
 def read_witnessed(
