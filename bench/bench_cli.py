@@ -74,7 +74,7 @@ def _ensure_log(path: Path, env: dict[str, str]) -> Path:
 def _middle_t(log: Path, env: dict[str, str]) -> str:
     """A time in the middle of the log, in the seconds ``--t`` takes."""
     code = (
-        "import sys; from trace_runtime.logset import open_log\n"
+        "import sys; from trace_runtime.reading.logset import open_log\n"
         "log = open_log(sys.argv[1])\n"
         "print((log.start_ns + log.end_ns) / 2e9)\n"
     )

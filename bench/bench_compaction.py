@@ -59,7 +59,7 @@ from bench_tiers import mcap_default_bytes, seek_medians_ms
 
 from sim import RunConfig, run
 from trace_runtime import open_log
-from trace_runtime.reader import open_segment
+from trace_runtime.reading.reader import open_segment
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.tier_formats import cold as cold_codec
 from trace_runtime.tier_formats.cold import ColdAssembler

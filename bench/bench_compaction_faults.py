@@ -73,7 +73,7 @@ elif target == "unlink":
         return real_unlink(self, *args, **kwargs)
     Path.unlink = unlink
 elif target == "write_batch":
-    from trace_runtime.segment_writer import SegmentWriter
+    from trace_runtime.logger.segment_writer import SegmentWriter
     kill_after(SegmentWriter, "write_batch")
 print("start", flush=True)
 compact({root!r}, "cold", older_than_ns=0, cold=ColdOptions(block_cycles={block}),

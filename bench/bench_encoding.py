@@ -11,12 +11,12 @@ run timing every candidate once in turn so machine noise hits them alike; read t
   (Rust) for both.
 - orjson, fixed key order: ``model_dump`` + orjson for models; for dicts orjson of the dict
   as given, NO validation (a lower bound; the key order is the robot's, not the schema's).
-- msgspec mirror: a ``msgspec.Struct`` per model (``trace_runtime.codec._mirror``), converted
-  from the dict (validation), then ``to_builtins`` + orjson (the canonical spelling), or
+- msgspec mirror: a ``msgspec.Struct`` per model (``trace_runtime.encoding.codec._mirror``),
+  converted from the dict (validation), then ``to_builtins`` + orjson (the canonical spelling), or
   msgspec's own JSON encoder (spells ``1e21`` where orjson and pydantic spell ``1e+21``).
 - msgspec Structs built by the robot: encode only (what it would cost if the public records
   were Structs; they are not, so this is a floor, not a candidate).
-- chosen (``trace_runtime.codec``): built records by orjson reading the validated fields
+- chosen (``trace_runtime.encoding.codec``): built records by orjson reading the validated fields
   (pydantic's bytes); dicts by the mirror and msgspec's encoder (the mirror bounds floats
   below 1e16, where msgspec spells as orjson does); pydantic for anything the mirror refuses
   (e.g. a dict with models nested inside).
@@ -38,7 +38,7 @@ import msgspec
 import orjson
 import zstandard
 
-from trace_runtime.codec import _encode_mirror, _mirror, encode_layer, layer_message
+from trace_runtime.encoding.codec import _encode_mirror, _mirror, encode_layer, layer_message
 from trace_runtime.records import LAYER_MODELS, _Record
 from trace_runtime.testing import CaptureLogger, synthetic_cycle
 

@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Any
 
 from trace_audit.explain import explain
-from trace_runtime.logset import open_log
+from trace_runtime.reading.logset import open_log
 from trace_runtime.tiers.catalog import CATALOG_NAME, refresh_catalog
 
 DAY_CYCLES = 864_000

@@ -32,7 +32,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
 from trace_runtime import AuditLogger, LoggerConfig, open_log
-from trace_runtime.codec import encode_layer
+from trace_runtime.encoding.codec import encode_layer
 from trace_runtime.records import LAYER_TOPICS
 from trace_runtime.testing import synthetic_cycle
 

@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/bench_merkle.py [--quick]
 
-What a logger pays per cycle to keep the tree of its seals (``trace_runtime.merkle``):
+What a logger pays per cycle to keep the tree of its seals (``trace_runtime.tlog.merkle``):
 ``leaf_hash`` of one seal (~300 bytes, the size of a cycle's seal record) and
 ``CompactRange.append`` of that leaf hash (about one node hash amortised). Each is timed over
 100,000 leaves, the median of several runs, in microseconds per leaf; also, for scale, one
@@ -19,7 +19,7 @@ import statistics
 import time
 from collections.abc import Callable
 
-from trace_runtime.merkle import CompactRange, leaf_hash
+from trace_runtime.tlog.merkle import CompactRange, leaf_hash
 
 TARGET_US = 3.0
 SEAL_BYTES = 300

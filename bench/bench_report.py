@@ -27,7 +27,7 @@ from typing import Any
 from trace_audit.explain import explain
 from trace_audit.report.data import gather_report
 from trace_audit.report.page import render_page
-from trace_runtime.logset import Log, open_log
+from trace_runtime.reading.logset import Log, open_log
 from trace_runtime.verification import verify
 
 SIZE_BUDGET = 2_000_000

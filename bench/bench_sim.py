@@ -51,9 +51,14 @@ from sim.perception import Perceiver
 from sim.runner import few_collections
 from trace_runtime import AuditLogger, CycleBuilder, LoggerConfig, LoggerStats, SessionInfo
 from trace_runtime.chain import digest
-from trace_runtime.codec import check_layer, encode_checked, encode_json, encode_seal_fields
+from trace_runtime.encoding.codec import (
+    check_layer,
+    encode_checked,
+    encode_json,
+    encode_seal_fields,
+)
+from trace_runtime.logger.segment_writer import OutMessage, SegmentWriter
 from trace_runtime.records import GENESIS, LAYER_MODELS, EvidenceRef
-from trace_runtime.segment_writer import OutMessage, SegmentWriter
 
 BUDGET = 5_000
 DAY = 864_000

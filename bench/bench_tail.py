@@ -42,7 +42,7 @@ CHILD = """
 import json, statistics, sys, time
 from pathlib import Path
 from trace_runtime import AuditLogger, LoggerConfig
-from trace_runtime.reader import Segment
+from trace_runtime.reading.reader import Segment
 from trace_runtime.testing import synthetic_cycle
 from trace_audit.tail import DecisionChange, tail
 

@@ -31,12 +31,12 @@ import time
 from pathlib import Path
 
 from trace_runtime import AuditLogger, LoggerConfig
-from trace_runtime.chain_writer import ChainWriter
-from trace_runtime.keys import Ed25519Signer
-from trace_runtime.merkle import CompactRange, leaf_hash
+from trace_runtime.logger.chain_writer import ChainWriter
 from trace_runtime.records import Evidence, Perception
-from trace_runtime.signed_note import NoteSigner, format_checkpoint, sign_note
 from trace_runtime.testing import synthetic_cycle
+from trace_runtime.tlog.keys import Ed25519Signer
+from trace_runtime.tlog.merkle import CompactRange, leaf_hash
+from trace_runtime.tlog.signed_note import NoteSigner, format_checkpoint, sign_note
 
 PERIOD_NS = 100_000_000
 TARGET_US = 3.0

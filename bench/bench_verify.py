@@ -28,9 +28,9 @@ from pathlib import Path
 
 from trace_audit.verify import verify_log
 from trace_runtime import AuditLogger, LoggerConfig, open_log
-from trace_runtime.keys import generate_keypair, load_public_key
 from trace_runtime.records import Evidence, Perception
 from trace_runtime.testing import synthetic_cycle
+from trace_runtime.tlog.keys import generate_keypair, load_public_key
 
 PERIOD_NS = 100_000_000
 START_NS = 1_700_000_000_000_000_000

@@ -32,7 +32,7 @@ from sim import SCENARIOS, FaultRates, RunConfig, RunResult, read_truth, run
 from sim.replay import check_counterfactuals
 from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
 from trace_runtime.flags import split_flags
-from trace_runtime.logset import open_log
+from trace_runtime.reading.logset import open_log
 from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION
 
 # The paper's reported figures (Tables II and III), quoted for comparison only.

@@ -19,7 +19,7 @@ from typing import Any
 
 from sim import FaultRates, RunConfig, run
 from trace_runtime.flags import split_flags
-from trace_runtime.logset import open_log
+from trace_runtime.reading.logset import open_log
 from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION
 
 

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Go and the reference sumdb packages for the witness oracle tests
-# (tests/trace_runtime/test_go_oracle.py): Debian's `golang-go` and `golang-golang-x-mod-dev`.
+# (tests/trace_runtime/tlog/test_go_oracle.py): Debian's `golang-go` and `golang-golang-x-mod-dev`.
 # Installs them when missing and this user may (root with apt-get); otherwise says why, and
 # the oracle tests skip with that reason visible. Never fails the caller.
 set -uo pipefail

@@ -24,7 +24,7 @@ from sim.belief import missing_rule_edges
 from sim.counterfactual import Found, holds
 from sim.policy import LEAVES, PolicyInput, evaluate
 from sim.runner import POLICY_VERSION, SimUsageError
-from trace_runtime.logset import open_log
+from trace_runtime.reading.logset import open_log
 from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF
 
 

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 from trace_runtime.lazy import lazy_exports
 
 _EXPORTS = {
-    "open_log": "trace_runtime.logset",
+    "open_log": "trace_runtime.reading.logset",
     "Selection": "trace_audit.selection",
     "SeveralRobotsError": "trace_audit.selection",
     "per_robot": "trace_audit.selection",
@@ -128,7 +128,7 @@ if TYPE_CHECKING:
     from trace_audit.selection import Selection, SeveralRobotsError, per_robot
     from trace_audit.timeline import Timeline, WhyResult, timeline, why
     from trace_audit.verify import VerifyReport, verify_log
-    from trace_runtime.logset import open_log
+    from trace_runtime.reading.logset import open_log
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, __all__)

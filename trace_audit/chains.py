@@ -46,8 +46,8 @@ from itertools import pairwise
 from typing import Any, NamedTuple
 
 from trace_audit.sensor_window import DEFAULT_SENSOR_WINDOW, SensorWindow
-from trace_runtime.cycles import Cycle
-from trace_runtime.recordings import Recordings
+from trace_runtime.encoding.cycles import Cycle
+from trace_runtime.reading.recordings import Recordings
 from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF, TOPIC_PERCEPTION
 
 __all__ = [

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import orjson
 
-from trace_runtime.cycles import Cycle
+from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION, TOPIC_SEAL
 
 __all__ = ["command_of", "execution_fields", "seal_dropped"]

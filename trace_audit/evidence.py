@@ -1,6 +1,6 @@
 """Evidence in external recordings, as an investigator reads it: resolved, checked, decoded.
 
-``trace_runtime.recordings`` finds the message an external evidence ref names (e.g. in a
+``trace_runtime.reading.recordings`` finds the message an external evidence ref names (e.g. in a
 rosbag2 MCAP) and checks its digest without decoding it. This module adds what a person
 needs to see: the message decoded with the library ROS 2 tools use (``mcap-ros2-support``,
 the ``ros2`` extra, imported only here and only when a CDR message is decoded), summarised
@@ -18,7 +18,7 @@ from typing import Any
 import orjson
 
 from trace_runtime.errors import LogReadError
-from trace_runtime.recordings import ExternalCheck, ExternalState, Recordings, is_external
+from trace_runtime.reading.recordings import ExternalCheck, ExternalState, Recordings, is_external
 
 __all__ = ["ExternalEvidence", "decode_message", "describe_refs", "open_recordings"]
 

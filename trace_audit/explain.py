@@ -31,13 +31,13 @@ from trace_audit.log_time import LogClock, TimeArg
 from trace_audit.metrics import MetricsConfig, dr_problems, trust_score
 from trace_audit.selection import Selection, robot_at, robot_with_cycle
 from trace_runtime.chain import GENESIS, digest
-from trace_runtime.cycles import Cycle
+from trace_runtime.encoding.cycles import Cycle
+from trace_runtime.encoding.seal_check import verify_cycle
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
 from trace_runtime.gaps import continuity, gap_limit_ns
-from trace_runtime.logset import Log, StaleCatalogError
-from trace_runtime.recordings import Recordings
+from trace_runtime.reading.logset import Log, StaleCatalogError
+from trace_runtime.reading.recordings import Recordings
 from trace_runtime.records import TOPIC_ACTION, TOPIC_PERCEPTION, TOPIC_SEAL
-from trace_runtime.seal_check import verify_cycle
 
 __all__ = [
     "DEFAULT_LOOKBACK_S",
@@ -56,7 +56,7 @@ DEFAULT_LOOKBACK_S = 600.0
 class SealCheck:
     """Whether the decision's seal verifies: its digests, and its link to the previous seal.
 
-    The check is ``trace_runtime.seal_check.verify_cycle`` (``state`` is its verdict: the
+    The check is ``trace_runtime.encoding.seal_check.verify_cycle`` (``state`` is its verdict: the
     layer messages and the evidenced sensor readings against the seal). ``prev_source`` says
     what the seal's ``prev`` was compared with: the previous sealed cycle in this log, the
     segment's recorded ``prev_seal`` (the previous segment is not in the log), or genesis.

@@ -42,11 +42,11 @@ from trace_audit.log_source import LogSource, require_cycles
 from trace_audit.log_time import TimeArg
 from trace_audit.selection import Selection
 from trace_audit.sensor_window import DEFAULT_SENSOR_WINDOW, SensorWindow
-from trace_runtime.cycles import Cycle
+from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import StorageError, UsageError
 from trace_runtime.gaps import GapFinder, SealedStamp
-from trace_runtime.logset import Log
-from trace_runtime.reader import Segment
+from trace_runtime.reading.logset import Log
+from trace_runtime.reading.reader import Segment
 from trace_runtime.records import PROFILE, TOPIC_PERCEPTION, TOPIC_SEAL
 from trace_runtime.schemas import SENSOR_SCHEMA_NAME, schema_bytes, schema_name
 from trace_runtime.session import EXCERPT_METADATA, SESSION_METADATA

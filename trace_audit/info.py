@@ -16,10 +16,10 @@ from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log, require_cycles
 from trace_audit.log_time import SECONDS_CLOCK, LogClock
 from trace_audit.selection import Selection
-from trace_runtime.chain_writer import CLOSE_METADATA
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, CycleRange, Gap
-from trace_runtime.logset import Log
-from trace_runtime.reader import Segment
+from trace_runtime.logger.chain_writer import CLOSE_METADATA
+from trace_runtime.reading.logset import Log
+from trace_runtime.reading.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
 
 __all__ = ["LogInfo", "SegmentRow", "log_info"]

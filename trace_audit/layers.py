@@ -8,7 +8,7 @@ robot's in time order, and every row names its robot.
 
 - ``iter_decisions`` yields each cycle's ``Decision`` (``read_decision``, what the CLI renders);
   ``iter_decision_fields`` only what each decision chose and why, decoded from its action
-  message alone (``trace_runtime.partial.DecisionFields``), for walking long logs.
+  message alone (``trace_runtime.encoding.partial.DecisionFields``), for walking long logs.
 - ``decision_table``, ``channel_table`` and ``check_table`` are columns of those decisions;
   ``entity_table`` the perceived entities; ``gap_table`` the gaps between sealed cycles by the
   one gap rule (``trace_runtime.gaps``). Column names are the fleet index's where it has the
@@ -34,13 +34,13 @@ from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log
 from trace_audit.log_time import TimeArg
 from trace_audit.selection import Selection, each_robot
-from trace_runtime.cycles import Cycle
+from trace_runtime.encoding.cycles import Cycle
+from trace_runtime.encoding.partial import DecisionFields, decision_fields
+from trace_runtime.encoding.seal_check import verify_cycle
 from trace_runtime.errors import UsageError
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, check_tolerance
-from trace_runtime.logset import Log
-from trace_runtime.partial import DecisionFields, decision_fields
+from trace_runtime.reading.logset import Log
 from trace_runtime.records import TOPIC_PERCEPTION
-from trace_runtime.seal_check import verify_cycle
 
 __all__ = [
     "RobotDecision",

@@ -9,9 +9,9 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from trace_audit.cycle_fields import seal_dropped
-from trace_runtime.cycles import Cycle
+from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap, GapFinder, SealedStamp
-from trace_runtime.logset import Log
+from trace_runtime.reading.logset import Log
 
 __all__ = ["gap_stepper"]
 

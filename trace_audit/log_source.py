@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from trace_runtime.errors import LogReadError
-from trace_runtime.logset import Log, open_log
+from trace_runtime.reading.logset import Log, open_log
 
 __all__ = ["LogSource", "as_log", "require_cycles"]
 

@@ -21,7 +21,7 @@ from decimal import Decimal, InvalidOperation
 
 from trace_runtime.clock import is_wall_clock, iso_utc, show_time
 from trace_runtime.errors import UsageError
-from trace_runtime.logset import Log
+from trace_runtime.reading.logset import Log
 
 __all__ = [
     "SECONDS_CLOCK",

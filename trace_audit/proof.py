@@ -28,21 +28,21 @@ import orjson
 from trace_audit.witness.tree import LevelTree
 from trace_runtime.boundary import read_side_file
 from trace_runtime.chain import sensor_cover, sensor_line
-from trace_runtime.chain_tree import prove_pass
 from trace_runtime.clock import iso_utc
 from trace_runtime.errors import LogReadError, TraceError, UsageError
-from trace_runtime.keys import PublicKey
-from trace_runtime.logset import Log, open_log
-from trace_runtime.merkle import leaf_hash, verify_inclusion
+from trace_runtime.reading.chain_tree import prove_pass
+from trace_runtime.reading.logset import Log, open_log
 from trace_runtime.records import TOPIC_SEAL
-from trace_runtime.signed_note import (
+from trace_runtime.tlog.cosignature_store import read_cosigned
+from trace_runtime.tlog.keys import PublicKey
+from trace_runtime.tlog.merkle import leaf_hash, verify_inclusion
+from trace_runtime.tlog.signed_note import (
     COSIGNATURE,
     NoteError,
     NoteVerifier,
     open_note,
     parse_checkpoint,
 )
-from trace_runtime.witnessed import read_cosigned
 
 __all__ = [
     "BUNDLE_FORMAT",

@@ -30,9 +30,9 @@ from trace_audit.log_time import (
     exact_seconds,
     resolve_time,
 )
-from trace_runtime.cycles import Cycle
+from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
-from trace_runtime.logset import Log
+from trace_runtime.reading.logset import Log
 
 __all__ = [
     "PerRobot",

@@ -14,8 +14,8 @@ from collections import OrderedDict, deque
 from collections.abc import Sequence
 from typing import Any
 
-from trace_runtime.cycles import RawMessage
-from trace_runtime.recordings import ExternalCheck, ExternalState, Recordings
+from trace_runtime.encoding.cycles import RawMessage
+from trace_runtime.reading.recordings import ExternalCheck, ExternalState, Recordings
 
 __all__ = ["DEFAULT_SENSOR_WINDOW", "SensorWindow"]
 

@@ -7,9 +7,10 @@ written, or the last one written), yields its decision changes, and with ``follo
 what is new, moving on to the next segment when the logger rotates.
 
 What it remembers is bounded however long it runs: per robot, the segment it reads and where
-in it the last complete record read ends (``trace_runtime.growing_file.GrowingSegment``), the
-last cycle number and time read, and the last command. Each poll reads only the bytes the
-logger appended since the last one, a chunk at a time; a chunk still being written is read
+in it the last complete record read ends
+(``trace_runtime.reading.growing_file.GrowingSegment``), the last cycle number and time
+read, and the last command. Each poll reads only the bytes the logger appended since the last
+one, a chunk at a time; a chunk still being written is read
 at the next poll. Whether a segment is being written is the writer lock's answer
 (``trace_runtime.live_writers``), looked up, never taken: a segment without a footer whose
 writer is gone is shown as recovered, one whose writer holds its lock as live.
@@ -29,13 +30,13 @@ from trace_audit.causal import FactorValue, read_decision
 from trace_audit.cycle_fields import command_of, seal_dropped
 from trace_audit.log_time import SECONDS_CLOCK, LogClock
 from trace_audit.selection import Selection
-from trace_runtime.cycles import Cycle
+from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.gaps import GapFinder, SealedStamp
-from trace_runtime.growing_file import GrowingSegment, NotHotSegmentError
 from trace_runtime.live_writers import is_live
-from trace_runtime.logset import open_log, preferred_copies, segment_files_by_robot
-from trace_runtime.reader import RECOVERED_WARNING, Segment
+from trace_runtime.reading.growing_file import GrowingSegment, NotHotSegmentError
+from trace_runtime.reading.logset import open_log, preferred_copies, segment_files_by_robot
+from trace_runtime.reading.reader import RECOVERED_WARNING, Segment
 
 __all__ = [
     "DEFAULT_POLL_S",

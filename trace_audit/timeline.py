@@ -20,11 +20,11 @@ from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log, require_cycles
 from trace_audit.log_time import SECONDS_CLOCK, LogClock, TimeArg, resolve_time
 from trace_audit.selection import Selection, SeveralRobotsError
-from trace_runtime.cycles import Cycle
+from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import UsageError
 from trace_runtime.flags import split_flags
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap
-from trace_runtime.logset import Log
+from trace_runtime.reading.logset import Log
 
 __all__ = [
     "ActionNotTakenError",

@@ -3,11 +3,11 @@
 The investigator's thin front on ``trace_runtime.verification`` (which owns every rule of
 the verdict): ``verify_log`` takes what an investigator has at hand (a path, external
 recordings to resolve evidence refs in), opens the log through the one owner of multi-file
-logs (``trace_runtime.logset.open_log``: which copy of a segment is read, which files could
+logs (``trace_runtime.reading.logset.open_log``: which copy of a segment is read, which files could
 not be read) and the recordings (``trace_audit.evidence``), and hands both to
 ``trace_runtime.verification.verify``. Retention in the runtime deletes only what that
 same verification finds clean. For one decision (``explain``) the check is
-``trace_runtime.seal_check.verify_cycle``. See docs/integrity.md.
+``trace_runtime.encoding.seal_check.verify_cycle``. See docs/integrity.md.
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from typing import TYPE_CHECKING
 
 from trace_audit.evidence import open_recordings
 from trace_audit.selection import Selection
-from trace_runtime.keys import PublicKey
-from trace_runtime.logset import open_log
-from trace_runtime.signed_note import NoteVerifier
+from trace_runtime.reading.logset import open_log
+from trace_runtime.tlog.keys import PublicKey
+from trace_runtime.tlog.signed_note import NoteVerifier
 from trace_runtime.verification import (
     Finding,
     FindingKind,

@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING
 from trace_runtime.lazy import lazy_exports
 
 _EXPORTS = {
-    "Cycle": "trace_runtime.cycles",
-    "RawMessage": "trace_runtime.cycles",
+    "Cycle": "trace_runtime.encoding.cycles",
+    "RawMessage": "trace_runtime.encoding.cycles",
     "LogLimitError": "trace_runtime.errors",
     "LogLockedError": "trace_runtime.errors",
     "LogReadError": "trace_runtime.errors",
@@ -22,25 +22,25 @@ _EXPORTS = {
     "TimeOutOfRangeError": "trace_runtime.errors",
     "TraceError": "trace_runtime.errors",
     "UsageError": "trace_runtime.errors",
-    "SealStatus": "trace_runtime.seal_check",
-    "verify_cycle": "trace_runtime.seal_check",
-    "Ed25519Signer": "trace_runtime.keys",
-    "PublicKey": "trace_runtime.keys",
-    "Signer": "trace_runtime.keys",
-    "generate_keypair": "trace_runtime.keys",
-    "load_public_key": "trace_runtime.keys",
-    "load_signer": "trace_runtime.keys",
-    "AuditLogger": "trace_runtime.logger",
-    "CycleBuilder": "trace_runtime.cycle_builder",
-    "LoggerConfig": "trace_runtime.logger_config",
-    "LoggerStats": "trace_runtime.logger_config",
-    "Log": "trace_runtime.logset",
-    "open_log": "trace_runtime.logset",
-    "Segment": "trace_runtime.reader",
-    "SegmentInfo": "trace_runtime.reader",
-    "open_segment": "trace_runtime.reader",
-    "Recordings": "trace_runtime.recordings",
-    "external_ref": "trace_runtime.recordings",
+    "SealStatus": "trace_runtime.encoding.seal_check",
+    "verify_cycle": "trace_runtime.encoding.seal_check",
+    "Ed25519Signer": "trace_runtime.tlog.keys",
+    "PublicKey": "trace_runtime.tlog.keys",
+    "Signer": "trace_runtime.tlog.keys",
+    "generate_keypair": "trace_runtime.tlog.keys",
+    "load_public_key": "trace_runtime.tlog.keys",
+    "load_signer": "trace_runtime.tlog.keys",
+    "AuditLogger": "trace_runtime.logger.api",
+    "CycleBuilder": "trace_runtime.logger.cycle_builder",
+    "LoggerConfig": "trace_runtime.logger.config",
+    "LoggerStats": "trace_runtime.logger.config",
+    "Log": "trace_runtime.reading.logset",
+    "open_log": "trace_runtime.reading.logset",
+    "Segment": "trace_runtime.reading.reader",
+    "SegmentInfo": "trace_runtime.reading.reader",
+    "open_segment": "trace_runtime.reading.reader",
+    "Recordings": "trace_runtime.reading.recordings",
+    "external_ref": "trace_runtime.reading.recordings",
     "Action": "trace_runtime.records",
     "Alternative": "trace_runtime.records",
     "Belief": "trace_runtime.records",
@@ -124,8 +124,8 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
-    from trace_runtime.cycle_builder import CycleBuilder
-    from trace_runtime.cycles import Cycle, RawMessage
+    from trace_runtime.encoding.cycles import Cycle, RawMessage
+    from trace_runtime.encoding.seal_check import SealStatus, verify_cycle
     from trace_runtime.errors import (
         LogLimitError,
         LogLockedError,
@@ -136,19 +136,12 @@ if TYPE_CHECKING:
         TraceError,
         UsageError,
     )
-    from trace_runtime.keys import (
-        Ed25519Signer,
-        PublicKey,
-        Signer,
-        generate_keypair,
-        load_public_key,
-        load_signer,
-    )
-    from trace_runtime.logger import AuditLogger
-    from trace_runtime.logger_config import LoggerConfig, LoggerStats
-    from trace_runtime.logset import Log, open_log
-    from trace_runtime.reader import Segment, SegmentInfo, open_segment
-    from trace_runtime.recordings import Recordings, external_ref
+    from trace_runtime.logger.api import AuditLogger
+    from trace_runtime.logger.config import LoggerConfig, LoggerStats
+    from trace_runtime.logger.cycle_builder import CycleBuilder
+    from trace_runtime.reading.logset import Log, open_log
+    from trace_runtime.reading.reader import Segment, SegmentInfo, open_segment
+    from trace_runtime.reading.recordings import Recordings, external_ref
     from trace_runtime.records import (
         Action,
         ActuatorChannel,
@@ -174,8 +167,15 @@ if TYPE_CHECKING:
         TreeEdge,
         TreeNode,
     )
-    from trace_runtime.seal_check import SealStatus, verify_cycle
     from trace_runtime.session import SessionInfo
+    from trace_runtime.tlog.keys import (
+        Ed25519Signer,
+        PublicKey,
+        Signer,
+        generate_keypair,
+        load_public_key,
+        load_signer,
+    )
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, __all__)

@@ -2,7 +2,7 @@
 the digest of the previous seal, so any change, removal or reordering breaks a link.
 
 This is the chain's primitive, below the reader's ``Cycle``; the check of one cycle against
-its seal, built on it, is ``trace_runtime.seal_check.verify_cycle``.
+its seal, built on it, is ``trace_runtime.encoding.seal_check.verify_cycle``.
 """
 
 from __future__ import annotations

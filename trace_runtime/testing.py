@@ -21,10 +21,10 @@ from typing import Any, TypeVar
 import orjson
 
 from trace_runtime.chain import digest, sensor_cover, sensor_line
-from trace_runtime.codec import EncodedLayer, LayerValue, encode_checked, encode_seal
-from trace_runtime.cycle_builder import CycleBuilder, next_cycle_time
+from trace_runtime.encoding.codec import EncodedLayer, LayerValue, encode_checked, encode_seal
 from trace_runtime.errors import UsageError
-from trace_runtime.logger import AuditLogger, LoggerStats
+from trace_runtime.logger.api import AuditLogger, LoggerStats
+from trace_runtime.logger.cycle_builder import CycleBuilder, next_cycle_time
 from trace_runtime.records import (
     GENESIS,
     LAYER_MODELS,

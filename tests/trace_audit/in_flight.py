@@ -6,7 +6,7 @@ from pathlib import Path
 
 from tests.trace_audit.conftest import rewrite_segment
 from trace_runtime import open_segment
-from trace_runtime.cycles import RawMessage
+from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.records import TOPIC_SEAL
 
 

@@ -23,8 +23,8 @@ from trace_audit.chains import (
     trace_layers,
 )
 from trace_runtime import AuditLogger, LoggerConfig
-from trace_runtime.cycles import RawMessage
-from trace_runtime.logset import open_log
+from trace_runtime.encoding.cycles import RawMessage
+from trace_runtime.reading.logset import open_log
 
 LIDAR = b'{"ranges":[1.5,1.52]}'
 

@@ -19,12 +19,12 @@ from tests.trace_runtime.verification.test_tamper import _write_plain, decode
 from trace_audit.cli import app
 from trace_audit.verify import verify_log
 from trace_runtime import open_log, open_segment
-from trace_runtime.checkpoints import decode_checkpoint, encode_checkpoint, make_checkpoint
 from trace_runtime.errors import TraceError, VerificationError
-from trace_runtime.keys import Ed25519Signer
 from trace_runtime.records import TOPIC_ACTION, TOPIC_CHECKPOINT
 from trace_runtime.tiers import ColdOptions, compact
 from trace_runtime.tiers.retention import RETENTION_LOG
+from trace_runtime.tlog.checkpoints import decode_checkpoint, encode_checkpoint, make_checkpoint
+from trace_runtime.tlog.keys import Ed25519Signer
 
 SMALL_BLOCKS = ColdOptions(block_cycles=16)
 

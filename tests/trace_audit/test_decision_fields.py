@@ -1,5 +1,5 @@
 """``iter_decision_fields`` gives what ``iter_decisions`` gives of each decision's own
-fields, from the action message alone (``trace_runtime.partial.DecisionFields``)."""
+fields, from the action message alone (``trace_runtime.encoding.partial.DecisionFields``)."""
 
 from __future__ import annotations
 

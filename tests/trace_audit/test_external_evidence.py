@@ -23,7 +23,7 @@ from trace_audit.explain import explain
 from trace_audit.metrics import MetricsConfig, compute_metrics
 from trace_audit.verify import verify_log
 from trace_runtime.errors import LogReadError, UsageError
-from trace_runtime.recordings import Recordings
+from trace_runtime.reading.recordings import Recordings
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "ros2_robot.py"

@@ -24,7 +24,7 @@ from trace_audit import (
     read_decision,
 )
 from trace_runtime import AuditLogger, LoggerConfig, RawMessage, open_log
-from trace_runtime.cycles import Cycle
+from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import UsageError
 from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION, TOPIC_PERCEPTION, TOPIC_SEAL
 

@@ -19,7 +19,7 @@ from trace_audit.metrics import MetricsConfig, compute_metrics
 from trace_audit.selection import per_robot
 from trace_audit.timeline import timeline
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap
-from trace_runtime.logset import open_log
+from trace_runtime.reading.logset import open_log
 from trace_runtime.tiers import compact
 
 # --- one tier policy ---------------------------------------------------------------------------

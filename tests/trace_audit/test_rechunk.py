@@ -19,9 +19,9 @@ from trace_audit.metrics import compute_metrics
 from trace_audit.verify import verify_log
 from trace_runtime import open_log
 from trace_runtime.chain import digest
-from trace_runtime.cycles import RawMessage
+from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.errors import LogReadError
-from trace_runtime.reader import open_segment
+from trace_runtime.reading.reader import open_segment
 from trace_runtime.records import GENESIS, TOPIC_ACTION, TOPIC_SEAL
 
 COMPRESSIONS = {

@@ -20,7 +20,7 @@ from tests.trace_runtime.verification.test_tamper import (
 )
 from trace_audit.cli import app
 from trace_audit.verify import verify_log
-from trace_runtime.keys import Ed25519Signer, generate_keypair, load_signer
+from trace_runtime.tlog.keys import Ed25519Signer, generate_keypair, load_signer
 
 
 def test_a_clock_stepping_back_within_a_segment_is_a_note_that_names_the_cycle(

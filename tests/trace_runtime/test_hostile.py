@@ -14,9 +14,9 @@ import pytest
 from tests.trace_runtime import hostile
 from tests.trace_runtime.conftest import write_log
 from trace_runtime.errors import LogLimitError, LogReadError, PayloadError
-from trace_runtime.logset import open_log
 from trace_runtime.read_limits import ReadLimits
-from trace_runtime.reader import Segment
+from trace_runtime.reading.logset import open_log
+from trace_runtime.reading.reader import Segment
 from trace_runtime.session import MIN_PERIOD_NS, SessionInfo
 
 GIB = hostile.GIB

@@ -4,6 +4,7 @@ investigator, and typer/rich stay inside the CLI modules."""
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -156,28 +157,25 @@ def test_no_import_cycles_inside_a_package(package: str) -> None:
 FLOORS: dict[str, list[set[str]]] = {
     # docs/architecture.md draws these floors; a module imports from its own floor or below.
     "trace_runtime": [
-        # the vocabulary: records, errors and the rules every reader and writer shares
+        # the ground: records, errors and the rules every reader and writer shares
         {
             "errors", "lazy", "costs", "clock", "flags", "segment_names", "read_limits",
-            "gaps", "records", "session", "schemas", "chain", "keys", "checkpoints",
-            "boundary", "live_writers", "merkle", "signed_note", "witness_protocol", "witnessed",
+            "gaps", "records", "session", "schemas", "chain", "boundary", "live_writers",
         },
-        # encodings: a record's bytes, an MCAP file's bytes, the warm and cold tier formats
-        {
-            "codec", "cycles", "seal_check", "mcap_records", "mcap_chunks", "mcap_file",
-            "tier_formats", "partial",
-        },
-        # reading: one segment, a robot's recordings, a log of many files
-        {"reader", "recordings", "logset", "growing_file", "chain_tree"},
-        # writing: the logger a robot embeds, and its test double
-        {
-            "segment_writer", "logger_config", "cycle_builder", "handover", "writer_lock",
-            "chain_writer", "writer_thread", "resume", "logger", "testing",
-        },
+        # a record's bytes and an MCAP file's bytes, cycles assembled by the chain
+        {"encoding"},
+        # the Merkle tree, signed notes, keys, checkpoints, the witness client and store
+        {"tlog"},
+        # the warm and cold tier formats, read by the reader
+        {"tier_formats"},
+        # one segment, a robot's recordings, a log of many files, a robot's tree
+        {"reading"},
+        # the logger a robot embeds
+        {"logger"},
         {"verification"},
         # moving segments between tiers verifies every copy it makes
         {"tiers"},
-        {""},  # the package's face
+        {"", "testing"},  # the package's face, and the test double users test their robots with
     ],
     "trace_audit": [
         # what every question needs: times, sources, a cycle's fields, JSON, evidence
@@ -227,12 +225,12 @@ def test_no_module_imports_from_a_higher_floor(package: str) -> None:
 def test_the_reader_layers_import_downwards() -> None:
     """Bytes, then cycles, then one segment, then many: never the other way."""
     graph = _module_imports("trace_runtime")
-    assert "trace_runtime.reader" not in graph["trace_runtime.mcap_file"]
-    assert "trace_runtime.logset" not in graph["trace_runtime.reader"]
-    assert not graph["trace_runtime.cycles"] & {
-        "trace_runtime.mcap_file",
-        "trace_runtime.reader",
-        "trace_runtime.logset",
+    assert "trace_runtime.reading.reader" not in graph["trace_runtime.encoding.mcap_file"]
+    assert "trace_runtime.reading.logset" not in graph["trace_runtime.reading.reader"]
+    assert not graph["trace_runtime.encoding.cycles"] & {
+        "trace_runtime.encoding.mcap_file",
+        "trace_runtime.reading.reader",
+        "trace_runtime.reading.logset",
     }
 
 
@@ -241,8 +239,8 @@ def test_the_tier_formats_sit_below_the_reader_and_compaction_above_verification
     segments; writing, recovering and retiring tiers verify, so they sit above it."""
     graph = _module_imports("trace_runtime")
     above_the_formats = {
-        "trace_runtime.reader",
-        "trace_runtime.logset",
+        "trace_runtime.reading.reader",
+        "trace_runtime.reading.logset",
         "trace_runtime.verification",
         "trace_runtime.tiers",
     }
@@ -250,5 +248,65 @@ def test_the_tier_formats_sit_below_the_reader_and_compaction_above_verification
         if module.startswith("trace_runtime.tier_formats"):
             upward = {t for t in targets if any(t.startswith(a) for a in above_the_formats)}
             assert not upward, (module, sorted(upward))
-    for module in ("trace_runtime.reader", "trace_runtime.logset", "trace_runtime.verification"):
+    for module in (
+        "trace_runtime.reading.reader",
+        "trace_runtime.reading.logset",
+        "trace_runtime.verification",
+    ):
         assert not {t for t in graph[module] if t.startswith("trace_runtime.tiers")}, module
+
+
+def _page_floors(package: str) -> list[tuple[set[str], str]]:
+    """docs/architecture.md's floor table of ``package``: per row, the top-level names its
+    "modules" column gives (``name`` or ``folder/``) and the whole row's text."""
+    page = (ROOT / "docs" / "architecture.md").read_text()
+    section = page.split(f"## {package}, floor by floor", 1)[1].split("\n## ", 1)[0]
+    rows: list[tuple[set[str], str]] = []
+    for line in section.splitlines():
+        cells = line.split(" | ")
+        if not line.startswith("| ") or len(cells) < 3 or cells[0] == "| floor":
+            continue
+        column = cells[1].split(":", 1)[0] if "/`:" in cells[1] else cells[1]
+        rows.append(({n.rstrip("/") for n in re.findall(r"`([^`]+)`", column)}, line))
+    return rows
+
+
+def _top_level(package: str) -> set[str]:
+    base = ROOT / package
+    return {
+        p.stem if p.is_file() else p.name
+        for p in base.iterdir()
+        if (p.suffix == ".py" and p.stem != "__init__") or (p / "__init__.py").is_file()
+    }
+
+
+@pytest.mark.parametrize("package", sorted(FLOORS))
+def test_the_architecture_page_draws_the_floors(package: str) -> None:
+    """Every module and folder at the package's top is on the page, on the floor FLOORS gives
+    it, and the page names nothing the package lacks."""
+    rows = _page_floors(package)
+    declared = [names - {""} for names in FLOORS[package] if names - {""}]
+    assert [names for names, _ in rows] == declared
+    assert set().union(*declared) == _top_level(package)
+
+
+def test_the_architecture_page_names_every_module_of_each_runtime_folder() -> None:
+    rows = dict((frozenset(names), text) for names, text in _page_floors("trace_runtime"))
+    for names, text in rows.items():
+        for folder in names:
+            base = ROOT / "trace_runtime" / folder
+            if not base.is_dir():
+                continue
+            modules = {p.stem for p in base.rglob("*.py") if p.stem != "__init__"}
+            modules |= {p.name for p in base.iterdir() if (p / "__init__.py").is_file()}
+            missing = sorted(m for m in modules if f"`{m}`" not in text and f"{m}/" not in text)
+            assert not missing, (folder, missing)
+
+
+def test_the_runtime_ground_stays_small() -> None:
+    """The top of trace_runtime is the ground: at most 20 modules; every floor above is a
+    folder."""
+    ground = FLOORS["trace_runtime"][0]
+    assert len(ground) <= 20
+    for names in FLOORS["trace_runtime"][1:-1]:
+        assert all((ROOT / "trace_runtime" / name).is_dir() for name in names), names

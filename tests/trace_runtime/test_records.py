@@ -31,7 +31,7 @@ from trace_runtime import (
     RecordError,
     open_log,
 )
-from trace_runtime.codec import _mirror, check_layer, encode_layer, layer_message
+from trace_runtime.encoding.codec import _mirror, check_layer, encode_layer, layer_message
 from trace_runtime.records import (
     Alternative,
     ComplianceCheck,
@@ -243,7 +243,7 @@ def test_the_writers_fast_seal_encoding_equals_the_models(
     dropped: int,
     sensors: tuple[int, str] | None,
 ) -> None:
-    from trace_runtime.codec import encode_seal, encode_seal_fields
+    from trace_runtime.encoding.codec import encode_seal, encode_seal_fields
     from trace_runtime.records import GENESIS, Seal, SensorCover
 
     cover = None if sensors is None else SensorCover(count=sensors[0], digest=sensors[1])

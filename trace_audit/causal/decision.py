@@ -17,7 +17,7 @@ from typing import Any
 from trace_audit.causal.defaults import layer_with_defaults
 from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
 from trace_audit.jsonout import OMIT_EMPTY
-from trace_runtime.cycles import Cycle
+from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.flags import split_flags
 from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF, TOPIC_EXECUTION, TOPIC_PERCEPTION
 

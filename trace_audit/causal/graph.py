@@ -19,7 +19,7 @@ from trace_audit.causal.decision import Decision, TreeView, format_value, read_d
 from trace_audit.causal.defaults import layer_with_defaults
 from trace_audit.causal.lenient import as_mapping, as_str, mappings
 from trace_audit.chains import DecisionChains, FactorChain, Link
-from trace_runtime.cycles import Cycle
+from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.records import TOPIC_BELIEF, TOPIC_PERCEPTION
 
 if TYPE_CHECKING:  # networkx is imported by the two functions that return its graphs

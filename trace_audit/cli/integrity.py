@@ -1,7 +1,7 @@
 """trace-audit commands for integrity: ``verify`` a log, ``keygen`` a checkpoint signing key.
 
 Each parses its arguments, calls one library function (``trace_audit.verify.verify_log``,
-``trace_runtime.keys.generate_keypair``) and renders the typed result: rich on a
+``trace_runtime.tlog.keys.generate_keypair``) and renders the typed result: rich on a
 terminal, plain text with ``--plain`` or in a pipe, JSON with ``--json``.
 """
 
@@ -31,7 +31,7 @@ if TYPE_CHECKING:  # the library is imported inside each command: start-up stays
     from trace_audit.log_time import LogClock
     from trace_audit.verify import Finding, RobotSummary, SegmentSummary, VerifyReport
     from trace_audit.witness.compare import WitnessReport
-    from trace_runtime.keys import KeyPair
+    from trace_runtime.tlog.keys import KeyPair
 
 _VERIFY_HELP = """Verify that a log is what the robot wrote: all of it, unaltered, in order.
 
@@ -131,7 +131,7 @@ def verify_command(
     plain: PlainOption = False,
 ) -> None:
     from trace_audit.verify import verify_log
-    from trace_runtime.keys import load_public_key
+    from trace_runtime.tlog.keys import load_public_key
 
     setup_logging()
 
@@ -180,8 +180,8 @@ def _verify_with_witness(
     from trace_audit.jsonout import to_jsonable
     from trace_audit.verify import add_witness, witness_check
     from trace_runtime.errors import UsageError
-    from trace_runtime.keys import load_public_key
-    from trace_runtime.signed_note import NoteError, parse_verifier_key
+    from trace_runtime.tlog.keys import load_public_key
+    from trace_runtime.tlog.signed_note import NoteError, parse_verifier_key
 
     def run() -> WitnessReport:
         try:
@@ -388,7 +388,7 @@ def keygen_command(
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
-    from trace_runtime.keys import generate_keypair
+    from trace_runtime.tlog.keys import generate_keypair
 
     pair = guarded(lambda: generate_keypair(out, name=name, overwrite=force))
     emit(pair, keygen_doc, json_out=json_out, plain=plain)

@@ -262,7 +262,7 @@ def _window_ns(
     if index is not None or not (point.relative or point.wall):
         return point.ns  # with --index, index_metrics refuses any window (its own rule)
     from trace_audit.selection import Selection, each_robot
-    from trace_runtime.logset import open_logs
+    from trace_runtime.reading.logset import open_logs
 
     log = Selection(tuple(robots or ())).of(open_logs(logs or []))
     if point.relative and len(log.robots) > 1:

@@ -85,7 +85,7 @@ def report_command(  # noqa: PLR0917 - typer maps each parameter to an option
     plain: PlainOption = False,
 ) -> None:
     from trace_audit.report import build_report, parse_window, write_report
-    from trace_runtime.keys import load_public_key
+    from trace_runtime.tlog.keys import load_public_key
 
     def run() -> tuple[IncidentReport, Path]:
         public = load_public_key(key) if key is not None else None

@@ -176,9 +176,9 @@ def compact_command(
     plain: PlainOption = False,
 ) -> None:
     def run() -> CompactionReport:
-        from trace_runtime.keys import load_public_key
         from trace_runtime.tier_formats.warm import INFORMATIONAL_PREFIXES
         from trace_runtime.tiers import ColdOptions, WarmPolicy, compact, parse_duration
+        from trace_runtime.tlog.keys import load_public_key
 
         public = load_public_key(key) if key is not None else None
         context_ns = parse_duration(context)

@@ -20,7 +20,7 @@ from mcap.records import Message
 
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, SensorWindow
 from trace_audit.doctor.rules import SegmentDoctor
-from trace_runtime.cycles import RawMessage
+from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.errors import RecordError
 from trace_runtime.records import (
     LAYER_TOPICS,

@@ -35,15 +35,15 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 
 from trace_audit.doctor.content import CycleCheck
 from trace_audit.doctor.rules import SegmentDoctor
-from trace_runtime.cycles import RawMessage
-from trace_runtime.errors import LogLimitError, LogReadError, TraceError
-from trace_runtime.mcap_records import (
+from trace_runtime.encoding.cycles import RawMessage
+from trace_runtime.encoding.mcap_records import (
     OP_CHANNEL,
     OP_CHUNK_INDEX,
     OP_METADATA_INDEX,
     OP_SCHEMA,
     OP_STATISTICS,
 )
+from trace_runtime.errors import LogLimitError, LogReadError, TraceError
 from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import MESSAGE_MODELS, PROFILE
 from trace_runtime.schemas import schema_name

@@ -44,8 +44,8 @@ from trace_audit.fleet.rows import ROW_TABLES, SegmentRows, day_of, partition_of
 from trace_audit.fleet.tables import INDEX_VERSION, parquet_options
 from trace_audit.metrics import MetricsConfig, score_segment
 from trace_runtime.errors import LogReadError, UsageError
-from trace_runtime.logset import Log, open_logs, preferred_copies
-from trace_runtime.reader import Segment, open_segment
+from trace_runtime.reading.logset import Log, open_logs, preferred_copies
+from trace_runtime.reading.reader import Segment, open_segment
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.tiers.catalog import file_digest
 

@@ -27,7 +27,7 @@ from trace_audit.log_time import hour_of
 from trace_audit.metrics import NO_SCENARIO, ScoredDecision, scenario_of
 from trace_audit.metrics.sums import failed_check_rules
 from trace_runtime.clock import is_wall_clock
-from trace_runtime.reader import Segment
+from trace_runtime.reading.reader import Segment
 
 if TYPE_CHECKING:
     import pyarrow as pa

@@ -20,7 +20,7 @@ Definitions (docs/metrics.md is the long form; every number here comes from the 
   least one), and its rationale is complete: not truncated, factors present, and
   counterfactuals present or ``counterfactuals_none_applicable``. A sealed cycle without an
   action is not reconstructable.
-- **Integrity(d)** = 1 when the one seal check (``trace_runtime.seal_check.verify_cycle``)
+- **Integrity(d)** = 1 when the one seal check (``trace_runtime.encoding.seal_check.verify_cycle``)
   passes: sealed, every layer payload it holds has the digest its seal names, every layer
   the seal names is present, evidenced readings match their refs, and the seal's ``prev``
   is the digest of the robot's previous seal (the segment's ``prev_seal`` for the first).

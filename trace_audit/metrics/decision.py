@@ -12,8 +12,8 @@ from typing import Any
 
 from trace_audit.chains import DecisionChains
 from trace_audit.metrics.config import TCSWeights
+from trace_runtime.encoding.seal_check import SealStatus
 from trace_runtime.flags import split_flags
-from trace_runtime.seal_check import SealStatus
 
 __all__ = [
     "NO_SCENARIO",

@@ -23,8 +23,8 @@ from trace_audit.metrics.scan import score_robot, score_segment
 from trace_audit.metrics.sums import ScanResult
 from trace_audit.selection import Selection, each_robot
 from trace_runtime.errors import LogReadError, UsageError
-from trace_runtime.logset import Log, open_logs
-from trace_runtime.reader import Segment
+from trace_runtime.reading.logset import Log, open_logs
+from trace_runtime.reading.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
 
 __all__ = ["ProgressCallback", "compute_metrics"]

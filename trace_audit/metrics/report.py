@@ -27,7 +27,7 @@ from trace_audit.metrics.results import (
 from trace_audit.metrics.sums import CheckTally, GroupSums, ScanResult
 from trace_runtime.costs import TIMING_METADATA, CostHistogram
 from trace_runtime.errors import LogReadError
-from trace_runtime.logset import Log
+from trace_runtime.reading.logset import Log
 
 __all__ = ["build_report", "report_from_sums"]
 

@@ -40,15 +40,16 @@ from trace_audit.metrics.sums import (
 from trace_runtime.chain import digest
 from trace_runtime.clock import clock_restarted, is_wall_clock
 from trace_runtime.costs import TIMING_METADATA, CostHistogram
-from trace_runtime.cycles import Cycle
-from trace_runtime.gaps import Gap, continuity, find_gap
-from trace_runtime.partial import (
+from trace_runtime.encoding.cycles import Cycle
+from trace_runtime.encoding.partial import (
     METRICS_ACTION,
     METRICS_BELIEF,
     METRICS_PERCEPTION,
     read_layer,
 )
-from trace_runtime.reader import Segment, open_segment
+from trace_runtime.encoding.seal_check import verify_cycle
+from trace_runtime.gaps import Gap, continuity, find_gap
+from trace_runtime.reading.reader import Segment, open_segment
 from trace_runtime.records import (
     TOPIC_ACTION,
     TOPIC_BELIEF,
@@ -56,7 +57,6 @@ from trace_runtime.records import (
     TOPIC_PERCEPTION,
     TOPIC_SEAL,
 )
-from trace_runtime.seal_check import verify_cycle
 
 __all__ = ["score_robot", "score_segment"]
 
@@ -163,7 +163,7 @@ class _Scanner:
         window = self.window
         window.push(cycle.sensors)
         # Each layer is read once: ET, DR and the seal check's evidence step share it. Without
-        # a sink only the fields they read are decoded (trace_runtime.partial); a sink (the
+        # a sink only the fields they read are decoded (trace_runtime.encoding.partial); a sink (the
         # fleet index) is handed whole layers.
         if self.sink is None:
             action = read_layer(cycle, METRICS_ACTION)

@@ -15,9 +15,9 @@ from typing import Any, NamedTuple
 from trace_audit.chains import DecisionScore
 from trace_audit.metrics.results import DecisionFailure
 from trace_runtime.costs import CostHistogram
-from trace_runtime.cycles import Cycle
+from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.gaps import Gap
-from trace_runtime.reader import Segment
+from trace_runtime.reading.reader import Segment
 
 __all__ = [
     "HAS_CHANNELS",

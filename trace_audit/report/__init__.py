@@ -34,7 +34,7 @@ from trace_runtime.errors import UsageError
 
 if TYPE_CHECKING:
     from trace_audit.rules import Rule
-from trace_runtime.keys import PublicKey
+from trace_runtime.tlog.keys import PublicKey
 
 __all__ = [
     "DEFAULT_WINDOW_S",

@@ -38,13 +38,13 @@ from trace_audit.log_time import TimeArg
 from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
 from trace_audit.rules import RobotRules, Rule, check_rules
 from trace_audit.timeline import Timeline, timeline
-from trace_runtime.cycles import Cycle
+from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import UsageError
-from trace_runtime.keys import PublicKey
-from trace_runtime.logset import Log
-from trace_runtime.reader import RECOVERED_WARNING, Segment
+from trace_runtime.reading.logset import Log
+from trace_runtime.reading.reader import RECOVERED_WARNING, Segment
 from trace_runtime.records import TOPIC_BELIEF, TOPIC_PERCEPTION
 from trace_runtime.session import SessionInfo
+from trace_runtime.tlog.keys import PublicKey
 from trace_runtime.verification import VerifyReport, verify
 
 __all__ = [

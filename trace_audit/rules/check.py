@@ -25,7 +25,7 @@ from trace_audit.rules.signals import read_signals
 from trace_audit.selection import Selection, per_robot
 from trace_audit.timeline import WindowOutsideLogError
 from trace_runtime.errors import TimeOutOfRangeError
-from trace_runtime.logset import Log
+from trace_runtime.reading.logset import Log
 
 __all__ = ["check_rules"]
 

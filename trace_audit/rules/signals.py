@@ -28,15 +28,15 @@ from typing import Any
 
 from trace_audit.causal.distances import entity_distances
 from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
-from trace_runtime.cycles import Cycle
-from trace_runtime.flags import split_flags
-from trace_runtime.partial import (
+from trace_runtime.encoding.cycles import Cycle
+from trace_runtime.encoding.partial import (
     RULES_ACTION,
     RULES_BELIEF,
     RULES_EXECUTION,
     RULES_PERCEPTION,
     read_layer,
 )
+from trace_runtime.flags import split_flags
 
 __all__ = [
     "FAMILIES",
@@ -81,7 +81,7 @@ def read_signals(cycle: Cycle, names: Iterable[str]) -> tuple[str | None, dict[s
     named signal; a signal the cycle does not log is left out.
 
     Read straight from the layers' bytes, only the fields the signals read
-    (``trace_runtime.partial``'s rules shapes, the full JSON where a shape declines), as
+    (``trace_runtime.encoding.partial``'s rules shapes, the full JSON where a shape declines), as
     leniently as the decision view reads them (``trace_audit.causal.lenient``: a value of
     the wrong type is absent); no schema default changes a signal, so none is filled in.
     ``tests/trace_audit/rules`` pins every family to the values of the ``Decision`` view."""

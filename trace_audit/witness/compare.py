@@ -33,15 +33,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from trace_runtime.boundary import read_side_file
-from trace_runtime.chain_tree import ChainTreeError, SealLeaf, robot_seal_leaves
 from trace_runtime.clock import iso_utc
 from trace_runtime.errors import LogReadError
 from trace_runtime.gaps import CycleRange
-from trace_runtime.keys import PublicKey
-from trace_runtime.logger_config import default_origin
-from trace_runtime.logset import Log
-from trace_runtime.merkle import CompactRange
-from trace_runtime.signed_note import (
+from trace_runtime.logger.config import default_origin
+from trace_runtime.reading.chain_tree import ChainTreeError, SealLeaf, robot_seal_leaves
+from trace_runtime.reading.logset import Log
+from trace_runtime.tlog.cosignature_store import read_cosigned
+from trace_runtime.tlog.keys import PublicKey
+from trace_runtime.tlog.merkle import CompactRange
+from trace_runtime.tlog.signed_note import (
     MAX_NOTE_BYTES,
     NoteError,
     NoteVerifier,
@@ -49,7 +50,6 @@ from trace_runtime.signed_note import (
     parse_checkpoint,
 )
 from trace_runtime.verification import Finding, FindingKind
-from trace_runtime.witnessed import read_cosigned
 
 __all__ = [
     "WitnessBound",

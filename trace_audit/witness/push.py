@@ -5,7 +5,7 @@ Each robot's seals are read once (``chain_tree.robot_seal_leaves``); each 1.2 ch
 with a note, in tree order, is sent with the consistency proof from the witness's size. A
 409 tells the witness's size: the same checkpoint is sent again with a proof from there
 (or skipped when the witness already holds a larger tree). Each cosignature returned is
-stored in the root's ``witness/<robot>.jsonl`` (``trace_runtime.witnessed``).
+stored in the root's ``witness/<robot>.jsonl`` (``trace_runtime.tlog.cosignature_store``).
 """
 
 from __future__ import annotations
@@ -15,13 +15,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from trace_audit.witness.tree import LevelTree
-from trace_runtime.chain_tree import robot_leaves
-from trace_runtime.checkpoints import decode_checkpoint, iter_checkpoints
 from trace_runtime.errors import RecordError
-from trace_runtime.logset import Log, open_log
+from trace_runtime.reading.chain_tree import robot_leaves
+from trace_runtime.reading.logset import Log, open_log
 from trace_runtime.records import Checkpoint
-from trace_runtime.witness_protocol import submit
-from trace_runtime.witnessed import append_cosigned
+from trace_runtime.tlog.checkpoints import decode_checkpoint, iter_checkpoints
+from trace_runtime.tlog.cosignature_store import append_cosigned
+from trace_runtime.tlog.witness_client import submit
 
 __all__ = ["PushReport", "RobotPush", "push_root", "robot_checkpoints"]
 

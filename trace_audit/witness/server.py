@@ -31,9 +31,9 @@ from types import FrameType
 
 from trace_audit.witness.state import Latest, WitnessState
 from trace_runtime.errors import UsageError
-from trace_runtime.keys import load_signer
-from trace_runtime.merkle import EMPTY_ROOT, verify_consistency
-from trace_runtime.signed_note import (
+from trace_runtime.tlog.keys import load_signer
+from trace_runtime.tlog.merkle import EMPTY_ROOT, verify_consistency
+from trace_runtime.tlog.signed_note import (
     COSIGNATURE,
     ED25519,
     NoteError,
@@ -45,7 +45,7 @@ from trace_runtime.signed_note import (
     parse_checkpoint,
     parse_verifier_key,
 )
-from trace_runtime.witness_protocol import (
+from trace_runtime.tlog.witness_client import (
     CONTENT_TYPE_SIZE,
     MAX_BODY_BYTES,
     WitnessProtocolError,

@@ -1,6 +1,6 @@
 """A robot's whole tree held in memory, so many proofs over one log stay cheap.
 
-``trace_runtime.merkle``'s proofs hash every leaf of the subtrees they name (O(n) each):
+``trace_runtime.tlog.merkle``'s proofs hash every leaf of the subtrees they name (O(n) each):
 right for one proof, but ``witness push`` of a day's log (864,000 leaves, 8,640
 checkpoints) would hash billions of times. ``LevelTree`` hashes each complete aligned
 subtree once (n - 1 hashes in all); any RFC 6962 subtree root is then O(log n) of them,
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from trace_runtime.merkle import (
+from trace_runtime.tlog.merkle import (
     EMPTY_ROOT,
     MerkleError,
     consistency_path,

@@ -24,7 +24,7 @@ from typing import Any
 
 import orjson
 
-from trace_runtime.cycles import Cycle, RawMessage
+from trace_runtime.encoding.cycles import Cycle, RawMessage
 from trace_runtime.flags import SCENARIO_FLAG
 from trace_runtime.records import (
     LAYER_TOPICS,

@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import BinaryIO
 
 from trace_runtime.boundary import create_exclusive, folder_lock
+from trace_runtime.logger.segment_writer import LIBRARY
 from trace_runtime.records import PROFILE
 from trace_runtime.segment_names import parse_segment_name
-from trace_runtime.segment_writer import LIBRARY
 
 PARTIAL_SUFFIX = ".partial"
 LOCK_NAME = ".compact.lock"

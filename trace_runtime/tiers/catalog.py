@@ -33,8 +33,8 @@ from trace_runtime.boundary import (
 )
 from trace_runtime.chain import digest
 from trace_runtime.errors import LogReadError
-from trace_runtime.logset import find_segment_files
-from trace_runtime.reader import Segment
+from trace_runtime.reading.logset import find_segment_files
+from trace_runtime.reading.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.session import TIER_METADATA, TIERS
 from trace_runtime.tier_formats.cold import INDEX_TOPIC

@@ -22,7 +22,7 @@ verify`` runs (``trace_runtime.verification``: seals, links, checkpoints, and si
 ``key`` is given) finds nothing in them; anything else is held as evidence. Each deletion is
 recorded in ``retention.jsonl`` in the root first.
 
-Segment files are found and opened through ``trace_runtime.logset``, like every reader.
+Segment files are found and opened through ``trace_runtime.reading.logset``, like every reader.
 """
 
 from __future__ import annotations
@@ -36,8 +36,7 @@ from pathlib import Path
 
 from trace_runtime.boundary import regular_file, tier_folder
 from trace_runtime.errors import LogReadError, UsageError
-from trace_runtime.keys import PublicKey
-from trace_runtime.reader import Segment
+from trace_runtime.reading.reader import Segment
 from trace_runtime.session import TIERS
 from trace_runtime.tier_formats.warm import WarmPolicy
 from trace_runtime.tiers._files import LOCK_NAME, PartialOpener, open_partial, root_lock
@@ -63,6 +62,7 @@ from trace_runtime.tiers.report import (
 )
 from trace_runtime.tiers.retention import RETENTION_LOG, apply_retention
 from trace_runtime.tiers.workers import compact_in_workers, picklable
+from trace_runtime.tlog.keys import PublicKey
 
 __all__ = ["DEFAULT_OLDER_THAN_NS", "DEFAULT_RETENTION_NS", "DEFAULT_SOURCES", "compact"]
 

@@ -8,15 +8,15 @@ from dataclasses import replace
 from itertools import zip_longest
 from pathlib import Path
 
-from trace_runtime.cycles import RawMessage
+from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.errors import VerificationError
-from trace_runtime.keys import PublicKey
-from trace_runtime.logset import Log
-from trace_runtime.reader import Segment
+from trace_runtime.reading.logset import Log
+from trace_runtime.reading.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.session import TIER_METADATA
 from trace_runtime.tier_formats.cold import iter_decoded
 from trace_runtime.tier_formats.warm import WarmPolicy, warm_cycles
+from trace_runtime.tlog.keys import PublicKey
 from trace_runtime.verification import verify
 
 __all__ = ["chain_problems", "verify_replacement"]

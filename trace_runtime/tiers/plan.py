@@ -10,8 +10,8 @@ from typing import Literal
 
 import orjson
 
-from trace_runtime.logset import FileProblem, open_segments
-from trace_runtime.reader import Segment
+from trace_runtime.reading.logset import FileProblem, open_segments
+from trace_runtime.reading.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.tier_formats.cold import INDEX_TOPIC
 from trace_runtime.tiers.catalog import segment_files

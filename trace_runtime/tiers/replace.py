@@ -11,7 +11,7 @@ from pathlib import Path
 
 from trace_runtime.boundary import fsync_dir
 from trace_runtime.errors import StorageError, TraceError
-from trace_runtime.reader import Segment
+from trace_runtime.reading.reader import Segment
 from trace_runtime.tier_formats.warm import WarmPolicy
 from trace_runtime.tiers._files import PartialOpener, open_partial, partial_path
 from trace_runtime.tiers.catalog import refresh_catalog

@@ -16,11 +16,11 @@ import orjson
 
 from trace_runtime.boundary import append_line, remove_own_file
 from trace_runtime.errors import TraceError
-from trace_runtime.keys import PublicKey
-from trace_runtime.logset import Log, open_segments
-from trace_runtime.reader import Segment
+from trace_runtime.reading.logset import Log, open_segments
+from trace_runtime.reading.reader import Segment
 from trace_runtime.tiers.catalog import file_digest, segment_files
 from trace_runtime.tiers.report import RetentionResult, rel_path
+from trace_runtime.tlog.keys import PublicKey
 from trace_runtime.verification import SegmentSummary, VerifyReport, verify
 
 RETENTION_LOG = "retention.jsonl"

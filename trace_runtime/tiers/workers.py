@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from trace_runtime.errors import LogReadError
-from trace_runtime.reader import Segment
+from trace_runtime.reading.reader import Segment
 from trace_runtime.tier_formats.warm import WarmPolicy
 from trace_runtime.tiers._files import PartialOpener
 from trace_runtime.tiers.plan import segment_result

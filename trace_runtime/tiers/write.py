@@ -19,11 +19,11 @@ from typing import Any, BinaryIO, cast
 import orjson
 
 from trace_runtime.costs import TIMING_METADATA
-from trace_runtime.cycles import RawMessage
+from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.errors import LogReadError, VerificationError
-from trace_runtime.reader import Segment
+from trace_runtime.logger.segment_writer import OutMessage, SegmentWriteError, SegmentWriter
+from trace_runtime.reading.reader import Segment
 from trace_runtime.records import MESSAGE_MODELS, TOPIC_SEAL
-from trace_runtime.segment_writer import OutMessage, SegmentWriteError, SegmentWriter
 from trace_runtime.session import TIER_METADATA, SessionInfo
 from trace_runtime.tier_formats.cold import (
     BLOCK_SCHEMA,

@@ -15,14 +15,14 @@ from __future__ import annotations
 import bisect
 from dataclasses import dataclass, field
 
-from trace_runtime.chain_tree import checkpoint_range, has_tree
-from trace_runtime.checkpoints import CheckpointState, NoteState, check_checkpoint, check_note
 from trace_runtime.gaps import CycleRange
-from trace_runtime.keys import PublicKey
-from trace_runtime.merkle import CompactRange
-from trace_runtime.reader import Segment
+from trace_runtime.reading.chain_tree import checkpoint_range, has_tree
+from trace_runtime.reading.reader import Segment
 from trace_runtime.records import Checkpoint
 from trace_runtime.session import TIER_METADATA
+from trace_runtime.tlog.checkpoints import CheckpointState, NoteState, check_checkpoint, check_note
+from trace_runtime.tlog.keys import PublicKey
+from trace_runtime.tlog.merkle import CompactRange
 from trace_runtime.verification.report import FindingKind
 from trace_runtime.verification.scan import Anchor, SealScan
 from trace_runtime.verification.sink import SegmentReporter

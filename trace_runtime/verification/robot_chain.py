@@ -18,16 +18,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trace_runtime.clock import clock_restarted
-from trace_runtime.cycles import Cycle
+from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import LogReadError
 from trace_runtime.gaps import CycleRange
-from trace_runtime.keys import PublicKey
-from trace_runtime.logset import FileProblem, Log, copy_rank, cut_short_copy
-from trace_runtime.merkle import CompactRange, leaf_hash
-from trace_runtime.reader import Segment
-from trace_runtime.recordings import Recordings
+from trace_runtime.reading.logset import FileProblem, Log, copy_rank, cut_short_copy
+from trace_runtime.reading.reader import Segment
+from trace_runtime.reading.recordings import Recordings
 from trace_runtime.records import GENESIS, TOPIC_SEAL
 from trace_runtime.session import EXCERPT_METADATA
+from trace_runtime.tlog.keys import PublicKey
+from trace_runtime.tlog.merkle import CompactRange, leaf_hash
 from trace_runtime.verification.checkpoint_check import CheckpointCheck, TreeCheck
 from trace_runtime.verification.report import (
     Finding,

@@ -9,15 +9,15 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 
-from trace_runtime.checkpoints import decode_checkpoint, iter_checkpoints
-from trace_runtime.cycles import Cycle, RawMessage
+from trace_runtime.encoding.cycles import Cycle, RawMessage
+from trace_runtime.encoding.seal_check import SealStatus, verify_cycle
 from trace_runtime.errors import LogReadError, RecordError
 from trace_runtime.gaps import CycleRange
-from trace_runtime.keys import PublicKey
-from trace_runtime.reader import Segment
-from trace_runtime.recordings import ExternalCheck, Recordings
+from trace_runtime.reading.reader import Segment
+from trace_runtime.reading.recordings import ExternalCheck, Recordings
 from trace_runtime.records import TOPIC_CHECKPOINT, Checkpoint
-from trace_runtime.seal_check import SealStatus, verify_cycle
+from trace_runtime.tlog.checkpoints import decode_checkpoint, iter_checkpoints
+from trace_runtime.tlog.keys import PublicKey
 from trace_runtime.verification.checkpoint_check import CheckpointCheck, ReadCheckpoint
 from trace_runtime.verification.numbering import Numbering
 from trace_runtime.verification.reorder import ChainOrder

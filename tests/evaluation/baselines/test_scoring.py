@@ -10,7 +10,7 @@ import pytest
 
 from evaluation.baselines.scoring import Citation, ExplanationRecord, as_action, score_explanation
 from trace_audit.chains import SensorWindow
-from trace_runtime.cycles import RawMessage
+from trace_runtime.encoding.cycles import RawMessage
 
 T_NS = 1_000_000_000
 SCAN = b'{"ranges":[1.0,2.0]}'

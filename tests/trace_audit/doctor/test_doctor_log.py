@@ -15,7 +15,7 @@ from tests.trace_audit.conftest import rewrite_segment, write_log
 from tests.trace_audit.profile_writer import Faults, write_profile_log
 from trace_audit.cli import app
 from trace_audit.doctor import RULES, DoctorReport, doctor_log
-from trace_runtime.cycles import RawMessage
+from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.errors import LogReadError
 
 V1_FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "v1" / "amr-fixture_000000.mcap"

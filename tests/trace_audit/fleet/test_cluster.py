@@ -19,7 +19,7 @@ import pytest
 from tests.trace_audit.conftest import rewrite_segment
 from tests.trace_audit.fleet.test_index import _fleet
 from trace_audit.fleet.local import LocalDask, free_port
-from trace_runtime.cycles import RawMessage
+from trace_runtime.encoding.cycles import RawMessage
 
 pytest.importorskip("distributed")
 

@@ -10,7 +10,7 @@ from pathlib import Path
 from tests.trace_audit.conftest import write_log
 from trace_audit.fleet.rows import SegmentRows, day_of, partition_of
 from trace_audit.metrics import MetricsConfig, ScoredDecision, score_segment
-from trace_runtime.reader import open_segment
+from trace_runtime.reading.reader import open_segment
 
 
 def _scored(path: Path) -> list[ScoredDecision]:

@@ -1,5 +1,5 @@
-"""The scan's partial decoding (``trace_runtime.partial``) scores every decision as the whole
-layers do: a scan handed to a sink (which parses every layer in full) is the reference.
+"""The scan's partial decoding (``trace_runtime.encoding.partial``) scores every decision as the
+whole layers do: a scan handed to a sink (which parses every layer in full) is the reference.
 A message orjson refuses still fails the scan as before where its seal does not vouch for it."""
 
 from __future__ import annotations

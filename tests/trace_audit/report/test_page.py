@@ -266,7 +266,7 @@ def test_warm_summary_says_what_was_not_retained_and_cold_matches_hot(tmp_path: 
 
 
 def test_a_signed_log_names_the_key_and_counts_valid_signatures(tmp_path: Path) -> None:
-    from trace_runtime.keys import generate_keypair, load_public_key
+    from trace_runtime.tlog.keys import generate_keypair, load_public_key
 
     pair = generate_keypair(tmp_path / "keys")
     logger = AuditLogger(

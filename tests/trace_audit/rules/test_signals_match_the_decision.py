@@ -17,8 +17,8 @@ import orjson
 from sim.runner import RunConfig, run
 from trace_audit.causal import Decision, read_decision
 from trace_audit.rules.signals import read_signals
-from trace_runtime.cycles import Cycle
-from trace_runtime.logset import open_log
+from trace_runtime.encoding.cycles import Cycle
+from trace_runtime.reading.logset import open_log
 from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION
 
 REPO = Path(__file__).resolve().parents[3]

@@ -16,7 +16,7 @@ from sim.faults import FaultRates
 from sim.policy import CONTINUE, PolicyInput, evaluate
 from sim.runner import RunConfig, run
 from trace_audit.rules import CheckResult, Outcome, RuleResult, check_rules, read_rules
-from trace_runtime.logset import open_log
+from trace_runtime.reading.logset import open_log
 
 REPO = Path(__file__).resolve().parents[3]
 RULES = REPO / "docs" / "rules" / "warehouse.toml"

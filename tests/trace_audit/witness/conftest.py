@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from trace_runtime.keys import generate_keypair, load_public_key, load_signer
-from trace_runtime.signed_note import COSIGNATURE, NoteSigner, NoteVerifier, verifier_key
+from trace_runtime.tlog.keys import generate_keypair, load_public_key, load_signer
+from trace_runtime.tlog.signed_note import COSIGNATURE, NoteSigner, NoteVerifier, verifier_key
 
 ROOT = Path(__file__).resolve().parents[3]
 ORIGIN = "trace.local/amr-7"

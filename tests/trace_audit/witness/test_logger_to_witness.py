@@ -15,8 +15,8 @@ from tests.trace_audit.conftest import fill_cycle
 from tests.trace_audit.witness.conftest import Keys, WitnessProcess, run_cli
 from tests.trace_audit.witness.test_tail import PERIOD_NS, T0_NS, verify
 from trace_runtime import AuditLogger, LoggerConfig
-from trace_runtime.keys import load_signer
-from trace_runtime.witnessed import read_cosigned
+from trace_runtime.tlog.cosignature_store import read_cosigned
+from trace_runtime.tlog.keys import load_signer
 
 
 def _log(root: Path, keys: Keys, url: str, cycles: int, *, threaded: bool) -> AuditLogger:

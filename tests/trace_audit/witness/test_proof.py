@@ -16,7 +16,7 @@ import pytest
 from tests.trace_audit.witness.conftest import Keys, WitnessProcess, run_cli
 from tests.trace_audit.witness.test_tail import write
 from trace_audit.proof import BUNDLE_FORMAT, check_bundle
-from trace_runtime.keys import load_public_key
+from trace_runtime.tlog.keys import load_public_key
 
 
 @pytest.fixture

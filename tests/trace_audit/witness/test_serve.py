@@ -10,16 +10,16 @@ import urllib.request
 from collections.abc import Callable
 
 from tests.trace_audit.witness.conftest import ORIGIN, Keys, WitnessProcess, run_cli
-from trace_runtime.keys import Ed25519Signer
-from trace_runtime.merkle import consistency_proof, root_of
-from trace_runtime.signed_note import (
+from trace_runtime.tlog.keys import Ed25519Signer
+from trace_runtime.tlog.merkle import consistency_proof, root_of
+from trace_runtime.tlog.signed_note import (
     NoteSigner,
     format_checkpoint,
     open_note,
     sign_note,
     verify_cosignature,
 )
-from trace_runtime.witness_protocol import Submitted, submit
+from trace_runtime.tlog.witness_client import Submitted, submit
 
 LEAVES = [hashlib.sha256(b"leaf %d" % i).digest() for i in range(40)]
 OTHER = [hashlib.sha256(b"other %d" % i).digest() for i in range(40)]

@@ -17,7 +17,7 @@ import pytest
 from tests.trace_audit.conftest import fill_cycle
 from tests.trace_audit.witness.conftest import Keys, WitnessProcess, run_cli
 from trace_runtime import AuditLogger, LoggerConfig
-from trace_runtime.keys import load_signer
+from trace_runtime.tlog.keys import load_signer
 
 T0_NS = 1_790_000_000_000_000_000
 PERIOD_NS = 100_000_000
@@ -191,8 +191,8 @@ def test_a_robot_deleted_whole_is_found_when_the_fleet_is_expected(
     """Two robots in one root, both witnessed; every segment of one (and its store file) is
     deleted. verify --witness alone cannot know it existed; with the fleet's robots named
     (--expect), the witness's tree of it is a truncated_tail."""
-    from trace_runtime.keys import load_public_key
-    from trace_runtime.signed_note import verifier_key
+    from trace_runtime.tlog.keys import load_public_key
+    from trace_runtime.tlog.signed_note import verifier_key
 
     root = tmp_path / "fleet"
     write(root, keys.robot_key, range(60))

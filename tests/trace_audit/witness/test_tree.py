@@ -1,4 +1,4 @@
-"""``LevelTree`` gives exactly ``trace_runtime.merkle``'s roots and proofs (which are pinned
+"""``LevelTree`` gives exactly ``trace_runtime.tlog.merkle``'s roots and proofs (which are pinned
 to Go's tlog), for every size and index up to 70 leaves and random ones beyond."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import random
 import pytest
 
 from trace_audit.witness.tree import LevelTree
-from trace_runtime.merkle import MerkleError, consistency_proof, inclusion_proof, root_of
+from trace_runtime.tlog.merkle import MerkleError, consistency_proof, inclusion_proof, root_of
 
 LEAVES = [hashlib.sha256(b"%d" % i).digest() for i in range(1100)]
 

@@ -53,7 +53,7 @@ if target == "replace":  # the replacement renamed in, its source not yet remove
 elif target == "fsync":
     kill_after(os, "fsync")
 elif target == "write_batch":
-    from trace_runtime.segment_writer import SegmentWriter
+    from trace_runtime.logger.segment_writer import SegmentWriter
     kill_after(SegmentWriter, "write_batch")
 print("start", flush=True)
 compact({root!r}, "cold", older_than_ns=0, cold=ColdOptions(block_cycles=8),

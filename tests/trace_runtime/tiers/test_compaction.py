@@ -17,7 +17,7 @@ import pytest
 
 from tests.trace_runtime.tier_logs import T0_NS, cycle_key, make_root
 from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
-from trace_runtime.cycles import RawMessage
+from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.testing import synthetic_cycle
 from trace_runtime.tier_formats.cold import BlockEncoder
 from trace_runtime.tiers import (
@@ -273,7 +273,7 @@ elif target == "unlink":
 elif target == "fsync":
     wrap(os, "fsync")
 elif target == "write_batch":
-    from trace_runtime.segment_writer import SegmentWriter
+    from trace_runtime.logger.segment_writer import SegmentWriter
     wrap(SegmentWriter, "write_batch")
 print("start", flush=True)
 compact(

@@ -14,10 +14,10 @@ from mcap.reader import make_reader
 from tests.trace_runtime.verification.test_tamper import write_signed_log
 from trace_runtime import open_segment
 from trace_runtime.chain import digest
-from trace_runtime.checkpoints import decode_checkpoint, iter_checkpoints
 from trace_runtime.errors import LogReadError
-from trace_runtime.keys import Ed25519Signer
 from trace_runtime.records import TOPIC_SEAL
+from trace_runtime.tlog.checkpoints import decode_checkpoint, iter_checkpoints
+from trace_runtime.tlog.keys import Ed25519Signer
 from trace_runtime.verification.segment_check import SegmentCheck
 from trace_runtime.verification.sink import FindingSink
 

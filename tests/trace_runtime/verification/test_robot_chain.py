@@ -1,6 +1,6 @@
-"""``verify`` reads a log through the one owner of multi-file logs (``trace_runtime.logset``):
-the same copy of every segment as every other reader, the same unreadable-file problems; and
-it agrees with PROFILE §6 that checkpoints are a SHOULD.
+"""``verify`` reads a log through the one owner of multi-file logs
+(``trace_runtime.reading.logset``): the same copy of every segment as every other reader, the
+same unreadable-file problems; and it agrees with PROFILE §6 that checkpoints are a SHOULD.
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from tests.trace_runtime.tier_logs import make_root
 from tests.trace_runtime.verification.test_tamper import _write_plain, decode, write_signed_log
 from trace_audit.verify import verify_log
 from trace_runtime import open_log
-from trace_runtime.keys import Ed25519Signer
 from trace_runtime.tiers import compact
+from trace_runtime.tlog.keys import Ed25519Signer
 
 
 def _kinds(items: list) -> list[str]:  # type: ignore[type-arg]

@@ -25,15 +25,9 @@ from tests.trace_audit.conftest import fill_cycle
 from trace_audit.verify import VerifyReport, verify_log
 from trace_runtime import AuditLogger, LoggerConfig, open_segment
 from trace_runtime.chain import digest
-from trace_runtime.checkpoints import (
-    decode_checkpoint,
-    encode_checkpoint,
-    make_checkpoint,
-    signing_bytes,
-)
-from trace_runtime.codec import encode_seal
-from trace_runtime.cycles import RawMessage
-from trace_runtime.keys import Ed25519Signer, Signer
+from trace_runtime.encoding.codec import encode_seal
+from trace_runtime.encoding.cycles import RawMessage
+from trace_runtime.logger.segment_writer import OutMessage, SegmentWriter
 from trace_runtime.records import (
     LAYER_TOPICS,
     TOPIC_ACTION,
@@ -43,8 +37,14 @@ from trace_runtime.records import (
     Seal,
 )
 from trace_runtime.schemas import SENSOR_SCHEMA_NAME, schema_bytes, schema_name
-from trace_runtime.segment_writer import OutMessage, SegmentWriter
 from trace_runtime.session import SESSION_METADATA, SessionInfo
+from trace_runtime.tlog.checkpoints import (
+    decode_checkpoint,
+    encode_checkpoint,
+    make_checkpoint,
+    signing_bytes,
+)
+from trace_runtime.tlog.keys import Ed25519Signer, Signer
 
 T0_NS = 100_000_000_000
 PERIOD_NS = 100_000_000

@@ -25,8 +25,8 @@ from tests.trace_runtime.verification.test_tamper import write_signed_log
 from trace_audit.verify import verify_log
 from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
 from trace_runtime.errors import LogReadError
-from trace_runtime.keys import Ed25519Signer, generate_keypair, load_public_key
 from trace_runtime.testing import simulate_crash
+from trace_runtime.tlog.keys import Ed25519Signer, generate_keypair, load_public_key
 
 REPO = Path(__file__).resolve().parents[3]
 

@@ -15,7 +15,7 @@ from typing import Any
 
 import orjson
 
-from trace_runtime.cycles import Cycle, RawMessage, assemble_hot
+from trace_runtime.encoding.cycles import Cycle, RawMessage, assemble_hot
 from trace_runtime.errors import LogReadError
 from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import TOPIC_SEAL

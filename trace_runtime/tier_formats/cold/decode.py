@@ -19,7 +19,7 @@ from typing import Any
 
 import orjson
 
-from trace_runtime.cycles import RawMessage
+from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.tier_formats.cold.columns import (
     decode_column,
     plan,

@@ -24,7 +24,7 @@ from typing import Any
 import orjson
 import zstandard
 
-from trace_runtime.cycles import RawMessage
+from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.tier_formats.cold.cache import BlockCache
 from trace_runtime.tier_formats.cold.columns import (

@@ -9,7 +9,7 @@ from typing import Any
 
 import orjson
 
-from trace_runtime.cycles import RawMessage
+from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.tier_formats.cold.columns import counters, decode_column, plan
 from trace_runtime.tier_formats.cold.decode import BlockStreams, fitting, hex_of

@@ -23,7 +23,7 @@ import zstandard
 
 from tests.trace_runtime import hostile
 from tests.trace_runtime.tier_logs import make_root
-from trace_runtime.cycles import RawMessage
+from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.read_limits import ReadLimits
 from trace_runtime.tier_formats.cold import (
     BLOCK_TOPIC,

@@ -1,0 +1,112 @@
+"""What an integrator sets and reads on an ``AuditLogger``: ``LoggerConfig`` (how it writes)
+and ``LoggerStats`` (the counters a robot exports to its health monitoring)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import BinaryIO, Literal
+
+from trace_runtime.tlog.keys import Signer
+
+__all__ = ["LoggerConfig", "LoggerStats", "Opener", "default_opener", "default_origin"]
+
+Opener = Callable[[Path], BinaryIO]
+
+
+def default_origin(robot_id: str) -> str:
+    """The checkpoint origin of a robot whose ``LoggerConfig.origin`` is None."""
+    return f"trace.local/{robot_id}"
+
+
+def default_opener(path: Path) -> BinaryIO:
+    """Open a new segment file for writing (``LoggerConfig.opener`` when none is given)."""
+    return open(path, "wb")
+
+
+@dataclass(frozen=True, slots=True)
+class LoggerConfig:
+    """How the logger writes. Defaults suit a 10 Hz robot on a local disk."""
+
+    threaded: bool = True
+    """Write on a background thread (robots). False writes at ``commit()`` (simulators, tests)."""
+    batch_cycles: int = 1
+    """With ``threaded=False``: cycles per chunk. Above 1, a crash can lose that many cycles,
+    and a failed write drops them all; for simulators and log generators, not robots."""
+    queue_cycles: int = 256
+    """Bound of the hand-over queue, in cycles."""
+    when_full: Literal["drop", "block"] = "drop"
+    """Queue full: drop the cycle and count it (default; never stalls the loop) or block."""
+    max_batch_cycles: int = 512
+    """At most this many cycles per chunk when the writer is catching up."""
+    fsync_interval_s: float | None = 1.0
+    """fsync the segment at most this often (None: leave it to the OS)."""
+    max_segment_s: float = 3600.0
+    """Rotate to a new segment after this much log time (log roots only)."""
+    max_segment_bytes: int = 512 * 1024 * 1024
+    """Rotate to a new segment past this size (log roots only)."""
+    compression_level: int = 3
+    opener: Opener | None = None
+    """How segment files are opened; a plug point for custom storage and fault injection."""
+    checkpoint_interval_s: float | None = 10.0
+    """Write a /trace/checkpoint (the chain head) after the first seal at or past each
+    multiple of this much log time from the segment's first cycle, however cycles are
+    batched into chunks; one is always written when a segment closes. None: only then."""
+    checkpoint_key: str | Path | Signer | None = None
+    """Sign checkpoints: an Ed25519 private key file (``trace-audit keygen``) or a ``Signer``.
+    None writes unsigned checkpoints (chain-head anchors only). A ``Signer`` that also has a
+    ``public_key`` (a ``keys.PublicKey``, as ``Ed25519Signer`` has) signs each checkpoint's
+    C2SP note too (profile 1.2); one without gives checkpoints whose tree is unsigned."""
+    origin: str | None = None
+    """The C2SP checkpoint origin naming this robot's log, and the key name its notes are
+    signed under (e.g. ``fleet.example.com/amr-7``; no spaces, no ``+``). None:
+    ``trace.local/<robot_id>``."""
+    witness: str | None = None
+    """A C2SP tlog-witness (``http(s)://host:port``, e.g. ``trace-audit witness serve``):
+    after writing a checkpoint the writer thread submits its note there with a consistency
+    proof from the size the witness last cosigned, and stores the cosigned note beside the
+    log (``<root>/witness/<robot_id>.jsonl``). Failures are counted
+    (``LoggerStats.witness_failures``) and retried with the next checkpoint. Needs a
+    ``checkpoint_key`` (only signed notes are submitted)."""
+    witness_timeout_s: float = 2.0
+    """How long one submission may take; the writer thread waits at most this long."""
+
+
+@dataclass(slots=True)
+class LoggerStats:
+    """Counters a robot can export to its health monitoring."""
+
+    committed: int = 0
+    written: int = 0
+    """Cycles on disk (cycles of a segment later lost with its storage are taken back out)."""
+    dropped_queue_full: int = 0
+    dropped_io: int = 0
+    dropped_aborted: int = 0
+    dropped_storage_lost: int = 0
+    """Cycles written into a segment that was then deleted under the writer."""
+    dropped_undelivered: int = 0
+    """Cycles still queued or being written when ``close()`` gave up waiting (a hung disk)."""
+    segments: list[Path] = field(default_factory=list)
+    bytes_written: int = 0
+    checkpoints: int = 0
+    checkpoint_failures: int = 0
+    witness_cosigned: int = 0
+    """Checkpoints the witness cosigned (stored beside the log)."""
+    witness_failures: int = 0
+    """Submissions that did not end in a stored cosignature: the witness unreachable or
+    refusing, a 409 (it holds another size; the next checkpoint is proved from there), a
+    size the logger cannot prove from, or a store that could not be written."""
+    tree_failures: int = 0
+    """Checkpoints written without their Merkle tree: the tree could not be resumed at start
+    (the chain on disk could not be followed to its last seal) or computed."""
+
+    @property
+    def dropped(self) -> int:
+        return (
+            self.dropped_queue_full
+            + self.dropped_io
+            + self.dropped_aborted
+            + self.dropped_storage_lost
+            + self.dropped_undelivered
+        )
