@@ -24,7 +24,7 @@ from tests.trace_runtime.tlog.test_go_oracle import Ask, ask, b64, unb64  # noqa
 from tests.trace_runtime.verification.test_tamper import decode, write, write_signed_log
 from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
 from trace_runtime.chain import digest
-from trace_runtime.logger.api import chain_writer as chain_writer_module
+from trace_runtime.logger import chain_writer as chain_writer_module
 from trace_runtime.reading.chain_tree import checkpoint_range, robot_leaves, tree_through
 from trace_runtime.records import TOPIC_CHECKPOINT, TOPIC_SEAL, Checkpoint
 from trace_runtime.tlog.checkpoints import (
@@ -403,7 +403,7 @@ def test_a_tree_that_cannot_be_resumed_leaves_checkpoints_without_one(
 ) -> None:
     """The chain on disk cannot be followed to its last seal: the logger still logs, its
     checkpoints carry no tree, the stats count them, and verify finds nothing to object."""
-    from trace_runtime.logger.api import resume
+    from trace_runtime.logger import resume
 
     signer = Ed25519Signer.generate()
     root = tmp_path / "root"
