@@ -14,8 +14,9 @@ from typing import Any
 import orjson
 import pytest
 
-from trace_runtime import AuditLogger, LoggerConfig, logset
+from trace_runtime import AuditLogger, LoggerConfig
 from trace_runtime.errors import TimeOutOfRangeError
+from trace_runtime.reading import logset
 from trace_runtime.reading.logset import Log, open_log
 from trace_runtime.reading.reader import Segment
 from trace_runtime.tiers import compact, load_catalog, refresh_catalog
