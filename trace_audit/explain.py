@@ -33,9 +33,9 @@ from trace_audit.selection import Selection, robot_at, robot_with_cycle
 from trace_runtime.chain import GENESIS, digest
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.encoding.seal_check import verify_cycle
-from trace_runtime.errors import TimeOutOfRangeError, UsageError
+from trace_runtime.errors import StaleCatalogError, TimeOutOfRangeError, UsageError
 from trace_runtime.gaps import continuity, gap_limit_ns
-from trace_runtime.reading.logset import Log, StaleCatalogError
+from trace_runtime.reading.logset import Log
 from trace_runtime.reading.recordings import Recordings
 from trace_runtime.records import TOPIC_ACTION, TOPIC_PERCEPTION, TOPIC_SEAL
 

@@ -29,7 +29,7 @@ from trace_audit.witness.tree import LevelTree
 from trace_runtime.boundary import read_side_file
 from trace_runtime.chain import sensor_cover, sensor_line
 from trace_runtime.clock import iso_utc
-from trace_runtime.errors import LogReadError, TraceError, UsageError
+from trace_runtime.errors import InputError, LogReadError, NoteError, UsageError
 from trace_runtime.reading.chain_tree import prove_pass
 from trace_runtime.reading.logset import Log, open_log
 from trace_runtime.records import TOPIC_SEAL
@@ -38,7 +38,6 @@ from trace_runtime.tlog.keys import PublicKey
 from trace_runtime.tlog.merkle import leaf_hash, verify_inclusion
 from trace_runtime.tlog.signed_note import (
     COSIGNATURE,
-    NoteError,
     NoteVerifier,
     open_note,
     parse_checkpoint,
@@ -186,7 +185,7 @@ def read_bundle(path: str | Path) -> dict[str, Any]:
     return value
 
 
-class _BadBundleError(TraceError):
+class _BadBundleError(InputError):
     """A bundle not of the documented shape (reported as a failed step, never raised out)."""
 
 

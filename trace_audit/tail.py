@@ -31,10 +31,10 @@ from trace_audit.cycle_fields import command_of, seal_dropped
 from trace_audit.log_time import SECONDS_CLOCK, LogClock
 from trace_audit.selection import Selection
 from trace_runtime.encoding.cycles import Cycle
-from trace_runtime.errors import LogReadError, UsageError
+from trace_runtime.errors import LogReadError, NotHotSegmentError, UsageError
 from trace_runtime.gaps import GapFinder, SealedStamp
 from trace_runtime.live_writers import is_live
-from trace_runtime.reading.growing_file import GrowingSegment, NotHotSegmentError
+from trace_runtime.reading.growing_file import GrowingSegment
 from trace_runtime.reading.logset import open_log, preferred_copies, segment_files_by_robot
 from trace_runtime.reading.reader import RECOVERED_WARNING, Segment
 

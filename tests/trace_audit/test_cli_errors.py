@@ -225,6 +225,7 @@ def test_every_error_the_project_defines_is_a_trace_error(error: type[BaseExcept
 def test_exit_codes_come_from_the_error_type_alone() -> None:
     from trace_audit.cli.app import exit_code_for
     from trace_runtime.errors import (
+        ColdFormatError,
         LogLimitError,
         LogReadError,
         NotTraceLogError,
@@ -232,7 +233,6 @@ def test_exit_codes_come_from_the_error_type_alone() -> None:
         TimeOutOfRangeError,
         UsageError,
     )
-    from trace_runtime.tier_formats.cold import ColdFormatError
 
     assert exit_code_for(UsageError("x")) == 2
     assert exit_code_for(TimeOutOfRangeError(1, 2, 3)) == 2
@@ -244,6 +244,24 @@ def test_exit_codes_come_from_the_error_type_alone() -> None:
         ColdFormatError("bad block"),
     ):
         assert exit_code_for(err) == 3
+
+
+def test_an_error_outside_the_three_branches_is_a_bug_not_unreadable_input() -> None:
+    """A ``TraceError`` that is neither usage, input nor storage has no exit code: ``guarded``
+    lets it surface (a traceback in tests) instead of reporting a damaged file."""
+    from trace_audit.cli.app import exit_code_for, guarded
+    from trace_runtime.errors import StorageError, TraceError
+
+    class _BugError(TraceError):
+        pass
+
+    def broken() -> None:
+        raise _BugError("a bug in the tree code")
+
+    assert exit_code_for(_BugError("x")) is None
+    assert exit_code_for(StorageError("p", "full")) == 4
+    with pytest.raises(_BugError):
+        guarded(broken)
 
 
 @pytest.mark.parametrize("command", ["info", "verify", "metrics", "timeline"])

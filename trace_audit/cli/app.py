@@ -17,7 +17,7 @@ import typer
 
 from trace_audit.cli.output import setup_logging
 from trace_audit.cli.typer_compat import App, Group
-from trace_runtime.errors import StorageError, TimeOutOfRangeError, TraceError, UsageError
+from trace_runtime.errors import InputError, StorageError, TraceError, UsageError
 
 __all__ = [
     "EXIT_CANNOT_WRITE",
@@ -92,17 +92,22 @@ def fail(message: str, code: int) -> NoReturn:
     raise typer.Exit(code)
 
 
-def exit_code_for(err: TraceError) -> int:
+_EXIT_CODES: tuple[tuple[type[TraceError], int], ...] = (
+    (UsageError, EXIT_USAGE),
+    (InputError, EXIT_UNREADABLE),
+    (StorageError, EXIT_CANNOT_WRITE),
+)
+"""The error tree's three branches (trace_runtime/errors.py) and their exit codes."""
+
+
+def exit_code_for(err: TraceError) -> int | None:
     """The documented exit code of an error raised by the library: the one place they are
-    mapped. Every error the library raises on purpose is a ``TraceError`` (third-party
-    errors are wrapped where they arise), so nothing here knows zstd, struct or orjson."""
-    if isinstance(err, TimeOutOfRangeError | UsageError):
-        return EXIT_USAGE
-    if isinstance(err, StorageError):
-        return EXIT_CANNOT_WRITE
-    # LogReadError (and its LogLimitError, PayloadError, NotTraceLogError) and every other
-    # TraceError describe the input: unreadable, not a TRACE log, over a read limit.
-    return EXIT_UNREADABLE
+    mapped. ``None`` for a ``TraceError`` outside the three branches: a bug, which
+    ``guarded`` lets surface instead of calling it unreadable input."""
+    for kind, code in _EXIT_CODES:
+        if isinstance(err, kind):
+            return code
+    return None
 
 
 def guarded(call: Callable[[], T]) -> T:
@@ -114,6 +119,9 @@ def guarded(call: Callable[[], T]) -> T:
     try:
         return call()
     except TraceError as err:
-        fail(str(err), exit_code_for(err))
+        code = exit_code_for(err)
+        if code is None:
+            raise
+        fail(str(err), code)
     except KeyboardInterrupt:
         fail("interrupted", 130)

@@ -179,9 +179,9 @@ def _verify_with_witness(
     its time bounds shown beside the robot's clock (JSON: the report plus ``witness``)."""
     from trace_audit.jsonout import to_jsonable
     from trace_audit.verify import add_witness, witness_check
-    from trace_runtime.errors import UsageError
+    from trace_runtime.errors import NoteError, UsageError
     from trace_runtime.tlog.keys import load_public_key
-    from trace_runtime.tlog.signed_note import NoteError, parse_verifier_key
+    from trace_runtime.tlog.signed_note import parse_verifier_key
 
     def run() -> WitnessReport:
         try:

@@ -137,8 +137,9 @@ def witness_command(
     if action == "vkey":
         if key is None or origin is None:
             fail("witness vkey needs --key PUB and --origin NAME", EXIT_USAGE)
+        from trace_runtime.errors import NoteError
         from trace_runtime.tlog.keys import load_public_key
-        from trace_runtime.tlog.signed_note import COSIGNATURE, ED25519, NoteError, verifier_key
+        from trace_runtime.tlog.signed_note import COSIGNATURE, ED25519, verifier_key
 
         public = guarded(lambda: load_public_key(key))
         try:
@@ -243,8 +244,9 @@ def verify_proof_command(
     plain: PlainOption = False,
 ) -> None:
     from trace_audit.proof import check_bundle, read_bundle
+    from trace_runtime.errors import NoteError
     from trace_runtime.tlog.keys import load_public_key
-    from trace_runtime.tlog.signed_note import NoteError, parse_verifier_key
+    from trace_runtime.tlog.signed_note import parse_verifier_key
 
     setup_logging()
     public = guarded(lambda: load_public_key(key))

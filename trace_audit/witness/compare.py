@@ -34,17 +34,16 @@ from pathlib import Path
 
 from trace_runtime.boundary import read_side_file
 from trace_runtime.clock import iso_utc
-from trace_runtime.errors import LogReadError
+from trace_runtime.errors import ChainTreeError, LogReadError, NoteError
 from trace_runtime.gaps import CycleRange
 from trace_runtime.logger.config import default_origin
-from trace_runtime.reading.chain_tree import ChainTreeError, SealLeaf, robot_seal_leaves
+from trace_runtime.reading.chain_tree import SealLeaf, robot_seal_leaves
 from trace_runtime.reading.logset import Log
 from trace_runtime.tlog.cosignature_store import read_cosigned
 from trace_runtime.tlog.keys import PublicKey
 from trace_runtime.tlog.merkle import CompactRange
 from trace_runtime.tlog.signed_note import (
     MAX_NOTE_BYTES,
-    NoteError,
     NoteVerifier,
     open_note,
     parse_checkpoint,

@@ -30,16 +30,14 @@ from pathlib import Path
 from types import FrameType
 
 from trace_audit.witness.state import Latest, WitnessState
-from trace_runtime.errors import UsageError
+from trace_runtime.errors import NoteError, UnverifiedNoteError, UsageError, WitnessProtocolError
 from trace_runtime.tlog.keys import load_signer
 from trace_runtime.tlog.merkle import EMPTY_ROOT, verify_consistency
 from trace_runtime.tlog.signed_note import (
     COSIGNATURE,
     ED25519,
-    NoteError,
     NoteSigner,
     NoteVerifier,
-    UnverifiedNoteError,
     cosignature_line,
     open_note,
     parse_checkpoint,
@@ -48,7 +46,6 @@ from trace_runtime.tlog.signed_note import (
 from trace_runtime.tlog.witness_client import (
     CONTENT_TYPE_SIZE,
     MAX_BODY_BYTES,
-    WitnessProtocolError,
     parse_add_checkpoint,
 )
 

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from trace_runtime.errors import MerkleError
 from trace_runtime.tlog.merkle import (
     EMPTY_ROOT,
-    MerkleError,
     consistency_path,
     inclusion_path,
     node_hash,

@@ -36,7 +36,7 @@ from trace_runtime.encoding.codec import (
     encode_layer,
     encode_seal_fields,
 )
-from trace_runtime.errors import UsageError
+from trace_runtime.errors import NoteError, SegmentWriteError, UsageError, WitnessProtocolError
 from trace_runtime.logger.config import LoggerConfig, LoggerStats, default_opener, default_origin
 from trace_runtime.logger.cycle_builder import COST_SAMPLE_EVERY
 from trace_runtime.logger.handover import PendingCycle
@@ -44,7 +44,6 @@ from trace_runtime.logger.lock import WriterLock
 from trace_runtime.logger.segment_writer import (
     MessageFields,
     OutMessage,
-    SegmentWriteError,
     SegmentWriter,
 )
 from trace_runtime.records import GENESIS, LAYER_MODELS, TOPIC_CHECKPOINT, TOPIC_SEAL
@@ -54,8 +53,8 @@ from trace_runtime.tlog.checkpoints import encode_checkpoint, make_checkpoint
 from trace_runtime.tlog.cosignature_store import append_cosigned
 from trace_runtime.tlog.keys import PublicKey, Signer
 from trace_runtime.tlog.merkle import EMPTY_ROOT, CompactRange, leaf_hash
-from trace_runtime.tlog.signed_note import NoteError, NoteSigner, format_checkpoint
-from trace_runtime.tlog.witness_client import Submitted, WitnessProtocolError, submit
+from trace_runtime.tlog.signed_note import NoteSigner, format_checkpoint
+from trace_runtime.tlog.witness_client import Submitted, submit
 
 __all__ = ["CLOSE_METADATA", "WITNESS_MAX_LEAVES", "ChainWriter", "WitnessFeed"]
 

@@ -43,7 +43,7 @@ from mcap.records import (
 )
 
 from trace_runtime.encoding.mcap_records import CHUNK_TABLE_ATTACHMENT, MAGIC
-from trace_runtime.errors import TraceError
+from trace_runtime.errors import SegmentWriteError
 from trace_runtime.records import LAYER_TOPICS, PROFILE, TOPIC_SEAL
 from trace_runtime.schemas import SENSOR_SCHEMA_NAME, schema_bytes, schema_name
 from trace_runtime.session import SESSION_METADATA, SessionInfo
@@ -94,23 +94,6 @@ def _message_records(
         elif log_time > end:
             end = log_time
     return records, indexes, start, end
-
-
-class SegmentWriteError(TraceError):
-    """A batch could not be written. ``rolled_back`` says whether the segment is still usable.
-
-    ``kept``: the write failed and could not be rolled back, yet the batch's chunk is in the
-    file whole (its ``written`` bytes), so a reader recovers every cycle of it; the segment
-    is given up all the same.
-    """
-
-    def __init__(
-        self, reason: str, *, rolled_back: bool, kept: bool = False, written: int = 0
-    ) -> None:
-        super().__init__(reason)
-        self.rolled_back = rolled_back
-        self.kept = kept
-        self.written = written
 
 
 class OutMessage(NamedTuple):

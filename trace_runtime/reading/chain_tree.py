@@ -22,14 +22,13 @@ import orjson
 
 from trace_runtime.chain import digest
 from trace_runtime.encoding.cycles import Cycle
-from trace_runtime.errors import LogReadError, RecordError, TraceError
+from trace_runtime.errors import ChainTreeError, MerkleError, RecordError, TraceError
 from trace_runtime.reading.logset import Log, best_copy_first, open_segments, robot_segment_files
 from trace_runtime.reading.reader import Segment
 from trace_runtime.records import GENESIS, TOPIC_CHECKPOINT, TOPIC_SEAL, Checkpoint
 from trace_runtime.tlog.checkpoints import decode_checkpoint
 from trace_runtime.tlog.merkle import (
     CompactRange,
-    MerkleError,
     consistency_path,
     leaf_hash,
     node_hash,
@@ -37,7 +36,6 @@ from trace_runtime.tlog.merkle import (
 )
 
 __all__ = [
-    "ChainTreeError",
     "ProvedCycle",
     "SealLeaf",
     "checkpoint_range",
@@ -50,11 +48,6 @@ __all__ = [
     "tree_fields",
     "tree_through",
 ]
-
-
-class ChainTreeError(LogReadError):
-    """A robot's tree cannot be read from this log: its chain does not start at its genesis
-    here (an excerpt, or earlier segments removed), or a segment of it is missing."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -43,7 +43,7 @@ from trace_runtime.encoding.mcap_records import (
     damage_reason,
     read_str,
 )
-from trace_runtime.errors import LogLimitError, LogReadError, NotTraceLogError
+from trace_runtime.errors import LogLimitError, LogReadError, NotHotSegmentError, NotTraceLogError
 from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import PROFILE, TOPIC_SEAL
 from trace_runtime.session import SESSION_METADATA, SessionInfo
@@ -55,10 +55,6 @@ log = logging.getLogger("trace_runtime")
 _READ_BLOCK = 1 << 20
 """How much is read from the file at a time: a poll reads what was appended in pieces of
 this size (plus at most one record), never the whole file at once."""
-
-
-class NotHotSegmentError(LogReadError):
-    """The file is a warm or cold segment: written whole and finished, read by ``Segment``."""
 
 
 class GrowingSegment:

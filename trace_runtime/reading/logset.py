@@ -27,7 +27,13 @@ from trace_runtime.boundary import file_kind, read_side_json, tier_folder
 from trace_runtime.clock import clock_restarted
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.encoding.seal_check import SealStatus, verify_cycle
-from trace_runtime.errors import LogReadError, NotTraceLogError, TimeOutOfRangeError, UsageError
+from trace_runtime.errors import (
+    LogReadError,
+    NotTraceLogError,
+    StaleCatalogError,
+    TimeOutOfRangeError,
+    UsageError,
+)
 from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.reading.reader import Segment
 from trace_runtime.records import TOPIC_SEAL
@@ -215,12 +221,6 @@ def segment_files_by_robot(root: Path) -> dict[str, dict[int, list[Path]]]:
         if parsed is not None:
             found.setdefault(parsed[0], {}).setdefault(parsed[1], []).append(path)
     return dict(sorted(found.items()))
-
-
-class StaleCatalogError(LogReadError):
-    """A lazily opened log found a segment that is not what the root's catalog row says (a
-    catalog edited, or copied with other files): the row is ignored, and a query is asked
-    again of the log opened in full."""
 
 
 @dataclass(slots=True)

@@ -24,7 +24,7 @@ from typing import Any
 
 import orjson
 
-from trace_runtime.errors import TraceError
+from trace_runtime.errors import ShapeError
 
 MAX_DEPTH = 32
 MAX_LEAVES = 1 << 16
@@ -39,10 +39,6 @@ SCALAR = 0
 VECTOR = 1
 Descriptor = Any  # dict[str, Descriptor] | list[Descriptor] | SCALAR | VECTOR
 Path = tuple[str | int, ...]
-
-
-class ShapeError(TraceError, ValueError):
-    """A value cannot be given a shape (a bare scalar, too deep, too big) or a shape is bad."""
 
 
 class Shape:

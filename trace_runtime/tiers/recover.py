@@ -10,11 +10,11 @@ from pathlib import Path
 
 from trace_runtime.boundary import fsync_dir
 from trace_runtime.encoding.cycles import RawMessage
-from trace_runtime.errors import LogReadError, VerificationError
+from trace_runtime.errors import ColdFormatError, LogReadError, VerificationError
 from trace_runtime.reading.logset import Log
 from trace_runtime.reading.reader import Segment
 from trace_runtime.session import TIER_METADATA, TIERS
-from trace_runtime.tier_formats.cold import ColdFormatError, iter_decoded
+from trace_runtime.tier_formats.cold import iter_decoded
 from trace_runtime.tiers._files import PARTIAL_SUFFIX, compaction_marker, partial_owner
 from trace_runtime.tiers.catalog import segment_files
 from trace_runtime.tiers.copies import verify_replacement

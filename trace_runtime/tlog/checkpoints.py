@@ -15,15 +15,13 @@ from typing import TYPE_CHECKING, Literal
 
 import orjson
 
-from trace_runtime.errors import RecordError
+from trace_runtime.errors import NoteError, RecordError, UnverifiedNoteError
 from trace_runtime.records import TOPIC_CHECKPOINT, Checkpoint, validate_record
 from trace_runtime.tlog.keys import PublicKey, Signer
 from trace_runtime.tlog.merkle import CompactRange
 from trace_runtime.tlog.signed_note import (
-    NoteError,
     NoteSigner,
     NoteVerifier,
-    UnverifiedNoteError,
     format_checkpoint,
     open_note,
     parse_checkpoint,

@@ -28,14 +28,18 @@ from pathlib import Path
 import orjson
 
 from trace_runtime.boundary import append_line, fsync_dir, read_side_file
-from trace_runtime.errors import StorageError, TraceError, UnsafePathError
-from trace_runtime.tlog.signed_note import NoteError, parse_checkpoint
+from trace_runtime.errors import (
+    NoteError,
+    StorageError,
+    UnsafePathError,
+    WitnessStoreError,
+)
+from trace_runtime.tlog.signed_note import parse_checkpoint
 
 __all__ = [
     "MAX_STORE_BYTES",
     "WITNESS_FOLDER",
     "Cosigned",
-    "WitnessStoreError",
     "append_cosigned",
     "cosigned_note",
     "read_cosigned",
@@ -48,11 +52,6 @@ MAX_STORE_BYTES = 64 << 20
 store is read from its end: the newest lines are the ones kept when it is larger)."""
 _ROBOT_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$")
 _DASH = "\u2014 "
-
-
-class WitnessStoreError(TraceError, ValueError):
-    """A cosigned checkpoint that cannot be stored as given (not a checkpoint note, no
-    cosignature line, a robot id that is not a file name)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -17,13 +17,12 @@ from __future__ import annotations
 import hashlib
 from collections.abc import Callable, Iterable, Sequence
 
-from trace_runtime.errors import TraceError
+from trace_runtime.errors import MerkleError
 
 __all__ = [
     "EMPTY_ROOT",
     "HASH_SIZE",
     "CompactRange",
-    "MerkleError",
     "consistency_path",
     "consistency_proof",
     "inclusion_path",
@@ -40,11 +39,6 @@ _sha256 = hashlib.sha256
 EMPTY_ROOT = _sha256(b"").digest()
 _LEAF = b"\x00"
 _NODE = b"\x01"
-
-
-class MerkleError(TraceError, ValueError):
-    """A Merkle tree was asked for something it does not have (a saved state that cannot be
-    a compact range, a leaf index beyond the tree)."""
 
 
 def leaf_hash(data: bytes) -> bytes:

@@ -24,7 +24,7 @@ import string
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from trace_runtime.errors import TraceError
+from trace_runtime.errors import NoteError, UnverifiedNoteError
 from trace_runtime.tlog.keys import PublicKey, Signer
 
 __all__ = [
@@ -33,12 +33,10 @@ __all__ = [
     "MAX_NOTE_BYTES",
     "MAX_SIGNATURES",
     "Checkpoint",
-    "NoteError",
     "NoteSignature",
     "NoteSigner",
     "NoteVerifier",
     "OpenedNote",
-    "UnverifiedNoteError",
     "cosignature_line",
     "cosignature_message",
     "format_checkpoint",
@@ -66,19 +64,6 @@ _MAX_SIZE = (1 << 63) - 1
 _HEX = frozenset(string.hexdigits)
 _DIGITS = frozenset(string.digits)
 _SIG_LENGTH = {ED25519: 64, COSIGNATURE: 8 + 64}
-
-
-class NoteError(TraceError, ValueError):
-    """A signed note, checkpoint, key or signature that does not follow its specification,
-    or whose signature by a known key does not verify."""
-
-
-class UnverifiedNoteError(NoteError):
-    """A well-formed note that no known key signed (the spec says: reject it)."""
-
-    def __init__(self, message: str, unverified: tuple[NoteSignature, ...]) -> None:
-        super().__init__(message)
-        self.unverified = unverified
 
 
 def _check_name(name: object) -> str:

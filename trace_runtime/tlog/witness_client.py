@@ -23,7 +23,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
-from trace_runtime.errors import TraceError
+from trace_runtime.errors import WitnessProtocolError
 from trace_runtime.tlog.merkle import HASH_SIZE
 from trace_runtime.tlog.signed_note import MAX_NOTE_BYTES
 
@@ -33,7 +33,6 @@ __all__ = [
     "MAX_PROOF_HASHES",
     "AddCheckpoint",
     "Submitted",
-    "WitnessProtocolError",
     "add_checkpoint_body",
     "parse_add_checkpoint",
     "submit",
@@ -47,10 +46,6 @@ _MAX_RESPONSE_BYTES = 64 << 10
 _MAX_SIZE = (1 << 63) - 1
 CONTENT_TYPE_SIZE = "text/x.tlog.size"
 """The content type of a 409 answer: the witness's size for the origin, a decimal line."""
-
-
-class WitnessProtocolError(TraceError, ValueError):
-    """An add-checkpoint request (or a witness's answer) that is not what the protocol says."""
 
 
 @dataclass(frozen=True, slots=True)

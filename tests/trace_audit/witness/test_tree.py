@@ -9,7 +9,8 @@ import random
 import pytest
 
 from trace_audit.witness.tree import LevelTree
-from trace_runtime.tlog.merkle import MerkleError, consistency_proof, inclusion_proof, root_of
+from trace_runtime.errors import MerkleError
+from trace_runtime.tlog.merkle import consistency_proof, inclusion_proof, root_of
 
 LEAVES = [hashlib.sha256(b"%d" % i).digest() for i in range(1100)]
 

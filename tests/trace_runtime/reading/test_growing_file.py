@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from trace_runtime import AuditLogger, LoggerConfig
-from trace_runtime.errors import NotTraceLogError
-from trace_runtime.reading.growing_file import GrowingSegment, NotHotSegmentError
+from trace_runtime.errors import NotHotSegmentError, NotTraceLogError
+from trace_runtime.reading.growing_file import GrowingSegment
 from trace_runtime.reading.reader import Segment
 from trace_runtime.testing import synthetic_cycle
 

@@ -9,9 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from trace_runtime.errors import UnsafePathError
+from trace_runtime.errors import UnsafePathError, WitnessStoreError
 from trace_runtime.tlog.cosignature_store import (
-    WitnessStoreError,
     append_cosigned,
     read_cosigned,
     store_path,

@@ -21,6 +21,7 @@ from typing import Any
 import pytest
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
+from trace_runtime.errors import NoteError
 from trace_runtime.tlog.keys import Ed25519Signer
 from trace_runtime.tlog.merkle import (
     consistency_proof,
@@ -31,7 +32,6 @@ from trace_runtime.tlog.merkle import (
 )
 from trace_runtime.tlog.signed_note import (
     COSIGNATURE,
-    NoteError,
     NoteSigner,
     cosignature_line,
     format_checkpoint,

@@ -12,10 +12,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from trace_runtime.errors import MerkleError
 from trace_runtime.tlog.merkle import (
     EMPTY_ROOT,
     CompactRange,
-    MerkleError,
     consistency_proof,
     inclusion_proof,
     leaf_hash,

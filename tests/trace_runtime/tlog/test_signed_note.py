@@ -15,16 +15,15 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from trace_runtime.errors import NoteError, UnverifiedNoteError
 from trace_runtime.tlog.keys import Ed25519Signer
 from trace_runtime.tlog.signed_note import (
     COSIGNATURE,
     ED25519,
     MAX_SIGNATURES,
     Checkpoint,
-    NoteError,
     NoteSigner,
     NoteVerifier,
-    UnverifiedNoteError,
     cosignature_line,
     cosignature_message,
     format_checkpoint,

@@ -10,9 +10,9 @@ from typing import ClassVar
 
 import pytest
 
+from trace_runtime.errors import WitnessProtocolError
 from trace_runtime.tlog.witness_client import (
     MAX_PROOF_HASHES,
-    WitnessProtocolError,
     add_checkpoint_body,
     parse_add_checkpoint,
     submit,

@@ -31,7 +31,6 @@ from trace_runtime.tier_formats.cold.format import (
     INDEX_SCHEMA,
     INDEX_TOPIC,
     PLAIN_TOPICS,
-    ColdFormatError,
     gc_paused,
 )
 from trace_runtime.tier_formats.cold.seek import PartialBlock
@@ -49,7 +48,6 @@ __all__ = [
     "BlockCache",
     "BlockEncoder",
     "ColdAssembler",
-    "ColdFormatError",
     "DecodedBlock",
     "PartialBlock",
     "assemble_cold",

@@ -16,7 +16,7 @@ from typing import Any
 import orjson
 
 from trace_runtime.encoding.cycles import Cycle, RawMessage, assemble_hot
-from trace_runtime.errors import LogReadError
+from trace_runtime.errors import ColdFormatError, LogReadError
 from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.tier_formats.cold.cache import BlockCache
@@ -24,7 +24,6 @@ from trace_runtime.tier_formats.cold.format import (
     BLOCK_TOPIC,
     INDEX_TOPIC,
     PLAIN_TOPICS,
-    ColdFormatError,
     gc_paused,
     malformed_as_format_error,
 )

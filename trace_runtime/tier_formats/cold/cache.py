@@ -20,12 +20,12 @@ from collections import OrderedDict
 
 import zstandard
 
+from trace_runtime.errors import ColdFormatError
 from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.tier_formats.cold.decode import DecodedBlock, decode_body
 from trace_runtime.tier_formats.cold.format import (
     MAGIC,
     BuildBudget,
-    ColdFormatError,
     gc_paused,
     malformed_as_format_error,
 )

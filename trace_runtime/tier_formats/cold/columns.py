@@ -17,6 +17,7 @@ from typing import Any
 
 import orjson
 
+from trace_runtime.errors import ColdFormatError
 from trace_runtime.tier_formats.cold.format import (
     BOOL,
     CONST,
@@ -29,7 +30,6 @@ from trace_runtime.tier_formats.cold.format import (
     NULLABLE,
     SENSORS,
     STR,
-    ColdFormatError,
     ColumnKey,
 )
 from trace_runtime.tier_formats.cold.sensors import DERIVED

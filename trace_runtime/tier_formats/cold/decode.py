@@ -20,6 +20,7 @@ from typing import Any
 import orjson
 
 from trace_runtime.encoding.cycles import RawMessage
+from trace_runtime.errors import ColdFormatError
 from trace_runtime.tier_formats.cold.columns import (
     decode_column,
     plan,
@@ -34,7 +35,6 @@ from trace_runtime.tier_formats.cold.format import (
     REFERENCES,
     SENSORS,
     BuildBudget,
-    ColdFormatError,
     ColumnKey,
 )
 from trace_runtime.tier_formats.cold.sensors import DERIVED, SensorCovers

@@ -25,6 +25,7 @@ import orjson
 import zstandard
 
 from trace_runtime.encoding.cycles import RawMessage
+from trace_runtime.errors import ColdFormatError, ShapeError
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.tier_formats.cold.cache import BlockCache
 from trace_runtime.tier_formats.cold.columns import (
@@ -51,12 +52,11 @@ from trace_runtime.tier_formats.cold.format import (
     NULLABLE,
     SENSORS,
     STR,
-    ColdFormatError,
     ColumnKey,
     gc_paused,
 )
 from trace_runtime.tier_formats.cold.sensors import SENSOR_DIGEST_PATH, SensorCovers
-from trace_runtime.tier_formats.shapes import SHAPE_CACHE_LIMIT, Shape, ShapeError, describe
+from trace_runtime.tier_formats.shapes import SHAPE_CACHE_LIMIT, Shape, describe
 
 SEAL_ANCHOR_CYCLES = 64
 """Every this-many-th seal of a block keeps its ``prev`` digest as a literal instead of a

@@ -21,10 +21,10 @@ from typing import Any
 import orjson
 import zstandard
 
-from trace_runtime.errors import TraceError
+from trace_runtime.errors import ColdFormatError, ShapeError
 from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import TOPIC_CHECKPOINT
-from trace_runtime.tier_formats.shapes import Shape, ShapeError
+from trace_runtime.tier_formats.shapes import Shape
 
 CODEC = "trace-cold-v1"
 BLOCK_TOPIC = "/trace/cold/block"
@@ -61,11 +61,6 @@ FLAT = -2
 
 ColumnKey = tuple[int, tuple[Any, ...]]
 """A column of a block: (topic id in the block, leaf path)."""
-
-
-class ColdFormatError(TraceError, ValueError):
-    """A cold block is malformed (wrapped into ``LogReadError`` by callers). A ``TraceError``
-    so that one that escapes still maps to an exit code; a ``ValueError`` because it is one."""
 
 
 COMPILE_BYTES = 256

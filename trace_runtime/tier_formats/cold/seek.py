@@ -10,6 +10,7 @@ from typing import Any
 import orjson
 
 from trace_runtime.encoding.cycles import RawMessage
+from trace_runtime.errors import ColdFormatError
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.tier_formats.cold.columns import counters, decode_column, plan
 from trace_runtime.tier_formats.cold.decode import BlockStreams, fitting, hex_of
@@ -19,7 +20,6 @@ from trace_runtime.tier_formats.cold.format import (
     LENGTHS,
     REFERENCES,
     BuildBudget,
-    ColdFormatError,
     ColumnKey,
 )
 from trace_runtime.tier_formats.cold.sensors import DERIVED, SensorCovers
