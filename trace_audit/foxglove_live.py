@@ -25,7 +25,7 @@ from typing import Any
 from trace_audit.foxglove import FoxgloveView, logged_schema, require_sdk, view_channels
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import UsageError
-from trace_runtime.reading.logset import segment_files_by_robot
+from trace_runtime.reading.segment_files import segment_files_by_robot
 from trace_runtime.records import LAYER_TOPICS, TOPIC_SEAL
 
 __all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "LiveView", "live_robot"]

@@ -34,9 +34,11 @@ from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import LogReadError, NotHotSegmentError, UsageError
 from trace_runtime.gaps import GapFinder, SealedStamp
 from trace_runtime.live_writers import is_live
+from trace_runtime.reading.copies import preferred_copies
 from trace_runtime.reading.growing_file import GrowingSegment
-from trace_runtime.reading.logset import open_log, preferred_copies, segment_files_by_robot
+from trace_runtime.reading.logset import open_log
 from trace_runtime.reading.reader import RECOVERED_WARNING, Segment
+from trace_runtime.reading.segment_files import segment_files_by_robot
 
 __all__ = [
     "DEFAULT_POLL_S",
@@ -247,7 +249,7 @@ def _read_robot(robot: _Robot, numbered: dict[int, list[Path]]) -> Iterator[Tail
 
 
 def _copy_of(copies: list[Path]) -> Path | None:
-    """The copy of a segment to read (``logset.preferred_copies`` when there are several)."""
+    """The copy of a segment to read (``copies.preferred_copies`` when there are several)."""
     if len(copies) == 1:
         return copies[0]
     opened: list[Segment] = []

@@ -23,8 +23,9 @@ from trace_audit.doctor.structure import check_structure
 from trace_audit.evidence import open_recordings
 from trace_audit.selection import Selection
 from trace_runtime.errors import LogReadError
-from trace_runtime.reading.logset import Log, find_segment_files, open_log
+from trace_runtime.reading.logset import Log, open_log
 from trace_runtime.reading.recordings import Recordings
+from trace_runtime.reading.segment_files import find_segment_files
 from trace_runtime.segment_names import parse_segment_name
 from trace_runtime.session import SessionInfo
 from trace_runtime.verification import Finding, is_external_evidence, verify

@@ -44,7 +44,8 @@ from trace_audit.fleet.rows import ROW_TABLES, SegmentRows, day_of, partition_of
 from trace_audit.fleet.tables import INDEX_VERSION, parquet_options
 from trace_audit.metrics import MetricsConfig, score_segment
 from trace_runtime.errors import LogReadError, UsageError
-from trace_runtime.reading.logset import Log, open_logs, preferred_copies
+from trace_runtime.reading.copies import preferred_copies
+from trace_runtime.reading.logset import Log, open_logs
 from trace_runtime.reading.reader import Segment, open_segment
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.tiers.catalog import file_digest
@@ -266,7 +267,7 @@ def _one_copy_each(log: Log) -> tuple[set[Path], list[str]]:
         for other in copies[1:]:
             if _identity(other) != first:
                 raise _different_logs(copies[0].path, other.path, key)
-        best = copies[0]  # the copy every reader reads (logset.preferred_copies)
+        best = copies[0]  # the copy every reader reads (copies.preferred_copies)
         for copy in copies:
             if copy is not best:
                 left_out.add(copy.path)

@@ -1,9 +1,9 @@
 """Where a robot's chain goes on when its logger starts on a log root that already holds
 some of its segments: the next cycle number, the seal to link to, the next segment number.
 
-The segments are the log's own (``logset.robot_segment_files``), and of a segment found in
+The segments are the log's own (``segment_files.robot_segment_files``), and of a segment found in
 several copies (one mid-compaction in two tiers, a copy cut short beside its original) the
-copy every reader reads comes first (``logset.best_copy_first``). It runs at logger start-up, so
+copy every reader reads comes first (``copies.best_copy_first``). It runs at logger start-up, so
 it reads only what it needs: names, then the newest segment's last seal (from its end).
 
 The robot's Merkle tree (profile 1.2) goes on too (``resume_tree``): from the newest
@@ -18,8 +18,10 @@ from typing import NamedTuple
 
 from trace_runtime.errors import TraceError
 from trace_runtime.reading.chain_tree import tree_through
-from trace_runtime.reading.logset import best_copy_first, open_segments, robot_segment_files
+from trace_runtime.reading.copies import best_copy_first
+from trace_runtime.reading.logset import open_segments
 from trace_runtime.reading.reader import Segment, last_seal
+from trace_runtime.reading.segment_files import robot_segment_files
 from trace_runtime.records import GENESIS
 from trace_runtime.tlog.merkle import CompactRange
 

@@ -23,8 +23,10 @@ import orjson
 from trace_runtime.chain import digest
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import ChainTreeError, MerkleError, RecordError, TraceError
-from trace_runtime.reading.logset import Log, best_copy_first, open_segments, robot_segment_files
+from trace_runtime.reading.copies import best_copy_first
+from trace_runtime.reading.logset import Log, open_segments
 from trace_runtime.reading.reader import Segment
+from trace_runtime.reading.segment_files import robot_segment_files
 from trace_runtime.records import GENESIS, TOPIC_CHECKPOINT, TOPIC_SEAL, Checkpoint
 from trace_runtime.tlog.checkpoints import decode_checkpoint
 from trace_runtime.tlog.merkle import (
@@ -86,7 +88,7 @@ def _prev_of(data: bytes) -> str:
 
 def robot_seal_leaves(log: Log, robot: str) -> list[SealLeaf]:
     """Every leaf of ``robot``'s tree the log holds, in chain order, each segment read in the
-    copy every reader reads (``logset.preferred_copies``).
+    copy every reader reads (``copies.preferred_copies``).
 
     ``ChainTreeError`` when the log does not hold the chain from its genesis (its first
     segment is not number 0 starting at ``GENESIS``) or a segment number is missing: the

@@ -33,8 +33,8 @@ from trace_runtime.boundary import (
 )
 from trace_runtime.chain import digest
 from trace_runtime.errors import LogReadError
-from trace_runtime.reading.logset import find_segment_files
 from trace_runtime.reading.reader import Segment
+from trace_runtime.reading.segment_files import find_segment_files
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.session import TIER_METADATA, TIERS
 from trace_runtime.tier_formats.cold import INDEX_TOPIC
@@ -176,7 +176,7 @@ def _confirmed(root: Path, path: Path, cached: CatalogEntry | None) -> CatalogEn
 
 def segment_files(root: Path) -> list[Path]:
     """Every segment file directly in the tier directories of ``root``, as
-    ``logset.find_segment_files`` finds them (writes in progress excluded); a tier folder
+    ``segment_files.find_segment_files`` finds them (writes in progress excluded); a tier folder
     that is a symbolic link is refused (``boundary.tier_folder``)."""
     files: list[Path] = []
     for tier in TIERS:

@@ -21,7 +21,8 @@ from trace_runtime.clock import clock_restarted
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import LogReadError
 from trace_runtime.gaps import CycleRange
-from trace_runtime.reading.logset import FileProblem, Log, copy_rank, cut_short_copy
+from trace_runtime.reading.copies import copy_rank, cut_short_copy
+from trace_runtime.reading.logset import FileProblem, Log
 from trace_runtime.reading.reader import Segment
 from trace_runtime.reading.recordings import Recordings
 from trace_runtime.records import GENESIS, TOPIC_SEAL
@@ -74,7 +75,7 @@ def verify(
     merged in robot order, so the report is the one a local run gives.
 
     Each segment is verified in every copy the log holds (``log.segments`` and the copies
-    they shadow); the copy ``logset.preferred_copies`` reads is the one counted. The files
+    they shadow); the copy ``copies.preferred_copies`` reads is the one counted. The files
     ``log.problems`` lists become ``damaged`` findings, or ``skipped_file`` notes when foreign.
     """
     sink = FindingSink()

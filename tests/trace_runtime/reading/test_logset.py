@@ -10,7 +10,8 @@ import pytest
 
 from trace_runtime import AuditLogger, LoggerConfig
 from trace_runtime.errors import LogReadError
-from trace_runtime.reading.logset import copy_rank, open_log
+from trace_runtime.reading.copies import copy_rank
+from trace_runtime.reading.logset import open_log
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.tiers import compact
 

@@ -16,7 +16,7 @@ import pytest
 
 from trace_runtime import AuditLogger, LoggerConfig
 from trace_runtime.errors import TimeOutOfRangeError
-from trace_runtime.reading import logset
+from trace_runtime.reading import catalogued, logset
 from trace_runtime.reading.logset import Log, open_log
 from trace_runtime.reading.reader import Segment
 from trace_runtime.tiers import compact, load_catalog, refresh_catalog
@@ -45,6 +45,7 @@ def opened(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[str]]:
             super().__init__(path, *args, **kwargs)  # type: ignore[arg-type]
 
     monkeypatch.setattr(logset, "Segment", CountedSegment)
+    monkeypatch.setattr(catalogued, "Segment", CountedSegment)
     yield names
 
 
@@ -145,14 +146,15 @@ def test_a_compacted_root_is_read_lazily(root: Path) -> None:
 
 
 def test_the_catalog_is_read_as_the_catalog_module_reads_it(root: Path) -> None:
-    """``logset`` reads ``catalog.json`` itself (the tiers package would import the writer
+    """``catalogued`` reads ``catalog.json`` itself (the tiers package would import the writer
     and the ``mcap`` library); its rows must be ``load_catalog``'s entries."""
-    rows = logset._catalog_rows(root)
+    rows = catalogued._catalog_rows(root)
     catalog = load_catalog(root)
     assert rows is not None and catalog is not None
-    assert (logset._CATALOG_NAME, logset._CATALOG_FORMAT) == (CATALOG_NAME, CATALOG_FORMAT)
-    assert [{name: row[name] for name in logset._CATALOG_FIELDS} for row in rows] == [
-        {name: getattr(entry, name) for name in logset._CATALOG_FIELDS} for entry in catalog.entries
+    assert (catalogued._CATALOG_NAME, catalogued._CATALOG_FORMAT) == (CATALOG_NAME, CATALOG_FORMAT)
+    assert [{name: row[name] for name in catalogued._CATALOG_FIELDS} for row in rows] == [
+        {name: getattr(entry, name) for name in catalogued._CATALOG_FIELDS}
+        for entry in catalog.entries
     ]
 
 
