@@ -19,12 +19,12 @@ from tests.trace_runtime.tier_logs import make_root
 from trace_runtime import open_log, open_segment
 from trace_runtime.chain import digest
 from trace_runtime.encoding.cycles import RawMessage
+from trace_runtime.errors import ColdFormatError
 from trace_runtime.records import TOPIC_CHECKPOINT, TOPIC_SEAL
 from trace_runtime.tier_formats import cold as cold_module
 from trace_runtime.tier_formats.cold import (
     BlockCache,
     BlockEncoder,
-    ColdFormatError,
     PartialBlock,
     decode_block,
     iter_blocks,

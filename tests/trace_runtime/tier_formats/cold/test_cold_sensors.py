@@ -22,11 +22,11 @@ from hypothesis import strategies as st
 
 from trace_runtime.chain import GENESIS, digest, sensor_cover, sensor_line
 from trace_runtime.encoding.cycles import RawMessage
+from trace_runtime.errors import ColdFormatError
 from trace_runtime.records import TOPIC_CHECKPOINT, TOPIC_SEAL
 from trace_runtime.tier_formats.cold import (
     BlockCache,
     BlockEncoder,
-    ColdFormatError,
     PartialBlock,
     decode_block,
     iter_blocks,

@@ -24,14 +24,9 @@ import zstandard
 from tests.trace_runtime import hostile
 from tests.trace_runtime.tier_logs import make_root
 from trace_runtime.encoding.cycles import RawMessage
+from trace_runtime.errors import ColdFormatError
 from trace_runtime.read_limits import ReadLimits
-from trace_runtime.tier_formats.cold import (
-    BLOCK_TOPIC,
-    BlockCache,
-    BlockEncoder,
-    ColdFormatError,
-    PartialBlock,
-)
+from trace_runtime.tier_formats.cold import BLOCK_TOPIC, BlockCache, BlockEncoder, PartialBlock
 from trace_runtime.tier_formats.cold.columns import pack_i64
 from trace_runtime.tier_formats.cold.format import MAGIC
 from trace_runtime.tier_formats.shapes import Shape
