@@ -71,13 +71,13 @@ def test_checkpoints_and_heads_from_the_scan_equal_a_read_of_their_own(
 
     segment = open_segment(path)
     decodes: list[int] = []
-    real = segment._chunks.decode
+    real = segment._chunk_reader.decoder.decode
 
     def counted(data: object, offset: int, *args: object) -> object:
         decodes.append(offset)
         return real(data, offset, *args)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(segment._chunks, "decode", counted)
+    monkeypatch.setattr(segment._chunk_reader.decoder, "decode", counted)
     sink = FindingSink()
     check = SegmentCheck(segment, None, None, None, sink)
     check.run()
