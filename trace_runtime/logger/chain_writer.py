@@ -20,11 +20,9 @@ Every method runs on one thread at a time: the writer thread, or the control thr
 from __future__ import annotations
 
 import contextlib
-import functools
 import logging
 import os
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
 
@@ -36,27 +34,25 @@ from trace_runtime.encoding.codec import (
     encode_layer,
     encode_seal_fields,
 )
-from trace_runtime.errors import NoteError, SegmentWriteError, UsageError, WitnessProtocolError
+from trace_runtime.errors import NoteError, SegmentWriteError, UsageError
+from trace_runtime.logger.checkpointer import Checkpointer
 from trace_runtime.logger.config import LoggerConfig, LoggerStats, default_opener, default_origin
 from trace_runtime.logger.cycle_builder import COST_SAMPLE_EVERY
 from trace_runtime.logger.handover import PendingCycle
 from trace_runtime.logger.lock import WriterLock
 from trace_runtime.logger.segment_writer import (
     MessageFields,
-    OutMessage,
     SegmentWriter,
 )
-from trace_runtime.records import GENESIS, LAYER_MODELS, TOPIC_CHECKPOINT, TOPIC_SEAL
+from trace_runtime.logger.witness_feed import WitnessFeed
+from trace_runtime.records import GENESIS, LAYER_MODELS, TOPIC_SEAL
 from trace_runtime.segment_names import rotated_segment_name, segment_name
 from trace_runtime.session import SessionInfo
-from trace_runtime.tlog.checkpoints import encode_checkpoint, make_checkpoint
-from trace_runtime.tlog.cosignature_store import append_cosigned
-from trace_runtime.tlog.keys import PublicKey, Signer
+from trace_runtime.tlog.keys import Signer
 from trace_runtime.tlog.merkle import EMPTY_ROOT, CompactRange, leaf_hash
-from trace_runtime.tlog.signed_note import NoteSigner, format_checkpoint
-from trace_runtime.tlog.witness_client import Submitted, submit
+from trace_runtime.tlog.signed_note import format_checkpoint
 
-__all__ = ["CLOSE_METADATA", "WITNESS_MAX_LEAVES", "ChainWriter", "WitnessFeed"]
+__all__ = ["CLOSE_METADATA", "ChainWriter"]
 
 log = logging.getLogger("trace_runtime")
 
@@ -66,11 +62,6 @@ CLOSE_METADATA = "trace.close"
 _NO_READINGS = (0, NO_SENSORS)
 """The ``sensors`` of a cycle without readings: written too, so that readings added to such
 a cycle are found as surely as readings taken away from another."""
-
-WITNESS_MAX_LEAVES = 1 << 20
-"""At most this many leaf hashes (32 MB, 29 h at 10 Hz) are kept since the size the witness
-last cosigned; past it the logger proves from its current size, and a witness further
-behind is caught up by ``trace-audit witness push``."""
 
 
 class ChainWriter:
@@ -98,7 +89,6 @@ class ChainWriter:
         self.is_root = is_root
         self.config = config
         self.stats = stats
-        self._signer = signer
         self._writer_lock = writer_lock
         self._opener = config.opener or default_opener
         self.undeclared = 0
@@ -109,7 +99,6 @@ class ChainWriter:
         self._segment_start_ns: int | None = None
         self._head: tuple[int, int] | None = None  # (cycle, t_ns) of the segment's last seal
         self._sealed_in_segment = 0
-        self._checkpoint_due_ns: int | None = None  # log time the next periodic one is due
         self._costs = CostHistogram()  # this segment's per-cycle control-thread costs
         self.session = session
         self.prev_seal = session.prev_seal
@@ -119,12 +108,14 @@ class ChainWriter:
             format_checkpoint(self.origin, 0, EMPTY_ROOT)
         except NoteError as err:
             raise UsageError(f"LoggerConfig.origin {self.origin!r} cannot be one: {err}") from err
-        self._note_signer = self._make_note_signer(signer)
+        self._checkpoints = Checkpointer(
+            config, stats, origin=self.origin, signer=signer, report_once=self.report_once
+        )
         self.tree: CompactRange | None = self._first_tree(path, session)
         """The robot's Merkle tree through ``prev_seal`` (profile 1.2); None when it could not
         be resumed (checkpoints then carry no tree, counted in ``stats.tree_failures``)."""
         self._feed: WitnessFeed | None = None
-        if config.witness and self.tree is not None and self._note_signer is not None:
+        if config.witness and self.tree is not None and self._checkpoints.note_signer is not None:
             self._feed = WitnessFeed(
                 config.witness,
                 timeout_s=config.witness_timeout_s,
@@ -139,23 +130,7 @@ class ChainWriter:
                 "witness", "no checkpoint is submitted to the witness: it needs signed notes"
             )
         self._batch_leaves: list[bytes] = []  # this batch's leaves, for the witness feed
-        self._batch_notes: list[tuple[str, int]] = []  # its checkpoints' notes and sizes
         self.open_segment(session)
-
-    def _make_note_signer(self, signer: Signer | None) -> NoteSigner | None:
-        """The checkpoint key as a C2SP note signer named ``origin``: it needs the public
-        key, which ``Ed25519Signer`` has and another ``Signer`` may (``public_key``)."""
-        if signer is None:
-            return None
-        public = getattr(signer, "public_key", None)
-        if not isinstance(public, PublicKey):
-            self.report_once(
-                "note",
-                "the checkpoint signer has no public_key: checkpoint notes (the signed tree) "
-                "are not written",
-            )
-            return None
-        return NoteSigner(self.origin, signer, public.raw)
 
     def _first_tree(self, path: Path, session: SessionInfo) -> CompactRange | None:
         """The tree the first segment continues: empty at genesis, else resumed from the
@@ -201,7 +176,7 @@ class ChainWriter:
         Swallows every failure."""
         tree = self.tree
         saved = tree.state() if tree is not None else None  # a dropped batch takes its leaves
-        self._batch_leaves, self._batch_notes = [], []
+        self._batch_leaves, self._checkpoints.notes = [], []
         try:
             self.check_storage()
             self._maybe_rotate(batch[0].t_ns)
@@ -235,8 +210,8 @@ class ChainWriter:
         feed = self._feed
         if feed is not None:
             feed.add_leaves(self._batch_leaves)
-            if self._batch_notes:
-                feed.offer(*self._batch_notes[-1])
+            if self._checkpoints.notes:
+                feed.offer(*self._checkpoints.notes[-1])
             feed.submit()
         if self._segment_start_ns is None:
             self._segment_start_ns = batch[0].t_ns
@@ -295,10 +270,17 @@ class ChainWriter:
                 if keep is not None:
                     keep(leaf)
             carried = 0
-            if self._checkpoint_due(t_ns):
+            if self._checkpoints.due(t_ns, self._segment_start_ns):
                 sealed = self._sealed_in_segment + index + 1
-                checkpoint = self._checkpoint_message(
-                    segment, cycle, t_ns, prev, sealed, final=False
+                checkpoint = self._checkpoints.message(
+                    segment,
+                    self.session,
+                    self.tree,
+                    cycle=cycle,
+                    t_ns=t_ns,
+                    head=prev,
+                    sealed=sealed,
+                    final=False,
                 )
                 if checkpoint is not None:
                     append(checkpoint)
@@ -362,7 +344,7 @@ class ChainWriter:
         self._segment_start_ns = None
         self._head = None
         self._sealed_in_segment = 0
-        self._checkpoint_due_ns = None
+        self._checkpoints.new_segment()
         self._costs = CostHistogram()
         self.stats.segments.append(path)
 
@@ -407,11 +389,19 @@ class ChainWriter:
     def _final_checkpoint(self, segment: SegmentWriter, cycle: int, t_ns: int) -> bool:
         """Write the segment's closing checkpoint (its last seal: ``cycle`` at ``t_ns``);
         whether it is in the file."""
-        self._batch_notes = []
-        message = self._checkpoint_message(
-            segment, cycle, t_ns, self.prev_seal, self._sealed_in_segment, final=True
+        checkpoints = self._checkpoints
+        checkpoints.notes = []
+        message = checkpoints.message(
+            segment,
+            self.session,
+            self.tree,
+            cycle=cycle,
+            t_ns=t_ns,
+            head=self.prev_seal,
+            sealed=self._sealed_in_segment,
+            final=True,
         )
-        notes, self._batch_notes = self._batch_notes, []  # the batch's own come after
+        notes, checkpoints.notes = checkpoints.notes, []  # the batch's own come after
         if message is None:
             return False
         try:
@@ -438,78 +428,6 @@ class ChainWriter:
                 return self.path
             return self.path.with_name(rotated_segment_name(self.path.stem, session.segment))
         return self.path / "hot" / segment_name(session.robot_id, session.segment)
-
-    def _checkpoint_due(self, t_ns: int) -> bool:
-        """Whether a periodic checkpoint goes after the seal of the cycle at ``t_ns``.
-
-        They fall on a grid in log time: the first seal at or past each multiple of the
-        interval from the segment's first cycle, so their spacing does not depend on how
-        cycles were batched into chunks. After a pause longer than the interval there is one
-        checkpoint, not one per missed multiple. A checkpoint that could not be built or
-        signed still counts as done: a signer that is down (an HSM that times out) is asked
-        again an interval later, not on every cycle.
-        """
-        interval = self.config.checkpoint_interval_s
-        if interval is None:
-            return False
-        step = max(1, round(interval * 1e9))
-        due = self._checkpoint_due_ns
-        if due is None:
-            start = t_ns if self._segment_start_ns is None else self._segment_start_ns
-            due = self._checkpoint_due_ns = start + step
-        if t_ns < due:
-            return False
-        self._checkpoint_due_ns = due + ((t_ns - due) // step + 1) * step
-        return True
-
-    def _checkpoint_message(
-        self,
-        segment: SegmentWriter,
-        cycle: int,
-        t_ns: int,
-        head: str,
-        sealed: int,
-        *,
-        final: bool,
-    ) -> OutMessage | None:
-        """Build (and sign) a checkpoint message; None if that fails: never raises.
-
-        When signing fails (an HSM gone) the checkpoint is written unsigned: it still
-        anchors the chain head and marks a closed segment, and verify reports it unsigned.
-        """
-        tree = self.tree
-        build = functools.partial(
-            make_checkpoint,
-            tree=tree,
-            origin=self.origin if tree is not None else None,
-            robot_id=self.session.robot_id,
-            segment=self.session.segment,
-            first_cycle=self.session.first_cycle,
-            cycle=cycle,
-            t_ns=t_ns,
-            sealed=sealed,
-            head=head,
-            final=final,
-        )
-        try:
-            if tree is None:
-                self.stats.tree_failures += 1
-            try:
-                checkpoint = build(signer=self._signer, note_signer=self._note_signer)
-            except Exception as err:
-                if self._signer is None:
-                    raise
-                self.stats.checkpoint_failures += 1
-                self.report_once("sign", f"could not sign a checkpoint, wrote it unsigned: {err}")
-                checkpoint = build()
-            data = encode_checkpoint(checkpoint)
-            if checkpoint.note is not None and checkpoint.tree_size is not None:
-                self._batch_notes.append((checkpoint.note, checkpoint.tree_size))
-            return OutMessage(segment.channel(TOPIC_CHECKPOINT), cycle, t_ns, data)
-        except Exception as err:  # the audit trail goes on without this checkpoint
-            self.stats.checkpoint_failures += 1
-            self.report_once("checkpoint", f"could not build a checkpoint: {err}")
-            return None
 
     def _maybe_sync(self) -> None:
         interval = self.config.fsync_interval_s
@@ -551,119 +469,3 @@ def _give_up_header(stream: BinaryIO, path: Path, opened: tuple[int, int] | None
         there = os.lstat(path)
         if (there.st_dev, there.st_ino) == opened:
             os.unlink(path)
-
-
-class WitnessFeed:
-    """A robot's checkpoints submitted to a C2SP tlog-witness, from the writer thread.
-
-    It keeps the tree's compact range at ``witness_size`` (the size the witness last
-    cosigned, as far as the logger knows) and the leaf hashes since, which is all a
-    consistency proof from there needs (``chain_tree.consistency_proof_from``). Only the
-    newest checkpoint of a batch is submitted. 200: the cosigned note is appended to the
-    store beside the log (``witnessed.append_cosigned``) and the range moves up to that
-    size; 409: the witness's size is learnt and the next checkpoint is proved from it (when
-    the logger holds it: 0, or a size since its range); anything else is counted and retried
-    with the next checkpoint. At start the witness is taken to be at the resumed size.
-    """
-
-    def __init__(
-        self,
-        url: str,
-        *,
-        timeout_s: float,
-        store_root: Path,
-        robot_id: str,
-        tree: CompactRange,
-        stats: LoggerStats,
-        report_once: Callable[[str, str], None],
-    ) -> None:
-        self.url = url
-        self.timeout_s = timeout_s
-        self.store_root = store_root
-        self.robot_id = robot_id
-        self.stats = stats
-        self._report_once = report_once
-        self.base = CompactRange.restore(*tree.state())
-        self._since = bytearray()  # leaf hashes after base.size, 32 bytes each
-        self.witness_size: int = tree.size
-        self._pending: tuple[str, int] | None = None
-
-    def add_leaves(self, leaves: list[bytes]) -> None:
-        """Leaves now on disk, in order."""
-        if len(self._since) // 32 + len(leaves) > WITNESS_MAX_LEAVES:
-            self._advance(self.base.size + len(self._since) // 32)
-            self.witness_size = self.base.size
-        self._since += b"".join(leaves)
-
-    def offer(self, note: str, size: int) -> None:
-        """The newest checkpoint written (its note and tree size): the next to submit."""
-        self._pending = (note, size)
-
-    def submit(self) -> None:
-        """Submit the pending checkpoint, if any; never raises."""
-        pending, self._pending = self._pending, None
-        if pending is None:
-            return
-        note, size = pending
-        try:
-            proof = self._proof(size)
-            if proof is None:
-                self._failed(
-                    f"the witness holds size {self.witness_size}, which this logger cannot "
-                    "prove from (trace-audit witness push catches it up)"
-                )
-                return
-            result = submit(self.url, self.witness_size, proof, note, timeout_s=self.timeout_s)
-            self._answer(result, note, size)
-        except (WitnessProtocolError, OSError, ValueError) as err:
-            self._failed(f"could not submit a checkpoint to the witness: {err}")
-        except Exception as err:  # the store and the client are plug points: never the robot
-            self._failed(f"could not submit a checkpoint to the witness: {err}")
-
-    def _proof(self, size: int) -> list[bytes] | None:
-        old = self.witness_size
-        if old in (0, size):
-            return []
-        held = len(self._since) // 32
-        if old != self.base.size or not old < size <= old + held:
-            return None
-        from trace_runtime.reading.chain_tree import consistency_proof_from  # the reading floor
-
-        since = self._since
-        leaves = [bytes(since[i : i + 32]) for i in range(0, (size - old) * 32, 32)]
-        return consistency_proof_from(self.base, leaves)
-
-    def _answer(self, result: Submitted, note: str, size: int) -> None:
-        if result.ok:
-            append_cosigned(
-                self.store_root, self.robot_id, note, result.cosignatures, witness_url=self.url
-            )
-            self.stats.witness_cosigned += 1
-            self._advance(size)
-            self.witness_size = size
-            return
-        if result.outcome == "conflict" and result.witness_size is not None:
-            learnt = result.witness_size
-            if self.base.size <= learnt <= self.base.size + len(self._since) // 32:
-                self._advance(learnt)
-            self.witness_size = learnt
-            self._failed(f"the witness holds size {learnt} (409); proving from there next")
-            return
-        self._failed(
-            f"the witness did not cosign ({result.outcome}"
-            f"{f' {result.status}' if result.status else ''}: {result.detail})"
-        )
-
-    def _advance(self, size: int) -> None:
-        """Move the kept range up to ``size`` (within the leaves held)."""
-        count = size - self.base.size
-        if count <= 0:
-            return
-        since = self._since
-        for i in range(0, count * 32, 32):
-            self.base.append(bytes(since[i : i + 32]))
-        del since[: count * 32]
-
-    def _failed(self, message: str) -> None:
-        self.stats.witness_failures += 1
-        self._report_once("witness", message)

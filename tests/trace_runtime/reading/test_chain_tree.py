@@ -24,7 +24,7 @@ from tests.trace_runtime.tlog.test_go_oracle import Ask, ask, b64, unb64  # noqa
 from tests.trace_runtime.verification.test_tamper import decode, write, write_signed_log
 from trace_runtime import AuditLogger, LoggerConfig, open_log, open_segment
 from trace_runtime.chain import digest
-from trace_runtime.logger import chain_writer as chain_writer_module
+from trace_runtime.logger import checkpointer as checkpointer_module
 from trace_runtime.reading.chain_tree import checkpoint_range, robot_leaves, tree_through
 from trace_runtime.records import TOPIC_CHECKPOINT, TOPIC_SEAL, Checkpoint
 from trace_runtime.tlog.checkpoints import (
@@ -213,7 +213,7 @@ def test_a_chain_without_a_tree_checkpoint_is_recomputed_from_all_its_seals(
         return make_checkpoint(**fields)
 
     with monkeypatch.context() as patched:
-        patched.setattr(chain_writer_module, "make_checkpoint", old_profile)
+        patched.setattr(checkpointer_module, "make_checkpoint", old_profile)
         with AuditLogger(root, robot_id="r", config=_config(signer)) as logger:
             log_cycles(logger, range(23))
     seals, old = _plain_read(root)

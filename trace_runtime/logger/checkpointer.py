@@ -1,0 +1,133 @@
+"""A robot's checkpoints as the writer thread makes them: when a periodic one is due (a
+grid in log time), and the checkpoint message itself, signed with the robot's key and, as a
+C2SP note, by the same key named after the robot's origin. Never raises: a checkpoint that
+cannot be built is counted and the trail goes on; one that cannot be signed is written
+unsigned (it still anchors the chain head; ``verify`` reports it unsigned).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+
+from trace_runtime.logger.config import LoggerConfig, LoggerStats
+from trace_runtime.logger.segment_writer import OutMessage, SegmentWriter
+from trace_runtime.records import TOPIC_CHECKPOINT
+from trace_runtime.session import SessionInfo
+from trace_runtime.tlog.checkpoints import encode_checkpoint, make_checkpoint
+from trace_runtime.tlog.keys import PublicKey, Signer
+from trace_runtime.tlog.merkle import CompactRange
+from trace_runtime.tlog.signed_note import NoteSigner
+
+__all__ = ["Checkpointer"]
+
+
+class Checkpointer:
+    """The checkpoints of one robot's chain. ``notes`` collects the signed notes (and tree
+    sizes) of the checkpoints made since the caller last took them, for the witness feed."""
+
+    def __init__(
+        self,
+        config: LoggerConfig,
+        stats: LoggerStats,
+        *,
+        origin: str,
+        signer: Signer | None,
+        report_once: Callable[[str, str], None],
+    ) -> None:
+        self._interval_s = config.checkpoint_interval_s
+        self._stats = stats
+        self._report_once = report_once
+        self.origin = origin
+        self._signer = signer
+        self.note_signer = self._note_signer(signer)
+        self.notes: list[tuple[str, int]] = []
+        self._due_ns: int | None = None  # log time the next periodic one is due
+
+    def _note_signer(self, signer: Signer | None) -> NoteSigner | None:
+        """The checkpoint key as a C2SP note signer named ``origin``: it needs the public
+        key, which ``Ed25519Signer`` has and another ``Signer`` may (``public_key``)."""
+        if signer is None:
+            return None
+        public = getattr(signer, "public_key", None)
+        if not isinstance(public, PublicKey):
+            self._report_once(
+                "note",
+                "the checkpoint signer has no public_key: checkpoint notes (the signed tree) "
+                "are not written",
+            )
+            return None
+        return NoteSigner(self.origin, signer, public.raw)
+
+    def new_segment(self) -> None:
+        """A new segment starts its own grid."""
+        self._due_ns = None
+
+    def due(self, t_ns: int, segment_start_ns: int | None) -> bool:
+        """Whether a periodic checkpoint goes after the seal of the cycle at ``t_ns``.
+
+        They fall on a grid in log time: the first seal at or past each multiple of the
+        interval from the segment's first cycle, so their spacing does not depend on how
+        cycles were batched into chunks. After a pause longer than the interval there is one
+        checkpoint, not one per missed multiple. A checkpoint that could not be built or
+        signed still counts as done: a signer that is down (an HSM that times out) is asked
+        again an interval later, not on every cycle.
+        """
+        if self._interval_s is None:
+            return False
+        step = max(1, round(self._interval_s * 1e9))
+        due = self._due_ns
+        if due is None:
+            start = t_ns if segment_start_ns is None else segment_start_ns
+            due = self._due_ns = start + step
+        if t_ns < due:
+            return False
+        self._due_ns = due + ((t_ns - due) // step + 1) * step
+        return True
+
+    def message(
+        self,
+        segment: SegmentWriter,
+        session: SessionInfo,
+        tree: CompactRange | None,
+        *,
+        cycle: int,
+        t_ns: int,
+        head: str,
+        sealed: int,
+        final: bool,
+    ) -> OutMessage | None:
+        """Build (and sign) a checkpoint message; None if that fails: never raises."""
+        build = functools.partial(
+            make_checkpoint,
+            tree=tree,
+            origin=self.origin if tree is not None else None,
+            robot_id=session.robot_id,
+            segment=session.segment,
+            first_cycle=session.first_cycle,
+            cycle=cycle,
+            t_ns=t_ns,
+            sealed=sealed,
+            head=head,
+            final=final,
+        )
+        stats = self._stats
+        try:
+            if tree is None:
+                stats.tree_failures += 1
+            try:
+                checkpoint = build(signer=self._signer, note_signer=self.note_signer)
+            except Exception as err:  # a signer is a plug point (an HSM that is gone)
+                if self._signer is None:
+                    raise
+                stats.checkpoint_failures += 1
+                self._report_once("sign", f"could not sign a checkpoint, wrote it unsigned: {err}")
+                checkpoint = build()
+            data = encode_checkpoint(checkpoint)
+            if checkpoint.note is not None and checkpoint.tree_size is not None:
+                self.notes.append((checkpoint.note, checkpoint.tree_size))
+            return OutMessage(segment.channel(TOPIC_CHECKPOINT), cycle, t_ns, data)
+        except Exception as err:  # the audit trail goes on without this checkpoint
+            stats.checkpoint_failures += 1
+            self._report_once("checkpoint", f"could not build a checkpoint: {err}")
+            return None
