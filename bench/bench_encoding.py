@@ -39,13 +39,14 @@ import orjson
 import zstandard
 
 from trace_runtime.encoding.codec import _encode_mirror, _mirror, encode_layer, layer_message
-from trace_runtime.records import LAYER_MODELS, _Record
+from trace_runtime.record_model import RecordModel
+from trace_runtime.records import LAYER_MODELS
 from trace_runtime.testing import CaptureLogger, synthetic_cycle
 
 MODELS = list(LAYER_MODELS.values())
 
 
-def _v1_encode(cycle: int, record: _Record) -> bytes:
+def _v1_encode(cycle: int, record: RecordModel) -> bytes:
     """The baseline path per record (labelled v1): pydantic's serializer, then the stamp."""
     body = type(record).__pydantic_serializer__.to_json(record, by_alias=True)
     return b'{"cycle":%d,"t_ns":%d,' % (cycle, cycle * 100) + body[1:]
@@ -56,7 +57,7 @@ def _stamp(cycle: int, body: dict[str, Any]) -> dict[str, Any]:
 
 
 def candidates(
-    built: list[tuple[_Record, ...]], dicts: list[list[dict[str, Any]]]
+    built: list[tuple[RecordModel, ...]], dicts: list[list[dict[str, Any]]]
 ) -> dict[str, Callable[[], object]]:
     """name -> a function that encodes every cycle once."""
     structs = [
@@ -144,7 +145,7 @@ def candidates(
     }
 
 
-def scale(built: list[tuple[_Record, ...]]) -> dict[str, Callable[[], object]]:
+def scale(built: list[tuple[RecordModel, ...]]) -> dict[str, Callable[[], object]]:
     """Per-cycle costs around the encoding, for scale."""
     messages = [[encode_layer(i, i * 100, r) for r in c] for i, c in enumerate(built)]
     compressor = zstandard.ZstdCompressor(level=3)

@@ -12,14 +12,11 @@ Constructing a model with bad fields raises ``RecordError`` (a ``TraceError``).
 
 from __future__ import annotations
 
-import inspect
-from typing import Annotated, Any, Literal, TypeVar
+from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, GetJsonSchemaHandler, ValidationError
-from pydantic.json_schema import JsonSchemaValue
-from pydantic_core import CoreSchema
+from pydantic import Field
 
-from trace_runtime.errors import RecordError
+from trace_runtime.record_model import RecordModel
 
 PROFILE = "trace"
 PROFILE_VERSION = "1.3"
@@ -41,90 +38,10 @@ Scalar = float | int | bool | str
 Comparison = Literal["<", "<=", ">", ">=", "==", "!="]
 
 
-class _Record(BaseModel):
-    model_config = ConfigDict(
-        frozen=True,
-        extra="forbid",
-        allow_inf_nan=False,
-        populate_by_name=True,
-        ser_json_inf_nan="null",
-    )
-
-    def __init__(self, /, **data: Any) -> None:
-        try:
-            super().__init__(**data)
-        except ValidationError as err:
-            raise RecordError(_describe(type(self).__name__, err)) from err
-
-    # Tell pydantic this __init__ only wraps errors: nested records validated from dicts then
-    # stay on pydantic's fast path instead of calling back into Python once per object.
-    __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]
-
-    @classmethod
-    def __pydantic_init_subclass__(cls, **kwargs: Any) -> None:
-        super().__pydantic_init_subclass__(**kwargs)
-        cls.__doc__ = _with_field_docs(cls)
-
-    @classmethod
-    def __get_pydantic_json_schema__(
-        cls, core_schema: CoreSchema, handler: GetJsonSchemaHandler
-    ) -> JsonSchemaValue:
-        # The JSON Schemas keep the class's own docstring: their fields carry the meanings.
-        schema = handler.resolve_ref_schema(handler(core_schema))
-        own = cls.__dict__.get("_own_doc")
-        if own:
-            schema["description"] = own
-        return schema
-
-
-def _with_field_docs(model: type[BaseModel]) -> str:
-    """The class docstring followed by one line per field (JSON name, type, default,
-    meaning), so ``help()`` and IDEs show what each field means rather than pydantic's
-    generic text. The meanings are the fields' ``description``s, the same text that the
-    JSON Schemas carry."""
-    head = inspect.cleandoc(model.__dict__.get("__doc__") or "")
-    type.__setattr__(model, "_own_doc", head)
-    lines = [head, "", "Fields (JSON name: type = default, meaning):", ""]
-    for name, info in model.model_fields.items():
-        key = info.alias or name
-        shown = key if key == name else f"{key} (Python: {name})"
-        kind = _type_text(info.annotation)
-        required = info.is_required()
-        default = "" if required else " = " + repr(info.get_default(call_default_factory=True))
-        lines.append(f"    {shown}: {kind}{default}")
-        lines.append(f"        {info.description or '(undocumented)'}")
-    return "\n".join(lines) + "\n"
-
-
-def _type_text(annotation: Any) -> str:
-    text = getattr(annotation, "__name__", None) if isinstance(annotation, type) else None
-    return text or str(annotation).replace("trace_runtime.records.", "").replace("typing.", "")
-
-
-def _describe(model: str, err: ValidationError) -> str:
-    first = err.errors()[0]
-    where = ".".join(str(p) for p in first["loc"]) or "<root>"
-    more = f" (and {err.error_count() - 1} more)" if err.error_count() > 1 else ""
-    return f"invalid {model}: {where}: {first['msg']}{more}"
-
-
-R = TypeVar("R", bound=_Record)
-
-
-def validate_record(model: type[R], data: Any) -> R:
-    """Validate ``data`` (a dict or already a model) as ``model``; raise ``RecordError``."""
-    if isinstance(data, model):
-        return data
-    try:
-        return model.model_validate(data)
-    except ValidationError as err:
-        raise RecordError(_describe(model.__name__, err)) from err
-
-
 # --- shared pieces ---------------------------------------------------------------------
 
 
-class Pose(_Record):
+class Pose(RecordModel):
     """A pose in SE(3): position in metres and a unit quaternion (x, y, z, w)."""
 
     position: tuple[float, float, float] = Field(description="x, y, z in metres, in ``frame``")
@@ -134,7 +51,7 @@ class Pose(_Record):
     frame: str = Field(default="map", description="the coordinate frame, e.g. map, base_link")
 
 
-class EvidenceRef(_Record):
+class EvidenceRef(RecordModel):
     """Names one sensor message: topic + log time (+ sequence, + content digest).
 
     Without ``recording`` the message is in the TRACE log itself (a ``/sensors/...``
@@ -161,7 +78,7 @@ class EvidenceRef(_Record):
     )
 
 
-class Region(_Record):
+class Region(RecordModel):
     """The part of a sensor reading that supported a detection.
 
     ``kind`` says how to read ``values``: ``beams`` = [first_beam, last_beam] of a scan,
@@ -176,7 +93,7 @@ class Region(_Record):
     frame: str = Field(default="base_link", description="the frame a box or cone is in")
 
 
-class Evidence(_Record):
+class Evidence(RecordModel):
     """One member of an entity's evidence set (Def. 1): sensor, weight, region and ref."""
 
     sensor: str = Field(
@@ -198,7 +115,7 @@ class Evidence(_Record):
 # --- layer 1: perception ---------------------------------------------------------------
 
 
-class Entity(_Record):
+class Entity(RecordModel):
     """An evidence-grounded entity (Def. 1).
 
     The class is ``cls`` in Python (``class`` is a keyword) and ``class`` in JSON; a dict
@@ -221,7 +138,7 @@ class Entity(_Record):
     )
 
 
-class Perception(_Record):
+class Perception(RecordModel):
     """Layer 1: the entity set E_t and its evidence aggregation record."""
 
     entities: list[Entity] = Field(default_factory=list, description="the entity set E_t")
@@ -240,7 +157,7 @@ class Perception(_Record):
 # --- layer 2: belief -------------------------------------------------------------------
 
 
-class BeliefNode(_Record):
+class BeliefNode(RecordModel):
     """A node of the belief graph: an entity, or a derived state such as ``collision_risk``."""
 
     id: str = Field(min_length=1, description="the node's id, unique in this cycle's graph")
@@ -254,7 +171,7 @@ class BeliefNode(_Record):
     entity: str | None = Field(default=None, description="entity id, for kind == entity")
 
 
-class BeliefEdge(_Record):
+class BeliefEdge(RecordModel):
     """A documented inference: ``child`` was derived from ``parent`` by ``rule``."""
 
     parent: str = Field(min_length=1, description="id of the node inferred from")
@@ -263,7 +180,7 @@ class BeliefEdge(_Record):
     rule: str = Field(min_length=1, description="the name of the rule or model that inferred it")
 
 
-class Belief(_Record):
+class Belief(RecordModel):
     """Layer 2: the probabilistic scene / causal graph B_t = (V, E, P) (Def. 2)."""
 
     nodes: list[BeliefNode] = Field(default_factory=list, description="the graph's nodes V")
@@ -273,7 +190,7 @@ class Belief(_Record):
 # --- layer 3: action -------------------------------------------------------------------
 
 
-class Factor(_Record):
+class Factor(RecordModel):
     """A belief node the decision depended on, with the value the policy saw."""
 
     node: str = Field(min_length=1, description="id of a node in this cycle's belief graph")
@@ -282,7 +199,7 @@ class Factor(_Record):
     unit: str | None = Field(default=None, description="the unit of value")
 
 
-class Rationale(_Record):
+class Rationale(RecordModel):
     """Why the command was chosen: text plus the structured factors (R in Def. 3)."""
 
     text: str = Field(description="the reason in words")
@@ -294,7 +211,7 @@ class Rationale(_Record):
     )
 
 
-class Alternative(_Record):
+class Alternative(RecordModel):
     """A command that was considered and lost, with its score and the reason."""
 
     command: str = Field(min_length=1, description="the command considered")
@@ -302,7 +219,7 @@ class Alternative(_Record):
     rejected_because: str = Field(description="why it lost")
 
 
-class Counterfactual(_Record):
+class Counterfactual(RecordModel):
     """``would_select`` would have been chosen had ``factor`` satisfied the comparison."""
 
     factor: str = Field(min_length=1, description="belief node id of the factor")
@@ -311,7 +228,7 @@ class Counterfactual(_Record):
     would_select: str = Field(min_length=1, description="the command that would then be chosen")
 
 
-class TreeNode(_Record):
+class TreeNode(RecordModel):
     """A node of the counterfactual decision tree: a test, or a leaf naming a command."""
 
     id: str = Field(min_length=1, description="the node's id, unique in the tree")
@@ -320,7 +237,7 @@ class TreeNode(_Record):
     command: str | None = Field(default=None, description="the command a leaf selects")
 
 
-class TreeEdge(_Record):
+class TreeEdge(RecordModel):
     """An edge of the counterfactual decision tree: one outcome of the parent's test."""
 
     parent: str = Field(description="id of the tree node tested")
@@ -328,7 +245,7 @@ class TreeEdge(_Record):
     label: str = Field(default="", description="the outcome, e.g. yes / no")
 
 
-class DecisionTree(_Record):
+class DecisionTree(RecordModel):
     """The counterfactual decision tree (paper Fig. 2) with the path the policy took."""
 
     nodes: list[TreeNode] = Field(description="tests and leaves")
@@ -336,7 +253,7 @@ class DecisionTree(_Record):
     taken_path: list[str] = Field(description="node ids from root to the chosen leaf")
 
 
-class Action(_Record):
+class Action(RecordModel):
     """Layer 3: the justified action a*_t = <cmd, A_alt, R, CF> (Def. 3)."""
 
     command: str = Field(min_length=1, description="the command chosen, e.g. SLOW, GRASP")
@@ -362,7 +279,7 @@ class Action(_Record):
 # --- layer 4: execution ----------------------------------------------------------------
 
 
-class Motion(_Record):
+class Motion(RecordModel):
     """A planar motion command or measurement: linear m/s, angular rad/s.
 
     The shape of a mobile base. Other robots (arms, grippers, drones) name their own
@@ -373,7 +290,7 @@ class Motion(_Record):
     angular: float = Field(default=0.0, description="yaw rate, rad/s (counter-clockwise)")
 
 
-class ActuatorChannel(_Record):
+class ActuatorChannel(RecordModel):
     """One commanded-and-measured quantity of any actuator: a joint velocity, a gripper
     force, an end-effector speed, a thrust. ``intended`` and ``actual`` are in ``unit``."""
 
@@ -388,7 +305,7 @@ class ActuatorChannel(_Record):
     )
 
 
-class ComplianceCheck(_Record):
+class ComplianceCheck(RecordModel):
     """One safety or compliance rule checked against this cycle's execution."""
 
     rule: str = Field(min_length=1, description="the rule's name, e.g. max_speed_near_person")
@@ -398,7 +315,7 @@ class ComplianceCheck(_Record):
     detail: str = Field(default="", description="anything else the check reports")
 
 
-class Execution(_Record):
+class Execution(RecordModel):
     """Layer 4: intended vs actual behaviour, deviation delta_t, compliance, flags.
 
     A mobile base logs ``intended`` and ``actual`` as planar ``Motion``s (profile 1.0).
@@ -434,7 +351,7 @@ class Execution(_Record):
 # --- messages on the wire --------------------------------------------------------------
 
 
-class _Stamp(_Record):
+class _Stamp(RecordModel):
     cycle: int = Field(ge=0, description="the cycle number, +1 per cycle begun (PROFILE §4)")
     t_ns: int = Field(ge=0, description="the cycle's time in ns; the message's MCAP log_time")
 
@@ -455,7 +372,7 @@ class ExecutionMessage(_Stamp, Execution):
     """``/trace/execution``"""
 
 
-class SensorCover(_Record):
+class SensorCover(RecordModel):
     """A seal's ``sensors`` (profile 1.3): every sensor reading the cycle logged, cited by
     evidence or not, so that a reading which detected nothing is in the chain too."""
 
@@ -489,7 +406,7 @@ MESSAGE_MODELS: dict[str, type[_Stamp]] = {
     TOPIC_SEAL: Seal,
 }
 
-LAYER_MODELS: dict[str, type[_Record]] = {
+LAYER_MODELS: dict[str, type[RecordModel]] = {
     TOPIC_PERCEPTION: Perception,
     TOPIC_BELIEF: Belief,
     TOPIC_ACTION: Action,

@@ -22,13 +22,13 @@ from trace_audit.chains import DEFAULT_SENSOR_WINDOW, SensorWindow
 from trace_audit.doctor.rules import SegmentDoctor
 from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.errors import RecordError
+from trace_runtime.record_model import validate_record
 from trace_runtime.records import (
     LAYER_TOPICS,
     MESSAGE_MODELS,
     TOPIC_CHECKPOINT,
     TOPIC_PERCEPTION,
     TOPIC_SEAL,
-    validate_record,
 )
 from trace_runtime.tier_formats.warm import SUMMARY_TOPIC
 

@@ -32,14 +32,15 @@ import msgspec
 import orjson
 from pydantic_core import PydanticUndefined
 
-from trace_runtime.records import Seal, _Record, validate_record
+from trace_runtime.record_model import RecordModel, validate_record
+from trace_runtime.records import Seal
 
 _SPELLED_ALIKE = 1e16
 _MIRROR_ENCODER = msgspec.json.Encoder()
 
 
 def encode_layer(
-    cycle: int, t_ns: int, record: _Record, model: type[_Record] | None = None
+    cycle: int, t_ns: int, record: RecordModel, model: type[RecordModel] | None = None
 ) -> bytes:
     """Canonical bytes of one layer record stamped with its cycle and time.
 
@@ -86,7 +87,7 @@ def _build_fast_encoder() -> _FastEncoder:
     plain_counts: dict[type, int] = {}  # class -> number of fields, JSON names = field names
     renamed: dict[type, tuple[tuple[str, str], ...]] = {}  # class -> (field, JSON name)
     for cls in vars(records).values():
-        if isinstance(cls, type) and issubclass(cls, _Record) and cls is not _Record:
+        if isinstance(cls, type) and issubclass(cls, RecordModel) and cls is not RecordModel:
             names = tuple((name, info.alias or name) for name, info in cls.model_fields.items())
             if all(name == key for name, key in names):
                 plain_counts[cls] = len(names)
@@ -122,12 +123,12 @@ class EncodedLayer(NamedTuple):
     digest: str
 
 
-LayerValue = _Record | EncodedLayer
+LayerValue = RecordModel | EncodedLayer
 """A layer record checked on the control thread: the robot's built model (encoded later by
 the writer), or the message a plain dict was validated and encoded into."""
 
 
-def check_layer(model: type[_Record], cycle: int, t_ns: int, record: Any) -> LayerValue:
+def check_layer(model: type[RecordModel], cycle: int, t_ns: int, record: Any) -> LayerValue:
     """Validate ``record`` (a ``model`` or a dict of its fields) for cycle ``cycle`` at
     ``t_ns``; raise ``RecordError`` when it is not a valid ``model``.
 
@@ -152,7 +153,7 @@ def check_layer(model: type[_Record], cycle: int, t_ns: int, record: Any) -> Lay
     return EncodedLayer(data, digest_keeping_gil(data))
 
 
-def encode_checked(cycle: int, t_ns: int, model: type[_Record], value: LayerValue) -> bytes:
+def encode_checked(cycle: int, t_ns: int, model: type[RecordModel], value: LayerValue) -> bytes:
     """Canonical bytes of a value ``check_layer`` gave for ``model``. Holds the GIL throughout
     (no I/O, no release): the writer thread calls it and must not convoy with the robot."""
     if isinstance(value, EncodedLayer):
@@ -160,7 +161,7 @@ def encode_checked(cycle: int, t_ns: int, model: type[_Record], value: LayerValu
     return encode_layer(cycle, t_ns, value, model)
 
 
-def layer_message(model: type[_Record], cycle: int, t_ns: int, record: Any) -> bytes:
+def layer_message(model: type[RecordModel], cycle: int, t_ns: int, record: Any) -> bytes:
     """Validate ``record`` and return the canonical bytes of its message (both steps)."""
     return encode_checked(cycle, t_ns, model, check_layer(model, cycle, t_ns, record))
 
@@ -201,7 +202,7 @@ def _stamped(cycle: int, t_ns: int, body: bytes) -> bytes:
 
 
 @functools.cache
-def _mirror(model: type[_Record]) -> type[msgspec.Struct]:
+def _mirror(model: type[RecordModel]) -> type[msgspec.Struct]:
     """A ``msgspec.Struct`` with ``model``'s fields, order, aliases, defaults and constraints.
 
     Built on first use, once per model (the cache is bounded by the number of record
@@ -264,7 +265,7 @@ def _mirror_type(annotation: Any, metadata: list[Any] | tuple[Any, ...] = ()) ->
         return typing.Union[tuple(members)]  # noqa: UP007 - built from a tuple
     if bounds:
         raise TypeError(f"no msgspec mirror for constraints on {annotation!r}")
-    if isinstance(annotation, type) and issubclass(annotation, _Record):
+    if isinstance(annotation, type) and issubclass(annotation, RecordModel):
         return _mirror(annotation)
     if origin is Literal:
         return annotation

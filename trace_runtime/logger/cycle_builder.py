@@ -20,6 +20,7 @@ from pydantic import ValidationError
 from trace_runtime.encoding.codec import LayerValue, check_layer, digest_keeping_gil, encode_json
 from trace_runtime.errors import RecordError, UsageError
 from trace_runtime.logger.handover import SensorReading
+from trace_runtime.record_model import validate_record
 from trace_runtime.records import (
     LAYER_MODELS,
     SENSOR_PREFIX,
@@ -28,7 +29,6 @@ from trace_runtime.records import (
     TOPIC_EXECUTION,
     TOPIC_PERCEPTION,
     EvidenceRef,
-    validate_record,
 )
 
 __all__ = [

@@ -16,7 +16,8 @@ from typing import TYPE_CHECKING, Literal
 import orjson
 
 from trace_runtime.errors import NoteError, RecordError, UnverifiedNoteError
-from trace_runtime.records import TOPIC_CHECKPOINT, Checkpoint, validate_record
+from trace_runtime.record_model import validate_record
+from trace_runtime.records import TOPIC_CHECKPOINT, Checkpoint
 from trace_runtime.tlog.keys import PublicKey, Signer
 from trace_runtime.tlog.merkle import CompactRange
 from trace_runtime.tlog.signed_note import (

@@ -27,20 +27,21 @@ from trace_runtime.costs import TIMING_METADATA, CostHistogram, bucket_bounds, b
 from trace_runtime.encoding.codec import layer_message
 from trace_runtime.errors import RecordError, UsageError
 from trace_runtime.logger.cycle_builder import COST_SAMPLE_EVERY
-from trace_runtime.records import LAYER_MODELS, MESSAGE_MODELS, TOPIC_EXECUTION, _Record
+from trace_runtime.record_model import RecordModel
+from trace_runtime.records import LAYER_MODELS, MESSAGE_MODELS, TOPIC_EXECUTION
 from trace_runtime.testing import CaptureLogger, synthetic_cycle
 from trace_runtime.tlog.checkpoints import decode_checkpoint, iter_checkpoints
 
 PERIOD_NS = 100_000_000
 
 
-def _record_classes() -> list[type[_Record]]:
+def _record_classes() -> list[type[RecordModel]]:
     return [
         cls
         for cls in vars(records).values()
         if isinstance(cls, type)
-        and issubclass(cls, _Record)
-        and cls is not _Record
+        and issubclass(cls, RecordModel)
+        and cls is not RecordModel
         and not cls.__name__.startswith("_")
     ]
 
@@ -49,7 +50,9 @@ def _record_classes() -> list[type[_Record]]:
 
 
 @pytest.mark.parametrize("model", _record_classes(), ids=lambda m: m.__name__)
-def test_help_on_a_record_class_lists_every_field_with_its_meaning(model: type[_Record]) -> None:
+def test_help_on_a_record_class_lists_every_field_with_its_meaning(
+    model: type[RecordModel],
+) -> None:
     text = pydoc.render_doc(model, renderer=pydoc.plaintext)
     assert "(undocumented)" not in text
     for name, info in model.model_fields.items():
