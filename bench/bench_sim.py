@@ -57,7 +57,8 @@ from trace_runtime.encoding.codec import (
     encode_json,
     encode_seal_fields,
 )
-from trace_runtime.logger.segment_writer import OutMessage, SegmentWriter
+from trace_runtime.logger.mcap_out import OutMessage
+from trace_runtime.logger.segment_writer import SegmentWriter
 from trace_runtime.records import GENESIS, LAYER_MODELS, EvidenceRef
 
 BUDGET = 5_000

@@ -40,10 +40,8 @@ from trace_runtime.logger.config import LoggerConfig, LoggerStats, default_opene
 from trace_runtime.logger.cycle_builder import COST_SAMPLE_EVERY
 from trace_runtime.logger.handover import PendingCycle
 from trace_runtime.logger.lock import WriterLock
-from trace_runtime.logger.segment_writer import (
-    MessageFields,
-    SegmentWriter,
-)
+from trace_runtime.logger.mcap_out import MessageFields
+from trace_runtime.logger.segment_writer import SegmentWriter
 from trace_runtime.logger.witness_feed import WitnessFeed
 from trace_runtime.records import GENESIS, LAYER_MODELS, TOPIC_SEAL
 from trace_runtime.segment_names import rotated_segment_name, segment_name

@@ -11,7 +11,8 @@ import functools
 from collections.abc import Callable
 
 from trace_runtime.logger.config import LoggerConfig, LoggerStats
-from trace_runtime.logger.segment_writer import OutMessage, SegmentWriter
+from trace_runtime.logger.mcap_out import OutMessage
+from trace_runtime.logger.segment_writer import SegmentWriter
 from trace_runtime.records import TOPIC_CHECKPOINT
 from trace_runtime.session import SessionInfo
 from trace_runtime.tlog.checkpoints import encode_checkpoint, make_checkpoint

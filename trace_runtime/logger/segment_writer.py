@@ -23,10 +23,10 @@ import sys
 import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import BinaryIO, NamedTuple
+from typing import BinaryIO
 
 import zstandard
-from mcap.data_stream import RecordBuilder as _RecordBuilder
+from mcap.data_stream import RecordBuilder
 from mcap.records import (
     Attachment,
     AttachmentIndex,
@@ -44,72 +44,26 @@ from mcap.records import (
 
 from trace_runtime.encoding.mcap_records import CHUNK_TABLE_ATTACHMENT, MAGIC
 from trace_runtime.errors import SegmentWriteError
+from trace_runtime.logger.mcap_out import (
+    CHUNK_HEADER,
+    INDEX_ENTRY,
+    INDEX_HEADER,
+    OPCODE_CHANNEL,
+    OPCODE_CHUNK,
+    OPCODE_MESSAGE_INDEX,
+    OPCODE_METADATA,
+    OPCODE_SCHEMA,
+    U64,
+    MessageFields,
+    builder_bytes,
+    encode_record,
+    message_records,
+)
 from trace_runtime.records import LAYER_TOPICS, PROFILE, TOPIC_SEAL
 from trace_runtime.schemas import SENSOR_SCHEMA_NAME, schema_bytes, schema_name
 from trace_runtime.session import SESSION_METADATA, SessionInfo
 
 LIBRARY = "trace_runtime 0.1"
-_MESSAGE_HEADER = struct.Struct("<BQHIQQ")
-_CHUNK_HEADER = struct.Struct("<BQQQQII")  # opcode, length, start, end, size, crc, compression len
-_INDEX_HEADER = struct.Struct("<BQHI")  # opcode, length, channel id, entries byte length
-_INDEX_ENTRY = struct.Struct("<QQ")
-_U64 = struct.Struct("<Q")
-_OPCODE_CHUNK = 0x06
-_OPCODE_MESSAGE_INDEX = 0x07
-_OPCODE_MESSAGE = 0x05
-_OPCODE_SCHEMA = 0x03
-_OPCODE_CHANNEL = 0x04
-_OPCODE_METADATA = 0x0C
-
-
-def _encode(record: object) -> bytes:
-    builder = _RecordBuilder()
-    record.write(builder)  # type: ignore[attr-defined]
-    return _end(builder)
-
-
-def _end(builder: _RecordBuilder) -> bytes:
-    """The builder's bytes (the mcap library leaves ``end`` unannotated)."""
-    return bytes(builder.end())  # type: ignore[no-untyped-call]
-
-
-def _message_records(
-    messages: Sequence[MessageFields],
-) -> tuple[bytearray, dict[int, bytearray], int, int]:
-    """A batch's message records as one chunk holds them, each channel's message-index
-    entries (packed as they are made), and the batch's first and last log time."""
-    records = bytearray()
-    indexes: dict[int, bytearray] = {}
-    start = end = messages[0][2]
-    pack, pack_entry = _MESSAGE_HEADER.pack, _INDEX_ENTRY.pack
-    for channel_id, sequence, log_time, data in messages:
-        index = indexes.get(channel_id)
-        if index is None:
-            index = indexes[channel_id] = bytearray()
-        index += pack_entry(log_time, len(records))
-        records += pack(_OPCODE_MESSAGE, 22 + len(data), channel_id, sequence, log_time, log_time)
-        records += data
-        if log_time < start:
-            start = log_time
-        elif log_time > end:
-            end = log_time
-    return records, indexes, start, end
-
-
-class OutMessage(NamedTuple):
-    """One message to write: channel id, per-channel sequence, log time and data.
-
-    A tuple, so the logger's writer may hand ``write_batch`` plain 4-tuples in this order: it
-    makes several per cycle, and a tuple costs a fraction of a class instance to build."""
-
-    channel_id: int
-    sequence: int
-    log_time_ns: int
-    data: bytes
-
-
-MessageFields = tuple[int, int, int, bytes]
-"""What ``write_batch`` reads from each message: ``OutMessage`` or a plain tuple like it."""
 
 
 @dataclass(slots=True)
@@ -155,10 +109,10 @@ class SegmentWriter:
         """Once ``broken``: the file's size after it was closed (None: it cannot be known,
         the stream has no file descriptor)."""
 
-        head = _RecordBuilder()
+        head = RecordBuilder()
         head.write(MAGIC)
         Header(profile=PROFILE, library=LIBRARY).write(head)
-        self._write_now(_end(head))
+        self._write_now(builder_bytes(head))
         for topic in (*LAYER_TOPICS, TOPIC_SEAL):
             self.channel(topic)
         self.add_metadata(SESSION_METADATA, session.to_metadata())
@@ -192,10 +146,10 @@ class SegmentWriter:
                 id=len(self._schemas) + 1, name=name, encoding=schema_encoding, data=data
             )
             self._schemas[name] = record
-            self._pending += _encode(record)
+            self._pending += encode_record(record)
         spec = _ChannelSpec(len(self._channels) + 1, topic, record.id, encoding)
         self._channels[topic] = spec
-        self._pending += _encode(
+        self._pending += encode_record(
             Channel(
                 id=spec.id,
                 topic=topic,
@@ -209,7 +163,7 @@ class SegmentWriter:
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         """Write a metadata record now (outside any chunk) and index it."""
         start = self.offset + len(self._pending)
-        record = _encode(Metadata(name=name, metadata=data))
+        record = encode_record(Metadata(name=name, metadata=data))
         self._write_now(record)
         self._metadata_indexes.append(MetadataIndex(offset=start, length=len(record), name=name))
 
@@ -228,7 +182,7 @@ class SegmentWriter:
             raise SegmentWriteError("segment is closed", rolled_back=False)
         if not messages:
             return 0
-        records, indexes, start, end = _message_records(messages)
+        records, indexes, start, end = message_records(messages)
         payload = self._compressor.compress(records) if self._compressor else bytes(records)
 
         before = self.offset
@@ -263,7 +217,7 @@ class SegmentWriter:
         )
         counts = self._message_counts
         for channel_id, entries in indexes.items():
-            counts[channel_id] = counts.get(channel_id, 0) + len(entries) // _INDEX_ENTRY.size
+            counts[channel_id] = counts.get(channel_id, 0) + len(entries) // INDEX_ENTRY.size
         self._start_ns = start if self._start_ns is None else min(self._start_ns, start)
         self._end_ns = max(self._end_ns, end)
         return self.offset - before
@@ -282,8 +236,8 @@ class SegmentWriter:
         compression = self._compression.encode()
         body_len = 8 + 8 + 8 + 4 + 4 + len(compression) + 8 + len(payload)
         out = bytearray(
-            _CHUNK_HEADER.pack(
-                _OPCODE_CHUNK,
+            CHUNK_HEADER.pack(
+                OPCODE_CHUNK,
                 body_len,
                 start,
                 end,
@@ -293,14 +247,14 @@ class SegmentWriter:
             )
         )
         out += compression
-        out += _U64.pack(len(payload))
+        out += U64.pack(len(payload))
         out += payload
         chunk_length = len(out)
         offsets: dict[int, int] = {}
         for channel_id, entries in indexes.items():
             offsets[channel_id] = chunk_offset + len(out)
-            out += _INDEX_HEADER.pack(
-                _OPCODE_MESSAGE_INDEX, 2 + 4 + len(entries), channel_id, len(entries)
+            out += INDEX_HEADER.pack(
+                OPCODE_MESSAGE_INDEX, 2 + 4 + len(entries), channel_id, len(entries)
             )
             out += entries
         return out, chunk_length, offsets
@@ -336,29 +290,31 @@ class SegmentWriter:
         """Write the data end, the summary (schemas, channels, statistics, indexes), the footer."""
         if self.finished or self.broken:
             return
-        out = _RecordBuilder()
+        out = RecordBuilder()
         attachment_index = self._chunk_table(out)
         DataEnd(data_section_crc=0).write(out)
         summary_start = self.offset + len(self._pending) + out.count
         summary_bytes, groups = self._summary(summary_start, attachment_index)
-        offsets = _RecordBuilder()
+        offsets = RecordBuilder()
         for opcode, begin, length in groups:
             SummaryOffset(group_opcode=opcode, group_start=begin, group_length=length).write(
                 offsets
             )
-        offset_bytes = _end(offsets)
+        offset_bytes = builder_bytes(offsets)
         summary_offset_start = summary_start + len(summary_bytes)
         footer_prefix = struct.pack("<BQQQ", 0x02, 20, summary_start, summary_offset_start)
         crc = zlib.crc32(summary_bytes + offset_bytes + footer_prefix)
-        tail = _RecordBuilder()
+        tail = RecordBuilder()
         Footer(
             summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=crc
         ).write(tail)
-        self._write_now(_end(out) + summary_bytes + offset_bytes + _end(tail) + MAGIC)
+        self._write_now(
+            builder_bytes(out) + summary_bytes + offset_bytes + builder_bytes(tail) + MAGIC
+        )
         self.finished = True
         self.sync()
 
-    def _chunk_table(self, out: _RecordBuilder) -> AttachmentIndex | None:
+    def _chunk_table(self, out: RecordBuilder) -> AttachmentIndex | None:
         """Write the chunk table attachment (every chunk's first and last time and offset, in
         columns, for a reader's seek) into ``out`` when the chunks are in time order, and
         return its index entry; None when they are not."""
@@ -396,7 +352,7 @@ class SegmentWriter:
     ) -> tuple[bytes, list[tuple[int, int, int]]]:
         """The summary section (schemas, channels, statistics, chunk, attachment and metadata
         indexes) starting at ``summary_start``, and its groups (opcode, start, length)."""
-        summary = _RecordBuilder()
+        summary = RecordBuilder()
         groups: list[tuple[int, int, int]] = []
 
         def group(opcode: int, records: Sequence[object]) -> None:
@@ -407,9 +363,9 @@ class SegmentWriter:
                 record.write(summary)  # type: ignore[attr-defined]
             groups.append((opcode, summary_start + begin, summary.count - begin))
 
-        group(_OPCODE_SCHEMA, list(self._schemas.values()))
+        group(OPCODE_SCHEMA, list(self._schemas.values()))
         group(
-            _OPCODE_CHANNEL,
+            OPCODE_CHANNEL,
             [
                 Channel(
                     id=c.id,
@@ -439,8 +395,8 @@ class SegmentWriter:
         )
         group(0x08, self._chunk_indexes)
         group(0x0A, [] if attachment_index is None else [attachment_index])
-        group(_OPCODE_METADATA + 1, self._metadata_indexes)
-        return _end(summary), groups
+        group(OPCODE_METADATA + 1, self._metadata_indexes)
+        return builder_bytes(summary), groups
 
     def close(self) -> None:
         """Finish (if still healthy) and close the underlying stream."""

@@ -21,7 +21,8 @@ import orjson
 from trace_runtime.costs import TIMING_METADATA
 from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.errors import ColdFormatError, LogReadError, SegmentWriteError, VerificationError
-from trace_runtime.logger.segment_writer import OutMessage, SegmentWriter
+from trace_runtime.logger.mcap_out import OutMessage
+from trace_runtime.logger.segment_writer import SegmentWriter
 from trace_runtime.reading.reader import Segment
 from trace_runtime.records import MESSAGE_MODELS, TOPIC_SEAL
 from trace_runtime.session import TIER_METADATA, SessionInfo

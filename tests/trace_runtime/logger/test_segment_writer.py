@@ -14,7 +14,8 @@ import pytest
 from tests.trace_runtime.full_disk import FullDisk
 from trace_runtime.encoding.mcap_file import McapFile
 from trace_runtime.errors import SegmentWriteError
-from trace_runtime.logger.segment_writer import OutMessage, SegmentWriter
+from trace_runtime.logger.mcap_out import OutMessage
+from trace_runtime.logger.segment_writer import SegmentWriter
 from trace_runtime.session import SessionInfo
 
 SESSION = SessionInfo(robot_id="r", period_ns=100_000_000)

@@ -27,7 +27,8 @@ from trace_runtime import AuditLogger, LoggerConfig, open_segment
 from trace_runtime.chain import digest
 from trace_runtime.encoding.codec import encode_seal
 from trace_runtime.encoding.cycles import RawMessage
-from trace_runtime.logger.segment_writer import OutMessage, SegmentWriter
+from trace_runtime.logger.mcap_out import OutMessage
+from trace_runtime.logger.segment_writer import SegmentWriter
 from trace_runtime.records import (
     LAYER_TOPICS,
     TOPIC_ACTION,
