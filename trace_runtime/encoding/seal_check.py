@@ -9,7 +9,7 @@ and the whole-log verification (``trace_runtime.verification``) is built on it.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -185,73 +185,97 @@ def verify_cycle(
     seal_digest = digest(seal_data)
     parsed = _parse_seal(seal_data)
     if parsed is None:
-        return SealStatus(
-            cycle.cycle,
-            cycle.t_ns,
-            "modified",
-            seal_digest,
-            modified=(TOPIC_SEAL,),
-            detail="the seal is not a valid seal record",
-        )
+        return _unreadable_seal(cycle, seal_digest)
     number, t_ns, digests, prev, dropped, sealed_sensors = parsed
-    problems: list[str] = []
-    if number != cycle.cycle or t_ns != cycle.t_ns:
-        problems.append(
-            f"the seal says cycle {number} at {t_ns} ns, the log stores it as cycle "
-            f"{cycle.cycle} at {cycle.t_ns} ns"
-        )
     modified, missing, summarised, extra = _compare_layers(cycle, digests)
-    checked, unresolved, uncited = 0, 0, len(cycle.sensors)
     sensor_problem = None
     if sealed_sensors is not None and cycle.summary is None:
         # (a warm summary keeps only the readings its evidence cites: not checkable here)
         hexes: dict[int, str] = {}
         sensor_problem = _sensor_problem(cycle, sealed_sensors, hexes, sensor_digest)
         sensor_digest = _digest_from(hexes, sensor_digest)
-    bad: list[str] = []
     external: list[dict[str, Any]] = []
-    perception = cycle.payloads.get(TOPIC_PERCEPTION)
-    if perception is not None and TOPIC_PERCEPTION not in modified:
-        # Sensor readings are not sealed themselves: the evidence refs that name them carry
-        # their digests, and the refs are sealed with the perception message.
-        if perception_json is None and TOPIC_PERCEPTION in digests:
-            checked, unresolved, bad, uncited = _check_evidence_shape(
-                cycle, perception, external, sensor_digest
-            )
-        else:
-            found = _check_evidence(cycle, perception, perception_json, external, sensor_digest)
-            assert found is not None  # whole=True: never None
-            checked, unresolved, bad, uncited = found
+    found = _check_cited(
+        cycle,
+        digests=digests,
+        modified=modified,
+        perception_json=perception_json,
+        external=external,
+        sensor_digest=sensor_digest,
+    )
+    checked, unresolved, bad, uncited = found or (0, 0, [], len(cycle.sensors))
     if sealed_sensors is not None:
         uncited = 0  # the seal covers every reading, cited or not
-    if modified or missing or extra:
-        problems += _layer_problems(modified, missing, extra)
-    if sensor_problem is not None:
-        problems.append(sensor_problem)
-
-    link: Literal["ok", "broken", "unchecked"] = "unchecked"
-    if prev_seal_digest is not None:
-        link = "ok" if prev == prev_seal_digest else "broken"
+    problems = _problems(cycle, number, t_ns, (modified, missing, extra), sensor_problem)
+    link = _link(prev, prev_seal_digest)
     state, detail = _verdict(problems, prev, prev_seal_digest, summarised=bool(summarised))
-    return _seal_status(
+    head = (cycle.cycle, cycle.t_ns, state, seal_digest, prev, link, dropped)
+    layers = (tuple(modified), tuple(missing), tuple(extra), tuple(summarised))
+    evidence = (checked, unresolved, tuple(bad), uncited, tuple(external))
+    return _seal_status(*head, *layers, *evidence, detail)
+
+
+def _unreadable_seal(cycle: Cycle, seal_digest: str) -> SealStatus:
+    return SealStatus(
         cycle.cycle,
         cycle.t_ns,
-        state,
+        "modified",
         seal_digest,
-        prev,
-        link,
-        dropped,
-        tuple(modified),
-        tuple(missing),
-        tuple(extra),
-        tuple(summarised),
-        checked,
-        unresolved,
-        tuple(bad),
-        uncited,
-        tuple(external),
-        detail,
+        modified=(TOPIC_SEAL,),
+        detail="the seal is not a valid seal record",
     )
+
+
+def _problems(
+    cycle: Cycle,
+    number: int,
+    t_ns: int,
+    layers: tuple[list[str], list[str], list[str]],
+    sensor_problem: str | None,
+) -> list[str]:
+    """What the seal and the stored cycle disagree on: its number or time, its layers
+    (modified, missing, extra), its sensor readings."""
+    problems: list[str] = []
+    if number != cycle.cycle or t_ns != cycle.t_ns:
+        problems.append(
+            f"the seal says cycle {number} at {t_ns} ns, the log stores it as cycle "
+            f"{cycle.cycle} at {cycle.t_ns} ns"
+        )
+    if any(layers):
+        problems += _layer_problems(*layers)
+    if sensor_problem is not None:
+        problems.append(sensor_problem)
+    return problems
+
+
+def _link(prev: str, prev_seal_digest: str | None) -> Literal["ok", "broken", "unchecked"]:
+    """Whether the seal names the previous one (unchecked when it is not known)."""
+    if prev_seal_digest is None:
+        return "unchecked"
+    return "ok" if prev == prev_seal_digest else "broken"
+
+
+def _check_cited(
+    cycle: Cycle,
+    *,
+    digests: dict[str, str],
+    modified: list[str],
+    perception_json: Any,
+    external: list[dict[str, Any]],
+    sensor_digest: Callable[[RawMessage], str] | None,
+) -> tuple[int, int, list[str], int] | None:
+    """The evidence refs of an intact perception message checked against the readings they
+    cite: (checked, unresolved, bad, uncited); None without such a message. Sensor readings
+    before profile 1.3 are not sealed themselves: the refs that name them carry their
+    digests, and the refs are sealed with the perception message."""
+    perception = cycle.payloads.get(TOPIC_PERCEPTION)
+    if perception is None or TOPIC_PERCEPTION in modified:
+        return None
+    if perception_json is None and TOPIC_PERCEPTION in digests:
+        return _check_evidence_shape(cycle, perception, external, sensor_digest)
+    found = _check_evidence(cycle, perception, perception_json, external, sensor_digest)
+    assert found is not None  # whole=True: never None
+    return found
 
 
 def _digest_from(
@@ -344,6 +368,25 @@ def _seal_status(*values: Any) -> SealStatus:
     return status
 
 
+class _Readings:
+    """A cycle's sensor readings found by (topic, sequence), else by (topic, log time)."""
+
+    __slots__ = ("_by_sequence", "_by_time", "_sensors")
+
+    def __init__(self, sensors: Sequence[RawMessage]) -> None:
+        self._sensors = sensors
+        self._by_sequence = {(m.topic, m.sequence): i for i, m in enumerate(sensors)}
+        self._by_time: dict[tuple[Any, Any], int] | None = None  # built on the first miss
+
+    def find(self, topic: Any, sequence: Any, log_time_ns: Any) -> int | None:
+        index = self._by_sequence.get((topic, sequence)) if sequence is not None else None
+        if index is None:
+            if self._by_time is None:
+                self._by_time = {(m.topic, m.log_time_ns): i for i, m in enumerate(self._sensors)}
+            index = self._by_time.get((topic, log_time_ns))
+        return index
+
+
 def _check_evidence(
     cycle: Cycle,
     perception: bytes,
@@ -366,9 +409,7 @@ def _check_evidence(
         entities = value.get("entities") or ()
     except (orjson.JSONDecodeError, AttributeError):
         return 0, 0, [], len(cycle.sensors)
-    sensors = cycle.sensors
-    by_sequence = {(m.topic, m.sequence): i for i, m in enumerate(sensors)}
-    by_time: dict[tuple[Any, Any], int] | None = None  # built on the first ref without a match
+    readings = _Readings(cycle.sensors)
     digests: dict[int, str] = {}
     checked = unresolved = 0
     bad: list[str] = []
@@ -385,12 +426,8 @@ def _check_evidence(
                 continue
             if not ref.get("digest"):
                 continue
-            topic, seq = ref.get("topic"), ref.get("sequence")
-            index = by_sequence.get((topic, seq)) if seq is not None else None
-            if index is None:
-                if by_time is None:
-                    by_time = {(m.topic, m.log_time_ns): i for i, m in enumerate(sensors)}
-                index = by_time.get((topic, ref.get("log_time_ns")))
+            topic = ref.get("topic")
+            index = readings.find(topic, ref.get("sequence"), ref.get("log_time_ns"))
             if index is None:
                 unresolved += 1
                 continue
