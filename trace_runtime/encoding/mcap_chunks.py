@@ -162,9 +162,7 @@ class ChunkDecoder:
                         raise self._flood(offset, most)
                     topic = topic_of(channel_id)
                     if topic is None:
-                        raise LogReadError(
-                            self._name, f"chunk at offset {offset}: message on unknown channel"
-                        )
+                        raise self._unknown_channel(offset)
                     if only is not None and topic != only:
                         pos = stop
                         continue
@@ -188,9 +186,7 @@ class ChunkDecoder:
                 channel_id, sequence, log_time, _publish = fixed(raw, body)
                 topic = topics.get(channel_id)
                 if topic is None:
-                    raise LogReadError(
-                        self._name, f"chunk at offset {offset}: message on unknown channel"
-                    )
+                    raise self._unknown_channel(offset)
                 if only is None or topic == only:
                     append(raw_message(topic, sequence, log_time, raw[body + 22 : pos]))
             elif opcode == OP_CHANNEL:
@@ -198,6 +194,9 @@ class ChunkDecoder:
                 topic_name, _ = read_str(raw, body + 4)
                 topics[channel_id] = topic_name
         return messages
+
+    def _unknown_channel(self, offset: int) -> LogReadError:
+        return LogReadError(self._name, f"chunk at offset {offset}: message on unknown channel")
 
     def _flood(self, offset: int, most: int) -> LogLimitError:
         return LogLimitError(

@@ -40,7 +40,7 @@ from trace_runtime.logger.config import LoggerConfig, LoggerStats, default_opene
 from trace_runtime.logger.cycle_builder import COST_SAMPLE_EVERY
 from trace_runtime.logger.handover import PendingCycle
 from trace_runtime.logger.lock import WriterLock
-from trace_runtime.logger.mcap_out import MessageFields
+from trace_runtime.logger.mcap_out import MessageFields, OutMessage
 from trace_runtime.logger.segment_writer import SegmentWriter
 from trace_runtime.logger.witness_feed import WitnessFeed
 from trace_runtime.records import GENESIS, LAYER_MODELS, TOPIC_SEAL
@@ -270,16 +270,7 @@ class ChainWriter:
             carried = 0
             if self._checkpoints.due(t_ns, self._segment_start_ns):
                 sealed = self._sealed_in_segment + index + 1
-                checkpoint = self._checkpoints.message(
-                    segment,
-                    self.session,
-                    self.tree,
-                    cycle=cycle,
-                    t_ns=t_ns,
-                    head=prev,
-                    sealed=sealed,
-                    final=False,
-                )
+                checkpoint = self._checkpoint(segment, cycle, t_ns, prev, sealed, final=False)
                 if checkpoint is not None:
                     append(checkpoint)
                     checkpoints += 1
@@ -384,20 +375,29 @@ class ChainWriter:
         except Exception as err:
             self.report_once("close", f"could not finish segment: {err}")
 
-    def _final_checkpoint(self, segment: SegmentWriter, cycle: int, t_ns: int) -> bool:
-        """Write the segment's closing checkpoint (its last seal: ``cycle`` at ``t_ns``);
-        whether it is in the file."""
-        checkpoints = self._checkpoints
-        checkpoints.notes = []
-        message = checkpoints.message(
+    def _checkpoint(
+        self, segment: SegmentWriter, cycle: int, t_ns: int, head: str, sealed: int, *, final: bool
+    ) -> OutMessage | None:
+        """A checkpoint of the chain head ``head`` (the seal of ``cycle``); None if it could
+        not be built."""
+        return self._checkpoints.message(
             segment,
             self.session,
             self.tree,
             cycle=cycle,
             t_ns=t_ns,
-            head=self.prev_seal,
-            sealed=self._sealed_in_segment,
-            final=True,
+            head=head,
+            sealed=sealed,
+            final=final,
+        )
+
+    def _final_checkpoint(self, segment: SegmentWriter, cycle: int, t_ns: int) -> bool:
+        """Write the segment's closing checkpoint (its last seal: ``cycle`` at ``t_ns``);
+        whether it is in the file."""
+        checkpoints = self._checkpoints
+        checkpoints.notes = []
+        message = self._checkpoint(
+            segment, cycle, t_ns, self.prev_seal, self._sealed_in_segment, final=True
         )
         notes, checkpoints.notes = checkpoints.notes, []  # the batch's own come after
         if message is None:

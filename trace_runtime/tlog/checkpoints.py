@@ -76,6 +76,26 @@ def signing_bytes(checkpoint: Checkpoint) -> bytes:
     return ("\n".join(lines) + "\n").encode()
 
 
+def _tree_fields(
+    tree: CompactRange, origin: str | None, note_signer: NoteSigner | None
+) -> dict[str, object]:
+    """A checkpoint's statement of the robot's tree (profile 1.2): its size, root and compact
+    range, and with a ``note_signer`` the signed C2SP note of (origin, size, root)."""
+    if origin is None:
+        raise ValueError("a checkpoint with a tree names its origin")
+    root_hash = tree.root()
+    fields: dict[str, object] = {
+        "tree_size": tree.size,
+        "root": root_hash.hex(),
+        "range": [h.hex() for h in tree.hashes],
+    }
+    if note_signer is not None:
+        if note_signer.name != origin:
+            raise ValueError("a checkpoint's note is signed under the key name origin")
+        fields["note"] = sign_note(format_checkpoint(origin, tree.size, root_hash), note_signer)
+    return fields
+
+
 def make_checkpoint(
     *,
     robot_id: str,
@@ -111,17 +131,7 @@ def make_checkpoint(
         "note": note,
     }
     if tree is not None:
-        if origin is None:
-            raise ValueError("a checkpoint with a tree names its origin")
-        root_hash = tree.root()
-        tree_fields.update(
-            tree_size=tree.size, root=root_hash.hex(), range=[h.hex() for h in tree.hashes]
-        )
-        if note_signer is not None:
-            if note_signer.name != origin:
-                raise ValueError("a checkpoint's note is signed under the key name origin")
-            text = format_checkpoint(origin, tree.size, root_hash)
-            tree_fields["note"] = sign_note(text, note_signer)
+        tree_fields.update(_tree_fields(tree, origin, note_signer))
     body = Checkpoint(
         cycle=cycle,
         t_ns=t_ns,

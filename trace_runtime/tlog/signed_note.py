@@ -290,12 +290,9 @@ class OpenedNote:
         return None
 
 
-def open_note(note: str | bytes, verifiers: Iterable[NoteVerifier]) -> OpenedNote:
-    """Parse a signed note and verify every signature by a known key.
-
-    Signatures by unknown keys are ignored (kept in ``unverified``); a known key's signature
-    that fails is a ``NoteError``; a note no known key signed is an ``UnverifiedNoteError``.
-    """
+def _note_bytes(note: str | bytes) -> bytes:
+    """A note's bytes: text or bytes, at most ``MAX_NOTE_BYTES``, UTF-8, no control
+    character but newlines."""
     if isinstance(note, str):
         if len(note) > MAX_NOTE_BYTES:
             raise NoteError(f"a note over {MAX_NOTE_BYTES} bytes is refused")
@@ -314,12 +311,28 @@ def open_note(note: str | bytes, verifiers: Iterable[NoteVerifier]) -> OpenedNot
     except UnicodeDecodeError as err:
         raise NoteError("a note is not valid UTF-8") from err
     _check_controls(data)
+    return data
+
+
+def _known_keys(verifiers: Iterable[NoteVerifier]) -> dict[tuple[str, int], NoteVerifier]:
+    """The verifiers by (name, key id); two different keys under one pair are refused."""
     known: dict[tuple[str, int], NoteVerifier] = {}
     for v in verifiers:
         if not isinstance(v, NoteVerifier):
             raise NoteError("verifiers must be NoteVerifier (see parse_verifier_key)")
         if known.setdefault((v.name, v.key_id), v) != v:
             raise NoteError(f"two known keys share the name {v.name} and key id {v.key_id:08x}")
+    return known
+
+
+def open_note(note: str | bytes, verifiers: Iterable[NoteVerifier]) -> OpenedNote:
+    """Parse a signed note and verify every signature by a known key.
+
+    Signatures by unknown keys are ignored (kept in ``unverified``); a known key's signature
+    that fails is a ``NoteError``; a note no known key signed is an ``UnverifiedNoteError``.
+    """
+    data = _note_bytes(note)
+    known = _known_keys(verifiers)
     split = data.rfind(b"\n\n")
     if split < 0:
         raise NoteError("a note has no blank line before its signatures")

@@ -450,23 +450,12 @@ def _message_indexes(column: _Column, group_msgs: list[list[int]]) -> list[int] 
 def _encode_sensors(
     values: list[str], at_rows: list[int], covers: SensorCovers, digests: list[str]
 ) -> tuple[str, Any, bytes] | None:
-    """Seals' sensors digests as flags (1: the cover of the cycle's readings in the block,
-    recomputed on decoding) and the literals that are not; None if none is derived."""
-    flags = bytearray()
-    literals: list[str] = []
-    for value, at in zip(values, at_rows, strict=True):
-        if covers.cover(at, digests.__getitem__, _free) == value:
-            flags.append(1)
-        else:
-            flags.append(0)
-            literals.append(value)
+    """Seals' sensors digests as flags (1: derived from the block) and the literals that
+    are not; None if none is derived."""
+    flags, literals = covers.derived(values, at_rows, digests)
     if len(literals) == len(values):
         return None
-    return SENSORS, [literals], bytes(flags)
-
-
-def _free(_size: int) -> None:
-    """The encoder's covers are charged nothing: it computes them from its own input."""
+    return SENSORS, [literals], flags
 
 
 def _encode_strings(

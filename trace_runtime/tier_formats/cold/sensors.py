@@ -72,6 +72,22 @@ class SensorCovers:
         is_reading, topic_ids = self._is_reading, self._topic_ids
         return [i for i in range(self.cycle_start(at), at) if is_reading[topic_ids[i]]]
 
+    def derived(
+        self, values: Sequence[str], at_rows: Sequence[int], digests: Sequence[str]
+    ) -> tuple[bytes, list[str]]:
+        """The encoder's side: for each seal's sensors digest (``values``, at message
+        positions ``at_rows``), a flag (1: the cover of its readings in the block, derived
+        again on decoding) and the literals that are not. The encoder computes covers from its
+        own input, so they are charged nothing."""
+        flags = bytearray()
+        literals: list[str] = []
+        for value, at in zip(values, at_rows, strict=True):
+            derived = self.cover(at, digests.__getitem__, _free) == value
+            flags.append(derived)
+            if not derived:
+                literals.append(value)
+        return bytes(flags), literals
+
     def cover(
         self, at: int, digest_of: Callable[[int], str | None], spend: Callable[[int], None]
     ) -> str | None:
@@ -94,3 +110,7 @@ class SensorCovers:
                 return None
             lines.append(sensor_line(names[topic_ids[i]], sequences[i], times[i], data_digest))
         return sensor_cover(lines)[1]
+
+
+def _free(_size: int) -> None:
+    """Nothing is charged (see ``SensorCovers.derived``)."""
