@@ -48,8 +48,10 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from sim import RunConfig, run  # noqa: E402
+from trace_audit.fleet.find import find_decisions  # noqa: E402
 from trace_audit.fleet.index import MANIFEST, build_index  # noqa: E402
-from trace_audit.fleet.query import connect, find_decisions, index_metrics, run_query  # noqa: E402
+from trace_audit.fleet.metrics import index_metrics  # noqa: E402
+from trace_audit.fleet.query import connect, run_query  # noqa: E402
 from trace_audit.fleet.tables import INDEX_FORMAT, INDEX_VERSION, schema  # noqa: E402
 from trace_audit.metrics import MetricsConfig, compute_metrics  # noqa: E402
 

@@ -24,6 +24,7 @@ from sim.belief import missing_rule_edges
 from sim.counterfactual import Found, holds
 from sim.policy import LEAVES, PolicyInput, evaluate
 from sim.runner import POLICY_VERSION, SimUsageError
+from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.reading.logset import open_log
 from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF
 
@@ -126,38 +127,48 @@ def check_counterfactuals(
         prev_cycle, prev_leaf = cycle.cycle, _taken_leaf(action)
         if belief is None or action is None:
             continue
-        cfs = action.get("counterfactuals") or []
-        if not held_known:
-            _unverifiable(report, "previous cycle not in the log (hysteresis state unknown)", cfs)
-            continue
-        nodes = [_Node(n["id"], n.get("value")) for n in belief["nodes"]]
-        values = {n.id: n.value for n in nodes}
-        edges = [(e["parent"], e["child"], e["rule"]) for e in belief["edges"]]
-        try:
-            inp = PolicyInput.from_nodes(nodes, held)
-        except (KeyError, TypeError, ValueError):
-            _unverifiable(report, "belief graph lacks a value the policy reads", cfs)
-            continue
-        report.decisions += 1
-        got = evaluate(inp, values).command
-        if got != action["command"]:
-            report.findings.append(
-                Finding(cycle.cycle, cycle.t_ns, "decision", action["command"], got)
-            )
-            continue
-        if missing_rule_edges(edges):
-            _unverifiable(report, "belief edge missing from the log", cfs)
-            continue
-        for cf in cfs:
-            found = Found(
-                cf["factor"], cf["comparison"], float(cf["threshold"]), cf["would_select"]
-            )
-            report.counterfactuals += 1
-            if cf["factor"] not in values or not holds(inp, values, found, edges):
-                report.findings.append(
-                    Finding(cycle.cycle, cycle.t_ns, "counterfactual", _claim(cf), "does not hold")
-                )
+        _replay(report, cycle, belief, action, held_known=held_known, held=held)
     return report
+
+
+def _replay(
+    report: ReplayReport,
+    cycle: Cycle,
+    belief: dict[str, Any],
+    action: dict[str, Any],
+    *,
+    held_known: bool,
+    held: str | None,
+) -> None:
+    """Re-run one logged decision, then its counterfactuals, into ``report``; what the log
+    alone cannot re-run is counted as unverifiable."""
+    cfs = action.get("counterfactuals") or []
+    if not held_known:
+        _unverifiable(report, "previous cycle not in the log (hysteresis state unknown)", cfs)
+        return
+    nodes = [_Node(n["id"], n.get("value")) for n in belief["nodes"]]
+    values = {n.id: n.value for n in nodes}
+    edges = [(e["parent"], e["child"], e["rule"]) for e in belief["edges"]]
+    try:
+        inp = PolicyInput.from_nodes(nodes, held)
+    except (KeyError, TypeError, ValueError):
+        _unverifiable(report, "belief graph lacks a value the policy reads", cfs)
+        return
+    report.decisions += 1
+    got = evaluate(inp, values).command
+    if got != action["command"]:
+        report.findings.append(Finding(cycle.cycle, cycle.t_ns, "decision", action["command"], got))
+        return
+    if missing_rule_edges(edges):
+        _unverifiable(report, "belief edge missing from the log", cfs)
+        return
+    for cf in cfs:
+        found = Found(cf["factor"], cf["comparison"], float(cf["threshold"]), cf["would_select"])
+        report.counterfactuals += 1
+        if cf["factor"] not in values or not holds(inp, values, found, edges):
+            report.findings.append(
+                Finding(cycle.cycle, cycle.t_ns, "counterfactual", _claim(cf), "does not hold")
+            )
 
 
 def _unverifiable(report: ReplayReport, reason: str, cfs: list[Any]) -> None:

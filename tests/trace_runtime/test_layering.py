@@ -190,7 +190,7 @@ FLOORS: dict[str, list[set[str]]] = {
         {"metrics", "explain", "export", "timeline", "info", "verify", "doctor", "layers", "rules"}
         | {"tail", "witness", "proof"},
         # what is built from the answers: the fleet index, the incident report, the Foxglove view
-        {"fleet", "report", "foxglove", "foxglove_live"},
+        {"fleet", "report", "foxglove", "foxglove_view", "foxglove_live"},
         {"cli"},
         {""},
     ],

@@ -195,7 +195,7 @@ def find_command(
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
-    from trace_audit.fleet.query import find_decisions
+    from trace_audit.fleet.find import find_decisions
 
     _one_format(json_out=json_out, csv_out=csv_out)
     result = guarded(

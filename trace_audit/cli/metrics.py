@@ -291,7 +291,7 @@ def _parse_by(value: str | None) -> Any:
 def _from_index(
     index: Path, by: str | None, config: MetricsConfig, *, failures: bool, limits: QueryLimits
 ) -> MetricsReport:
-    from trace_audit.fleet.query import index_metrics, parse_index_by
+    from trace_audit.fleet.metrics import index_metrics, parse_index_by
 
     if failures:  # the index counts them; what each one misses is in the logs
         raise UsageError(

@@ -14,10 +14,10 @@ _EXPORTS = {
     "IndexReport": "trace_audit.fleet.index",
     "ColumnSession": "trace_audit.fleet.query",
     "run_query": "trace_audit.fleet.query",
-    "find_decisions": "trace_audit.fleet.query",
-    "index_robots": "trace_audit.fleet.query",
+    "find_decisions": "trace_audit.fleet.find",
+    "index_robots": "trace_audit.fleet.find",
     "QueryResult": "trace_audit.fleet.query",
-    "index_metrics": "trace_audit.fleet.query",
+    "index_metrics": "trace_audit.fleet.metrics",
     "QueryLimits": "trace_audit.fleet.limits",
     "dask_executor": "trace_audit.fleet.cluster",
 }
@@ -36,15 +36,10 @@ __all__ = [
 
 if TYPE_CHECKING:
     from trace_audit.fleet.cluster import dask_executor
+    from trace_audit.fleet.find import find_decisions, index_robots
     from trace_audit.fleet.index import IndexReport, build_index
-    from trace_audit.fleet.query import (
-        ColumnSession,
-        QueryResult,
-        find_decisions,
-        index_metrics,
-        index_robots,
-        run_query,
-    )
+    from trace_audit.fleet.metrics import index_metrics
+    from trace_audit.fleet.query import ColumnSession, QueryResult, run_query
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, __all__)

@@ -1,5 +1,7 @@
-"""SQL over the fleet index on DuckDB (embedded, no server), and what is built on it:
-named questions (``find_decisions``) and fleet metrics without re-reading the logs.
+"""SQL over the fleet index on DuckDB (embedded, no server): a confined session of the
+index's own files (``connect``), one bounded statement (``run_query``), and a session whose
+results are numpy columns (``ColumnSession``). The named questions built on it live beside
+it: ``fleet.find`` (decisions) and ``fleet.metrics`` (metrics without re-reading the logs).
 
 The tables are views over the Parquet files (Hive partitions ``robot`` and ``day`` come back
 as columns; ``day`` is text: the UTC date on a wall clock, ``run-<segment>`` on a sim or
@@ -9,10 +11,8 @@ that reconstructs the row's decision from its segment, by cycle and robot.
 
 from __future__ import annotations
 
-import dataclasses
 import datetime
 import decimal
-import math
 import time
 import uuid
 from collections.abc import Sequence
@@ -23,52 +23,29 @@ from typing import TYPE_CHECKING, Any
 from trace_audit.fleet.folder import listed_files, load_manifest
 from trace_audit.fleet.limits import QueryLimits, format_size, over_limit, row_bytes, watchdog
 from trace_audit.fleet.tables import TABLES, schema
-from trace_audit.metrics import (
-    NO_SCENARIO,
-    GroupSums,
-    MetricsConfig,
-    MetricsReport,
-    report_from_sums,
-)
 from trace_runtime.errors import LogReadError, UsageError
 
 if TYPE_CHECKING:
     import duckdb
 
 __all__ = [
-    "DAY_MEANING",
-    "INDEX_GROUP_BYS",
     "ColumnSession",
     "QueryResult",
     "connect",
-    "find_decisions",
-    "index_metrics",
-    "index_robots",
+    "plain",
     "run_query",
+    "sql_literal",
 ]
 
-INDEX_GROUP_BYS: dict[str, str] = {
-    "robot": "robot",
-    "day": "CAST(day AS VARCHAR)",
-    "hour": "hour",
-    "segment": "segment",
-    "scenario": f"COALESCE(scenario, '{NO_SCENARIO}')",
-    "software_version": "software_version",
-    "policy_version": "policy_version",
-    "tier": "tier",
-    "command": "command",
-}
-"""What ``metrics --index --by`` may group by (comma-separated for several), as SQL."""
 
-
-def _literal(text: str) -> str:
+def sql_literal(text: str) -> str:
     """``text`` as a SQL string literal."""
     return "'" + text.replace("'", "''") + "'"
 
 
-_SHELL_SAFE = _literal("[A-Za-z0-9_./+:@%=,-]+")
-_QUOTE = _literal("'")
-_QUOTE_IN_QUOTES = _literal("'\"'\"'")
+_SHELL_SAFE = sql_literal("[A-Za-z0-9_./+:@%=,-]+")
+_QUOTE = sql_literal("'")
+_QUOTE_IN_QUOTES = sql_literal("'\"'\"'")
 _EXPLAIN = (
     "'trace-audit explain ' || "
     # The segment's absolute path, quoted for a POSIX shell unless it needs no quoting.
@@ -79,13 +56,6 @@ _EXPLAIN = (
 )
 """The exact decision: its segment file, its cycle number and its robot (a time would name
 the decision in force then, and a float time not even that)."""
-
-DAY_MEANING = (
-    "the UTC date (YYYY-MM-DD) of the decision's time on a wall clock; on a sim or "
-    "monotonic clock, whose times count from an arbitrary zero, the robot's run: "
-    "run-<number of the run's first segment>"
-)
-"""What the index's ``day`` column (and ``metrics --index --by day``) means."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -165,7 +135,7 @@ def connect(
         # directory is not the index's and must not be counted.
         files = [(root / rel).as_posix() for rel in listed if rel.startswith(f"{table}/")]
         if files:
-            names = ", ".join(_literal(f) for f in files)
+            names = ", ".join(sql_literal(f) for f in files)
             source = (
                 f"read_parquet([{names}], hive_partitioning = true, "
                 "hive_types = {'robot': VARCHAR, 'day': VARCHAR})"
@@ -373,235 +343,3 @@ def _rest(cursor: Any) -> int:
         # DuckDB warns that Arrow output of a DB-API result copies rows: it is counted only.
         warnings.filterwarnings("ignore", message="Arrow output on a DB-API result")
         return sum(batch.num_rows for batch in cursor.to_arrow_reader(65_536))
-
-
-def find_decisions(
-    index: str | Path,
-    *,
-    action: str | None = None,
-    near: str | None = None,
-    within_m: float | None = None,
-    where: str | None = None,
-    robots: Sequence[str] = (),
-    limit: int = 1000,
-    limits: QueryLimits | None = None,
-) -> QueryResult:
-    """Decisions by command, by a perceived entity's class and distance, and by any SQL
-    condition on the decisions' columns; each row with ``robot``, ``t_ns`` and ``explain``.
-
-    ``robots``: only these robots' decisions (none: every robot's); a robot the index
-    does not hold is a ``UsageError`` naming those it does (``index_robots``)."""
-    conditions: list[str] = []
-    params: list[Any] = []
-    if action is not None:
-        conditions.append("upper(d.command) = upper(?)")
-        params.append(action)
-    if robots:
-        robots = _held_robots(index, robots, limits)
-        # One placeholder per robot: the ids themselves only ever travel as parameters.
-        conditions.append(f"d.robot IN ({', '.join('?' for _ in robots)})")
-        params.extend(robots)
-    if where:
-        conditions.append(f"({where})")
-    select = (
-        "d.robot, d.day, d.t_ns, d.cycle, d.command, d.previous_command, d.lead_factor, "
-        "d.lead_value, d.lead_unit, d.et, d.dr, d.seal_verified, d.software_version"
-    )
-    if near is not None or within_m is not None:
-        # From the decision's own ``nearest`` map (class -> nearest distance), built from
-        # the same entity rows: one scan of one table, no join of two fleet-sized ones.
-        if near is not None:
-            distance = f"d.nearest[{_literal(near)}]"
-            select += f", {_literal(near)} AS nearest_class"
-        else:
-            distance = "list_min(map_values(d.nearest))"
-            select += (
-                ", map_keys(d.nearest)[list_position(map_values(d.nearest), "
-                f"{distance})] AS nearest_class"
-            )
-        select += f", {distance} AS nearest_m"
-        conditions.append(f"{distance} IS NOT NULL")
-        if within_m is not None:
-            if not math.isfinite(within_m):
-                raise UsageError(f"--within must be a finite distance, got {within_m}")
-            conditions.append(f"{distance} < {float(within_m)!r}")
-    sql = f"SELECT {select}, d.explain FROM decisions d"
-    if conditions:
-        sql += " WHERE " + " AND ".join(conditions)
-    try:
-        ordered = sql + f" ORDER BY d.t_ns, d.robot LIMIT {int(limit)}"
-        found = run_query(index, ordered, params, limits=limits)
-    except UsageError as err:
-        if where:  # the error is about SQL the user did not write around the condition
-            raise UsageError(f"--where {where!r}: {err}") from err
-        raise
-    if len(found.rows) < limit:
-        return found
-    # As many rows as the limit: count the matches so the output can say it was cut.
-    count = run_query(index, f"SELECT count(*) FROM ({sql})", params, limits=limits).rows[0][0]
-    return dataclasses.replace(found, total=int(count) if count > len(found.rows) else None)
-
-
-def index_robots(index: str | Path, limits: QueryLimits | None = None) -> list[str]:
-    """The robots the index holds (those with an indexed segment), sorted."""
-    found = run_query(index, "SELECT DISTINCT robot FROM segments ORDER BY robot", limits=limits)
-    return [str(row[0]) for row in found.rows]
-
-
-def _held_robots(index: str | Path, robots: Sequence[str], limits: QueryLimits | None) -> list[str]:
-    """``robots`` once each; ``UsageError`` naming the index's robots when one is not held."""
-    wanted = list(dict.fromkeys(robots))
-    held = index_robots(index, limits)
-    missing = [repr(r) for r in wanted if r not in held]
-    if missing:
-        holds = ", ".join(held) if held else "no robot"
-        raise UsageError(f"robot {', '.join(missing)} is not in this index; it holds {holds}")
-    return wanted
-
-
-def parse_index_by(text: str | None) -> list[str]:
-    """``robot,day`` -> ["robot", "day"]; ``UsageError`` naming what is allowed."""
-    if not text:
-        return []
-    keys = [k.strip() for k in text.split(",") if k.strip()]
-    for key in keys:
-        if key not in INDEX_GROUP_BYS:
-            raise UsageError(
-                f"cannot group the index by {key!r} (use {', '.join(INDEX_GROUP_BYS)})"
-            )
-    return keys
-
-
-def index_metrics(
-    index: str | Path,
-    by: Sequence[str] = (),
-    config: MetricsConfig | None = None,
-    limits: QueryLimits | None = None,
-) -> MetricsReport:
-    """ET, ET_partial, TC, DR and TCS from the index's decision rows, without reading a log:
-    the sums metrics keeps per group, summed again by DuckDB (``report_from_sums``). As
-    ``compute_metrics`` does, an index of several robots and no ``by`` is grouped by robot."""
-    started = time.perf_counter()
-    cfg = config or MetricsConfig()
-    robots = _check_index_config(index, cfg, by)
-    if not by and len(robots) > 1:
-        by = ["robot"]
-    result = run_query(index, _sums_sql(cfg, by), limits=limits)
-    groups: dict[str, GroupSums] = {}
-    segments: set[str] = set()
-    cycles = failures_total = 0
-    for row in result.rows:
-        name, sums, names, failing = _group_sums(row)
-        failures_total += failing
-        groups[name] = sums
-        segments.update(names)
-        cycles += sums.decisions
-    report = report_from_sums(
-        [str(index)],
-        cfg,
-        groups,
-        by=",".join(by) or None,
-        segments=tuple(sorted(segments)),
-        cycles=cycles,
-        elapsed=time.perf_counter() - started,
-    )
-    # Counted from the rows as the logs count them; the listing itself stays with the logs.
-    gaps_total = sum(g.gaps for g in groups.values())
-    definitions = dict(report.definitions)
-    if "day" in by:
-        definitions["day"] = DAY_MEANING
-    return dataclasses.replace(
-        report,
-        definitions=definitions,
-        failures_total=failures_total,
-        gaps_total=gaps_total,
-        logging_time="not in the index",
-        not_in_index=("logging_cost", "channel_deviation", "external_refs", "failures", "gaps"),
-    )
-
-
-def _check_index_config(index: str | Path, cfg: MetricsConfig, by: Sequence[str]) -> set[str]:
-    """``UsageError`` (``LogReadError`` for no index) unless the index can answer with ``cfg``:
-    built with the same gap tolerance and sensor window, no time window, no evidence. The
-    robots the index holds."""
-    manifest = load_manifest(index)
-    if manifest is None:
-        raise LogReadError(str(index), "not a fleet index (run trace-audit index first)")
-    built = manifest.get("config", {})
-    for name in ("gap_tolerance", "sensor_window"):
-        if built.get(name) != getattr(cfg, name):
-            raise UsageError(
-                f"the index was built with {name} {built.get(name)}, not "
-                f"{getattr(cfg, name)}: rebuild it or drop the option"
-            )
-    if cfg.start_ns is not None or cfg.end_ns is not None:
-        raise UsageError("--start/--end are not supported with --index (filter in SQL)")
-    for key in by:
-        if key not in INDEX_GROUP_BYS:
-            raise UsageError(f"cannot group the index by {key!r}")
-    if cfg.evidence:
-        raise UsageError("--evidence is not supported with --index (run metrics on the logs)")
-    entries = manifest.get("segments")
-    return {
-        str(e.get("robot"))
-        for e in (entries.values() if isinstance(entries, dict) else ())
-        if isinstance(e, dict)
-    }
-
-
-def _sums_sql(cfg: MetricsConfig, by: Sequence[str]) -> str:
-    """The query summing each group's decision rows into the columns of ``GroupSums``; its
-    TCS is recomputed from the rows with ``cfg``'s weights (``trust_score`` as SQL)."""
-    group = " || ', ' || ".join(f"CAST({INDEX_GROUP_BYS[k]} AS VARCHAR)" for k in by) or "'all'"
-    w = cfg.weights
-    total = w.et + w.et_partial + w.dr + w.continuity + w.integrity
-    gate = "NOT seal_verified" if w.integrity_gate else "false"
-    tcs = (
-        f"CASE WHEN {gate} THEN 0.0 ELSE ({w.et!r} * et + {w.et_partial!r} * et_partial + "
-        f"{w.dr!r} * dr::DOUBLE + {w.continuity!r} * continuity + "
-        f"{w.integrity!r} * seal_verified::DOUBLE) / {total!r} END"
-    )
-    return f"""
-        WITH d AS (SELECT *, {group} AS g, {tcs} AS tcs_w FROM decisions)
-        SELECT g, count(*), sum(sealed::INT), sum(summarized::INT),
-               fsum(et), fsum(et * et), fsum(et_partial), fsum(et_partial * et_partial),
-               sum((factors_total > 0 AND factors_traceable = factors_total)::INT),
-               sum(factors_total), sum(factors_traceable), sum((factors_total = 0)::INT),
-               sum(dr::INT), sum(seal_verified::INT), fsum(tcs_w), fsum(tcs_w * tcs_w),
-               sum(window_ns), sum(gap_ns), sum((gap_ns > 0)::INT), sum(missing_cycles),
-               sum(dropped), sum(clock_anomaly::INT), list(DISTINCT segment),
-               count(*) FILTER (WHERE NOT (factors_total > 0
-                   AND factors_traceable = factors_total AND dr AND seal_verified))
-        FROM d GROUP BY g ORDER BY g
-    """
-
-
-def _group_sums(row: Sequence[Any]) -> tuple[str, GroupSums, list[str], int]:
-    """One row of ``_sums_sql``: (group, its sums, its segments, its failing decisions)."""
-    (name, n, sealed, summarized, et, et2, etp, etp2, full, factors, traceable) = row[:11]
-    (no_factors, dr, intact, tcs_sum, tcs2, window, gap, gaps, missing) = row[11:20]
-    (dropped, anomalies, names, failing) = row[20:]
-    sums = GroupSums(
-        decisions=n,
-        sealed=sealed,
-        summarized=summarized,
-        et_sum=et,
-        et_sq=et2,
-        etp_sum=etp,
-        etp_sq=etp2,
-        full=full,
-        factors=factors,
-        factors_traceable=traceable,
-        no_factors=no_factors,
-        dr_ok=dr,
-        integrity_ok=intact,
-        tcs_sum=tcs_sum,
-        tcs_sq=tcs2,
-        window_ns=int(window),
-        gap_ns=int(gap),
-        gaps=gaps,
-        missing_cycles=int(missing),
-        dropped=int(dropped),
-        anomalies=anomalies,
-    )
-    return str(name), sums, names, failing

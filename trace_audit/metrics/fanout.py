@@ -136,6 +136,35 @@ def compute_metrics(
         if progress is not None:
             progress(done, expected)
 
+    _score_plan(plan, cfg, executor, total=total, advance=advance)
+    elapsed = time.perf_counter() - started
+    segments_read = tuple(str(s.path) for _, segs in plan for s in segs)
+    report = build_report(
+        paths,
+        cfg,
+        log=log,
+        total=total,
+        segments=segments_read,
+        elapsed=elapsed,
+        by=cfg.by,
+        robots=selection.robots,
+    )
+    if report.overall.decisions == 0 and cfg.start_ns is None and cfg.end_ns is None:
+        # As info, explain and verify say it: nothing to score is an empty log, not 0 %.
+        raise LogReadError(str(paths[0]), "the log holds no decision cycles")
+    return report
+
+
+def _score_plan(
+    plan: list[tuple[str, list[Segment]]],
+    cfg: MetricsConfig,
+    executor: Executor | None,
+    *,
+    total: ScanResult,
+    advance: Callable[[int], None],
+) -> None:
+    """Score the plan into ``total``: on ``executor`` when given, else in this process (one
+    pass a robot) or, with ``cfg.workers``, in local processes."""
     tasks = _tasks(plan, cfg, absolute=executor is not None)
     workers = min(cfg.workers, len(tasks), _usable_cpus())
     if executor is not None:
@@ -155,22 +184,6 @@ def compute_metrics(
 
         with ProcessPoolExecutor(max_workers=workers) as pool:
             _fan_out(pool, tasks, plan=plan, total=total, advance=advance, limit=cfg.max_listed)
-    elapsed = time.perf_counter() - started
-    segments_read = tuple(str(s.path) for _, segs in plan for s in segs)
-    report = build_report(
-        paths,
-        cfg,
-        log=log,
-        total=total,
-        segments=segments_read,
-        elapsed=elapsed,
-        by=cfg.by,
-        robots=selection.robots,
-    )
-    if report.overall.decisions == 0 and cfg.start_ns is None and cfg.end_ns is None:
-        # As info, explain and verify say it: nothing to score is an empty log, not 0 %.
-        raise LogReadError(str(paths[0]), "the log holds no decision cycles")
-    return report
 
 
 def _fan_out(

@@ -206,30 +206,43 @@ class _Scanner:
             return
         partial.failures_total += 1
         if len(partial.failures) < self.config.max_listed:
-            problems: tuple[str, ...] | list[str] = ()
-            if not full:
-                # a listed chain names factors and nodes: the whole layers
-                problems = et_problems(
-                    trace_layers(
-                        cycle.cycle,
-                        cycle.t_ns,
-                        cycle.layer(TOPIC_ACTION),
-                        cycle.layer(TOPIC_BELIEF),
-                        cycle.layer(TOPIC_PERCEPTION),
-                        window=window,
-                    )
-                )
             partial.failures.append(
-                _failure(
-                    cycle,
-                    segment,
-                    group=group,
-                    score=score,
-                    et=tuple(problems),
-                    dr=missing_dr,
-                    integrity=seal.problems,
+                self._listed_failure(cycle, segment, group, score, dr=missing_dr, seal=seal)
+            )
+
+    def _listed_failure(
+        self,
+        cycle: Cycle,
+        segment: Segment,
+        group: str,
+        score: DecisionScore,
+        *,
+        dr: list[str],
+        seal: SealOutcome,
+    ) -> DecisionFailure:
+        """A failing decision as listed; a chain that is not fully traceable is walked again
+        with its links, since a listed chain names factors and nodes (the whole layers)."""
+        problems: tuple[str, ...] | list[str] = ()
+        if not (score.factors > 0 and score.traceable == score.factors):
+            problems = et_problems(
+                trace_layers(
+                    cycle.cycle,
+                    cycle.t_ns,
+                    cycle.layer(TOPIC_ACTION),
+                    cycle.layer(TOPIC_BELIEF),
+                    cycle.layer(TOPIC_PERCEPTION),
+                    window=self.window,
                 )
             )
+        return _failure(
+            cycle,
+            segment,
+            group=group,
+            score=score,
+            et=tuple(problems),
+            dr=dr,
+            integrity=seal.problems,
+        )
 
     def _add_execution(self, cycle: Cycle, segment: Segment) -> None:
         """Add the execution record's actuator channels and failed checks to the sums; the

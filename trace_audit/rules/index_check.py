@@ -11,7 +11,7 @@ comes from ``decisions.intended_linear`` and ``actual_linear`` by the logs' own 
 (``signals.planar_speed``).
 
 The SQL runs through a query function the caller gives (``query(sql, params) -> columns``),
-the fleet package's bounded, confined ``query_columns`` (``trace_audit.fleet``, which stands
+the fleet package's bounded, confined ``ColumnSession`` (``trace_audit.fleet``, which stands
 on a floor above this one): nothing here opens a file. Given an ``Executor`` (a Dask
 cluster's, ``--scheduler``), each robot is one task (its rows read and judged on a worker,
 so the query function must pickle); the answers are kept in robot order, as locally.
@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Executor
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,7 +40,7 @@ __all__ = ["BY_KEYS", "NOT_WALL_CLOCK", "IndexQuery", "check_index", "judge_inde
 
 IndexQuery = Callable[[str, Sequence[Any]], Mapping[str, Any]]
 """Runs one SQL statement with parameters on the index; its result as numpy columns by
-name, NULL as NaN in numbers and None in text (``trace_audit.fleet.query_columns``)."""
+name, NULL as NaN in numbers and None in text (``trace_audit.fleet.ColumnSession``)."""
 
 BY_KEYS = ("robot", "day")
 """What ``check --index --by`` groups by."""
@@ -105,19 +105,7 @@ def judge_index_robot(
 def robot_signals(query: IndexQuery, robot: str, rules: Sequence[Rule]) -> RobotSignals:
     """One robot's rows of the index, in time order, with the signals ``rules`` read."""
     names = tuple(dict.fromkeys(s for rule in rules for s in rule.formula.signals))
-    segments = _rows(
-        query(
-            "SELECT segment, segment_path, period_ns, start_ns, day FROM segments WHERE robot = ?",
-            [robot],
-        )
-    )
-    paths = {str(s[0]): str(s[1]) for s in segments}
-    period_ns = max((int(s[2]) for s in segments if _present(s[2])), default=0)
-    if period_ns <= 0:
-        raise RulesError(f"{robot}: the index declares no cycle period to judge rules at")
-    start_ns = min((int(s[3]) for s in segments if _present(s[3])), default=0)
-    wall = any(not str(s[4]).startswith("run-") for s in segments)
-    clock = LogClock("system" if wall else NOT_WALL_CLOCK, start_ns)
+    paths, period_ns, clock = _segments(query, robot)
     channels, logged = _channels(query, robot, names)
     planar = "speed" not in logged and any(n.startswith("channel.speed.") for n in names)
     checks = _checks(query, robot, names)
@@ -149,23 +137,7 @@ def robot_signals(query: IndexQuery, robot: str, rules: Sequence[Rule]) -> Robot
     cycles = np.asarray(data["cycle"], dtype=np.int64)
     t_ns = np.asarray(data["t_ns"], dtype=np.int64)
     segment = labels["segment"]
-    keys = (segment, cycles, t_ns)
-    values: dict[str, NDArray[np.float64]] = {}
-    for name in names:
-        family, _, rest = name.partition(".")
-        if family == "command":
-            values[name] = _indicator(labels["command"], rest)
-        elif family in ("nearest", "flag"):
-            values[name] = np.asarray(data[name], dtype=np.float64)
-        elif family == "factor":
-            values[name] = _factor_values(data["factors"], rest)
-        elif planar and name.startswith("channel.speed."):
-            part = name.removeprefix("channel.speed.")
-            values[name] = _planar(part, data["intended_linear"], data["actual_linear"])
-        elif family == "channel":
-            values[name] = _by_key(channels, keys, name, n)
-        elif family == "check":
-            values[name] = _by_key(checks, keys, name, n)
+    by_row = _RowValues(data, labels, (segment, cycles, t_ns), n, channels, checks, planar)
     return RobotSignals(
         robot,
         period_ns,
@@ -173,12 +145,63 @@ def robot_signals(query: IndexQuery, robot: str, rules: Sequence[Rule]) -> Robot
         cycles,
         t_ns,
         labels["command"],
-        values,
+        {name: value for name in names if (value := by_row.signal(name)) is not None},
         np.ones(n, dtype=np.bool_),
         Labels(segment.codes, tuple(s and paths.get(s, s) for s in segment.names)),
         _gaps(robot, data),
         labels["day"],
     )
+
+
+def _segments(query: IndexQuery, robot: str) -> tuple[dict[str, str], int, LogClock]:
+    """The robot's segments in the index: each one's path by name, the cycle period rules
+    are judged at (``RulesError`` when none is declared), and the clock its times are shown
+    on (a wall clock unless every row is under a ``run-`` partition)."""
+    segments = _rows(
+        query(
+            "SELECT segment, segment_path, period_ns, start_ns, day FROM segments WHERE robot = ?",
+            [robot],
+        )
+    )
+    paths = {str(s[0]): str(s[1]) for s in segments}
+    period_ns = max((int(s[2]) for s in segments if _present(s[2])), default=0)
+    if period_ns <= 0:
+        raise RulesError(f"{robot}: the index declares no cycle period to judge rules at")
+    start_ns = min((int(s[3]) for s in segments if _present(s[3])), default=0)
+    wall = any(not str(s[4]).startswith("run-") for s in segments)
+    return paths, period_ns, LogClock("system" if wall else NOT_WALL_CLOCK, start_ns)
+
+
+class _RowValues(NamedTuple):
+    """What a signal's value at each decision row is read from: the decision columns, the
+    text columns as codes, the rows' keys (segment, cycle, t_ns), and the channel and check
+    values by key."""
+
+    data: Mapping[str, Any]
+    labels: Mapping[str, Labels]
+    keys: tuple[Labels, NDArray[np.int64], NDArray[np.int64]]
+    n: int
+    channels: Mapping[tuple[str, int, int, str], float]
+    checks: Mapping[tuple[str, int, int, str], float]
+    planar: bool
+
+    def signal(self, name: str) -> NDArray[np.float64] | None:
+        """The signal ``name`` at each row; None for a family the index does not hold."""
+        family, _, rest = name.partition(".")
+        if family == "command":
+            return _indicator(self.labels["command"], rest)
+        if family in ("nearest", "flag"):
+            return np.asarray(self.data[name], dtype=np.float64)
+        if family == "factor":
+            return _factor_values(self.data["factors"], rest)
+        if self.planar and name.startswith("channel.speed."):
+            part = name.removeprefix("channel.speed.")
+            return _planar(part, self.data["intended_linear"], self.data["actual_linear"])
+        if family == "channel":
+            return _by_key(self.channels, self.keys, name, self.n)
+        if family == "check":
+            return _by_key(self.checks, self.keys, name, self.n)
+        return None
 
 
 _GAPS = (

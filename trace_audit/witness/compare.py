@@ -344,53 +344,19 @@ def _compare_robot(
     *,
     checked: bool,
 ) -> None:
+    """One robot's tree against its trusted witnessed checkpoints: a tree witnessed larger
+    than the log's is a ``truncated_tail``, one whose root differs a ``fork``; the largest
+    that agrees bounds the time of its last cycle."""
     try:
         leaves = robot_seal_leaves(log, robot)
     except ChainTreeError as err:
         report.unmatched.append(f"{robot}: its tree cannot be read here ({err.reason})")
         return
     entries = sorted(entries, key=lambda e: (e[0].tree_size, e[1]))
-    n = len(leaves)
-    last = leaves[-1] if leaves else None
-    tree = CompactRange()
-    at = 0
-    best: tuple[Witnessed, int] | None = None
-    beyond = [(w, stamp) for w, stamp in entries if w.tree_size > n]
-    if beyond:
-        w, stamp = beyond[-1]  # the largest tree witnessed: the most that was removed
-        others = (
-            f" ({len(beyond) - 1} other witnessed tree(s) also beyond it)" if beyond[1:] else ""
-        )
-        report.findings.append(
-            _finding(
-                "truncated_tail",
-                robot,
-                f"witness {w.witness} cosigned a tree of {w.tree_size} seals at "
-                f"{iso_utc(stamp * 1_000_000_000)}, but this log holds {n}: the newest "
-                f"{w.tree_size - n} cycle(s) were removed{others}",
-                last,
-            )
-        )
-    for w, stamp in entries:
-        when = iso_utc(stamp * 1_000_000_000)
-        if w.tree_size > n:
-            continue
-        while at < w.tree_size:
-            tree.append(leaves[at].leaf)
-            at += 1
-        if tree.root() != w.root:
-            report.findings.append(
-                _finding(
-                    "fork",
-                    robot,
-                    f"witness {w.witness} cosigned another tree of size {w.tree_size} at "
-                    f"{when}: the log's first {w.tree_size} seals were rewritten",
-                    leaves[w.tree_size - 1] if w.tree_size else None,
-                )
-            )
-            continue
-        if best is None or w.tree_size > best[0].tree_size:
-            best = (w, stamp)  # the largest tree, at the earliest time it was vouched for
+    truncated = _truncated_tail(robot, entries, leaves)
+    if truncated is not None:
+        report.findings.append(truncated)
+    best = _largest_agreeing(robot, entries, leaves, report.findings)
     if best is not None and best[0].tree_size:
         w, stamp = best
         leaf = leaves[w.tree_size - 1]
@@ -406,3 +372,59 @@ def _compare_robot(
                 checked,
             )
         )
+
+
+def _truncated_tail(
+    robot: str, entries: list[tuple[Witnessed, int]], leaves: Sequence[SealLeaf]
+) -> Finding | None:
+    """A ``truncated_tail`` when a witness cosigned a larger tree than the log holds, named
+    by the largest (the most that was removed); ``entries`` sorted by tree size."""
+    n = len(leaves)
+    beyond = [(w, stamp) for w, stamp in entries if w.tree_size > n]
+    if not beyond:
+        return None
+    w, stamp = beyond[-1]
+    others = f" ({len(beyond) - 1} other witnessed tree(s) also beyond it)" if beyond[1:] else ""
+    return _finding(
+        "truncated_tail",
+        robot,
+        f"witness {w.witness} cosigned a tree of {w.tree_size} seals at "
+        f"{iso_utc(stamp * 1_000_000_000)}, but this log holds {n}: the newest "
+        f"{w.tree_size - n} cycle(s) were removed{others}",
+        leaves[-1] if leaves else None,
+    )
+
+
+def _largest_agreeing(
+    robot: str,
+    entries: list[tuple[Witnessed, int]],
+    leaves: Sequence[SealLeaf],
+    findings: list[Finding],
+) -> tuple[Witnessed, int] | None:
+    """The largest witnessed tree the log's first seals give the same root for, at the
+    earliest time it was vouched for; each that differs is a ``fork`` in ``findings``.
+    ``entries`` sorted by tree size, then time: the log's tree is grown once."""
+    tree = CompactRange()
+    at = 0
+    best: tuple[Witnessed, int] | None = None
+    for w, stamp in entries:
+        if w.tree_size > len(leaves):
+            continue
+        while at < w.tree_size:
+            tree.append(leaves[at].leaf)
+            at += 1
+        if tree.root() != w.root:
+            findings.append(
+                _finding(
+                    "fork",
+                    robot,
+                    f"witness {w.witness} cosigned another tree of size {w.tree_size} at "
+                    f"{iso_utc(stamp * 1_000_000_000)}: the log's first {w.tree_size} seals "
+                    "were rewritten",
+                    leaves[w.tree_size - 1] if w.tree_size else None,
+                )
+            )
+            continue
+        if best is None or w.tree_size > best[0].tree_size:
+            best = (w, stamp)
+    return best

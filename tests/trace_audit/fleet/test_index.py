@@ -14,8 +14,10 @@ from pathlib import Path
 import pytest
 
 from tests.trace_audit.conftest import T0_NS, write_log
+from trace_audit.fleet.find import find_decisions
 from trace_audit.fleet.index import MANIFEST, build_index
-from trace_audit.fleet.query import find_decisions, index_metrics, run_query
+from trace_audit.fleet.metrics import index_metrics
+from trace_audit.fleet.query import run_query
 from trace_audit.fleet.tables import TABLES, schema
 from trace_audit.info import log_info
 from trace_audit.metrics import MetricsConfig, compute_metrics

@@ -16,9 +16,10 @@ import pytest
 
 from tests.trace_audit.conftest import write_log
 from tests.trace_runtime import hostile
+from trace_audit.fleet.find import find_decisions
 from trace_audit.fleet.index import build_index
 from trace_audit.fleet.limits import QueryLimits, parse_size
-from trace_audit.fleet.query import find_decisions, run_query
+from trace_audit.fleet.query import run_query
 from trace_runtime.errors import UsageError
 
 REPO = Path(__file__).resolve().parents[3]

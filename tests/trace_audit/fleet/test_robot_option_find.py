@@ -10,8 +10,8 @@ import pytest
 
 from tests.outside import cli, one_line
 from tests.trace_audit.conftest import stretch, write_log
+from trace_audit.fleet.find import find_decisions, index_robots
 from trace_audit.fleet.index import build_index
-from trace_audit.fleet.query import find_decisions, index_robots
 
 SCRIPT = (stretch("clear", 5), stretch("ped_close", 5))
 ROBOTS = ("amr-1", "amr-2", "amr-3")

@@ -1,135 +1,31 @@
-"""Causal chains of one decision: from each factor the action names down to a sensor reading.
-
-This is the one chain walker of the investigator. It reads plain JSON dicts (what
-``Cycle.layer(topic)`` returns, for full and warm-summary cycles alike) with dicts and sets
-only, so metrics over a long log stay fast.
-
-The documented chain of a factor, top to bottom (one *level* per line):
-
-1. ``factor_node``    the factor's ``node`` is a node of this cycle's belief graph;
-2. ``belief_path``    belief edges (parent -> child), walked from the factor node up through
-                      parents, reach a node with ``kind == "entity"``;
-3. ``entity``         that entity node's ``entity`` names an entity of this cycle's perception;
-4. ``evidence_ref``   that entity has evidence whose ``ref`` is recorded (not null);
-5. ``sensor_reading`` the ref resolves to a logged ``/sensors`` message: same topic and
-                      ``log_time_ns``, and, when the ref carries them, the same sequence and
-                      the SHA-256 of the message data.
-
-Expected depth is 5 for a factor on a derived-state node, and 4 for a factor whose node is
-itself an entity node (it has no belief path to document). A factor whose node is not in
-the belief graph is taken as a state factor (expected 5): nothing logged says otherwise.
-The documented depth is the number of consecutive documented levels from the top; a level
-below the first missing one is reported as missing ("not reached"), never skipped, because
-without it nothing says which entity or evidence the chain would have continued to.
-
-Where a factor has several routes (a node with several parents, an entity with several
-evidence items), the chain reported is the deepest one; the first fully documented route
-in breadth-first order (nearest entity first) wins ties.
-
-Evidence refs resolve against the sensor messages of the decision's own cycle and of the
-``SensorWindow.cycles`` cycles before it (default 50, i.e. 5 s at 10 Hz); a ref to a
-reading older than that or to a later cycle does not resolve. A ref into an external
-recording (PROFILE.md section 11, e.g. a rosbag2 MCAP) resolves when the window was given
-that recording and the message there matches the ref; without the recording it stays
-undocumented, with a reason that says it was not checked rather than broken.
-
-``label_chain`` names a chain's nodes and links in the labels of its decision's causal graph
-(``trace_audit.causal``), the words ``trace-audit explain`` draws it with.
-"""
+"""The walk: each factor the action names followed down through the belief graph, the
+perception entity and its evidence to a logged sensor reading (``trace_layers``, with every
+link; ``score_layers``, the depths alone, for metrics over long logs). The rules it follows
+are the package's (``trace_audit.chains``)."""
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
-from itertools import pairwise
-from typing import Any, NamedTuple
+from collections.abc import Iterable
+from typing import Any
 
-from trace_audit.sensor_window import DEFAULT_SENSOR_WINDOW, SensorWindow
+from trace_audit.chains.model import (
+    EXPECTED_DEPTH_ENTITY,
+    EXPECTED_DEPTH_STATE,
+    LEVELS,
+    DecisionChains,
+    DecisionScore,
+    FactorChain,
+    Link,
+)
+from trace_audit.sensor_window import SensorWindow
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.reading.recordings import Recordings
 from trace_runtime.records import TOPIC_ACTION, TOPIC_BELIEF, TOPIC_PERCEPTION
 
-__all__ = [
-    "DEFAULT_SENSOR_WINDOW",
-    "EXPECTED_DEPTH_ENTITY",
-    "EXPECTED_DEPTH_STATE",
-    "LEVELS",
-    "DecisionChains",
-    "DecisionScore",
-    "FactorChain",
-    "LabelledChain",
-    "LabelledLink",
-    "Link",
-    "SensorWindow",
-    "label_chain",
-    "score_layers",
-    "trace_cycle",
-    "trace_layers",
-]
-
-LEVELS = ("factor_node", "belief_path", "entity", "evidence_ref", "sensor_reading")
-EXPECTED_DEPTH_STATE = 5
-EXPECTED_DEPTH_ENTITY = 4
+__all__ = ["score_layers", "trace_cycle", "trace_layers"]
 
 _NOT_REACHED = "not reached: the chain is broken above"
-
-
-@dataclass(frozen=True, slots=True)
-class Link:
-    """One level of a factor's chain: what it points at, and whether the log documents it."""
-
-    level: str
-    documented: bool
-    ref: str
-    detail: str = ""
-
-
-@dataclass(frozen=True, slots=True)
-class FactorChain:
-    """The documented chain of one factor of a decision."""
-
-    node: str
-    name: str
-    links: tuple[Link, ...]
-    depth: int
-    expected_depth: int
-
-    @property
-    def traceable(self) -> bool:
-        return self.depth == self.expected_depth
-
-    @property
-    def partial(self) -> float:
-        return self.depth / self.expected_depth
-
-    @property
-    def missing(self) -> Link | None:
-        """The first missing link (where the chain breaks), or None when traceable."""
-        for link in self.links:
-            if not link.documented:
-                return link
-        return None
-
-
-@dataclass(frozen=True, slots=True)
-class DecisionChains:
-    """Every factor chain of one decision and its ET / ET_partial.
-
-    A decision whose action is not logged, or names no factor, has ET = ET_partial = 0:
-    nothing links it to evidence (``reason`` says which).
-    """
-
-    cycle: int
-    t_ns: int
-    factors: tuple[FactorChain, ...]
-    et: float
-    et_partial: float
-    reason: str = ""
-
-    @property
-    def fully_traceable(self) -> bool:
-        return bool(self.factors) and all(f.traceable for f in self.factors)
 
 
 def trace_cycle(
@@ -179,20 +75,6 @@ def trace_layers(
     return DecisionChains(cycle, t_ns, chains, et, et_partial)
 
 
-class DecisionScore(NamedTuple):
-    """ET numbers of one decision without the links (what metrics need per cycle)."""
-
-    et: float
-    et_partial: float
-    factors: int
-    traceable: int
-    reason: str
-
-    @property
-    def fully_traceable(self) -> bool:
-        return self.factors > 0 and self.traceable == self.factors
-
-
 def score_layers(
     action: Any, belief: Any, perception: Any, *, window: SensorWindow
 ) -> DecisionScore:
@@ -218,98 +100,6 @@ def score_layers(
     if not n:
         return DecisionScore(0.0, 0.0, 0, 0, "action names no factors")
     return DecisionScore(traceable / n, partial / n, n, traceable, "")
-
-
-# --- a chain in the causal graph's words ---------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class LabelledLink:
-    """One link of a factor's chain, named by the labels of the decision's causal graph."""
-
-    link: Link
-    what: str
-    """What it points at: a node's label, the belief path with its rules, or the ref."""
-
-    @property
-    def reached(self) -> bool:
-        """False below the first missing link: nothing logged says where it would go on."""
-        return self.link.documented or not self.link.detail.startswith("not reached")
-
-    @property
-    def placeholder(self) -> bool:
-        """``what`` is the graph's stand-in for an undocumented node ("? ..."), which says
-        nothing the link's detail does not."""
-        return self.what.startswith("? ")
-
-
-@dataclass(frozen=True, slots=True)
-class LabelledChain:
-    """A factor's chain as the causal graph draws it, bottom (sensor reading) up."""
-
-    chain: FactorChain
-    path: tuple[str, ...]
-    """The labels of the chain's nodes from the bottom (a sensor reading or a placeholder)
-    up to the action; the belief graph's entity node is left out (it mirrors the perception
-    entity). Empty when the chain's edges do not form one path."""
-    links: tuple[LabelledLink, ...]
-    """The links bottom-up: sensor reading first, factor node last."""
-
-
-def label_chain(chain: FactorChain, graph: Mapping[str, Any], command: str | None) -> LabelledChain:
-    """``chain`` named by ``graph``, the node-link JSON of its decision's causal graph
-    (``trace_audit.causal.causal_graph_data``), whose action is ``command``."""
-    nodes = graph["nodes"]
-    labels = {n["id"]: str(n.get("label", n["id"])) for n in nodes}
-    kinds = {n["id"]: n.get("belief_kind") for n in nodes}
-    mine = [e for e in graph["edges"] if chain.node in e.get("factors", ())]
-    by_level: dict[str, list[Mapping[str, Any]]] = {}
-    for edge in mine:
-        by_level.setdefault(str(edge.get("level")), []).append(edge)
-    path = tuple(labels.get(p, p) for p in _edge_path(mine) if kinds.get(p) != "entity")
-    links = []
-    for link in reversed(chain.links):
-        edges = by_level.get(link.level, [])
-        if link.level == "belief_path" and link.documented:
-            what = _belief_path_text(graph, link.ref)
-        elif link.level == "factor_node":
-            what = f"{labels.get('belief:' + chain.node, chain.node)} -> {command}"
-        elif edges:
-            what = labels.get(edges[0]["source"], link.ref)
-        else:
-            what = link.ref
-        links.append(LabelledLink(link, what))
-    return LabelledChain(chain, path, tuple(links))
-
-
-def _belief_path_text(graph: Mapping[str, Any], ref: str) -> str:
-    """``ped_1 -> ped_1.distance -> collision_risk (rules: a, b)``, bottom-up."""
-    rules = {(e["source"], e["target"]): e.get("rule") for e in graph["edges"] if e.get("rule")}
-    path = list(reversed(ref.split(" <- ")))
-    used = [
-        str(rules[key])
-        for key in ((f"belief:{a}", f"belief:{b}") for a, b in pairwise(path))
-        if key in rules
-    ]
-    text = " -> ".join(path)
-    return f"{text} (rules: {', '.join(used)})" if used else text
-
-
-def _edge_path(edges: Sequence[Mapping[str, Any]]) -> list[str]:
-    """The nodes of a chain's edges from the bottom up to the action; [] unless they form
-    one path."""
-    succ = {e["source"]: e["target"] for e in edges}
-    targets = set(succ.values())
-    starts = [s for s in succ if s not in targets]
-    if len(starts) != 1:
-        return []
-    path = [starts[0]]
-    while path[-1] in succ and len(path) <= len(edges):
-        path.append(succ[path[-1]])
-    return path
-
-
-# --- the walk ----------------------------------------------------------------------------
 
 
 class _Walker:

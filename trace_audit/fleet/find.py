@@ -1,0 +1,114 @@
+"""``find``: the named question over the fleet index, decisions by command, by a perceived
+entity's class and distance, by robot and by any SQL condition, each with the exact
+``trace-audit explain`` command that reconstructs it (``decisions.explain``)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from trace_audit.fleet.limits import QueryLimits
+from trace_audit.fleet.query import QueryResult, run_query, sql_literal
+from trace_runtime.errors import UsageError
+
+__all__ = ["find_decisions", "index_robots"]
+
+_COLUMNS = (
+    "d.robot, d.day, d.t_ns, d.cycle, d.command, d.previous_command, d.lead_factor, "
+    "d.lead_value, d.lead_unit, d.et, d.dr, d.seal_verified, d.software_version"
+)
+"""The columns a found decision shows, before the nearest entity's and ``explain``."""
+
+
+def find_decisions(
+    index: str | Path,
+    *,
+    action: str | None = None,
+    near: str | None = None,
+    within_m: float | None = None,
+    where: str | None = None,
+    robots: Sequence[str] = (),
+    limit: int = 1000,
+    limits: QueryLimits | None = None,
+) -> QueryResult:
+    """Decisions by command, by a perceived entity's class and distance, and by any SQL
+    condition on the decisions' columns; each row with ``robot``, ``t_ns`` and ``explain``.
+
+    ``robots``: only these robots' decisions (none: every robot's); a robot the index
+    does not hold is a ``UsageError`` naming those it does (``index_robots``)."""
+    conditions: list[str] = []
+    params: list[Any] = []
+    if action is not None:
+        conditions.append("upper(d.command) = upper(?)")
+        params.append(action)
+    if robots:
+        robots = _held_robots(index, robots, limits)
+        # One placeholder per robot: the ids themselves only ever travel as parameters.
+        conditions.append(f"d.robot IN ({', '.join('?' for _ in robots)})")
+        params.extend(robots)
+    if where:
+        conditions.append(f"({where})")
+    select = _COLUMNS
+    if near is not None or within_m is not None:
+        nearest, within = _nearest(near, within_m)
+        select += nearest
+        conditions += within
+    sql = f"SELECT {select}, d.explain FROM decisions d"
+    if conditions:
+        sql += " WHERE " + " AND ".join(conditions)
+    try:
+        ordered = sql + f" ORDER BY d.t_ns, d.robot LIMIT {int(limit)}"
+        found = run_query(index, ordered, params, limits=limits)
+    except UsageError as err:
+        if where:  # the error is about SQL the user did not write around the condition
+            raise UsageError(f"--where {where!r}: {err}") from err
+        raise
+    if len(found.rows) < limit:
+        return found
+    # As many rows as the limit: count the matches so the output can say it was cut.
+    count = run_query(index, f"SELECT count(*) FROM ({sql})", params, limits=limits).rows[0][0]
+    return dataclasses.replace(found, total=int(count) if count > len(found.rows) else None)
+
+
+def _nearest(near: str | None, within_m: float | None) -> tuple[str, list[str]]:
+    """The columns naming the nearest entity (of class ``near``, else of any class) and
+    its distance, and the conditions that it exists and, with ``within_m``, is closer.
+
+    From the decision's own ``nearest`` map (class -> nearest distance), built from the
+    same entity rows: one scan of one table, no join of two fleet-sized ones."""
+    if near is not None:
+        distance = f"d.nearest[{sql_literal(near)}]"
+        select = f", {sql_literal(near)} AS nearest_class"
+    else:
+        distance = "list_min(map_values(d.nearest))"
+        select = (
+            ", map_keys(d.nearest)[list_position(map_values(d.nearest), "
+            f"{distance})] AS nearest_class"
+        )
+    select += f", {distance} AS nearest_m"
+    conditions = [f"{distance} IS NOT NULL"]
+    if within_m is not None:
+        if not math.isfinite(within_m):
+            raise UsageError(f"--within must be a finite distance, got {within_m}")
+        conditions.append(f"{distance} < {float(within_m)!r}")
+    return select, conditions
+
+
+def index_robots(index: str | Path, limits: QueryLimits | None = None) -> list[str]:
+    """The robots the index holds (those with an indexed segment), sorted."""
+    found = run_query(index, "SELECT DISTINCT robot FROM segments ORDER BY robot", limits=limits)
+    return [str(row[0]) for row in found.rows]
+
+
+def _held_robots(index: str | Path, robots: Sequence[str], limits: QueryLimits | None) -> list[str]:
+    """``robots`` once each; ``UsageError`` naming the index's robots when one is not held."""
+    wanted = list(dict.fromkeys(robots))
+    held = index_robots(index, limits)
+    missing = [repr(r) for r in wanted if r not in held]
+    if missing:
+        holds = ", ".join(held) if held else "no robot"
+        raise UsageError(f"robot {', '.join(missing)} is not in this index; it holds {holds}")
+    return wanted
