@@ -65,3 +65,15 @@ def readme_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     # A reader runs the commands in the checkout, where the shipped rules files are.
     shutil.copytree(README.parent / "docs" / "rules", where / "docs" / "rules")
     return where
+
+
+def test_the_readme_stays_a_first_page() -> None:
+    """Under 150 lines, and no history or budget table: figures live in docs/performance.md,
+    history (commits, issues, earlier runs) in CHANGELOG.md."""
+    text = README.read_text()
+    assert len(text.splitlines()) < 150
+    assert not re.search(r"\bissue \d+|earlier run|this session", text, re.IGNORECASE)
+    hashes = set(re.findall(r"\b[0-9a-f]{7,40}\b", text)) - {"ed25519"}
+    assert not hashes
+    assert "| target |" not in text and "| budget |" not in text
+    assert "pip install ." in text and "'.[cli]'" in text

@@ -6,7 +6,7 @@ metadata record (so the file reaches the deep code), then chunks that are bombs 
 The ``mcap`` Writer refuses to write a chunk whose declared size lies, so chunks are
 written as records with ``mcap.records`` (the library's own record encoders).
 
-Used by ``tests/trace_runtime/test_hostile.py``, ``tests/trace_audit/test_cli_hostile.py``
+Used by ``tests/trace_runtime/test_hostile.py``, ``tests/trace_audit/cli/test_hostile.py``
 and ``bench/bench_hostile.py``.
 """
 

@@ -191,7 +191,7 @@ FLOORS: dict[str, list[set[str]]] = {
         | {"tail", "witness", "proof"},
         # what is built from the answers: the fleet index, the incident report, the Foxglove view
         {"fleet", "report", "foxglove", "foxglove_view", "foxglove_live"},
-        {"cli"},
+        {"cli", "entry"},  # entry: the console script's check that the cli extra is installed
         {""},
     ],
 }  # fmt: skip

@@ -3,7 +3,7 @@ compacted logs: what a clean log looks like (zero findings, the validated range,
 anchored) and which notes are not tampering.
 
 The tamper campaign lives in test_tamper.py; what ``trace-audit verify`` and ``keygen``
-print and exit is pinned in tests/trace_audit/test_verify_cli.py.
+print and exit is pinned in tests/trace_audit/cli/test_verify.py.
 """
 
 from __future__ import annotations

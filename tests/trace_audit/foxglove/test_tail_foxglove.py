@@ -26,8 +26,8 @@ from typing import Any
 
 import pytest
 
-from tests.trace_audit.look.test_foxglove_decoded import _decoder
-from tests.trace_audit.look.test_tail import _Lines, _log, _robot, _tail
+from tests.trace_audit.foxglove.test_foxglove_decoded import _decoder
+from tests.trace_audit.test_tail import _Lines, _log, _robot, _tail
 
 pytest.importorskip("foxglove")
 pytest.importorskip("google.protobuf")
