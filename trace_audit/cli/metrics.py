@@ -2,8 +2,9 @@
 
 Parses its arguments into a ``MetricsConfig``, calls ``trace_audit.metrics.compute_metrics``
 (or ``index_metrics`` with ``--index``) and renders the typed report: the tables and their
-notes as a ``Printout`` for people, or JSON (the report with Table II and III as the paper
-names their columns) for scripts. A metric under its ``--fail-under`` threshold exits 1.
+notes as a ``Doc`` of console blocks for people, or JSON (the report with Table II and III
+as the paper names their columns) for scripts. A metric under its ``--fail-under``
+threshold exits 1.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from trace_audit.cli.app import EXIT_FINDINGS, app, guarded
-from trace_audit.cli.doc import BoxColumn, BoxTable, Printout
+from trace_audit.cli.doc import BoxColumn, BoxTable, Doc
 from trace_audit.cli.options import (
     JsonOption,
     MemoryLimitOption,
@@ -344,44 +345,44 @@ _WIDE = 90
 """Console columns from which Table III shows TCS too."""
 
 
-def metrics_doc(report: MetricsReport, *, failures: bool, width: int) -> Printout:
+def metrics_doc(report: MetricsReport, *, failures: bool, width: int) -> Doc:
     """The metrics report for people: Table II and its notes, the execution deviation per
     channel, Table III, the failed execution checks, what was not read, the failures
     (``--failures``), the thresholds."""
-    out = Printout()
+    out = Doc()
     overall = report.overall
     segs = len(report.segments)
     named = len(report.robots)
     robots = f"; robot{'s' if named > 1 else ''} {', '.join(report.robots)}" if named else ""
-    out.print(
+    out.markup(
         f"[bold]Auditability[/bold] of {overall.decisions} decisions in {segs} "
         f"segment{'s' if segs != 1 else ''} ({', '.join(report.logs)}{robots})"
     )
-    out.table(_table_ii(report))
+    out.box(_table_ii(report))
     _table_ii_notes(out, report)
     if report.channel_deviation:
-        out.table(_channels(report))
+        out.box(_channels(report))
         fewest = min(c.cycles for c in report.channel_deviation)
         if fewest < report.overall.decisions:
-            out.print(
+            out.markup(
                 f"  Channel figures cover the cycles that log each channel (as few as "
                 f"{fewest:,} of the {report.overall.decisions:,} decisions), not every decision."
             )
     if report.groups:
         wide = width >= _WIDE
-        out.table(_table_iii(report, wide=wide))
-        out.print(
+        out.box(_table_iii(report, wide=wide))
+        out.markup(
             "  ET std in each row is across that group's decisions; ET_p = ET_partial mean"
             + ("." if wide else "; TCS per group in --json (the terminal is too narrow).")
         )
     if report.failed_checks is not None:
-        out.table(_failed_checks(report.failed_checks))
+        out.box(_failed_checks(report.failed_checks))
     _reading_notes(out, report)
     if failures:
         _failures(out, report)
     for check in report.thresholds:
         verdict = "ok" if check.passed else "BELOW"
-        out.print(
+        out.markup(
             f"  threshold {check.metric} >= {check.threshold * 100:.1f}%: "
             f"{_pct(check.value, 2)} {verdict}"
         )
@@ -412,10 +413,10 @@ def _table_ii(report: MetricsReport) -> BoxTable:
     )
 
 
-def _table_ii_notes(out: Printout, report: MetricsReport) -> None:
+def _table_ii_notes(out: Doc, report: MetricsReport) -> None:
     """What Table II's columns mean, the spread across groups, and what ET leaves out."""
     overall = report.overall
-    out.print(
+    out.markup(
         "  ET: mean ± std across decisions; fully tr.: fully traceable decisions; "
         f"gaps: count (gap time) in a {overall.window_s:.1f} s window; not rec.: not "
         "reconstructable decisions."
@@ -424,19 +425,19 @@ def _table_ii_notes(out: Printout, report: MetricsReport) -> None:
         a = report.across_groups
         tc = _pm(a.tc) if a.tc else "n/a"
         dr = _pm(a.dr) if a.dr else "n/a"
-        out.print(
+        out.markup(
             f"  Across {a.groups} {a.by}s (mean ± std of the per-{a.by} values): "
             f"ET {_pm(a.et)}, fully traceable {_pm(a.fully_traceable_share)}, "
             f"ET_partial {a.et_partial.mean:.3f} ± {a.et_partial.std:.3f}, TC {tc}, DR {dr}."
         )
-    out.print(
+    out.markup(
         f"  Fully traceable {_pm(overall.fully_traceable_share)}%, ET_partial "
         f"{overall.et_partial.mean:.3f} ± {overall.et_partial.std:.3f}, TCS "
         f"{overall.tcs.mean:.3f} ± {overall.tcs.std:.3f} (std across decisions); factors "
         f"traceable {_share(overall.factors_traceable, overall.factors)}."
     )
     if overall.summarized:
-        out.print(
+        out.markup(
             f"  {overall.summarized} decisions come from warm-tier summaries, which keep the "
             "evidence refs but not the sensor readings: on those ET stops one link short "
             "by design, ET_partial still measures the chain."
@@ -444,7 +445,7 @@ def _table_ii_notes(out: Printout, report: MetricsReport) -> None:
     if overall.no_factors:
         named = overall.decisions - overall.no_factors
         et_named = overall.et.mean * overall.decisions / named if named else None
-        out.print(
+        out.markup(
             f"  {overall.no_factors} decisions name no factors (action missing or rationale "
             f"truncated away): ET(d) = 0 by definition; over the {named} that name factors, "
             f"ET {_pct(et_named)}."
@@ -452,10 +453,10 @@ def _table_ii_notes(out: Printout, report: MetricsReport) -> None:
     _seal_note(out, report)
 
 
-def _seal_note(out: Printout, report: MetricsReport) -> None:
+def _seal_note(out: Doc, report: MetricsReport) -> None:
     """Seals, integrity failures, missing and declared-dropped cycles, clock restarts."""
     overall = report.overall
-    out.print(
+    out.markup(
         f"  Sealed {overall.sealed}, unsealed {overall.unsealed}, integrity failed "
         f"{overall.integrity_failed}; the gaps hold ~{overall.missing_cycles} missing cycles, "
         f"the seals declare {overall.declared_dropped} dropped"
@@ -540,7 +541,7 @@ def _failed_checks(checks: FailedChecks) -> BoxTable:
     return BoxTable(columns, tuple(rows), title="Failed execution checks", flush=True)
 
 
-def _reading_notes(out: Printout, report: MetricsReport) -> None:
+def _reading_notes(out: Doc, report: MetricsReport) -> None:
     """What was not read or not scored, what an index does not hold, external refs."""
     for skipped in report.skipped_segments:
         out.verbatim(f"  not read: {skipped}")
@@ -561,10 +562,10 @@ def _reading_notes(out: Printout, report: MetricsReport) -> None:
         )
 
 
-def _failures(out: Printout, report: MetricsReport) -> None:
+def _failures(out: Doc, report: MetricsReport) -> None:
     """Each failing decision with what it misses, then each gap."""
     listed = len(report.failures)
-    out.print(
+    out.markup(
         f"\n[bold]Failing decisions[/bold]: {report.failures_total}"
         + (f" (first {listed} listed)" if listed < report.failures_total else "")
     )
@@ -575,7 +576,7 @@ def _failures(out: Printout, report: MetricsReport) -> None:
         )
         for problem in f.problems:
             out.verbatim(f"      {problem}")
-    out.print(f"\n[bold]Gaps[/bold]: {report.gaps_total}")
+    out.markup(f"\n[bold]Gaps[/bold]: {report.gaps_total}")
     for gap in report.gaps:
         out.verbatim(
             f"  {gap.robot}: after cycle {gap.after_cycle} (t={gap.after_t_ns / 1e9:.3f} s) "
