@@ -16,6 +16,7 @@ from trace_audit.cli import (  # noqa: F401 - each module registers its commands
     info,
     integrity,
     metrics,
+    proof,
     report,
     storage,
     tail,
