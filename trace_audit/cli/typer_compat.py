@@ -60,6 +60,31 @@ class Group(TyperGroup):
             option.default = False
         return option
 
+    def format_commands(self, ctx: Any, formatter: Any) -> None:
+        """The commands under "Commands:", in sections by their ``rich_help_panel`` (what a
+        user does with them) when they name one: each section in the order its first command
+        is listed, its heading at the margin and its commands indented, as ``git help``
+        lists its commands. The names are aligned across sections.
+
+        typer 0.29 draws the panels only in its rich help, which this app does not use
+        (start-up); its plain help would list every command in one block."""
+        shown = [(name, self.get_command(ctx, name)) for name in self.list_commands(ctx)]
+        commands = [(name, cmd) for name, cmd in shown if cmd is not None and not cmd.hidden]
+        if not any(getattr(cmd, "rich_help_panel", None) for _name, cmd in commands):
+            super().format_commands(ctx, formatter)
+            return
+        width = max(len(name) for name, _cmd in commands)
+        limit = formatter.width - 6 - width  # as click's: three times its column spacing
+        sections: dict[str, list[tuple[str, str]]] = {}
+        for name, cmd in commands:
+            rows = sections.setdefault(getattr(cmd, "rich_help_panel", None) or "Other", [])
+            rows.append((name.ljust(width), cmd.get_short_help_str(limit)))
+        formatter.write_paragraph()
+        formatter.write_heading("Commands")
+        for title, rows in sections.items():
+            with formatter.section(title):
+                formatter.write_dl(rows)
+
 
 class Command(TyperCommand):
     """A command whose help text may carry rich markup; click's formatter prints it plain.
