@@ -14,9 +14,10 @@ from typing import Annotated, Any
 
 import typer
 
-from sim.cli import EXIT_USAGE, fail, help_text, new_app, summary
 from sim.cli import app as simulator_app
+from sim.cli import fail, help_text, new_app, summary
 from sim.runner import SimUsageError
+from trace_runtime.errors import EXIT_USAGE
 
 __all__ = ["app", "main"]
 

@@ -3,8 +3,8 @@
 ``run``, ``scenarios`` and ``check-counterfactuals`` live here; the ``trace-sim`` program,
 with the evaluation's ``baselines`` command among them, is assembled in ``evaluation/cli.py``.
 
-Exit codes: 0 ok, 1 findings (``check-counterfactuals``), 2 usage, 3 unwritable output or
-unreadable log.
+Exit codes, trace-audit's (``trace_runtime.errors``): 0 ok, 1 findings
+(``check-counterfactuals``), 2 usage, 3 unreadable log, 4 output that cannot be written.
 """
 
 from __future__ import annotations
@@ -29,21 +29,15 @@ from sim.runner import (
     run,
 )
 from sim.scenarios import EPISODE_CYCLES, SCENARIOS
+from trace_runtime.errors import EXIT_CANNOT_WRITE, EXIT_FINDINGS, EXIT_UNREADABLE, EXIT_USAGE
 
 __all__ = [
-    "EXIT_FINDINGS",
-    "EXIT_OUTPUT",
-    "EXIT_USAGE",
     "app",
     "fail",
     "help_text",
     "new_app",
     "summary",
 ]
-
-EXIT_FINDINGS = 1
-EXIT_USAGE = 2
-EXIT_OUTPUT = 3
 
 
 def new_app() -> typer.Typer:
@@ -123,72 +117,81 @@ its logger submit each checkpoint to a witness (trace-audit witness serve):
 """
 
 
+_Out = Annotated[
+    Path, typer.Option("--out", "-o", metavar="PATH", help="a .mcap file or a log root directory")
+]
+_Scenario = Annotated[
+    str, typer.Option(metavar="TEXT", help="all, or one of: " + ", ".join(SCENARIOS))
+]
+_Cycles = Annotated[
+    int, typer.Option(metavar="INTEGER", help="decision cycles per scenario (10 Hz)")
+]
+_Seed = Annotated[int, typer.Option(metavar="INTEGER", help="random seed; same seed, same log")]
+_Faults = Annotated[
+    str, typer.Option(metavar="on|off", help="on: inject faults at the paper's rates; off: none")
+]
+_Duration = Annotated[
+    str | None,
+    typer.Option(
+        metavar="TEXT", help="routine operation for this long (e.g. 24h), cycling through scenarios"
+    ),
+]
+_Batch = Annotated[
+    int | None,
+    typer.Option(
+        metavar="INTEGER",
+        help=f"cycles per write, --duration runs only (default {DURATION_BATCH}); "
+        "1 writes cycle by cycle like the paper's runs",
+    ),
+]
+_RobotId = Annotated[
+    str,
+    typer.Option(
+        "--robot-id",
+        metavar="TEXT",
+        help="the robot's id; robots with distinct ids share a log root",
+    ),
+]
+_Start = Annotated[
+    str | None,
+    typer.Option(
+        metavar="TEXT",
+        help="the first cycle's time: an ISO 8601 UTC time (e.g. 2026-05-04T06:00:00Z, "
+        "a wall clock) or seconds (a sim clock); default a sim clock from 0",
+    ),
+]
+_Key = Annotated[
+    Path | None,
+    typer.Option(
+        "--key",
+        metavar="PATH",
+        help="the robot's private key (trace-audit keygen): checkpoints signed",
+    ),
+]
+_Witness = Annotated[
+    str | None,
+    typer.Option(
+        metavar="URL",
+        help="a witness (trace-audit witness serve) the logger submits checkpoints to",
+    ),
+]
+_Json = Annotated[bool, typer.Option("--json", help="print the summary as JSON")]
+
+
 @app.command("run", help=help_text(_RUN_HELP), short_help=summary(_RUN_HELP))
 def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
-    out: Annotated[
-        Path,
-        typer.Option("--out", "-o", metavar="PATH", help="a .mcap file or a log root directory"),
-    ],
-    scenario: Annotated[
-        str, typer.Option(metavar="TEXT", help="all, or one of: " + ", ".join(SCENARIOS))
-    ] = "all",
-    cycles: Annotated[
-        int, typer.Option(metavar="INTEGER", help="decision cycles per scenario (10 Hz)")
-    ] = 100,
-    seed: Annotated[
-        int, typer.Option(metavar="INTEGER", help="random seed; same seed, same log")
-    ] = 0,
-    faults: Annotated[
-        str,
-        typer.Option(metavar="on|off", help="on: inject faults at the paper's rates; off: none"),
-    ] = "on",
-    duration: Annotated[
-        str | None,
-        typer.Option(
-            metavar="TEXT",
-            help="routine operation for this long (e.g. 24h), cycling through scenarios",
-        ),
-    ] = None,
-    batch: Annotated[
-        int | None,
-        typer.Option(
-            metavar="INTEGER",
-            help=f"cycles per write, --duration runs only (default {DURATION_BATCH}); "
-            "1 writes cycle by cycle like the paper's runs",
-        ),
-    ] = None,
-    robot_id: Annotated[
-        str,
-        typer.Option(
-            "--robot-id",
-            metavar="TEXT",
-            help="the robot's id; robots with distinct ids share a log root",
-        ),
-    ] = DEFAULT_ROBOT_ID,
-    start: Annotated[
-        str | None,
-        typer.Option(
-            metavar="TEXT",
-            help="the first cycle's time: an ISO 8601 UTC time (e.g. 2026-05-04T06:00:00Z, "
-            "a wall clock) or seconds (a sim clock); default a sim clock from 0",
-        ),
-    ] = None,
-    key: Annotated[
-        Path | None,
-        typer.Option(
-            "--key",
-            metavar="PATH",
-            help="the robot's private key (trace-audit keygen): checkpoints signed",
-        ),
-    ] = None,
-    witness: Annotated[
-        str | None,
-        typer.Option(
-            metavar="URL",
-            help="a witness (trace-audit witness serve) the logger submits checkpoints to",
-        ),
-    ] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="print the summary as JSON")] = False,
+    out: _Out,
+    scenario: _Scenario = "all",
+    cycles: _Cycles = 100,
+    seed: _Seed = 0,
+    faults: _Faults = "on",
+    duration: _Duration = None,
+    batch: _Batch = None,
+    robot_id: _RobotId = DEFAULT_ROBOT_ID,
+    start: _Start = None,
+    key: _Key = None,
+    witness: _Witness = None,
+    as_json: _Json = False,
 ) -> None:
     """Simulate scenarios and write the TRACE log plus a fault ground-truth sidecar."""
     # Injected audit-write timeouts make the logger warn; the summary reports them instead.
@@ -196,24 +199,17 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
     level = runtime_log.level
     runtime_log.setLevel(logging.ERROR)
     try:
-        if faults not in ("on", "off"):
-            raise SimUsageError(f"--faults must be on or off, got {faults!r}")
-        if batch is not None and duration is None:
-            raise SimUsageError("--batch needs --duration (scenario runs write cycle by cycle)")
-        total = parse_duration(duration) if duration is not None else None
-        start_ns, clock = (0, "sim") if start is None else parse_start(start)
-        config = RunConfig(
+        config = _run_config(
             out=out,
             scenario=scenario,
             cycles=cycles,
             seed=seed,
-            faults=FaultRates() if faults == "on" else FaultRates.off(),
-            total_cycles=total,
-            batch_cycles=1 if total is None else DURATION_BATCH if batch is None else batch,
+            faults=faults,
+            duration=duration,
+            batch=batch,
             robot_id=robot_id,
-            start_ns=start_ns,
-            clock=clock,
-            checkpoint_key=key,
+            start=start,
+            key=key,
             witness=witness,
         )
         result = run(config) if as_json else _run_with_progress(config)
@@ -221,7 +217,7 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
         fail(str(err), EXIT_USAGE)
         return
     except SimOutputError as err:
-        fail(str(err), EXIT_OUTPUT)
+        fail(str(err), EXIT_CANNOT_WRITE)
         return
     finally:
         runtime_log.setLevel(level)  # the caller's logging is theirs (e.g. a test session)
@@ -229,6 +225,43 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
         sys.stdout.write(json.dumps(result.as_dict(), indent=2) + "\n")
     else:
         _render(result)
+
+
+def _run_config(
+    *,
+    out: Path,
+    scenario: str,
+    cycles: int,
+    seed: int,
+    faults: str,
+    duration: str | None,
+    batch: int | None,
+    robot_id: str,
+    start: str | None,
+    key: Path | None,
+    witness: str | None,
+) -> RunConfig:
+    """The run the options ask for; ``SimUsageError`` for options that do not go together."""
+    if faults not in ("on", "off"):
+        raise SimUsageError(f"--faults must be on or off, got {faults!r}")
+    if batch is not None and duration is None:
+        raise SimUsageError("--batch needs --duration (scenario runs write cycle by cycle)")
+    total = parse_duration(duration) if duration is not None else None
+    start_ns, clock = (0, "sim") if start is None else parse_start(start)
+    return RunConfig(
+        out=out,
+        scenario=scenario,
+        cycles=cycles,
+        seed=seed,
+        faults=FaultRates() if faults == "on" else FaultRates.off(),
+        total_cycles=total,
+        batch_cycles=1 if total is None else DURATION_BATCH if batch is None else batch,
+        robot_id=robot_id,
+        start_ns=start_ns,
+        clock=clock,
+        checkpoint_key=key,
+        witness=witness,
+    )
 
 
 def _run_with_progress(config: RunConfig) -> RunResult:
@@ -356,7 +389,7 @@ def check_counterfactuals_cmd(
         fail(str(err), EXIT_USAGE)
         return
     except TraceError as err:
-        fail(f"cannot read {log}: {err}", EXIT_OUTPUT)
+        fail(f"cannot read {log}: {err}", EXIT_UNREADABLE)
         return
     if as_json:
         sys.stdout.write(json.dumps(report.as_dict(), indent=2) + "\n")

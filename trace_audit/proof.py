@@ -18,6 +18,7 @@ from __future__ import annotations
 import base64
 import binascii
 import hashlib
+import os
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,30 +27,41 @@ from typing import Any
 import orjson
 
 from trace_audit.witness.tree import LevelTree
-from trace_runtime.boundary import read_side_file
+from trace_runtime.boundary import read_side_file, write_new
 from trace_runtime.chain import sensor_cover, sensor_line
 from trace_runtime.clock import iso_utc
-from trace_runtime.errors import InputError, LogReadError, NoteError, UsageError
+from trace_runtime.errors import (
+    InputError,
+    LogReadError,
+    NoteError,
+    StorageError,
+    UsageError,
+)
 from trace_runtime.reading.chain_tree import prove_pass
 from trace_runtime.reading.logset import Log, open_log
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.tlog.cosignature_store import read_cosigned
-from trace_runtime.tlog.keys import PublicKey
+from trace_runtime.tlog.keys import PublicKey, load_public_key
 from trace_runtime.tlog.merkle import leaf_hash, verify_inclusion
 from trace_runtime.tlog.signed_note import (
     COSIGNATURE,
     NoteVerifier,
+    OpenedNote,
     open_note,
     parse_checkpoint,
+    parse_verifier_key,
 )
 
 __all__ = [
     "BUNDLE_FORMAT",
     "MAX_BUNDLE_BYTES",
     "BundleCheck",
+    "WrittenBundle",
     "check_bundle",
     "make_bundle",
     "read_bundle",
+    "verify_proof",
+    "write_bundle",
 ]
 
 BUNDLE_FORMAT = "trace-proof/3"
@@ -128,6 +140,43 @@ def make_bundle(log_path: str | Path, cycle: int, *, robot: str | None = None) -
         "note": note,
         "cosigned": cosigned,
     }
+
+
+@dataclass(frozen=True, slots=True)
+class WrittenBundle:
+    """What ``write_bundle`` wrote: the file, its size, and the proof it holds."""
+
+    path: str
+    bytes: int
+    cycle: int
+    leaf_index: int
+    tree_size: int
+    proof_hashes: int
+    cosigned: bool
+
+
+def write_bundle(
+    log_path: str | Path, cycle: int, out: str | Path, *, robot: str | None = None
+) -> WrittenBundle:
+    """Write the proof bundle of ``cycle`` (``make_bundle``) to ``out`` as indented JSON.
+
+    ``out`` must not exist: ``StorageError`` before the log is read when it does (and again
+    at the end, should the name be taken meanwhile: a bundle never replaces a file)."""
+    out = Path(out)
+    if os.path.lexists(out):
+        raise StorageError(str(out), "it exists, and is never overwritten")
+    bundle = make_bundle(log_path, cycle, robot=robot)
+    data = orjson.dumps(bundle, option=orjson.OPT_INDENT_2) + b"\n"
+    write_new(out, data)
+    return WrittenBundle(
+        path=str(out),
+        bytes=len(data),
+        cycle=bundle["cycle"],
+        leaf_index=bundle["leaf_index"],
+        tree_size=bundle["tree_size"],
+        proof_hashes=len(bundle["inclusion"]),
+        cosigned=bundle["cosigned"],
+    )
 
 
 def _only_robot(log: Log) -> str:
@@ -279,6 +328,22 @@ def _check_readings(
     return True
 
 
+def verify_proof(
+    bundle_path: str | Path, key_path: str | Path, *, witness_key: str | None = None
+) -> BundleCheck:
+    """``verify-proof``: the bundle file checked (``check_bundle``) with the robot's public
+    key file and, given, the witness's verifier key (``UsageError`` when it is not one)."""
+    public = load_public_key(Path(key_path))
+    verifier = None
+    if witness_key is not None:
+        try:
+            verifier = parse_verifier_key(witness_key)
+        except NoteError as err:
+            raise UsageError(f"--witness-key: {err}") from err
+    data = read_bundle(bundle_path)
+    return check_bundle(data, public, witness_key=verifier, path=str(bundle_path))
+
+
 def check_bundle(
     bundle: dict[str, Any],
     key: PublicKey,
@@ -299,6 +364,7 @@ def check_bundle(
 def _check(
     bundle: dict[str, Any], key: PublicKey, witness_key: NoteVerifier | None, r: BundleCheck
 ) -> None:
+    """Each step in order (the module doc); a failed one ends the check."""
     expected = BUNDLE_FIELDS.get(bundle.get("format"))  # type: ignore[arg-type]
     if expected is None:
         raise _BadBundleError(f"the format is not one of {', '.join(BUNDLE_FORMATS)}")
@@ -308,6 +374,21 @@ def _check(
     r.cycle = _field(bundle, "cycle", int)
     r.t_ns = _field(bundle, "t_ns", int)
     seal_bytes = _unb64(bundle.get("seal"), "seal")
+    read = _DataReader(deflated=bundle["format"] == BUNDLE_FORMAT)
+    if not _check_digests(bundle, seal_bytes, r, read):
+        return
+    root = _check_inclusion(bundle, seal_bytes, r)
+    if root is None:
+        return
+    opened = _check_note(bundle, key, witness_key, root, r)
+    if opened is not None and witness_key is not None:
+        _check_cosignature(opened, witness_key, r)
+
+
+def _check_digests(
+    bundle: dict[str, Any], seal_bytes: bytes, r: BundleCheck, read: _DataReader
+) -> bool:
+    """The messages (and the readings a 1.3 seal covers) against the seal's digests."""
     try:
         seal = orjson.loads(seal_bytes)
     except orjson.JSONDecodeError as err:
@@ -317,11 +398,9 @@ def _check(
         raise _BadBundleError("the seal has no digests")
     if seal.get("cycle") != r.cycle or seal.get("t_ns") != r.t_ns:
         r.steps.append(("digests", False, "the seal is of another cycle or time"))
-        return
-    messages = _field(bundle, "messages", list)
-    read = _DataReader(deflated=bundle["format"] == BUNDLE_FORMAT)
+        return False
     given: dict[str, bytes] = {}
-    for m in messages:
+    for m in _field(bundle, "messages", list):
         if (
             not isinstance(m, dict)
             or set(m) != {"topic", "data"}
@@ -343,10 +422,13 @@ def _check(
             if part
         )
         r.steps.append(("digests", False, detail))
-        return
+        return False
     r.steps.append(("digests", True, f"{len(given)} message(s) match the seal"))
-    if "sensors" in bundle and not _check_readings(bundle, seal, r, read):
-        return
+    return "sensors" not in bundle or _check_readings(bundle, seal, r, read)
+
+
+def _check_inclusion(bundle: dict[str, Any], seal_bytes: bytes, r: BundleCheck) -> bytes | None:
+    """The seal's leaf in the tree: the root it proves to, or None when it does not."""
     r.leaf_index = _field(bundle, "leaf_index", int)
     r.tree_size = _field(bundle, "tree_size", int)
     root_hex = _field(bundle, "root", str)
@@ -356,10 +438,22 @@ def _check(
     proof = [_unb64(h, "an inclusion hash") for h in _field(bundle, "inclusion", list)]
     if not verify_inclusion(r.leaf_index, r.tree_size, leaf_hash(seal_bytes), proof, root):
         r.steps.append(("inclusion", False, "the seal is not leaf of the tree at that root"))
-        return
+        return None
     r.steps.append(
         ("inclusion", True, f"leaf {r.leaf_index} of {r.tree_size}, {len(proof)} hash(es)")
     )
+    return root
+
+
+def _check_note(
+    bundle: dict[str, Any],
+    key: PublicKey,
+    witness_key: NoteVerifier | None,
+    root: bytes,
+    r: BundleCheck,
+) -> OpenedNote | None:
+    """The checkpoint note: of the proof's tree, signed by the robot's key under its origin,
+    and ``cosigned`` saying what it carries. The opened note, or None when it fails."""
     note = _field(bundle, "note", str)
     split = note.rfind("\n\n")
     for line in note[split + 2 :].splitlines() if split >= 0 else ():
@@ -368,11 +462,11 @@ def _check(
         body = parse_checkpoint(note[: split + 1] if split >= 0 else note)
     except NoteError as err:
         r.steps.append(("note", False, f"not a checkpoint note: {err}"))
-        return
+        return None
     r.origin = body.origin
     if (body.size, body.root) != (r.tree_size, root):
         r.steps.append(("note", False, "the note states another tree than the proof's"))
-        return
+        return None
     verifiers = [NoteVerifier.of(body.origin, key.raw)]
     if witness_key is not None:
         verifiers.append(witness_key)
@@ -380,17 +474,20 @@ def _check(
         opened = open_note(note, verifiers)
     except NoteError as err:
         r.steps.append(("note", False, f"the note does not verify: {err}"))
-        return
+        return None
     if opened.verified_by(verifiers[0]) is None:
         r.steps.append(("note", False, f"not signed by the robot's key under {body.origin}"))
-        return
+        return None
     r.steps.append(("note", True, f"signed by the robot's key under {body.origin}"))
     cosigned = _field(bundle, "cosigned", bool)
     if cosigned != (len(opened.verified) + len(opened.unverified) > 1):
         r.steps.append(("note", False, "'cosigned' does not say what the note carries"))
-        return
-    if witness_key is None:
-        return
+        return None
+    return opened
+
+
+def _check_cosignature(opened: OpenedNote, witness_key: NoteVerifier, r: BundleCheck) -> None:
+    """The witness's cosignature on the note, and the time it states."""
     if witness_key.sig_type != COSIGNATURE:
         raise _BadBundleError("the witness key is not a cosignature key")
     sig = opened.verified_by(witness_key)

@@ -14,14 +14,17 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from concurrent.futures import Executor
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from trace_audit.evidence import open_recordings
 from trace_audit.selection import Selection
+from trace_runtime.errors import NoteError, UsageError
+from trace_runtime.gaps import JSON_INLINE
 from trace_runtime.reading.logset import open_log
 from trace_runtime.tlog.keys import PublicKey
-from trace_runtime.tlog.signed_note import NoteVerifier
+from trace_runtime.tlog.signed_note import NoteVerifier, parse_verifier_key
 from trace_runtime.verification import (
     Finding,
     FindingKind,
@@ -42,8 +45,10 @@ __all__ = [
     "RobotSummary",
     "SegmentSummary",
     "VerifyReport",
+    "WitnessedVerifyReport",
     "add_witness",
     "verify_log",
+    "verify_witnessed",
     "witness_check",
 ]
 
@@ -97,3 +102,41 @@ def add_witness(report: VerifyReport, witness: WitnessReport) -> VerifyReport:
     if witness.findings:
         report.ok = False
     return report
+
+
+@dataclass(slots=True)
+class WitnessedVerifyReport:
+    """``verify --witness``: the verify report, the witness comparison's findings added to it
+    (``add_witness``), and the comparison itself (its time bounds, what it read). As JSON:
+    the report's fields, then ``witness``."""
+
+    report: VerifyReport = field(metadata={JSON_INLINE: True})
+    witness: WitnessReport
+
+    @property
+    def ok(self) -> bool:
+        return self.report.ok
+
+
+def verify_witnessed(
+    path: str | Path,
+    source: str,
+    *,
+    key: PublicKey | None = None,
+    witness_key: str | None = None,
+    evidence: Sequence[str | Path] = (),
+    executor: Executor | None = None,
+    robots: Sequence[str] = (),
+    expected: Sequence[str] = (),
+) -> WitnessedVerifyReport:
+    """``verify_log`` and ``witness_check`` of one log, as one report. ``witness_key``: the
+    witness's verifier key as text (``UsageError`` when it is not one)."""
+    try:
+        verifier = parse_verifier_key(witness_key) if witness_key else None
+    except NoteError as err:
+        raise UsageError(f"--witness-key: {err}") from err
+    report = verify_log(path, key=key, evidence=evidence, executor=executor, robots=robots)
+    witnessed = witness_check(
+        path, source, key=key, witness_key=verifier, robots=robots, expected=expected
+    )
+    return WitnessedVerifyReport(add_witness(report, witnessed), witnessed)

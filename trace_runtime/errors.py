@@ -45,6 +45,11 @@ if TYPE_CHECKING:
     from trace_runtime.tlog.signed_note import NoteSignature
 
 __all__ = [
+    "EXIT_CANNOT_WRITE",
+    "EXIT_FINDINGS",
+    "EXIT_OK",
+    "EXIT_UNREADABLE",
+    "EXIT_USAGE",
     "ChainTreeError",
     "ColdFormatError",
     "InputError",
@@ -246,3 +251,18 @@ class SegmentWriteError(StorageError):
         self.rolled_back = rolled_back
         self.kept = kept
         self.written = written
+
+
+# The exit codes every program of the project documents (trace-audit, trace-sim): their numbers
+# live beside the errors they stand for, so a program that may not import the investigator
+# (sim/cli.py) still says what trace-audit says. Which error gets which code is each CLI's one
+# mapping (trace_audit.cli.app.exit_code_for).
+EXIT_OK = 0
+EXIT_FINDINGS = 1
+"""Findings: verify failed, a metric under its threshold, a counterfactual that does not hold."""
+EXIT_USAGE = 2
+"""A bad option or value, a time outside the log."""
+EXIT_UNREADABLE = 3
+"""Input that cannot be read: missing, not MCAP, truncated, not a TRACE log."""
+EXIT_CANNOT_WRITE = 4
+"""Output that cannot be written: a read-only folder, a full disk, a name already taken."""

@@ -334,12 +334,14 @@ def test_cli_usage_errors_exit_2_with_one_line(args: list[str], code: int, tmp_p
     assert res.stderr.startswith("trace-sim: ") and res.stderr.count("\n") == 1
 
 
-def test_cli_unwritable_output_exits_3(tmp_path: Path) -> None:
+def test_cli_unwritable_output_exits_4_as_trace_audit_does(tmp_path: Path) -> None:
+    """An --out the process cannot write (a folder that cannot be made: its parent is a
+    regular file, which refuses root as well) is trace-audit's "cannot write", exit 4."""
     blocker = tmp_path / "file"
     blocker.write_text("not a directory")
     res = CliRunner().invoke(app, ["run", "--out", str(blocker / "run.mcap"), "--cycles", "1"])
-    assert res.exit_code == 3
-    assert "Traceback" not in res.output
+    assert res.exit_code == 4
+    assert res.stderr.startswith("trace-sim: cannot write") and res.stderr.count("\n") == 1
 
 
 def test_with_faults_off_at_most_2_percent_of_cycles_fail_a_compliance_check(

@@ -16,6 +16,7 @@ from trace_audit.cli import (  # noqa: F401 - each module registers its commands
     info,
     integrity,
     metrics,
+    proof,
     report,
     storage,
     tail,
@@ -28,16 +29,25 @@ from trace_audit.cli.typer_compat import TyperException, usage_error_line
 
 __all__ = ["app", "main"]
 
-_LISTED = (
-    *("doctor", "check", "index", "query", "find", "verify", "keygen"),
-    *("explain", "why", "timeline", "tail", "info", "export"),
-    *("metrics", "report", "compact", "catalog"),
-    *("witness", "prove", "verify-proof"),
+_SECTIONS = (
+    ("Investigate", ("info", "explain", "why", "timeline", "tail", "export", "report")),
+    ("Measure and check rules", ("metrics", "check")),
+    ("Integrity", ("verify", "keygen", "prove", "verify-proof", "witness")),
+    ("Storage", ("compact", "catalog")),
+    ("Fleet", ("index", "query", "find")),
+    ("Authoring", ("doctor",)),
 )
-"""The commands in the order ``trace-audit --help`` lists them: checks and the fleet first,
-then one decision's investigation, then measures, reports and storage."""
+"""How ``trace-audit --help`` lists the commands: by what a user does with them, each
+section's commands in this order (a sub-command group, ``witness``, after its section's
+commands: click lists groups after commands)."""
 
-app.registered_commands.sort(key=lambda command: _LISTED.index(command.name or ""))
+_ORDER = [name for _title, names in _SECTIONS for name in names]
+_SECTION_OF = {name: title for title, names in _SECTIONS for name in names}
+app.registered_commands.sort(key=lambda command: _ORDER.index(command.name or ""))
+for _info in app.registered_commands:
+    _info.rich_help_panel = _SECTION_OF[_info.name or ""]
+for _group in app.registered_groups:
+    _group.rich_help_panel = _SECTION_OF[str(_group.name)]
 
 
 def main() -> None:

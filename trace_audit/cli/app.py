@@ -17,7 +17,17 @@ import typer
 
 from trace_audit.cli.output import setup_logging
 from trace_audit.cli.typer_compat import App, Group
-from trace_runtime.errors import InputError, StorageError, TraceError, UsageError
+from trace_runtime.errors import (
+    EXIT_CANNOT_WRITE,
+    EXIT_FINDINGS,
+    EXIT_OK,
+    EXIT_UNREADABLE,
+    EXIT_USAGE,
+    InputError,
+    StorageError,
+    TraceError,
+    UsageError,
+)
 
 __all__ = [
     "EXIT_CANNOT_WRITE",
@@ -35,12 +45,6 @@ __all__ = [
 ]
 
 T = TypeVar("T")
-
-EXIT_OK = 0
-EXIT_FINDINGS = 1
-EXIT_USAGE = 2
-EXIT_UNREADABLE = 3
-EXIT_CANNOT_WRITE = 4
 
 _PROCESS = {"ours": False}
 """Whether this process runs one command and exits (``main``), so its process-wide limits are

@@ -1,13 +1,15 @@
-"""What a command prints for people, as data: the document models and the formats of times.
+"""What a command prints for people, as data: the document model and the formats of times.
 
-``Doc`` is a flow of titles, headings, label/value fields, tables, trees and lines, laid out
-by ``trace_audit.cli.render`` with rich on a terminal or as plain ASCII text. Meaning never
-rests on colour alone: every styled span carries its own words or markers (``[ok]``,
-``MISSING``, ``=>``), and the plain layout may swap in an ASCII form.
+A ``Doc`` is a list of blocks, in order. The flow blocks (titles, headings, label/value
+fields, tables, trees and lines) are laid out by ``trace_audit.cli.render`` with rich on a
+terminal or as plain ASCII text. Meaning never rests on colour alone: every styled span
+carries its own words or markers (``[ok]``, ``MISSING``, ``=>``), and the plain layout may
+swap in an ASCII form.
 
-``Printout`` is a list of console lines (rich markup) and boxed tables that rich draws in
-both modes, with ASCII boxes when colour is off: the layout of ``metrics``, ``compact`` and
-``catalog``. Building either imports nothing heavy; only drawing them imports rich.
+The console blocks (lines of rich markup, verbatim lines, boxed tables: the layout of
+``metrics``, ``compact`` and ``catalog``) are rich's own layout, so a document that holds any
+is drawn by rich in both modes, without colour and with ASCII boxes when plain. Building a
+document imports nothing heavy; only drawing it imports rich.
 """
 
 from __future__ import annotations
@@ -24,11 +26,9 @@ __all__ = [
     "BoxColumn",
     "BoxTable",
     "Column",
-    "ConsoleLine",
     "Doc",
     "Item",
     "Line",
-    "Printout",
     "Seg",
     "fmt_duration",
     "fmt_t",
@@ -88,51 +88,6 @@ class Item:
         return child
 
 
-BlockKind = Literal["title", "heading", "fields", "table", "tree", "line"]
-
-
-@dataclass(slots=True)
-class Block:
-    kind: BlockKind
-    data: Any
-
-
-@dataclass(slots=True)
-class Doc:
-    """What a command prints, in order."""
-
-    blocks: list[Block] = field(default_factory=list)
-
-    def title(self, line: Line) -> None:
-        self.blocks.append(Block("title", line))
-
-    def heading(self, text: str) -> None:
-        self.blocks.append(Block("heading", text))
-
-    def fields(self, rows: Iterable[tuple[str, Line]]) -> None:
-        self.blocks.append(Block("fields", list(rows)))
-
-    def table(self, columns: Sequence[Column], rows: Iterable[Sequence[Line]]) -> None:
-        self.blocks.append(Block("table", (list(columns), [list(r) for r in rows])))
-
-    def tree(self, root: Item) -> None:
-        self.blocks.append(Block("tree", root))
-
-    def line(self, line: Line, indent: int = 0) -> None:
-        self.blocks.append(Block("line", (line, indent)))
-
-
-# --- the printout: rich draws it in both modes ----------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class ConsoleLine:
-    """One ``console.print``: rich markup, or verbatim text that may run past the width."""
-
-    text: str
-    markup: bool = True
-
-
 @dataclass(frozen=True, slots=True)
 class BoxColumn:
     header: str
@@ -154,22 +109,59 @@ class BoxTable:
     """The padding between columns collapses when colour is off."""
 
 
+BlockKind = Literal[
+    "title", "heading", "fields", "table", "tree", "line", "markup", "verbatim", "box"
+]
+CONSOLE_KINDS: frozenset[BlockKind] = frozenset({"markup", "verbatim", "box"})
+"""The blocks only rich lays out: a document holding one is drawn by rich in both modes."""
+
+
 @dataclass(slots=True)
-class Printout:
-    """Console lines and boxed tables, in order."""
+class Block:
+    kind: BlockKind
+    data: Any
 
-    parts: list[ConsoleLine | BoxTable] = field(default_factory=list)
 
-    def print(self, text: str) -> None:
-        """A line of rich markup."""
-        self.parts.append(ConsoleLine(text))
+@dataclass(slots=True)
+class Doc:
+    """What a command prints, in order."""
+
+    blocks: list[Block] = field(default_factory=list)
+
+    @property
+    def console_layout(self) -> bool:
+        """Whether rich draws this document in both modes (it holds a console block)."""
+        return any(block.kind in CONSOLE_KINDS for block in self.blocks)
+
+    def title(self, line: Line) -> None:
+        self.blocks.append(Block("title", line))
+
+    def heading(self, text: str) -> None:
+        self.blocks.append(Block("heading", text))
+
+    def fields(self, rows: Iterable[tuple[str, Line]]) -> None:
+        self.blocks.append(Block("fields", list(rows)))
+
+    def table(self, columns: Sequence[Column], rows: Iterable[Sequence[Line]]) -> None:
+        self.blocks.append(Block("table", (list(columns), [list(r) for r in rows])))
+
+    def tree(self, root: Item) -> None:
+        self.blocks.append(Block("tree", root))
+
+    def line(self, line: Line, indent: int = 0) -> None:
+        self.blocks.append(Block("line", (line, indent)))
+
+    def markup(self, text: str) -> None:
+        """A console line of rich markup."""
+        self.blocks.append(Block("markup", text))
 
     def verbatim(self, text: str) -> None:
-        """A line printed as it is (no markup), not wrapped at the width."""
-        self.parts.append(ConsoleLine(text, markup=False))
+        """A console line printed as it is (no markup), not wrapped at the width."""
+        self.blocks.append(Block("verbatim", text))
 
-    def table(self, table: BoxTable) -> None:
-        self.parts.append(table)
+    def box(self, table: BoxTable) -> None:
+        """A boxed table."""
+        self.blocks.append(Block("box", table))
 
 
 # --- formats ---------------------------------------------------------------------------------

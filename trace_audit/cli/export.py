@@ -40,6 +40,39 @@ through (trace-audit verify checks the export). docs/foxglove.md; needs the look
 """
 
 
+_FormatOption = Annotated[
+    str, typer.Option("--format", help=f"One of {', '.join(EXPORT_FORMATS)}.")
+]
+_OutOption = Annotated[
+    Path | None,
+    typer.Option("--out", help="Write to this file instead of stdout.", show_default=False),
+]
+_ExportJsonOption = Annotated[
+    bool,
+    typer.Option(
+        "--json",
+        help="Print the export and its counts (cycle, nodes, edges, undocumented links) "
+        "as one JSON object.",
+    ),
+]
+_FromOption = Annotated[
+    str | None,
+    typer.Option(
+        "--from",
+        help="foxglove: start of the window (as --t). Default: the log start.",
+        show_default=False,
+    ),
+]
+_ToOption = Annotated[
+    str | None,
+    typer.Option(
+        "--to",
+        help="foxglove: end of the window (as --t). Default: the log end.",
+        show_default=False,
+    ),
+]
+
+
 @app.command("export", help=help_text(_EXPORT_HELP))
 def export_command(
     log: LogArgument,
@@ -47,38 +80,12 @@ def export_command(
     t: TimeOption = None,
     cycle: Annotated[int | None, cycle_option("Export")] = None,
     robot: RobotsOption = None,
-    fmt: Annotated[
-        str, typer.Option("--format", help=f"One of {', '.join(EXPORT_FORMATS)}.")
-    ] = "dot",
-    out: Annotated[
-        Path | None,
-        typer.Option("--out", help="Write to this file instead of stdout.", show_default=False),
-    ] = None,
-    json_out: Annotated[
-        bool,
-        typer.Option(
-            "--json",
-            help="Print the export and its counts (cycle, nodes, edges, undocumented links) "
-            "as one JSON object.",
-        ),
-    ] = False,
+    fmt: _FormatOption = "dot",
+    out: _OutOption = None,
+    json_out: _ExportJsonOption = False,
     plain: PlainOption = False,  # the export is plain text already; accepted like elsewhere
-    start: Annotated[
-        str | None,
-        typer.Option(
-            "--from",
-            help="foxglove: start of the window (as --t). Default: the log start.",
-            show_default=False,
-        ),
-    ] = None,
-    end: Annotated[
-        str | None,
-        typer.Option(
-            "--to",
-            help="foxglove: end of the window (as --t). Default: the log end.",
-            show_default=False,
-        ),
-    ] = None,
+    start: _FromOption = None,
+    end: _ToOption = None,
 ) -> None:
     if fmt not in EXPORT_FORMATS:
         fail(f"unknown export format {fmt!r} (use {', '.join(EXPORT_FORMATS)})", EXIT_USAGE)
@@ -91,10 +98,24 @@ def export_command(
             )
         _foxglove(log, out, robot or (), start, end, json_out=json_out)
         return
+    _decision(log, t, cycle, robot or (), fmt, out, json_out=json_out)
+
+
+def _decision(  # noqa: PLR0917 - the export command's options for one decision
+    log: Path,
+    t: str | None,
+    cycle: int | None,
+    robots: list[str] | tuple[str, ...],
+    fmt: str,
+    out: Path | None,
+    *,
+    json_out: bool,
+) -> None:
+    """One decision's export (dot, mermaid, json): on stdout, or written to a new file."""
     from trace_audit.export import export_decision
     from trace_runtime.boundary import write_new
 
-    result = guarded(lambda: export_decision(log, t=t, cycle=cycle, fmt=fmt, robots=robot or ()))
+    result = guarded(lambda: export_decision(log, t=t, cycle=cycle, fmt=fmt, robots=robots))
     if json_out and out is None:
         print_json(result)
         return

@@ -29,7 +29,13 @@ from trace_audit.cli.output import emit, setup_logging
 
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
     from trace_audit.log_time import LogClock
-    from trace_audit.verify import Finding, RobotSummary, SegmentSummary, VerifyReport
+    from trace_audit.verify import (
+        Finding,
+        RobotSummary,
+        SegmentSummary,
+        VerifyReport,
+        WitnessedVerifyReport,
+    )
     from trace_audit.witness.compare import WitnessReport
     from trace_runtime.tlog.keys import KeyPair
 
@@ -85,128 +91,92 @@ from openssl genpkey -algorithm ed25519 work as well. Refuses to overwrite a key
 _MAX_LISTED = 200
 
 
+_WitnessOption = Annotated[
+    str | None,
+    typer.Option(
+        "--witness",
+        help="Compare with what a witness cosigned: its URL, a file of cosigned checkpoint "
+        "notes, or 'local' (the root's witness/ store). A log that ends before the "
+        "witnessed tree is truncated_tail, one with another root a fork.",
+        show_default=False,
+    ),
+]
+_WitnessKeyOption = Annotated[
+    str | None,
+    typer.Option(
+        "--witness-key",
+        help="The witness's verifier key (witness vkey --cosignature): its cosignatures "
+        "are checked.",
+        show_default=False,
+    ),
+]
+_ExpectOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--expect",
+        help="With --witness: a robot (or its origin) the witness is asked about even if "
+        "the log holds none of its segments: one it cosigned a tree of is a "
+        "truncated_tail (every segment deleted). Repeat for a fleet's robots.",
+        show_default=False,
+    ),
+]
+_VerifyKeyOption = Annotated[
+    Path | None, key_option("The robot's Ed25519 public key (PEM, OpenSSH or 32 raw bytes).")
+]
+_VerifyEvidenceOption = Annotated[
+    Recordings, evidence_option(then=": their digests are checked there. Repeat for several.")
+]
+
+
 @app.command("verify", help=help_text(_VERIFY_HELP))
 def verify_command(
     log: CheckedLogArgument,
     *,
-    key: Annotated[
-        Path | None, key_option("The robot's Ed25519 public key (PEM, OpenSSH or 32 raw bytes).")
-    ] = None,
-    evidence: Annotated[
-        Recordings,
-        evidence_option(then=": their digests are checked there. Repeat for several."),
-    ] = None,
+    key: _VerifyKeyOption = None,
+    evidence: _VerifyEvidenceOption = None,
     scheduler: SchedulerOption = None,
     robot: RobotsOption = None,
-    witness: Annotated[
-        str | None,
-        typer.Option(
-            "--witness",
-            help="Compare with what a witness cosigned: its URL, a file of cosigned checkpoint "
-            "notes, or 'local' (the root's witness/ store). A log that ends before the "
-            "witnessed tree is truncated_tail, one with another root a fork.",
-            show_default=False,
-        ),
-    ] = None,
-    witness_key: Annotated[
-        str | None,
-        typer.Option(
-            "--witness-key",
-            help="The witness's verifier key (witness vkey --cosignature): its cosignatures "
-            "are checked.",
-            show_default=False,
-        ),
-    ] = None,
-    expect: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--expect",
-            help="With --witness: a robot (or its origin) the witness is asked about even if "
-            "the log holds none of its segments: one it cosigned a tree of is a "
-            "truncated_tail (every segment deleted). Repeat for a fleet's robots.",
-            show_default=False,
-        ),
-    ] = None,
+    witness: _WitnessOption = None,
+    witness_key: _WitnessKeyOption = None,
+    expect: _ExpectOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
-    from trace_audit.verify import verify_log
+    from trace_audit.verify import verify_log, verify_witnessed
     from trace_runtime.tlog.keys import load_public_key
 
     setup_logging()
-
-    def run() -> VerifyReport:
-        public = load_public_key(key) if key is not None else None
-        with cluster(scheduler) as executor:
-            return verify_log(
-                log, key=public, evidence=evidence or (), executor=executor, robots=robot or ()
-            )
-
     if expect and witness is None:
         fail("--expect asks a witness about robots: give --witness too", EXIT_USAGE)
-    report = guarded(run)
-    if witness is not None:
-        _verify_with_witness(
-            log,
-            report,
-            witness,
-            witness_key=witness_key,
-            key=key,
-            robot=robot,
-            expect=expect or [],
-            json_out=json_out,
-            plain=plain,
-        )
-        return
-    emit(report, verify_doc, json_out=json_out, plain=plain)
-    if not report.ok:
-        raise typer.Exit(EXIT_FINDINGS)
 
-
-def _verify_with_witness(
-    log: Path,
-    report: VerifyReport,
-    source: str,
-    *,
-    witness_key: str | None,
-    key: Path | None,
-    robot: list[str] | None,
-    expect: list[str],
-    json_out: bool,
-    plain: bool,
-) -> None:
-    """``verify --witness``: the report, the witness comparison's findings added to it, and
-    its time bounds shown beside the robot's clock (JSON: the report plus ``witness``)."""
-    from trace_audit.jsonout import to_jsonable
-    from trace_audit.verify import add_witness, witness_check
-    from trace_runtime.errors import NoteError, UsageError
-    from trace_runtime.tlog.keys import load_public_key
-    from trace_runtime.tlog.signed_note import parse_verifier_key
-
-    def run() -> WitnessReport:
-        try:
-            verifier = parse_verifier_key(witness_key) if witness_key else None
-        except NoteError as err:
-            raise UsageError(f"--witness-key: {err}") from err
+    def run() -> VerifyReport | WitnessedVerifyReport:
         public = load_public_key(key) if key is not None else None
-        return witness_check(
-            log, source, key=public, witness_key=verifier, robots=robot or (), expected=expect
-        )
+        with cluster(scheduler) as executor:
+            if witness is None:
+                return verify_log(
+                    log, key=public, evidence=evidence or (), executor=executor,
+                    robots=robot or (),
+                )  # fmt: skip
+            return verify_witnessed(
+                log, witness, key=public, witness_key=witness_key, evidence=evidence or (),
+                executor=executor, robots=robot or (), expected=expect or (),
+            )  # fmt: skip
 
-    witnessed = guarded(run)
-    add_witness(report, witnessed)
-
-    def to_json(r: VerifyReport) -> object:
-        return {**to_jsonable(r), "witness": to_jsonable(witnessed)}
-
-    def to_doc(r: VerifyReport) -> Doc:
-        doc = verify_doc(r)
-        _witness_section(doc, r, witnessed)
-        return doc
-
-    emit(report, to_doc, json_out=json_out, plain=plain, to_json=to_json)
+    report = guarded(run)
+    emit(report, _verify_doc, json_out=json_out, plain=plain)
     if not report.ok:
         raise typer.Exit(EXIT_FINDINGS)
+
+
+def _verify_doc(r: VerifyReport | WitnessedVerifyReport) -> Doc:
+    """The verify report as a document; with --witness, the witness's section after it."""
+    from trace_audit.verify import WitnessedVerifyReport
+
+    if not isinstance(r, WitnessedVerifyReport):
+        return verify_doc(r)
+    doc = verify_doc(r.report)
+    _witness_section(doc, r.report, r.witness)
+    return doc
 
 
 def _witness_section(doc: Doc, r: VerifyReport, w: WitnessReport) -> None:

@@ -17,8 +17,8 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, TypeVar
 
-from trace_audit.cli.doc import Doc, Printout
-from trace_audit.cli.render import draw_printout, draw_rich, render_plain
+from trace_audit.cli.doc import Doc
+from trace_audit.cli.render import draw_rich, render_plain
 
 __all__ = [
     "console",
@@ -61,7 +61,7 @@ def console(plain: bool = False) -> Any:
 
 
 def console_width(plain: bool) -> int:
-    """The width a ``Printout`` is drawn at: what ``console(plain)`` has."""
+    """The width a document of console blocks is drawn at: what ``console(plain)`` has."""
     width: int = console(plain).width
     return width
 
@@ -78,14 +78,15 @@ def _width() -> int:
     return max(40, shutil.get_terminal_size((80, 24)).columns)
 
 
-def show(doc: Doc | Printout, *, plain: bool) -> None:
-    """Print a document on stdout.
+def show(doc: Doc, *, plain: bool) -> None:
+    """Print a document on stdout: the one choice of its layout.
 
-    A ``Doc``: rich on a terminal, plain text otherwise (or when asked), at the terminal's
-    width (80 columns when it is unknown). A ``Printout``: rich either way, without colour
-    and with ASCII boxes when plain."""
-    if isinstance(doc, Printout):
-        draw_printout(doc, console(plain))
+    Flow blocks only: rich on a terminal, plain text otherwise (or when asked), at the
+    terminal's width (80 columns when it is unknown). With console blocks
+    (``Doc.console_layout``): rich either way, without colour and with ASCII boxes when
+    plain."""
+    if doc.console_layout:
+        draw_rich(doc, console(plain))
     elif use_plain(plain):
         sys.stdout.write(render_plain(doc, _width()))
     else:
@@ -96,7 +97,7 @@ def show(doc: Doc | Printout, *, plain: bool) -> None:
 
 def emit(
     result: R,
-    to_doc: Callable[[R], Doc | Printout],
+    to_doc: Callable[[R], Doc],
     *,
     json_out: bool,
     plain: bool,

@@ -1,8 +1,10 @@
-"""Drawing the document models of ``trace_audit.cli.doc``: a ``Doc`` as plain ASCII text or
-onto a rich console, a ``Printout`` onto a rich console.
+"""Drawing the document model of ``trace_audit.cli.doc``: a ``Doc`` as plain ASCII text
+(flow blocks only) or onto a rich console (every block; boxed tables in ASCII when the
+console's colour is off).
 
 Plain text fits the width it is given (long words excepted); rich fits the console's. This
-module decides layout only: which stream and which console is ``trace_audit.cli.output``'s.
+module decides layout only: which stream, which console and which of the two layouts is
+``trace_audit.cli.output.show``'s.
 """
 
 from __future__ import annotations
@@ -11,29 +13,32 @@ import textwrap
 from typing import Any
 
 from trace_audit.cli.doc import (
+    CONSOLE_KINDS,
     Block,
     BoxTable,
     Column,
-    ConsoleLine,
     Doc,
     Item,
     Line,
-    Printout,
     plain_text,
     segs,
 )
 
-__all__ = ["draw_printout", "draw_rich", "render_plain"]
+__all__ = ["draw_rich", "render_plain"]
 
 
 # --- plain text -------------------------------------------------------------------------------
 
 
 def render_plain(doc: Doc, width: int = 80) -> str:
-    """``doc`` as plain ASCII-marked text no wider than ``width`` (long words excepted)."""
+    """``doc`` as plain ASCII-marked text no wider than ``width`` (long words excepted).
+
+    Its blocks are flow blocks: rich lays out the others (``Doc.console_layout``)."""
     out: list[str] = []
     for block in doc.blocks:
         kind, data = block.kind, block.data
+        if kind in CONSOLE_KINDS:
+            raise ValueError(f"a {kind} block is drawn by rich only (draw_rich)")
         if kind == "title":
             text = plain_text(data)
             out += [text, "=" * min(len(text), width)]
@@ -165,13 +170,20 @@ def _rich_text(line: Line) -> Any:
 
 
 def draw_rich(doc: Doc, console: Any) -> None:
-    """Print ``doc`` on a rich ``console``: colour and box drawing."""
+    """Print ``doc`` on a rich ``console``: colour and box drawing (ASCII boxes when the
+    console's colour is off)."""
     from rich.markup import escape
 
     for block in doc.blocks:
         if block.kind == "heading":
             console.print()
             console.print(f"[bold cyan]{escape(block.data)}[/]")
+        elif block.kind == "markup":
+            console.print(block.data)
+        elif block.kind == "verbatim":
+            console.print(block.data, markup=False, soft_wrap=True)
+        elif block.kind == "box":
+            console.print(_box_table(block.data, plain=console.no_color))
         else:
             console.print(_rich_block(block))
 
@@ -240,19 +252,7 @@ def _rich_tree(root: Item) -> Any:
     return tree
 
 
-# --- the printout -----------------------------------------------------------------------------
-
-
-def draw_printout(printout: Printout, console: Any) -> None:
-    """Print ``printout`` on a rich ``console``; ASCII boxes when its colour is off."""
-    for part in printout.parts:
-        if isinstance(part, ConsoleLine):
-            if part.markup:
-                console.print(part.text)
-            else:
-                console.print(part.text, markup=False, soft_wrap=True)
-        else:
-            console.print(_box_table(part, plain=console.no_color))
+# --- boxed tables ----------------------------------------------------------------------------
 
 
 def _box_table(spec: BoxTable, *, plain: bool) -> Any:

@@ -1,7 +1,7 @@
 """``trace-audit compact`` and ``trace-audit catalog``: storage tiers of a log root.
 
 Each parses its arguments, calls one library function (``trace_runtime.tiers.compact``,
-``refresh_catalog``) and renders the typed result: a ``Printout`` (a table and its notes)
+``refresh_catalog``) and renders the typed result: a ``Doc`` of a boxed table and its notes
 for people, JSON for scripts.
 """
 
@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from trace_audit.cli.app import EXIT_FINDINGS, app, guarded
-from trace_audit.cli.doc import BoxColumn, BoxTable, Printout
+from trace_audit.cli.doc import BoxColumn, BoxTable, Doc
 from trace_audit.cli.options import (
     JsonOption,
     PlainOption,
@@ -288,29 +288,29 @@ def _when(t_ns: int | None) -> str:
     return datetime.fromtimestamp(t_ns / 1e9, tz=UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
 
 
-def compact_doc(report: CompactionReport) -> Printout:
+def compact_doc(report: CompactionReport) -> Doc:
     """What compaction moved (or would move), a row per segment, what it left and deleted."""
-    out = Printout()
-    out.print(
+    out = Doc()
+    out.markup(
         f"[bold]compact[/bold] {report.root} -> {report.tier} (from {', '.join(report.sources)})"
     )
-    out.print(
+    out.markup(
         f"  segments older than {_span(report.older_than_ns)} before the {report.reference}"
         f" ({_when(report.reference_ns)})"
     )
     for leftover in report.leftovers:
-        out.print(f"  leftover {leftover.path}: {leftover.action}")
+        out.markup(f"  leftover {leftover.path}: {leftover.action}")
     if report.segments:
-        out.table(_segment_table(report))
-    out.print(_moved_line(report))
+        out.box(_segment_table(report))
+    out.markup(_moved_line(report))
     reasons: dict[str, int] = {}
     for s in report.skipped:
         reasons[s.detail] = reasons.get(s.detail, 0) + 1
     for reason, count in sorted(reasons.items()):
-        out.print(f"  left {count} segment(s): {reason}")
+        out.markup(f"  left {count} segment(s): {reason}")
     for r in report.retention:
         detail = f" ({r.detail})" if r.detail else ""
-        out.print(f"  retention: {r.path} {r.status}{detail}")
+        out.markup(f"  retention: {r.path} {r.status}{detail}")
     return out
 
 
@@ -378,7 +378,7 @@ def catalog_command(
     )
 
 
-def catalog_doc(catalog: Catalog) -> Printout:
+def catalog_doc(catalog: Catalog) -> Doc:
     """A row per segment of the catalog, the total, and what could not be read.
 
     Too wide for the console, the tier and the times wrap; the robot is never cut (at its
@@ -405,15 +405,15 @@ def catalog_doc(catalog: Catalog) -> Printout:
         )
         for e in catalog.entries
     )
-    out = Printout()
-    out.table(BoxTable(columns, rows, title=f"catalog of {catalog.root}"))
+    out = Doc()
+    out.box(BoxTable(columns, rows, title=f"catalog of {catalog.root}"))
     total = sum(e.bytes for e in catalog.entries)
     lossy = any(e.lossy for e in catalog.entries)
-    out.print(
+    out.markup(
         f"  {len(catalog.entries)} segment(s), {_size(total)}"
         + ("; * lossy (warm summaries)" if lossy else "")
         + "; seal digests and file SHA-256 in --json"
     )
     for problem in catalog.problems:
-        out.print(f"  unreadable: {problem}")
+        out.markup(f"  unreadable: {problem}")
     return out

@@ -16,8 +16,8 @@ from typing import Any
 import typer
 from typer.core import TyperCommand, TyperGroup
 from typer.exceptions import TyperException
-from typer.main import get_group
-from typer.models import CommandFunctionType, CommandInfo
+from typer.main import get_group, solve_typer_info_defaults
+from typer.models import CommandFunctionType, CommandInfo, TyperInfo
 
 __all__ = ["App", "Command", "Group", "TyperException", "usage_error_line"]
 
@@ -31,6 +31,12 @@ def _plain(text: str | None) -> str | None:
     return None if text is None else _MARKUP_TAG.sub("", text)
 
 
+def _summary(help: str | None) -> str | None:
+    """A command's line in a listing: its help's whole first paragraph (click would cut it
+    at ~45 characters with "...")."""
+    return " ".join(help.strip().split("\n\n")[0].split()) if help else None
+
+
 class Group(TyperGroup):
     """typer's group, with a ``--help`` flag that starts as ``False`` rather than unset.
 
@@ -38,14 +44,46 @@ class Group(TyperGroup):
     value yet, the group's own ``--help`` among them, so ``trace-audit COMMAND --help``
     would import pydantic (~60 ms) before it printed a word; a ``bool`` is left alone."""
 
-    def __init__(self, *args: Any, help: str | None = None, **kwargs: Any) -> None:
-        super().__init__(*args, help=_plain(help), **kwargs)
+    def __init__(
+        self,
+        *args: Any,
+        help: str | None = None,
+        short_help: str | None = None,
+        **kwargs: Any,
+    ) -> None:
+        help = _plain(help)
+        super().__init__(*args, help=help, short_help=short_help or _summary(help), **kwargs)
 
     def get_help_option(self, ctx: Any) -> Any:
         option = super().get_help_option(ctx)
         if option is not None and option.default is None:
             option.default = False
         return option
+
+    def format_commands(self, ctx: Any, formatter: Any) -> None:
+        """The commands under "Commands:", in sections by their ``rich_help_panel`` (what a
+        user does with them) when they name one: each section in the order its first command
+        is listed, its heading at the margin and its commands indented, as ``git help``
+        lists its commands. The names are aligned across sections.
+
+        typer 0.29 draws the panels only in its rich help, which this app does not use
+        (start-up); its plain help would list every command in one block."""
+        shown = [(name, self.get_command(ctx, name)) for name in self.list_commands(ctx)]
+        commands = [(name, cmd) for name, cmd in shown if cmd is not None and not cmd.hidden]
+        if not any(getattr(cmd, "rich_help_panel", None) for _name, cmd in commands):
+            super().format_commands(ctx, formatter)
+            return
+        width = max(len(name) for name, _cmd in commands)
+        limit = formatter.width - 6 - width  # as click's: three times its column spacing
+        sections: dict[str, list[tuple[str, str]]] = {}
+        for name, cmd in commands:
+            rows = sections.setdefault(getattr(cmd, "rich_help_panel", None) or "Other", [])
+            rows.append((name.ljust(width), cmd.get_short_help_str(limit)))
+        formatter.write_paragraph()
+        formatter.write_heading("Commands")
+        for title, rows in sections.items():
+            with formatter.section(title):
+                formatter.write_dl(rows)
 
 
 class Command(TyperCommand):
@@ -62,9 +100,7 @@ class Command(TyperCommand):
         **kwargs: Any,
     ) -> None:
         help = _plain(help)
-        if short_help is None and help:
-            short_help = " ".join(help.strip().split("\n\n")[0].split())
-        super().__init__(*args, help=help, short_help=short_help, **kwargs)
+        super().__init__(*args, help=help, short_help=short_help or _summary(help), **kwargs)
 
     def collect_usage_pieces(self, ctx: Any) -> list[str]:
         # "explain [OPTIONS] LOG", as click and every Unix tool write it; typer 0.29 writes
@@ -127,34 +163,57 @@ class App(typer.Typer):
         return super().command(name, cls=cls or Command, **kwargs)
 
     def runner_for(self, args: Sequence[str]) -> Callable[..., Any]:
-        """What runs this command line: when it names a command first, a group holding that
-        command alone; else the whole app.
+        """What runs this command line: when it names a command (or a sub-command group)
+        first, a group holding that one alone; else the whole app.
 
         typer builds every registered command (the signature and type hints of its function,
         ~1.3 ms each, ~20 ms for all) before it reads the arguments, though one runs. A
         command's parsing, errors and help name no other command, so they come out the same;
         anything else (no command, ``--help``, an unknown or misspelt name) meets them all."""
         name = args[0] if args else None
-        if self.registered_groups or self.registered_callback:
+        if self.registered_callback:
             return self
         if list(args) in ([], ["--help"]):
             return get_group(self._listing())
-        chosen = [info for info in self.registered_commands if info.name == name]
-        if len(chosen) != 1:
+        commands = [info for info in self.registered_commands if info.name == name]
+        groups = [info for info in self.registered_groups if _group_name(info) == name]
+        if len(commands) + len(groups) != 1:
             return self
         alone = copy.copy(self)
-        alone.registered_commands = chosen
+        alone.registered_commands = commands
+        alone.registered_groups = groups
         # As a group, as the whole app is: typer would run an app of one command as that
         # command (its usage line would lose the command's name).
         return get_group(alone)
 
     def _listing(self) -> App:
-        """The app as its own help lists it: each command's name and help, none of its
-        parameters (the list shows no parameter; building them all is most of the time
-        ``trace-audit --help`` takes)."""
+        """The app as its own help lists it: each command's (and sub-command group's) name
+        and help, none of its parameters or sub-commands (the list shows none; building them
+        all is most of the time ``trace-audit --help`` takes)."""
         listing = copy.copy(self)
-        listing.registered_commands = [_without_parameters(i) for i in self.registered_commands]
+        listing.registered_commands = [
+            *(_without_parameters(i) for i in self.registered_commands),
+            *(_as_listed(i) for i in self.registered_groups),
+        ]
+        listing.registered_groups = []
         return listing
+
+
+def _group_name(info: TyperInfo) -> str | None:
+    """A sub-command group's name: given to ``add_typer``, else its app's own."""
+    return solve_typer_info_defaults(info).name
+
+
+def _as_listed(info: TyperInfo) -> CommandInfo:
+    """A sub-command group as the listing shows it: a line like a command's."""
+    solved = solve_typer_info_defaults(info)
+    return CommandInfo(
+        name=solved.name,
+        cls=Command,
+        help=solved.help,
+        rich_help_panel=solved.rich_help_panel,
+        callback=_no_parameters,
+    )
 
 
 def _without_parameters(info: CommandInfo) -> CommandInfo:
