@@ -29,7 +29,13 @@ from trace_audit.causal import (
     layer_with_defaults,
     read_decision,
 )
-from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
+from trace_audit.causal.lenient import (
+    as_float,
+    as_mapping,
+    as_number_or_flag,
+    as_str,
+    mappings,
+)
 from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log
 from trace_audit.log_time import TimeArg
@@ -117,7 +123,7 @@ def decision_table(
             decision.rationale,
             decision.truncated,
             lead.label if lead else None,
-            _number(lead.value) if lead else None,
+            as_number_or_flag(lead.value) if lead else None,
             _text(lead.value) if lead else None,
             lead.unit if lead else None,
             [_factor(f) for f in decision.factors],
@@ -300,23 +306,16 @@ class _Columns:
         )
 
 
-def _number(value: Any) -> float | None:
-    """A factor's value as a number (booleans as 0/1, as the fleet index has them)."""
-    if isinstance(value, bool):
-        return float(value)
-    return as_float(value)
-
-
 def _text(value: Any) -> str | None:
     """A factor's value as text when it is not a number (the CLI's rendering)."""
-    return None if value is None or _number(value) is not None else format_value(value)
+    return None if value is None or as_number_or_flag(value) is not None else format_value(value)
 
 
 def _factor(factor: FactorValue) -> dict[str, Any]:
     return {
         "node": factor.node,
         "name": factor.name,
-        "value": _number(factor.value),
+        "value": as_number_or_flag(factor.value),
         "text": _text(factor.value),
         "unit": factor.unit,
     }

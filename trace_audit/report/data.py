@@ -30,6 +30,7 @@ from trace_audit.causal import (
     layer_with_defaults,
     read_decision,
 )
+from trace_audit.causal.lenient import as_float, mappings
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, SensorWindow
 from trace_audit.evidence import open_recordings
 from trace_audit.explain import Explanation, explain
@@ -412,11 +413,9 @@ def _samples(
                 t_ns=c.t_ns,
                 command=d.command,
                 factors={
-                    f.label: float(f.value)
+                    f.label: value
                     for f in d.factors
-                    if f.label in names
-                    and isinstance(f.value, int | float)
-                    and not isinstance(f.value, bool)
+                    if f.label in names and (value := as_float(f.value)) is not None
                 },
                 channels=execution_channels(ex) if ex is not None else {},
                 deviation=ex.deviation if ex is not None else None,
@@ -434,7 +433,7 @@ def _entities(target: Cycle, sensors: SensorWindow) -> tuple[EntityView, ...]:
     belief = target.layer(TOPIC_BELIEF)
     distances: dict[str, str] = {}
     if isinstance(belief, Mapping):
-        for node in _dicts(belief.get("nodes")):
+        for node in mappings(belief.get("nodes")):
             node_id = node.get("id")
             if isinstance(node_id, str) and node_id.endswith(".distance"):
                 unit = node.get("unit")
@@ -444,7 +443,7 @@ def _entities(target: Cycle, sensors: SensorWindow) -> tuple[EntityView, ...]:
     if not isinstance(perception, Mapping):
         return ()
     out = []
-    for raw in _dicts(perception.get("entities")):
+    for raw in mappings(perception.get("entities")):
         entity_id = str(raw.get("id", "?"))
         cls = str(raw.get("class", "?"))
         pose = raw.get("pose") if isinstance(raw.get("pose"), Mapping) else {}
@@ -456,11 +455,11 @@ def _entities(target: Cycle, sensors: SensorWindow) -> tuple[EntityView, ...]:
             EntityView(
                 id=entity_id,
                 cls=cls,
-                confidence=_number(p),
+                confidence=as_float(p),
                 x=xy[0],
                 y=xy[1],
                 frame=str(pose.get("frame", "map")) if isinstance(pose, Mapping) else "map",
-                evidence=tuple(_evidence(e, sensors) for e in _dicts(raw.get("evidence"))),
+                evidence=tuple(_evidence(e, sensors) for e in mappings(raw.get("evidence"))),
                 distance=distances.get(entity_id),
             )
         )
@@ -478,7 +477,7 @@ def _robot_pose(target: Cycle) -> RobotPose | None:
         return None
     q = pose.get("orientation")
     heading = 0.0
-    if isinstance(q, list | tuple) and len(q) == 4 and all(_is_number(v) for v in q):
+    if isinstance(q, list | tuple) and len(q) == 4 and all(as_float(v) is not None for v in q):
         qx, qy, qz, qw = (float(v) for v in q)
         # yaw of a unit quaternion (x, y, z, w)
         heading = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
@@ -491,7 +490,7 @@ def _evidence(raw: Mapping[str, Any], sensors: SensorWindow) -> EvidenceView:
     where = ""
     if isinstance(region, Mapping):
         values = ", ".join(
-            f"{v:g}" if _is_number(v) else str(v) for v in region.get("values") or ()
+            f"{v:g}" if as_float(v) is not None else str(v) for v in region.get("values") or ()
         )
         where = f"{region.get('kind')} [{values}] in {region.get('frame', '?')}"
     weight = raw.get("weight")
@@ -502,7 +501,7 @@ def _evidence(raw: Mapping[str, Any], sensors: SensorWindow) -> EvidenceView:
         problem, label = "no evidence ref recorded", "-"
     return EvidenceView(
         sensor=str(raw.get("sensor", "?")),
-        weight=_number(weight),
+        weight=as_float(weight),
         region=where,
         ref=label,
         resolved=not problem,
@@ -522,19 +521,7 @@ def _not_retained(result: Explanation) -> tuple[str, ...]:
 
 def _xy(position: Any) -> tuple[float | None, float | None]:
     if isinstance(position, list | tuple) and len(position) >= 2:
-        x, y = position[0], position[1]
-        if _is_number(x) and _is_number(y):
-            return float(x), float(y)
+        x, y = as_float(position[0]), as_float(position[1])
+        if x is not None and y is not None:
+            return x, y
     return None, None
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
-
-
-def _number(value: Any) -> float | None:
-    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
-
-
-def _dicts(value: Any) -> list[Mapping[str, Any]]:
-    return [v for v in value if isinstance(v, Mapping)] if isinstance(value, list) else []
