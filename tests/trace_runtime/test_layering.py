@@ -178,10 +178,10 @@ FLOORS: dict[str, list[set[str]]] = {
         {"", "testing"},  # the package's face, and the test double users test their robots with
     ],
     "trace_audit": [
-        # what every question needs: times, sources, a cycle's fields, JSON, evidence
+        # what every question needs: times, sources, a cycle's fields, JSON, evidence, columns
         {
             "jsonout", "log_time", "selection", "log_source", "cycle_fields", "log_gaps",
-            "sensor_window", "evidence",
+            "sensor_window", "evidence", "columns",
         },
         # views over one decision: its causal graph and its chains
         {"causal", "chains"},

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 from trace_audit.causal.distances import entity_distances
 from trace_audit.causal.lenient import as_number_or_flag
+from trace_audit.columns import gap_row
 from trace_audit.log_time import hour_of
 from trace_audit.metrics import NO_SCENARIO, ScoredDecision, scenario_of
 from trace_audit.metrics.sums import failed_check_rules
@@ -243,19 +244,7 @@ class SegmentRows:
         gap = d.seal.gap
         assert gap is not None  # the caller checked
         self.days["gaps"].append(day)
-        self.rows["gaps"].append(
-            (
-                self._name,
-                gap.after_cycle,
-                gap.after_t_ns,
-                gap.before_cycle,
-                gap.before_t_ns,
-                gap.period_ns,
-                gap.gap_ns,
-                gap.missing_cycles,
-                gap.declared_dropped,
-            )
-        )
+        self.rows["gaps"].append(gap_row(self._name, gap))
 
     def _channels(self, d: ScoredDecision, execution: dict[str, Any], day: str) -> None:
         """Add the cycle's actuator channel rows, each with the record's ``deviation_unit``."""
