@@ -12,7 +12,8 @@ robot's in time order, and every row names its robot.
 - ``decision_table``, ``channel_table`` and ``check_table`` are columns of those decisions;
   ``entity_table`` the perceived entities; ``gap_table`` the gaps between sealed cycles by the
   one gap rule (``trace_runtime.gaps``). Columns are the fleet index's where it has the
-  same column (one definition of each, ``trace_audit.columns``; docs/fleet.md); ``.to_pandas()`` gives a DataFrame.
+  same column (one definition of each, ``trace_audit.columns``; docs/fleet.md);
+  ``.to_pandas()`` gives a DataFrame.
 
 pyarrow comes with the ``fleet`` extra; without it the tables raise ``UsageError``.
 """
