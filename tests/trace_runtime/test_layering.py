@@ -186,10 +186,10 @@ FLOORS: dict[str, list[set[str]]] = {
         # views over one decision: its causal graph and its chains
         {"causal", "chains"},
         # the questions an investigator asks of a log
-        {"metrics", "explain", "export", "timeline", "info", "verify", "doctor", "layers", "rules"}
-        | {"tail", "witness", "proof"},
+        {"metrics", "explanation", "export", "transitions", "info", "verify", "doctor", "layers"}
+        | {"rules", "tail", "witness", "proof"},
         # what is built from the answers: the fleet index, the incident report, the Foxglove view
-        {"fleet", "report", "foxglove", "foxglove_live"},
+        {"fleet", "incident", "foxglove", "foxglove_live"},
         {"cli"},
         {""},
     ],

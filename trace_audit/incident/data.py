@@ -33,12 +33,12 @@ from trace_audit.causal import (
 from trace_audit.causal.lenient import as_float, mappings
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, SensorWindow
 from trace_audit.evidence import open_recordings
-from trace_audit.explain import Explanation, explain
+from trace_audit.explanation import Explanation, explain
 from trace_audit.log_source import as_log
 from trace_audit.log_time import TimeArg
 from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
 from trace_audit.rules import RobotRules, Rule, check_rules
-from trace_audit.timeline import Timeline, timeline
+from trace_audit.transitions import Timeline, timeline
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import UsageError
 from trace_runtime.reading.logset import Log

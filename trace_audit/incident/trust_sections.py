@@ -10,8 +10,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from html import escape
 
-from trace_audit.report.data import ReportData
-from trace_audit.report.markup import html_fields, html_problems, html_table
+from trace_audit.incident.data import ReportData
+from trace_audit.incident.markup import html_fields, html_problems, html_table
 from trace_runtime.verification import Finding
 
 __all__ = ["auditability_section", "integrity_section", "rules_section"]

@@ -5,8 +5,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from trace_audit.report.data import EntityView, ReportData
-from trace_audit.report.drawing import (
+from trace_audit.incident.data import EntityView, ReportData
+from trace_audit.incident.drawing import (
     BROKEN,
     MAX_ENTITIES,
     figure_style,

@@ -6,8 +6,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from trace_audit.causal.lenient import as_float
-from trace_audit.report.data import ReportData
-from trace_audit.report.drawing import (
+from trace_audit.incident.data import ReportData
+from trace_audit.incident.drawing import (
     BROKEN,
     MARKED,
     MAX_FACTORS,
