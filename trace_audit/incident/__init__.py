@@ -24,10 +24,10 @@ from trace_audit.incident.data import (
     DEFAULT_WINDOW_S,
     ReportData,
     Verdict,
-    execution_channels,
     gather_report,
     parse_window,
 )
+from trace_audit.incident.window import execution_channels
 from trace_audit.log_time import TimeArg
 from trace_runtime.boundary import write_atomic
 from trace_runtime.errors import UsageError

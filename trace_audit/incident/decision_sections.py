@@ -10,7 +10,7 @@ from __future__ import annotations
 from html import escape
 
 from trace_audit.causal import format_value
-from trace_audit.incident.data import ReportData, execution_channels
+from trace_audit.incident.data import ReportData
 from trace_audit.incident.drawing import MAX_ENTITIES, MAX_FACTORS, MAX_GRAPH_NODES
 from trace_audit.incident.graph_figures import causal_figure, tree_figure
 from trace_audit.incident.markup import (
@@ -23,6 +23,7 @@ from trace_audit.incident.markup import (
 )
 from trace_audit.incident.scene import scene_figure
 from trace_audit.incident.time_figures import execution_figure, factors_figure
+from trace_audit.incident.window import execution_channels
 
 __all__ = [
     "causal_section",
