@@ -43,7 +43,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from trace_audit.explain import explain
+from trace_audit.explanation import explain
 from trace_runtime.reading.logset import open_log
 from trace_runtime.tiers.catalog import CATALOG_NAME, refresh_catalog
 

@@ -24,9 +24,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from trace_audit.explain import explain
-from trace_audit.report.data import gather_report
-from trace_audit.report.page import render_page
+from trace_audit.explanation import explain
+from trace_audit.incident.data import gather_report
+from trace_audit.incident.page import render_page
 from trace_runtime.reading.logset import Log, open_log
 from trace_runtime.verification import verify
 
@@ -44,7 +44,7 @@ def _timed(call: Callable[[], Any], rounds: int) -> tuple[float, Any]:
 
 def _demo(path: Path) -> str:
     from sim.runner import RunConfig, run
-    from trace_audit.timeline import why
+    from trace_audit.transitions import why
 
     if not path.exists():
         run(RunConfig(out=path, scenario="all", cycles=100, seed=42))

@@ -39,12 +39,12 @@ _EXPORTS = {
     "channel_table": "trace_audit.layers",
     "check_table": "trace_audit.layers",
     "gap_table": "trace_audit.layers",
-    "explain": "trace_audit.explain",
-    "Explanation": "trace_audit.explain",
-    "why": "trace_audit.timeline",
-    "timeline": "trace_audit.timeline",
-    "WhyResult": "trace_audit.timeline",
-    "Timeline": "trace_audit.timeline",
+    "explain": "trace_audit.explanation",
+    "Explanation": "trace_audit.explanation",
+    "why": "trace_audit.transitions",
+    "timeline": "trace_audit.transitions",
+    "WhyResult": "trace_audit.transitions",
+    "Timeline": "trace_audit.transitions",
     "log_info": "trace_audit.info",
     "LogInfo": "trace_audit.info",
     "export_decision": "trace_audit.export",
@@ -109,7 +109,7 @@ if TYPE_CHECKING:
     from trace_audit.chains import DecisionChains, trace_cycle
     from trace_audit.doctor import DoctorReport, doctor_log
     from trace_audit.evidence import ExternalEvidence, describe_refs
-    from trace_audit.explain import Explanation, explain
+    from trace_audit.explanation import Explanation, explain
     from trace_audit.export import export_decision
     from trace_audit.info import LogInfo, log_info
     from trace_audit.layers import (
@@ -126,7 +126,7 @@ if TYPE_CHECKING:
     from trace_audit.log_time import LogClock
     from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
     from trace_audit.selection import Selection, SeveralRobotsError, per_robot
-    from trace_audit.timeline import Timeline, WhyResult, timeline, why
+    from trace_audit.transitions import Timeline, WhyResult, timeline, why
     from trace_audit.verify import VerifyReport, verify_log
     from trace_runtime.reading.logset import open_log
 

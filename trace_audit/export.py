@@ -14,7 +14,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, get_args
 
-from trace_audit.explain import Explanation, explain
+from trace_audit.explanation import Explanation, explain
 from trace_audit.log_source import LogSource
 from trace_audit.log_time import TimeArg
 from trace_runtime.errors import UsageError

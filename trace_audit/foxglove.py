@@ -77,7 +77,7 @@ def export_foxglove(
 
     One robot: ``robots`` selects it in a log of several (``SeveralRobotsError`` else). The
     file must not exist (``StorageError``), and the SDK must be installed (``UsageError``)."""
-    from trace_audit.timeline import one_robot
+    from trace_audit.transitions import one_robot
 
     log = one_robot(source, robots, "decisions in this log")
     require_cycles(log)

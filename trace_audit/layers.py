@@ -11,8 +11,9 @@ robot's in time order, and every row names its robot.
   message alone (``trace_runtime.encoding.partial.DecisionFields``), for walking long logs.
 - ``decision_table``, ``channel_table`` and ``check_table`` are columns of those decisions;
   ``entity_table`` the perceived entities; ``gap_table`` the gaps between sealed cycles by the
-  one gap rule (``trace_runtime.gaps``). Column names are the fleet index's where it has the
-  same column (docs/fleet.md); ``.to_pandas()`` gives a DataFrame.
+  one gap rule (``trace_runtime.gaps``). Columns are the fleet index's where it has the
+  same column (one definition of each, ``trace_audit.columns``; docs/fleet.md);
+  ``.to_pandas()`` gives a DataFrame.
 
 pyarrow comes with the ``fleet`` extra; without it the tables raise ``UsageError``.
 """
@@ -29,7 +30,22 @@ from trace_audit.causal import (
     layer_with_defaults,
     read_decision,
 )
-from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
+from trace_audit.causal.lenient import (
+    as_float,
+    as_mapping,
+    as_number_or_flag,
+    as_str,
+    mappings,
+)
+from trace_audit.columns import (
+    DECISION_WHY,
+    channel_columns,
+    check_columns,
+    decision_columns,
+    entity_columns,
+    gap_columns,
+    gap_row,
+)
 from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log
 from trace_audit.log_time import TimeArg
@@ -117,7 +133,7 @@ def decision_table(
             decision.rationale,
             decision.truncated,
             lead.label if lead else None,
-            _number(lead.value) if lead else None,
+            as_number_or_flag(lead.value) if lead else None,
             _text(lead.value) if lead else None,
             lead.unit if lead else None,
             [_factor(f) for f in decision.factors],
@@ -233,17 +249,7 @@ def gap_table(
         for cycle in robot_log.iter_cycles(lo, hi):
             gap = step(cycle)
             if gap is not None:
-                rows.add(
-                    gap.robot,
-                    gap.after_cycle,
-                    gap.after_t_ns,
-                    gap.before_cycle,
-                    gap.before_t_ns,
-                    gap.period_ns,
-                    gap.gap_ns,
-                    gap.missing_cycles,
-                    gap.declared_dropped,
-                )
+                rows.add(*gap_row(gap.robot, gap))
     return rows.table()
 
 
@@ -300,23 +306,16 @@ class _Columns:
         )
 
 
-def _number(value: Any) -> float | None:
-    """A factor's value as a number (booleans as 0/1, as the fleet index has them)."""
-    if isinstance(value, bool):
-        return float(value)
-    return as_float(value)
-
-
 def _text(value: Any) -> str | None:
     """A factor's value as text when it is not a number (the CLI's rendering)."""
-    return None if value is None or _number(value) is not None else format_value(value)
+    return None if value is None or as_number_or_flag(value) is not None else format_value(value)
 
 
 def _factor(factor: FactorValue) -> dict[str, Any]:
     return {
         "node": factor.node,
         "name": factor.name,
-        "value": _number(factor.value),
+        "value": as_number_or_flag(factor.value),
         "text": _text(factor.value),
         "unit": factor.unit,
     }
@@ -330,95 +329,44 @@ def _position(value: Any) -> tuple[float | None, float | None, float | None]:
     return x, y, z
 
 
+_DECISION_COLUMNS = (
+    "robot",
+    "segment",
+    "cycle",
+    "t_ns",
+    "command",
+    "score",
+    "rationale",
+    "truncated",
+    *DECISION_WHY,
+    "failed_checks",
+    "flags",
+    "scenario",
+    "summarized",
+    "sealed",
+    "seal_verified",
+)
+_ENTITY_COLUMNS = (
+    "robot",
+    "cycle",
+    "t_ns",
+    "entity",
+    "class",
+    "confidence",
+    "x",
+    "y",
+    "z",
+    "frame",
+    "evidence",
+)
+
+
 def _decision_schema(pa: Any) -> Any:
-    factor = factor_struct(pa)
-    strings = pa.list_(pa.string())
-    return pa.schema(
-        [
-            ("robot", pa.string()),
-            ("segment", pa.string()),
-            ("cycle", pa.int64()),
-            ("t_ns", pa.int64()),
-            ("command", pa.string()),
-            ("score", pa.float64()),
-            ("rationale", pa.string()),
-            ("truncated", pa.bool_()),
-            ("lead_factor", pa.string()),
-            ("lead_value", pa.float64()),
-            ("lead_text", pa.string()),
-            ("lead_unit", pa.string()),
-            ("factors", pa.list_(factor)),
-            ("alternatives", pa.int32()),
-            ("counterfactuals", pa.int32()),
-            ("deviation", pa.float64()),
-            ("deviation_unit", pa.string()),
-            ("failed_checks", strings),
-            ("flags", strings),
-            ("scenario", pa.string()),
-            ("summarized", pa.bool_()),
-            ("sealed", pa.bool_()),
-            ("seal_verified", pa.bool_()),
-        ]
-    )
+    return pa.schema(decision_columns(pa, _DECISION_COLUMNS))
 
 
 def _entity_schema(pa: Any) -> Any:
-    return pa.schema(
-        [
-            ("robot", pa.string()),
-            ("cycle", pa.int64()),
-            ("t_ns", pa.int64()),
-            ("entity", pa.string()),
-            ("class", pa.string()),
-            ("confidence", pa.float64()),
-            ("x", pa.float64()),
-            ("y", pa.float64()),
-            ("z", pa.float64()),
-            ("frame", pa.string()),
-            ("evidence", pa.int32()),
-        ]
-    )
-
-
-def factor_struct(pa: Any) -> Any:
-    """A factor as a column value: the same in these tables and the fleet index's."""
-    return pa.struct(
-        [
-            ("node", pa.string()),
-            ("name", pa.string()),
-            ("value", pa.float64()),
-            ("text", pa.string()),
-            ("unit", pa.string()),
-        ]
-    )
-
-
-def channel_columns(pa: Any) -> list[tuple[str, Any]]:
-    """An actuator channel row's columns after the key saying whose it is (``robot`` here,
-    ``segment`` in the fleet index): one definition for both."""
-    return [
-        ("cycle", pa.int64()),
-        ("t_ns", pa.int64()),
-        ("channel", pa.string()),
-        ("intended", pa.float64()),
-        ("actual", pa.float64()),
-        ("deviation", pa.float64()),
-        ("unit", pa.string()),
-        ("deviation_unit", pa.string()),
-    ]
-
-
-def check_columns(pa: Any) -> list[tuple[str, Any]]:
-    """An execution check row's columns after its key, as ``channel_columns``."""
-    return [
-        ("cycle", pa.int64()),
-        ("t_ns", pa.int64()),
-        ("rule", pa.string()),
-        ("passed", pa.bool_()),
-        ("value", pa.float64()),
-        ("limit", pa.float64()),
-        ("detail", pa.string()),
-    ]
+    return pa.schema(entity_columns(pa, _ENTITY_COLUMNS))
 
 
 def _channel_schema(pa: Any) -> Any:
@@ -430,16 +378,4 @@ def _check_schema(pa: Any) -> Any:
 
 
 def _gap_schema(pa: Any) -> Any:
-    return pa.schema(
-        [
-            ("robot", pa.string()),
-            ("after_cycle", pa.int64()),
-            ("after_t_ns", pa.int64()),
-            ("before_cycle", pa.int64()),
-            ("before_t_ns", pa.int64()),
-            ("period_ns", pa.int64()),
-            ("gap_ns", pa.int64()),
-            ("missing_cycles", pa.int64()),
-            ("declared_dropped", pa.int64()),
-        ]
-    )
+    return pa.schema([("robot", pa.string()), *gap_columns(pa)])

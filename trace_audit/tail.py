@@ -1,6 +1,6 @@
 """Decision changes as they are written: a log root followed like ``journalctl -f``.
 
-A *decision change* is what the timeline calls one (``trace_audit.timeline``): a cycle whose
+A *decision change* is what the timeline calls one (``trace_audit.transitions``): a cycle whose
 command differs from the previous cycle's of the same robot; a robot's first cycle read opens
 with one too (``previous`` None). ``tail`` reads each robot's newest segment (the one being
 written, or the last one written), yields its decision changes, and with ``follow`` polls for

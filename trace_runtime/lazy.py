@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import importlib
 import sys
-import types
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -35,23 +34,4 @@ def lazy_exports(
     def names_listed() -> list[str]:
         return list(names)
 
-    sys.modules[package].__class__ = _ExportsOverSubmodules
     return attribute, names_listed
-
-
-class _ExportsOverSubmodules(types.ModuleType):
-    """A package whose exported name is also a submodule's (``trace_audit.explain``, the
-    function, and ``trace_audit/explain.py``): importing the submodule binds it on the
-    package, which would hide the function from ``from trace_audit import explain`` for
-    good. The binding of a submodule over an exported name is skipped; the submodule stays
-    importable by its full name (``from trace_audit.explain import Explanation``), while
-    ``import trace_audit.explain as m`` names the export."""
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        if (
-            isinstance(value, types.ModuleType)
-            and value.__name__ == f"{self.__name__}.{name}"
-            and name in self.__dict__.get("__all__", ())
-        ):
-            return
-        super().__setattr__(name, value)

@@ -12,9 +12,9 @@ import pytest
 from typer.testing import CliRunner
 
 from trace_audit.cli import app
-from trace_audit.explain import explain
+from trace_audit.explanation import explain
 from trace_audit.metrics import compute_metrics
-from trace_audit.timeline import timeline
+from trace_audit.transitions import timeline
 from trace_audit.verify import verify_log
 from trace_runtime import open_log
 
@@ -94,7 +94,7 @@ def test_metrics_reports_deviation_per_channel_and_the_loggers_cost(arm_log: Pat
 
 
 def test_the_incident_report_draws_the_arms_channels_in_their_units(arm_log: Path) -> None:
-    from trace_audit.report import build_report
+    from trace_audit.incident import build_report
 
     report = build_report(arm_log, t="6.5")
     samples = report.data.samples

@@ -11,9 +11,9 @@ from trace_audit.cli.explain import explain_doc
 from trace_audit.cli.render import render_plain
 from trace_audit.cli.timeline import timeline_doc
 from trace_audit.cli.why import why_doc
-from trace_audit.explain import explain
+from trace_audit.explanation import explain
 from trace_audit.export import export_decision
-from trace_audit.timeline import timeline, why
+from trace_audit.transitions import timeline, why
 
 
 def _minimal_log(tmp_path: Path) -> Path:

@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 
 from trace_audit.cli import app
 from trace_audit.doctor import doctor_log
-from trace_audit.explain import explain
+from trace_audit.explanation import explain
 from trace_audit.metrics import MetricsConfig, compute_metrics
 from trace_audit.verify import verify_log
 from trace_runtime.errors import LogReadError, UsageError
@@ -296,7 +296,7 @@ def test_the_incident_report_resolves_the_recording_when_given_it(
 ) -> None:
     """``report --evidence``: the same resolution as explain, metrics and verify, shown in
     the page, and the reproduce commands carry the recording."""
-    from trace_audit.report import build_report
+    from trace_audit.incident import build_report
 
     log, bag = robot
     without = build_report(log, cycle=10)

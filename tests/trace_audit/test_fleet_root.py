@@ -19,9 +19,9 @@ import pytest
 
 from tests.outside import REPO, cli, one_line
 from tests.trace_audit.conftest import write_log
+from trace_audit.incident.data import gather_report
 from trace_audit.jsonout import to_jsonable
 from trace_audit.log_time import LogClock
-from trace_audit.report.data import gather_report
 
 SIM_ROBOTS = ("amr-1", "amr-2", "amr-3")
 WALL_T0_NS = 1_777_874_400 * 10**9  # 2026-05-04T06:00:00Z

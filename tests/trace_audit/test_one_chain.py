@@ -13,11 +13,11 @@ import pytest
 
 from tests.trace_audit.conftest import write_log
 from tests.trace_audit.metrics.test_scan import PERIOD, HandLog, layers, t
-from trace_audit.explain import explain
+from trace_audit.explanation import explain
 from trace_audit.info import log_info
 from trace_audit.metrics import MetricsConfig, compute_metrics
 from trace_audit.selection import per_robot
-from trace_audit.timeline import timeline
+from trace_audit.transitions import timeline
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, Gap
 from trace_runtime.reading.logset import open_log
 from trace_runtime.tiers import compact

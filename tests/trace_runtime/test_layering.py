@@ -179,18 +179,18 @@ FLOORS: dict[str, list[set[str]]] = {
         {"", "testing"},  # the package's face, and the test double users test their robots with
     ],
     "trace_audit": [
-        # what every question needs: times, sources, a cycle's fields, JSON, evidence
+        # what every question needs: times, sources, a cycle's fields, JSON, evidence, columns
         {
             "jsonout", "log_time", "selection", "log_source", "cycle_fields", "log_gaps",
-            "sensor_window", "evidence",
+            "sensor_window", "evidence", "columns",
         },
         # views over one decision: its causal graph and its chains
         {"causal", "chains"},
         # the questions an investigator asks of a log
-        {"metrics", "explain", "export", "timeline", "info", "verify", "doctor", "layers", "rules"}
-        | {"tail", "witness", "proof"},
+        {"metrics", "explanation", "export", "transitions", "info", "verify", "doctor", "layers"}
+        | {"rules", "tail", "witness", "proof"},
         # what is built from the answers: the fleet index, the incident report, the Foxglove view
-        {"fleet", "report", "foxglove", "foxglove_view", "foxglove_live"},
+        {"fleet", "incident", "foxglove", "foxglove_view", "foxglove_live"},
         {"cli", "entry"},  # entry: the console script's check that the cli extra is installed
         {""},
     ],

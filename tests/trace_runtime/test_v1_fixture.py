@@ -41,7 +41,7 @@ def test_the_v1_fixture_verifies_clean_with_its_signatures() -> None:
 
 @pytest.mark.parametrize("cycle", sorted(int(n) for n in _golden()))
 def test_the_v1_fixture_explains_as_it_did_when_written(cycle: int) -> None:
-    from trace_audit.explain import explain
+    from trace_audit.explanation import explain
     from trace_audit.jsonout import to_jsonable
 
     got = to_jsonable(explain(SEGMENT, cycle=cycle))

@@ -3,7 +3,9 @@
 ``decision`` holds the ``Decision`` view model and ``read_decision`` (a logged cycle read
 leniently, optional fields at their schema defaults, ``defaults``); ``graph`` builds the
 causal graph and the counterfactual tree from it and the chains ``trace_audit.chains``
-walked. ``lenient`` is the JSON access both share.
+walked. ``lenient`` is the one owner of reading untrusted JSON leniently, for these and
+every reader above them (its two meanings of "a number" named: ``as_float``,
+``as_number_or_flag``).
 """
 
 from __future__ import annotations

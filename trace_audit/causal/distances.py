@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from trace_audit.causal.lenient import as_number_or_flag
+
 __all__ = ["DISTANCE_UNITS", "entity_distances"]
 
 DISTANCE_UNITS = frozenset(("m", "meter", "metre", "meters", "metres"))
@@ -29,7 +31,7 @@ def entity_distances(belief: Any) -> dict[str, float]:
             and node.get("unit") in DISTANCE_UNITS
             and "distance" in f"{node.get('label', '')} {node.get('id', '')}".lower()
         ):
-            value = _number(node.get("value"))
+            value = as_number_or_flag(node.get("value"))
             if value is not None:
                 values[node.get("id")] = value
     if not values:
@@ -42,12 +44,3 @@ def entity_distances(belief: Any) -> dict[str, float]:
                 parent = str(edge.get("parent"))
                 out[parent] = min(value, out.get(parent, value))
     return out
-
-
-def _number(value: Any) -> float | None:
-    kind = type(value)
-    if kind is float:
-        return value  # type: ignore[no-any-return]
-    if kind is int or kind is bool:
-        return float(value)
-    return None

@@ -1,7 +1,19 @@
 """Lenient access to a layer's plain JSON: a value of the wrong type reads as absent.
 
-The decision view and the causal graph read what was logged, however damaged or partial
-(a warm summary, another writer's record), without validating it.
+The one owner of reading untrusted, decoded JSON without validating it: the decision view,
+the causal graph, the layer tables, the fleet index, the rules' signals and the incident
+report read what was logged, however damaged or partial (a warm summary, another writer's
+record), through these functions.
+
+"A number" has two meanings here, and each reader says which one it means:
+
+- ``as_float``: **a bool is not a number** (``true`` is a flag, not 1.0). What a value shown
+  as a quantity needs: a score, a confidence, a position, a factor plotted over time.
+- ``as_number_or_flag``: **a bool counts as 0.0 or 1.0**. What a column of numbers a query
+  or a rule compares needs: a factor ``obstacle_seen: true`` is 1.0 in the fleet index's
+  ``lead_value`` and in a rule's signal.
+
+Neither ever raises: anything else (a string, null, a list, an object) is None.
 """
 
 from __future__ import annotations
@@ -9,7 +21,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-__all__ = ["as_float", "as_mapping", "as_str", "mappings"]
+__all__ = ["as_float", "as_mapping", "as_number_or_flag", "as_str", "mappings"]
 
 
 def as_mapping(value: Any) -> Mapping[str, Any] | None:
@@ -30,7 +42,19 @@ def as_str(value: Any) -> str | None:
 
 
 def as_float(value: Any) -> float | None:
-    """``value`` as a float when it is a JSON number (not a boolean), else None."""
+    """``value`` as a float when it is a JSON number, else None: a bool is not a number."""
     if isinstance(value, bool) or not isinstance(value, int | float):
         return None
     return float(value)
+
+
+def as_number_or_flag(value: Any) -> float | None:
+    """``value`` as a float when it is a JSON number or a bool (``true`` 1.0, ``false``
+    0.0), else None."""
+    # The exact types first: this runs for every number of every row the fleet index builds.
+    kind = type(value)
+    if kind is float:
+        return value  # type: ignore[no-any-return]
+    if kind is int or kind is bool:
+        return float(value)
+    return float(value) if isinstance(value, int | float) else None

@@ -15,9 +15,9 @@ from trace_audit.cli.app import EXIT_FINDINGS, app, guarded, help_text
 from trace_audit.cli.doc import Column, Doc, Seg
 from trace_audit.cli.options import (
     CheckedLogArgument,
+    EvidencePaths,
     JsonOption,
     PlainOption,
-    Recordings,
     RobotsOption,
     evidence_option,
 )
@@ -60,7 +60,7 @@ def doctor_command(
     log: CheckedLogArgument,
     *,
     robot: RobotsOption = None,
-    evidence: Annotated[Recordings, evidence_option("that evidence refs")] = None,
+    evidence: Annotated[EvidencePaths, evidence_option("that evidence refs")] = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:

@@ -1,6 +1,6 @@
 """``trace-audit explain``: the decision in force at a time, what the robot did and why.
 
-Parses its arguments, calls ``trace_audit.explain.explain`` and renders the typed
+Parses its arguments, calls ``trace_audit.explanation.explain`` and renders the typed
 ``Explanation``, a section per question (what was decided, on which factors, against which
 alternatives, traced to which sensor readings, executed how, scored and sealed how): rich
 on a terminal, plain text with ``--plain`` or in a pipe, JSON with ``--json``. The causal
@@ -29,7 +29,7 @@ from trace_audit.cli.output import emit
 
 if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
     from trace_audit.causal import FactorValue
-    from trace_audit.explain import Explanation
+    from trace_audit.explanation import Explanation
 
 __all__ = ["explain_command", "explain_doc"]
 
@@ -76,7 +76,7 @@ def explain_command(  # noqa: PLR0917 - typer maps each parameter to an option
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
-    from trace_audit.explain import explain
+    from trace_audit.explanation import explain
 
     result = guarded(
         lambda: explain(

@@ -14,7 +14,7 @@ from trace_audit.cli.doc import Item, Seg
 
 if TYPE_CHECKING:
     from trace_audit.chains import FactorChain, LabelledLink
-    from trace_audit.explain import Explanation
+    from trace_audit.explanation import Explanation
 
 __all__ = ["chain_item", "tree_item"]
 

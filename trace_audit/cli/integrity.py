@@ -16,9 +16,9 @@ from trace_audit.cli.app import EXIT_FINDINGS, EXIT_USAGE, app, fail, guarded, h
 from trace_audit.cli.doc import Column, Doc, Seg, fmt_duration, fmt_t
 from trace_audit.cli.options import (
     CheckedLogArgument,
+    EvidencePaths,
     JsonOption,
     PlainOption,
-    Recordings,
     RobotsOption,
     SchedulerOption,
     cluster,
@@ -124,7 +124,7 @@ _VerifyKeyOption = Annotated[
     Path | None, key_option("The robot's Ed25519 public key (PEM, OpenSSH or 32 raw bytes).")
 ]
 _VerifyEvidenceOption = Annotated[
-    Recordings, evidence_option(then=": their digests are checked there. Repeat for several.")
+    EvidencePaths, evidence_option(then=": their digests are checked there. Repeat for several.")
 ]
 
 

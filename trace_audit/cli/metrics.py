@@ -18,10 +18,10 @@ import typer
 from trace_audit.cli.app import EXIT_FINDINGS, app, guarded
 from trace_audit.cli.metrics_doc import metrics_doc, metrics_json, pct
 from trace_audit.cli.options import (
+    EvidencePaths,
     JsonOption,
     MemoryLimitOption,
     PlainOption,
-    Recordings,
     RobotsOption,
     SchedulerOption,
     SqlTimeoutOption,
@@ -195,7 +195,7 @@ def metrics_command(
     start: _Start = None,
     end: _End = None,
     tcs_weights: _TcsWeights = None,
-    evidence: Annotated[Recordings, evidence_option("the logs' evidence refs")] = None,
+    evidence: Annotated[EvidencePaths, evidence_option("the logs' evidence refs")] = None,
     memory_limit: MemoryLimitOption = None,
     timeout: SqlTimeoutOption = None,
     json_out: JsonOption = False,

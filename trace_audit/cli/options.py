@@ -24,13 +24,13 @@ __all__ = [
     "CheckedLogArgument",
     "CsvOption",
     "EvidenceOption",
+    "EvidencePaths",
     "FromOption",
     "IndexArgument",
     "JsonOption",
     "LogArgument",
     "MemoryLimitOption",
     "PlainOption",
-    "Recordings",
     "RobotsOption",
     "RootArgument",
     "SchedulerOption",
@@ -79,7 +79,7 @@ CheckedLogArgument = Annotated[
 RootArgument = Annotated[Path, typer.Argument(help="A log root (with hot/ warm/ cold/).")]
 IndexArgument = Annotated[Path, typer.Argument(help="The index directory.", show_default=False)]
 
-Recordings = list[Path] | None
+EvidencePaths = list[Path] | None
 """External recordings (``--evidence``), as typer hands them over."""
 
 
@@ -94,7 +94,7 @@ def evidence_option(
     )
 
 
-EvidenceOption = Annotated[Recordings, evidence_option()]
+EvidenceOption = Annotated[EvidencePaths, evidence_option()]
 
 # --- which decision --------------------------------------------------------------------------
 

@@ -23,7 +23,7 @@ from trace_audit.cli.options import (
 from trace_audit.cli.output import emit
 
 if TYPE_CHECKING:
-    from trace_audit.report import IncidentReport
+    from trace_audit.incident import IncidentReport
 
 _REPORT_HELP = """Write the incident report of the decision in force at a time: one HTML
 file to read, print, archive and hand over.
@@ -84,7 +84,7 @@ def report_command(  # noqa: PLR0917 - typer maps each parameter to an option
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
-    from trace_audit.report import build_report, parse_window, write_report
+    from trace_audit.incident import build_report, parse_window, write_report
     from trace_runtime.tlog.keys import load_public_key
 
     def run() -> tuple[IncidentReport, Path]:
@@ -124,7 +124,7 @@ def _status() -> Any:
 
 
 def _summary(report: IncidentReport, written: Path) -> dict[str, Any]:
-    from trace_audit.report.page import sections_of
+    from trace_audit.incident.page import sections_of
 
     data = report.data
     e = data.explanation

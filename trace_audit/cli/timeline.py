@@ -1,6 +1,6 @@
 """``trace-audit timeline``: the decisions over time, a row per change, and the gaps.
 
-Parses its arguments, calls ``trace_audit.timeline.timeline`` and renders the typed result:
+Parses its arguments, calls ``trace_audit.transitions.timeline`` and renders the typed result:
 rich on a terminal, plain text with ``--plain`` or in a pipe, JSON with ``--json``.
 """
 
@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # the library is imported inside the command: start-up stays 
     from collections.abc import Sequence
     from pathlib import Path
 
-    from trace_audit.timeline import ClockRun, Timeline
+    from trace_audit.transitions import ClockRun, Timeline
     from trace_runtime.gaps import Gap
 
 __all__ = ["timeline_command", "timeline_doc"]
@@ -71,7 +71,7 @@ def _each_robot(
     from trace_audit.log_source import as_log
     from trace_audit.log_time import NotWallClockError
     from trace_audit.selection import Selection, per_robot
-    from trace_audit.timeline import WindowOutsideLogError, timeline
+    from trace_audit.transitions import WindowOutsideLogError, timeline
 
     log = Selection(tuple(robots)).of(as_log(source))
     answers = per_robot(

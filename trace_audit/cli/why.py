@@ -1,6 +1,6 @@
 """``trace-audit why``: every transition into an action, with the reason logged for it.
 
-Parses its arguments, calls ``trace_audit.timeline.why`` and renders the typed result:
+Parses its arguments, calls ``trace_audit.transitions.why`` and renders the typed result:
 rich on a terminal, plain text with ``--plain`` or in a pipe, JSON with ``--json``.
 """
 
@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # the library is imported inside the command: start-up stays 
     from collections.abc import Sequence
     from pathlib import Path
 
-    from trace_audit.timeline import WhyResult
+    from trace_audit.transitions import WhyResult
 
 __all__ = ["why_command", "why_doc"]
 
@@ -76,7 +76,7 @@ def _why_each_robot(
     from trace_audit.log_source import as_log
     from trace_audit.log_time import NotWallClockError
     from trace_audit.selection import Selection, per_robot
-    from trace_audit.timeline import ActionNotTakenError, why
+    from trace_audit.transitions import ActionNotTakenError, why
     from trace_runtime.errors import TimeOutOfRangeError
 
     log = Selection(tuple(robots)).of(as_log(source))

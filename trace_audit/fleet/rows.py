@@ -23,6 +23,8 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from trace_audit.causal.distances import entity_distances
+from trace_audit.causal.lenient import as_number_or_flag
+from trace_audit.columns import gap_row
 from trace_audit.log_time import hour_of
 from trace_audit.metrics import NO_SCENARIO, ScoredDecision, scenario_of
 from trace_audit.metrics.sums import failed_check_rules
@@ -58,22 +60,13 @@ def partition_of(clock: str, start_ns: int, first_segment: int) -> str | None:
     return f"run-{first_segment:06d}"
 
 
-def _number(value: Any) -> float | None:
-    kind = type(value)
-    if kind is float:
-        return value  # type: ignore[no-any-return]
-    if kind is int or kind is bool:
-        return float(value)
-    return None
-
-
 def _text(value: Any) -> str | None:
     return None if value is None else str(value)
 
 
 def _linear(motion: Any) -> float | None:
     """A planar ``Motion``'s linear m/s, as logged (None: no planar motion)."""
-    return _number(motion.get("linear")) if type(motion) is dict else None
+    return as_number_or_flag(motion.get("linear")) if type(motion) is dict else None
 
 
 @dataclass(slots=True)
@@ -174,7 +167,7 @@ class SegmentRows:
         for f in raw_factors or ():
             if type(f) is dict:
                 raw = f.get("value")
-                value = _number(raw)
+                value = as_number_or_flag(raw)
                 node, name = str(f.get("node", "")), str(f.get("name", ""))
                 text = None if value is not None else str(raw)
                 unit = f.get("unit")
@@ -222,7 +215,7 @@ class SegmentRows:
                 lead_unit,
                 len(action.get("alternatives") or ()),
                 len(action.get("counterfactuals") or ()),
-                _number(execution.get("deviation")),
+                as_number_or_flag(execution.get("deviation")),
                 _text(execution.get("deviation_unit")),
                 _linear(execution.get("intended")),
                 _linear(execution.get("actual")),
@@ -251,19 +244,7 @@ class SegmentRows:
         gap = d.seal.gap
         assert gap is not None  # the caller checked
         self.days["gaps"].append(day)
-        self.rows["gaps"].append(
-            (
-                self._name,
-                gap.after_cycle,
-                gap.after_t_ns,
-                gap.before_cycle,
-                gap.before_t_ns,
-                gap.period_ns,
-                gap.gap_ns,
-                gap.missing_cycles,
-                gap.declared_dropped,
-            )
-        )
+        self.rows["gaps"].append(gap_row(self._name, gap))
 
     def _channels(self, d: ScoredDecision, execution: dict[str, Any], day: str) -> None:
         """Add the cycle's actuator channel rows, each with the record's ``deviation_unit``."""
@@ -282,9 +263,9 @@ class SegmentRows:
                     number,
                     t_ns,
                     _text(channel.get("name")),
-                    _number(channel.get("intended")),
-                    _number(channel.get("actual")),
-                    _number(channel.get("deviation")),
+                    as_number_or_flag(channel.get("intended")),
+                    as_number_or_flag(channel.get("actual")),
+                    as_number_or_flag(channel.get("deviation")),
                     _text(channel.get("unit")),
                     unit,
                 )
@@ -307,8 +288,8 @@ class SegmentRows:
                     t_ns,
                     _text(check.get("rule")),
                     passed if type(passed) is bool else None,
-                    _number(check.get("value")),
-                    _number(check.get("limit")),
+                    as_number_or_flag(check.get("value")),
+                    as_number_or_flag(check.get("limit")),
                     _text(check.get("detail")),
                 )
             )
@@ -340,10 +321,10 @@ class SegmentRows:
                     t_ns,
                     entity_id,
                     None if cls is None else str(cls),
-                    _number(confidence.get(cls)) if type(confidence) is dict else None,
+                    as_number_or_flag(confidence.get(cls)) if type(confidence) is dict else None,
                     distance,
-                    _number(xy[0]),
-                    _number(xy[1]),
+                    as_number_or_flag(xy[0]),
+                    as_number_or_flag(xy[1]),
                     len(entity.get("evidence") or ()),
                 )
             )

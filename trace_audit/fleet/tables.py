@@ -12,7 +12,14 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from trace_audit.layers import channel_columns, check_columns, factor_struct
+from trace_audit.columns import (
+    DECISION_WHY,
+    channel_columns,
+    check_columns,
+    decision_columns,
+    entity_columns,
+    gap_columns,
+)
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -73,74 +80,68 @@ def schema(table: str) -> pa.Schema:
 _Columns = list[tuple[str, "pa.DataType"]]
 
 
+_DECISION_COLUMNS = (
+    "segment",
+    "segment_path",
+    "tier",
+    "cycle",
+    "t_ns",
+    "hour",
+    "command",
+    "previous_command",
+    *DECISION_WHY,
+    "intended_linear",
+    "actual_linear",
+    "failed_checks",
+    "flags",
+    "nearest",
+    "scenario",
+    "et",
+    "et_partial",
+    "factors_total",
+    "factors_traceable",
+    "dr",
+    "dr_problems",
+    "sealed",
+    "seal_verified",
+    "integrity_problems",
+    "summarized",
+    "continuity",
+    "tcs",
+    "window_ns",
+    "gap_ns",
+    "missing_cycles",
+    "dropped",
+    "clock_anomaly",
+    "software_version",
+    "policy_version",
+)
+_ENTITY_COLUMNS = (
+    "segment",
+    "cycle",
+    "t_ns",
+    "entity",
+    "class",
+    "confidence",
+    "distance",
+    "x",
+    "y",
+    "evidence",
+)
+
+
 def _decision_columns() -> _Columns:
     """One row per decision: what it did, why, and how it scores."""
     import pyarrow as pa
 
-    factor = factor_struct(pa)
-    strings = pa.list_(pa.string())
-    return [
-        ("segment", pa.string()),
-        ("segment_path", pa.string()),
-        ("tier", pa.string()),
-        ("cycle", pa.int64()),
-        ("t_ns", pa.int64()),
-        ("hour", pa.string()),
-        ("command", pa.string()),
-        ("previous_command", pa.string()),
-        ("lead_factor", pa.string()),
-        ("lead_value", pa.float64()),
-        ("lead_text", pa.string()),
-        ("lead_unit", pa.string()),
-        ("factors", pa.list_(factor)),
-        ("alternatives", pa.int32()),
-        ("counterfactuals", pa.int32()),
-        ("deviation", pa.float64()),
-        ("deviation_unit", pa.string()),
-        ("intended_linear", pa.float64()),
-        ("actual_linear", pa.float64()),
-        ("failed_checks", strings),
-        ("flags", strings),
-        ("nearest", pa.map_(pa.string(), pa.float64())),
-        ("scenario", pa.string()),
-        ("et", pa.float64()),
-        ("et_partial", pa.float64()),
-        ("factors_total", pa.int32()),
-        ("factors_traceable", pa.int32()),
-        ("dr", pa.bool_()),
-        ("dr_problems", strings),
-        ("sealed", pa.bool_()),
-        ("seal_verified", pa.bool_()),
-        ("integrity_problems", strings),
-        ("summarized", pa.bool_()),
-        ("continuity", pa.float64()),
-        ("tcs", pa.float64()),
-        ("window_ns", pa.int64()),
-        ("gap_ns", pa.int64()),
-        ("missing_cycles", pa.int64()),
-        ("dropped", pa.int64()),
-        ("clock_anomaly", pa.bool_()),
-        ("software_version", pa.string()),
-        ("policy_version", pa.string()),
-    ]
+    return decision_columns(pa, _DECISION_COLUMNS)
 
 
 def _entity_columns() -> _Columns:
     """One row per perceived entity of a decision."""
     import pyarrow as pa
 
-    return [
-        ("segment", pa.string()),
-        ("cycle", pa.int64()),
-        ("t_ns", pa.int64()),
-        ("entity", pa.string()),
-        ("class", pa.string()),
-        ("confidence", pa.float64()),
-        ("distance", pa.float64()),
-        ("x", pa.float64()),
-        ("y", pa.float64()),
-        ("evidence", pa.int32()),
-    ]
+    return entity_columns(pa, _ENTITY_COLUMNS)
 
 
 def _channel_columns() -> _Columns:
@@ -161,17 +162,7 @@ def _gap_columns() -> _Columns:
     """One row per gap between sealed cycles."""
     import pyarrow as pa
 
-    return [
-        ("segment", pa.string()),
-        ("after_cycle", pa.int64()),
-        ("after_t_ns", pa.int64()),
-        ("before_cycle", pa.int64()),
-        ("before_t_ns", pa.int64()),
-        ("period_ns", pa.int64()),
-        ("gap_ns", pa.int64()),
-        ("missing_cycles", pa.int64()),
-        ("declared_dropped", pa.int64()),
-    ]
+    return [("segment", pa.string()), *gap_columns(pa)]
 
 
 def _segment_columns() -> _Columns:

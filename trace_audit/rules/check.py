@@ -23,7 +23,7 @@ from trace_audit.rules.results import CheckResult, RobotRules, Skipped
 from trace_audit.rules.rulebook import Rule
 from trace_audit.rules.signals import read_signals
 from trace_audit.selection import Selection, per_robot
-from trace_audit.timeline import WindowOutsideLogError
+from trace_audit.transitions import WindowOutsideLogError
 from trace_runtime.errors import TimeOutOfRangeError
 from trace_runtime.reading.logset import Log
 

@@ -27,7 +27,13 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from trace_audit.causal.distances import entity_distances
-from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
+from trace_audit.causal.lenient import (
+    as_float,
+    as_mapping,
+    as_number_or_flag,
+    as_str,
+    mappings,
+)
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.encoding.partial import (
     RULES_ACTION,
@@ -127,8 +133,7 @@ def _factor_signal(action: Mapping[str, Any] | None, wanted: str) -> float | Non
     rationale = as_mapping(action.get("rationale")) if action is not None else None
     for factor in mappings(rationale.get("factors") if rationale is not None else None):
         if wanted in (as_str(factor.get("node")) or "", as_str(factor.get("name")) or ""):
-            value = factor.get("value")
-            return _number(value) if isinstance(value, int | float | bool) else None
+            return as_number_or_flag(factor.get("value"))
     return None
 
 
@@ -196,9 +201,3 @@ def nearest_by_class(cycle: Cycle) -> dict[str, float] | None:
         if cls is not None and distance is not None:
             nearest[cls] = min(distance, nearest.get(cls, distance))
     return nearest
-
-
-def _number(value: Any) -> float | None:
-    if isinstance(value, bool):
-        return float(value)
-    return as_float(value)

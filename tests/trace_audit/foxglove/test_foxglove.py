@@ -15,7 +15,7 @@ from mcap.reader import make_reader
 
 from tests.outside import REPO, cli
 from tests.trace_audit.conftest import write_log
-from trace_audit.timeline import timeline
+from trace_audit.transitions import timeline
 
 pytest.importorskip("foxglove")
 

@@ -11,7 +11,7 @@ from tests.trace_audit.conftest import stretch, t_ns, write_log
 from tests.trace_audit.rules.check_helpers import rule_text
 from trace_audit.rules import Outcome, RulesError, UndecidedReason, check_rules, parse_rules
 from trace_audit.rules.formula import rtamt_module
-from trace_audit.timeline import why
+from trace_audit.transitions import why
 
 NEVER_STOP = '[[rule]]\nname = "never_stop"\nstl = "always(command.STOP < 0.5)"\n'
 

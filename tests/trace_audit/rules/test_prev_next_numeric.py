@@ -32,7 +32,7 @@ def test_next_and_prev_of_a_number_read_the_next_and_previous_cycle() -> None:
 
 
 def test_next_stop_rule_counts_each_start_of_stop(sample_log: Path) -> None:
-    from trace_audit.timeline import why
+    from trace_audit.transitions import why
 
     rules = parse_rules(rule_text("starts", "always(next(command.STOP) <= command.STOP)"))
     (rule,) = check_rules(sample_log, rules).robots[0].rules

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from tests.trace_audit.conftest import PERIOD_NS, stretch, t_ns, write_log
-from trace_audit.timeline import why
+from trace_audit.transitions import why
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
 
 

@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 from tests.trace_audit.conftest import PERIOD_NS, stretch, t_ns, write_log
 from trace_audit.cli import app
 from trace_audit.jsonout import to_jsonable
-from trace_audit.timeline import timeline
+from trace_audit.transitions import timeline
 from trace_runtime.errors import UsageError
 
 

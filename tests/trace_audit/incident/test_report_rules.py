@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 from typer.testing import CliRunner
 
-from tests.trace_audit.report_html import parse_report
+from tests.trace_audit.incident_html import parse_report
 from trace_audit.cli import app
 
 REPO = Path(__file__).resolve().parents[3]

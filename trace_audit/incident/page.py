@@ -13,9 +13,8 @@ import json
 import shlex
 from html import escape
 
-from trace_audit.jsonout import to_jsonable
-from trace_audit.report.data import ReportData
-from trace_audit.report.decision_sections import (
+from trace_audit.incident.data import ReportData
+from trace_audit.incident.decision_sections import (
     causal_section,
     counterfactuals_section,
     execution_section,
@@ -23,12 +22,13 @@ from trace_audit.report.decision_sections import (
     scene_section,
     summary_section,
 )
-from trace_audit.report.markup import command_badge
-from trace_audit.report.trust_sections import (
+from trace_audit.incident.markup import command_badge
+from trace_audit.incident.trust_sections import (
     auditability_section,
     integrity_section,
     rules_section,
 )
+from trace_audit.jsonout import to_jsonable
 
 __all__ = ["SECTIONS", "render_page", "sections_of"]
 

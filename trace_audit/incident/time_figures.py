@@ -3,10 +3,11 @@ over the bands of the command in force."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from trace_audit.report.data import ReportData
-from trace_audit.report.drawing import (
+from trace_audit.causal.lenient import as_float
+from trace_audit.incident.data import ReportData
+from trace_audit.incident.drawing import (
     BROKEN,
     MARKED,
     MAX_FACTORS,
@@ -59,7 +60,7 @@ def _factor_axis(ax: Axes, data: ReportData, name: str) -> None:
     ax.plot(xs, ys, ".", ms=2.5, color="#333333")
     ax.plot(xs, ys, "-", lw=0.8, color="#333333", alpha=0.5)
     for cf in data.decision.counterfactuals:
-        threshold = _number(cf.threshold)
+        threshold = as_float(cf.threshold)
         if cf.name != name or threshold is None:
             continue
         ax.axhline(threshold, color=command_colour(cf.would_select), ls="--", lw=1)
@@ -76,7 +77,7 @@ def _factor_axis(ax: Axes, data: ReportData, name: str) -> None:
             bbox={"fc": "white", "ec": "none", "alpha": 0.85, "pad": 1},
         )
     now = next((f for f in data.decision.factors if f.label == name), None)
-    value = _number(now.value) if now is not None else None
+    value = as_float(now.value) if now is not None else None
     if now is not None and value is not None:
         ax.plot([as_seconds(data.explanation.t_ns)], [value], "o", color=MARKED, ms=5)
         ax.annotate(
@@ -91,10 +92,6 @@ def _factor_axis(ax: Axes, data: ReportData, name: str) -> None:
         )
     ax.set_ylabel(f"{name} ({unit})" if unit else name)
     ax.set_xlim(as_seconds(data.start_ns), as_seconds(data.end_ns))
-
-
-def _number(value: Any) -> float | None:
-    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
 
 
 # --- execution ---------------------------------------------------------------------------

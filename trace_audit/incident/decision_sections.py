@@ -10,10 +10,10 @@ from __future__ import annotations
 from html import escape
 
 from trace_audit.causal import format_value
-from trace_audit.report.data import ReportData, execution_channels
-from trace_audit.report.drawing import MAX_ENTITIES, MAX_FACTORS, MAX_GRAPH_NODES
-from trace_audit.report.graph_figures import causal_figure, tree_figure
-from trace_audit.report.markup import (
+from trace_audit.incident.data import ReportData
+from trace_audit.incident.drawing import MAX_ENTITIES, MAX_FACTORS, MAX_GRAPH_NODES
+from trace_audit.incident.graph_figures import causal_figure, tree_figure
+from trace_audit.incident.markup import (
     command_badge,
     html_fields,
     html_figure,
@@ -21,8 +21,9 @@ from trace_audit.report.markup import (
     html_table,
     seconds,
 )
-from trace_audit.report.scene import scene_figure
-from trace_audit.report.time_figures import execution_figure, factors_figure
+from trace_audit.incident.scene import scene_figure
+from trace_audit.incident.time_figures import execution_figure, factors_figure
+from trace_audit.incident.window import execution_channels
 
 __all__ = [
     "causal_section",

@@ -20,11 +20,11 @@ from tests.trace_audit.conftest import (
     write_log,
 )
 from tests.trace_audit.in_flight import cut_in_flight
-from tests.trace_audit.report_html import parse_report
+from tests.trace_audit.incident_html import parse_report
 from trace_audit.causal import format_value
 from trace_audit.cli import app
-from trace_audit.report import build_report, parse_window
-from trace_audit.report.page import SECTIONS
+from trace_audit.incident import build_report, parse_window
+from trace_audit.incident.page import SECTIONS
 from trace_runtime import AuditLogger, LoggerConfig, open_segment
 from trace_runtime.errors import UsageError
 
@@ -42,7 +42,7 @@ def sim_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def first_stop(sim_log: Path) -> str:
-    from trace_audit.timeline import why
+    from trace_audit.transitions import why
 
     return f"{why(sim_log, 'STOP').transitions[0].t_ns / 1e9:.9g}"
 

@@ -16,49 +16,39 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 from trace_audit.causal import (
     Decision,
-    ExecutionView,
-    format_value,
-    layer_with_defaults,
-    read_decision,
 )
-from trace_audit.chains import DEFAULT_SENSOR_WINDOW, SensorWindow
 from trace_audit.evidence import open_recordings
-from trace_audit.explain import Explanation, explain
+from trace_audit.explanation import Explanation, explain
+from trace_audit.incident.window import (
+    EntityView,
+    RobotPose,
+    Sample,
+    entities_at,
+    robot_pose,
+    window_samples,
+)
 from trace_audit.log_source import as_log
 from trace_audit.log_time import TimeArg
 from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
 from trace_audit.rules import RobotRules, Rule, check_rules
-from trace_audit.timeline import Timeline, timeline
-from trace_runtime.encoding.cycles import Cycle
+from trace_audit.transitions import Timeline, timeline
 from trace_runtime.errors import UsageError
 from trace_runtime.reading.logset import Log
 from trace_runtime.reading.reader import RECOVERED_WARNING, Segment
-from trace_runtime.records import TOPIC_BELIEF, TOPIC_PERCEPTION
+from trace_runtime.records import TOPIC_PERCEPTION
 from trace_runtime.session import SessionInfo
 from trace_runtime.tlog.keys import PublicKey
 from trace_runtime.verification import VerifyReport, verify
 
-__all__ = [
-    "DEFAULT_WINDOW_S",
-    "EntityView",
-    "EvidenceView",
-    "ReportData",
-    "RobotPose",
-    "Sample",
-    "Verdict",
-    "execution_channels",
-    "gather_report",
-    "parse_window",
-]
+__all__ = ["DEFAULT_WINDOW_S", "ReportData", "Verdict", "gather_report", "parse_window"]
 
 DEFAULT_WINDOW_S = 30.0
 MAX_WINDOW_S = 3600.0
@@ -83,77 +73,6 @@ def parse_window(text: str) -> float:
             f"more than 0 and at most {MAX_WINDOW_S:.0f} s"
         )
     return seconds
-
-
-def execution_channels(view: ExecutionView) -> dict[str, tuple[float | None, float | None]]:
-    """Each execution channel the record offers: name (with unit) -> (intended, actual).
-
-    The one place that knows the shapes of the execution record: the planar motion of a
-    mobile base, and the named actuator channels (joints, a gripper, thrust) of profile 1.1
-    in the robot's own names and units. Every figure and table of the report follows it."""
-    shown: dict[str, tuple[float | None, float | None]] = {}
-    if view.planar:
-        shown["linear speed (m/s)"] = (view.intended[0], view.actual[0])
-        shown["angular speed (rad/s)"] = (view.intended[1], view.actual[1])
-    for channel in view.channels:
-        shown[f"{channel.name} ({channel.unit})"] = (channel.intended, channel.actual)
-    return shown
-
-
-@dataclass(frozen=True, slots=True)
-class Sample:
-    """One cycle of the window, as the factor and execution figures plot it."""
-
-    cycle: int
-    t_ns: int
-    command: str | None
-    factors: dict[str, float]
-    """Factor name -> numeric value, for the factors this cycle's action names."""
-    channels: dict[str, tuple[float | None, float | None]]
-    deviation: float | None
-    failed_checks: tuple[str, ...]
-
-
-@dataclass(frozen=True, slots=True)
-class EvidenceView:
-    """One item of an entity's evidence, and whether its ref resolves to a logged reading."""
-
-    sensor: str
-    weight: float | None
-    region: str
-    ref: str
-    resolved: bool
-    problem: str
-
-
-@dataclass(frozen=True, slots=True)
-class EntityView:
-    """A perceived entity at t: where, what, how sure, on which evidence."""
-
-    id: str
-    cls: str
-    confidence: float | None
-    x: float | None
-    y: float | None
-    frame: str
-    evidence: tuple[EvidenceView, ...]
-    distance: str | None
-    """The belief graph's distance to it, as logged (``<id>.distance``), when there is one."""
-
-    @property
-    def evidence_failed(self) -> bool:
-        """No evidence at all, or none of it resolves to a logged sensor reading."""
-        return not any(e.resolved for e in self.evidence)
-
-
-@dataclass(frozen=True, slots=True)
-class RobotPose:
-    """Where the robot was at t, as its perception record says (``robot_pose``)."""
-
-    x: float
-    y: float
-    heading_rad: float
-    frame: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -280,42 +199,26 @@ def gather_report(
     result = explain(given, t=t, cycle=cycle, evidence=evidence, robots=robots)
     whole = given.of_robots([result.robot])
     log = whole.clock_run(result.decision.segment)
-    before = int(window_s * 2 / 3 * 1e9)
-    start = max(log.start_ns, result.t_ns - before)
-    end = min(log.end_ns, start + int(window_s * 1e9))
+    start, end = _window(log, result.t_ns, window_s)
     spans = timeline(log, start=start, end=end)
-    samples, target, sensors = _samples(log, start, end, result)
-    entities = _entities(target, sensors) if target is not None else ()
+    samples, target, sensors = window_samples(log, start, end, result)
     inputs = () if log is given else tuple(str(s.path) for s in log.segments)
-    with _warned_once(whole):
-        metrics = compute_metrics(
-            list(inputs) or [path],
-            MetricsConfig(start_ns=start, end_ns=end, evidence=tuple(str(e) for e in evidence)),
-        )
     scope = [s for s in log.segments if s.end_ns >= start and s.start_ns <= end]
-    integrity = _window_integrity(
-        verify(Log(scope, log.root), key=key, recordings=open_recordings(evidence)), whole, scope
-    )
-    session = next(
-        (s.session for s in log.segments if s.path.name == result.decision.segment),
-        log.segments[0].session,
-    )
-    judged = check_rules(log, rules, start=start, end=end).robots[0] if rules else None
     return ReportData(
         path=str(path),
         explanation=result,
-        session=session,
+        session=_session_of(log, result.decision.segment),
         window_s=window_s,
         start_ns=start,
         end_ns=end,
         timeline=spans,
         samples=samples,
         factor_units={f.label: f.unit for f in result.decision.factors},
-        entities=entities,
+        entities=entities_at(target, sensors) if target is not None else (),
         entities_retained=target is not None and TOPIC_PERCEPTION in target.payloads,
-        robot=_robot_pose(target) if target is not None else None,
-        metrics=metrics,
-        integrity=integrity,
+        robot=robot_pose(target) if target is not None else None,
+        metrics=_window_metrics(whole, list(inputs) or [path], start, end, evidence),
+        integrity=_window_integrity(whole, scope, log.root, key, evidence),
         integrity_scope=tuple(s.path.name for s in scope),
         key_id=key.key_id if key is not None else None,
         key_path=None if key_path is None else str(key_path),
@@ -323,15 +226,47 @@ def gather_report(
         evidence=tuple(str(e) for e in evidence),
         not_retained=_not_retained(result),
         window_inputs=inputs,
-        rules=judged,
+        rules=check_rules(log, rules, start=start, end=end).robots[0] if rules else None,
         rules_path=None if rules_path is None else str(rules_path),
     )
 
 
-def _window_integrity(report: VerifyReport, whole: Log, scope: Sequence[Segment]) -> VerifyReport:
+def _window(log: Log, t_ns: int, window_s: float) -> tuple[int, int]:
+    """The report's window around a decision at ``t_ns``: two thirds of ``window_s``
+    before it, one third after, clipped to the log."""
+    start = max(log.start_ns, t_ns - int(window_s * 2 / 3 * 1e9))
+    return start, min(log.end_ns, start + int(window_s * 1e9))
+
+
+def _session_of(log: Log, segment: str) -> SessionInfo:
+    """The session of the segment holding the decision (the log's first if none does)."""
+    return next(
+        (s.session for s in log.segments if s.path.name == segment), log.segments[0].session
+    )
+
+
+def _window_metrics(
+    whole: Log, inputs: list[str | Path], start: int, end: int, evidence: Sequence[str | Path]
+) -> MetricsReport:
+    """The window's auditability, by ``compute_metrics`` over its files (``inputs``)."""
+    with _warned_once(whole):
+        return compute_metrics(
+            inputs,
+            MetricsConfig(start_ns=start, end_ns=end, evidence=tuple(str(e) for e in evidence)),
+        )
+
+
+def _window_integrity(
+    whole: Log,
+    scope: Sequence[Segment],
+    root: Path,
+    key: PublicKey | None,
+    evidence: Sequence[str | Path],
+) -> VerifyReport:
     """verify of the window's segments, told what it could not see: a chain that starts
     after segment 0 there is the window's start when the log holds the earlier segments,
     not retention having removed them."""
+    report = verify(Log(scope, root), key=key, recordings=open_recordings(evidence))
     first = min((s.session.segment for s in scope), default=0)
     earlier = any(s.session.segment < first for s in whole.segments)
     if not earlier:
@@ -383,133 +318,6 @@ def _warned_once(log: Log) -> Iterator[None]:
         logger.removeFilter(said)
 
 
-def _samples(
-    log: Log, start_ns: int, end_ns: int, result: Explanation
-) -> tuple[tuple[Sample, ...], Cycle | None, SensorWindow]:
-    """The window's cycles as samples, the decision's own cycle (for the scene) and the
-    sensor readings in reach of its evidence refs.
-
-    Sensor readings are pushed through a ``SensorWindow`` of the explain default so the
-    scene's evidence resolves exactly as the chain walker resolves it."""
-    names = {f.label for f in result.decision.factors}
-    period = max(result.period_ns, 1)
-    lead_ns = (DEFAULT_SENSOR_WINDOW + 1) * period
-    window = SensorWindow(DEFAULT_SENSOR_WINDOW)
-    samples: list[Sample] = []
-    target: Cycle | None = None
-    for c in log.iter_cycles(min(start_ns, result.t_ns - lead_ns), max(end_ns, result.t_ns)):
-        if c.t_ns <= result.t_ns:
-            window.push(c.sensors)
-        if c.cycle == result.cycle and c.t_ns == result.t_ns:
-            target = c
-        if c.t_ns < start_ns or c.t_ns > end_ns:
-            continue
-        d = read_decision(c)
-        ex = d.execution
-        samples.append(
-            Sample(
-                cycle=c.cycle,
-                t_ns=c.t_ns,
-                command=d.command,
-                factors={
-                    f.label: float(f.value)
-                    for f in d.factors
-                    if f.label in names
-                    and isinstance(f.value, int | float)
-                    and not isinstance(f.value, bool)
-                },
-                channels=execution_channels(ex) if ex is not None else {},
-                deviation=ex.deviation if ex is not None else None,
-                failed_checks=tuple(ch.rule for ch in ex.checks if not ch.passed)
-                if ex is not None
-                else (),
-            )
-        )
-    return tuple(samples), target, window
-
-
-def _entities(target: Cycle, sensors: SensorWindow) -> tuple[EntityView, ...]:
-    """The perceived entities of the decision's cycle, each evidence ref resolved."""
-    perception = layer_with_defaults(target, TOPIC_PERCEPTION)
-    belief = target.layer(TOPIC_BELIEF)
-    distances: dict[str, str] = {}
-    if isinstance(belief, Mapping):
-        for node in _dicts(belief.get("nodes")):
-            node_id = node.get("id")
-            if isinstance(node_id, str) and node_id.endswith(".distance"):
-                unit = node.get("unit")
-                distances[node_id[: -len(".distance")]] = format_value(
-                    node.get("value"), unit if isinstance(unit, str) else None
-                )
-    if not isinstance(perception, Mapping):
-        return ()
-    out = []
-    for raw in _dicts(perception.get("entities")):
-        entity_id = str(raw.get("id", "?"))
-        cls = str(raw.get("class", "?"))
-        pose = raw.get("pose") if isinstance(raw.get("pose"), Mapping) else {}
-        position = pose.get("position") if isinstance(pose, Mapping) else None
-        xy = _xy(position)
-        confidence = raw.get("confidence")
-        p = confidence.get(cls) if isinstance(confidence, Mapping) else None
-        out.append(
-            EntityView(
-                id=entity_id,
-                cls=cls,
-                confidence=_number(p),
-                x=xy[0],
-                y=xy[1],
-                frame=str(pose.get("frame", "map")) if isinstance(pose, Mapping) else "map",
-                evidence=tuple(_evidence(e, sensors) for e in _dicts(raw.get("evidence"))),
-                distance=distances.get(entity_id),
-            )
-        )
-    return tuple(out)
-
-
-def _robot_pose(target: Cycle) -> RobotPose | None:
-    """The robot's own pose from the perception record, when the robot logged one."""
-    perception = target.layer(TOPIC_PERCEPTION)
-    pose = perception.get("robot_pose") if isinstance(perception, Mapping) else None
-    if not isinstance(pose, Mapping):
-        return None
-    x, y = _xy(pose.get("position"))
-    if x is None or y is None:
-        return None
-    q = pose.get("orientation")
-    heading = 0.0
-    if isinstance(q, list | tuple) and len(q) == 4 and all(_is_number(v) for v in q):
-        qx, qy, qz, qw = (float(v) for v in q)
-        # yaw of a unit quaternion (x, y, z, w)
-        heading = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
-    return RobotPose(x, y, heading, str(pose.get("frame", "map")))
-
-
-def _evidence(raw: Mapping[str, Any], sensors: SensorWindow) -> EvidenceView:
-    ref = raw.get("ref")
-    region = raw.get("region")
-    where = ""
-    if isinstance(region, Mapping):
-        values = ", ".join(
-            f"{v:g}" if _is_number(v) else str(v) for v in region.get("values") or ()
-        )
-        where = f"{region.get('kind')} [{values}] in {region.get('frame', '?')}"
-    weight = raw.get("weight")
-    if isinstance(ref, dict):
-        problem = sensors.resolve(ref)
-        label = f"{ref.get('topic')} @ {ref.get('log_time_ns')}"
-    else:
-        problem, label = "no evidence ref recorded", "-"
-    return EvidenceView(
-        sensor=str(raw.get("sensor", "?")),
-        weight=_number(weight),
-        region=where,
-        ref=label,
-        resolved=not problem,
-        problem=problem,
-    )
-
-
 def _not_retained(result: Explanation) -> tuple[str, ...]:
     """What a warm-tier summary cycle did not keep, in words (empty for a full cycle)."""
     d = result.decision
@@ -518,23 +326,3 @@ def _not_retained(result: Explanation) -> tuple[str, ...]:
     out = ["the sensor readings (warm summaries keep the digests, not the data)"]
     out += [f"the full {topic} message" for topic in result.seal.summarised]
     return tuple(out)
-
-
-def _xy(position: Any) -> tuple[float | None, float | None]:
-    if isinstance(position, list | tuple) and len(position) >= 2:
-        x, y = position[0], position[1]
-        if _is_number(x) and _is_number(y):
-            return float(x), float(y)
-    return None, None
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
-
-
-def _number(value: Any) -> float | None:
-    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
-
-
-def _dicts(value: Any) -> list[Mapping[str, Any]]:
-    return [v for v in value if isinstance(v, Mapping)] if isinstance(value, list) else []

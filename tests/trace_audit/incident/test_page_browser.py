@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from tests.trace_audit.browser import find_chromium, run_chromium
-from trace_audit.report import build_report, write_report
+from trace_audit.incident import build_report, write_report
 
 CHROMIUM = find_chromium()
 pytestmark = pytest.mark.skipif(
@@ -25,7 +25,7 @@ pytestmark = pytest.mark.skipif(
 @pytest.fixture(scope="module")
 def report_page(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from sim.runner import RunConfig, run
-    from trace_audit.timeline import why
+    from trace_audit.transitions import why
 
     work = tmp_path_factory.mktemp("browser")
     log = work / "run.mcap"

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from html import escape
 
-from trace_audit.report.drawing import command_colour
+from trace_audit.incident.drawing import command_colour
 
 __all__ = [
     "command_badge",

@@ -5,7 +5,7 @@ over a window around it (``timeline``), the window's auditability (``compute_met
 integrity (``verify``), and renders them with inline SVG figures (matplotlib, networkx) into
 a page that loads nothing from anywhere::
 
-    from trace_audit.report import build_report
+    from trace_audit.incident import build_report
 
     report = build_report("run.mcap", t="20.0", window_s=30)
     Path("incident.html").write_text(report.html, encoding="utf-8")
@@ -20,15 +20,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from trace_audit.log_time import TimeArg
-from trace_audit.report.data import (
+from trace_audit.incident.data import (
     DEFAULT_WINDOW_S,
     ReportData,
     Verdict,
-    execution_channels,
     gather_report,
     parse_window,
 )
+from trace_audit.incident.window import execution_channels
+from trace_audit.log_time import TimeArg
 from trace_runtime.boundary import write_atomic
 from trace_runtime.errors import UsageError
 
@@ -82,7 +82,7 @@ def build_report(
         import matplotlib  # noqa: F401 - the report extra
     except ImportError as err:
         raise UsageError("the report needs matplotlib: pip install 'trace-audit[report]'") from err
-    from trace_audit.report.page import render_page
+    from trace_audit.incident.page import render_page
 
     data = gather_report(
         path,

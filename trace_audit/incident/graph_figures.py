@@ -7,8 +7,8 @@ import textwrap
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
-from trace_audit.report.data import ReportData
-from trace_audit.report.drawing import (
+from trace_audit.incident.data import ReportData
+from trace_audit.incident.drawing import (
     BROKEN,
     MAX_GRAPH_NODES,
     command_colour,

@@ -10,8 +10,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from html import escape
 
-from trace_audit.report.data import ReportData
-from trace_audit.report.markup import html_fields, html_problems, html_table
+from trace_audit.incident.data import ReportData
+from trace_audit.incident.markup import html_fields, html_problems, html_table
+from trace_audit.log_time import LogClock
+from trace_audit.rules import RobotRules
 from trace_runtime.verification import Finding
 
 __all__ = ["auditability_section", "integrity_section", "rules_section"]
@@ -29,6 +31,20 @@ def rules_section(data: ReportData) -> str:
     judged = data.rules
     assert judged is not None  # the page holds this section only when rules were given
     clock = data.explanation.log_clock
+    source = escape(data.rules_path or "the rules given")
+    return (
+        f"<p>The rules of {source}, judged over the window ({judged.cycles} cycles; a rule's "
+        "robustness is how far the worst cycle is from breaking it, negative when broken; "
+        "a window over a gap or the log's edge is not decidable). docs/rules.md.</p>"
+        + _rule_outcomes(judged)
+        + _unseen_names(judged)
+        + _violations(judged, clock)
+        + _not_decidable(judged, clock)
+    )
+
+
+def _rule_outcomes(judged: RobotRules) -> str:
+    """One row per rule: its outcome, robustness, cycles judged and violations."""
     rows = []
     for rule in judged.rules:
         robustness = "" if rule.robustness is None else f"{rule.robustness:.4g}"
@@ -41,9 +57,23 @@ def rules_section(data: ReportData) -> str:
                 str(len(rule.violations)),
             ]
         )
-    table = html_table(
+    return html_table(
         ["rule", "outcome", "robustness", "cycles judged", "violations"], rows, {2, 3, 4}
     )
+
+
+def _unseen_names(judged: RobotRules) -> str:
+    """A note for each name a rule reads that the window never shows."""
+    unseen = [(rule.rule, name) for rule in judged.rules for name in rule.unseen]
+    return "".join(
+        f'<p class="warn">Note: the window never shows <code>{escape(name)}</code>, read by '
+        f"<code>{escape(rule)}</code> (a typo?).</p>"
+        for rule, name in unseen
+    )
+
+
+def _violations(judged: RobotRules, clock: LogClock) -> str:
+    """Each violation: when, which cycles, how badly, the decision in force."""
     violations = [
         [
             f"<code>{escape(rule.rule)}</code>",
@@ -56,11 +86,15 @@ def rules_section(data: ReportData) -> str:
         for rule in judged.rules
         for v in rule.violations
     ]
-    listed = (
-        html_table(["rule", "when", "cycles", "robustness", "decision", "explain"], violations, {3})
-        if violations
-        else "<p>No rule is violated in the window.</p>"
+    if not violations:
+        return "<p>No rule is violated in the window.</p>"
+    return html_table(
+        ["rule", "when", "cycles", "robustness", "decision", "explain"], violations, {3}
     )
+
+
+def _not_decidable(judged: RobotRules, clock: LogClock) -> str:
+    """The stretches no rule could be decided on, the first ``_LISTED`` of them."""
     undecided = [
         [
             f"<code>{escape(rule.rule)}</code>",
@@ -71,33 +105,17 @@ def rules_section(data: ReportData) -> str:
         for rule in judged.rules
         for u in rule.undecided
     ]
-    why = (
-        "<h3>Not decidable</h3>"
-        + html_table(["rule", "when", "cycles", "why"], undecided[:_LISTED], set())
-        + (
-            f"<p>… and {len(undecided) - _LISTED} more (<code>check --json</code> lists them "
-            "all).</p>"
-            if len(undecided) > _LISTED
-            else ""
-        )
-        if undecided
+    if not undecided:
+        return ""
+    more = (
+        f"<p>… and {len(undecided) - _LISTED} more (<code>check --json</code> lists them all).</p>"
+        if len(undecided) > _LISTED
         else ""
     )
-    unseen = [(rule.rule, name) for rule in judged.rules for name in rule.unseen]
-    notes = "".join(
-        f'<p class="warn">Note: the window never shows <code>{escape(name)}</code>, read by '
-        f"<code>{escape(rule)}</code> (a typo?).</p>"
-        for rule, name in unseen
-    )
-    source = escape(data.rules_path or "the rules given")
     return (
-        f"<p>The rules of {source}, judged over the window ({judged.cycles} cycles; a rule's "
-        "robustness is how far the worst cycle is from breaking it, negative when broken; "
-        "a window over a gap or the log's edge is not decidable). docs/rules.md.</p>"
-        + table
-        + notes
-        + listed
-        + why
+        "<h3>Not decidable</h3>"
+        + html_table(["rule", "when", "cycles", "why"], undecided[:_LISTED], set())
+        + more
     )
 
 

@@ -33,7 +33,7 @@ from trace_audit.causal import (
 )
 from trace_audit.chains import trace_cycle
 from trace_audit.cli import app
-from trace_audit.explain import explain, find_cycle
+from trace_audit.explanation import explain, find_cycle
 from trace_audit.jsonout import to_jsonable
 from trace_runtime import AuditLogger, LoggerConfig, RawMessage, open_log
 from trace_runtime.errors import TimeOutOfRangeError, UsageError
@@ -280,7 +280,7 @@ def test_explain_does_not_import_networkx(sample_log: Path) -> None:
 
     code = (
         "import sys\n"
-        "from trace_audit.explain import explain\n"
+        "from trace_audit.explanation import explain\n"
         f"explain({str(sample_log)!r}, t={t_ns(45)})\n"
         "assert 'networkx' not in sys.modules, 'explain imported networkx'\n"
     )
@@ -320,7 +320,7 @@ def sim_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_sim_ped_close_stop_shows_the_papers_example(sim_log: Path) -> None:
-    from trace_audit.timeline import timeline
+    from trace_audit.transitions import timeline
 
     stops = [
         row
@@ -397,7 +397,7 @@ def test_sim_injected_null_evidence_shows_as_a_missing_link(sim_log: Path) -> No
 
 def test_explain_scores_each_decision_as_the_metrics_do(sim_log: Path) -> None:
     """explain's per-decision ET / DR agree with what `trace-audit metrics` lists as failing."""
-    from trace_audit.explain import explain
+    from trace_audit.explanation import explain
     from trace_audit.metrics import MetricsConfig, compute_metrics
 
     report = compute_metrics([sim_log], MetricsConfig())

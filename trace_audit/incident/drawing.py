@@ -18,7 +18,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
-from trace_audit.report.data import ReportData
+from trace_audit.incident.data import ReportData
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes

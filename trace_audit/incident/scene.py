@@ -5,8 +5,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from trace_audit.report.data import EntityView, ReportData
-from trace_audit.report.drawing import (
+from trace_audit.incident.data import ReportData
+from trace_audit.incident.drawing import (
     BROKEN,
     MAX_ENTITIES,
     figure_style,
@@ -14,6 +14,7 @@ from trace_audit.report.drawing import (
     to_svg,
     wrap_label,
 )
+from trace_audit.incident.window import EntityView
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
