@@ -30,8 +30,6 @@ if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
 
-    from trace_audit.rules.index_check import IndexColumns
-
 T = TypeVar("T")
 
 __all__ = [
@@ -220,10 +218,10 @@ class ColumnSession:
         self.limits = limits or QueryLimits()
         self._con: duckdb.DuckDBPyConnection | None = None
 
-    def __call__(self, sql: str, params: Sequence[object] = ()) -> IndexColumns:
+    def __call__(self, sql: str, params: Sequence[object] = ()) -> dict[str, NDArray[np.generic]]:
         bounds = self.limits
 
-        def fetch(con: duckdb.DuckDBPyConnection) -> IndexColumns:
+        def fetch(con: duckdb.DuckDBPyConnection) -> dict[str, NDArray[np.generic]]:
             columns = con.execute(sql, list(params)).fetchnumpy()
             held = sum(_column_bytes(c) for c in columns.values())
             if held > bounds.result_bytes:
