@@ -20,9 +20,13 @@ each product says how to get it.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from types import ModuleType
+from typing import TYPE_CHECKING
 
 from trace_runtime.gaps import Gap
+
+if TYPE_CHECKING:  # the fleet extra; the products import it when they build a table
+    import pyarrow
 
 __all__ = [
     "DECISION_WHY",
@@ -35,7 +39,8 @@ __all__ = [
     "gap_row",
 ]
 
-Columns = list[tuple[str, Any]]
+Columns = list[tuple[str, "pyarrow.DataType"]]
+"""Named Arrow column types, in a table's order."""
 
 DECISION_WHY = (
     "lead_factor",
@@ -51,7 +56,7 @@ DECISION_WHY = (
 """Why a decision was taken and how it went, in the order both decision tables keep."""
 
 
-def decision_columns(pa: Any, names: Sequence[str]) -> Columns:
+def decision_columns(pa: ModuleType, names: Sequence[str]) -> Columns:
     """The decision table's columns called ``names``, in that order."""
     strings = pa.list_(pa.string())
     types = {
@@ -105,7 +110,7 @@ def decision_columns(pa: Any, names: Sequence[str]) -> Columns:
     return [(name, types[name]) for name in names]
 
 
-def entity_columns(pa: Any, names: Sequence[str]) -> Columns:
+def entity_columns(pa: ModuleType, names: Sequence[str]) -> Columns:
     """The entity table's columns called ``names``, in that order."""
     types = {
         "robot": pa.string(),
@@ -125,7 +130,7 @@ def entity_columns(pa: Any, names: Sequence[str]) -> Columns:
     return [(name, types[name]) for name in names]
 
 
-def factor_struct(pa: Any) -> Any:
+def factor_struct(pa: ModuleType) -> pyarrow.StructType:
     """A factor as a column value: the same in the layer tables and the fleet index."""
     return pa.struct(
         [
@@ -138,7 +143,7 @@ def factor_struct(pa: Any) -> Any:
     )
 
 
-def channel_columns(pa: Any) -> Columns:
+def channel_columns(pa: ModuleType) -> Columns:
     """An actuator channel row's columns after the key saying whose it is."""
     return [
         ("cycle", pa.int64()),
@@ -152,7 +157,7 @@ def channel_columns(pa: Any) -> Columns:
     ]
 
 
-def check_columns(pa: Any) -> Columns:
+def check_columns(pa: ModuleType) -> Columns:
     """An execution check row's columns after its key."""
     return [
         ("cycle", pa.int64()),
@@ -165,7 +170,7 @@ def check_columns(pa: Any) -> Columns:
     ]
 
 
-def gap_columns(pa: Any) -> Columns:
+def gap_columns(pa: ModuleType) -> Columns:
     """A gap row's columns after its key (``trace_runtime.gaps.Gap``'s fields)."""
     return [
         ("after_cycle", pa.int64()),

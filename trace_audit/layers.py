@@ -20,8 +20,10 @@ pyarrow comes with the ``fleet`` extra; without it the tables raise ``UsageError
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Iterator, Sequence
-from typing import Any, NamedTuple
+from types import ModuleType
+from typing import TYPE_CHECKING, NamedTuple, TypedDict
 
 from trace_audit.causal import (
     Decision,
@@ -56,7 +58,10 @@ from trace_runtime.encoding.seal_check import verify_cycle
 from trace_runtime.errors import UsageError
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, check_tolerance
 from trace_runtime.reading.logset import Log
-from trace_runtime.records import TOPIC_PERCEPTION
+from trace_runtime.records import TOPIC_PERCEPTION, Scalar
+
+if TYPE_CHECKING:  # the fleet extra, imported when a table is built (``_pyarrow``)
+    import pyarrow
 
 __all__ = [
     "RobotDecision",
@@ -114,7 +119,7 @@ def iter_decision_fields(
 
 def decision_table(
     source: LogSource, *, robots: Robots = (), start: TimeArg = None, end: TimeArg = None
-) -> Any:
+) -> pyarrow.Table:
     """A ``pyarrow.Table`` with one row per decision: what it did, why, and its seal."""
     pa = _pyarrow()
     rows = _Columns(pa, _decision_schema(pa))
@@ -153,7 +158,7 @@ def decision_table(
 
 def entity_table(
     source: LogSource, *, robots: Robots = (), start: TimeArg = None, end: TimeArg = None
-) -> Any:
+) -> pyarrow.Table:
     """A ``pyarrow.Table`` with one row per perceived entity of each decision.
 
     ``x``, ``y``, ``z`` and ``frame`` are the entity's logged position (null where the record
@@ -185,7 +190,7 @@ def entity_table(
 
 def channel_table(
     source: LogSource, *, robots: Robots = (), start: TimeArg = None, end: TimeArg = None
-) -> Any:
+) -> pyarrow.Table:
     """A ``pyarrow.Table`` with one row per logged actuator channel of each decision
     (profile 1.1): intended, actual and deviation in the channel's ``unit``; ``deviation_unit``
     is the unit of the execution record's overall deviation."""
@@ -210,7 +215,7 @@ def channel_table(
 
 def check_table(
     source: LogSource, *, robots: Robots = (), start: TimeArg = None, end: TimeArg = None
-) -> Any:
+) -> pyarrow.Table:
     """A ``pyarrow.Table`` with one row per compliance check of each decision's execution."""
     pa = _pyarrow()
     rows = _Columns(pa, _check_schema(pa))
@@ -237,7 +242,7 @@ def gap_table(
     start: TimeArg = None,
     end: TimeArg = None,
     tolerance: float = DEFAULT_GAP_TOLERANCE,
-) -> Any:
+) -> pyarrow.Table:
     """A ``pyarrow.Table`` with one row per gap between two sealed cycles of a robot inside
     the window (``trace_runtime.gaps``: ``gap_ns`` is the time beyond one period)."""
     pa = _pyarrow()
@@ -279,26 +284,29 @@ def _iter_selected(
 # --- columns -------------------------------------------------------------------------------
 
 
-def _pyarrow() -> Any:
+def _pyarrow() -> ModuleType:
+    # import_module says what it returns (a module); a plain import of the untyped package
+    # would be Any to mypy.
     try:
-        import pyarrow as pa
+        return importlib.import_module("pyarrow")
     except ImportError as err:
         raise UsageError("the layer tables need pyarrow: pip install 'trace-audit[fleet]'") from err
-    return pa
 
 
 class _Columns:
     """Rows gathered column by column, made into one table at the end."""
 
-    def __init__(self, pa: Any, schema: Any) -> None:
+    def __init__(self, pa: ModuleType, schema: pyarrow.Schema) -> None:
         self.pa, self.schema = pa, schema
-        self.values: list[list[Any]] = [[] for _ in schema.names]
+        # A cell is whatever pyarrow converts to its column's type (str, int, float, bool,
+        # None, lists of those, a factor's dict): the schema, not Python, types it.
+        self.values: list[list[object]] = [[] for _ in schema.names]
 
-    def add(self, *row: Any) -> None:
+    def add(self, *row: object) -> None:
         for column, value in zip(self.values, row, strict=True):
             column.append(value)
 
-    def table(self) -> Any:
+    def table(self) -> pyarrow.Table:
         pa, schema = self.pa, self.schema
         return pa.Table.from_arrays(
             [pa.array(v, type=f.type) for v, f in zip(self.values, schema, strict=True)],
@@ -306,12 +314,22 @@ class _Columns:
         )
 
 
-def _text(value: Any) -> str | None:
+def _text(value: Scalar | None) -> str | None:
     """A factor's value as text when it is not a number (the CLI's rendering)."""
     return None if value is None or as_number_or_flag(value) is not None else format_value(value)
 
 
-def _factor(factor: FactorValue) -> dict[str, Any]:
+class _FactorCell(TypedDict):
+    """A factor in the ``factors`` column (``trace_audit.columns.factor_struct``)."""
+
+    node: str
+    name: str
+    value: float | None
+    text: str | None
+    unit: str | None
+
+
+def _factor(factor: FactorValue) -> _FactorCell:
     return {
         "node": factor.node,
         "name": factor.name,
@@ -321,7 +339,7 @@ def _factor(factor: FactorValue) -> dict[str, Any]:
     }
 
 
-def _position(value: Any) -> tuple[float | None, float | None, float | None]:
+def _position(value: object) -> tuple[float | None, float | None, float | None]:
     """x, y, z of a logged position (a list of numbers); None for what is not there."""
     if not isinstance(value, list):
         return None, None, None
@@ -361,21 +379,21 @@ _ENTITY_COLUMNS = (
 )
 
 
-def _decision_schema(pa: Any) -> Any:
+def _decision_schema(pa: ModuleType) -> pyarrow.Schema:
     return pa.schema(decision_columns(pa, _DECISION_COLUMNS))
 
 
-def _entity_schema(pa: Any) -> Any:
+def _entity_schema(pa: ModuleType) -> pyarrow.Schema:
     return pa.schema(entity_columns(pa, _ENTITY_COLUMNS))
 
 
-def _channel_schema(pa: Any) -> Any:
+def _channel_schema(pa: ModuleType) -> pyarrow.Schema:
     return pa.schema([("robot", pa.string()), *channel_columns(pa)])
 
 
-def _check_schema(pa: Any) -> Any:
+def _check_schema(pa: ModuleType) -> pyarrow.Schema:
     return pa.schema([("robot", pa.string()), *check_columns(pa)])
 
 
-def _gap_schema(pa: Any) -> Any:
+def _gap_schema(pa: ModuleType) -> pyarrow.Schema:
     return pa.schema([("robot", pa.string()), *gap_columns(pa)])

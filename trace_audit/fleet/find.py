@@ -70,6 +70,7 @@ def find_decisions(
         return found
     # As many rows as the limit: count the matches so the output can say it was cut.
     count = run_query(index, f"SELECT count(*) FROM ({sql})", params, limits=limits).rows[0][0]
+    assert isinstance(count, int)  # count(*) is a BIGINT, never NULL
     return dataclasses.replace(found, total=int(count) if count > len(found.rows) else None)
 
 

@@ -20,9 +20,9 @@ import json
 import os
 import re
 import stat
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 from trace_audit.fleet.tables import INDEX_FORMAT, INDEX_VERSION, TABLES
 from trace_runtime.boundary import (
@@ -183,7 +183,7 @@ def index_lock(out: Path) -> Iterator[None]:
         yield
 
 
-def write_table_file(out: Path, rel: str, write: Any) -> None:
+def write_table_file(out: Path, rel: str, write: Callable[[BinaryIO], object]) -> None:
     """Write Parquet file ``out/rel`` aside through ``write(file)`` and rename it into place;
     its folder is made inside ``out`` and never reached through a link."""
     target = out / rel

@@ -24,7 +24,7 @@ import sys
 import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from trace_runtime.errors import UsageError
 
@@ -118,11 +118,11 @@ def watchdog(con: duckdb.DuckDBPyConnection, limits: QueryLimits) -> Iterator[No
         timer.cancel()
 
 
-def row_bytes(row: tuple[Any, ...]) -> int:
+def row_bytes(row: tuple[object, ...]) -> int:
     """What a fetched row holds, near enough to bound a result: the length of each text and
     binary value, 8 bytes for any other scalar, nested values summed."""
     total = 0
-    stack: list[Any] = list(row)
+    stack: list[object] = list(row)
     while stack:
         value = stack.pop()
         if isinstance(value, str | bytes | bytearray):

@@ -15,10 +15,10 @@ import datetime
 import decimal
 import time
 import uuid
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypeVar
 
 from trace_audit.fleet.folder import listed_files, load_manifest
 from trace_audit.fleet.limits import QueryLimits, format_size, over_limit, row_bytes, watchdog
@@ -27,6 +27,10 @@ from trace_runtime.errors import LogReadError, UsageError
 
 if TYPE_CHECKING:
     import duckdb
+    import numpy as np
+    from numpy.typing import NDArray
+
+T = TypeVar("T")
 
 __all__ = [
     "ColumnSession",
@@ -63,17 +67,18 @@ class QueryResult:
     """Rows of a query, with their column names."""
 
     columns: tuple[str, ...]
-    rows: list[tuple[Any, ...]]
+    rows: list[tuple[object, ...]]
+    """Each row's values as DuckDB gives them (any SQL type: ``plain`` makes them JSON)."""
     elapsed_s: float
     total: int | None = None
     """Rows the statement gave when more than ``rows`` (cut by a limit); None when whole."""
 
-    def records(self) -> list[dict[str, Any]]:
+    def records(self) -> list[dict[str, object]]:
         """Rows as JSON-ready dicts (dates as ISO text)."""
         return [{c: plain(v) for c, v in zip(self.columns, row, strict=True)} for row in self.rows]
 
 
-def plain(value: Any) -> Any:
+def plain(value: object) -> object:
     """A DuckDB value as JSON-ready data: DECIMAL as a number, dates and times as ISO 8601
     text, INTERVAL as an ISO 8601 duration, UUID as text, BLOB as hex."""
     if isinstance(value, datetime.date | datetime.datetime | datetime.time):
@@ -175,7 +180,7 @@ def connect(
 def run_query(
     index: str | Path,
     sql: str,
-    params: Sequence[Any] = (),
+    params: Sequence[object] = (),
     *,
     limit: int | None = None,
     limits: QueryLimits | None = None,
@@ -213,10 +218,10 @@ class ColumnSession:
         self.limits = limits or QueryLimits()
         self._con: duckdb.DuckDBPyConnection | None = None
 
-    def __call__(self, sql: str, params: Sequence[Any] = ()) -> dict[str, Any]:
+    def __call__(self, sql: str, params: Sequence[object] = ()) -> dict[str, NDArray[np.generic]]:
         bounds = self.limits
 
-        def fetch(con: duckdb.DuckDBPyConnection) -> dict[str, Any]:
+        def fetch(con: duckdb.DuckDBPyConnection) -> dict[str, NDArray[np.generic]]:
             columns = con.execute(sql, list(params)).fetchnumpy()
             held = sum(_column_bytes(c) for c in columns.values())
             if held > bounds.result_bytes:
@@ -228,8 +233,7 @@ class ColumnSession:
 
         if self._con is None:
             self._con = connect(self.index, limits=bounds)
-        columns: dict[str, Any] = _guarded(self.index, self._con, bounds, fetch)
-        return columns
+        return _guarded(self.index, self._con, bounds, fetch)
 
     def close(self) -> None:
         if self._con is not None:
@@ -243,13 +247,13 @@ class ColumnSession:
         self.close()
 
 
-def _column_bytes(column: Any) -> int:
+def _column_bytes(column: NDArray[np.generic]) -> int:
     """What a fetched column holds: its array's bytes, a text or list value counted at
     64 bytes (a Python object and its pointer; the values are not walked)."""
     return int(column.size * 64 if column.dtype == object else column.nbytes)
 
 
-def _unmasked(column: Any) -> Any:
+def _unmasked(column: NDArray[np.generic]) -> NDArray[np.generic]:
     """DuckDB's masked array of a column with NULLs as a plain one: NaN in numbers (as
     floats), None in anything else."""
     import numpy as np
@@ -262,8 +266,11 @@ def _unmasked(column: Any) -> Any:
 
 
 def _guarded(
-    index: str | Path, con: duckdb.DuckDBPyConnection, bounds: QueryLimits, work: Any
-) -> Any:
+    index: str | Path,
+    con: duckdb.DuckDBPyConnection,
+    bounds: QueryLimits,
+    work: Callable[[duckdb.DuckDBPyConnection], T],
+) -> T:
     """``work(con)`` on a confined session of ``index`` under its watchdog; DuckDB's
     errors as the one-line errors of ``run_query``."""
     import duckdb
@@ -288,7 +295,7 @@ def _guarded(
 def _run(
     con: duckdb.DuckDBPyConnection,
     sql: str,
-    params: Sequence[Any],
+    params: Sequence[object],
     *,
     limit: int | None,
     bounds: QueryLimits,
@@ -314,10 +321,12 @@ def _run(
     )
 
 
-def _fetch(cursor: Any, limit: int | None, bounds: QueryLimits) -> list[tuple[Any, ...]]:
+def _fetch(
+    cursor: duckdb.DuckDBPyConnection, limit: int | None, bounds: QueryLimits
+) -> list[tuple[object, ...]]:
     """Up to ``limit`` rows (all when None), a batch at a time; ``UsageError`` once they
     hold more than ``bounds.result_bytes``."""
-    rows: list[tuple[Any, ...]] = []
+    rows: list[tuple[object, ...]] = []
     held = 0
     while limit is None or len(rows) < limit:
         want = 2048 if limit is None else min(2048, limit - len(rows))
@@ -335,11 +344,14 @@ def _fetch(cursor: Any, limit: int | None, bounds: QueryLimits) -> list[tuple[An
     return rows
 
 
-def _rest(cursor: Any) -> int:
+def _rest(cursor: duckdb.DuckDBPyConnection) -> int:
     """Rows left in a result, counted in Arrow batches (bounded memory, no Python rows)."""
     import warnings
 
     with warnings.catch_warnings():
         # DuckDB warns that Arrow output of a DB-API result copies rows: it is counted only.
         warnings.filterwarnings("ignore", message="Arrow output on a DB-API result")
-        return sum(batch.num_rows for batch in cursor.to_arrow_reader(65_536))
+        reader = cursor.to_arrow_reader(65_536)
+        # None only for a statement without a result; ``_run`` counts only after rows came.
+        assert reader is not None
+        return sum(batch.num_rows for batch in reader)

@@ -19,6 +19,7 @@ every row of a segment (its name, path, tier, versions) are filled once, in ``ta
 from __future__ import annotations
 
 import time
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -60,11 +61,11 @@ def partition_of(clock: str, start_ns: int, first_segment: int) -> str | None:
     return f"run-{first_segment:06d}"
 
 
-def _text(value: Any) -> str | None:
+def _text(value: object) -> str | None:
     return None if value is None else str(value)
 
 
-def _linear(motion: Any) -> float | None:
+def _linear(motion: object) -> float | None:
     """A planar ``Motion``'s linear m/s, as logged (None: no planar motion)."""
     return as_number_or_flag(motion.get("linear")) if type(motion) is dict else None
 
@@ -75,9 +76,10 @@ class _Flat:
     ends (Arrow's own layout, so the column is built without a Python list per row)."""
 
     offsets: list[int] = field(default_factory=lambda: [0])
-    items: list[Any] = field(default_factory=list)
+    items: list[object] = field(default_factory=list)
+    """Cells of the column's item type (pyarrow converts them: ``array``)."""
 
-    def add(self, items: list[Any] | tuple[Any, ...]) -> None:
+    def add(self, items: Sequence[object]) -> None:
         if items:
             self.items.extend(items)
         self.offsets.append(len(self.items))
@@ -157,12 +159,13 @@ class SegmentRows:
         if d.seal.gap is not None:
             self._gap(d, self._day_hour(d.seal.gap.after_t_ns)[0])
 
-    def _factors(self, rationale: Any) -> tuple[str | None, float | None, str | None, Any]:
+    def _factors(self, rationale: object) -> tuple[str | None, float | None, str | None, object]:
         """Add the decision's factors to the flat ``factors`` column; return the leading
         one's name, value, text and unit (all None without factors)."""
         raw_factors = rationale.get("factors") if type(rationale) is dict else None
         nodes, names, values, texts, units = self._factor_items
-        lead: tuple[str | None, float | None, str | None, Any] = (None, None, None, None)
+        # The unit as logged (text, or whatever another writer put there: a string column).
+        lead: tuple[str | None, float | None, str | None, object] = (None, None, None, None)
         count = 0
         for f in raw_factors or ():
             if type(f) is dict:
@@ -246,7 +249,7 @@ class SegmentRows:
         self.days["gaps"].append(day)
         self.rows["gaps"].append(gap_row(self._name, gap))
 
-    def _channels(self, d: ScoredDecision, execution: dict[str, Any], day: str) -> None:
+    def _channels(self, d: ScoredDecision, execution: dict[str, object], day: str) -> None:
         """Add the cycle's actuator channel rows, each with the record's ``deviation_unit``."""
         channels = execution["channels"]
         if type(channels) is not list:
@@ -271,7 +274,7 @@ class SegmentRows:
                 )
             )
 
-    def _checks(self, d: ScoredDecision, checks: Any, day: str) -> None:
+    def _checks(self, d: ScoredDecision, checks: object, day: str) -> None:
         """Add the cycle's compliance check rows, one per rule checked."""
         if type(checks) is not list:
             return
@@ -294,7 +297,9 @@ class SegmentRows:
                 )
             )
 
-    def _entities(self, d: ScoredDecision, entities: Any, day: str) -> dict[str, float]:
+    def _entities(
+        self, d: ScoredDecision, entities: Iterable[object], day: str
+    ) -> dict[str, float]:
         """Add the cycle's entity rows; return the nearest distance of each class seen."""
         distances = entity_distances(d.belief)
         nearest: dict[str, float] = {}

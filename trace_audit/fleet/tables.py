@@ -10,7 +10,7 @@ text: the UTC date on a wall clock, ``run-<segment>`` on a sim or monotonic cloc
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypedDict
 
 from trace_audit.columns import (
     DECISION_WHY,
@@ -47,7 +47,15 @@ _RISING = ("cycle", "t_ns")
 """Integer columns that climb row by row: delta-encoded, not dictionary-encoded."""
 
 
-def parquet_options(shape: pa.Schema) -> dict[str, Any]:
+class ParquetOptions(TypedDict):
+    """Keyword arguments of ``pyarrow.parquet.write_table`` (``parquet_options``)."""
+
+    compression: str
+    use_dictionary: list[str]
+    column_encoding: dict[str, str]
+
+
+def parquet_options(shape: pa.Schema) -> ParquetOptions:
     """``pyarrow.parquet.write_table`` settings for one table's file: zstd; dictionaries
     only for top-level strings (names, commands, versions repeat; a dictionary of distinct
     floats and times costs bytes and time); ``cycle`` and ``t_ns`` as deltas. On the bench

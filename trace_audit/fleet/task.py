@@ -6,14 +6,18 @@ the manifest's entry)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from trace_audit.fleet.folder import write_table_file
 from trace_audit.fleet.rows import ROW_TABLES, SegmentRows, day_of
 from trace_audit.fleet.tables import parquet_options
 from trace_audit.metrics import MetricsConfig, score_segment
 from trace_runtime.reading.reader import Segment, open_segment
+
+if TYPE_CHECKING:  # the fleet extra, imported by the functions that build the tables
+    import pyarrow as pa
 
 __all__ = ["IndexTask", "IndexedSegment", "index_segment"]
 
@@ -72,7 +76,7 @@ def index_segment(task: IndexTask) -> IndexedSegment:
             part = table if len(set(days)) == 1 else _rows_of_day(table, days, day)
             rel = f"{name}/robot={robot}/day={day}/{stem}.parquet"
             options = parquet_options(part.schema)
-            write_table_file(out, rel, lambda f, p=part, o=options: pq.write_table(p, f, **o))
+            write_table_file(out, rel, partial(pq.write_table, part, **options))
             files.append(rel)
     return IndexedSegment(
         key=task.key,
@@ -87,7 +91,7 @@ def index_segment(task: IndexTask) -> IndexedSegment:
     )
 
 
-def _rows_of_day(table: Any, days: list[str], day: str) -> Any:
+def _rows_of_day(table: pa.Table, days: list[str], day: str) -> pa.Table:
     import pyarrow as pa
 
     return table.filter(pa.array([d == day for d in days]))
@@ -106,7 +110,7 @@ def _last_command(previous: str | None) -> str | None:
 
 def _segment_row(
     segment: Segment, rows: SegmentRows, sha256: str, run: str | None
-) -> tuple[Any, list[str]]:
+) -> tuple[pa.Table, list[str]]:
     import pyarrow as pa
 
     from trace_audit.fleet.tables import schema

@@ -24,16 +24,17 @@ import logging
 import math
 import re
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import Any
+from types import ModuleType
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trace_audit.rules.signals import FAMILIES, SIGNAL_PATTERN, bad_signal, signal_names
-from trace_audit.rules.vector import compile_columns
+from trace_audit.rules.vector import BoundedNode, StlNode, compile_columns, is_bounded
 from trace_runtime.errors import UsageError
 
 __all__ = ["Formula", "Horizon", "RulesError", "compile_formula", "rtamt_module"]
@@ -54,6 +55,29 @@ _STEP_PAST = frozenset(("Previous", "StrongPrevious", "Rise", "Fall"))
 _UNBOUNDED = frozenset(("Always", "Eventually", "Until", "Historically", "Once", "Since"))
 _KEYWORDS = {kind: kind.lower() for kind in _UNBOUNDED}
 _BOUNDED = _FUTURE | _PAST
+
+
+class _StlAst(Protocol):
+    @property
+    def specs(self) -> Sequence[StlNode]: ...
+
+
+class _Specification(Protocol):
+    """What is used of an ``rtamt.StlDiscreteTimeSpecification`` (rtamt ships no type
+    information): declare the signals, set the formula and the period, parse, evaluate
+    offline (one ``[time, robustness]`` pair a sample)."""
+
+    spec: str
+
+    @property
+    def ast(self) -> _StlAst: ...
+    @property
+    def free_vars(self) -> Iterable[str]: ...
+    def declare_var(self, name: str, var_type: str) -> None: ...
+    def set_sampling_period(self, period: int, unit: str, tolerance: float) -> None: ...
+    def parse(self) -> None: ...
+    def evaluate(self, dataset: Mapping[str, list[float]]) -> Sequence[Sequence[float]]: ...
+
 
 _DOTTED = re.compile(r"(?<![\w.])[A-Za-z_]\w*(?:\.\w+)+")
 _FAMILIES_HELP = "signals: " + ", ".join(f"{f}.*" for f in FAMILIES)
@@ -152,7 +176,9 @@ class Formula:
 
         return run
 
-    def _robustness(self, spec: Any, given: Mapping[str, ArrayLike], period_ns: int) -> list[float]:
+    def _robustness(
+        self, spec: _Specification, given: Mapping[str, ArrayLike], period_ns: int
+    ) -> list[float]:
         columns = {k: np.asarray(v, dtype=np.float64).tolist() for k, v in given.items()}
         n = len(next(iter(columns.values()))) if columns else 0
         if n == 0:
@@ -178,7 +204,7 @@ class Formula:
             ) from err
         return [float(value) + 0.0 for _, value in out[:n]]  # + 0.0: no -0 robustness
 
-    def _spec(self, period_ns: int) -> Any:
+    def _spec(self, period_ns: int) -> _Specification:
         period_s = Fraction(period_ns, 10**9)
         for text, seconds in self.bounds:
             if seconds % period_s:
@@ -221,11 +247,11 @@ def compile_formula(rule: str, stl: str, *, origin: str = "") -> Formula:
     return Formula(rule, stl, body, names, horizon, _bounds(spec.ast.specs[0]), origin)
 
 
-def _check_intervals(node: Any, rule: str) -> None:
+def _check_intervals(node: StlNode, rule: str) -> None:
     """Every bounded operator's interval is ``[a:b]`` with ``0 <= a <= b`` (rtamt takes a
     reversed or negative one and evaluates every cycle to an infinity)."""
     kind = type(node).__name__
-    if kind in _BOUNDED:
+    if is_bounded(node, _BOUNDED):
         begin = Fraction(node.begin) * _UNITS.get(str(node.begin_unit or ""), Fraction(1))
         end = _end(node)
         if begin < 0 or end < begin:
@@ -238,10 +264,10 @@ def _check_intervals(node: Any, rule: str) -> None:
         _check_intervals(child, rule)
 
 
-def _bounds(node: Any) -> tuple[tuple[str, Fraction], ...]:
+def _bounds(node: StlNode) -> tuple[tuple[str, Fraction], ...]:
     """Every temporal bound under ``node``: as shown (``0.05 s``) and in seconds."""
     out: list[tuple[str, Fraction]] = []
-    if type(node).__name__ in _BOUNDED:
+    if is_bounded(node, _BOUNDED):
         for value, unit in ((node.begin, node.begin_unit), (node.end, node.end_unit)):
             seconds = Fraction(value) * _UNITS.get(str(unit or ""), Fraction(1))
             out.append((f"{float(seconds):g} s", seconds))
@@ -272,7 +298,7 @@ def _body(rule: str, stl: str) -> str:
     )
 
 
-def _horizon(node: Any, rule: str) -> Horizon:
+def _horizon(node: StlNode, rule: str) -> Horizon:
     kind = type(node).__name__
     if kind in _UNBOUNDED:
         op = _KEYWORDS[kind]
@@ -284,11 +310,11 @@ def _horizon(node: Any, rule: str) -> Horizon:
     inner = Horizon()
     for child in node.children:
         inner = inner.widest(_horizon(child, rule))
-    if kind in _FUTURE:
+    if is_bounded(node, _FUTURE):
         return Horizon(
             inner.past_s, inner.past_steps, inner.future_s + _end(node), inner.future_steps
         )
-    if kind in _PAST:
+    if is_bounded(node, _PAST):
         return Horizon(
             inner.past_s + _end(node), inner.past_steps, inner.future_s, inner.future_steps
         )
@@ -299,7 +325,7 @@ def _horizon(node: Any, rule: str) -> Horizon:
     return inner
 
 
-def _end(node: Any) -> Fraction:
+def _end(node: BoundedNode) -> Fraction:
     """A temporal operator's upper bound in seconds."""
     return Fraction(node.end) * _UNITS.get(str(node.end_unit or ""), Fraction(1))
 
@@ -339,12 +365,12 @@ def _steps_grouped(formula: str) -> str:
     return "".join(out)
 
 
-def rtamt_module() -> Any:
+def rtamt_module() -> ModuleType:
     """The ``rtamt`` module (imported on first use; ``RulesError`` when it is missing)."""
     return _rtamt()
 
 
-def _rtamt() -> Any:
+def _rtamt() -> ModuleType:
     try:
         with warnings.catch_warnings():
             # rtamt's pinned parser runtime (antlr4 4.7) imports ``typing.io``, deprecated
@@ -363,14 +389,14 @@ def _rtamt_errors() -> tuple[type[Exception], ...]:
     return (_rtamt().RTAMTException, KeyError, ValueError, ZeroDivisionError)
 
 
-def _specification(names: Sequence[str]) -> Any:
-    spec = _rtamt().StlDiscreteTimeSpecification()
+def _specification(names: Sequence[str]) -> _Specification:
+    spec: _Specification = _rtamt().StlDiscreteTimeSpecification()
     for i in range(len(names)):
         spec.declare_var(_ident(i), "float")
     return spec
 
 
-def _parse(spec: Any, rule: str, names: Sequence[str]) -> None:
+def _parse(spec: _Specification, rule: str, names: Sequence[str]) -> None:
     # rtamt logs a warning (on the root logger) for each undeclared name before it declares
     # it itself; the unknown name is reported here instead, as one line.
     previous = logging.root.manager.disable

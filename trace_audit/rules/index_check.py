@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Executor
-from typing import Any, NamedTuple
+from typing import NamedTuple, TypeGuard
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,11 +36,25 @@ from trace_audit.rules.signals import command_signal, planar_speed
 from trace_runtime.errors import UsageError
 from trace_runtime.gaps import Gap
 
-__all__ = ["BY_KEYS", "NOT_WALL_CLOCK", "IndexQuery", "check_index", "judge_index_robot"]
+__all__ = [
+    "BY_KEYS",
+    "NOT_WALL_CLOCK",
+    "IndexColumns",
+    "IndexQuery",
+    "check_index",
+    "judge_index_robot",
+]
 
-IndexQuery = Callable[[str, Sequence[Any]], Mapping[str, Any]]
-"""Runs one SQL statement with parameters on the index; its result as numpy columns by
-name, NULL as NaN in numbers and None in text (``trace_audit.fleet.ColumnSession``)."""
+IndexColumns = Mapping[str, NDArray[np.generic]]
+"""A statement's result as numpy columns by name (of the column's SQL type; NULL as NaN in
+numbers and None in text)."""
+
+IndexQuery = Callable[[str, Sequence[object]], IndexColumns]
+"""Runs one SQL statement with parameters on the index; its result as columns
+(``trace_audit.fleet.ColumnSession``)."""
+
+Cell = str | int | float | bool | None
+"""A value of a small result's row (``_rows``): a number, a text, a flag or NULL."""
 
 BY_KEYS = ("robot", "day")
 """What ``check --index --by`` groups by."""
@@ -177,7 +191,7 @@ class _RowValues(NamedTuple):
     text columns as codes, the rows' keys (segment, cycle, t_ns), and the channel and check
     values by key."""
 
-    data: Mapping[str, Any]
+    data: IndexColumns
     labels: Mapping[str, Labels]
     keys: tuple[Labels, NDArray[np.int64], NDArray[np.int64]]
     n: int
@@ -212,16 +226,25 @@ _GAPS = (
 """The robot's gaps, one for the row after each (segment, cycle, t_ns)."""
 
 
-def _rows(columns: Mapping[str, Any]) -> list[tuple[Any, ...]]:
+def _rows(columns: IndexColumns) -> list[tuple[Cell, ...]]:
     """A small result's columns as rows."""
     return list(zip(*(c.tolist() for c in columns.values()), strict=True))
 
 
-def _present(value: Any) -> bool:
+def _present(value: object) -> TypeGuard[int | float]:
+    """Whether a number column's value is there (NULL reads as NaN, or None)."""
     return value is not None and not (isinstance(value, float) and math.isnan(value))
 
 
-def _decision_columns(names: Sequence[str], planar: bool) -> tuple[list[str], list[Any]]:
+def _int(value: Cell) -> int:
+    """``int(value)`` of a whole-number column the index never leaves NULL (``cycle``,
+    ``t_ns``); a NULL fails as ``int(None)`` would."""
+    if value is None:
+        raise TypeError("a NULL in a column of whole numbers the index always fills")
+    return int(value)
+
+
+def _decision_columns(names: Sequence[str], planar: bool) -> tuple[list[str], list[str]]:
     """What to select from ``decisions`` (``d``, its gap joined as ``g``) and the SQL's
     parameters: the row's place, its command, each ``nearest.<class>`` as the class's value
     in the ``nearest`` map (+inf when the class is not in it) and each ``flag.<name>`` as
@@ -229,7 +252,7 @@ def _decision_columns(names: Sequence[str], planar: bool) -> tuple[list[str], li
     factors whole (a factor is found by node or name); ``planar``: the linear motion too;
     the gap before the row (NULL ``after_cycle``: none)."""
     exprs = ["d.cycle", "d.t_ns"]
-    params: list[Any] = []
+    params: list[str] = []
     for name in names:
         family, _, rest = name.partition(".")
         if family == "nearest":
@@ -265,7 +288,9 @@ def _indicator(commands: Labels, action: str) -> NDArray[np.float64]:
     return table[commands.codes]
 
 
-def _planar(part: str, intended: Any, actual: Any) -> NDArray[np.float64]:
+def _planar(
+    part: str, intended: NDArray[np.generic], actual: NDArray[np.generic]
+) -> NDArray[np.float64]:
     """``channel.speed.<part>`` at each row, by ``planar_speed`` over the columns."""
     i = np.asarray(intended, dtype=np.float64)
     a = np.asarray(actual, dtype=np.float64)
@@ -273,7 +298,7 @@ def _planar(part: str, intended: Any, actual: Any) -> NDArray[np.float64]:
         return np.asarray(planar_speed(part, i, a), dtype=np.float64)
 
 
-def _factor_values(factors: Any, wanted: str) -> NDArray[np.float64]:
+def _factor_values(factors: NDArray[np.generic], wanted: str) -> NDArray[np.float64]:
     out = np.full(len(factors), np.nan)
     for row, items in enumerate(factors.tolist()):
         for factor in () if items is None else items:  # a list, or DuckDB's array of them
@@ -304,7 +329,7 @@ def _by_key(
     return out
 
 
-def _gaps(robot: str, data: Mapping[str, Any]) -> dict[int, Gap]:
+def _gaps(robot: str, data: IndexColumns) -> dict[int, Gap]:
     """Row -> the gap that ends before it, from the joined ``gap_*`` columns."""
     after = data["gap_after_cycle"]
     rows = np.flatnonzero(~np.isnan(np.asarray(after, dtype=np.float64)))
@@ -333,8 +358,8 @@ def _channels(
     wanted: dict[str, list[tuple[str, str]]] = {}
     for n in names:
         if n.startswith("channel."):
-            channel, _, part = n.removeprefix("channel.").rpartition(".")
-            wanted.setdefault(channel, []).append((part, n))
+            name, _, part = n.removeprefix("channel.").rpartition(".")
+            wanted.setdefault(name, []).append((part, n))
     if not wanted:
         return {}, set()
     marks = ", ".join("?" for _ in wanted)
@@ -350,9 +375,10 @@ def _channels(
         logged.add(str(channel))
         parts = {"intended": intended, "actual": actual, "deviation": deviation}
         for part, n in wanted[str(channel)]:
-            key = (str(segment), int(cycle), int(t_ns), n)
-            if key not in out and _present(parts[part]):  # the first such channel, as logged
-                out[key] = float(parts[part])
+            key = (str(segment), _int(cycle), _int(t_ns), n)
+            value = parts[part]
+            if key not in out and _present(value):  # the first such channel, as logged
+                out[key] = float(value)
     return out, logged
 
 
@@ -372,6 +398,6 @@ def _checks(
             [robot, *wanted],
         )
     ):
-        key = (str(segment), int(cycle), int(t_ns), wanted[str(rule)])
+        key = (str(segment), _int(cycle), _int(t_ns), wanted[str(rule)])
         out[key] = min(out.get(key, 1.0), 1.0 if passed is True else 0.0)
     return out

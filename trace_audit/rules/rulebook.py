@@ -16,7 +16,6 @@ from __future__ import annotations
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from trace_audit.rules.formula import Formula, RulesError, compile_formula
 
@@ -73,7 +72,7 @@ def parse_rules(text: str, origin: str = "<rules>") -> tuple[Rule, ...]:
     return tuple(rules)
 
 
-def _rule(entry: Any, i: int, origin: str) -> Rule:
+def _rule(entry: object, i: int, origin: str) -> Rule:
     if not isinstance(entry, dict):
         raise RulesError(f"{origin}: rule #{i} is not a table")
     name = entry.get("name")

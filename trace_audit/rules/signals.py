@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, TypeVar
 
 from trace_audit.causal.distances import entity_distances
 from trace_audit.causal.lenient import (
@@ -43,6 +43,10 @@ from trace_runtime.encoding.partial import (
     read_layer,
 )
 from trace_runtime.flags import split_flags
+
+if TYPE_CHECKING:  # numpy is imported by the index's reader, not by a log's
+    import numpy as np
+    from numpy.typing import NDArray
 
 __all__ = [
     "FAMILIES",
@@ -63,6 +67,9 @@ SIGNAL_PATTERN = re.compile(rf"\b(?:{'|'.join(FAMILIES)})(?:\.[A-Za-z0-9_]+)+")
 """A signal name in a formula: a family, then dot-separated words of letters, digits, ``_``."""
 
 _CHANNEL_PARTS = ("intended", "actual", "deviation")
+
+Speed = TypeVar("Speed", float, "NDArray[np.float64]")
+"""A linear speed in m/s: one cycle's, or a column of the fleet index's rows."""
 
 
 def signal_names(formula: str) -> tuple[str, ...]:
@@ -129,7 +136,7 @@ def read_signals(cycle: Cycle, names: Iterable[str]) -> tuple[str | None, dict[s
     return command, out
 
 
-def _factor_signal(action: Mapping[str, Any] | None, wanted: str) -> float | None:
+def _factor_signal(action: Mapping[str, object] | None, wanted: str) -> float | None:
     rationale = as_mapping(action.get("rationale")) if action is not None else None
     for factor in mappings(rationale.get("factors") if rationale is not None else None):
         if wanted in (as_str(factor.get("node")) or "", as_str(factor.get("name")) or ""):
@@ -137,7 +144,7 @@ def _factor_signal(action: Mapping[str, Any] | None, wanted: str) -> float | Non
     return None
 
 
-def _channel(execution: Mapping[str, Any], name: str, part: str) -> float | None:
+def _channel(execution: Mapping[str, object], name: str, part: str) -> float | None:
     for channel in mappings(execution.get("channels")):
         if (as_str(channel.get("name")) or "?") == name:
             return as_float(channel.get(part)) if part in _CHANNEL_PARTS else None
@@ -157,12 +164,12 @@ def _channel(execution: Mapping[str, Any], name: str, part: str) -> float | None
     return None if math.isnan(value) else value
 
 
-def _linear(motion: Mapping[str, Any] | None) -> float:
+def _linear(motion: Mapping[str, object] | None) -> float:
     value = as_float(motion.get("linear")) if motion is not None else None
     return math.nan if value is None else value
 
 
-def planar_speed(part: str, intended: Any, actual: Any) -> Any:
+def planar_speed(part: str, intended: Speed, actual: Speed) -> Speed:
     """``channel.speed.<part>`` (``intended``, ``actual`` or ``deviation``) of a planar
     record whose linear motion was ``intended`` and ``actual`` (m/s, signed as logged, NaN
     when not logged): the speeds as magnitudes, the deviation ``|actual - intended|``; NaN

@@ -26,23 +26,93 @@ where Python raises on a zero or a negative, numpy would go on) is not compiled 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Container, Mapping, Sequence
 from fractions import Fraction
-from typing import Any
+from typing import Protocol, TypeGuard
 
 import numpy as np
 from numpy.typing import NDArray
 
 from trace_runtime.errors import TraceError
 
-__all__ = ["Columns", "compile_columns"]
+__all__ = ["BoundedNode", "Columns", "StlNode", "compile_columns", "is_bounded"]
 
 Columns = Callable[[Mapping[str, NDArray[np.float64]], int], NDArray[np.float64]]
 """Robustness at each step of a stretch: its columns by rtamt identifier, and its length."""
 
+_Column = NDArray[np.float64]
+_Binary = Callable[[_Column, _Column], _Column]
+
+
+# --- rtamt's syntax tree, as read here and by ``rules.formula`` --------------------------
+# rtamt ships no type information; these say what is read of its nodes
+# (``rtamt/syntax/node``). A node's kind is its class name; the guards below narrow a node
+# to the attributes its kind has.
+
+
+class StlNode(Protocol):
+    """A node of the tree rtamt parsed: every kind has its operands as ``children``."""
+
+    @property
+    def children(self) -> Sequence[StlNode]: ...
+
+
+class BoundedNode(StlNode, Protocol):
+    """A temporal operator with an interval (``always[a:b]``: rtamt's ``Interval``); a bound
+    is a ``Fraction`` of its unit (``""`` or None: seconds)."""
+
+    @property
+    def begin(self) -> Fraction | int: ...
+    @property
+    def end(self) -> Fraction | int: ...
+    @property
+    def begin_unit(self) -> str | None: ...
+    @property
+    def end_unit(self) -> str | None: ...
+
+
+class _VariableNode(StlNode, Protocol):
+    @property
+    def var(self) -> str: ...
+    @property
+    def field(self) -> str | None: ...
+
+
+class _ConstantNode(StlNode, Protocol):
+    @property
+    def val(self) -> float: ...
+
+
+class _Operator(Protocol):
+    @property
+    def value(self) -> int: ...
+
+
+class _PredicateNode(StlNode, Protocol):
+    @property
+    def operator(self) -> _Operator: ...
+
+
+def is_bounded(node: StlNode, kinds: Container[str]) -> TypeGuard[BoundedNode]:
+    """Whether ``node`` is of one of ``kinds``, temporal operators with an interval."""
+    return type(node).__name__ in kinds
+
+
+def _is_variable(node: StlNode) -> TypeGuard[_VariableNode]:
+    return type(node).__name__ == "Variable"
+
+
+def _is_constant(node: StlNode) -> TypeGuard[_ConstantNode]:
+    return type(node).__name__ == "Constant"
+
+
+def _is_predicate(node: StlNode) -> TypeGuard[_PredicateNode]:
+    return type(node).__name__ == "Predicate"
+
+
 _UNITS = {"": Fraction(1), "s": Fraction(1), "ms": Fraction(1, 1000), "us": Fraction(1, 10**6)}
 _UNITS["ns"] = Fraction(1, 10**9)
-_BINARY: dict[str, Callable[[Any, Any], Any]] = {
+_BINARY: dict[str, _Binary] = {
     "Addition": np.add,
     "Subtraction": np.subtract,
     "Multiplication": np.multiply,
@@ -52,7 +122,7 @@ _BINARY: dict[str, Callable[[Any, Any], Any]] = {
     "Iff": lambda left, right: -np.abs(left - right),
     "Xor": lambda left, right: np.abs(left - right),
 }
-_UNARY: dict[str, Callable[[Any], Any]] = {
+_UNARY: dict[str, Callable[[_Column], _Column]] = {
     "Neg": np.negative,
     "Abs": np.abs,
 }
@@ -76,7 +146,7 @@ class _UnsupportedError(TraceError):
     """An operator this module does not compute: rtamt evaluates the formula."""
 
 
-def compile_columns(node: Any, period_ns: int) -> Columns | None:
+def compile_columns(node: StlNode, period_ns: int) -> Columns | None:
     """The robustness of rtamt's parsed ``node`` over whole columns, at ``period_ns``; None
     when ``node`` uses an operator only rtamt's own interpreter computes."""
     try:
@@ -85,18 +155,18 @@ def compile_columns(node: Any, period_ns: int) -> Columns | None:
         return None
 
 
-def _compile(node: Any, period_s: Fraction) -> Columns:
+def _compile(node: StlNode, period_s: Fraction) -> Columns:
     kind = type(node).__name__
     children = [_compile(c, period_s) for c in _operands(node, kind)]
-    if kind == "Variable":
+    if _is_variable(node):
         if node.field:
             raise _UnsupportedError(kind)
         name = node.var
         return lambda columns, n: columns[name]
-    if kind == "Constant":
+    if _is_constant(node):
         value = float(node.val)
         return lambda columns, n: np.full(n, value)
-    if kind == "Predicate":
+    if _is_predicate(node):
         left, right = children
         compare = _comparison(node.operator.value)
         return lambda columns, n: compare(left(columns, n), right(columns, n))
@@ -108,7 +178,7 @@ def _compile(node: Any, period_s: Fraction) -> Columns:
         (inner,) = children
         unary = _UNARY[kind]
         return lambda columns, n: unary(inner(columns, n))
-    if kind in _WINDOWS:
+    if is_bounded(node, _WINDOWS):
         (inner,) = children
         reduce, ahead, beyond = _WINDOWS[kind]
         begin, end = _steps(node, period_s)
@@ -119,14 +189,14 @@ def _compile(node: Any, period_s: Fraction) -> Columns:
         (inner,) = children
         ahead, beyond = _STEPS[kind]
         return lambda columns, n: _shift(inner(columns, n), 1 if ahead else -1, beyond)
-    if kind == "TimedSince":
+    if is_bounded(node, ("TimedSince",)):
         left, right = children
         begin, end = _steps(node, period_s)
         return lambda columns, n: _since(left(columns, n), right(columns, n), begin, end)
     raise _UnsupportedError(kind)
 
 
-def _operands(node: Any, kind: str) -> list[Any]:
+def _operands(node: StlNode, kind: str) -> list[StlNode]:
     """The operands rtamt's interpreter reads: the first one or two children (its parser
     can attach an operand more than once, e.g. to ``not`` and to ``x + x``)."""
     arity = 2 if kind in _BINARY or kind in ("Predicate", "TimedSince") else 1
@@ -149,7 +219,7 @@ def _comparison(
     raise _UnsupportedError(str(operator))
 
 
-def _steps(node: Any, period_s: Fraction) -> tuple[int, int]:
+def _steps(node: BoundedNode, period_s: Fraction) -> tuple[int, int]:
     """A bounded operator's ``[begin, end]`` in whole steps (the bounds are multiples of the
     period: ``Formula`` checked them before rtamt would have)."""
     begin_unit = str(node.begin_unit or node.end_unit or "")
@@ -181,7 +251,7 @@ def _window(
     x: NDArray[np.float64],
     begin: int,
     end: int,
-    reduce: Callable[[Any, Any], Any],
+    reduce: _Binary,
     *,
     ahead: bool,
     beyond: float,
