@@ -189,7 +189,9 @@ def tree_figure(data: ReportData) -> str | None:
             **{k: v for k, v in edge.items() if k not in ("source", "target")},
         )
     root = tree["graph"].get("root")
-    if root not in source or len(source) > MAX_GRAPH_NODES or not nx.is_tree(source):
+    if root is None or root not in source:
+        return None
+    if len(source) > MAX_GRAPH_NODES or not nx.is_tree(source):
         return None
     pos = _tidy_layout(source, root)
     depth = 1 + round(-min(y for _, y in pos.values()))
