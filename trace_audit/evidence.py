@@ -13,7 +13,6 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import orjson
 
@@ -49,7 +48,7 @@ def open_recordings(paths: Sequence[str | Path]) -> Recordings | None:
 
 
 def describe_refs(
-    perception: Any, recordings: Recordings | None, *, decode: bool = True
+    perception: object, recordings: Recordings | None, *, decode: bool = True
 ) -> list[ExternalEvidence]:
     """Every external evidence ref of a perception message (parsed JSON), checked against
     ``recordings`` (None: each is unresolved) and, when resolved, decoded."""
@@ -57,7 +56,8 @@ def describe_refs(
     for entity_id, ref in _external_refs(perception):
         name = str(ref.get("recording"))
         topic = str(ref.get("topic"))
-        t_ns = ref.get("log_time_ns") if type(ref.get("log_time_ns")) is int else None
+        stamp = ref.get("log_time_ns")
+        t_ns = stamp if type(stamp) is int else None
         if recordings is None:
             out.append(ExternalEvidence(entity_id, name, topic, t_ns, "unresolved", "not given"))
             continue
@@ -71,7 +71,7 @@ def describe_refs(
     return out
 
 
-def _external_refs(perception: Any) -> Iterable[tuple[str, dict[str, Any]]]:
+def _external_refs(perception: object) -> Iterable[tuple[str, dict[str, object]]]:
     if not isinstance(perception, dict):
         return
     for entity in perception.get("entities") or ():
@@ -92,12 +92,13 @@ def _decoded(check: ExternalCheck) -> tuple[str, tuple[tuple[str, str], ...]]:
     return schema, _summary(value)
 
 
-def decode_message(path: Path, topic: str, data: bytes) -> tuple[str, Any]:
+def decode_message(path: Path, topic: str, data: bytes) -> tuple[str, object]:
     """Decode one message of ``topic`` in the MCAP file at ``path``: (schema name, value).
 
     CDR (ROS 2) with a ``ros2msg`` schema decodes through ``mcap-ros2-support``; JSON is
-    parsed. Raises ``LogReadError`` when the file has no summary to find the channel's
-    schema in, or the encoding is one this tool does not decode.
+    parsed. The value is JSON or a ROS 2 message (a class the decoder builds from the
+    schema), read by its fields. Raises ``LogReadError`` when the file has no summary to
+    find the channel's schema in, or the encoding is one this tool does not decode.
     """
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
@@ -135,7 +136,7 @@ def decode_message(path: Path, topic: str, data: bytes) -> tuple[str, Any]:
         raise LogReadError(str(path), f"{topic}: does not decode as {name} ({err})") from err
 
 
-def _summary(value: Any) -> tuple[tuple[str, str], ...]:
+def _summary(value: object) -> tuple[tuple[str, str], ...]:
     """Top-level fields as short text: scalars as they are, sequences by length, nested
     messages by their own first fields."""
     if isinstance(value, dict):
@@ -146,7 +147,7 @@ def _summary(value: Any) -> tuple[tuple[str, str], ...]:
     return tuple((str(name), _short(field)) for name, field in items[:_MAX_FIELDS])
 
 
-def _short(value: Any) -> str:
+def _short(value: object) -> str:
     if isinstance(value, float):
         text = f"{value:.6g}"
     elif isinstance(value, bytes | bytearray):

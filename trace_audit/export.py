@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Literal, get_args
+from typing import Literal, get_args
 
+from trace_audit.causal import EdgeData, GraphData
 from trace_audit.explanation import Explanation, explain
 from trace_audit.log_source import LogSource
 from trace_audit.log_time import TimeArg
@@ -86,7 +87,7 @@ def _title(result: Explanation) -> str:
     )
 
 
-def _json(result: Explanation) -> dict[str, Any]:
+def _json(result: Explanation) -> dict[str, object]:
     return {
         "robot": result.robot,
         "log": result.path,
@@ -98,7 +99,7 @@ def _json(result: Explanation) -> dict[str, Any]:
     }
 
 
-def _edge_note(edge: Mapping[str, Any]) -> str:
+def _edge_note(edge: EdgeData) -> str:
     level = str(edge.get("level") or "")
     rule = edge.get("rule")
     note = f"{level}: {rule}" if rule else level
@@ -253,7 +254,7 @@ def _mm_causal(
     return missing_nodes, undocumented
 
 
-def _mm_tree(tree: dict[str, Any], nid: _MermaidIds, lines: list[str]) -> None:
+def _mm_tree(tree: GraphData, nid: _MermaidIds, lines: list[str]) -> None:
     """The counterfactual tree's subgraph into ``lines``, the taken path thick."""
     lines.append('  subgraph tree["counterfactual decision tree (taken path thick)"]')
     lines.append("    direction TB")

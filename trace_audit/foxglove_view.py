@@ -16,7 +16,7 @@ from typing import Any
 
 import orjson
 
-from trace_audit.causal import layer_with_defaults, read_decision
+from trace_audit.causal import Decision, layer_with_defaults, read_decision
 from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
 from trace_audit.cycle_fields import command_of, seal_dropped
 from trace_audit.sensor_window import DEFAULT_SENSOR_WINDOW, SensorWindow
@@ -125,7 +125,7 @@ class FoxgloveView:
         out.append(_json(TOPIC_FACTORS, numbers, cycle.t_ns))
         execution = decision.execution
         if execution is not None:
-            channels: dict[str, Any] = {"deviation": execution.deviation}
+            channels: dict[str, object] = {"deviation": execution.deviation}
             for channel in execution.channels:
                 channels[_PLOT_KEY.sub("_", channel.name)] = {
                     "intended": channel.intended,
@@ -285,7 +285,7 @@ class FoxgloveView:
             cycle.t_ns,
         )
 
-    def _decision(self, cycle: Cycle, decision: Any, command: str | None) -> FoxgloveMessage:
+    def _decision(self, cycle: Cycle, decision: Decision, command: str | None) -> FoxgloveMessage:
         m = self.m
         was = "" if self.cycles == 1 else f"{self.command} -> "
         text = f"cycle {cycle.cycle}: {was}{command}"
@@ -330,7 +330,7 @@ def _json_schema(topic: str) -> tuple[str, str, bytes]:
     return topic.rsplit("/", 1)[-1], "jsonschema", orjson.dumps(_NUMBERS_SCHEMA)
 
 
-def _json(topic: str, value: dict[str, Any], t_ns: int) -> FoxgloveMessage:
+def _json(topic: str, value: Mapping[str, object], t_ns: int) -> FoxgloveMessage:
     return FoxgloveMessage(topic, _json_schema(topic), "json", orjson.dumps(value), t_ns)
 
 

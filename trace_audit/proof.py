@@ -20,9 +20,10 @@ import binascii
 import hashlib
 import os
 import zlib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TypedDict, TypeVar
 
 import orjson
 
@@ -30,13 +31,7 @@ from trace_audit.witness.tree import LevelTree
 from trace_runtime.boundary import read_side_file, write_new
 from trace_runtime.chain import sensor_cover, sensor_line
 from trace_runtime.clock import iso_utc
-from trace_runtime.errors import (
-    InputError,
-    LogReadError,
-    NoteError,
-    StorageError,
-    UsageError,
-)
+from trace_runtime.errors import InputError, LogReadError, NoteError, StorageError, UsageError
 from trace_runtime.reading.chain_tree import prove_pass
 from trace_runtime.reading.logset import Log, open_log
 from trace_runtime.records import TOPIC_SEAL
@@ -56,6 +51,7 @@ __all__ = [
     "BUNDLE_FORMAT",
     "MAX_BUNDLE_BYTES",
     "BundleCheck",
+    "ProofBundle",
     "WrittenBundle",
     "check_bundle",
     "make_bundle",
@@ -68,10 +64,28 @@ BUNDLE_FORMAT = "trace-proof/3"
 """The format ``prove`` writes: ``trace-proof/2`` with each message's and reading's data
 deflated (the largest bundle of a 24 h simulator log 7.9 KB, not 24)."""
 BUNDLE_FORMATS = ("trace-proof/1", "trace-proof/2", BUNDLE_FORMAT)
-_FIELDS_1 = frozenset(
-    {"format", "cycle", "t_ns", "messages", "seal", "leaf_index", "tree_size", "root"}
-    | {"inclusion", "note", "cosigned"}
-)
+T = TypeVar("T")
+
+
+class ProofBundle(TypedDict):
+    """A bundle as ``make_bundle`` builds it (``BUNDLE_FORMAT``); one read from a file is
+    untrusted JSON (``read_bundle``) until ``check_bundle`` has checked every field."""
+
+    format: str
+    cycle: int
+    t_ns: int
+    messages: list[dict[str, str]]  # topic, data
+    sensors: list[dict[str, str | int]]  # topic, sequence, log_time_ns, data
+    seal: str
+    leaf_index: int
+    tree_size: int
+    root: str
+    inclusion: list[str]
+    note: str
+    cosigned: bool
+
+
+_FIELDS_1 = ProofBundle.__required_keys__ - {"sensors"}
 BUNDLE_FIELDS = {
     "trace-proof/1": _FIELDS_1,
     "trace-proof/2": _FIELDS_1 | {"sensors"},
@@ -96,10 +110,8 @@ def _deflated(data: bytes) -> str:
     return _b64(squeeze.compress(data) + squeeze.flush())
 
 
-def make_bundle(log_path: str | Path, cycle: int, *, robot: str | None = None) -> dict[str, Any]:
+def make_bundle(log_path: str | Path, cycle: int, *, robot: str | None = None) -> ProofBundle:
     """The proof bundle of ``cycle`` of ``robot`` (the log's only robot when None)."""
-    from trace_audit.witness.push import robot_checkpoints
-
     log = open_log(log_path)
     robot_id = robot or _only_robot(log)
     proved = prove_pass(log, robot_id, cycle)
@@ -109,15 +121,14 @@ def make_bundle(log_path: str | Path, cycle: int, *, robot: str | None = None) -
     seal = found.payloads[TOPIC_SEAL]
     tree = LevelTree(proved.leaves)
     del proved
-    note, size, cosigned = _covering_note(log, robot_id, index, tree, robot_checkpoints)
-    root = tree.root(size)
-    messages = [
+    note, size, cosigned = _covering_note(log, robot_id, index, tree)
+    messages: list[dict[str, str]] = [
         {"topic": topic, "data": _deflated(data)}
         for topic, data in sorted(found.payloads.items())
         if topic != TOPIC_SEAL
     ]
     covered = b'"sensors":{' in seal  # a 1.3 seal: the readings can be checked alone
-    sensors = [
+    sensors: list[dict[str, str | int]] = [
         {
             "topic": m.topic,
             "sequence": m.sequence,
@@ -135,7 +146,7 @@ def make_bundle(log_path: str | Path, cycle: int, *, robot: str | None = None) -
         "seal": _b64(seal),
         "leaf_index": index,
         "tree_size": size,
-        "root": root.hex(),
+        "root": tree.root(size).hex(),
         "inclusion": [_b64(h) for h in tree.inclusion_proof(index, size)],
         "note": note,
         "cosigned": cosigned,
@@ -186,11 +197,11 @@ def _only_robot(log: Log) -> str:
     return robots[0]
 
 
-def _covering_note(
-    log: Log, robot: str, index: int, tree: LevelTree, robot_checkpoints: Any
-) -> tuple[str, int, bool]:
+def _covering_note(log: Log, robot: str, index: int, tree: LevelTree) -> tuple[str, int, bool]:
     """The note of a tree covering leaf ``index``: the smallest cosigned one in the root's
     store that matches the seals, else the robot's newest signed checkpoint."""
+    from trace_audit.witness.push import robot_checkpoints
+
     for record in sorted(read_cosigned(log.root, robot), key=lambda r: r.tree_size):
         fits = index < record.tree_size <= tree.size
         if fits and tree.root(record.tree_size).hex() == record.root:
@@ -221,7 +232,7 @@ class BundleCheck:
     ok: bool = False
 
 
-def read_bundle(path: str | Path) -> dict[str, Any]:
+def read_bundle(path: str | Path) -> dict[str, object]:
     data = read_side_file(Path(path), limit=MAX_BUNDLE_BYTES)
     if data is None:
         raise LogReadError(str(path), "no such proof bundle")
@@ -238,7 +249,7 @@ class _BadBundleError(InputError):
     """A bundle not of the documented shape (reported as a failed step, never raised out)."""
 
 
-def _field(bundle: dict[str, Any], name: str, kind: type) -> Any:
+def _field(bundle: Mapping[str, object], name: str, kind: type[T]) -> T:
     value = bundle.get(name)
     if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
         raise _BadBundleError(f"field {name} is missing or not {kind.__name__}")
@@ -299,7 +310,7 @@ class _DataReader:
 
 
 def _check_readings(
-    bundle: dict[str, Any], seal: dict[str, Any], r: BundleCheck, read: _DataReader
+    bundle: Mapping[str, object], seal: Mapping[str, object], r: BundleCheck, read: _DataReader
 ) -> bool:
     """The bundle's sensor readings against the seal's ``sensors``: False when they differ."""
     lines = []
@@ -317,11 +328,8 @@ def _check_readings(
             raise _BadBundleError("sensor readings given for a seal that does not cover them")
         r.steps.append(("sensors", True, "not covered by this seal (profile 1.2 or earlier)"))
         return True
-    count, readings = sensor_cover(lines)
-    if not isinstance(sealed, dict) or (sealed.get("count"), sealed.get("digest")) != (
-        count,
-        readings,
-    ):
+    cover = count, _ = sensor_cover(lines)
+    if not isinstance(sealed, dict) or (sealed.get("count"), sealed.get("digest")) != cover:
         r.steps.append(("sensors", False, f"the {count} reading(s) differ from the seal's"))
         return False
     r.steps.append(("sensors", True, f"{count} sensor reading(s) match the seal"))
@@ -345,7 +353,7 @@ def verify_proof(
 
 
 def check_bundle(
-    bundle: dict[str, Any],
+    bundle: Mapping[str, object],
     key: PublicKey,
     *,
     witness_key: NoteVerifier | None = None,
@@ -362,10 +370,11 @@ def check_bundle(
 
 
 def _check(
-    bundle: dict[str, Any], key: PublicKey, witness_key: NoteVerifier | None, r: BundleCheck
+    bundle: Mapping[str, object], key: PublicKey, witness_key: NoteVerifier | None, r: BundleCheck
 ) -> None:
     """Each step in order (the module doc); a failed one ends the check."""
-    expected = BUNDLE_FIELDS.get(bundle.get("format"))  # type: ignore[arg-type]
+    fmt = bundle.get("format")
+    expected = BUNDLE_FIELDS.get(fmt) if isinstance(fmt, str) else None
     if expected is None:
         raise _BadBundleError(f"the format is not one of {', '.join(BUNDLE_FORMATS)}")
     if set(bundle) != expected:
@@ -386,7 +395,7 @@ def _check(
 
 
 def _check_digests(
-    bundle: dict[str, Any], seal_bytes: bytes, r: BundleCheck, read: _DataReader
+    bundle: Mapping[str, object], seal_bytes: bytes, r: BundleCheck, read: _DataReader
 ) -> bool:
     """The messages (and the readings a 1.3 seal covers) against the seal's digests."""
     try:
@@ -401,11 +410,7 @@ def _check_digests(
         return False
     given: dict[str, bytes] = {}
     for m in _field(bundle, "messages", list):
-        if (
-            not isinstance(m, dict)
-            or set(m) != {"topic", "data"}
-            or not isinstance(m.get("topic"), str)
-        ):
+        if not isinstance(m, dict) or set(m) != {"topic", "data"} or type(m["topic"]) is not str:
             raise _BadBundleError("a message has no topic")
         if m["topic"] in given:
             raise _BadBundleError(f"two messages on {m['topic']}")
@@ -413,21 +418,15 @@ def _check_digests(
     wrong = sorted(t for t, d in given.items() if digests.get(t) != hashlib.sha256(d).hexdigest())
     absent = sorted(set(digests) - set(given))
     if wrong or absent:
-        detail = "; ".join(
-            part
-            for part in (
-                f"digest differs: {', '.join(wrong)}" if wrong else "",
-                f"sealed but absent: {', '.join(absent)}" if absent else "",
-            )
-            if part
-        )
-        r.steps.append(("digests", False, detail))
+        problems = [f"digest differs: {', '.join(wrong)}"] if wrong else []
+        problems += [f"sealed but absent: {', '.join(absent)}"] if absent else []
+        r.steps.append(("digests", False, "; ".join(problems)))
         return False
     r.steps.append(("digests", True, f"{len(given)} message(s) match the seal"))
     return "sensors" not in bundle or _check_readings(bundle, seal, r, read)
 
 
-def _check_inclusion(bundle: dict[str, Any], seal_bytes: bytes, r: BundleCheck) -> bytes | None:
+def _check_inclusion(bundle: Mapping[str, object], seal: bytes, r: BundleCheck) -> bytes | None:
     """The seal's leaf in the tree: the root it proves to, or None when it does not."""
     r.leaf_index = _field(bundle, "leaf_index", int)
     r.tree_size = _field(bundle, "tree_size", int)
@@ -436,7 +435,7 @@ def _check_inclusion(bundle: dict[str, Any], seal_bytes: bytes, r: BundleCheck) 
         raise _BadBundleError("the root is not 64 lowercase hex digits")
     root = bytes.fromhex(root_hex)
     proof = [_unb64(h, "an inclusion hash") for h in _field(bundle, "inclusion", list)]
-    if not verify_inclusion(r.leaf_index, r.tree_size, leaf_hash(seal_bytes), proof, root):
+    if not verify_inclusion(r.leaf_index, r.tree_size, leaf_hash(seal), proof, root):
         r.steps.append(("inclusion", False, "the seal is not leaf of the tree at that root"))
         return None
     r.steps.append(
@@ -446,7 +445,7 @@ def _check_inclusion(bundle: dict[str, Any], seal_bytes: bytes, r: BundleCheck) 
 
 
 def _check_note(
-    bundle: dict[str, Any],
+    bundle: Mapping[str, object],
     key: PublicKey,
     witness_key: NoteVerifier | None,
     root: bytes,

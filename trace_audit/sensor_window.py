@@ -11,8 +11,7 @@ from __future__ import annotations
 
 import hashlib
 from collections import OrderedDict, deque
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Mapping, Sequence
 
 from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.reading.recordings import ExternalCheck, ExternalState, Recordings
@@ -47,7 +46,7 @@ class SensorWindow:
         """External recordings refs may name (None: such refs are unresolved, unchecked)."""
         # (recording, topic, log time, sequence, digest) -> its check, most recent last:
         # tracked entities cite the same reading cycle after cycle
-        self._external: OrderedDict[tuple[Any, ...], ExternalCheck] = OrderedDict()
+        self._external: OrderedDict[tuple[object, ...], ExternalCheck] = OrderedDict()
         # (topic, log_time_ns) -> the messages logged under it, oldest first
         self._index: dict[tuple[str, int], list[RawMessage]] = {}
         self._batches: deque[Sequence[RawMessage]] = deque()
@@ -83,7 +82,7 @@ class SensorWindow:
         self._batches.clear()
         self._digests.clear()
 
-    def resolve(self, ref: dict[str, Any]) -> str:
+    def resolve(self, ref: Mapping[str, object]) -> str:
         """'' when the ref resolves to a message in the window, else why it does not."""
         if type(ref.get("recording")) is str:
             return self.check_external(ref).detail
@@ -107,7 +106,7 @@ class SensorWindow:
             return ""
         return why
 
-    def check_external(self, ref: dict[str, Any]) -> ExternalCheck:
+    def check_external(self, ref: Mapping[str, object]) -> ExternalCheck:
         """The check of a ref into an external recording (remembered for the last few
         thousand refs); ``detail`` is '' when it resolved."""
         key = tuple(ref.get(k) for k in ("recording", "topic", "log_time_ns", "sequence", "digest"))
@@ -131,7 +130,7 @@ class SensorWindow:
             self._external.popitem(last=False)
         return found
 
-    def external_state(self, ref: dict[str, Any]) -> ExternalState:
+    def external_state(self, ref: Mapping[str, object]) -> ExternalState:
         """resolved, broken or unresolved: what became of a ref into an external recording."""
         return self.check_external(ref).state
 

@@ -27,6 +27,10 @@ from trace_audit.causal.decision import (
 from trace_audit.causal.defaults import layer_with_defaults
 from trace_audit.causal.graph import (
     ACTION_NODE,
+    EdgeData,
+    GraphAttributes,
+    GraphData,
+    NodeData,
     causal_graph,
     causal_graph_data,
     graph_data,
@@ -41,8 +45,12 @@ __all__ = [
     "CheckView",
     "CounterfactualView",
     "Decision",
+    "EdgeData",
     "ExecutionView",
     "FactorValue",
+    "GraphAttributes",
+    "GraphData",
+    "NodeData",
     "TreeEdgeView",
     "TreeNodeView",
     "TreeView",

@@ -12,10 +12,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from itertools import pairwise
-from typing import Any
 
 from trace_audit.causal.defaults import layer_with_defaults
-from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
+from trace_audit.causal.lenient import as_float, as_list, as_mapping, as_str, mappings
 from trace_audit.jsonout import OMIT_EMPTY
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.flags import split_flags
@@ -39,7 +38,7 @@ __all__ = [
 Scalar = float | int | bool | str
 
 
-def format_value(value: Any, unit: str | None = None) -> str:
+def format_value(value: object, unit: str | None = None) -> str:
     """A factor value as people read it: ``1.5 m``, ``0.70``, ``true``."""
     if isinstance(value, bool):
         text = "true" if value else "false"
@@ -264,7 +263,7 @@ def read_decision(cycle: Cycle, *, with_tree: bool = True) -> Decision:
     )
 
 
-def _factor(raw: Mapping[str, Any]) -> FactorValue:
+def _factor(raw: Mapping[str, object]) -> FactorValue:
     value = raw.get("value")
     return FactorValue(
         node=as_str(raw.get("node")) or "",
@@ -275,7 +274,7 @@ def _factor(raw: Mapping[str, Any]) -> FactorValue:
 
 
 def _counterfactual(
-    raw: Mapping[str, Any], factors: Mapping[str, FactorValue]
+    raw: Mapping[str, object], factors: Mapping[str, FactorValue]
 ) -> CounterfactualView:
     node = as_str(raw.get("factor")) or "?"
     known = factors.get(node)
@@ -298,8 +297,8 @@ def _counterfactual(
     )
 
 
-def _execution(raw: Mapping[str, Any]) -> ExecutionView:
-    flags = tuple(str(f) for f in raw.get("flags") or () if isinstance(f, str))
+def _execution(raw: Mapping[str, object]) -> ExecutionView:
+    flags = tuple(str(f) for f in as_list(raw.get("flags")) if isinstance(f, str))
     problems, scenario = split_flags(flags)
     intended = as_mapping(raw.get("intended")) or {}
     actual = as_mapping(raw.get("actual")) or {}
@@ -334,8 +333,8 @@ def _execution(raw: Mapping[str, Any]) -> ExecutionView:
     )
 
 
-def _tree_view(raw: Mapping[str, Any], command: str | None) -> TreeView:
-    path = tuple(str(p) for p in raw.get("taken_path") or () if isinstance(p, str))
+def _tree_view(raw: Mapping[str, object], command: str | None) -> TreeView:
+    path = tuple(str(p) for p in as_list(raw.get("taken_path")) if isinstance(p, str))
     on_path = set(path)
     taken_edges = set(pairwise(path))
     nodes = tuple(

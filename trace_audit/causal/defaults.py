@@ -9,7 +9,7 @@ from __future__ import annotations
 import types
 from collections.abc import Mapping
 from functools import cache
-from typing import Any, Union, get_args, get_origin
+from typing import Union, get_args, get_origin
 
 from pydantic import BaseModel
 
@@ -19,7 +19,7 @@ from trace_runtime.records import MESSAGE_MODELS
 __all__ = ["layer_with_defaults", "with_defaults"]
 
 
-def layer_with_defaults(cycle: Cycle, topic: str) -> Any:
+def layer_with_defaults(cycle: Cycle, topic: str) -> object:
     """``cycle.layer(topic)`` with every optional field the writer left out set to its
     schema default (``trace_runtime.records``), as JSON: a robot in another language may
     omit ``angular`` and mean ``0.0``. A warm summary is returned as kept: a field missing
@@ -31,7 +31,7 @@ def layer_with_defaults(cycle: Cycle, topic: str) -> Any:
     return with_defaults(model, layer)
 
 
-def with_defaults(model: type[BaseModel], value: Any) -> Any:
+def with_defaults(model: type[BaseModel], value: object) -> object:
     """``value`` (plain JSON) with the defaults of ``model``'s omitted optional fields,
     recursively through nested records and lists of them; anything else is left as it is
     (this reads, it does not validate)."""
@@ -59,13 +59,13 @@ _REQUIRED = object()
 @cache
 def _fields(
     model: type[BaseModel],
-) -> tuple[tuple[str, Any, tuple[type[BaseModel], bool] | None], ...]:
+) -> tuple[tuple[str, object, tuple[type[BaseModel], bool] | None], ...]:
     """(JSON key, default or a factory or ``_REQUIRED``, nested record type) per field."""
     out = []
     for name, info in model.model_fields.items():
         key = info.alias or name
         if info.is_required():
-            default: Any = _REQUIRED
+            default: object = _REQUIRED
         elif info.default_factory is not None:
             default = info.default_factory
         else:
@@ -74,11 +74,11 @@ def _fields(
     return tuple(out)
 
 
-def _jsonable(value: Any) -> Any:
+def _jsonable(value: object) -> object:
     return list(value) if isinstance(value, tuple) else value
 
 
-def _nested(annotation: Any) -> tuple[type[BaseModel], bool] | None:
+def _nested(annotation: object) -> tuple[type[BaseModel], bool] | None:
     """The record type a field holds (and whether it is a list of them), if any."""
     if isinstance(annotation, type) and issubclass(annotation, BaseModel):
         return annotation, False

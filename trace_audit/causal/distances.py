@@ -9,8 +9,6 @@ derives no distance has none.
 
 from __future__ import annotations
 
-from typing import Any
-
 from trace_audit.causal.lenient import as_number_or_flag
 
 __all__ = ["DISTANCE_UNITS", "entity_distances"]
@@ -18,12 +16,12 @@ __all__ = ["DISTANCE_UNITS", "entity_distances"]
 DISTANCE_UNITS = frozenset(("m", "meter", "metre", "meters", "metres"))
 
 
-def entity_distances(belief: Any) -> dict[str, float]:
+def entity_distances(belief: object) -> dict[str, float]:
     """Entity id -> distance to the robot in metres, for a cycle's ``/trace/belief``
     record as parsed JSON (anything else gives none)."""
     if type(belief) is not dict:
         return {}
-    values: dict[Any, float] = {}
+    values: dict[object, float] = {}
     for node in belief.get("nodes") or ():
         if (
             type(node) is dict

@@ -13,11 +13,11 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from itertools import pairwise
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Required, TypedDict, Unpack
 
 from trace_audit.causal.decision import Decision, TreeView, format_value, read_decision
 from trace_audit.causal.defaults import layer_with_defaults
-from trace_audit.causal.lenient import as_mapping, as_str, mappings
+from trace_audit.causal.lenient import as_list, as_mapping, as_str, mappings
 from trace_audit.chains import DecisionChains, FactorChain, Link
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.records import TOPIC_BELIEF, TOPIC_PERCEPTION
@@ -27,6 +27,10 @@ if TYPE_CHECKING:  # networkx is imported by the two functions that return its g
 
 __all__ = [
     "ACTION_NODE",
+    "EdgeData",
+    "GraphAttributes",
+    "GraphData",
+    "NodeData",
     "causal_graph",
     "causal_graph_data",
     "graph_data",
@@ -35,6 +39,83 @@ __all__ = [
 ]
 
 ACTION_NODE = "action"
+
+
+class GraphAttributes(TypedDict, total=False):
+    """The graph's own attributes: the causal graph's decision (``cycle``, ``t_ns``,
+    ``command``), the tree's ``root`` and ``taken_path``."""
+
+    cycle: int
+    t_ns: int
+    command: str | None
+    root: str | None
+    taken_path: list[str]
+
+
+class NodeAttributes(TypedDict, total=False):
+    """A node's attributes. Causal graph: ``kind`` (sensor, evidence, entity, belief,
+    action, missing), ``label``, ``missing``, ``detail`` (why a placeholder), ``factor``,
+    ``belief_kind`` and ``p`` (as logged: untrusted JSON), ``belief_id``, ``entity_id``,
+    ``in_cycle``. Tree: ``label``, ``test``, ``command``, ``taken``, ``missing``."""
+
+    kind: str
+    label: str
+    missing: bool
+    detail: str
+    factor: bool
+    belief_kind: object
+    p: object
+    belief_id: str
+    entity_id: str
+    in_cycle: bool
+    test: str | None
+    command: str | None
+    taken: bool
+
+
+class EdgeAttributes(TypedDict, total=False):
+    """An edge's attributes. Causal graph: ``level``, ``documented``, ``detail``,
+    ``factors`` (the factor chains that use it), ``role``, and a belief edge's ``rule``
+    and ``p`` (as logged: untrusted JSON). Tree: ``label``, ``taken``."""
+
+    level: str
+    documented: bool
+    detail: str
+    factors: list[str]
+    role: str
+    rule: object
+    p: object
+    label: str
+    taken: bool
+
+
+class _ChainEdgeAttributes(TypedDict, total=False):
+    """What an edge of the causal graph adds to those its chain's link gives it."""
+
+    role: str
+    rule: object
+    p: object
+
+
+class NodeData(NodeAttributes, total=False):
+    """A node as plain JSON data: its ``id`` and attributes."""
+
+    id: Required[str]
+
+
+class EdgeData(EdgeAttributes, total=False):
+    """An edge as plain JSON data: ``source``, ``target`` and attributes."""
+
+    source: Required[str]
+    target: Required[str]
+
+
+class GraphData(TypedDict):
+    """A graph as plain JSON data (``graph_data``): its attributes, nodes and edges."""
+
+    graph: GraphAttributes
+    nodes: list[NodeData]
+    edges: list[EdgeData]
 
 
 class _Graph:
@@ -46,34 +127,34 @@ class _Graph:
     node in that order, then by target as added), so the data is the same as from a
     ``networkx.DiGraph`` built by the same calls."""
 
-    def __init__(self, **graph: Any) -> None:
-        self.graph: dict[str, Any] = graph
-        self.nodes: dict[str, dict[str, Any]] = {}
-        self._succ: dict[str, dict[str, dict[str, Any]]] = {}
+    def __init__(self, **graph: Unpack[GraphAttributes]) -> None:
+        self.graph = graph
+        self.nodes: dict[str, NodeAttributes] = {}
+        self._succ: dict[str, dict[str, EdgeAttributes]] = {}
 
     def __contains__(self, node: str) -> bool:
         return node in self.nodes
 
-    def add_node(self, node: str, **attrs: Any) -> None:
+    def add_node(self, node: str, **attrs: Unpack[NodeAttributes]) -> None:
         self.nodes.setdefault(node, {}).update(attrs)
 
-    def add_edge(self, u: str, v: str, **attrs: Any) -> None:
+    def add_edge(self, u: str, v: str, **attrs: Unpack[EdgeAttributes]) -> None:
         for end in (u, v):
             self.nodes.setdefault(end, {})
         self._succ.setdefault(u, {}).setdefault(v, {}).update(attrs)
 
-    def edge(self, u: str, v: str) -> dict[str, Any] | None:
+    def edge(self, u: str, v: str) -> EdgeAttributes | None:
         """The attributes of edge ``u -> v`` (None when there is no such edge)."""
         return self._succ.get(u, {}).get(v)
 
-    def edges(self) -> Iterable[tuple[str, str, dict[str, Any]]]:
+    def edges(self) -> Iterable[tuple[str, str, EdgeAttributes]]:
         for u in self.nodes:
             for v, data in self._succ.get(u, {}).items():
                 yield u, v, data
 
-    def data(self) -> dict[str, Any]:
+    def data(self) -> GraphData:
         return {
-            "graph": dict(self.graph),
+            "graph": self.graph.copy(),
             "nodes": [{"id": n, **attrs} for n, attrs in self.nodes.items()],
             "edges": [{"source": u, "target": v, **attrs} for u, v, attrs in self.edges()],
         }
@@ -102,7 +183,7 @@ def causal_graph(
 
 def causal_graph_data(
     cycle: Cycle, chains: DecisionChains, decision: Decision | None = None
-) -> dict[str, Any]:
+) -> GraphData:
     """``graph_data(causal_graph(...))``, built without networkx."""
     return _causal(cycle, chains, decision).data()
 
@@ -133,9 +214,9 @@ class _GraphBuilder:
     def __init__(
         self,
         g: _Graph,
-        nodes: Mapping[str, Mapping[str, Any]],
-        edges: Mapping[tuple[str, str], Mapping[str, Any]],
-        entities: Mapping[str, Mapping[str, Any]],
+        nodes: Mapping[str, Mapping[str, object]],
+        edges: Mapping[tuple[str, str], Mapping[str, object]],
+        entities: Mapping[str, Mapping[str, object]],
         sensors: set[tuple[str, int]],
     ) -> None:
         self.g = g
@@ -144,7 +225,7 @@ class _GraphBuilder:
         self.entities = entities
         self.sensors = sensors
 
-    def _node(self, node_id: str, **attrs: Any) -> str:
+    def _node(self, node_id: str, **attrs: Unpack[NodeAttributes]) -> str:
         if node_id not in self.g:
             self.g.add_node(node_id, **attrs)
         return node_id
@@ -168,7 +249,14 @@ class _GraphBuilder:
             detail=link.detail,
         )
 
-    def _edge(self, u: str, v: str, chain: FactorChain, link: Link, **attrs: Any) -> None:
+    def _edge(
+        self,
+        u: str,
+        v: str,
+        chain: FactorChain,
+        link: Link,
+        **attrs: Unpack[_ChainEdgeAttributes],
+    ) -> None:
         data = self.g.edge(u, v)
         if data is not None:
             data["documented"] = data["documented"] or link.documented
@@ -293,8 +381,8 @@ class _GraphBuilder:
 
 
 def _pick_evidence(
-    evidence: list[Mapping[str, Any]], ref_label: str
-) -> tuple[int, Mapping[str, Any]] | None:
+    evidence: list[Mapping[str, object]], ref_label: str
+) -> tuple[int, Mapping[str, object]] | None:
     """The evidence item whose ref the chain followed, else the first item logged."""
     for index, item in enumerate(evidence):
         ref = as_mapping(item.get("ref"))
@@ -303,7 +391,7 @@ def _pick_evidence(
     return (0, evidence[0]) if evidence else None
 
 
-def _entity_label(entity_id: str, entity: Mapping[str, Any]) -> str:
+def _entity_label(entity_id: str, entity: Mapping[str, object]) -> str:
     cls = as_str(entity.get("class")) or "?"
     confidence = as_mapping(entity.get("confidence")) or {}
     p = confidence.get(cls)
@@ -311,13 +399,14 @@ def _entity_label(entity_id: str, entity: Mapping[str, Any]) -> str:
     return f"{cls}{shown} ({entity_id})"
 
 
-def _evidence_label(item: Mapping[str, Any]) -> str:
+def _evidence_label(item: Mapping[str, object]) -> str:
     sensor = as_str(item.get("sensor")) or "?"
     region = as_mapping(item.get("region"))
     where = ""
     if region:
         values = ", ".join(
-            f"{v:g}" if isinstance(v, int | float) else str(v) for v in region.get("values") or ()
+            f"{v:g}" if isinstance(v, int | float) else str(v)
+            for v in as_list(region.get("values"))
         )
         where = f" {region.get('kind')} [{values}]"
     weight = item.get("weight")
@@ -330,7 +419,7 @@ def tree_graph(tree: TreeView) -> nx.DiGraph:
     return _tree(tree).to_networkx()
 
 
-def tree_graph_data(tree: TreeView) -> dict[str, Any]:
+def tree_graph_data(tree: TreeView) -> GraphData:
     """``graph_data(tree_graph(tree))``, built without networkx."""
     return _tree(tree).data()
 
@@ -351,10 +440,12 @@ def _tree(tree: TreeView) -> _Graph:
     return g
 
 
-def graph_data(g: nx.DiGraph) -> dict[str, Any]:
+def graph_data(g: nx.DiGraph) -> GraphData:
     """A graph as plain JSON data: ``{"graph": {...}, "nodes": [...], "edges": [...]}``."""
-    return {
-        "graph": dict(g.graph),
-        "nodes": [{"id": n, **data} for n, data in g.nodes(data=True)],
-        "edges": [{"source": u, "target": v, **data} for u, v, data in g.edges(data=True)],
-    }
+    # networkx is untyped: its attribute dicts hold what the builder set, for this module's
+    # graphs the attributes above. ``_Graph`` iterates in networkx's order (see there).
+    out = _Graph(**g.graph)
+    out.nodes = dict(g.nodes(data=True))
+    for u, v, data in g.edges(data=True):
+        out.add_edge(u, v, **data)
+    return out.data()

@@ -4,12 +4,15 @@ each node and link named by the graph's labels, bottom (sensor reading) up, as
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from itertools import pairwise
-from typing import Any
+from typing import TYPE_CHECKING
 
 from trace_audit.chains.model import FactorChain, Link
+
+if TYPE_CHECKING:  # the causal graph is built from chains: its module imports this package
+    from trace_audit.causal.graph import EdgeData, GraphData
 
 __all__ = ["LabelledChain", "LabelledLink", "label_chain"]
 
@@ -47,14 +50,14 @@ class LabelledChain:
     """The links bottom-up: sensor reading first, factor node last."""
 
 
-def label_chain(chain: FactorChain, graph: Mapping[str, Any], command: str | None) -> LabelledChain:
+def label_chain(chain: FactorChain, graph: GraphData, command: str | None) -> LabelledChain:
     """``chain`` named by ``graph``, the node-link JSON of its decision's causal graph
     (``trace_audit.causal.causal_graph_data``), whose action is ``command``."""
     nodes = graph["nodes"]
     labels = {n["id"]: str(n.get("label", n["id"])) for n in nodes}
     kinds = {n["id"]: n.get("belief_kind") for n in nodes}
     mine = [e for e in graph["edges"] if chain.node in e.get("factors", ())]
-    by_level: dict[str, list[Mapping[str, Any]]] = {}
+    by_level: dict[str, list[EdgeData]] = {}
     for edge in mine:
         by_level.setdefault(str(edge.get("level")), []).append(edge)
     path = tuple(labels.get(p, p) for p in _edge_path(mine) if kinds.get(p) != "entity")
@@ -73,7 +76,7 @@ def label_chain(chain: FactorChain, graph: Mapping[str, Any], command: str | Non
     return LabelledChain(chain, path, tuple(links))
 
 
-def _belief_path_text(graph: Mapping[str, Any], ref: str) -> str:
+def _belief_path_text(graph: GraphData, ref: str) -> str:
     """``ped_1 -> ped_1.distance -> collision_risk (rules: a, b)``, bottom-up."""
     rules = {(e["source"], e["target"]): e.get("rule") for e in graph["edges"] if e.get("rule")}
     path = list(reversed(ref.split(" <- ")))
@@ -86,7 +89,7 @@ def _belief_path_text(graph: Mapping[str, Any], ref: str) -> str:
     return f"{text} (rules: {', '.join(used)})" if used else text
 
 
-def _edge_path(edges: Sequence[Mapping[str, Any]]) -> list[str]:
+def _edge_path(edges: Sequence[EdgeData]) -> list[str]:
     """The nodes of a chain's edges from the bottom up to the action; [] unless they form
     one path."""
     succ = {e["source"]: e["target"] for e in edges}

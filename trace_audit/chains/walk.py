@@ -6,8 +6,7 @@ are the package's (``trace_audit.chains``)."""
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterable
-from typing import Any
+from collections.abc import Iterable, Mapping
 
 from trace_audit.chains.model import (
     EXPECTED_DEPTH_ENTITY,
@@ -52,13 +51,14 @@ def trace_cycle(
 def trace_layers(
     cycle: int,
     t_ns: int,
-    action: Any,
-    belief: Any,
-    perception: Any,
+    action: object,
+    belief: object,
+    perception: object,
     *,
     window: SensorWindow,
 ) -> DecisionChains:
-    """The factor chains of one decision given its layer messages as plain JSON dicts."""
+    """The factor chains of one decision given its layer messages as parsed JSON (or a
+    metrics shape's fields of them); anything but a JSON object is a layer not logged."""
     if not isinstance(action, dict):
         return DecisionChains(cycle, t_ns, (), 0.0, 0.0, "action not logged")
     rationale = action.get("rationale")
@@ -76,7 +76,7 @@ def trace_layers(
 
 
 def score_layers(
-    action: Any, belief: Any, perception: Any, *, window: SensorWindow
+    action: object, belief: object, perception: object, *, window: SensorWindow
 ) -> DecisionScore:
     """ET and ET_partial of one decision, as ``trace_layers`` gives them, without the links.
 
@@ -119,23 +119,23 @@ class _Walker:
 
     def __init__(
         self,
-        belief: Any,
-        perception: Any,
+        belief: object,
+        perception: object,
         window: SensorWindow,
     ) -> None:
         self._window = window
         self._belief_missing = type(belief) is not dict
         self._perception_missing = type(perception) is not dict
         self._perception = perception
-        self._nodes: dict[str, dict[str, Any]] = {}
+        self._nodes: dict[str, dict[str, object]] = {}
         self._parents: dict[str, list[str]] = {}
         if type(belief) is dict:
             self._nodes, self._parents = _index_belief(belief)
-        self._entities: dict[str, dict[str, Any]] | None = None
+        self._entities: dict[str, dict[str, object]] | None = None
         self._entity_memo: dict[str, tuple[Link, ...]] = {}
         self._depth_memo: dict[str, int] = {}
 
-    def _entity(self, entity_id: str) -> dict[str, Any] | None:
+    def _entity(self, entity_id: str) -> dict[str, object] | None:
         entities = self._entities
         if entities is None:
             entities = self._entities = {}
@@ -147,7 +147,7 @@ class _Walker:
                         entities[key] = entity
         return entities.get(entity_id)
 
-    def depth(self, factor: dict[str, Any]) -> tuple[int, int]:
+    def depth(self, factor: dict[str, object]) -> tuple[int, int]:
         """(documented depth, expected depth) of a factor: ``factor()`` without the links."""
         nodes = self._nodes
         start = factor.get("node")
@@ -184,7 +184,7 @@ class _Walker:
             return 1, EXPECTED_DEPTH_STATE
         return 2 + best, EXPECTED_DEPTH_STATE
 
-    def _entity_depth(self, node: dict[str, Any]) -> int:
+    def _entity_depth(self, node: dict[str, object]) -> int:
         """Documented levels below an entity node: entity, evidence_ref, sensor_reading."""
         entity_id = node.get("entity")
         if type(entity_id) is not str or not entity_id:
@@ -208,7 +208,7 @@ class _Walker:
         self._depth_memo[entity_id] = depth
         return depth
 
-    def factor(self, factor: dict[str, Any]) -> FactorChain:
+    def factor(self, factor: dict[str, object]) -> FactorChain:
         raw = factor.get("node")
         node_id = raw if type(raw) is str else ""
         name = str(factor.get("name") or "")
@@ -275,7 +275,7 @@ class _Walker:
                     queue.append(step)
         return found
 
-    def _entity_links(self, node: dict[str, Any]) -> tuple[Link, ...]:
+    def _entity_links(self, node: dict[str, object]) -> tuple[Link, ...]:
         """The entity, evidence_ref and sensor_reading links below an entity node."""
         entity_id = node.get("entity")
         if not isinstance(entity_id, str) or not entity_id:
@@ -311,7 +311,7 @@ class _Walker:
             )
         top = Link("entity", True, entity_id)
         evidence = list(_dicts(entity.get("evidence")))
-        refs = [e["ref"] for e in evidence if isinstance(e.get("ref"), dict)]
+        refs = [ref for e in evidence if isinstance(ref := e.get("ref"), dict)]
         if not refs:
             why = (
                 f"entity {entity_id!r} has no evidence"
@@ -352,9 +352,11 @@ def _depth(links: Iterable[Link]) -> int:
     return depth
 
 
-def _index_belief(belief: dict[str, Any]) -> tuple[dict[str, Any], dict[str, list[str]]]:
+def _index_belief(
+    belief: dict[str, object],
+) -> tuple[dict[str, dict[str, object]], dict[str, list[str]]]:
     """Node by id, and the parents of each child, from a belief message's JSON."""
-    nodes: dict[str, dict[str, Any]] = {}
+    nodes: dict[str, dict[str, object]] = {}
     parents: dict[str, list[str]] = {}
     raw = belief.get("nodes")
     if type(raw) is list:
@@ -377,13 +379,13 @@ def _index_belief(belief: dict[str, Any]) -> tuple[dict[str, Any], dict[str, lis
     return nodes, parents
 
 
-def _dicts(value: Any) -> list[dict[str, Any]]:
+def _dicts(value: object) -> list[dict[str, object]]:
     if type(value) is list:
         return [v for v in value if type(v) is dict]
     return []
 
 
-def _ref_label(ref: dict[str, Any]) -> str:
+def _ref_label(ref: Mapping[str, object]) -> str:
     recording = ref.get("recording")
     where = f"{recording}:" if type(recording) is str else ""
     return f"{where}{ref.get('topic')}@{ref.get('log_time_ns')}"

@@ -4,9 +4,9 @@ parts (whether the seal holds, since when the command held, the decision's score
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Literal
 
-from trace_audit.causal import Decision
+from trace_audit.causal import Decision, GraphData
 from trace_audit.chains import DecisionChains
 from trace_audit.evidence import ExternalEvidence
 from trace_audit.jsonout import OMIT_EMPTY
@@ -108,8 +108,8 @@ class Explanation:
     scores: DecisionScores
     seal: SealCheck
     held: HeldSince
-    graph: dict[str, Any]
-    tree: dict[str, Any] | None
+    graph: GraphData
+    tree: GraphData | None
     external_evidence: tuple[ExternalEvidence, ...] = ()
     """The decision's evidence refs into external recordings: resolved (and decoded),
     broken, or unresolved (recording not given)."""

@@ -16,11 +16,12 @@ import re
 import textwrap
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from trace_audit.incident.data import ReportData
 
 if TYPE_CHECKING:
+    from matplotlib.artist import Artist
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
@@ -152,12 +153,12 @@ def command_bands(ax: Axes, data: ReportData) -> None:
     ax.axvline(as_seconds(data.explanation.t_ns), color=MARKED, lw=1.2, ls="-")
 
 
-def command_legend(fig: Figure, data: ReportData, extra: Sequence[Any] = ()) -> None:
+def command_legend(fig: Figure, data: ReportData, extra: Sequence[Artist] = ()) -> None:
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
     commands = dict.fromkeys(row.command for row in data.timeline.rows)
-    handles: list[Any] = [
+    handles: list[Artist] = [
         Patch(color=command_colour(c), alpha=0.35, label=c or "no action") for c in commands
     ]
     handles.append(Line2D([], [], color=MARKED, lw=1.2, label="decision explained"))

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import textwrap
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypeAlias, TypedDict
 
 from trace_audit.incident.data import ReportData
 from trace_audit.incident.drawing import (
@@ -19,9 +19,24 @@ from trace_audit.incident.drawing import (
 )
 
 if TYPE_CHECKING:
+    import networkx as nx
+    import numpy as np
     from matplotlib.axes import Axes
+    from numpy.typing import NDArray
+
+    from trace_audit.causal import EdgeData
 
 __all__ = ["causal_figure", "tree_figure"]
+
+_Point: TypeAlias = "tuple[float, float] | NDArray[np.float64]"
+"""A node's position: networkx's layouts give numpy arrays, ``_tidy_layout`` tuples."""
+
+
+class _DrawnEdge(TypedDict):
+    """What the causal figure draws of an edge."""
+
+    documented: bool
+    detail: str
 
 
 # --- the causal chain --------------------------------------------------------------------
@@ -68,7 +83,7 @@ def causal_figure(data: ReportData) -> str:
         return to_svg(fig, "causal", "The causal chain from sensor readings to the action")
 
 
-def _edge_attrs(edge: Mapping[str, Any]) -> dict[str, Any]:
+def _edge_attrs(edge: EdgeData) -> _DrawnEdge:
     return {
         "documented": bool(edge.get("documented", True)),
         "detail": str(edge.get("detail") or ""),
@@ -92,7 +107,7 @@ _BELOW = 0.1
 """How far under the row of nodes the reason of a broken link is written (layout units)."""
 
 
-def _draw_causal(ax: Axes, g: Any, pos: Mapping[str, Any]) -> None:
+def _draw_causal(ax: Axes, g: nx.DiGraph, pos: Mapping[str, _Point]) -> None:
     import networkx as nx
 
     layer = {n: g.nodes[n]["layer"] for n in g}
@@ -126,9 +141,7 @@ def _draw_causal(ax: Axes, g: Any, pos: Mapping[str, Any]) -> None:
     )
 
 
-def _broken_reason(
-    ax: Axes, start: tuple[float, float], end: tuple[float, float], detail: str, *, arcs: bool
-) -> None:
+def _broken_reason(ax: Axes, start: _Point, end: _Point, detail: str, *, arcs: bool) -> None:
     """The reason a link is broken, under it (the nodes leave no room beside it), joined to
     it by a thin red leader."""
     (x1, y1), (x2, y2) = start, end
@@ -147,7 +160,7 @@ def _broken_reason(
     )
 
 
-def _draw_causal_nodes(ax: Axes, g: Any, pos: Mapping[str, Any]) -> None:
+def _draw_causal_nodes(ax: Axes, g: nx.DiGraph, pos: Mapping[str, _Point]) -> None:
     """Each node as a labelled box in its kind's colour; a placeholder dashed and red."""
     for node, (x, y) in pos.items():
         attrs = g.nodes[node]
@@ -189,7 +202,9 @@ def tree_figure(data: ReportData) -> str | None:
             **{k: v for k, v in edge.items() if k not in ("source", "target")},
         )
     root = tree["graph"].get("root")
-    if root not in source or len(source) > MAX_GRAPH_NODES or not nx.is_tree(source):
+    if root is None or root not in source:
+        return None
+    if len(source) > MAX_GRAPH_NODES or not nx.is_tree(source):
         return None
     pos = _tidy_layout(source, root)
     depth = 1 + round(-min(y for _, y in pos.values()))
@@ -201,7 +216,7 @@ def tree_figure(data: ReportData) -> str | None:
         return to_svg(fig, "tree", "The counterfactual decision tree with the taken path")
 
 
-def _tidy_layout(g: Any, root: str) -> dict[str, tuple[float, float]]:
+def _tidy_layout(g: nx.DiGraph, root: str) -> dict[str, tuple[float, float]]:
     """Leaves side by side in depth-first order, each parent centred over its children,
     one row per depth: a tree drawn this way has no crossing edges."""
     import networkx as nx
@@ -219,7 +234,7 @@ def _tidy_layout(g: Any, root: str) -> dict[str, tuple[float, float]]:
     return {n: (x[n], -float(depth[n])) for n in x}
 
 
-def _draw_tree(ax: Axes, g: Any, pos: Mapping[str, Any]) -> None:
+def _draw_tree(ax: Axes, g: nx.DiGraph, pos: Mapping[str, _Point]) -> None:
     import networkx as nx
 
     for taken in (False, True):

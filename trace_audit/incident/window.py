@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 from trace_audit.causal import ExecutionView, format_value, layer_with_defaults, read_decision
 from trace_audit.causal.lenient import as_float, mappings
@@ -202,7 +201,7 @@ def robot_pose(target: Cycle) -> RobotPose | None:
     return RobotPose(x, y, heading, str(pose.get("frame", "map")))
 
 
-def _evidence(raw: Mapping[str, Any], sensors: SensorWindow) -> EvidenceView:
+def _evidence(raw: Mapping[str, object], sensors: SensorWindow) -> EvidenceView:
     ref = raw.get("ref")
     region = raw.get("region")
     where = ""
@@ -227,7 +226,7 @@ def _evidence(raw: Mapping[str, Any], sensors: SensorWindow) -> EvidenceView:
     )
 
 
-def _xy(position: Any) -> tuple[float | None, float | None]:
+def _xy(position: object) -> tuple[float | None, float | None]:
     if isinstance(position, list | tuple) and len(position) >= 2:
         x, y = as_float(position[0]), as_float(position[1])
         if x is not None and y is not None:

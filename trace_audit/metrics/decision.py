@@ -8,8 +8,6 @@ everywhere.
 
 from __future__ import annotations
 
-from typing import Any
-
 from trace_audit.chains import DecisionChains
 from trace_audit.metrics.config import TCSWeights
 from trace_runtime.encoding.seal_check import SealStatus
@@ -69,7 +67,7 @@ def trust_score(
     ) / total
 
 
-def dr_problems(action: Any) -> list[str]:
+def dr_problems(action: object) -> list[str]:
     """Why a decision is not reconstructable (DR = 0); [] when DR = 1. ``action`` is JSON."""
     if not isinstance(action, dict) or not action.get("command"):
         return ["action not logged"]
@@ -106,7 +104,7 @@ def et_problems(chains: DecisionChains) -> list[str]:
     return out
 
 
-def scenario_of(execution: Any) -> str:
+def scenario_of(execution: object) -> str:
     """The scenario an execution record's ``scenario:NAME`` flag names, or ``(none)``."""
     if isinstance(execution, dict):
         return split_flags(execution.get("flags") or ())[1] or NO_SCENARIO

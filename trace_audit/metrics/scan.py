@@ -12,7 +12,7 @@ import contextlib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 from trace_audit.chains import DecisionScore, SensorWindow, score_layers, trace_layers
 from trace_audit.evidence import open_recordings
@@ -144,7 +144,7 @@ class _Scanner:
         wall = is_wall_clock(segment.session.clock, segment.info.start_ns)
         return lambda cycle: hour_of(cycle.t_ns, wall)
 
-    def _count_external(self, perception: Any) -> None:
+    def _count_external(self, perception: object) -> None:
         """Tally the perception's refs into external recordings by resolved / broken /
         unresolved (a ref's check is remembered by the window, so a reading cited cycle
         after cycle is read once)."""
@@ -298,7 +298,7 @@ class _Scanner:
         return tcs
 
     def _seal_and_gap(
-        self, cycle: Cycle, segment: Segment, acc: GroupSums, perception: Any
+        self, cycle: Cycle, segment: Segment, acc: GroupSums, perception: object
     ) -> SealOutcome:
         """Integrity problems of the cycle (the one seal check, ``verify_cycle``) and its
         continuity; a sealed cycle closes an interval, which the one gap rule judges."""

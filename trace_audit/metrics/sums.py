@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 from trace_audit.chains import DecisionScore
 from trace_audit.metrics.results import DecisionFailure
@@ -92,10 +92,10 @@ class ScoredDecision:
     cycle: Cycle
     segment: Segment
     group: str
-    action: Any
-    belief: Any
-    perception: Any
-    execution: Any
+    action: object
+    belief: object
+    perception: object
+    execution: object
     score: DecisionScore
     dr_problems: tuple[str, ...]
     seal: SealOutcome
@@ -174,7 +174,7 @@ HAS_CHANNELS = b'"channels":[{'
 every profile 1.0 record among them, are not parsed again for it."""
 
 
-def add_channels(into: dict[tuple[str, str], list[float]], execution: Any) -> None:
+def add_channels(into: dict[tuple[str, str], list[float]], execution: object) -> None:
     """Add an execution record's actuator channels to ``into`` (see ``ScanResult.channels``)."""
     channels = execution.get("channels") if isinstance(execution, dict) else None
     for channel in channels if isinstance(channels, list) else ():
@@ -198,7 +198,7 @@ MAY_FAIL_A_CHECK = b"false"
 their checks."""
 
 
-def failed_check_rules(execution: Any) -> list[str]:
+def failed_check_rules(execution: object) -> list[str]:
     """The rules of an execution record's checks that failed (``passed`` is false), in order."""
     checks = execution.get("checks") if isinstance(execution, dict) else None
     if not isinstance(checks, list):
@@ -211,7 +211,7 @@ def failed_check_rules(execution: Any) -> list[str]:
 
 
 def add_failed_checks(
-    into: dict[tuple[str, str], CheckTally], execution: Any, robot: str, cycle: Cycle
+    into: dict[tuple[str, str], CheckTally], execution: object, robot: str, cycle: Cycle
 ) -> None:
     """Count an execution record's failed checks into ``into`` (see ``ScanResult.checks``)."""
     for rule in failed_check_rules(execution):

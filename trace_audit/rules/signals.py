@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, TypeVar
 from trace_audit.causal.distances import entity_distances
 from trace_audit.causal.lenient import (
     as_float,
+    as_list,
     as_mapping,
     as_number_or_flag,
     as_str,
@@ -126,7 +127,7 @@ def read_signals(cycle: Cycle, names: Iterable[str]) -> tuple[str | None, dict[s
             ]
             value = (1.0 if all(passed) else 0.0) if passed else None
         elif family == "flag":
-            problems, _ = split_flags(execution.get("flags") or ())
+            problems, _ = split_flags(as_list(execution.get("flags")))
             value = 1.0 if rest in problems else 0.0
         else:  # channel
             channel, _, part = rest.rpartition(".")

@@ -100,7 +100,7 @@ class Cycle:
         data = self.payloads.get(topic)
         return None if data is None else parse_json(data, topic, self.segment)
 
-    def layer(self, topic: str) -> Any:
+    def layer(self, topic: str) -> object:
         """The message on ``topic`` as JSON: the full one, else the warm summary's, else None."""
         data = self.payloads.get(topic)
         if data is not None:
@@ -189,7 +189,7 @@ def assemble_hot(messages: Sequence[RawMessage], segment: str) -> list[Cycle]:
     return cycles
 
 
-def parse_json(data: bytes, topic: str, segment: str) -> Any:
+def parse_json(data: bytes, topic: str, segment: str) -> object:
     """A stored message's data as JSON; ``PayloadError`` (a ``LogReadError``) if it is not.
 
     orjson refuses nesting past 1024 levels itself, so a hostile payload costs one bounded
