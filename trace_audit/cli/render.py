@@ -10,7 +10,7 @@ module decides layout only: which stream, which console and which of the two lay
 from __future__ import annotations
 
 import textwrap
-from typing import Any
+from typing import TYPE_CHECKING
 
 from trace_audit.cli.doc import (
     CONSOLE_KINDS,
@@ -23,6 +23,12 @@ from trace_audit.cli.doc import (
     plain_text,
     segs,
 )
+
+if TYPE_CHECKING:  # rich is imported where a document is drawn, not to build one
+    from rich.console import Console, RenderableType
+    from rich.table import Table
+    from rich.text import Text
+    from rich.tree import Tree
 
 __all__ = ["draw_rich", "render_plain"]
 
@@ -160,7 +166,7 @@ def _plain_tree(root: Item, width: int) -> list[str]:
 # --- rich -------------------------------------------------------------------------------------
 
 
-def _rich_text(line: Line) -> Any:
+def _rich_text(line: Line) -> Text:
     from rich.text import Text
 
     text = Text()
@@ -169,7 +175,7 @@ def _rich_text(line: Line) -> Any:
     return text
 
 
-def draw_rich(doc: Doc, console: Any) -> None:
+def draw_rich(doc: Doc, console: Console) -> None:
     """Print ``doc`` on a rich ``console``: colour and box drawing (ASCII boxes when the
     console's colour is off)."""
     from rich.markup import escape
@@ -188,7 +194,7 @@ def draw_rich(doc: Doc, console: Any) -> None:
             console.print(_rich_block(block))
 
 
-def _rich_block(block: Block) -> Any:
+def _rich_block(block: Block) -> RenderableType:
     """A block other than a heading as one rich renderable."""
     kind, data = block.kind, block.data
     if kind == "title":
@@ -210,7 +216,7 @@ def _rich_block(block: Block) -> Any:
     return text
 
 
-def _rich_fields(rows: list[tuple[str, Line]]) -> Any:
+def _rich_fields(rows: list[tuple[str, Line]]) -> Table:
     from rich.table import Table
 
     grid = Table.grid(padding=(0, 2))
@@ -221,7 +227,7 @@ def _rich_fields(rows: list[tuple[str, Line]]) -> Any:
     return grid
 
 
-def _rich_table(columns: list[Column], rows: list[list[Line]]) -> Any:
+def _rich_table(columns: list[Column], rows: list[list[Line]]) -> Table:
     from rich import box
     from rich.table import Table
 
@@ -239,12 +245,12 @@ def _rich_table(columns: list[Column], rows: list[list[Line]]) -> Any:
     return table
 
 
-def _rich_tree(root: Item) -> Any:
+def _rich_tree(root: Item) -> Tree:
     from rich.tree import Tree
 
     tree = Tree(_rich_text(root.line), guide_style="dim")
 
-    def add(node: Any, item: Item) -> None:
+    def add(node: Tree, item: Item) -> None:
         for child in item.children:
             add(node.add(_rich_text(child.line)), child)
 
@@ -255,18 +261,18 @@ def _rich_tree(root: Item) -> Any:
 # --- boxed tables ----------------------------------------------------------------------------
 
 
-def _box_table(spec: BoxTable, *, plain: bool) -> Any:
+def _box_table(spec: BoxTable, *, plain: bool) -> Table:
     from rich import box
     from rich.table import Table
 
-    options: dict[str, Any] = {"box": box.ASCII if plain else box.SIMPLE_HEAVY, "show_edge": False}
-    if spec.title is not None:
-        options["title"] = spec.title
-    if spec.flush:
-        options.update(title_justify="left", pad_edge=False)
-    if spec.collapse_plain:
-        options["collapse_padding"] = not plain
-    table = Table(**options)
+    table = Table(  # what is not asked for keeps rich's default (centred title, padded edges)
+        box=box.ASCII if plain else box.SIMPLE_HEAVY,
+        show_edge=False,
+        title=spec.title,
+        title_justify="left" if spec.flush else "center",
+        pad_edge=not spec.flush,
+        collapse_padding=spec.collapse_plain and not plain,
+    )
     for col in spec.columns:
         table.add_column(col.header, justify=col.justify, no_wrap=col.no_wrap)
         if col.min_width is not None:
