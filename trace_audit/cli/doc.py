@@ -186,8 +186,9 @@ def fmt_duration(ns: int) -> str:
     return f"{int(s // 3600)} h {int(s % 3600 // 60):02d} min"
 
 
-def fmt_value(value: Any, unit: str | None = None) -> str:
-    """A logged value as the investigator writes it everywhere (``trace_audit.causal``)."""
+def fmt_value(value: object, unit: str | None = None) -> str:
+    """A logged value as the investigator writes it everywhere (``trace_audit.causal``):
+    any value (``object``), what is not a number, bool or None written as ``str`` writes it."""
     from trace_audit.causal import format_value  # the library: not needed for ``--help``
 
     return format_value(value, unit)
