@@ -13,13 +13,22 @@ import textwrap
 from typing import TYPE_CHECKING
 
 from trace_audit.cli.doc import (
-    CONSOLE_KINDS,
-    Block,
+    BoxBlock,
     BoxTable,
     Column,
+    ConsoleBlock,
     Doc,
+    FieldsBlock,
+    FlowBlock,
+    HeadingBlock,
     Item,
     Line,
+    LineBlock,
+    MarkupBlock,
+    TableBlock,
+    TitleBlock,
+    TreeBlock,
+    VerbatimBlock,
     plain_text,
     segs,
 )
@@ -42,25 +51,30 @@ def render_plain(doc: Doc, width: int = 80) -> str:
     Its blocks are flow blocks: rich lays out the others (``Doc.console_layout``)."""
     out: list[str] = []
     for block in doc.blocks:
-        kind, data = block.kind, block.data
-        if kind in CONSOLE_KINDS:
-            raise ValueError(f"a {kind} block is drawn by rich only (draw_rich)")
-        if kind == "title":
-            text = plain_text(data)
-            out += [text, "=" * min(len(text), width)]
-        elif kind == "heading":
-            out += ["", data, "-" * min(len(data), width)]
-        elif kind == "fields":
-            out += _plain_fields(data, width)
-        elif kind == "table":
-            out += _plain_table(data[0], data[1], width)
-        elif kind == "tree":
-            out += _plain_tree(data, width)
-        elif kind == "line":
-            line, indent = data
-            pad = " " * indent
-            out += _wrap(plain_text(line), width, pad, pad + "  ")
+        if isinstance(block, ConsoleBlock):
+            raise ValueError(f"a {_KIND[type(block)]} block is drawn by rich only (draw_rich)")
+        out += _plain_block(block, width)
     return "\n".join(out) + "\n"
+
+
+_KIND = {MarkupBlock: "markup", VerbatimBlock: "verbatim", BoxBlock: "box"}
+"""A console block's name in the error ``render_plain`` raises."""
+
+
+def _plain_block(block: FlowBlock, width: int) -> list[str]:
+    if isinstance(block, TitleBlock):
+        text = plain_text(block.line)
+        return [text, "=" * min(len(text), width)]
+    if isinstance(block, HeadingBlock):
+        return ["", block.text, "-" * min(len(block.text), width)]
+    if isinstance(block, FieldsBlock):
+        return _plain_fields(block.rows, width)
+    if isinstance(block, TableBlock):
+        return _plain_table(block.columns, block.rows, width)
+    if isinstance(block, TreeBlock):
+        return _plain_tree(block.root, width)
+    pad = " " * block.indent
+    return _wrap(plain_text(block.line), width, pad, pad + "  ")
 
 
 def _wrap(text: str, width: int, first: str, rest: str) -> list[str]:
@@ -181,34 +195,35 @@ def draw_rich(doc: Doc, console: Console) -> None:
     from rich.markup import escape
 
     for block in doc.blocks:
-        if block.kind == "heading":
+        if isinstance(block, HeadingBlock):
             console.print()
-            console.print(f"[bold cyan]{escape(block.data)}[/]")
-        elif block.kind == "markup":
-            console.print(block.data)
-        elif block.kind == "verbatim":
-            console.print(block.data, markup=False, soft_wrap=True)
-        elif block.kind == "box":
-            console.print(_box_table(block.data, plain=console.no_color))
+            console.print(f"[bold cyan]{escape(block.text)}[/]")
+        elif isinstance(block, MarkupBlock):
+            console.print(block.text)
+        elif isinstance(block, VerbatimBlock):
+            console.print(block.text, markup=False, soft_wrap=True)
+        elif isinstance(block, BoxBlock):
+            console.print(_box_table(block.table, plain=console.no_color))
         else:
             console.print(_rich_block(block))
 
 
-def _rich_block(block: Block) -> RenderableType:
-    """A block other than a heading as one rich renderable."""
-    kind, data = block.kind, block.data
-    if kind == "title":
-        text = _rich_text(data)
+def _rich_block(
+    block: TitleBlock | FieldsBlock | TableBlock | TreeBlock | LineBlock,
+) -> RenderableType:
+    """A flow block other than a heading as one rich renderable."""
+    if isinstance(block, TitleBlock):
+        text = _rich_text(block.line)
         text.stylize("bold")
         return text
-    if kind == "fields":
-        return _rich_fields(data)
-    if kind == "table":
-        return _rich_table(*data)
-    if kind == "tree":
-        return _rich_tree(data)
-    line, indent = data
-    text = _rich_text(line)
+    if isinstance(block, FieldsBlock):
+        return _rich_fields(block.rows)
+    if isinstance(block, TableBlock):
+        return _rich_table(block.columns, block.rows)
+    if isinstance(block, TreeBlock):
+        return _rich_tree(block.root)
+    text = _rich_text(block.line)
+    indent = block.indent
     if indent:
         from rich.padding import Padding
 
