@@ -32,7 +32,7 @@ from trace_audit.cli.options import (
     cluster,
     sql_limits,
 )
-from trace_audit.cli.output import emit
+from trace_audit.cli.output import JsonValue, emit
 from trace_runtime.errors import UsageError
 
 if TYPE_CHECKING:  # the library (and rtamt) is imported inside the command
@@ -226,7 +226,7 @@ def _check_index(
         rows.close()
 
 
-def check_json(result: CheckResult) -> Any:
+def check_json(result: CheckResult) -> JsonValue:
     """The result as JSON data, every non-finite float (an infinite robustness: no person
     ever perceived) ``null``: JSON has no Infinity (docs/rules.md, "Reading robustness")."""
     from trace_audit.jsonout import to_jsonable
@@ -234,7 +234,7 @@ def check_json(result: CheckResult) -> Any:
     return _finite(to_jsonable(result))
 
 
-def _finite(value: Any) -> Any:
+def _finite(value: JsonValue) -> JsonValue:
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):

@@ -16,20 +16,31 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Literal, TypeAlias
 
 if TYPE_CHECKING:
     from trace_audit.log_time import LogClock
 
 __all__ = [
     "Block",
+    "BoxBlock",
     "BoxColumn",
     "BoxTable",
     "Column",
+    "ConsoleBlock",
     "Doc",
+    "FieldsBlock",
+    "FlowBlock",
+    "HeadingBlock",
     "Item",
     "Line",
+    "LineBlock",
+    "MarkupBlock",
     "Seg",
+    "TableBlock",
+    "TitleBlock",
+    "TreeBlock",
+    "VerbatimBlock",
     "fmt_duration",
     "fmt_t",
     "fmt_value",
@@ -109,17 +120,67 @@ class BoxTable:
     """The padding between columns collapses when colour is off."""
 
 
-BlockKind = Literal[
-    "title", "heading", "fields", "table", "tree", "line", "markup", "verbatim", "box"
-]
-CONSOLE_KINDS: frozenset[BlockKind] = frozenset({"markup", "verbatim", "box"})
+# --- blocks: one class each, so that a renderer gets the type it draws --------------------
+
+
+@dataclass(frozen=True, slots=True)
+class TitleBlock:
+    line: Line
+
+
+@dataclass(frozen=True, slots=True)
+class HeadingBlock:
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
+class FieldsBlock:
+    """Label/value rows."""
+
+    rows: list[tuple[str, Line]]
+
+
+@dataclass(frozen=True, slots=True)
+class TableBlock:
+    columns: list[Column]
+    rows: list[list[Line]]
+
+
+@dataclass(frozen=True, slots=True)
+class TreeBlock:
+    root: Item
+
+
+@dataclass(frozen=True, slots=True)
+class LineBlock:
+    line: Line
+    indent: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class MarkupBlock:
+    """A console line of rich markup."""
+
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
+class VerbatimBlock:
+    """A console line printed as it is (no markup), not wrapped at the width."""
+
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
+class BoxBlock:
+    table: BoxTable
+
+
+FlowBlock: TypeAlias = TitleBlock | HeadingBlock | FieldsBlock | TableBlock | TreeBlock | LineBlock
+"""The blocks laid out as plain text or by rich."""
+ConsoleBlock: TypeAlias = MarkupBlock | VerbatimBlock | BoxBlock
 """The blocks only rich lays out: a document holding one is drawn by rich in both modes."""
-
-
-@dataclass(slots=True)
-class Block:
-    kind: BlockKind
-    data: Any
+Block: TypeAlias = FlowBlock | ConsoleBlock
 
 
 @dataclass(slots=True)
@@ -131,37 +192,37 @@ class Doc:
     @property
     def console_layout(self) -> bool:
         """Whether rich draws this document in both modes (it holds a console block)."""
-        return any(block.kind in CONSOLE_KINDS for block in self.blocks)
+        return any(isinstance(block, ConsoleBlock) for block in self.blocks)
 
     def title(self, line: Line) -> None:
-        self.blocks.append(Block("title", line))
+        self.blocks.append(TitleBlock(line))
 
     def heading(self, text: str) -> None:
-        self.blocks.append(Block("heading", text))
+        self.blocks.append(HeadingBlock(text))
 
     def fields(self, rows: Iterable[tuple[str, Line]]) -> None:
-        self.blocks.append(Block("fields", list(rows)))
+        self.blocks.append(FieldsBlock(list(rows)))
 
     def table(self, columns: Sequence[Column], rows: Iterable[Sequence[Line]]) -> None:
-        self.blocks.append(Block("table", (list(columns), [list(r) for r in rows])))
+        self.blocks.append(TableBlock(list(columns), [list(r) for r in rows]))
 
     def tree(self, root: Item) -> None:
-        self.blocks.append(Block("tree", root))
+        self.blocks.append(TreeBlock(root))
 
     def line(self, line: Line, indent: int = 0) -> None:
-        self.blocks.append(Block("line", (line, indent)))
+        self.blocks.append(LineBlock(line, indent))
 
     def markup(self, text: str) -> None:
         """A console line of rich markup."""
-        self.blocks.append(Block("markup", text))
+        self.blocks.append(MarkupBlock(text))
 
     def verbatim(self, text: str) -> None:
         """A console line printed as it is (no markup), not wrapped at the width."""
-        self.blocks.append(Block("verbatim", text))
+        self.blocks.append(VerbatimBlock(text))
 
     def box(self, table: BoxTable) -> None:
         """A boxed table."""
-        self.blocks.append(Block("box", table))
+        self.blocks.append(BoxBlock(table))
 
 
 # --- formats ---------------------------------------------------------------------------------
@@ -186,8 +247,9 @@ def fmt_duration(ns: int) -> str:
     return f"{int(s // 3600)} h {int(s % 3600 // 60):02d} min"
 
 
-def fmt_value(value: Any, unit: str | None = None) -> str:
-    """A logged value as the investigator writes it everywhere (``trace_audit.causal``)."""
+def fmt_value(value: object, unit: str | None = None) -> str:
+    """A logged value as the investigator writes it everywhere (``trace_audit.causal``):
+    any value (``object``), what is not a number, bool or None written as ``str`` writes it."""
     from trace_audit.causal import format_value  # the library: not needed for ``--help``
 
     return format_value(value, unit)

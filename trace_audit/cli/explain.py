@@ -9,12 +9,12 @@ chains and the counterfactual tree are drawn by ``trace_audit.cli.explain_graphs
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from trace_audit.cli.app import app, guarded, help_text
-from trace_audit.cli.doc import Column, Doc, Seg, fmt_duration, fmt_t, fmt_value
+from trace_audit.cli.doc import Column, Doc, Line, Seg, fmt_duration, fmt_t, fmt_value
 from trace_audit.cli.explain_graphs import chain_item, tree_item
 from trace_audit.cli.options import (
     EvidenceOption,
@@ -124,7 +124,7 @@ def explain_doc(r: Explanation, lookback_s: float = 600.0) -> Doc:
 # --- what was decided, when ---------------------------------------------------------------------
 
 
-def _decision_rows(r: Explanation, lookback_s: float) -> list[tuple[str, Any]]:
+def _decision_rows(r: Explanation, lookback_s: float) -> list[tuple[str, Line]]:
     """Where the decision was read, when it was made against the asked time, its action,
     since when it held, and its rationale."""
     d = r.decision
@@ -133,7 +133,7 @@ def _decision_rows(r: Explanation, lookback_s: float) -> list[tuple[str, Any]]:
         where += " (recovered from an unfinished segment)"
     elif r.live:
         where += " (live: the log is being written)"
-    rows: list[tuple[str, Any]] = [("Log", where), ("Decision", _decided(r))]
+    rows: list[tuple[str, Line]] = [("Log", where), ("Decision", _decided(r))]
     if r.stale:
         rows.append(
             (
@@ -189,7 +189,7 @@ def _clock_line(r: Explanation) -> Seg:
     )
 
 
-def _held_line(r: Explanation, lookback_s: float) -> Any:
+def _held_line(r: Explanation, lookback_s: float) -> str:
     h = r.held
     span = fmt_duration(r.t_ns - h.since_t_ns)
     if h.cycles <= 1 and h.bound == "change":
@@ -221,7 +221,7 @@ def _factors(doc: Doc, r: Explanation) -> None:
         doc.line(Seg("none logged: the decision cannot be traced to evidence", "red"), 2)
 
 
-def _factor_name(f: FactorValue, leading: bool) -> Any:
+def _factor_name(f: FactorValue, leading: bool) -> Line:
     return [f.label, Seg(" (leading)", "dim")] if leading else f.label
 
 
@@ -299,7 +299,7 @@ def _execution(doc: Doc, r: Explanation) -> None:
                 for c in ex.channels
             ],
         )
-    motion: list[tuple[str, Any]] = (
+    motion: list[tuple[str, Line]] = (
         [("Intended", _motion(ex.intended)), ("Actual", _motion(ex.actual))]
         if ex.planar or not ex.channels
         else []
@@ -339,7 +339,7 @@ def _scores(doc: Doc, r: Explanation) -> None:
     doc.heading("Auditability of this decision")
     s = r.scores
     traceable = sum(1 for c in r.chains.factors if c.traceable)
-    score_rows: list[tuple[str, Any]] = [
+    score_rows: list[tuple[str, Line]] = [
         (
             "ET",
             f"{s.et:.2f}  ({traceable} of {len(r.chains.factors)} factors traced to "
@@ -358,7 +358,7 @@ def _integrity(doc: Doc, r: Explanation) -> None:
     """The decision's seal: verified, unsealed (a crash), or failed, and what it covers."""
     doc.heading("Integrity")
     seal = r.seal
-    rows: list[tuple[str, Any]] = [("Seal", [_seal_status(r), f" ({seal.state})"])]
+    rows: list[tuple[str, Line]] = [("Seal", [_seal_status(r), f" ({seal.state})"])]
     if seal.sealed:
         rows += _sealed_rows(r)
     doc.fields(rows)
@@ -378,7 +378,7 @@ def _seal_status(r: Explanation) -> Seg:
     return Seg("✘ seal does NOT verify", "bold red", "[FAILED] seal does not verify")
 
 
-def _sealed_rows(r: Explanation) -> list[tuple[str, Any]]:
+def _sealed_rows(r: Explanation) -> list[tuple[str, Line]]:
     """What a seal covers: the layers, the evidenced readings, the chain link, the drops."""
     seal = r.seal
     if seal.digests_ok is None:
@@ -395,7 +395,7 @@ def _sealed_rows(r: Explanation) -> list[tuple[str, Any]]:
         )
     if seal.summarised:
         layers += f"; {len(seal.summarised)} layers summarised (warm tier), not comparable"
-    rows: list[tuple[str, Any]] = [("Layers", layers)]
+    rows: list[tuple[str, Line]] = [("Layers", layers)]
     if seal.evidence_checked or seal.evidence_mismatch:
         evidence = f"{seal.evidence_checked} evidenced sensor readings checked"
         if seal.evidence_mismatch:

@@ -56,7 +56,7 @@ def chain_item(r: Explanation, chain: FactorChain) -> Item:
     return root
 
 
-def _link_line(labelled: LabelledLink) -> list[Any]:
+def _link_line(labelled: LabelledLink) -> list[str | Seg]:
     link = labelled.link
     name = _LEVEL_NAMES.get(link.level, link.level)
     if link.documented:
@@ -96,7 +96,7 @@ def tree_item(r: Explanation) -> Item:
     return build(root_id if root_id is not None else next(iter(nodes), "?"), "", 0)
 
 
-def _tree_line(node: Mapping[str, Any], node_id: str, label: str) -> list[Any]:
+def _tree_line(node: Mapping[str, object], node_id: str, label: str) -> list[str | Seg]:
     taken = bool(node.get("taken"))
     text = str(node.get("label") or node_id)
     prefix = f"[{label}] " if label else ""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -244,8 +244,9 @@ def _count(result: QueryResult) -> str:
     return f"{len(result.rows)} of {result.total} rows (--limit {len(result.rows)})"
 
 
-def _csv_cell(value: Any) -> Any:
-    """Nested values (lists, structs, maps) as JSON text a CSV reader can parse."""
+def _csv_cell(value: object) -> object:
+    """Nested values (lists, structs, maps) as JSON text a CSV reader can parse; any other
+    value (``object``: a DuckDB value made plain) as the CSV writer writes it."""
     import json
 
     return json.dumps(value, ensure_ascii=False) if isinstance(value, list | dict) else value
@@ -258,7 +259,7 @@ def _rows_doc(result: QueryResult) -> Doc:
     return doc
 
 
-def _cell(value: Any) -> str:
+def _cell(value: object) -> str:
     if value is None:
         return "-"
     if isinstance(value, float):

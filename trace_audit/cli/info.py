@@ -7,12 +7,12 @@ rich on a terminal, plain text with ``--plain`` or in a pipe, JSON with ``--json
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from trace_audit.cli.app import app, guarded, help_text
-from trace_audit.cli.doc import Column, Doc, Seg, fmt_duration, fmt_t
+from trace_audit.cli.doc import Column, Doc, Line, Seg, fmt_duration, fmt_t
 from trace_audit.cli.options import JsonOption, LogArgument, PlainOption, RobotsOption
 from trace_audit.cli.output import emit_per_robot
 
@@ -84,7 +84,7 @@ def info_doc(r: LogInfo) -> Doc:
     return doc
 
 
-def _summary_rows(r: LogInfo) -> list[tuple[str, Any]]:
+def _summary_rows(r: LogInfo) -> list[tuple[str, Line]]:
     """Time range, cycles, segments and tiers, state; drops and gaps when scanned."""
     state = (
         Seg("RECOVERED (a segment has no footer and no writer: read by scan)", "bold yellow")
@@ -97,7 +97,7 @@ def _summary_rows(r: LogInfo) -> list[tuple[str, Any]]:
     )
     tiers = ", ".join(f"{k} x{v}" for k, v in sorted(r.tiers.items()))
     period = f"{r.period_ns / 1e6:g} ms" if r.period_ns else "?"
-    rows: list[tuple[str, Any]] = [
+    rows: list[tuple[str, Line]] = [
         (
             "Time range",
             f"{fmt_t(r.start_ns, r.clock)} .. {fmt_t(r.end_ns, r.clock)} "

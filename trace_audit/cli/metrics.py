@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated, TypeGuard
 
 import typer
 
@@ -37,7 +37,7 @@ if TYPE_CHECKING:  # the library is imported inside the command: start-up stays 
     from concurrent.futures import Executor
 
     from trace_audit.fleet.limits import QueryLimits
-    from trace_audit.metrics import MetricsConfig, MetricsReport
+    from trace_audit.metrics import GroupBy, MetricsConfig, MetricsReport
 
 __all__ = ["metrics_command"]
 
@@ -287,12 +287,18 @@ def _window_ns(
     return resolve_time(point, log)
 
 
-def _parse_by(value: str | None) -> Any:
+def _parse_by(value: str | None) -> GroupBy | None:
     from trace_audit.metrics import GROUP_BYS
 
-    if value is not None and value not in GROUP_BYS:
+    if value is not None and not _is_group_by(value):
         raise UsageError(f"--by must be one of {', '.join(GROUP_BYS)}, got {value!r}")
     return value
+
+
+def _is_group_by(value: str) -> TypeGuard[GroupBy]:
+    from trace_audit.metrics import GROUP_BYS
+
+    return value in GROUP_BYS
 
 
 def _from_index(

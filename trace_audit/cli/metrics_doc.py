@@ -4,11 +4,12 @@ report with Table II and III as the paper names their columns)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from trace_audit.cli.doc import BoxColumn, BoxTable, Doc
 
 if TYPE_CHECKING:
+    from trace_audit.cli.output import JsonValue
     from trace_audit.metrics import FailedChecks, MetricsReport, Stat
 
 __all__ = ["metrics_doc", "metrics_json", "pct"]
@@ -273,10 +274,10 @@ def _failures(out: Doc, report: MetricsReport) -> None:
         )
 
 
-def metrics_json(report: MetricsReport, failures: bool) -> dict[str, Any]:
+def metrics_json(report: MetricsReport, failures: bool) -> dict[str, JsonValue]:
     from trace_audit.jsonout import to_jsonable
 
-    data: dict[str, Any] = to_jsonable(report)
+    data: dict[str, JsonValue] = to_jsonable(report)
     data["passed"] = report.passed
     o = report.overall
     data["table_ii"] = {

@@ -11,7 +11,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -19,6 +19,8 @@ from trace_audit.fleet.limits import QueryLimits, format_size
 
 if TYPE_CHECKING:
     from concurrent.futures import Executor
+
+    from trace_audit.cli.typer_compat import OptionInfo
 
 __all__ = [
     "CheckedLogArgument",
@@ -82,16 +84,20 @@ IndexArgument = Annotated[Path, typer.Argument(help="The index directory.", show
 EvidencePaths = list[Path] | None
 """External recordings (``--evidence``), as typer hands them over."""
 
+# The option factories below bind ``typer.Option(...)`` to an ``OptionInfo``: typer annotates
+# it ``-> Any`` so that it may stand as a parameter's default, and returns an ``OptionInfo``.
+
 
 def evidence_option(
     named_by: str = "the log's evidence refs", then: str = "; repeat for several."
-) -> Any:
+) -> OptionInfo:
     """``--evidence``: the external recordings that evidence refs (``named_by``) name."""
-    return typer.Option(
+    option: OptionInfo = typer.Option(
         "--evidence",
         help=f"An external recording (MCAP file or rosbag2 directory) {named_by} name{then}",
         show_default=False,
     )
+    return option
 
 
 EvidenceOption = Annotated[EvidencePaths, evidence_option()]
@@ -109,16 +115,18 @@ TimeOption = Annotated[
 ]
 
 
-def cycle_option(verb: str) -> Any:
+def cycle_option(verb: str) -> OptionInfo:
     """``--cycle N``, the other way to name a decision than ``--t``: "``verb`` this cycle"."""
-    return typer.Option(
+    option: OptionInfo = typer.Option(
         "--cycle", help=f"{verb} this cycle number instead of a time.", show_default=False
     )
+    return option
 
 
-def action_option(help: str) -> Any:
+def action_option(help: str) -> OptionInfo:
     """``--action``: a command the robot logged, e.g. STOP."""
-    return typer.Option("--action", help=help, show_default=False)
+    option: OptionInfo = typer.Option("--action", help=help, show_default=False)
+    return option
 
 
 FromOption = Annotated[
@@ -150,22 +158,25 @@ RobotsOption = Annotated[
 """``--robot``, repeatable: the robots an investigating command reads (``selection``)."""
 
 
-def robot_option(help: str) -> Any:
+def robot_option(help: str) -> OptionInfo:
     """``--robot``: one robot of a fleet."""
-    return typer.Option("--robot", help=help, show_default=False)
+    option: OptionInfo = typer.Option("--robot", help=help, show_default=False)
+    return option
 
 
-def limit_option(help: str, *, least: int) -> Any:
+def limit_option(help: str, *, least: int) -> OptionInfo:
     """``--limit``: at most this many rows."""
-    return typer.Option("--limit", help=help, min=least)
+    option: OptionInfo = typer.Option("--limit", help=help, min=least)
+    return option
 
 
 # --- how it runs -----------------------------------------------------------------------------
 
 
-def jobs_option(help: str) -> Any:
+def jobs_option(help: str) -> OptionInfo:
     """``--jobs`` / ``-j``: local processes."""
-    return typer.Option("--jobs", "-j", help=help, min=1)
+    option: OptionInfo = typer.Option("--jobs", "-j", help=help, min=1)
+    return option
 
 
 SchedulerOption = Annotated[
@@ -231,6 +242,7 @@ def sql_limits(memory_limit: str | None, timeout: float | None) -> QueryLimits:
     return limits
 
 
-def key_option(help: str) -> Any:
+def key_option(help: str) -> OptionInfo:
     """``--key``: the robots' Ed25519 public key."""
-    return typer.Option("--key", help=help, show_default=False)
+    option: OptionInfo = typer.Option("--key", help=help, show_default=False)
+    return option

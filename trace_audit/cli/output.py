@@ -15,12 +15,17 @@ import shutil
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, TypeAlias, TypeVar
 
 from trace_audit.cli.doc import Doc
 from trace_audit.cli.render import draw_rich, render_plain
 
+if TYPE_CHECKING:  # rich is imported where a document is drawn: ``--help`` needs none of it
+    from rich.console import Console
+    from rich.progress import Progress
+
 __all__ = [
+    "JsonValue",
     "console",
     "console_width",
     "emit",
@@ -33,9 +38,15 @@ __all__ = [
 
 R = TypeVar("R")
 
+JsonValue: TypeAlias = "str | int | float | bool | list[JsonValue] | dict[str, JsonValue] | None"
+"""Plain JSON data, as a command builds the JSON it prints when that is not a result itself."""
 
-def print_json(value: Any) -> None:
-    """Write ``value`` (pydantic model, dataclass tree or plain data) as JSON on stdout."""
+
+def print_json(value: object) -> None:
+    """Write ``value`` (pydantic model, dataclass tree or plain data) as JSON on stdout.
+
+    ``object``: ``to_jsonable`` takes any value (what it does not convert, ``json`` writes or
+    refuses)."""
     import json  # here, not at the top: start-up (``--help``) does not need it
 
     from trace_audit.jsonout import to_jsonable
@@ -43,7 +54,7 @@ def print_json(value: Any) -> None:
     sys.stdout.write(json.dumps(to_jsonable(value), indent=2, ensure_ascii=False) + "\n")
 
 
-def console(plain: bool = False) -> Any:
+def console(plain: bool = False) -> Console:
     """A rich console; plain (no colour, ASCII boxes) when asked or when stdout is not a tty."""
     from rich.console import Console
 
@@ -62,8 +73,7 @@ def console(plain: bool = False) -> Any:
 
 def console_width(plain: bool) -> int:
     """The width a document of console blocks is drawn at: what ``console(plain)`` has."""
-    width: int = console(plain).width
-    return width
+    return console(plain).width
 
 
 def use_plain(plain: bool) -> bool:
@@ -101,7 +111,7 @@ def emit(
     *,
     json_out: bool,
     plain: bool,
-    to_json: Callable[[R], Any] | None = None,
+    to_json: Callable[[R], object] | None = None,
 ) -> None:
     """A command's output: ``result`` as JSON for scripts (``to_json(result)`` when the JSON
     is not the result itself), or its document for people."""
@@ -163,7 +173,7 @@ def setup_logging() -> None:
 
 
 @contextmanager
-def progress_bar(description: str, *, visible: bool = True) -> Iterator[Any]:
+def progress_bar(description: str, *, visible: bool = True) -> Iterator[Progress]:
     """A transient rich progress bar on stderr (counts, bar, time left), for long library
     calls that report progress; the caller decides whether to show one at all."""
     from rich.console import Console

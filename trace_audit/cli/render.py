@@ -10,19 +10,34 @@ module decides layout only: which stream, which console and which of the two lay
 from __future__ import annotations
 
 import textwrap
-from typing import Any
+from typing import TYPE_CHECKING
 
 from trace_audit.cli.doc import (
-    CONSOLE_KINDS,
-    Block,
+    BoxBlock,
     BoxTable,
     Column,
+    ConsoleBlock,
     Doc,
+    FieldsBlock,
+    FlowBlock,
+    HeadingBlock,
     Item,
     Line,
+    LineBlock,
+    MarkupBlock,
+    TableBlock,
+    TitleBlock,
+    TreeBlock,
+    VerbatimBlock,
     plain_text,
     segs,
 )
+
+if TYPE_CHECKING:  # rich is imported where a document is drawn, not to build one
+    from rich.console import Console, RenderableType
+    from rich.table import Table
+    from rich.text import Text
+    from rich.tree import Tree
 
 __all__ = ["draw_rich", "render_plain"]
 
@@ -36,25 +51,30 @@ def render_plain(doc: Doc, width: int = 80) -> str:
     Its blocks are flow blocks: rich lays out the others (``Doc.console_layout``)."""
     out: list[str] = []
     for block in doc.blocks:
-        kind, data = block.kind, block.data
-        if kind in CONSOLE_KINDS:
-            raise ValueError(f"a {kind} block is drawn by rich only (draw_rich)")
-        if kind == "title":
-            text = plain_text(data)
-            out += [text, "=" * min(len(text), width)]
-        elif kind == "heading":
-            out += ["", data, "-" * min(len(data), width)]
-        elif kind == "fields":
-            out += _plain_fields(data, width)
-        elif kind == "table":
-            out += _plain_table(data[0], data[1], width)
-        elif kind == "tree":
-            out += _plain_tree(data, width)
-        elif kind == "line":
-            line, indent = data
-            pad = " " * indent
-            out += _wrap(plain_text(line), width, pad, pad + "  ")
+        if isinstance(block, ConsoleBlock):
+            raise ValueError(f"a {_KIND[type(block)]} block is drawn by rich only (draw_rich)")
+        out += _plain_block(block, width)
     return "\n".join(out) + "\n"
+
+
+_KIND = {MarkupBlock: "markup", VerbatimBlock: "verbatim", BoxBlock: "box"}
+"""A console block's name in the error ``render_plain`` raises."""
+
+
+def _plain_block(block: FlowBlock, width: int) -> list[str]:
+    if isinstance(block, TitleBlock):
+        text = plain_text(block.line)
+        return [text, "=" * min(len(text), width)]
+    if isinstance(block, HeadingBlock):
+        return ["", block.text, "-" * min(len(block.text), width)]
+    if isinstance(block, FieldsBlock):
+        return _plain_fields(block.rows, width)
+    if isinstance(block, TableBlock):
+        return _plain_table(block.columns, block.rows, width)
+    if isinstance(block, TreeBlock):
+        return _plain_tree(block.root, width)
+    pad = " " * block.indent
+    return _wrap(plain_text(block.line), width, pad, pad + "  ")
 
 
 def _wrap(text: str, width: int, first: str, rest: str) -> list[str]:
@@ -160,7 +180,7 @@ def _plain_tree(root: Item, width: int) -> list[str]:
 # --- rich -------------------------------------------------------------------------------------
 
 
-def _rich_text(line: Line) -> Any:
+def _rich_text(line: Line) -> Text:
     from rich.text import Text
 
     text = Text()
@@ -169,40 +189,41 @@ def _rich_text(line: Line) -> Any:
     return text
 
 
-def draw_rich(doc: Doc, console: Any) -> None:
+def draw_rich(doc: Doc, console: Console) -> None:
     """Print ``doc`` on a rich ``console``: colour and box drawing (ASCII boxes when the
     console's colour is off)."""
     from rich.markup import escape
 
     for block in doc.blocks:
-        if block.kind == "heading":
+        if isinstance(block, HeadingBlock):
             console.print()
-            console.print(f"[bold cyan]{escape(block.data)}[/]")
-        elif block.kind == "markup":
-            console.print(block.data)
-        elif block.kind == "verbatim":
-            console.print(block.data, markup=False, soft_wrap=True)
-        elif block.kind == "box":
-            console.print(_box_table(block.data, plain=console.no_color))
+            console.print(f"[bold cyan]{escape(block.text)}[/]")
+        elif isinstance(block, MarkupBlock):
+            console.print(block.text)
+        elif isinstance(block, VerbatimBlock):
+            console.print(block.text, markup=False, soft_wrap=True)
+        elif isinstance(block, BoxBlock):
+            console.print(_box_table(block.table, plain=console.no_color))
         else:
             console.print(_rich_block(block))
 
 
-def _rich_block(block: Block) -> Any:
-    """A block other than a heading as one rich renderable."""
-    kind, data = block.kind, block.data
-    if kind == "title":
-        text = _rich_text(data)
+def _rich_block(
+    block: TitleBlock | FieldsBlock | TableBlock | TreeBlock | LineBlock,
+) -> RenderableType:
+    """A flow block other than a heading as one rich renderable."""
+    if isinstance(block, TitleBlock):
+        text = _rich_text(block.line)
         text.stylize("bold")
         return text
-    if kind == "fields":
-        return _rich_fields(data)
-    if kind == "table":
-        return _rich_table(*data)
-    if kind == "tree":
-        return _rich_tree(data)
-    line, indent = data
-    text = _rich_text(line)
+    if isinstance(block, FieldsBlock):
+        return _rich_fields(block.rows)
+    if isinstance(block, TableBlock):
+        return _rich_table(block.columns, block.rows)
+    if isinstance(block, TreeBlock):
+        return _rich_tree(block.root)
+    text = _rich_text(block.line)
+    indent = block.indent
     if indent:
         from rich.padding import Padding
 
@@ -210,7 +231,7 @@ def _rich_block(block: Block) -> Any:
     return text
 
 
-def _rich_fields(rows: list[tuple[str, Line]]) -> Any:
+def _rich_fields(rows: list[tuple[str, Line]]) -> Table:
     from rich.table import Table
 
     grid = Table.grid(padding=(0, 2))
@@ -221,7 +242,7 @@ def _rich_fields(rows: list[tuple[str, Line]]) -> Any:
     return grid
 
 
-def _rich_table(columns: list[Column], rows: list[list[Line]]) -> Any:
+def _rich_table(columns: list[Column], rows: list[list[Line]]) -> Table:
     from rich import box
     from rich.table import Table
 
@@ -239,12 +260,12 @@ def _rich_table(columns: list[Column], rows: list[list[Line]]) -> Any:
     return table
 
 
-def _rich_tree(root: Item) -> Any:
+def _rich_tree(root: Item) -> Tree:
     from rich.tree import Tree
 
     tree = Tree(_rich_text(root.line), guide_style="dim")
 
-    def add(node: Any, item: Item) -> None:
+    def add(node: Tree, item: Item) -> None:
         for child in item.children:
             add(node.add(_rich_text(child.line)), child)
 
@@ -255,18 +276,18 @@ def _rich_tree(root: Item) -> Any:
 # --- boxed tables ----------------------------------------------------------------------------
 
 
-def _box_table(spec: BoxTable, *, plain: bool) -> Any:
+def _box_table(spec: BoxTable, *, plain: bool) -> Table:
     from rich import box
     from rich.table import Table
 
-    options: dict[str, Any] = {"box": box.ASCII if plain else box.SIMPLE_HEAVY, "show_edge": False}
-    if spec.title is not None:
-        options["title"] = spec.title
-    if spec.flush:
-        options.update(title_justify="left", pad_edge=False)
-    if spec.collapse_plain:
-        options["collapse_padding"] = not plain
-    table = Table(**options)
+    table = Table(  # what is not asked for keeps rich's default (centred title, padded edges)
+        box=box.ASCII if plain else box.SIMPLE_HEAVY,
+        show_edge=False,
+        title=spec.title,
+        title_justify="left" if spec.flush else "center",
+        pad_edge=not spec.flush,
+        collapse_padding=spec.collapse_plain and not plain,
+    )
     for col in spec.columns:
         table.add_column(col.header, justify=col.justify, no_wrap=col.no_wrap)
         if col.min_width is not None:

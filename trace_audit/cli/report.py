@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Literal, TypedDict
 
 import typer
 
@@ -23,6 +23,8 @@ from trace_audit.cli.options import (
 from trace_audit.cli.output import emit
 
 if TYPE_CHECKING:
+    from rich.status import Status
+
     from trace_audit.incident import IncidentReport
 
 _REPORT_HELP = """Write the incident report of the decision in force at a time: one HTML
@@ -117,13 +119,47 @@ def report_command(  # noqa: PLR0917 - typer maps each parameter to an option
     emit(_summary(report, written), _summary_doc, json_out=json_out, plain=plain)
 
 
-def _status() -> Any:
+def _status() -> Status:
     from rich.console import Console
 
     return Console(stderr=True).status("gathering and drawing the incident report ...")
 
 
-def _summary(report: IncidentReport, written: Path) -> dict[str, Any]:
+class _RuleSummary(TypedDict):
+    """A rule judged over the window, in the summary."""
+
+    rule: str
+    outcome: str
+    robustness: float | None
+    violations: int
+
+
+class _Summary(TypedDict):
+    """What ``report`` prints once the page is written (``--json``: these keys, in order)."""
+
+    out: str
+    size_bytes: int
+    robot: str
+    cycle: int
+    t_ns: int
+    command: str | None
+    clock: str
+    log_start_ns: int
+    window_start_ns: int
+    window_end_ns: int
+    cycles_in_window: int
+    integrity: Literal["clean", "not_anchored", "unsealed", "failed"]
+    integrity_ok: bool
+    integrity_findings: int
+    decision_verified: bool
+    anchored: bool
+    anchored_through: int | None
+    unanchored_cycles: list[int] | None
+    sections: list[str]
+    rules: list[_RuleSummary] | None
+
+
+def _summary(report: IncidentReport, written: Path) -> _Summary:
     from trace_audit.incident.page import sections_of
 
     data = report.data
@@ -164,7 +200,7 @@ def _summary(report: IncidentReport, written: Path) -> dict[str, Any]:
     }
 
 
-def _summary_doc(summary: dict[str, Any]) -> Doc:
+def _summary_doc(summary: _Summary) -> Doc:
     from trace_audit.log_time import LogClock
 
     clock = LogClock(summary["clock"], summary["log_start_ns"])
@@ -192,7 +228,7 @@ def _summary_doc(summary: dict[str, Any]) -> Doc:
     return doc
 
 
-def _rules_line(rules: list[dict[str, Any]]) -> Seg:
+def _rules_line(rules: list[_RuleSummary]) -> Seg:
     broken = [r["rule"] for r in rules if r["outcome"] == "violated"]
     if broken:
         return Seg(f"VIOLATED in the window: {', '.join(broken)}", "bold red")
@@ -201,7 +237,7 @@ def _rules_line(rules: list[dict[str, Any]]) -> Seg:
     return Seg(text + (f", {undecided} not decidable" if undecided else ""), "green")
 
 
-def _integrity_line(summary: dict[str, Any]) -> Seg:
+def _integrity_line(summary: _Summary) -> Seg:
     """The page's integrity verdict in one line: the same four cases as its badges."""
     kind = summary["integrity"]
     unanchored = summary["unanchored_cycles"]

@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Literal, TypedDict
 
 import typer
 
@@ -28,7 +28,16 @@ from trace_audit.cli.output import emit, progress_bar
 from trace_runtime.errors import UsageError
 
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
-    from trace_runtime.tiers import Catalog, CompactionReport, Progress
+    from collections.abc import Callable
+
+    from trace_runtime.tiers import (
+        Catalog,
+        CompactionReport,
+        Leftover,
+        Progress,
+        RetentionResult,
+        SegmentResult,
+    )
 
 # The defaults shown in ``--help``, written out so that showing it does not import the
 # compaction machinery (the reader, pydantic models, codecs). A test pins them to
@@ -217,10 +226,12 @@ def compact_command(
         raise typer.Exit(EXIT_FINDINGS)
 
 
-def _with_progress(call: Any, *, quiet: bool) -> CompactionReport:
+def _with_progress(
+    call: Callable[[Callable[[Progress], None] | None], CompactionReport], *, quiet: bool
+) -> CompactionReport:
+    """``call(progress)``: with a progress bar on stderr unless ``quiet`` or not a terminal."""
     if quiet or not sys.stderr.isatty():
-        result: CompactionReport = call(None)
-        return result
+        return call(None)
     with progress_bar("compacting") as bar:
         task = bar.task_ids[0]
 
@@ -232,11 +243,32 @@ def _with_progress(call: Any, *, quiet: bool) -> CompactionReport:
                 total=event.cycles_total,
             )
 
-        result = call(progress)
-        return result
+        return call(progress)
 
 
-def _report_json(report: CompactionReport) -> dict[str, Any]:
+class _ReportJson(TypedDict):
+    """``compact --json``: the report's figures, its properties (cycles, bytes) included."""
+
+    root: str
+    tier: str
+    sources: list[str]
+    dry_run: bool
+    reference: Literal["newest log time", "wall clock", "given"]
+    reference_ns: int | None
+    older_than_ns: int
+    cutoff_ns: int | None
+    retention_ns: int | None
+    cycles: int
+    bytes_before: int
+    bytes_after: int
+    seconds: float
+    segments: list[SegmentResult]
+    skipped: list[SegmentResult]
+    leftovers: list[Leftover]
+    retention: list[RetentionResult]
+
+
+def _report_json(report: CompactionReport) -> _ReportJson:
     return {
         "root": str(report.root),
         "tier": report.tier,

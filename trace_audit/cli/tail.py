@@ -10,7 +10,7 @@ from __future__ import annotations
 import signal
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -19,7 +19,9 @@ from trace_audit.cli.options import JsonOption, PlainOption, RobotsOption
 
 if TYPE_CHECKING:  # the library is imported inside the command: start-up stays light
     from collections.abc import Sequence
+    from types import FrameType
 
+    from trace_audit.cli.output import JsonValue
     from trace_audit.foxglove_live import LiveView
     from trace_audit.tail import TailEvent
 
@@ -104,7 +106,7 @@ def _run(
         follow = True
     stop = threading.Event()
 
-    def interrupted(_signum: int, _frame: Any) -> None:
+    def interrupted(_signum: int, _frame: FrameType | None) -> None:
         stop.set()
 
     previous = signal.signal(signal.SIGINT, interrupted)
@@ -113,7 +115,7 @@ def _run(
         for event in tail(root, robots=robots, follow=follow, stop=stop, on_cycle=on_cycle):
             if stop.is_set():
                 break
-            _print(event_json(event) if json_out else event_line(event), json_out=json_out)
+            _print(_json_line(event_json(event)) if json_out else event_line(event))
     except BrokenPipeError:  # `tail ... | head`: the reader went away, nothing more to say
         sys.stderr.close()
     finally:
@@ -141,14 +143,15 @@ def _serve(root: Path, robots: tuple[str, ...], host: str, port: int) -> LiveVie
     return view
 
 
-def _print(value: Any, *, json_out: bool) -> None:
-    if json_out:
-        import orjson
-
-        sys.stdout.write(orjson.dumps(value).decode() + "\n")
-    else:
-        sys.stdout.write(value + "\n")
+def _print(line: str) -> None:
+    sys.stdout.write(line + "\n")
     sys.stdout.flush()
+
+
+def _json_line(data: dict[str, JsonValue]) -> str:
+    import orjson
+
+    return orjson.dumps(data).decode()
 
 
 def event_line(event: TailEvent) -> str:
@@ -177,12 +180,12 @@ def event_line(event: TailEvent) -> str:
     return "; ".join(parts)
 
 
-def event_json(event: TailEvent) -> dict[str, Any]:
+def event_json(event: TailEvent) -> dict[str, JsonValue]:
     """One event as JSON data; a change carries its time as shown (``t``) beside ``t_ns``."""
     from trace_audit.jsonout import to_jsonable
     from trace_audit.tail import DecisionChange, LogGap
 
-    data: dict[str, Any] = to_jsonable(event)
+    data: dict[str, JsonValue] = to_jsonable(event)
     if isinstance(event, DecisionChange | LogGap):
         del data["clock"]
         data["t"] = event.shown_t

@@ -6,12 +6,12 @@ rich on a terminal, plain text with ``--plain`` or in a pipe, JSON with ``--json
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from trace_audit.cli.app import app, guarded, help_text
-from trace_audit.cli.doc import Column, Doc, Seg, fmt_duration, fmt_t, fmt_value
+from trace_audit.cli.doc import Column, Doc, Line, Seg, fmt_duration, fmt_t, fmt_value
 from trace_audit.cli.options import (
     FromOption,
     JsonOption,
@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # the library is imported inside the command: start-up stays 
     from collections.abc import Sequence
     from pathlib import Path
 
-    from trace_audit.transitions import ClockRun, Timeline
+    from trace_audit.transitions import ClockRun, Timeline, TimelineRow
     from trace_runtime.gaps import Gap
 
 __all__ = ["timeline_command", "timeline_doc"]
@@ -123,12 +123,12 @@ def _in_run(cycle: int, run: ClockRun) -> bool:
     return first is not None and last is not None and first <= cycle <= last
 
 
-def _timeline_table(doc: Doc, r: Timeline, rows: list[Any], gaps: list[Gap]) -> None:
-    events: list[tuple[int, int, list[Any]]] = []
+def _timeline_table(doc: Doc, r: Timeline, rows: list[TimelineRow], gaps: list[Gap]) -> None:
+    events: list[tuple[int, int, list[Line]]] = []
     for row in rows:
         lead = f"{row.leading.label} = {row.leading.shown}" if row.leading else "-"
         flags = ", ".join(f"{k} x{v}" if v > 1 else k for k, v in row.flag_counts.items())
-        what: list[Any] = [lead]
+        what: list[str | Seg] = [lead]
         if row.max_deviation is not None:
             what.append(f"; max deviation {fmt_value(row.max_deviation)} {row.deviation_unit}")
         if flags:
@@ -174,7 +174,7 @@ def _cell(r: Timeline, t_ns: int) -> str:
     return shown[11:-1] if shown[:10] == start[:10] else shown
 
 
-def _gap_row(gap: Gap, when: str) -> list[Any]:
+def _gap_row(gap: Gap, when: str) -> list[Line]:
     """A timeline row for a gap: how long beyond the period, the cycles it would have held,
     and what the seal after it declares."""
     declared = gap.declared_dropped

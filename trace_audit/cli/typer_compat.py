@@ -2,8 +2,10 @@
 its bundled click) class that shapes help, usage lines or usage errors.
 
 Written against typer 0.29 (the range pinned in ``pyproject.toml``); each override names the
-behaviour of that version it replaces. Nothing else in ``trace_audit/cli`` imports
-``typer.core``, ``typer.main``, ``typer.models`` or ``typer.exceptions``.
+behaviour of that version it replaces. That version carries its own copy of click
+(``typer._click``): its classes, not the ``click`` package's, are what the overrides receive.
+Nothing else in ``trace_audit/cli`` imports ``typer._click``, ``typer.core``, ``typer.main``,
+``typer.models`` or ``typer.exceptions`` (``OptionInfo`` is re-exported for ``options``).
 """
 
 from __future__ import annotations
@@ -14,12 +16,13 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import typer
-from typer.core import TyperCommand, TyperGroup
+from typer._click import Context, HelpFormatter, Parameter
+from typer.core import TyperCommand, TyperGroup, TyperOption
 from typer.exceptions import TyperException
 from typer.main import get_group, solve_typer_info_defaults
-from typer.models import CommandFunctionType, CommandInfo, TyperInfo
+from typer.models import CommandFunctionType, CommandInfo, OptionInfo, TyperInfo
 
-__all__ = ["App", "Command", "Group", "TyperException", "usage_error_line"]
+__all__ = ["App", "Command", "Group", "OptionInfo", "TyperException", "usage_error_line"]
 
 # Rich markup written in help texts ("[bold]Examples[/bold]:"): the help is drawn by click's
 # plain formatter (below), so the tags are taken out rather than printed. Only style tags:
@@ -51,16 +54,17 @@ class Group(TyperGroup):
         short_help: str | None = None,
         **kwargs: Any,
     ) -> None:
+        # Any: whatever typer (0.29) builds a group with, passed on to it unread.
         help = _plain(help)
         super().__init__(*args, help=help, short_help=short_help or _summary(help), **kwargs)
 
-    def get_help_option(self, ctx: Any) -> Any:
+    def get_help_option(self, ctx: Context) -> TyperOption | None:
         option = super().get_help_option(ctx)
         if option is not None and option.default is None:
             option.default = False
         return option
 
-    def format_commands(self, ctx: Any, formatter: Any) -> None:
+    def format_commands(self, ctx: Context, formatter: HelpFormatter) -> None:
         """The commands under "Commands:", in sections by their ``rich_help_panel`` (what a
         user does with them) when they name one: each section in the order its first command
         is listed, its heading at the margin and its commands indented, as ``git help``
@@ -99,10 +103,11 @@ class Command(TyperCommand):
         short_help: str | None = None,
         **kwargs: Any,
     ) -> None:
+        # Any: whatever typer (0.29) builds a command with, passed on to it unread.
         help = _plain(help)
         super().__init__(*args, help=help, short_help=short_help or _summary(help), **kwargs)
 
-    def collect_usage_pieces(self, ctx: Any) -> list[str]:
+    def collect_usage_pieces(self, ctx: Context) -> list[str]:
         # "explain [OPTIONS] LOG", as click and every Unix tool write it; typer 0.29 writes
         # a required argument as "{log}", which reads like a template placeholder.
         pieces = [self.options_metavar] if self.options_metavar else []
@@ -112,7 +117,7 @@ class Command(TyperCommand):
                 pieces.append(name if param.required else f"[{name}]")
         return pieces
 
-    def format_options(self, ctx: Any, formatter: Any) -> None:
+    def format_options(self, ctx: Context, formatter: HelpFormatter) -> None:
         # typer 0.29 names a value by its Python type ("--evidence <list[Path]>", "log
         # <path>"); the usage line's names ("LOG", "--evidence PATH") read as click's do.
         sections: dict[str, list[tuple[str, str]]] = {"argument": [], "option": []}
@@ -146,7 +151,7 @@ _VALUE_WORDS = {
 """How an option's value is named in help, by the type name typer gives it."""
 
 
-def _argument_name(param: Any) -> str:
+def _argument_name(param: Parameter) -> str:
     name = str(param.metavar or param.name or "ARG").upper()
     return name + "..." if param.nargs != 1 else name
 
@@ -160,9 +165,10 @@ class App(typer.Typer):
     def command(
         self, name: str | None = None, *, cls: type[TyperCommand] | None = None, **kwargs: Any
     ) -> Callable[[CommandFunctionType], CommandFunctionType]:
+        # Any: typer.Typer.command's own keywords, passed on to it unread.
         return super().command(name, cls=cls or Command, **kwargs)
 
-    def runner_for(self, args: Sequence[str]) -> Callable[..., Any]:
+    def runner_for(self, args: Sequence[str]) -> typer.Typer | TyperGroup:
         """What runs this command line: when it names a command (or a sub-command group)
         first, a group holding that one alone; else the whole app.
 
