@@ -185,7 +185,7 @@ def tail(
     ``DecisionChange`` events; with ``follow``, polling every ``poll_s`` for what is new
     until ``stop`` is set (without, once through what is written so far). ``on_cycle`` is
     given every sealed cycle read, with its robot, before the events it makes (the live
-    Foxglove view, ``foxglove_live``, shows each one).
+    Foxglove view, ``foxglove.live``, shows each one).
 
     ``robots`` selects robots (``selection.Selection``; one not in the log is a
     ``UsageError``, but followed it is waited for: tail is started before the robot boots);

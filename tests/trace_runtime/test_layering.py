@@ -190,7 +190,7 @@ FLOORS: dict[str, list[set[str]]] = {
         {"metrics", "explanation", "export", "transitions", "info", "verify", "doctor", "layers"}
         | {"rules", "tail", "witness", "proof"},
         # what is built from the answers: the fleet index, the incident report, the Foxglove view
-        {"fleet", "incident", "foxglove", "foxglove_view", "foxglove_live"},
+        {"fleet", "incident", "foxglove"},
         {"cli", "entry"},  # entry: the console script's check that the cli extra is installed
         {""},
     ],

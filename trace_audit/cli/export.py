@@ -141,7 +141,7 @@ def _foxglove(
     """``--format foxglove``: the library writes the file; this says what it wrote."""
     if out is None:
         fail("--format foxglove writes an MCAP file: give --out FILE.mcap", EXIT_USAGE)
-    from trace_audit.foxglove import export_foxglove
+    from trace_audit.foxglove.export import export_foxglove
 
     target = out
     result = guarded(

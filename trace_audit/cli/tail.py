@@ -22,7 +22,7 @@ if TYPE_CHECKING:  # the library is imported inside the command: start-up stays 
     from types import FrameType
 
     from trace_audit.cli.output import JsonValue
-    from trace_audit.foxglove_live import LiveView
+    from trace_audit.foxglove.live import LiveView
     from trace_audit.tail import TailEvent
 
 __all__ = ["event_json", "event_line", "tail_command"]
@@ -127,7 +127,7 @@ def _run(
 def _serve(root: Path, robots: tuple[str, ...], host: str, port: int) -> LiveView:
     """Start the live Foxglove view (the root checked first, as tail checks it) and say on
     stderr where it listens."""
-    from trace_audit.foxglove_live import LiveView, live_robot
+    from trace_audit.foxglove.live import LiveView, live_robot
     from trace_runtime.errors import LogReadError
 
     if not root.exists():

@@ -21,7 +21,7 @@ with the SDK's own message types, schemas and encoding (``foxglove-sdk``):
   clean with a ``chain_start`` note from a later cycle (a window cut inside a segment carries
   a ``trace.excerpt`` record naming where it was cut, PROFILE section 2.1).
 
-What each cycle shows is ``foxglove_view``'s (the live view shows the same); this module
+What each cycle shows is ``foxglove.view``'s (the live view shows the same); this module
 writes it to one file beside the TRACE channels as logged.
 
 ``foxglove-sdk`` comes with the ``look`` extra; without it the export raises ``UsageError``.
@@ -35,7 +35,7 @@ from typing import Any
 
 import orjson
 
-from trace_audit.foxglove_view import FoxgloveView, logged_schema, require_sdk
+from trace_audit.foxglove.view import FoxgloveView, logged_schema, require_sdk
 from trace_audit.log_source import LogSource, require_cycles
 from trace_audit.log_time import TimeArg
 from trace_audit.selection import Selection

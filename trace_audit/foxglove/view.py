@@ -1,5 +1,5 @@
 """What one robot's cycles show in Foxglove, in Foxglove's own schemas, for any sink (an
-MCAP file, ``foxglove``; a live server, ``foxglove_live``): each cycle's scene update and
+MCAP file, ``foxglove.export``; a live server, ``foxglove.live``): each cycle's scene update and
 pose, its decision change, its factor and actuator numbers for the Plot panel, a warning
 where cycles are missing (``FoxgloveView``); every channel the view may write
 (``view_channels``) and the logger's schema of each TRACE channel copied beside them

@@ -2,7 +2,7 @@
 
 ``LiveView`` runs the SDK's WebSocket server (``foxglove.start_server``, the Foxglove
 WebSocket protocol, ``foxglove.websocket.v1``) and sends, for each cycle tail reads, exactly
-the messages the export writes for it (``foxglove_view.FoxgloveView``): the scene update, the
+the messages the export writes for it (``foxglove.view.FoxgloveView``): the scene update, the
 robot's pose, the decision change, the factor and actuator numbers; and the cycle's
 ``/trace/*`` layers and sensor readings as logged (JSON, the logger's schemas). Foxglove
 connects to ``ws://HOST:PORT`` (*Open connection → Foxglove WebSocket*) and shows them as
@@ -22,7 +22,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from trace_audit.foxglove_view import FoxgloveView, logged_schema, require_sdk, view_channels
+from trace_audit.foxglove.view import FoxgloveView, logged_schema, require_sdk, view_channels
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import UsageError
 from trace_runtime.reading.segment_files import segment_files_by_robot
