@@ -105,7 +105,7 @@ def serve_command(
         typer.Option(
             "--log",
             help="A robot's verifier key (witness vkey): the witness cosigns its checkpoints. "
-            "Repeat for each robot.",
+            "At least one; repeat for each robot.",
             show_default=False,
         ),
     ] = None,
