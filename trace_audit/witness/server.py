@@ -2,7 +2,7 @@
 
 ``POST /add-checkpoint`` checks, in order:
 
-1. the body's form (``witness_protocol.parse_add_checkpoint``) -> 400;
+1. the body's form (``witness_client.parse_add_checkpoint``) -> 400;
 2. the note's origin is a log this witness was given (``--log VKEY``) -> else 404;
 3. the note verifies under that log's key -> else 403; its text is a checkpoint -> else 400;
 4. the old size is at most the checkpoint's -> else 400;

@@ -174,7 +174,8 @@ class ChainWriter:
         Swallows every failure."""
         tree = self.tree
         saved = tree.state() if tree is not None else None  # a dropped batch takes its leaves
-        self._batch_leaves, self._checkpoints.notes = [], []
+        self._batch_leaves = []
+        self._checkpoints.take_note()  # one a dropped batch made is not offered
         try:
             self.check_storage()
             self._maybe_rotate(batch[0].t_ns)
@@ -208,8 +209,9 @@ class ChainWriter:
         feed = self._feed
         if feed is not None:
             feed.add_leaves(self._batch_leaves)
-            if self._checkpoints.notes:
-                feed.offer(*self._checkpoints.notes[-1])
+            note = self._checkpoints.take_note()
+            if note is not None:
+                feed.offer(*note)
             feed.submit()
         if self._segment_start_ns is None:
             self._segment_start_ns = batch[0].t_ns
@@ -394,12 +396,11 @@ class ChainWriter:
     def _final_checkpoint(self, segment: SegmentWriter, cycle: int, t_ns: int) -> bool:
         """Write the segment's closing checkpoint (its last seal: ``cycle`` at ``t_ns``);
         whether it is in the file."""
-        checkpoints = self._checkpoints
-        checkpoints.notes = []
+        self._checkpoints.take_note()
         message = self._checkpoint(
             segment, cycle, t_ns, self.prev_seal, self._sealed_in_segment, final=True
         )
-        notes, checkpoints.notes = checkpoints.notes, []  # the batch's own come after
+        note = self._checkpoints.take_note()  # the batch's own come after
         if message is None:
             return False
         try:
@@ -415,8 +416,8 @@ class ChainWriter:
             self.report_once("checkpoint", f"could not write a checkpoint: {err}")
             return False
         self.stats.checkpoints += 1
-        if self._feed is not None and notes:
-            self._feed.offer(*notes[-1])
+        if self._feed is not None and note is not None:
+            self._feed.offer(*note)
             self._feed.submit()
         return True
 

@@ -24,8 +24,8 @@ __all__ = ["Checkpointer"]
 
 
 class Checkpointer:
-    """The checkpoints of one robot's chain. ``notes`` collects the signed notes (and tree
-    sizes) of the checkpoints made since the caller last took them, for the witness feed."""
+    """The checkpoints of one robot's chain; the newest one's signed note is kept for the
+    witness feed until taken (``take_note``)."""
 
     def __init__(
         self,
@@ -42,7 +42,7 @@ class Checkpointer:
         self.origin = origin
         self._signer = signer
         self.note_signer = self._note_signer(signer)
-        self.notes: list[tuple[str, int]] = []
+        self._note: tuple[str, int] | None = None  # the newest note and its tree size
         self._due_ns: int | None = None  # log time the next periodic one is due
 
     def _note_signer(self, signer: Signer | None) -> NoteSigner | None:
@@ -59,6 +59,12 @@ class Checkpointer:
             )
             return None
         return NoteSigner(self.origin, signer, public.raw)
+
+    def take_note(self) -> tuple[str, int] | None:
+        """The signed note and tree size of the newest checkpoint made since the last call
+        (None when none was, or none was signed); the witness is offered only the newest."""
+        note, self._note = self._note, None
+        return note
 
     def new_segment(self) -> None:
         """A new segment starts its own grid."""
@@ -126,7 +132,7 @@ class Checkpointer:
                 checkpoint = build()
             data = encode_checkpoint(checkpoint)
             if checkpoint.note is not None and checkpoint.tree_size is not None:
-                self.notes.append((checkpoint.note, checkpoint.tree_size))
+                self._note = (checkpoint.note, checkpoint.tree_size)
             return OutMessage(segment.channel(TOPIC_CHECKPOINT), cycle, t_ns, data)
         except Exception as err:  # the audit trail goes on without this checkpoint
             stats.checkpoint_failures += 1

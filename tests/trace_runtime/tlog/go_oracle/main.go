@@ -1,5 +1,5 @@
-// The reference implementations as an oracle for trace_runtime.merkle and
-// trace_runtime.signed_note: golang.org/x/mod/sumdb/note (signed notes) and
+// The reference implementations as an oracle for trace_runtime.tlog.merkle and
+// trace_runtime.tlog.signed_note: golang.org/x/mod/sumdb/note (signed notes) and
 // golang.org/x/mod/sumdb/tlog (RFC 6962 trees and proofs).
 //
 // It reads one JSON request on stdin and writes one JSON answer on stdout;
