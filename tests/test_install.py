@@ -21,7 +21,8 @@ from pathlib import Path
 
 import pytest
 
-from trace_audit.entry import EXIT_NOT_INSTALLED, INVESTIGATOR_MODULES
+from trace_audit.entry import INVESTIGATOR_MODULES
+from trace_runtime.errors import EXIT_NOT_INSTALLED
 
 ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]

@@ -4,7 +4,8 @@ A robot's install (``pip install .``, no extras) carries ``trace_runtime`` and i
 dependencies only; typer, rich, networkx and numpy come with the ``cli`` extra. Without them
 ``trace-audit`` and ``trace-sim`` say so in one line on stderr and exit with
 ``EXIT_NOT_INSTALLED`` (docs/cli.md), instead of a ``ModuleNotFoundError`` traceback. This
-module imports nothing beyond the standard library until the check has passed.
+module imports nothing beyond the standard library and ``trace_runtime.errors`` (where every
+program's exit codes are numbered) until the check has passed.
 """
 
 from __future__ import annotations
@@ -12,14 +13,13 @@ from __future__ import annotations
 import sys
 from importlib.util import find_spec
 
-__all__ = ["EXIT_NOT_INSTALLED", "INVESTIGATOR_MODULES", "main", "missing_modules", "require"]
+from trace_runtime.errors import EXIT_NOT_INSTALLED
+
+__all__ = ["INVESTIGATOR_MODULES", "main", "missing_modules", "require"]
 
 INVESTIGATOR_MODULES = ("typer", "rich", "networkx", "numpy")
 """What the ``cli`` extra brings, by import name (tests/test_install.py holds this to
 pyproject.toml's ``cli`` extra)."""
-
-EXIT_NOT_INSTALLED = 5
-"""The exit code of a command whose extra is missing; 0-4 are the investigator's own."""
 
 
 def missing_modules() -> list[str]:

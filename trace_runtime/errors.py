@@ -47,6 +47,7 @@ if TYPE_CHECKING:
 __all__ = [
     "EXIT_CANNOT_WRITE",
     "EXIT_FINDINGS",
+    "EXIT_NOT_INSTALLED",
     "EXIT_OK",
     "EXIT_UNREADABLE",
     "EXIT_USAGE",
@@ -266,3 +267,5 @@ EXIT_UNREADABLE = 3
 """Input that cannot be read: missing, not MCAP, truncated, not a TRACE log."""
 EXIT_CANNOT_WRITE = 4
 """Output that cannot be written: a read-only folder, a full disk, a name already taken."""
+EXIT_NOT_INSTALLED = 5
+"""A command whose extra is not installed (a robot's install: ``trace_audit.entry``)."""
