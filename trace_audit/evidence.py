@@ -17,9 +17,18 @@ from pathlib import Path
 import orjson
 
 from trace_runtime.errors import LogReadError
+from trace_runtime.reading.logset import Log
+from trace_runtime.reading.reader import Segment
 from trace_runtime.reading.recordings import ExternalCheck, ExternalState, Recordings, is_external
+from trace_runtime.session import TIERS
 
-__all__ = ["ExternalEvidence", "decode_message", "describe_refs", "open_recordings"]
+__all__ = [
+    "ExternalEvidence",
+    "decode_message",
+    "describe_refs",
+    "open_recordings",
+    "recordings_for",
+]
 
 _MAX_FIELDS = 12
 _MAX_TEXT = 60
@@ -45,6 +54,29 @@ class ExternalEvidence:
 def open_recordings(paths: Sequence[str | Path]) -> Recordings | None:
     """``Recordings`` over the given files or directories; None when there are none."""
     return Recordings.open(paths) if paths else None
+
+
+def recordings_for(
+    segments: Iterable[Segment] | Log, given: Sequence[str | Path] = ()
+) -> Recordings | None:
+    """The one resolution of evidence every command uses: the recordings the log's segments
+    declare (profile 1.4, found where the robot said, relative to its root), with those
+    ``given`` (``--evidence``) taking precedence for a moved copy. None when the log
+    declares none and none were given; a declared recording that is not there is in
+    ``Recordings.missing`` (its refs are unresolved: unknown, not broken)."""
+    opened = open_recordings(given)
+    found = segments.segments if isinstance(segments, Log) else segments
+    sessions = [(_base_of(s.path), s.session.recordings) for s in found if s.session.recordings]
+    if not sessions:
+        return opened
+    return Recordings.declared(sessions, opened)
+
+
+def _base_of(segment: Path) -> Path:
+    """The folder a segment's declared recording paths are relative to: its log root when it
+    lies in a tier folder, else its own folder (a single-file log)."""
+    folder = segment.parent
+    return folder.parent if folder.name in TIERS else folder
 
 
 def describe_refs(

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from trace_audit.evidence import open_recordings
+from trace_audit.evidence import recordings_for
 from trace_audit.selection import Selection
 from trace_runtime.errors import NoteError, UsageError
 from trace_runtime.gaps import JSON_INLINE
@@ -70,9 +70,8 @@ def verify_log(
     segment inside a root is a finding. ``robots``: only these robots' chains
     (``selection.Selection``).
     """
-    recordings = open_recordings(evidence)
     log = Selection(tuple(robots)).of(open_log(path))
-    return verify(log, key=key, recordings=recordings, executor=executor)
+    return verify(log, key=key, recordings=recordings_for(log, evidence), executor=executor)
 
 
 def witness_check(

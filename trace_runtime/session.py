@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 from dataclasses import asdict, dataclass, replace
 
@@ -31,6 +32,8 @@ INT64_MAX = (1 << 63) - 1
 _ROBOT_ID = re.compile(r"[A-Za-z0-9_.-]+")
 _DIGEST = re.compile(r"[0-9a-f]{64}")
 _DECIMAL = re.compile(r"-?[0-9]{1,19}")
+_RECORDING_NAME = re.compile(r"(?!\.\.?$)[^/\\\x00]{1,255}")
+"""A recording's name: its folder's or file's name, so never a path nor ``.`` or ``..``."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,10 +50,17 @@ class SessionInfo:
     first_cycle: int = 0
     tier: str = "hot"
     profile_version: str = PROFILE_VERSION
+    recordings: tuple[tuple[str, str], ...] = ()
+    """The recordings the robot cites (profile 1.4): (name, path), the path relative to the
+    log root (or to a single-file log's folder) where it lies below it, else absolute."""
 
     def to_metadata(self) -> dict[str, str]:
-        """The MCAP metadata map (all values are strings, as MCAP requires)."""
-        return {key: str(value) for key, value in asdict(self).items()}
+        """The MCAP metadata map (all values are strings, as MCAP requires); ``recordings``
+        as a JSON object of name to path, left out when the robot cites none."""
+        values = {key: str(value) for key, value in asdict(self).items() if key != "recordings"}
+        if self.recordings:
+            values["recordings"] = json.dumps(dict(self.recordings), separators=(",", ":"))
+        return values
 
     @classmethod
     def from_metadata(cls, data: dict[str, str]) -> SessionInfo:
@@ -79,11 +89,31 @@ class SessionInfo:
             first_cycle=_integer(data, "first_cycle", 0, 0),
             tier=data.get("tier", "hot"),
             profile_version=data.get("profile_version", PROFILE_VERSION),
+            recordings=_recordings(data.get("recordings", "")),
         )
 
     def next_segment(self, prev_seal: str, first_cycle: int) -> SessionInfo:
         """The session record of the segment that follows this one."""
         return replace(self, segment=self.segment + 1, prev_seal=prev_seal, first_cycle=first_cycle)
+
+
+def _recordings(text: str) -> tuple[tuple[str, str], ...]:
+    """The ``recordings`` map's (name, path) pairs; entries that are not two strings are left
+    out, as is the whole map when it is not a JSON object: a damaged pointer to evidence must
+    not cost the investigator the segment (``doctor`` names it)."""
+    if not text:
+        return ()
+    try:
+        value = json.loads(text)
+    except ValueError:
+        return ()
+    if not isinstance(value, dict):
+        return ()
+    return tuple(
+        (name, path)
+        for name, path in value.items()
+        if isinstance(path, str) and _RECORDING_NAME.fullmatch(name) and path
+    )
 
 
 def _integer(data: dict[str, str], key: str, default: int | None, low: int) -> int:

@@ -330,5 +330,6 @@ def test_two_recordings_of_one_name_are_refused_not_checked_against_either(
     )
     assert result.exit_code == 2, result.output
     assert "two recordings named" in result.stderr
-    # the same file given twice (as a file and inside its directory) is one recording
-    assert Recordings.open([recording, bag]).names == [recording.name]
+    # the same file given twice (as a file and inside its directory) is one recording, known
+    # by its own name and by its bag's
+    assert Recordings.open([recording, bag]).names == sorted([bag.name, recording.name])

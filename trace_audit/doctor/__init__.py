@@ -20,7 +20,7 @@ from pathlib import Path
 
 from trace_audit.doctor.rules import RULES, DoctorReport, Problem, Rule, SegmentDoctor
 from trace_audit.doctor.structure import check_structure
-from trace_audit.evidence import open_recordings
+from trace_audit.evidence import open_recordings, recordings_for
 from trace_audit.selection import Selection
 from trace_runtime.errors import LogReadError
 from trace_runtime.reading.logset import Log, open_log
@@ -82,7 +82,7 @@ def doctor_log(
         # robots to choose among (doctor without --robot explains such files).
         selected = Selection(robots=tuple(robots)).of(open_log(root))
         files = _files_in(selected, files)
-    recordings = open_recordings(evidence)
+    given = open_recordings(evidence)
     report = DoctorReport(str(root))
     by_name: dict[str, SegmentDoctor] = {}
     total, done = sum(f.stat().st_size for f in files), 0
@@ -95,7 +95,7 @@ def doctor_log(
         done += file.stat().st_size
         if progress is not None:
             progress(done, total)
-    _verify_into(root, selected, report, by_name, recordings)
+    recordings = _verify_into(root, selected, report, by_name, evidence=evidence, given=given)
     report.evidence = recordings.names if recordings else []
     report.conforms = all(s.conforms for s in report.segments)
     return report
@@ -124,19 +124,25 @@ def _verify_into(
     log: Log | None,
     report: DoctorReport,
     by_name: dict[str, SegmentDoctor],
-    recordings: Recordings | None,
-) -> None:
+    *,
+    evidence: Sequence[str | Path],
+    given: Recordings | None,
+) -> Recordings | None:
     """Run the verifier over the log (``log``, the robots selected; else the whole of
-    ``root``) and file its findings under their segments."""
+    ``root``) with the recordings it declares and those given, and file its findings under
+    their segments; the recordings used."""
+    recordings = given
     try:
-        verified = verify(open_log(root) if log is None else log, recordings=recordings)
+        whole = open_log(root) if log is None else log
+        recordings = recordings_for(whole, evidence)
+        verified = verify(whole, recordings=recordings)
     except LogReadError as err:
         # The reader refuses what the structure checks may have let through (or explained).
         target = report.segments[0] if len(report.segments) == 1 else None
         for segment in [target] if target else report.segments:
             if segment is not None and segment.conforms:
                 segment.add("readable", f"the reference reader refuses the log: {err.reason}")
-        return
+        return recordings
     for finding in verified.findings:
         if finding.kind == "unsealed":
             continue
@@ -153,6 +159,7 @@ def _verify_into(
         rule = _NOTE_RULES.get(note.kind)
         if rule is not None:
             _file(note, rule, report, by_name)
+    return recordings
 
 
 def _file(

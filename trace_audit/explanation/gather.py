@@ -8,7 +8,7 @@ from pathlib import Path
 
 from trace_audit.causal import causal_graph_data, read_decision, tree_graph_data
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, DecisionChains, SensorWindow, trace_cycle
-from trace_audit.evidence import describe_refs, open_recordings
+from trace_audit.evidence import describe_refs, recordings_for
 from trace_audit.explanation.look_back import LookBack, look_back
 from trace_audit.explanation.result import Explanation
 from trace_audit.explanation.scores import decision_scores
@@ -112,7 +112,7 @@ def _explain(
     t_ns, log, target, offset = _find_target(log, t, cycle)
     whole, log = log, log.clock_run(target.segment)
     decision = read_decision(target)
-    recordings = open_recordings(evidence)
+    recordings = recordings_for(whole, evidence)
     # The cadence the robot kept when it decided: the period of the segment holding the
     # decision (the walk back, the gap to the previous seal and the output use it).
     holder = log.segment_named(target.segment)

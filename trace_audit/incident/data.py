@@ -25,7 +25,7 @@ from typing import Literal
 from trace_audit.causal import (
     Decision,
 )
-from trace_audit.evidence import open_recordings
+from trace_audit.evidence import recordings_for
 from trace_audit.explanation import Explanation, explain
 from trace_audit.incident.window import (
     EntityView,
@@ -266,7 +266,7 @@ def _window_integrity(
     """verify of the window's segments, told what it could not see: a chain that starts
     after segment 0 there is the window's start when the log holds the earlier segments,
     not retention having removed them."""
-    report = verify(Log(scope, root), key=key, recordings=open_recordings(evidence))
+    report = verify(Log(scope, root), key=key, recordings=recordings_for(whole, evidence))
     first = min((s.session.segment for s in scope), default=0)
     earlier = any(s.session.segment < first for s in whole.segments)
     if not earlier:

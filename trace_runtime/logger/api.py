@@ -132,6 +132,13 @@ class AuditLogger:
             from trace_runtime.logger.resume import resume_point
 
             first_cycle, prev_seal, segment_no = resume_point(self.path, robot_id)
+        recordings: tuple[tuple[str, str], ...] = ()
+        if self.config.recordings:
+            # Deferred like the resume point: a robot that cites no recording loads no reader.
+            from trace_runtime.reading.recordings import declare_recordings
+
+            base = self.path if self.is_root else self.path.parent
+            recordings = declare_recordings(self.config.recordings, base)
         return SessionInfo(
             robot_id=robot_id,
             period_ns=round(period_s * 1e9),
@@ -141,6 +148,7 @@ class AuditLogger:
             segment=segment_no,
             prev_seal=prev_seal,
             first_cycle=first_cycle,
+            recordings=recordings,
         )
 
     def _undeclared(self) -> int:

@@ -71,6 +71,18 @@ class LoggerConfig:
     ``checkpoint_key`` (only signed notes are submitted)."""
     witness_timeout_s: float = 2.0
     """How long one submission may take; the writer thread waits at most this long."""
+    recordings: tuple[str | Path, ...] = ()
+    """The sensor recordings the robot's evidence refs cite: a rosbag2 folder (as ``ros2 bag
+    record -o NAME`` makes it, split files and all) or one MCAP file, by path; it need not
+    exist yet. Each is declared in every segment (``trace.session`` ``recordings``), so every
+    command finds it without being told, and followed on the writer thread, so that every
+    message recorded in it is sealed into the robot's chain, cited or not (profile 1.4)."""
+    recording_window_s: float = 1.0
+    """The recording time one seal of a recording's messages covers."""
+    recording_settle_s: float = 1.0
+    """How long a window stays open after its end, in recording time (or, when the recording
+    stops growing, in wall time) for messages its recorder writes late: a message is sealed
+    at most ``recording_window_s + recording_settle_s`` plus one poll after it is on disk."""
 
 
 @dataclass(slots=True)

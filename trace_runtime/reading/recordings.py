@@ -20,6 +20,8 @@ Three outcomes, kept apart because they mean different things to an investigator
 from __future__ import annotations
 
 import hashlib
+import os
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,7 +33,19 @@ from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import EvidenceRef
 
-__all__ = ["ExternalCheck", "ExternalState", "Recordings", "external_ref", "is_external"]
+__all__ = [
+    "ExternalCheck",
+    "ExternalState",
+    "Recordings",
+    "declare_recordings",
+    "external_ref",
+    "is_external",
+    "recording_files",
+    "recording_name",
+]
+
+_SPLIT_INDEX = re.compile(r"_(\d+)$")
+"""rosbag2 numbers a bag's split files ``<bag>_<n>.mcap``."""
 
 ExternalState = Literal["resolved", "broken", "unresolved"]
 
@@ -74,27 +88,83 @@ def is_external(ref: Mapping[str, Any]) -> bool:
     return isinstance(ref.get("recording"), str)
 
 
-class Recordings:
-    """The external MCAP recordings an investigator was given, by file name.
+def recording_name(path: str | Path) -> str:
+    """What refs call a recording: its folder's name (a rosbag2 bag, split files and all) or
+    its file's name (one MCAP file)."""
+    return Path(path).name
 
-    Open with ``Recordings.open(paths)``: each path is an MCAP file or a directory (a rosbag2
-    bag holds its ``<name>_<n>.mcap`` files and a ``metadata.yaml``); directories are searched
-    for ``*.mcap`` files below them. Files are opened lazily, one index per file name.
+
+def recording_files(path: Path) -> list[Path]:
+    """The MCAP files of a recording as they are now: the file itself, or a bag folder's
+    ``*.mcap`` files in split order (``<bag>_2.mcap`` before ``<bag>_10.mcap``); [] when
+    there is nothing (yet)."""
+    if path.is_file():
+        return [path]
+    if not path.is_dir():
+        return []
+    return sorted((p for p in path.glob("*.mcap") if p.is_file()), key=_split_order)
+
+
+def _split_order(path: Path) -> tuple[int, str]:
+    match = _SPLIT_INDEX.search(path.stem)
+    return (int(match.group(1)) if match else -1, path.name)
+
+
+def declare_recordings(paths: Iterable[str | Path], base: Path) -> tuple[tuple[str, str], ...]:
+    """The ``trace.session`` ``recordings`` of a robot that cites ``paths``: each by its name,
+    at its path relative to ``base`` (the log root, or a single-file log's folder) when it
+    lies below or beside it, so that a root moved with its recordings still finds them;
+    absolute otherwise. Raises ``UsageError`` for two recordings of one name (refs could not
+    tell them apart) or a path with no name."""
+    declared: dict[str, str] = {}
+    for raw in paths:
+        path = Path(raw).absolute()
+        name = recording_name(path)
+        if name in ("", ".", ".."):
+            raise UsageError(f"recording {raw!s} has no name refs could cite")
+        if name in declared:
+            raise UsageError(
+                f"two recordings named {name}: refs name their recording, so names must differ"
+            )
+        relative = os.path.relpath(path, base.absolute())
+        declared[name] = (
+            Path(relative).as_posix() if not relative.startswith("../../") else (path.as_posix())
+        )
+    return tuple(declared.items())
+
+
+class Recordings:
+    """The external MCAP recordings evidence refs can be resolved against, by name.
+
+    A recording is a rosbag2 folder (its ``*.mcap`` split files) or one MCAP file; a ref
+    names it by the folder's or the file's name (``recording_name``), and refs written
+    before recordings were named so (profile 1.1-1.3) by the file's name, which is kept too.
+    ``Recordings.open(paths)`` takes what an investigator gives; ``Recordings.declared``
+    adds what the log's segments declare (profile 1.4). Files are opened lazily.
     """
 
-    def __init__(self, files: Mapping[str, Sequence[Path]], limits: ReadLimits = DEFAULT_LIMITS):
+    def __init__(
+        self,
+        files: Mapping[str, Sequence[Path]],
+        limits: ReadLimits = DEFAULT_LIMITS,
+        missing: Mapping[str, Path] | None = None,
+    ):
         self._paths = {name: tuple(paths) for name, paths in files.items()}
         self._limits = limits
         self._open: dict[Path, McapFile] = {}
+        self.missing: dict[str, Path] = dict(missing or {})
+        """Recordings the log declares that are not where it says (moved, never made): refs
+        into them are unresolved, so what they would show is unknown."""
 
     @classmethod
     def open(cls, paths: Iterable[str | Path], limits: ReadLimits = DEFAULT_LIMITS) -> Recordings:
         """Index the MCAP files at ``paths``; raise ``LogReadError`` for a path that is
         missing or a directory without MCAP files (the investigator asked for it).
 
-        Refs name their recording by file name, so two different files of one name are
-        refused (``UsageError``): checking a ref against whichever copy happens to match
-        would let an altered copy pass beside an intact one."""
+        Each file is known by its own name and by its folder's (a bag's files by the bag's
+        name); a directory is searched below for them. Two different files or folders of one
+        name are refused (``UsageError``): checking a ref against whichever copy happens to
+        match would let an altered copy pass beside an intact one."""
         files: dict[str, list[Path]] = {}
         for raw in paths:
             path = Path(raw)
@@ -107,28 +177,55 @@ class Recordings:
             else:
                 raise LogReadError(str(path), "no such recording")
             for file in found:
-                bucket = files.setdefault(file.name, [])
-                if all(file.resolve() != known.resolve() for known in bucket):
-                    bucket.append(file)
-        for name, bucket in files.items():
-            if len(bucket) > 1:
-                shown = ", ".join(str(p) for p in bucket)
-                raise UsageError(
-                    f"two recordings named {name} were given ({shown}): evidence refs name "
-                    "their recording by file name, so give only the one the log cites"
-                )
+                _add(files, file.name, [file])
+                if file.parent != path.parent or path.is_dir():
+                    _add(files, file.parent.name, recording_files(file.parent))
         return cls(files, limits)
+
+    @classmethod
+    def declared(
+        cls,
+        sessions: Iterable[tuple[Path, Sequence[tuple[str, str]]]],
+        given: Recordings | None = None,
+        limits: ReadLimits = DEFAULT_LIMITS,
+    ) -> Recordings:
+        """The recordings a log declares, ``sessions`` being each segment's (folder its paths
+        are relative to, ``trace.session`` ``recordings``), joined with those ``given``
+        (which win: ``--evidence`` is the override for a moved copy). A declared recording
+        that is not there is listed in ``missing``."""
+        files: dict[str, list[Path]] = (
+            {} if given is None else {name: list(paths) for name, paths in given._paths.items()}
+        )
+        missing: dict[str, Path] = {}
+        for base, declared in sessions:
+            for name, where in declared:
+                if name in files:
+                    continue
+                path = base / where
+                found = recording_files(path)
+                if found:
+                    files[name] = found
+                    missing.pop(name, None)
+                    for file in found:
+                        files.setdefault(file.name, [file])
+                else:
+                    missing.setdefault(name, path)
+        return cls(files, limits, missing)
 
     def __reduce__(self) -> tuple[Any, ...]:
         # Sent to another process (verify on an executor) as its file list, absolute so a
         # worker in another directory finds the same files; open files are not carried.
         files = {name: tuple(p.resolve() for p in paths) for name, paths in self._paths.items()}
-        return (type(self), (files, self._limits))
+        return (type(self), (files, self._limits, self.missing))
 
     @property
     def names(self) -> list[str]:
-        """The recording file names available, sorted."""
+        """The recording names (folders and files) available, sorted."""
         return sorted(self._paths)
+
+    def files_of(self, name: str) -> tuple[Path, ...]:
+        """The files of the recording ``name`` (a bag's split files in order); () if unknown."""
+        return self._paths.get(name, ())
 
     def __bool__(self) -> bool:
         return bool(self._paths)
@@ -153,7 +250,11 @@ class Recordings:
             return ExternalCheck("broken", name, "malformed ref (topic or log_time_ns missing)")
         paths = self._paths.get(name)
         if not paths:
-            return ExternalCheck("unresolved", name, f"recording {name} not given")
+            where = self.missing.get(name)
+            why = (
+                f"recording {name} not found at {where}" if where else f"recording {name} not given"
+            )
+            return ExternalCheck("unresolved", name, why)
         sequence, want = ref.get("sequence"), ref.get("digest")
         why, absent = f"no {topic} message at log_time_ns={t_ns} in {name}", True
         for path in paths:
@@ -169,3 +270,21 @@ class Recordings:
                     continue
                 return ExternalCheck("resolved", name, "", msg, path)
         return ExternalCheck("broken", name, why, absent=absent)
+
+
+def _add(files: dict[str, list[Path]], name: str, found: Sequence[Path]) -> None:
+    """Know ``found`` by ``name``; a different set already known by it is refused."""
+    bucket = files.setdefault(name, [])
+    if not bucket:
+        bucket.extend(found)
+        return
+    known = {p.resolve() for p in bucket}
+    if {p.resolve() for p in found} <= known or known <= {p.resolve() for p in found}:
+        if len(found) > len(bucket):
+            bucket[:] = found
+        return
+    shown = ", ".join(str(p) for p in [*bucket, *found])
+    raise UsageError(
+        f"two recordings named {name} were given ({shown}): evidence refs name their "
+        "recording, so give only the one the log cites"
+    )
