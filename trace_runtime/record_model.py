@@ -9,13 +9,13 @@ from __future__ import annotations
 import inspect
 from typing import Any, TypeVar
 
-from pydantic import BaseModel, ConfigDict, GetJsonSchemaHandler, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, GetJsonSchemaHandler, ValidationError
 from pydantic.json_schema import JsonSchemaValue
 from pydantic_core import CoreSchema
 
 from trace_runtime.errors import RecordError
 
-__all__ = ["RecordModel", "validate_record"]
+__all__ = ["RecordModel", "Stamp", "validate_record"]
 
 
 class RecordModel(BaseModel):
@@ -86,6 +86,13 @@ def _describe(model: str, err: ValidationError) -> str:
     where = ".".join(str(p) for p in first["loc"]) or "<root>"
     more = f" (and {err.error_count() - 1} more)" if err.error_count() > 1 else ""
     return f"invalid {model}: {where}: {first['msg']}{more}"
+
+
+class Stamp(RecordModel):
+    """What every ``/trace`` message begins with: the cycle it belongs to and its time."""
+
+    cycle: int = Field(ge=0, description="the cycle number, +1 per cycle begun (PROFILE §4)")
+    t_ns: int = Field(ge=0, description="the cycle's time in ns; the message's MCAP log_time")
 
 
 R = TypeVar("R", bound=RecordModel)

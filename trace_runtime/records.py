@@ -16,7 +16,8 @@ from typing import Annotated, Literal
 
 from pydantic import Field
 
-from trace_runtime.record_model import RecordModel
+from trace_runtime.record_model import RecordModel, Stamp
+from trace_runtime.recording_records import TOPIC_RECORDING, RecordingSeal
 
 PROFILE = "trace"
 PROFILE_VERSION = "1.3"
@@ -351,24 +352,19 @@ class Execution(RecordModel):
 # --- messages on the wire --------------------------------------------------------------
 
 
-class _Stamp(RecordModel):
-    cycle: int = Field(ge=0, description="the cycle number, +1 per cycle begun (PROFILE §4)")
-    t_ns: int = Field(ge=0, description="the cycle's time in ns; the message's MCAP log_time")
-
-
-class PerceptionMessage(_Stamp, Perception):
+class PerceptionMessage(Stamp, Perception):
     """``/trace/perception``"""
 
 
-class BeliefMessage(_Stamp, Belief):
+class BeliefMessage(Stamp, Belief):
     """``/trace/belief``"""
 
 
-class ActionMessage(_Stamp, Action):
+class ActionMessage(Stamp, Action):
     """``/trace/action``"""
 
 
-class ExecutionMessage(_Stamp, Execution):
+class ExecutionMessage(Stamp, Execution):
     """``/trace/execution``"""
 
 
@@ -384,7 +380,7 @@ class SensorCover(RecordModel):
     )
 
 
-class Seal(_Stamp):
+class Seal(Stamp):
     """``/trace/seal``: T_t, closing one cycle and linking it into the hash chain."""
 
     digests: dict[str, str] = Field(description="layer topic -> sha256 hex of its message data")
@@ -398,7 +394,7 @@ class Seal(_Stamp):
 
 LayerRecord = Perception | Belief | Action | Execution
 
-MESSAGE_MODELS: dict[str, type[_Stamp]] = {
+MESSAGE_MODELS: dict[str, type[Stamp]] = {
     TOPIC_PERCEPTION: PerceptionMessage,
     TOPIC_BELIEF: BeliefMessage,
     TOPIC_ACTION: ActionMessage,
@@ -421,7 +417,7 @@ GENESIS = "0" * 64
 TOPIC_CHECKPOINT = "/trace/checkpoint"
 
 
-class Checkpoint(_Stamp):
+class Checkpoint(Stamp):
     """``/trace/checkpoint``: a (signed) statement of the chain head, CT's signed tree head.
 
     ``cycle``/``t_ns`` are those of the head seal; ``head`` is the SHA-256 of that seal's data,
@@ -474,3 +470,4 @@ class Checkpoint(_Stamp):
 
 
 MESSAGE_MODELS[TOPIC_CHECKPOINT] = Checkpoint
+MESSAGE_MODELS[TOPIC_RECORDING] = RecordingSeal

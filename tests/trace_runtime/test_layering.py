@@ -160,7 +160,8 @@ FLOORS: dict[str, list[set[str]]] = {
         # the ground: records, errors and the rules every reader and writer shares
         {
             "errors", "lazy", "costs", "clock", "flags", "segment_names", "read_limits",
-            "gaps", "record_model", "records", "session", "schemas", "chain", "boundary",
+            "gaps", "record_model", "recording_records", "records", "session", "schemas",
+            "chain", "boundary",
             "live_writers",
         },
         # a record's bytes and an MCAP file's bytes, cycles assembled by the chain

@@ -41,8 +41,14 @@ from trace_runtime.logger.cycle_builder import COST_SAMPLE_EVERY
 from trace_runtime.logger.handover import PendingCycle
 from trace_runtime.logger.lock import WriterLock
 from trace_runtime.logger.mcap_out import MessageFields, OutMessage
+from trace_runtime.logger.recording_seals import (
+    RecordingBatch,
+    RecordingSeals,
+    encode_recording_seal,
+)
 from trace_runtime.logger.segment_writer import SegmentWriter
 from trace_runtime.logger.witness_feed import WitnessFeed
+from trace_runtime.recording_records import TOPIC_RECORDING
 from trace_runtime.records import GENESIS, LAYER_MODELS, TOPIC_SEAL
 from trace_runtime.segment_names import rotated_segment_name, segment_name
 from trace_runtime.session import SessionInfo
@@ -128,6 +134,15 @@ class ChainWriter:
                 "witness", "no checkpoint is submitted to the witness: it needs signed notes"
             )
         self._batch_leaves: list[bytes] = []  # this batch's leaves, for the witness feed
+        self._recordings: RecordingSeals | None = None
+        if session.recordings:
+            self._recordings = RecordingSeals(
+                session.recordings,
+                path if is_root else path.parent,
+                window_s=config.recording_window_s,
+                settle_s=config.recording_settle_s,
+                report_once=self.report_once,
+            )
         self.open_segment(session)
 
     def _first_tree(self, path: Path, session: SessionInfo) -> CompactRange | None:
@@ -184,7 +199,8 @@ class ChainWriter:
             segment = self._segment
             if segment is None:
                 raise SegmentWriteError("no segment could be opened", rolled_back=False)
-            messages, last_seal, checkpoints = self._seal(segment, batch)
+            recorded = self._recordings.collect() if self._recordings is not None else None
+            messages, last_seal, checkpoints = self._seal(segment, batch, recorded)
             self.stats.bytes_written += segment.write_batch(messages)
         except SegmentWriteError as err:
             if not err.kept:
@@ -202,6 +218,8 @@ class ChainWriter:
             return
         self.prev_seal = last_seal
         self.undeclared = 0
+        if recorded is not None and self._recordings is not None:
+            self._recordings.written()
         self.stats.written += len(batch)
         self._head = (batch[-1].cycle, batch[-1].t_ns)
         self._sealed_in_segment += len(batch)
@@ -226,7 +244,7 @@ class ChainWriter:
             self.tree = CompactRange.restore(*saved)
 
     def _seal(
-        self, segment: SegmentWriter, batch: list[PendingCycle]
+        self, segment: SegmentWriter, batch: list[PendingCycle], recorded: RecordingBatch | None
     ) -> tuple[list[MessageFields], str, int]:
         """The batch's messages in file order, the last seal's digest, and how many periodic
         checkpoints are among the messages (each right after the seal it names).
@@ -258,6 +276,10 @@ class ChainWriter:
                     data = encode_layer(cycle, t_ns, record, LAYER_MODELS[topic])
                     digests[topic] = digest_keeping_gil(data)
                 append((layer_channels[topic], cycle, t_ns, data))
+            if recorded is not None and index == 0:
+                data = encode_recording_seal(cycle, t_ns, recorded)
+                digests[TOPIC_RECORDING] = digest_keeping_gil(data)
+                append((channel(TOPIC_RECORDING), cycle, t_ns, data))
             cover = sensor_cover(lines) if lines else _NO_READINGS
             data = encode_seal_fields(
                 cycle, t_ns, digests, prev, carried + pending.dropped_before, sensors=cover

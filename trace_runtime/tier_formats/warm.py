@@ -26,6 +26,7 @@ import orjson
 
 from trace_runtime.encoding.cycles import Cycle, RawMessage
 from trace_runtime.flags import SCENARIO_FLAG
+from trace_runtime.recording_records import TOPIC_RECORDING
 from trace_runtime.records import (
     LAYER_TOPICS,
     TOPIC_ACTION,
@@ -37,6 +38,9 @@ from trace_runtime.records import (
 )
 
 SUMMARY_TOPIC = "/trace/summary"
+
+_KEPT_WHOLE = (TOPIC_CHECKPOINT, TOPIC_RECORDING)
+"""What a summarised cycle keeps of its messages besides its seal, byte for byte."""
 SUMMARY_SCHEMA = (
     "trace.Summary",
     "jsonschema",
@@ -410,8 +414,9 @@ def _emit(cycle: _Parsed, reasons: list[str], full: bool, policy: WarmPolicy) ->
         return WarmCycle(cycle.number, cycle.t_ns, True, reasons, cycle.messages)
     seal_msg = cycle.messages[-1]
     summary = summarize(cycle.layers)
-    # Signed checkpoints vouch for the chain of seals, which the warm tier keeps whole.
-    out = [m for m in cycle.messages if m.topic == TOPIC_CHECKPOINT]
+    # Signed checkpoints vouch for the chain of seals, which the warm tier keeps whole; the
+    # windows of the robot's recordings stay whole too, so the recordings stay checkable.
+    out = [m for m in cycle.messages if m.topic in _KEPT_WHOLE]
     if policy.keep_readings:
         sensors = [m for m in cycle.messages if not m.topic.startswith("/trace/")]
         out += _referenced_readings(summary, sensors)

@@ -46,12 +46,15 @@ FindingKind = Literal[
     "tree_mismatch",
     "truncated_tail",
     "fork",
+    "recording_modified",
 ]
 """What a finding says happened; every kind makes ``verify`` exit 1. ``tree_mismatch``: a
 profile 1.2 checkpoint states another Merkle tree (size, root, range) than the robot's seals
 give, or its C2SP note states another tree than the checkpoint. ``truncated_tail`` and
 ``fork`` come from a witness (``verify --witness``): the robot's tree ends before the size a
-witness cosigned, or differs from it at that size."""
+witness cosigned, or differs from it at that size. ``recording_modified``: a message of a
+recording the robot cites was changed, removed or added in a window its chain sealed
+(profile 1.4)."""
 
 NoteKind = Literal[
     "declared_gap",
@@ -68,8 +71,14 @@ NoteKind = Literal[
     "external_unresolved",
     "clock_backwards",
     "clock_restart",
+    "recording_gap",
+    "recording_unchecked",
+    "recording_unsealed",
 ]
-"""Things an investigator should know that are not tampering."""
+"""Things an investigator should know that are not tampering. ``recording_gap``: the logger
+declared a recording absent, stalled or unreadable; ``recording_unchecked``: sealed windows of
+a recording that is not here; ``recording_unsealed``: recorded messages after the last window
+the chain sealed (written after the robot's last cycle, or within the sealing lag)."""
 
 _INLINE = {JSON_INLINE: True}
 

@@ -30,6 +30,7 @@ from trace_runtime.session import EXCERPT_METADATA
 from trace_runtime.tlog.keys import PublicKey
 from trace_runtime.tlog.merkle import CompactRange, leaf_hash
 from trace_runtime.verification.checkpoint_check import CheckpointCheck, TreeCheck
+from trace_runtime.verification.recording_check import RecordingCheck
 from trace_runtime.verification.report import (
     Finding,
     RobotSummary,
@@ -151,6 +152,8 @@ class _RobotChain:
         self.sink = sink
         self.report = report
         self.recordings = recordings
+        self.recorded = RecordingCheck(recordings)
+        """The windows of the robot's recordings its chain sealed (profile 1.4)."""
         self.tail: ChainTail | None = None
         self.previous: int | None = None
         self.anchor: Anchor | None = None
@@ -166,6 +169,7 @@ class _RobotChain:
         for number in sorted(by_number):
             # The copy the log reads first, then the ones it shadows.
             self._segment(number, by_number[number])
+        self.recorded.finish()
         robot = self.robot
         robot.declared_dropped = self.sink.declared - declared_before
         if segments:
@@ -280,6 +284,7 @@ class _RobotChain:
                 self.key,
                 self.sink if n == 0 else self.sink.quiet(),
                 recordings=self.recordings,
+                recorded=self.recorded if n == 0 else None,
                 entry_tree=entry_tree,
             )
             check.run()
@@ -393,9 +398,12 @@ class _TreeSegmentCheck(SegmentCheck):
         sink: FindingSink,
         *,
         recordings: Recordings | None = None,
+        recorded: RecordingCheck | None = None,
         entry_tree: CompactRange | None = None,
     ) -> None:
-        super().__init__(segment, entry, entry_cycle, key, sink, recordings=recordings)
+        super().__init__(
+            segment, entry, entry_cycle, key, sink, recordings=recordings, recorded=recorded
+        )
         self.entry_tree = entry_tree
         self.exit_tree: CompactRange | None = None
         self.leaves: list[bytes] = []

@@ -15,11 +15,13 @@ from trace_runtime.errors import LogReadError, RecordError
 from trace_runtime.gaps import CycleRange
 from trace_runtime.reading.reader import Segment
 from trace_runtime.reading.recordings import ExternalCheck, Recordings
+from trace_runtime.recording_records import TOPIC_RECORDING
 from trace_runtime.records import TOPIC_CHECKPOINT, Checkpoint
 from trace_runtime.tlog.checkpoints import decode_checkpoint, iter_checkpoints
 from trace_runtime.tlog.keys import PublicKey
 from trace_runtime.verification.checkpoint_check import CheckpointCheck, ReadCheckpoint
 from trace_runtime.verification.numbering import Numbering
+from trace_runtime.verification.recording_check import RecordingCheck
 from trace_runtime.verification.reorder import ChainOrder
 from trace_runtime.verification.report import (
     EXTERNAL_RECORDING,
@@ -30,6 +32,9 @@ from trace_runtime.verification.scan import AbsentRun, Anchor, ChainTail, SealSc
 from trace_runtime.verification.sink import FindingSink, SegmentReporter
 
 __all__ = ["SegmentCheck"]
+
+_HELD = ("verified", "summarised")
+"""Seal states in which a cycle's ``/trace/recording`` message, where kept, matches its seal."""
 
 
 class SegmentCheck:
@@ -46,9 +51,12 @@ class SegmentCheck:
         sink: FindingSink,
         *,
         recordings: Recordings | None = None,
+        recorded: RecordingCheck | None = None,
     ) -> None:
         self.segment = segment
         self.recordings = recordings
+        self.recorded = recorded
+        """The robot's sealed recording windows, checked as their cycles are read."""
         self.session = segment.session
         self.name = display_name(segment.path)
         self.entry = entry
@@ -318,6 +326,10 @@ class SegmentCheck:
             self._seal_digests += bytes.fromhex(status.seal_digest)
             scan.uncited += status.sensors_uncited
             self._content_findings(status, position)
+            recorded = cycle.payloads.get(TOPIC_RECORDING)
+            if recorded is not None and self.recorded is not None and status.state in _HELD:
+                where = CycleRange(cycle.cycle, cycle.cycle, cycle.t_ns, cycle.t_ns)
+                self.recorded.sealed(recorded, where, self.report)
 
     def _check_entry(self, prev: str, cycle: Cycle) -> None:
         """The first seal against where the chain entered the segment."""
