@@ -20,11 +20,12 @@ from trace_runtime.record_model import RecordModel, Stamp
 from trace_runtime.recording_records import TOPIC_RECORDING, RecordingSeal
 
 PROFILE = "trace"
-PROFILE_VERSION = "1.3"
+PROFILE_VERSION = "1.4"
 """Major.minor (schemas/PROFILE.md §10). Minor revisions only add optional fields: every
 version 1 log is read as before, and a version 1 reader reads 1.1 logs (ignoring what it
 does not know). 1.2 adds each robot's Merkle tree to its checkpoints; 1.3 seals every
-sensor reading (the seal's ``sensors``)."""
+sensor reading (the seal's ``sensors``); 1.4 declares the recordings a robot cites
+(``trace.session`` ``recordings``) and seals every message in them (``/trace/recording``)."""
 
 TOPIC_PERCEPTION = "/trace/perception"
 TOPIC_BELIEF = "/trace/belief"

@@ -9,6 +9,7 @@ inflate past ``ReadLimits``. Each message it meets goes to the content checker
 
 from __future__ import annotations
 
+import json
 import struct
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -221,11 +222,30 @@ def _session_record(record: Metadata, seen: _Seen, report: SegmentDoctor, offset
         seen.content.seals_cover_sensors = _version(seen.session.profile_version) >= (1, 3)
     except ValueError as err:
         report.add("session-values", f"trace.session: {err}", offset=offset)
+    declared = record.metadata.get("recordings")
+    if declared is not None and seen.session is not None:
+        _check_recordings(declared, seen.session, report, offset)
     missing = [k for k in _SESSION_KEYS if k not in record.metadata]
     if missing:
         report.add(
             "session-keys",
             f"trace.session lacks {', '.join(missing)} (readers assume the defaults)",
+            offset=offset,
+        )
+
+
+def _check_recordings(text: str, session: SessionInfo, report: SegmentDoctor, offset: int) -> None:
+    """Profile 1.4: ``recordings`` is a JSON object of recording names to paths; readers keep
+    only the well-formed entries, so one they drop is a recording nobody will find."""
+    try:
+        value = json.loads(text)
+    except ValueError:
+        value = None
+    if not isinstance(value, dict) or len(value) != len(session.recordings):
+        report.add(
+            "session-values",
+            "trace.session recordings is not a JSON object of recording names (a folder's "
+            "or file's name) to paths: readers drop what is not",
             offset=offset,
         )
 
