@@ -15,8 +15,6 @@ from mcap.writer import Writer
 from tests.outside import cli
 from tests.trace_runtime.logger.test_recording_seals import RECORDER, run_robot
 
-pytest.importorskip("rosbags")
-
 
 @pytest.fixture(scope="module")
 def root(tmp_path_factory: pytest.TempPathFactory) -> Path:

@@ -23,9 +23,6 @@ from trace_runtime import AuditLogger, EvidenceRef, LoggerConfig, Perception, ex
 from trace_runtime.testing import synthetic_cycle
 from trace_runtime.tiers.compaction import compact
 
-pytest.importorskip("rosbags")
-
-
 ROOT = Path(__file__).resolve().parents[3]
 RECORDER = ROOT / "tests" / "rosbag_recorder.py"
 from tests.outside import cli  # noqa: E402
