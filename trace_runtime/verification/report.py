@@ -68,6 +68,7 @@ NoteKind = Literal[
     "external_unresolved",
     "clock_backwards",
     "clock_restart",
+    "clock_step",
 ]
 """Things an investigator should know that are not tampering."""
 

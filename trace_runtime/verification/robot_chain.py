@@ -17,7 +17,7 @@ from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 
-from trace_runtime.clock import clock_restarted
+from trace_runtime.clock import clock_restarted, is_wall_clock, iso_utc
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import LogReadError
 from trace_runtime.gaps import CycleRange
@@ -335,13 +335,22 @@ class _RobotChain:
         if tail is None or start is None or not clock_restarted(tail.t_ns, start):
             return
         at = summary.cycle_range.first_cycle
+        stepped = first.session.clock_step_from_ns
+        clock = first.session.clock
+        message = (
+            f"the robot's clock restarted: segment {number} starts at "
+            f"{_shown(start, clock)}, not after cycle {tail.cycle} at "
+            f"{_shown(tail.t_ns, clock)} (PROFILE section 4 allows it across segments"
+            if stepped is None
+            else f"the robot's clock stepped back {(stepped - start) / 1e9:.3f} s before cycle "
+            f"{at} (from {_shown(stepped, clock)} to {_shown(start, clock)}), as its writer "
+            f"declared in segment {number}: a new clock run, not tampering (PROFILE section 4"
+        )
         self.sink.note(
             Finding(
-                kind="clock_restart",
-                message=f"the robot's clock restarted: segment {number} starts at "
-                f"{start / 1e9:.3f} s, not after cycle {tail.cycle} at {tail.t_ns / 1e9:.3f} s "
-                "(PROFILE section 4 allows it across segments; a time may name a decision "
-                "in each run: explain by --cycle, or read each run apart)",
+                kind="clock_restart" if stepped is None else "clock_step",
+                message=f"{message}; a time may name a decision in each run: explain by "
+                "--cycle, or read each run apart)",
                 robot_id=self.robot.robot_id,
                 segment=display_name(first.path),
                 segment_no=number,
@@ -489,3 +498,8 @@ def _verify_on(
         for note in result.notes:
             sink.note(note)
         sink.declared += result.declared
+
+
+def _shown(t_ns: int, clock: str) -> str:
+    """A time in a note: ISO 8601 UTC on a wall clock, else seconds."""
+    return iso_utc(t_ns, digits=3) if is_wall_clock(clock, t_ns) else f"{t_ns / 1e9:.3f} s"
