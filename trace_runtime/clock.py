@@ -31,6 +31,7 @@ __all__ = [
     "clock_restarted",
     "is_wall_clock",
     "iso_utc",
+    "show_instant",
     "show_time",
 ]
 
@@ -95,3 +96,9 @@ def show_time(t_ns: int, clock: str, start_ns: int) -> str:
     if not is_wall_clock(clock, start_ns):
         return f"{t_ns / 1e9:.3f} s"
     return f"{iso_utc(t_ns, digits=3)} ({(t_ns - start_ns) / 1e9:+.3f} s)"
+
+
+def show_instant(t_ns: int, clock: str) -> str:
+    """One time of a log on ``clock`` on its own (in a message): ISO 8601 UTC to the
+    millisecond when it is a time of day, else seconds."""
+    return iso_utc(t_ns, digits=3) if is_wall_clock(clock, t_ns) else f"{t_ns / 1e9:.3f} s"

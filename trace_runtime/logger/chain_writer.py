@@ -96,7 +96,8 @@ class ChainWriter:
         self._segment: SegmentWriter | None = None
         self._segment_start_ns: int | None = None
         self._head: tuple[int, int] | None = None  # (cycle, t_ns) of the segment's last seal
-        self._last_t_ns: int | None = None  # time of the last cycle written, in any segment
+        self.last_t_ns: int | None = None
+        """The time of the last cycle written, in any segment (``logger.clock_steps``)."""
         self._step_from: int | None = None  # a clock step the next segment opened declares
         self._sealed_in_segment = 0
         self._costs = CostHistogram()  # this segment's per-cycle control-thread costs
@@ -171,28 +172,9 @@ class ChainWriter:
         if self._writer_lock is not None:
             self._writer_lock.release()
 
-    def write_batch(self, batch: list[PendingCycle]) -> None:
-        """Seal and write cycles, one caller at a time (``WriterThread`` holds its lock).
-        Swallows every failure.
-
-        A cycle earlier than the one before it is a clock step (chrony, a ROS time source
-        reset): time must not go back within a segment (PROFILE section 4), so the segment
-        ends there and the cycles from the step on go into the next one, whose
-        ``trace.session`` declares the step (``clock_step_from_ns``). Chain and cycle
-        numbers go on across it as across any rotation."""
-        start = 0
-        for index, pending in enumerate(batch):
-            before = batch[index - 1].t_ns if index else self._last_t_ns
-            if before is not None and pending.t_ns < before:
-                if index > start:
-                    self._write_run(batch[start:index])
-                self._step_clock(before, pending)
-                start = index
-        self._write_run(batch[start:] if start else batch)
-
-    def _step_clock(self, before_ns: int, pending: PendingCycle) -> None:
-        """End the segment before ``pending``, whose time is earlier than ``before_ns``; the
-        next segment opened declares the step."""
+    def step_clock(self, before_ns: int, pending: PendingCycle) -> None:
+        """End the segment before ``pending``, whose time is earlier than ``before_ns`` (the
+        clock stepped back: ``logger.clock_steps``); the next segment opened declares it."""
         self.stats.clock_steps += 1
         self.report_once(
             "clock_step",
@@ -202,8 +184,9 @@ class ChainWriter:
         self._step_from = before_ns
         self.close_segment()
 
-    def _write_run(self, batch: list[PendingCycle]) -> None:
-        """Seal and write cycles whose times never go back."""
+    def write_batch(self, batch: list[PendingCycle]) -> None:
+        """Seal and write cycles, one caller at a time (``WriterThread`` holds its lock).
+        Swallows every failure."""
         tree = self.tree
         saved = tree.state() if tree is not None else None  # a dropped batch takes its leaves
         self._batch_leaves = []
@@ -238,7 +221,7 @@ class ChainWriter:
         self.undeclared = 0
         self.stats.written += len(batch)
         self._head = (batch[-1].cycle, batch[-1].t_ns)
-        self._last_t_ns = batch[-1].t_ns
+        self.last_t_ns = batch[-1].t_ns
         self._sealed_in_segment += len(batch)
         self.stats.checkpoints += checkpoints
         feed = self._feed

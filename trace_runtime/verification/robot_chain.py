@@ -17,7 +17,7 @@ from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 
-from trace_runtime.clock import clock_restarted, is_wall_clock, iso_utc
+from trace_runtime.clock import clock_restarted, show_instant
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import LogReadError
 from trace_runtime.gaps import CycleRange
@@ -335,16 +335,16 @@ class _RobotChain:
         if tail is None or start is None or not clock_restarted(tail.t_ns, start):
             return
         at = summary.cycle_range.first_cycle
-        stepped = first.session.clock_step_from_ns
-        clock = first.session.clock
+        stepped, clock = first.session.clock_step_from_ns, first.session.clock
+        begins = show_instant(start, clock)
         message = (
-            f"the robot's clock restarted: segment {number} starts at "
-            f"{_shown(start, clock)}, not after cycle {tail.cycle} at "
-            f"{_shown(tail.t_ns, clock)} (PROFILE section 4 allows it across segments"
+            f"the robot's clock restarted: segment {number} starts at {begins}, not after "
+            f"cycle {tail.cycle} at {show_instant(tail.t_ns, clock)} (PROFILE section 4 allows "
+            "it across segments"
             if stepped is None
             else f"the robot's clock stepped back {(stepped - start) / 1e9:.3f} s before cycle "
-            f"{at} (from {_shown(stepped, clock)} to {_shown(start, clock)}), as its writer "
-            f"declared in segment {number}: a new clock run, not tampering (PROFILE section 4"
+            f"{at} (from {show_instant(stepped, clock)} to {begins}), as its writer declared "
+            f"in segment {number}: a new clock run, not tampering (PROFILE section 4"
         )
         self.sink.note(
             Finding(
@@ -498,8 +498,3 @@ def _verify_on(
         for note in result.notes:
             sink.note(note)
         sink.declared += result.declared
-
-
-def _shown(t_ns: int, clock: str) -> str:
-    """A time in a note: ISO 8601 UTC on a wall clock, else seconds."""
-    return iso_utc(t_ns, digits=3) if is_wall_clock(clock, t_ns) else f"{t_ns / 1e9:.3f} s"
