@@ -9,13 +9,15 @@ reads them all; ``scan=False`` answers from the summaries alone and says so.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from trace_audit.cycle_fields import seal_dropped
+from trace_audit.jsonout import OMIT_EMPTY
 from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log, require_cycles
 from trace_audit.log_time import SECONDS_CLOCK, LogClock
 from trace_audit.selection import Selection
+from trace_runtime.clock import ClockStep
 from trace_runtime.gaps import DEFAULT_GAP_TOLERANCE, CycleRange, Gap
 from trace_runtime.logger.chain_writer import CLOSE_METADATA
 from trace_runtime.reading.logset import Log
@@ -69,6 +71,9 @@ class LogInfo:
     """Gaps between each robot's sealed cycles, by the rule metrics uses for TC."""
     clock: LogClock = SECONDS_CLOCK
     """The log's clock and first time: how its times are shown (``log_time.LogClock``)."""
+    clock_steps: tuple[ClockStep, ...] = field(default=(), metadata={OMIT_EMPTY: True})
+    """Where a robot's clock went back between segments: a step its writer declared, or a
+    restart (``Log.clock_steps``); each run of the clock is read apart."""
 
     @property
     def duration_ns(self) -> int:
@@ -123,6 +128,7 @@ def log_info(
         dropped=seen.dropped,
         gaps=tuple(seen.gaps),
         clock=LogClock.of(log),
+        clock_steps=tuple(log.clock_steps()),
     )
 
 

@@ -7,6 +7,9 @@ a segment whose first time is earlier than the time its predecessor in the chain
 times are not a restart (a segment rotated mid-session may begin at the instant the last one
 ended); they are one run. ``Log.clock_runs`` splits a log's runs with it, ``verify`` notes it,
 and ``metrics`` starts a fresh continuity window after it, so the three always agree.
+A writer whose clock steps back mid-session (chrony, a ROS time source reset) begins a segment
+that declares the step (``trace.session`` ``clock_step_from_ns``); ``Log.clock_steps`` lists
+every such boundary as a ``ClockStep``, declared or not.
 
 A segment's ``clock`` names the clock behind its times (PROFILE section 3). Only a wall clock
 (``system``: nanoseconds since the Unix epoch) gives a time of day: times of such a log are
@@ -19,13 +22,16 @@ a ``system`` log whose times start before 2000 (``EARLIEST_WALL_NS``): a reader 
 from __future__ import annotations
 
 import datetime as _dt
+from dataclasses import dataclass
 
 __all__ = [
     "EARLIEST_WALL_NS",
     "WALL_CLOCKS",
+    "ClockStep",
     "clock_restarted",
     "is_wall_clock",
     "iso_utc",
+    "show_instant",
     "show_time",
 ]
 
@@ -33,6 +39,28 @@ WALL_CLOCKS = frozenset({"system"})
 """Clock names whose ``t_ns`` are nanoseconds since the Unix epoch (UTC)."""
 EARLIEST_WALL_NS = 946_684_800 * 1_000_000_000
 """2000-01-01T00:00:00Z: a wall-clock log starts after it."""
+
+
+@dataclass(frozen=True, slots=True)
+class ClockStep:
+    """Where a robot's clock went back between two of its segments: from ``from_ns`` (the
+    last time before it) to ``to_ns`` (the first time of ``segment``, which begins at
+    ``first_cycle``). ``declared``: its writer declared the step in that segment's
+    ``trace.session`` (a clock stepped back mid-session, the chain and cycles going on);
+    else the robot restarted on a clock that begins lower."""
+
+    robot_id: str
+    segment: str
+    segment_no: int
+    first_cycle: int
+    from_ns: int
+    to_ns: int
+    declared: bool
+
+    @property
+    def back_ns(self) -> int:
+        """How far the clock went back."""
+        return self.from_ns - self.to_ns
 
 
 def clock_restarted(before_ns: int, after_ns: int) -> bool:
@@ -68,3 +96,9 @@ def show_time(t_ns: int, clock: str, start_ns: int) -> str:
     if not is_wall_clock(clock, start_ns):
         return f"{t_ns / 1e9:.3f} s"
     return f"{iso_utc(t_ns, digits=3)} ({(t_ns - start_ns) / 1e9:+.3f} s)"
+
+
+def show_instant(t_ns: int, clock: str) -> str:
+    """One time of a log on ``clock`` on its own (in a message): ISO 8601 UTC to the
+    millisecond when it is a time of day, else seconds."""
+    return iso_utc(t_ns, digits=3) if is_wall_clock(clock, t_ns) else f"{t_ns / 1e9:.3f} s"

@@ -53,11 +53,21 @@ class SessionInfo:
     recordings: tuple[tuple[str, str], ...] = ()
     """The recordings the robot cites (profile 1.4): (name, path), the path relative to the
     log root (or to a single-file log's folder) where it lies below it, else absolute."""
+    clock_step_from_ns: int | None = None
+    """Set on a segment its writer began because the robot's clock stepped back (PROFILE
+    section 4): the time of the last cycle before the step, so the step is declared, not
+    mistaken for a restart or a gap. None on every other segment."""
 
     def to_metadata(self) -> dict[str, str]:
         """The MCAP metadata map (all values are strings, as MCAP requires); ``recordings``
         as a JSON object of name to path, left out when the robot cites none."""
-        values = {key: str(value) for key, value in asdict(self).items() if key != "recordings"}
+        values = {
+            key: str(value)
+            for key, value in asdict(self).items()
+            if key not in ("recordings", "clock_step_from_ns")
+        }
+        if self.clock_step_from_ns is not None:
+            values["clock_step_from_ns"] = str(self.clock_step_from_ns)
         if self.recordings:
             values["recordings"] = json.dumps(dict(self.recordings), separators=(",", ":"))
         return values
@@ -90,11 +100,21 @@ class SessionInfo:
             tier=data.get("tier", "hot"),
             profile_version=data.get("profile_version", PROFILE_VERSION),
             recordings=_recordings(data.get("recordings", "")),
+            clock_step_from_ns=_step_from(data.get("clock_step_from_ns", "")),
         )
 
-    def next_segment(self, prev_seal: str, first_cycle: int) -> SessionInfo:
-        """The session record of the segment that follows this one."""
-        return replace(self, segment=self.segment + 1, prev_seal=prev_seal, first_cycle=first_cycle)
+    def next_segment(
+        self, prev_seal: str, first_cycle: int, clock_step_from_ns: int | None = None
+    ) -> SessionInfo:
+        """The session record of the segment that follows this one (``clock_step_from_ns``:
+        it begins because the clock stepped back from that time)."""
+        return replace(
+            self,
+            segment=self.segment + 1,
+            prev_seal=prev_seal,
+            first_cycle=first_cycle,
+            clock_step_from_ns=clock_step_from_ns,
+        )
 
 
 def _recordings(text: str) -> tuple[tuple[str, str], ...]:
@@ -114,6 +134,15 @@ def _recordings(text: str) -> tuple[tuple[str, str], ...]:
         for name, path in value.items()
         if isinstance(path, str) and _RECORDING_NAME.fullmatch(name) and path
     )
+
+
+def _step_from(text: str) -> int | None:
+    """A declared clock step's earlier time; None when absent or not a decimal int64 (a
+    damaged declaration costs the note, not the segment: its cycles still verify)."""
+    if not _DECIMAL.fullmatch(text):
+        return None
+    value = int(text)
+    return value if 0 <= value <= INT64_MAX else None
 
 
 def _integer(data: dict[str, str], key: str, default: int | None, low: int) -> int:

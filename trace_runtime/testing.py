@@ -15,6 +15,7 @@ encoding and sealing, so what a test sees is exactly what would have been writte
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
@@ -22,9 +23,9 @@ import orjson
 
 from trace_runtime.chain import digest, sensor_cover, sensor_line
 from trace_runtime.encoding.codec import EncodedLayer, LayerValue, encode_checked, encode_seal
-from trace_runtime.errors import UsageError
+from trace_runtime.errors import RecordError, UsageError
 from trace_runtime.logger.api import AuditLogger, LoggerStats
-from trace_runtime.logger.cycle_builder import CycleBuilder, next_cycle_time
+from trace_runtime.logger.cycle_builder import CycleBuilder
 from trace_runtime.records import (
     GENESIS,
     LAYER_MODELS,
@@ -105,8 +106,13 @@ class CaptureLogger:
             raise UsageError("the logger is closed")
         if self._open is not None and not self._open._committed:
             raise UsageError(f"cycle {self._open.cycle} was begun but not committed")
-        self._last_t_ns = next_cycle_time(t_ns, self._last_t_ns)
-        builder = CycleBuilder(self, self._next_cycle, self._last_t_ns)
+        t_ns = time.time_ns() if t_ns is None else t_ns
+        if t_ns < 0:
+            raise RecordError(f"cycle time {t_ns} ns is negative (PROFILE section 4)")
+        if t_ns < self._last_t_ns:  # a clock step: AuditLogger declares it in a new segment
+            self.stats.clock_steps += 1
+        self._last_t_ns = t_ns
+        builder = CycleBuilder(self, self._next_cycle, t_ns)
         self._next_cycle += 1
         self._open = builder
         return builder

@@ -1,6 +1,7 @@
 """Evidence refs into an external rosbag2-style MCAP recording (PROFILE.md section 11).
 
-The recording is a real ROS 2 MCAP written by ``mcap-ros2-support`` (examples/ros2_robot.py):
+The recording is a real ROS 2 MCAP written by ``mcap-ros2-support`` (file_recording_robot.py,
+the example robot before issue 42: one file, cited by file name and sequence, not declared):
 ``sensor_msgs/msg/LaserScan`` with its ``ros2msg`` schema, CDR messages. The TRACE log cites
 its messages; explain, verify, metrics and doctor resolve them when given the recording,
 check their digests, and keep "recording not given" apart from "broken"."""
@@ -26,13 +27,13 @@ from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.reading.recordings import Recordings
 
 ROOT = Path(__file__).resolve().parents[2]
-EXAMPLE = ROOT / "examples" / "ros2_robot.py"
+EXAMPLE = ROOT / "tests" / "trace_audit" / "file_recording_robot.py"
 CYCLES = 40
 
 
 @pytest.fixture(scope="module")
 def robot(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """(TRACE log, rosbag2 directory) written by the example, as a user would run it."""
+    """(TRACE log, rosbag2 directory) written by the robot, as a user would run it."""
     out = tmp_path_factory.mktemp("ros2") / "robot.mcap"
     subprocess.run(
         [sys.executable, str(EXAMPLE), "--out", str(out), "--cycles", str(CYCLES)],

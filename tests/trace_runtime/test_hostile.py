@@ -208,3 +208,18 @@ def test_the_session_bounds_admit_what_the_profile_allows() -> None:
     )
     assert session.period_ns == MIN_PERIOD_NS and session.first_cycle == (1 << 63) - 1
     assert SessionInfo.from_metadata(SessionInfo("r", 100_000_000).to_metadata()).robot_id == "r"
+
+
+@pytest.mark.parametrize(
+    ("text", "read"),
+    [("1777000000000000000", 1_777_000_000_000_000_000), ("-1", None), ("1e9", None), ("", None)],
+)
+def test_a_damaged_clock_step_declaration_costs_the_note_not_the_segment(
+    text: str, read: int | None
+) -> None:
+    session = SessionInfo.from_metadata(hostile.session(clock_step_from_ns=text))
+    assert session.clock_step_from_ns == read
+    again = SessionInfo.from_metadata(session.to_metadata())
+    assert again == session and ("clock_step_from_ns" in session.to_metadata()) == (
+        read is not None
+    )

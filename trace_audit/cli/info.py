@@ -111,6 +111,8 @@ def _summary_rows(r: LogInfo) -> list[tuple[str, Line]]:
         ("Segments", f"{len(r.segments)} ({tiers})"),
         ("State", state),
     ]
+    if r.clock_steps:
+        rows.append(("Clock", Seg(_clock_steps(r), "yellow")))
     if r.scanned:
         dropped = r.dropped or 0
         rows.append(
@@ -131,6 +133,17 @@ def _summary_rows(r: LogInfo) -> list[tuple[str, Line]]:
     else:
         rows.append(("Dropped, gaps", "not counted (--quick)"))
     return rows
+
+
+def _clock_steps(r: LogInfo) -> str:
+    """Where the robot's clock went back: each step (declared by its writer) or restart."""
+    shown = [
+        f"{'stepped back' if s.declared else 'restarted'} {s.back_ns / 1e9:.3f} s before "
+        f"cycle {s.first_cycle} ({s.segment})"
+        for s in r.clock_steps[:5]
+    ]
+    more = f"; ... and {len(r.clock_steps) - 5} more" if len(r.clock_steps) > 5 else ""
+    return "; ".join(shown) + more + " (each run of the clock is read apart)"
 
 
 def _segment_table(doc: Doc, r: LogInfo) -> None:

@@ -27,16 +27,11 @@ from pathlib import Path
 from time import perf_counter_ns
 from typing import Any
 
-from trace_runtime.errors import LogLockedError, UsageError
+from trace_runtime.errors import LogLockedError, RecordError, UsageError
 from trace_runtime.live_writers import lock_path
 from trace_runtime.logger.chain_writer import ChainWriter
 from trace_runtime.logger.config import LoggerConfig, LoggerStats
-from trace_runtime.logger.cycle_builder import (
-    UNTIMED,
-    CycleBuilder,
-    TimedCycleBuilder,
-    time_went_back,
-)
+from trace_runtime.logger.cycle_builder import UNTIMED, CycleBuilder, TimedCycleBuilder
 from trace_runtime.logger.handover import PendingCycle
 from trace_runtime.logger.lock import WriterLock
 from trace_runtime.logger.segment_writer import SegmentWriter
@@ -86,7 +81,6 @@ class AuditLogger:
         self.stats = LoggerStats()
         self._closed = False
         self._open_cycle: CycleBuilder | None = None
-        self._last_t_ns = 0  # time of the last cycle begun (control thread only)
         self._sensor_seq: dict[str, int] = {}
         # Drops are declared by the seal of the next cycle written after them. The control
         # thread counts what it drops before the hand-over; the writer counts failed writes.
@@ -169,20 +163,18 @@ class AuditLogger:
     def cycle(self, t_ns: int | None = None) -> CycleBuilder:
         """Begin the next decision cycle at ``t_ns`` (default: now, wall clock).
 
-        Raises ``RecordError`` when ``t_ns`` is earlier than the previous cycle's time
-        (PROFILE §4: time does not go backwards within a session); the cycle number is then
-        not used.
+        A ``t_ns`` earlier than the previous cycle's is a clock step (chrony, a simulator
+        reset), not an error: the writer begins a segment that declares it (PROFILE §4),
+        the cycle number and the hash chain go on, and ``stats.clock_steps`` counts it.
         """
         if self._closed:
             raise UsageError("the logger is closed")
         if self._open_cycle is not None and not self._open_cycle._committed:
             raise UsageError(f"cycle {self._open_cycle.cycle} was begun but not committed")
-        # next_cycle_time()'s rule, inlined: this runs every cycle on the control thread.
         if t_ns is None:
             t_ns = time.time_ns()
-        elif t_ns < self._last_t_ns:
-            raise time_went_back(t_ns, self._last_t_ns)
-        self._last_t_ns = t_ns
+        elif t_ns < 0:  # a bug in the robot, not a clock step: no clock counts below zero
+            raise RecordError(f"cycle time {t_ns} ns is negative (PROFILE section 4)")
         number = self._next_cycle
         builder = (CycleBuilder if number & UNTIMED else TimedCycleBuilder)(self, number, t_ns)
         self._next_cycle += 1

@@ -102,6 +102,9 @@ class ChainWriter:
         self._segment: SegmentWriter | None = None
         self._segment_start_ns: int | None = None
         self._head: tuple[int, int] | None = None  # (cycle, t_ns) of the segment's last seal
+        self.last_t_ns: int | None = None
+        """The time of the last cycle written, in any segment (``logger.clock_steps``)."""
+        self._step_from: int | None = None  # a clock step the next segment opened declares
         self._sealed_in_segment = 0
         self._costs = CostHistogram()  # this segment's per-cycle control-thread costs
         self.session = session
@@ -184,6 +187,18 @@ class ChainWriter:
         if self._writer_lock is not None:
             self._writer_lock.release()
 
+    def step_clock(self, before_ns: int, pending: PendingCycle) -> None:
+        """End the segment before ``pending``, whose time is earlier than ``before_ns`` (the
+        clock stepped back: ``logger.clock_steps``); the next segment opened declares it."""
+        self.stats.clock_steps += 1
+        self.report_once(
+            "clock_step",
+            f"the clock went back {(before_ns - pending.t_ns) / 1e9:.3f} s at cycle "
+            f"{pending.cycle}: a new segment declares the step (PROFILE section 4)",
+        )
+        self._step_from = before_ns
+        self.close_segment()
+
     def write_batch(self, batch: list[PendingCycle]) -> None:
         """Seal and write cycles, one caller at a time (``WriterThread`` holds its lock).
         Swallows every failure."""
@@ -195,7 +210,9 @@ class ChainWriter:
             self.check_storage()
             self._maybe_rotate(batch[0].t_ns)
             if self._segment is None:
-                self.open_segment(self.session.next_segment(self.prev_seal, batch[0].cycle))
+                step, first = self._step_from, batch[0].cycle
+                self.open_segment(self.session.next_segment(self.prev_seal, first, step))
+                self._step_from = None  # declared
             segment = self._segment
             if segment is None:
                 raise SegmentWriteError("no segment could be opened", rolled_back=False)
@@ -222,6 +239,7 @@ class ChainWriter:
             self._recordings.written()
         self.stats.written += len(batch)
         self._head = (batch[-1].cycle, batch[-1].t_ns)
+        self.last_t_ns = batch[-1].t_ns
         self._sealed_in_segment += len(batch)
         self.stats.checkpoints += checkpoints
         feed = self._feed

@@ -109,6 +109,9 @@ class LoggerStats:
     """Submissions that did not end in a stored cosignature: the witness unreachable or
     refusing, a 409 (it holds another size; the next checkpoint is proved from there), a
     size the logger cannot prove from, or a store that could not be written."""
+    clock_steps: int = 0
+    """Times a cycle was begun earlier than the one before it: each began a segment that
+    declares the step (PROFILE section 4)."""
     tree_failures: int = 0
     """Checkpoints written without their Merkle tree: the tree could not be resumed at start
     (the chain on disk could not be followed to its last seal) or computed."""

@@ -1,5 +1,4 @@
-"""``CycleBuilder``: one decision cycle as the control loop assembles it, and the rule that a
-session's time never goes back.
+"""``CycleBuilder``: one decision cycle as the control loop assembles it.
 
 A builder keeps a reference to each built record (an ``isinstance``), validates and encodes
 a plain dict at once (``trace_runtime.encoding.codec.check_layer``), encodes the small sensor
@@ -10,7 +9,6 @@ times the logger's own calls for ``trace.timing``.
 
 from __future__ import annotations
 
-import time
 from time import perf_counter_ns
 from types import TracebackType
 from typing import Any, Protocol
@@ -37,30 +35,9 @@ __all__ = [
     "CycleBuilder",
     "CycleSink",
     "TimedCycleBuilder",
-    "next_cycle_time",
-    "time_went_back",
 ]
 
 _validate_evidence_ref = EvidenceRef.__pydantic_validator__.validate_python
-
-
-def next_cycle_time(t_ns: int | None, previous_ns: int) -> int:
-    """The time of the cycle being begun: ``t_ns``, or now when None. ``RecordError`` when
-    it is earlier than ``previous_ns``, the time of the cycle begun before it (0 before the
-    first): time never goes backwards within a session (schemas/PROFILE.md §4)."""
-    if t_ns is None:
-        return time.time_ns()
-    if t_ns < previous_ns:
-        raise time_went_back(t_ns, previous_ns)
-    return t_ns
-
-
-def time_went_back(t_ns: int, previous_ns: int) -> RecordError:
-    """The error for a cycle begun at ``t_ns``, before ``previous_ns``."""
-    return RecordError(
-        f"cycle time {t_ns} ns is earlier than {previous_ns} ns, the previous cycle's "
-        "(or 0 before the first): time must not go backwards (PROFILE section 4)"
-    )
 
 
 class CycleSink(Protocol):

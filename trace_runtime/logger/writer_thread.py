@@ -16,6 +16,7 @@ import threading
 from collections.abc import Callable
 
 from trace_runtime.logger.chain_writer import ChainWriter
+from trace_runtime.logger.clock_steps import write_across_steps
 from trace_runtime.logger.config import LoggerConfig
 from trace_runtime.logger.handover import Handover, PendingCycle
 
@@ -61,7 +62,7 @@ class WriterThread:
         if len(self._sync_batch) >= self._config.batch_cycles:
             batch, self._sync_batch = self._sync_batch, []
             with self._lock:
-                self._chain.write_batch(batch)
+                write_across_steps(self._chain, batch)
 
     def flush(self, timeout_s: float) -> bool:
         """Wait until every committed cycle has been written; True if it got there."""
@@ -115,7 +116,7 @@ class WriterThread:
             if not batch:
                 break  # closed and drained, or abandoned by a close() that timed out
             with self._lock:
-                self._chain.write_batch(batch)
+                write_across_steps(self._chain, batch)
             with self._accounting:
                 handover.done(len(batch))
                 if self._gave_up:  # close() counted this batch as undelivered; it is not
@@ -131,7 +132,7 @@ class WriterThread:
         try:
             with self._lock:
                 if batch:
-                    chain.write_batch(batch)
+                    write_across_steps(chain, batch)
                     with self._accounting:
                         if self._gave_up:
                             chain.stats.dropped_undelivered -= len(batch)

@@ -20,7 +20,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from trace_runtime.clock import clock_restarted
+from trace_runtime.clock import ClockStep, clock_restarted
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.encoding.seal_check import SealStatus, verify_cycle
 from trace_runtime.errors import (
@@ -117,6 +117,28 @@ class Log:
         chain order; ``[self]`` when it is one robot's and its clock never went back."""
         runs = self._clock_runs()
         return [self] if len(runs) == 1 else [self._of_run(run) for run in runs]
+
+    def clock_steps(self) -> list[ClockStep]:
+        """Where each robot's clock went back between two of its segments (the boundaries of
+        ``clock_runs``), robot by robot in chain order; opens only the segments after them."""
+        steps: list[ClockStep] = []
+        for before, after in itertools.pairwise(self._clock_runs()):
+            if robot_of(before[-1]) != robot_of(after[0]):
+                continue
+            session = open_slot(after[0]).session
+            declared = session.clock_step_from_ns
+            steps.append(
+                ClockStep(
+                    robot_id=session.robot_id,
+                    segment=after[0].path.name,
+                    segment_no=session.segment,
+                    first_cycle=session.first_cycle,
+                    from_ns=before[-1].end_ns if declared is None else declared,
+                    to_ns=after[0].start_ns,
+                    declared=declared is not None,
+                )
+            )
+        return steps
 
     def _clock_runs(self) -> list[list[Slot]]:
         """Each robot's segments in chain order, split where the clock restarted between two

@@ -71,6 +71,7 @@ NoteKind = Literal[
     "external_unresolved",
     "clock_backwards",
     "clock_restart",
+    "clock_step",
     "recording_gap",
     "recording_unchecked",
     "recording_unsealed",

@@ -17,7 +17,7 @@ from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 
-from trace_runtime.clock import clock_restarted
+from trace_runtime.clock import clock_restarted, show_instant
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import LogReadError
 from trace_runtime.gaps import CycleRange
@@ -340,13 +340,22 @@ class _RobotChain:
         if tail is None or start is None or not clock_restarted(tail.t_ns, start):
             return
         at = summary.cycle_range.first_cycle
+        stepped, clock = first.session.clock_step_from_ns, first.session.clock
+        begins = show_instant(start, clock)
+        message = (
+            f"the robot's clock restarted: segment {number} starts at {begins}, not after "
+            f"cycle {tail.cycle} at {show_instant(tail.t_ns, clock)} (PROFILE section 4 allows "
+            "it across segments"
+            if stepped is None
+            else f"the robot's clock stepped back {(stepped - start) / 1e9:.3f} s before cycle "
+            f"{at} (from {show_instant(stepped, clock)} to {begins}), as its writer declared "
+            f"in segment {number}: a new clock run, not tampering (PROFILE section 4"
+        )
         self.sink.note(
             Finding(
-                kind="clock_restart",
-                message=f"the robot's clock restarted: segment {number} starts at "
-                f"{start / 1e9:.3f} s, not after cycle {tail.cycle} at {tail.t_ns / 1e9:.3f} s "
-                "(PROFILE section 4 allows it across segments; a time may name a decision "
-                "in each run: explain by --cycle, or read each run apart)",
+                kind="clock_restart" if stepped is None else "clock_step",
+                message=f"{message}; a time may name a decision in each run: explain by "
+                "--cycle, or read each run apart)",
                 robot_id=self.robot.robot_id,
                 segment=display_name(first.path),
                 segment_no=number,

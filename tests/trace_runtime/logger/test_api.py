@@ -1,6 +1,7 @@
-"""The logger API as an integrator meets it (issue 15): field docs in ``help()``, time that
-must not go backwards, checkpoints on a grid of log time whatever the batching, the
-logger's own per-cycle cost at close, and execution channels beside planar motion."""
+"""The logger API as an integrator meets it (issue 15): field docs in ``help()``, a clock
+that steps back (a declared step, issue 42), checkpoints on a grid of log time whatever the
+batching, the logger's own per-cycle cost at close, and execution channels beside planar
+motion."""
 
 from __future__ import annotations
 
@@ -76,7 +77,11 @@ def test_json_schemas_keep_the_short_class_description() -> None:
 
 
 @pytest.mark.parametrize("make", ["logger", "capture"])
-def test_a_cycle_earlier_than_the_previous_one_is_refused(tmp_path: Path, make: str) -> None:
+def test_a_cycle_earlier_than_the_previous_one_is_a_clock_step_not_an_error(
+    tmp_path: Path, make: str
+) -> None:
+    """The control loop never sees an exception for a clock that stepped back: the cycle
+    keeps its number, and the writer declares the step in the segment it begins."""
     log = (
         AuditLogger(tmp_path / "t.mcap", robot_id="r", config=LoggerConfig(threaded=False))
         if make == "logger"
@@ -84,13 +89,20 @@ def test_a_cycle_earlier_than_the_previous_one_is_refused(tmp_path: Path, make: 
     )
     with log:
         log.log_cycle(5 * PERIOD_NS, action=synthetic_cycle(0)[2])
-        log.log_cycle(5 * PERIOD_NS, action=synthetic_cycle(1)[2])  # the same time is allowed
-        with pytest.raises(RecordError, match="earlier than 500000000 ns"):
-            log.cycle(5 * PERIOD_NS - 1)
-        number = log.log_cycle(6 * PERIOD_NS, action=synthetic_cycle(2)[2])
-    assert number == 2  # the refused cycle used no number
+        log.log_cycle(5 * PERIOD_NS, action=synthetic_cycle(1)[2])  # the same time: no step
+        stepped = log.log_cycle(5 * PERIOD_NS - 1, action=synthetic_cycle(2)[2])
+        number = log.log_cycle(6 * PERIOD_NS, action=synthetic_cycle(3)[2])
+        with pytest.raises(RecordError, match="negative"):
+            log.cycle(-1)  # no clock counts below zero: a bug in the robot
+    assert (stepped, number, log.stats.clock_steps) == (2, 3, 1)
     if make == "logger":
-        assert [c.cycle for c in open_log(tmp_path / "t.mcap").iter_cycles()] == [0, 1, 2]
+        before, after = open_segment(tmp_path / "t.mcap"), open_segment(tmp_path / "t.000001.mcap")
+        assert [c.cycle for c in before.iter_cycles()] == [0, 1]
+        assert [c.cycle for c in after.iter_cycles()] == [2, 3]
+        assert after.session.clock_step_from_ns == 5 * PERIOD_NS
+        assert before.session.clock_step_from_ns is None
+        chain = [(c.cycle, status.state) for c, status in open_log(tmp_path).iter_chain("r")]
+        assert chain == [(n, "verified") for n in range(4)]  # one chain across the step
 
 
 # --- checkpoints on the interval -------------------------------------------------------------
