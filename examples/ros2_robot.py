@@ -47,6 +47,7 @@ import shutil
 import struct
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -80,6 +81,11 @@ STOP_BELOW_M = 1.5
 SLOW_BELOW_M = 3.0
 SPEEDS = {"STOP": 0.0, "SLOW": 0.3, "CONTINUE": 0.8}
 _FRAME = struct.Struct("<HqI")  # one published message: topic length, log time, data length
+
+
+SEAL_WAIT_S = 2.5
+"""How long the robot's loop runs on after its recorder stopped: the logger's default
+sealing lag (1 s window, 1 s settle, 0.5 s poll), so the bag's last messages are sealed."""
 
 
 def choose(distance_m: float) -> str:
@@ -345,9 +351,25 @@ def run(
                         deviation=round(abs(target - speed), 3),
                     )
                 )
-        recorder.stdin.close()  # the robot shuts down: the recorder ends its last split
+        recorder.stdin.close()  # the recorder is stopped first: it ends its last split
         if recorder.wait(timeout=60) != 0:
             raise SystemExit(f"the recorder failed (exit {recorder.returncode})")
+        # The robot's loop goes on a moment, on its last scan, while its logger seals what
+        # the recorder wrote last: recorded messages are sealed into the cycles logged after
+        # they land, so what is recorded after the robot's last cycle stays unsealed.
+        for _ in range(round(SEAL_WAIT_S / period_s)):
+            t_ns += period_ns
+            with log.cycle(t_ns) as cycle:
+                target = SPEEDS[decide(cycle, distance, ref, beams)]
+                speed += 0.6 * (target - speed)
+                cycle.execution(
+                    Execution(
+                        intended=Motion(linear=target),
+                        actual=Motion(linear=round(speed, 3)),
+                        deviation=round(abs(target - speed), 3),
+                    )
+                )
+            time.sleep(period_s)
     return root, bag_dir
 
 

@@ -19,6 +19,7 @@ recording that ran before the robot, is sealed over several batches).
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -90,14 +91,15 @@ class RecordingFollower:
         files = recording_files(self.path)
         if not files:
             if self._state in ("new",):
-                self._gap(out, "absent", f"nothing recorded at {self.path} yet")
+                self._gap(out, "absent", f"nothing recorded at {os.path.normpath(self.path)} yet")
                 self._state = "absent"
             return
         grew = self._read(files, out)
         if grew:
             self._last_growth = now
             if self._state in ("absent", "stalled"):
-                self._gap(out, "resumed", "the recording grows again")
+                why = "it appeared" if self._state == "absent" else "it grows again"
+                self._gap(out, "resumed", why)
             self._state = "growing"
         elif now - self._last_growth >= self._idle_s:
             if self._pending and not out.full():
