@@ -412,17 +412,21 @@ class RemoteLogger:
 
     def _connect(self) -> bool:
         """Connect and say hello; True when welcomed (the reader thread then runs)."""
+        where: str | tuple[str, int]
+        if isinstance(self.address, tuple):
+            where = self.address
+            family = socket.AF_INET6 if ":" in where[0] else socket.AF_INET
+        else:
+            where, family = str(self.address), socket.AF_UNIX
+        sock = socket.socket(family, socket.SOCK_STREAM)
+        reader = FrameReader()
         try:
-            if isinstance(self.address, tuple):
-                sock = socket.create_connection(self.address, timeout=self._timeout_s)
-            else:
-                sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-                sock.settimeout(self._timeout_s)
-                sock.connect(str(self.address))
+            sock.settimeout(self._timeout_s)
+            sock.connect(where)
             sock.sendall(encode_frame(self._hello))
-            reader = FrameReader()
             answer = _first_answer(sock, reader)
         except OSError as err:
+            sock.close()
             self._note_once("connect", f"recorder at {self.address} unreachable: {err}")
             return False
         if answer.get("kind") != "welcome":

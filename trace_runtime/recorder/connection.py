@@ -24,6 +24,7 @@ from trace_runtime.recorder.protocol import (
     FrameReader,
     Oversized,
     encode_frame,
+    message_kind,
     parse_cycle,
     parse_hello,
     parse_message,
@@ -153,7 +154,7 @@ class Connection:
             self._refuse_frame(seq, str(err))
 
     def _dispatch(self, message: dict[str, Any]) -> None:
-        kind = message["kind"]
+        kind = message_kind(message)
         if kind == "hello":
             self._hello(message)
             return

@@ -40,6 +40,7 @@ __all__ = [
     "Oversized",
     "SensorMessage",
     "encode_frame",
+    "message_kind",
     "parse_cycle",
     "parse_hello",
     "parse_message",
@@ -128,17 +129,22 @@ class FrameReader:
 
 
 def parse_message(body: bytes) -> dict[str, Any]:
-    """The JSON object of a frame; ``WireProtocolError`` when it is not one of a known kind."""
+    """The JSON object of a frame; ``WireProtocolError`` when it is not one."""
     try:
         message = orjson.loads(body)
     except orjson.JSONDecodeError as err:
         raise WireProtocolError(f"not JSON: {err}") from err
     if not isinstance(message, dict):
         raise WireProtocolError(f"a frame must hold a JSON object, got {type(message).__name__}")
+    return message
+
+
+def message_kind(message: dict[str, Any]) -> str:
+    """The kind of a client's message; ``WireProtocolError`` when it is not one we know."""
     kind = message.get("kind")
     if kind not in CLIENT_KINDS:
         raise WireProtocolError(f"unknown kind {_shown(kind)} (expected one of {CLIENT_KINDS})")
-    return message
+    return str(kind)
 
 
 @dataclass(frozen=True, slots=True)

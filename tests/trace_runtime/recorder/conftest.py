@@ -3,6 +3,7 @@ and the C++ robot (``build/cpp_robot``, built by scripts/build-cpp.sh when absen
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -10,8 +11,11 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
+
+from tests.outside import cli
 
 REPO = Path(__file__).resolve().parents[3]
 CPP_ROBOT = REPO / "build" / "cpp_robot"
@@ -102,3 +106,17 @@ def run_cpp_robot(
 def _pairs(line: str) -> dict[str, float]:
     words = line.split()
     return {words[i]: float(words[i + 1]) for i in range(0, len(words), 2)}
+
+
+# What differs between two logs of the same cycles: where the files are, and how long logging
+# and measuring took.
+_RUN_SPECIFIC = {"logs", "segments", "elapsed_s", "cycles_per_s", "logging_time", "logging_cost"}
+
+
+def comparable_metrics(root: Path) -> dict[str, Any]:
+    """``trace-audit metrics ROOT --json`` without what differs from run to run."""
+    done = cli("metrics", root, "--json")
+    assert done.returncode == 0, done.stderr
+    result: dict[str, Any] = json.loads(done.stdout)
+    result["table_ii"].pop("time_per_cycle")
+    return {k: v for k, v in result.items() if k not in _RUN_SPECIFIC}

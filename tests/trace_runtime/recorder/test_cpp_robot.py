@@ -6,34 +6,24 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
 
 from tests.outside import cli
-from tests.trace_runtime.recorder.conftest import RecorderProcess, run_cpp_robot
+from tests.trace_runtime.recorder.conftest import (
+    RecorderProcess,
+    comparable_metrics,
+    run_cpp_robot,
+)
 from tests.trace_runtime.recorder.warehouse import log_in_process
 from trace_runtime import open_log
 
 CYCLES = 180  # two passes of the obstacle: STOP, SLOW and CONTINUE all taken
 HZ = 200.0
-# What differs between two runs of the same cycles: where the files are, and how long
-# logging and measuring took.
-_RUN_SPECIFIC = {"logs", "segments", "elapsed_s", "cycles_per_s", "logging_time", "logging_cost"}
-
-
-def _metrics(root: Path) -> dict[str, Any]:
-    done = cli("metrics", root, "--json")
-    assert done.returncode == 0, done.stderr
-    result: dict[str, Any] = json.loads(done.stdout)
-    result["table_ii"].pop("time_per_cycle")
-    return {k: v for k, v in result.items() if k not in _RUN_SPECIFIC}
 
 
 def test_the_cpp_robot_log_verifies_conforms_and_equals_the_in_process_log(
     recorder: RecorderProcess, cpp_robot: Path, tmp_path: Path
 ) -> None:
-    last, _ = run_cpp_robot(
-        cpp_robot, recorder.socket, "amr-cpp", CYCLES, HZ, "--sim-time"
-    )
+    last, _ = run_cpp_robot(cpp_robot, recorder.socket, "amr-cpp", CYCLES, HZ, "--sim-time")
     code, stderr = recorder.stop()
     assert code == 0, stderr
     assert last["sent"] == CYCLES and last["dropped"] == 0
@@ -48,8 +38,8 @@ def test_the_cpp_robot_log_verifies_conforms_and_equals_the_in_process_log(
 
     twin = tmp_path / "twin"
     log_in_process(twin, "amr-cpp", CYCLES, HZ)
-    remote = _metrics(recorder.root)
-    assert remote == _metrics(twin)
+    remote = comparable_metrics(recorder.root)
+    assert remote == comparable_metrics(twin)
     # The policy's faults are there to be found: not every decision is traceable or
     # reconstructable, so equal metrics are not two ones.
     assert 0 < remote["overall"]["et"]["mean"] < 1
