@@ -3,7 +3,8 @@
 
 ``protocol`` (frames, kinds, limits, checks), ``robots`` (one logger per robot id),
 ``connection`` (one client's thread), ``server`` (``Recorder``: the listening sockets),
-``client`` (``RemoteLogger``: ``AuditLogger``'s API over the protocol), ``cli``
+``client`` (``RemoteLogger``: ``AuditLogger``'s API over the protocol; ``remote_cycle``: the
+cycle it hands the control loop, and its counters), ``cli``
 (``trace-recorder``).
 """
 

@@ -15,6 +15,7 @@ import logging
 import signal
 import sys
 from types import FrameType
+from typing import NoReturn
 
 from trace_runtime.errors import (
     EXIT_CANNOT_WRITE,
@@ -38,8 +39,16 @@ exit codes: 0 stopped by SIGTERM or SIGINT (every logger closed), 2 usage (an
 option, a key file that cannot be read), 4 cannot write (the root, the socket)"""
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its usage errors as one line on stderr (exit 2), as every program of
+    the project reports bad input; ``--help`` shows the usage."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USAGE, f"{self.prog}: {message} (see --help)\n")
+
+
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="trace-recorder",
         description=_DESCRIPTION,
         epilog=_EPILOG,

@@ -46,24 +46,7 @@ def cycle_dicts(i: int, t_ns: int, actual_mm_s: int) -> tuple[dict[str, Any], in
         ],
         "sensors_used": ["range"],
     }
-    belief = {
-        "nodes": [
-            {"id": "obstacle_1", "kind": "entity", "p": 0.9, "entity": "obstacle_1"},
-            {"id": "obstacle_1.distance", "kind": "state", "p": 0.95, "value": d, "unit": "m"},
-            {
-                "id": "obstacle_1.risk",
-                "kind": "state",
-                "p": 0.9,
-                "value": min(1000, 1400000 // d_mm) / 1000.0,
-            },
-        ],
-        "edges": [
-            {"parent": "obstacle_1", "child": "obstacle_1.distance", "p": 0.95}
-            | {"rule": "range_to_distance"},
-            {"parent": "obstacle_1.distance", "child": "obstacle_1.risk", "p": 0.9}
-            | {"rule": "risk_from_distance"},
-        ],
-    }
+    belief = _belief(d, d_mm)
     alternatives = [
         {"command": COMMANDS[c], "score": 0.0, "rejected_because": "policy threshold"}
         for c in range(3)
@@ -87,6 +70,27 @@ def cycle_dicts(i: int, t_ns: int, actual_mm_s: int) -> tuple[dict[str, Any], in
     }
     layers = {"perception": perception, "belief": belief, "action": action}
     return {"t_ns": t_ns, "range_m": d, **layers, "execution": execution}, actual_mm_s
+
+
+def _belief(d: float, d_mm: int) -> dict[str, Any]:
+    return {
+        "nodes": [
+            {"id": "obstacle_1", "kind": "entity", "p": 0.9, "entity": "obstacle_1"},
+            {"id": "obstacle_1.distance", "kind": "state", "p": 0.95, "value": d, "unit": "m"},
+            {
+                "id": "obstacle_1.risk",
+                "kind": "state",
+                "p": 0.9,
+                "value": min(1000, 1400000 // d_mm) / 1000.0,
+            },
+        ],
+        "edges": [
+            {"parent": "obstacle_1", "child": "obstacle_1.distance", "p": 0.95}
+            | {"rule": "range_to_distance"},
+            {"parent": "obstacle_1.distance", "child": "obstacle_1.risk", "p": 0.9}
+            | {"rule": "risk_from_distance"},
+        ],
+    }
 
 
 def _counterfactuals(choice: int) -> list[dict[str, Any]]:
