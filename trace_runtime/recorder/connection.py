@@ -16,7 +16,7 @@ import selectors
 import socket
 import threading
 from dataclasses import dataclass, field
-from typing import Any, NoReturn
+from typing import Any
 
 from trace_runtime.errors import RecordError, TraceError, UsageError, WireProtocolError
 from trace_runtime.recorder.protocol import (
@@ -65,11 +65,6 @@ class RecorderCounters:
             }
 
 
-class _HangUpError(Exception):
-    """Not an error: the conversation is over (bye, or a client refused), and the loop is
-    left from deep inside a frame's handling."""
-
-
 class Connection:
     """Reads one client's frames, writes its cycles through its robot's logger, and
     answers; ends at ``bye``, end of stream, or when ``stopping`` is set."""
@@ -93,11 +88,11 @@ class Connection:
         self._reader = FrameReader(max_frame_bytes)
         self._outbox = bytearray()
         self._logged = 0
+        self._over = False  # bye, or the client refused: reply, then hang up
 
     def run(self) -> None:
         try:
             self._serve()
-        except _HangUpError:
             self._drain_outbox()
         except OSError as err:  # the client went away mid-reply: its cycles so far are kept
             log.info("%s: connection lost: %s", self._who(), err)
@@ -119,8 +114,9 @@ class Connection:
                     if events & selectors.EVENT_READ and not self._read():
                         self._ended_midway()
                         return
+                    if self._over:
+                        return
             self._reply({"kind": "bye", "reason": "the recorder is stopping"})
-            raise _HangUpError
 
     def _read(self) -> bool:
         """Take what the socket has; False at the end of the stream."""
@@ -132,6 +128,8 @@ class Connection:
             return False
         for frame in self._reader.feed(data):
             self._handle(frame)
+            if self._over:
+                break  # what follows a bye or a refusal is not read
         return True
 
     def _ended_midway(self) -> None:
@@ -173,7 +171,7 @@ class Connection:
             self.robot = None
             self.robots.release(robot)
             self._reply({"kind": "bye"})
-            raise _HangUpError
+            self._over = True
 
     def _hello(self, message: dict[str, Any]) -> None:
         if self.robot is not None:
@@ -183,6 +181,7 @@ class Connection:
             self.robot = self.robots.claim(hello)
         except (TraceError, OSError) as err:  # OSError: the root cannot be written
             self._refuse_client(str(err))
+            return
         self._reply(
             {
                 "kind": "welcome",
@@ -193,11 +192,11 @@ class Connection:
         )
         log.info("%s: robot %s connected", self.peer, hello.robot_id)
 
-    def _refuse_client(self, reason: str) -> NoReturn:
+    def _refuse_client(self, reason: str) -> None:
         self.counters.add("refused_connections")
         log.warning("%s: refused: %s", self._who(), reason)
         self._reply({"kind": "refused", "reason": reason})
-        raise _HangUpError
+        self._over = True
 
     def _refuse_frame(self, seq: Any, reason: str) -> None:
         self.counters.add("refused_frames")
