@@ -5,6 +5,8 @@ cd "$(dirname "$0")/.."
 bash scripts/bootstrap.sh
 bash scripts/install-browser.sh
 bash scripts/install-go.sh
+# the C++ robot the recorder's tests run against (tests/trace_runtime/recorder/)
+bash scripts/build-cpp.sh
 .venv/bin/ruff check .
 .venv/bin/ruff format --check .
 .venv/bin/mypy trace_runtime trace_audit sim evaluation

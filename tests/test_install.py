@@ -125,9 +125,12 @@ def test_all_is_every_extra_but_dev_and_each_investigator_extra_brings_cli() -> 
 
 
 def test_the_console_scripts_start_with_the_check() -> None:
+    """The investigator's programs start with the extra's check; the recorder is part of a
+    robot's install and needs none."""
     assert PYPROJECT["scripts"] == {
         "trace-audit": "trace_audit.entry:main",
         "trace-sim": "evaluation.entry:main",
+        "trace-recorder": "trace_runtime.recorder.cli:main",
     }
 
 
@@ -256,6 +259,11 @@ def test_a_robot_install_logs_reads_and_verifies_without_the_investigator(tmp_pa
     )
     assert read_back.returncode == 0, read_back.stderr
     assert read_back.stdout.split() == ["50", "True", "50"]
+
+    # The recorder is the robot's too: it runs without the investigator.
+    recorder = _run([str(bin_dir / "trace-recorder"), "serve", "--help"], tmp_path)
+    assert recorder.returncode == 0, recorder.stderr
+    assert "--socket" in recorder.stdout
 
     for program in ("trace-audit", "trace-sim"):
         done = _run([str(bin_dir / program), "--help"], tmp_path)

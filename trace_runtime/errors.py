@@ -24,6 +24,7 @@ CLI's exit code follows from the branch alone (``trace_audit.cli.app.exit_code_f
     │   │   └── UnverifiedNoteError        a note no known key signed
     │   ├── WitnessProtocolError       a witness request or answer off the protocol
     │   ├── WitnessStoreError          a cosigned checkpoint that cannot be stored as given
+    │   ├── WireProtocolError          a recorder frame or message off its wire protocol
     │   ├── LogLockedError             a log another live logger writes
     │   └── VerificationError          a copy that is not what its source becomes
     └── StorageError               exit 4: the filesystem refused a write
@@ -73,6 +74,7 @@ __all__ = [
     "UnverifiedNoteError",
     "UsageError",
     "VerificationError",
+    "WireProtocolError",
     "WitnessProtocolError",
     "WitnessStoreError",
 ]
@@ -201,6 +203,12 @@ class WitnessProtocolError(InputError, ValueError):
 class WitnessStoreError(InputError, ValueError):
     """A cosigned checkpoint that cannot be stored as given (not a checkpoint note, no
     cosignature line, a robot id that is not a file name)."""
+
+
+class WireProtocolError(InputError, ValueError):
+    """A frame or message a recorder client sent that is not what the wire protocol says
+    (PROFILE section 13): over the frame limit, not a JSON object, an unknown kind, a field
+    missing or of the wrong type. The recorder refuses it with this reason."""
 
 
 class LogLockedError(InputError):

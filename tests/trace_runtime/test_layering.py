@@ -174,6 +174,8 @@ FLOORS: dict[str, list[set[str]]] = {
         {"reading"},
         # the logger a robot embeds
         {"logger"},
+        # the recorder service: robots in other languages feed the same logger over a socket
+        {"recorder"},
         {"verification"},
         # moving segments between tiers verifies every copy it makes
         {"tiers"},
