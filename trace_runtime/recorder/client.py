@@ -77,6 +77,7 @@ class RemoteLogger:
         clock: str = "system",
         queue_cycles: int = 256,
         connect_timeout_s: float = 2.0,
+        recordings: tuple[str | Path, ...] = (),
     ) -> None:
         if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", robot_id):
             raise UsageError(f"robot_id must be a simple name (letters, digits, _.-): {robot_id!r}")
@@ -95,6 +96,8 @@ class RemoteLogger:
             "policy_version": policy_version,
             "profile": "1",
         }
+        if recordings:  # declared and sealed by the recorder, as LoggerConfig.recordings
+            self._hello["recordings"] = [str(Path(p).absolute()) for p in recordings]
         self._capacity = queue_cycles
         self._timeout_s = connect_timeout_s
         self._queue: deque[RemoteCycle | _Request] = deque()

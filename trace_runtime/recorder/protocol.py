@@ -68,8 +68,10 @@ _PROFILE = re.compile(r"1(\.[0-9]+)?")
 _MAX_TEXT = 256
 _HELLO_FIELDS = frozenset(
     {"kind", "protocol", "robot_id", "period_ns", "clock", "software_version"}
-    | {"policy_version", "profile"}
+    | {"policy_version", "profile", "recordings"}
 )
+MAX_RECORDINGS = 16
+"""Recordings one hello may declare (each a path on the recorder's machine)."""
 _CYCLE_FIELDS = frozenset({"kind", "seq", "dropped", "t_ns", "sensors", *LAYERS})
 _SENSOR_FIELDS = frozenset({"topic", "data", "log_time_ns"})
 
@@ -157,6 +159,9 @@ class Hello:
     software_version: str
     policy_version: str
     profile: str
+    recordings: tuple[str, ...] = ()
+    """The robot's sensor recordings (rosbag2 folders, MCAP files) by their path on this
+    machine: declared in its log and sealed as they grow (profile 1.4)."""
 
 
 def parse_hello(message: dict[str, Any]) -> Hello:
@@ -185,7 +190,19 @@ def parse_hello(message: dict[str, Any]) -> Hello:
         software_version=_text(message, "software_version"),
         policy_version=_text(message, "policy_version"),
         profile=profile,
+        recordings=_recordings(message.get("recordings")),
     )
+
+
+def _recordings(value: object) -> tuple[str, ...]:
+    """A hello's ``recordings``: a list of at most ``MAX_RECORDINGS`` non-empty paths."""
+    if value is None:
+        return ()
+    if not isinstance(value, list) or len(value) > MAX_RECORDINGS:
+        raise WireProtocolError(f"recordings must be a list of at most {MAX_RECORDINGS} paths")
+    if not all(isinstance(p, str) and 0 < len(p) <= 4096 and "\x00" not in p for p in value):
+        raise WireProtocolError("recordings must be paths (non-empty strings)")
+    return tuple(value)
 
 
 @dataclass(frozen=True, slots=True)

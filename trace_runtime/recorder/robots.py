@@ -11,7 +11,7 @@ in-process robot does.
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -131,7 +131,9 @@ class Robots:
                 software_version=hello.software_version,
                 policy_version=hello.policy_version,
                 clock=hello.clock,
-                config=self.config,
+                config=replace(self.config, recordings=hello.recordings)
+                if hello.recordings
+                else self.config,
             )
         except BaseException:
             with self._lock:

@@ -5,6 +5,8 @@ not there; a record the recorder refuses comes back as a count, never as an exce
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -76,3 +78,33 @@ def test_without_a_recorder_the_loop_runs_on_and_counts_its_drops(tmp_path: Path
     assert loop_s < 0.5  # 50 cycles never waited for a connection
     assert time.monotonic() - started < 3
     assert log.stats.dropped_disconnected == 50 and log.stats.sent == 0
+
+
+def test_a_recording_declared_in_the_hello_is_sealed_by_the_recorder(
+    recorder: RecorderProcess, tmp_path: Path
+) -> None:
+    """A ROS 2 node feeding the recorder names its rosbag2 bag in the hello: the recorder
+    declares it in the robot's log and seals every message of it, so an uncited message
+    changed afterwards is found by verify (profile 1.4)."""
+    from tests.rosbag_recorder import cdr
+    from tests.trace_runtime.logger.test_recording_seals import RECORDER as ROSBAG
+    from tests.trace_runtime.logger.test_recording_seals import rewrite
+
+    bag = tmp_path / "node_bag"
+    subprocess.run([sys.executable, str(ROSBAG), str(bag), "--messages", "40"], check=True)
+    with RemoteLogger(recorder.socket, robot_id="node-1", period_s=0.05, recordings=(bag,)) as log:
+        for i in range(80):
+            p, b, a, e = synthetic_cycle(i)
+            log.log_cycle(
+                1_000_000_000 + i * 50_000_000, perception=p, belief=b, action=a, execution=e
+            )
+            time.sleep(0.03)  # the recorder's writer polls the bag every 0.5 s
+        assert log.flush()
+    code, _ = recorder.stop()
+    assert code == 0
+    done = cli("verify", recorder.root, "--json")
+    assert done.returncode == 0, done.stdout
+    assert "recording_unsealed" not in done.stdout and "recording_unchecked" not in done.stdout
+    rewrite(next(bag.glob("*.mcap")), {12: cdr("odom forged")}, None)
+    done = cli("verify", recorder.root, "--json")
+    assert done.returncode == 1 and "1 changed: /odom" in done.stdout
