@@ -34,6 +34,7 @@ from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.records import EvidenceRef
 
 __all__ = [
+    "NEAR_NS",
     "ExternalCheck",
     "ExternalState",
     "Recordings",
@@ -43,6 +44,9 @@ __all__ = [
     "recording_files",
     "recording_name",
 ]
+
+NEAR_NS = 1_000_000_000
+"""How far from a ref's time a message with the ref's digest is looked for (PROFILE §11)."""
 
 _SPLIT_INDEX = re.compile(r"_(\d+)$")
 """rosbag2 numbers a bag's split files ``<bag>_<n>.mcap``."""
@@ -269,7 +273,25 @@ class Recordings:
                     why = f"{topic} message data in {name} does not match the ref's digest"
                     continue
                 return ExternalCheck("resolved", name, "", msg, path)
+        if absent and isinstance(want, str):
+            near = self._near(name, paths, topic, t_ns, want)
+            if near is not None:
+                return near
         return ExternalCheck("broken", name, why, absent=absent)
+
+    def _near(
+        self, name: str, paths: Sequence[Path], topic: str, t_ns: int, want: str
+    ) -> ExternalCheck | None:
+        """The message of ``topic`` whose data has digest ``want`` within ``NEAR_NS`` of
+        ``t_ns``: a robot may know a message's header stamp, not the time its recorder
+        received it (the log time), and the digest says which message it is."""
+        for path in paths:
+            for msg in self._file(path).iter_messages(max(0, t_ns - NEAR_NS), t_ns + NEAR_NS):
+                if msg.topic == topic and hashlib.sha256(msg.data).hexdigest() == want:
+                    shift = (msg.log_time_ns - t_ns) / 1e9
+                    detail = f"recorded {shift:+.3f} s from the ref's time"
+                    return ExternalCheck("resolved", name, detail, msg, path)
+        return None
 
 
 def _add(files: dict[str, list[Path]], name: str, found: Sequence[Path]) -> None:

@@ -20,6 +20,7 @@ from mcap.reader import make_reader
 from mcap.writer import Writer as McapWriter
 
 from trace_runtime import AuditLogger, EvidenceRef, LoggerConfig, Perception, external_ref
+from trace_runtime.reading.recordings import Recordings
 from trace_runtime.testing import synthetic_cycle
 from trace_runtime.tiers.compaction import compact
 
@@ -186,3 +187,22 @@ def test_the_windows_stay_checkable_after_compaction(tmp_path: Path, tier: str) 
     code, report = verify(root)
     assert code == 1
     assert any("1 removed: /odom" in f["message"] for f in report["findings"]), report["findings"]
+
+
+def test_a_ref_by_header_stamp_resolves_by_its_digest_near_the_recorded_time(
+    tmp_path: Path,
+) -> None:
+    """The robot knows a message's stamp, not when its recorder received it: a ref 4 ms
+    early with the message's digest resolves (the digest says which message), one with
+    another digest does not."""
+    bag = tmp_path / "ward_bag"
+    assert record(bag, "--messages", "10").wait(timeout=60) == 0
+    recordings = Recordings.open([bag])
+    data = cdr(scan_text(3, 64))
+    recorded = 1_000_000_000 + 3 * 50_000_000
+    early = external_ref(bag, "/scan", recorded - 4_000_000, data)
+    check = recordings.check(early.model_dump())
+    assert check.state == "resolved" and check.message is not None
+    assert check.message.log_time_ns == recorded and "+0.004 s" in check.detail
+    wrong = external_ref(bag, "/scan", recorded - 4_000_000, cdr("not recorded"))
+    assert recordings.check(wrong.model_dump()).state == "broken"
