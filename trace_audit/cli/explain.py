@@ -15,6 +15,7 @@ import typer
 
 from trace_audit.cli.app import app, guarded, help_text
 from trace_audit.cli.doc import Column, Doc, Line, Seg, fmt_duration, fmt_t, fmt_value
+from trace_audit.cli.explain_evidence import channel_evidence, external_evidence, sensors
 from trace_audit.cli.explain_graphs import chain_item, tree_item
 from trace_audit.cli.options import (
     EvidenceOption,
@@ -114,7 +115,8 @@ def explain_doc(r: Explanation, lookback_s: float = 600.0) -> Doc:
     for chain in r.chains.factors:
         doc.tree(chain_item(r, chain))
     if r.external_evidence:
-        _external_evidence(doc, r)
+        external_evidence(doc, r)
+    sensors(doc, r)
     _execution(doc, r)
     _scores(doc, r)
     _integrity(doc, r)
@@ -253,22 +255,6 @@ def _counterfactuals(doc: Doc, r: Explanation) -> None:
         doc.line(Seg("none logged", "red"), 2)
 
 
-def _external_evidence(doc: Doc, r: Explanation) -> None:
-    """Evidence refs into external recordings: resolved (decoded), broken, or not checked."""
-    doc.heading("External evidence (recordings the refs name)")
-    style = {"resolved": "green", "broken": "bold red", "unresolved": "yellow"}
-    for e in r.external_evidence:
-        state = {"resolved": "resolved, digest verified", "broken": "BROKEN"}.get(
-            e.state, "not checked (recording not given: --evidence)"
-        )
-        t = fmt_t(e.log_time_ns) if e.log_time_ns is not None else "?"
-        doc.line([f"{e.entity}: {e.recording} {e.topic} @ {t}  ", Seg(state, style[e.state])], 2)
-        if e.detail and e.state == "broken":
-            doc.line(e.detail, 4)
-        if e.schema:
-            doc.line(e.schema + ": " + ", ".join(f"{k}={v}" for k, v in e.fields), 4)
-
-
 # --- executed how -------------------------------------------------------------------------------
 
 
@@ -325,6 +311,7 @@ def _execution(doc: Doc, r: Explanation) -> None:
             *([("Scenario", ex.scenario)] if ex.scenario else []),
         ]
     )
+    channel_evidence(doc, r)
 
 
 def _motion(m: tuple[float | None, float | None]) -> str:
