@@ -38,9 +38,11 @@ _EXPLAIN_HELP = """Explain the decision in force at a time: what the robot did a
 
 Shows the action, rationale, factors with their values, the alternatives and why each
 lost, the counterfactuals, the counterfactual decision tree with the taken path, every
-factor's causal chain down to the sensor reading (each link documented or MISSING), the
-execution record, this decision's ET / ET_partial, whether its seal verifies, and since
-when the action has held.
+factor's causal chain down to the sensor reading (each link documented or MISSING), each
+message cited in a recording decoded (in full with --json) with the region the decision
+cited, the sensors used and unavailable with the age of each cited reading, the execution
+record (and the message each actuator channel was read from), this decision's ET /
+ET_partial, whether its seal verifies, and since when the action has held.
 
 The decision in force at t is the last cycle at or before t. A time outside the log's
 range is a usage error (exit 2) that names the range. In a root of several robots, --robot
