@@ -136,7 +136,6 @@ def _explain(
     scores = decision_scores(target, chains, seal, prev_sealed=back.prev_sealed, period_ns=period)
     clock = holder.session.clock if holder is not None else whole.clock
     graph = causal_graph_data(target, chains, decision, LogClock(clock, whole.start_ns))
-    tree = tree_graph_data(decision.tree) if decision.tree else None
     external, channels, sensors = _readings(target, recordings, period)
     return Explanation(
         path=str(whole.root),
@@ -158,7 +157,7 @@ def _explain(
         seal=seal,
         held=back.held,
         graph=graph,
-        tree=tree,
+        tree=tree_graph_data(decision.tree) if decision.tree else None,
         external_evidence=external,
         clock_run=() if log is whole else tuple(s.path.name for s in log.segments),
         channel_evidence=channels,
