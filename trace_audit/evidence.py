@@ -3,19 +3,26 @@
 ``trace_runtime.reading.recordings`` finds the message an external evidence ref names (e.g. in a
 rosbag2 MCAP) and checks its digest without decoding it. This module adds what a person
 needs to see: the message decoded with the library ROS 2 tools use (``mcap-ros2-support``,
-the ``ros2`` extra, imported only here and only when a CDR message is decoded), summarised
-as its type and top-level fields. ``describe_refs`` is what ``explain`` and the incident
-report call for a decision's refs.
+the ``ros2`` extra, imported only here and only when a CDR message is decoded), in full as
+bounded typed JSON and in a few readable lines (``trace_audit.readings``), with the region
+of it the decision cited. ``describe_refs`` is what ``explain`` and the incident report call
+for a decision's refs; ``describe_channel_refs`` for the messages its actuator channels
+were read from (profile 1.4), in a recording or in the log itself.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import orjson
 
+from trace_audit.jsonout import OMIT_EMPTY
+from trace_audit.readings import CitedRegion, cited_region, message_data, message_lines
+from trace_audit.sensor_window import SensorWindow
+from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.errors import LogReadError
 from trace_runtime.reading.logset import Log
 from trace_runtime.reading.reader import Segment
@@ -25,21 +32,22 @@ from trace_runtime.session import TIERS
 __all__ = [
     "ExternalEvidence",
     "decode_message",
+    "describe_channel_refs",
     "describe_refs",
     "open_recordings",
     "recordings_for",
 ]
 
-_MAX_FIELDS = 12
-_MAX_TEXT = 60
-
 
 @dataclass(frozen=True, slots=True)
 class ExternalEvidence:
-    """One external evidence ref of a decision and what became of it."""
+    """One evidence ref of a decision into a recording (or, for an actuator channel, into
+    this log) and what became of it: resolved and decoded, broken, or unresolved."""
 
     entity: str
+    """The entity whose evidence cites the message ('' for an actuator channel's ref)."""
     recording: str
+    """The recording's name; '' when the message is in this log (a channel's ref)."""
     topic: str
     log_time_ns: int | None
     state: ExternalState
@@ -47,8 +55,19 @@ class ExternalEvidence:
     """Why it is broken or unresolved ('' when resolved)."""
     schema: str = ""
     """The message's type, e.g. ``sensor_msgs/msg/LaserScan`` (when resolved)."""
-    fields: tuple[tuple[str, str], ...] = ()
-    """Top-level fields of the decoded message, each shortened to one line."""
+    message: Any = None
+    """The decoded message in full, as bounded typed JSON (``readings.message_data``);
+    None when not resolved or not decoded."""
+    lines: tuple[str, ...] = ()
+    """The decoded message for people (``readings.message_lines``), or why it was not
+    decoded."""
+    sensor: str = ""
+    """The evidence item's sensor name ('' for a channel's ref)."""
+    region: CitedRegion | None = field(default=None, metadata={OMIT_EMPTY: True})
+    """The part of the reading the decision cited, read against the decoded message."""
+    channel: str | None = field(default=None, metadata={OMIT_EMPTY: True})
+    """The actuator channel whose ``actual`` was read from the message (None for an
+    entity's evidence, and then left out of the JSON)."""
 
 
 def open_recordings(paths: Sequence[str | Path]) -> Recordings | None:
@@ -85,25 +104,76 @@ def describe_refs(
     """Every external evidence ref of a perception message (parsed JSON), checked against
     ``recordings`` (None: each is unresolved) and, when resolved, decoded."""
     out: list[ExternalEvidence] = []
-    for entity_id, ref in _external_refs(perception):
+    for entity_id, evidence, ref in _external_refs(perception):
         name = str(ref.get("recording"))
         topic = str(ref.get("topic"))
-        stamp = ref.get("log_time_ns")
-        t_ns = stamp if type(stamp) is int else None
-        if recordings is None:
-            out.append(ExternalEvidence(entity_id, name, topic, t_ns, "unresolved", "not given"))
-            continue
-        check = recordings.check(ref)
-        schema, fields = ("", ()) if not decode or check.state != "resolved" else _decoded(check)
+        t_ns = _time_of(ref)
+        sensor = str(evidence.get("sensor") or "")
+        check = (
+            ExternalCheck("unresolved", name, "not given")
+            if recordings is None
+            else recordings.check(ref)
+        )
+        shown = _shown(check) if decode and check.state == "resolved" else _NOT_DECODED
         out.append(
             ExternalEvidence(
-                entity_id, name, topic, t_ns, check.state, check.detail, schema, fields
+                entity_id,
+                name,
+                topic,
+                t_ns,
+                check.state,
+                check.detail,
+                schema=shown.schema,
+                message=shown.message,
+                lines=shown.lines,
+                sensor=sensor,
+                region=cited_region(evidence.get("region"), shown.decoded),
             )
         )
     return out
 
 
-def _external_refs(perception: object) -> Iterable[tuple[str, dict[str, object]]]:
+def describe_channel_refs(
+    execution: object, recordings: Recordings | None, sensors: Sequence[RawMessage] = ()
+) -> list[ExternalEvidence]:
+    """The message each actuator channel of an execution message (parsed JSON) cites as
+    where its ``actual`` was read from: in a recording, checked as an entity's external
+    evidence is (``Recordings.check``), or in this log, among the cycle's ``sensors``."""
+    out: list[ExternalEvidence] = []
+    for channel, ref in _channel_refs(execution):
+        topic, t_ns = str(ref.get("topic")), _time_of(ref)
+        if is_external(ref):
+            window = SensorWindow(0, recordings)
+            check = window.check_external(ref)
+        else:
+            check = _check_in_log(ref, sensors)
+        shown = _shown(check) if check.state == "resolved" else _NOT_DECODED
+        out.append(
+            ExternalEvidence(
+                "",
+                check.recording,
+                topic,
+                t_ns,
+                check.state,
+                check.detail,
+                schema=shown.schema,
+                message=shown.message,
+                lines=shown.lines,
+                channel=channel,
+            )
+        )
+    return out
+
+
+def _time_of(ref: Mapping[str, object]) -> int | None:
+    stamp = ref.get("log_time_ns")
+    return stamp if type(stamp) is int else None
+
+
+def _external_refs(
+    perception: object,
+) -> Iterable[tuple[str, Mapping[str, Any], dict[str, object]]]:
+    """(entity id, evidence item, ref) of each ref into a recording."""
     if not isinstance(perception, dict):
         return
     for entity in perception.get("entities") or ():
@@ -112,16 +182,66 @@ def _external_refs(perception: object) -> Iterable[tuple[str, dict[str, object]]
         for evidence in entity.get("evidence") or ():
             ref = evidence.get("ref") if isinstance(evidence, dict) else None
             if isinstance(ref, dict) and is_external(ref):
-                yield str(entity.get("id")), ref
+                yield str(entity.get("id")), evidence, ref
 
 
-def _decoded(check: ExternalCheck) -> tuple[str, tuple[tuple[str, str], ...]]:
-    assert check.message is not None and check.path is not None
+def _channel_refs(execution: object) -> Iterable[tuple[str, dict[str, object]]]:
+    """(channel name, ref) of each actuator channel that cites a message."""
+    channels = execution.get("channels") if isinstance(execution, dict) else None
+    for channel in channels if isinstance(channels, list) else ():
+        ref = channel.get("ref") if isinstance(channel, dict) else None
+        if isinstance(ref, dict):
+            yield str(channel.get("name") or "?"), ref
+
+
+def _check_in_log(ref: Mapping[str, object], sensors: Sequence[RawMessage]) -> ExternalCheck:
+    """A ref into this log checked against the cycle's sensor readings (``SensorWindow``'s
+    rule): resolved, broken when a reading of that topic and time differs from it, or
+    unresolved when the cycle holds none (an older reading: not checked here)."""
+    window = SensorWindow(0)
+    window.push(sensors)
+    why = window.resolve(ref)
+    at = (ref.get("topic"), ref.get("log_time_ns"))
+    same = [m for m in sensors if (m.topic, m.log_time_ns) == at]
+    if not why:
+        return ExternalCheck("resolved", "", message=same[0] if same else None)
+    return ExternalCheck("broken" if same else "unresolved", "", why)
+
+
+@dataclass(frozen=True, slots=True)
+class _Shown:
+    """A resolved message decoded: its type, the value, its JSON and its lines."""
+
+    schema: str = ""
+    decoded: object | None = None
+    message: Any = None
+    lines: tuple[str, ...] = ()
+
+
+_NOT_DECODED = _Shown()
+
+
+def _shown(check: ExternalCheck) -> _Shown:
+    """The message a check found, decoded: from its recording file, or as JSON when it is a
+    reading of this log (``path`` None)."""
+    found = check.message
+    if found is None:
+        return _NOT_DECODED
     try:
-        schema, value = decode_message(check.path, check.message.topic, check.message.data)
+        if check.path is None:
+            schema, value = "", _parse_json(found)
+        else:
+            schema, value = decode_message(check.path, found.topic, found.data)
     except LogReadError as err:
-        return "", (("(not decoded)", err.reason),)
-    return schema, _summary(value)
+        return _Shown(lines=(f"(not decoded: {err.reason})",))
+    return _Shown(schema, value, message_data(value), message_lines(value))
+
+
+def _parse_json(found: RawMessage) -> object:
+    try:
+        return orjson.loads(found.data)
+    except orjson.JSONDecodeError as err:
+        raise LogReadError(found.topic, f"not JSON ({err})") from err
 
 
 def decode_message(path: Path, topic: str, data: bytes) -> tuple[str, object]:
@@ -166,29 +286,3 @@ def decode_message(path: Path, topic: str, data: bytes) -> tuple[str, object]:
         return name, decoder(data)
     except (McapError, ValueError, IndexError, UnicodeDecodeError) as err:
         raise LogReadError(str(path), f"{topic}: does not decode as {name} ({err})") from err
-
-
-def _summary(value: object) -> tuple[tuple[str, str], ...]:
-    """Top-level fields as short text: scalars as they are, sequences by length, nested
-    messages by their own first fields."""
-    if isinstance(value, dict):
-        items = list(value.items())
-    else:
-        slots = getattr(value, "__slots__", None) or list(getattr(value, "__dict__", {}))
-        items = [(name, getattr(value, name)) for name in slots if not name.startswith("_")]
-    return tuple((str(name), _short(field)) for name, field in items[:_MAX_FIELDS])
-
-
-def _short(value: object) -> str:
-    if isinstance(value, float):
-        text = f"{value:.6g}"
-    elif isinstance(value, bytes | bytearray):
-        text = f"{len(value)} bytes"
-    elif isinstance(value, list | tuple):
-        head = ", ".join(_short(v) for v in value[:4])
-        text = f"[{len(value)}] {head}{', …' if len(value) > 4 else ''}"
-    elif isinstance(value, str | int | bool) or value is None:
-        text = repr(value) if isinstance(value, str) else str(value)
-    else:
-        text = "{" + ", ".join(f"{k}: {v}" for k, v in _summary(value)[:3]) + "}"
-    return text if len(text) <= _MAX_TEXT else text[: _MAX_TEXT - 1] + "…"

@@ -294,7 +294,8 @@ class Motion(RecordModel):
 
 class ActuatorChannel(RecordModel):
     """One commanded-and-measured quantity of any actuator: a joint velocity, a gripper
-    force, an end-effector speed, a thrust. ``intended`` and ``actual`` are in ``unit``."""
+    force, an end-effector speed, a thrust. ``intended`` and ``actual`` are in ``unit``;
+    ``ref`` may cite the message ``actual`` was read from, as an entity's evidence does."""
 
     name: str = Field(min_length=1, description="the robot's name for it, e.g. joint_3, grip")
     unit: str = Field(description="unit of intended, actual and deviation, e.g. rad/s, N")
@@ -304,6 +305,11 @@ class ActuatorChannel(RecordModel):
         default=None,
         ge=0.0,
         description="how far actual was from intended, in unit (usually |actual - intended|)",
+    )
+    ref: EvidenceRef | None = Field(
+        default=None,
+        description="the sensor message the actual value was read from (e.g. /joint_states "
+        "or /odom, in this log or a recording); null when not recorded (profile 1.4)",
     )
 
 

@@ -185,10 +185,10 @@ FLOORS: dict[str, list[set[str]]] = {
         # what every question needs: times, sources, a cycle's fields, JSON, evidence, columns
         {
             "jsonout", "log_time", "selection", "log_source", "cycle_fields", "log_gaps",
-            "sensor_window", "evidence", "columns",
+            "sensor_window", "evidence", "readings", "columns",
         },
-        # views over one decision: its causal graph and its chains
-        {"causal", "chains"},
+        # views over one decision: its causal graph, its chains, what it knew of its sensors
+        {"causal", "chains", "sensor_health"},
         # the questions an investigator asks of a log
         {"metrics", "explanation", "export", "transitions", "info", "verify", "doctor", "layers"}
         | {"rules", "tail", "witness", "proof"},

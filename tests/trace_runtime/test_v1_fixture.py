@@ -43,12 +43,31 @@ def test_the_v1_fixture_verifies_clean_with_its_signatures() -> None:
 def test_the_v1_fixture_explains_as_it_did_when_written(cycle: int) -> None:
     from trace_audit.explanation import explain
     from trace_audit.jsonout import to_jsonable
+    from trace_audit.log_time import LogClock
 
     got = to_jsonable(explain(SEGMENT, cycle=cycle))
     got.pop("path")
     # Added after the golden was written: the log's clock, for showing its times. What it
     # says of this log is checked here; everything else must be as it was.
     assert got.pop("clock") == "system"
+    # Added later too: what the decision knew of its sensors, read from its perception record
+    # and its refs' times.
+    sensors = got.pop("sensors")
+    found = open_log(SEGMENT).get_cycle(cycle)
+    assert found is not None
+    perception = found.layer("/trace/perception")
+    assert isinstance(perception, dict)
+    assert sensors["used"] == perception["sensors_used"]
+    assert sensors["unavailable"] == perception["sensors_unavailable"]
+    assert all(c["age_ns"] >= 0 for c in sensors["cited"])
+    # A sensor reading's time is now shown in the log's clock (ISO on this wall clock), as
+    # every other time explain shows; the golden has it as seconds.
+    clock = LogClock("system", got["log_start_ns"])
+    for node in got["graph"]["nodes"]:
+        if node["kind"] == "sensor":
+            topic, _, when = node["id"].removeprefix("sensor:").rpartition("@")
+            assert node["label"] == f"{topic} @ {clock.show(int(when))}"
+            node["label"] = f"{topic} @ {int(when) / 1e9:.3f} s"
     # through JSON text, as the golden went: tuples become lists, keys strings
     assert json.loads(json.dumps(got, ensure_ascii=False)) == _golden()[str(cycle)]
 

@@ -19,6 +19,7 @@ from trace_audit.causal.decision import Decision, TreeView, format_value, read_d
 from trace_audit.causal.defaults import layer_with_defaults
 from trace_audit.causal.lenient import as_list, as_mapping, as_str, mappings
 from trace_audit.chains import DecisionChains, FactorChain, Link
+from trace_audit.log_time import SECONDS_CLOCK, LogClock
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.records import TOPIC_BELIEF, TOPIC_PERCEPTION
 
@@ -169,26 +170,35 @@ class _Graph:
 
 
 def causal_graph(
-    cycle: Cycle, chains: DecisionChains, decision: Decision | None = None
+    cycle: Cycle,
+    chains: DecisionChains,
+    decision: Decision | None = None,
+    clock: LogClock = SECONDS_CLOCK,
 ) -> nx.DiGraph:
     """The decision's causal graph: evidence -> entity -> belief nodes -> factor -> action.
 
     Node attributes: ``kind`` (sensor, evidence, entity, belief, action), ``label``,
     ``missing`` (a placeholder for something the log does not hold). Edge attributes:
     ``level`` (the chain level it documents), ``documented``, ``detail``, ``factors`` (which
-    factor chains use it) and, for belief edges, ``rule`` and ``p``.
+    factor chains use it) and, for belief edges, ``rule`` and ``p``. A sensor reading's time
+    is shown in ``clock`` (the log's ``LogClock``: ISO on a wall clock).
     """
-    return _causal(cycle, chains, decision).to_networkx()
+    return _causal(cycle, chains, decision, clock).to_networkx()
 
 
 def causal_graph_data(
-    cycle: Cycle, chains: DecisionChains, decision: Decision | None = None
+    cycle: Cycle,
+    chains: DecisionChains,
+    decision: Decision | None = None,
+    clock: LogClock = SECONDS_CLOCK,
 ) -> GraphData:
     """``graph_data(causal_graph(...))``, built without networkx."""
-    return _causal(cycle, chains, decision).data()
+    return _causal(cycle, chains, decision, clock).data()
 
 
-def _causal(cycle: Cycle, chains: DecisionChains, decision: Decision | None) -> _Graph:
+def _causal(
+    cycle: Cycle, chains: DecisionChains, decision: Decision | None, clock: LogClock
+) -> _Graph:
     decision = decision or read_decision(cycle)
     belief = as_mapping(layer_with_defaults(cycle, TOPIC_BELIEF)) or {}
     perception = as_mapping(layer_with_defaults(cycle, TOPIC_PERCEPTION)) or {}
@@ -204,7 +214,7 @@ def _causal(cycle: Cycle, chains: DecisionChains, decision: Decision | None) -> 
         label=decision.command or "? (action not logged)",
         missing=decision.command is None,
     )
-    builder = _GraphBuilder(g, nodes, edges, entities, sensors)
+    builder = _GraphBuilder(g, nodes, edges, entities, sensors, clock=clock)
     for chain in chains.factors:
         builder.add_chain(chain)
     return g
@@ -218,12 +228,15 @@ class _GraphBuilder:
         edges: Mapping[tuple[str, str], Mapping[str, object]],
         entities: Mapping[str, Mapping[str, object]],
         sensors: set[tuple[str, int]],
+        *,
+        clock: LogClock,
     ) -> None:
         self.g = g
         self.nodes = nodes
         self.edges = edges
         self.entities = entities
         self.sensors = sensors
+        self.clock = clock
 
     def _node(self, node_id: str, **attrs: Unpack[NodeAttributes]) -> str:
         if node_id not in self.g:
@@ -372,7 +385,9 @@ class _GraphBuilder:
                 f"sensor:{sensor_link.ref}",
                 kind="sensor",
                 missing=not sensor_link.documented,
-                label=f"{topic} @ {int(when) / 1e9:.3f} s" if when.isdigit() else sensor_link.ref,
+                label=f"{topic} @ {self.clock.show(int(when))}"
+                if when.isdigit()
+                else sensor_link.ref,
                 in_cycle=logged,
             )
         else:

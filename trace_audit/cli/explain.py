@@ -15,6 +15,7 @@ import typer
 
 from trace_audit.cli.app import app, guarded, help_text
 from trace_audit.cli.doc import Column, Doc, Line, Seg, fmt_duration, fmt_t, fmt_value
+from trace_audit.cli.explain_evidence import channel_evidence, external_evidence, sensors
 from trace_audit.cli.explain_graphs import chain_item, tree_item
 from trace_audit.cli.options import (
     EvidenceOption,
@@ -37,9 +38,11 @@ _EXPLAIN_HELP = """Explain the decision in force at a time: what the robot did a
 
 Shows the action, rationale, factors with their values, the alternatives and why each
 lost, the counterfactuals, the counterfactual decision tree with the taken path, every
-factor's causal chain down to the sensor reading (each link documented or MISSING), the
-execution record, this decision's ET / ET_partial, whether its seal verifies, and since
-when the action has held.
+factor's causal chain down to the sensor reading (each link documented or MISSING), each
+message cited in a recording decoded (in full with --json) with the region the decision
+cited, the sensors used and unavailable with the age of each cited reading, the execution
+record (and the message each actuator channel was read from), this decision's ET /
+ET_partial, whether its seal verifies, and since when the action has held.
 
 The decision in force at t is the last cycle at or before t. A time outside the log's
 range is a usage error (exit 2) that names the range. In a root of several robots, --robot
@@ -114,7 +117,8 @@ def explain_doc(r: Explanation, lookback_s: float = 600.0) -> Doc:
     for chain in r.chains.factors:
         doc.tree(chain_item(r, chain))
     if r.external_evidence:
-        _external_evidence(doc, r)
+        external_evidence(doc, r)
+    sensors(doc, r)
     _execution(doc, r)
     _scores(doc, r)
     _integrity(doc, r)
@@ -253,22 +257,6 @@ def _counterfactuals(doc: Doc, r: Explanation) -> None:
         doc.line(Seg("none logged", "red"), 2)
 
 
-def _external_evidence(doc: Doc, r: Explanation) -> None:
-    """Evidence refs into external recordings: resolved (decoded), broken, or not checked."""
-    doc.heading("External evidence (recordings the refs name)")
-    style = {"resolved": "green", "broken": "bold red", "unresolved": "yellow"}
-    for e in r.external_evidence:
-        state = {"resolved": "resolved, digest verified", "broken": "BROKEN"}.get(
-            e.state, "not checked (recording not given: --evidence)"
-        )
-        t = fmt_t(e.log_time_ns) if e.log_time_ns is not None else "?"
-        doc.line([f"{e.entity}: {e.recording} {e.topic} @ {t}  ", Seg(state, style[e.state])], 2)
-        if e.detail and e.state == "broken":
-            doc.line(e.detail, 4)
-        if e.schema:
-            doc.line(e.schema + ": " + ", ".join(f"{k}={v}" for k, v in e.fields), 4)
-
-
 # --- executed how -------------------------------------------------------------------------------
 
 
@@ -325,6 +313,7 @@ def _execution(doc: Doc, r: Explanation) -> None:
             *([("Scenario", ex.scenario)] if ex.scenario else []),
         ]
     )
+    channel_evidence(doc, r)
 
 
 def _motion(m: tuple[float | None, float | None]) -> str:

@@ -8,19 +8,25 @@ from pathlib import Path
 
 from trace_audit.causal import causal_graph_data, read_decision, tree_graph_data
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, DecisionChains, SensorWindow, trace_cycle
-from trace_audit.evidence import describe_refs, recordings_for
+from trace_audit.evidence import (
+    ExternalEvidence,
+    describe_channel_refs,
+    describe_refs,
+    recordings_for,
+)
 from trace_audit.explanation.look_back import LookBack, look_back
 from trace_audit.explanation.result import Explanation
 from trace_audit.explanation.scores import decision_scores
 from trace_audit.explanation.seal import check_seal
 from trace_audit.log_source import LogSource, as_log, require_cycles
-from trace_audit.log_time import TimeArg
+from trace_audit.log_time import LogClock, TimeArg
 from trace_audit.selection import Selection, robot_at, robot_with_cycle
+from trace_audit.sensor_health import SensorHealth, sensor_health
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import StaleCatalogError, TimeOutOfRangeError, UsageError
 from trace_runtime.reading.logset import Log
 from trace_runtime.reading.recordings import Recordings
-from trace_runtime.records import TOPIC_PERCEPTION
+from trace_runtime.records import TOPIC_EXECUTION, TOPIC_PERCEPTION
 
 __all__ = ["DEFAULT_LOOKBACK_S", "explain", "find_cycle"]
 
@@ -128,14 +134,15 @@ def _explain(
     )
     seal = check_seal(log, target, back.prev_sealed)
     scores = decision_scores(target, chains, seal, prev_sealed=back.prev_sealed, period_ns=period)
-    graph = causal_graph_data(target, chains, decision)
-    tree = tree_graph_data(decision.tree) if decision.tree else None
+    clock = holder.session.clock if holder is not None else whole.clock
+    graph = causal_graph_data(target, chains, decision, LogClock(clock, whole.start_ns))
+    external, channels, sensors = _readings(target, recordings, period)
     return Explanation(
         path=str(whole.root),
         robot=log.first_robot,
         log_start_ns=whole.start_ns,
         log_end_ns=whole.end_ns,
-        clock=holder.session.clock if holder is not None else whole.clock,
+        clock=clock,
         recovered=whole.recovered,
         live=whole.live or None,
         query_t_ns=t_ns,
@@ -150,9 +157,25 @@ def _explain(
         seal=seal,
         held=back.held,
         graph=graph,
-        tree=tree,
-        external_evidence=tuple(describe_refs(target.layer(TOPIC_PERCEPTION), recordings)),
+        tree=tree_graph_data(decision.tree) if decision.tree else None,
+        external_evidence=external,
         clock_run=() if log is whole else tuple(s.path.name for s in log.segments),
+        channel_evidence=channels,
+        sensors=sensors,
+    )
+
+
+def _readings(
+    target: Cycle, recordings: Recordings | None, period_ns: int
+) -> tuple[tuple[ExternalEvidence, ...], tuple[ExternalEvidence, ...], SensorHealth]:
+    """The decision's evidence in recordings, the messages its actuator channels were read
+    from, and what it knew about its sensors (used, unavailable, the age of each reading)."""
+    perception = target.layer(TOPIC_PERCEPTION)
+    execution = target.layer(TOPIC_EXECUTION)
+    return (
+        tuple(describe_refs(perception, recordings)),
+        tuple(describe_channel_refs(execution, recordings, target.sensors)),
+        sensor_health(perception, execution, target.t_ns, period_ns),
     )
 
 

@@ -11,6 +11,7 @@ from trace_audit.chains import DecisionChains
 from trace_audit.evidence import ExternalEvidence
 from trace_audit.jsonout import OMIT_EMPTY
 from trace_audit.log_time import LogClock
+from trace_audit.sensor_health import SensorHealth
 from trace_runtime.gaps import gap_limit_ns
 
 __all__ = ["DecisionScores", "Explanation", "HeldSince", "SealCheck"]
@@ -119,6 +120,12 @@ class Explanation:
     live: bool | None = field(default=None, metadata={OMIT_EMPTY: True})
     """True when a segment of the log is being written right now (its logger holds the
     lock); None otherwise, and then left out of the JSON."""
+    channel_evidence: tuple[ExternalEvidence, ...] = field(default=(), metadata={OMIT_EMPTY: True})
+    """The messages the execution's actuator channels cite as where ``actual`` was read
+    from (profile 1.4), resolved and decoded as external evidence is; left out of the JSON
+    when no channel cites one."""
+    sensors: SensorHealth | None = None
+    """The sensors the decision used and missed, and the age of each reading it cited."""
 
     @property
     def log_clock(self) -> LogClock:

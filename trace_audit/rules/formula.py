@@ -84,7 +84,9 @@ _FAMILIES_HELP = "signals: " + ", ".join(f"{f}.*" for f in FAMILIES)
 
 _SIGNALS_HELP = (
     "signals are command.<ACTION>, channel.<name>.intended|actual|deviation, "
-    "nearest.<class>, factor.<name>, check.<rule>, flag.<name>; docs/rules.md"
+    "nearest.<class>, factor.<name>, check.<rule>, flag.<name>, "
+    "perception.sensors_unavailable|sensors_used[.<sensor>], evidence.age_s[.<sensor>]; "
+    "docs/rules.md"
 )
 
 _ALWAYS = re.compile(r"\s*(?:always|G)\s*\(")

@@ -83,6 +83,7 @@ def check_index(
     robot on it (None: one after the other here). ``engine`` as ``check_rules``'."""
     if not rules:
         raise RulesError(f"{rules_file or 'the rules'}: no rules to check")
+    _refuse_log_only_signals(rules, rules_file)
     for key in by:
         if key not in BY_KEYS:
             raise UsageError(f"cannot group rules by {key!r} (use {', '.join(BY_KEYS)})")
@@ -106,6 +107,23 @@ def check_index(
     answers = tuple(answer for answer, _ in judged)
     groups = tuple(group for _, robot_groups in judged for group in robot_groups)
     return CheckResult(index, rules_file, answers, groups)
+
+
+LOG_ONLY_FAMILIES = ("perception", "evidence")
+"""Signal families the fleet index does not hold (sensor lists, the age of cited readings):
+read from the logs only."""
+
+
+def _refuse_log_only_signals(rules: Sequence[Rule], rules_file: str) -> None:
+    """A rule reading a signal the index does not hold is refused (exit 2), never judged
+    "not decidable" on every row as if the robot had not logged it."""
+    for rule in rules:
+        for name in rule.formula.signals:
+            if name.partition(".")[0] in LOG_ONLY_FAMILIES:
+                raise RulesError(
+                    f"{rules_file or 'the rules'}: rule {rule.name!r}: {name} is read from the "
+                    "logs, not the fleet index: check the logs (trace-audit check LOG|ROOT --rules)"
+                )
 
 
 def judge_index_robot(

@@ -46,6 +46,7 @@ from trace_audit.rules.results import (
     Violation,
 )
 from trace_audit.rules.rulebook import Rule
+from trace_audit.rules.signals import is_indicator
 from trace_runtime.gaps import Gap
 
 __all__ = ["Labels", "RobotSignals", "SignalColumns", "judge"]
@@ -241,7 +242,7 @@ def _unseen(formula: Formula, signals: RobotSignals, judged: NDArray[np.bool_]) 
         family = name.partition(".")[0]
         if family == "nearest":
             seen = bool(np.isfinite(values).any())
-        elif family in ("command", "flag"):
+        elif is_indicator(name):
             seen = bool((values == 1.0).any())
         else:
             seen = not bool(np.isnan(values).all())

@@ -1,6 +1,6 @@
 """The signals a rule reads, by name, from one logged cycle.
 
-A rule's formula names signals in six families (docs/rules.md):
+A rule's formula names signals in eight families (docs/rules.md):
 
 - ``command.<ACTION>``: 1.0 while the cycle's command is ACTION (matched without regard to
   case, as ``why`` does), else 0.0.
@@ -13,6 +13,13 @@ A rule's formula names signals in six families (docs/rules.md):
 - ``factor.<node>`` or ``factor.<name>``: a factor value the decision names (booleans 0/1).
 - ``check.<rule>``: 1.0 when that execution check passed, 0.0 when it failed.
 - ``flag.<name>``: 1.0 when the execution record raises that flag, else 0.0.
+- ``perception.sensors_unavailable`` / ``perception.sensors_used``: how many sensors the
+  perception record lists there; ``perception.sensors_unavailable.<sensor>`` (or
+  ``sensors_used.<sensor>``): 1.0 when it lists that sensor, else 0.0.
+- ``evidence.age_s``: the age in seconds, at the decision, of the oldest reading its
+  evidence refs (and its actuator channels' refs) cite; ``evidence.age_s.<sensor>``: of
+  that sensor's readings (a channel's: its name). ``trace_audit.sensor_health`` computes
+  the ages, as ``explain`` shows them.
 
 A cycle that does not log what a signal is read from (no action, no execution record, no
 perception, a check it did not run, a factor it does not name) has no value for it: the
@@ -35,6 +42,7 @@ from trace_audit.causal.lenient import (
     as_str,
     mappings,
 )
+from trace_audit.sensor_health import cited_ages, sensor_names
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.encoding.partial import (
     RULES_ACTION,
@@ -54,6 +62,7 @@ __all__ = [
     "SIGNAL_PATTERN",
     "bad_signal",
     "command_signal",
+    "is_indicator",
     "nearest_by_class",
     "nearest_signal",
     "planar_speed",
@@ -61,13 +70,15 @@ __all__ = [
     "signal_names",
 ]
 
-FAMILIES = ("command", "channel", "nearest", "factor", "check", "flag")
+FAMILIES = ("command", "channel", "nearest", "factor", "check", "flag", "perception", "evidence")
 """The first word of every signal name."""
 
 SIGNAL_PATTERN = re.compile(rf"\b(?:{'|'.join(FAMILIES)})(?:\.[A-Za-z0-9_]+)+")
 """A signal name in a formula: a family, then dot-separated words of letters, digits, ``_``."""
 
 _CHANNEL_PARTS = ("intended", "actual", "deviation")
+_SENSOR_LISTS = ("sensors_unavailable", "sensors_used")
+_AGE = "age_s"
 
 Speed = TypeVar("Speed", float, "NDArray[np.float64]")
 """A linear speed in m/s: one cycle's, or a column of the fleet index's rows."""
@@ -87,7 +98,20 @@ def bad_signal(name: str) -> str | None:
             return f"{name}: a channel signal is channel.<name>.intended|actual|deviation"
     elif family == "command" and "." in rest:
         return f"{name}: a command signal is command.<ACTION>"
+    elif family == "perception" and rest.partition(".")[0] not in _SENSOR_LISTS:
+        return (
+            f"{name}: a perception signal is perception.sensors_unavailable|sensors_used[.<sensor>]"
+        )
+    elif family == "evidence" and rest.partition(".")[0] != _AGE:
+        return f"{name}: an evidence signal is evidence.age_s[.<sensor>]"
     return None
+
+
+def is_indicator(name: str) -> bool:
+    """Whether a signal is 1.0 or 0.0 only, and "seen" in a log when it is ever 1.0: a
+    command in force, a flag raised, a sensor listed (``perception.<list>.<sensor>``)."""
+    family, _, rest = name.partition(".")
+    return family in ("command", "flag") or (family == "perception" and "." in rest)
 
 
 def read_signals(cycle: Cycle, names: Iterable[str]) -> tuple[str | None, dict[str, float]]:
@@ -109,6 +133,11 @@ def read_signals(cycle: Cycle, names: Iterable[str]) -> tuple[str | None, dict[s
         else None
     )
     nearest = nearest_by_class(cycle) if "nearest" in families else None
+    perception = (
+        read_layer(cycle, RULES_PERCEPTION) if families & {"perception", "evidence"} else None
+    )
+    if "evidence" in families and execution is None:
+        execution = as_mapping(read_layer(cycle, RULES_EXECUTION))
     out: dict[str, float] = {}
     for (family, _, rest), name in zip(wanted, names, strict=True):
         if family == "command":
@@ -117,6 +146,10 @@ def read_signals(cycle: Cycle, names: Iterable[str]) -> tuple[str | None, dict[s
             value = None if nearest is None else nearest_signal(nearest, rest)
         elif family == "factor":
             value = _factor_signal(action, rest)
+        elif family == "perception":
+            value = _sensor_list_signal(perception, rest)
+        elif family == "evidence":
+            value = _age_signal(perception, execution, cycle.t_ns, rest)
         elif execution is None:
             value = None
         elif family == "check":
@@ -135,6 +168,30 @@ def read_signals(cycle: Cycle, names: Iterable[str]) -> tuple[str | None, dict[s
         if value is not None:
             out[name] = value
     return command, out
+
+
+def _sensor_list_signal(perception: object, wanted: str) -> float | None:
+    """``perception.<list>`` (how many it names) or ``perception.<list>.<sensor>`` (0/1);
+    None when the cycle logs no perception."""
+    if as_mapping(perception) is None:
+        return None
+    key, _, sensor = wanted.partition(".")
+    names = sensor_names(perception, key)
+    if not sensor:
+        return float(len(names))
+    return 1.0 if sensor in names else 0.0
+
+
+def _age_signal(perception: object, execution: object, t_ns: int, wanted: str) -> float | None:
+    """``evidence.age_s[.<sensor>]``: seconds from the oldest cited reading (of that sensor)
+    to the decision; None when the cycle cites none."""
+    _, _, sensor = wanted.partition(".")
+    ages = [
+        c.age_ns
+        for c in cited_ages(perception, execution, t_ns)
+        if not sensor or c.sensor == sensor
+    ]
+    return max(ages) / 1e9 if ages else None
 
 
 def _factor_signal(action: Mapping[str, object] | None, wanted: str) -> float | None:

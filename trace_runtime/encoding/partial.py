@@ -217,13 +217,31 @@ SEAL_FIELDS: Shape[SealFields] = Shape("seal fields", TOPIC_SEAL, SealFields)
 Number = int | float
 """A JSON number as orjson gives it: an int, or a float (never coerced to one)."""
 
-_RulesEntity = TypedDict("_RulesEntity", {"id": str, "class": str}, total=False)
+
+class _RulesRef(TypedDict, total=False):
+    topic: str
+    log_time_ns: Int
+    recording: str | None
+
+
+class _RulesEvidence(TypedDict, total=False):
+    sensor: str
+    ref: _RulesRef | None
+
+
+_RulesEntity = TypedDict(
+    "_RulesEntity", {"id": str, "class": str, "evidence": list[_RulesEvidence]}, total=False
+)
 
 
 class RulesPerception(TypedDict, total=False):
-    """Each perceived entity's id and class (``nearest.<class>``)."""
+    """Each perceived entity's id and class (``nearest.<class>``), the sensors the robot
+    used and missed (``perception.*``) and each evidence item's sensor and ref
+    (``evidence.age_s``)."""
 
     entities: list[_RulesEntity]
+    sensors_used: list[str]
+    sensors_unavailable: list[str]
 
 
 class _RulesNode(TypedDict, total=False):
@@ -272,11 +290,12 @@ class _Channel(TypedDict, total=False):
     intended: Number | None
     actual: Number | None
     deviation: Number | None
+    ref: _RulesRef | None
 
 
 class RulesExecution(TypedDict, total=False):
     """The planar motion, the checks, the flags and the actuator channels
-    (``channel.*``, ``check.*``, ``flag.*``)."""
+    (``channel.*``, ``check.*``, ``flag.*``; a channel's ref for ``evidence.age_s``)."""
 
     intended: _Motion | None
     actual: _Motion | None

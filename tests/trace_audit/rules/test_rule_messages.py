@@ -40,7 +40,8 @@ def test_an_unknown_signal_family_is_named_with_the_families() -> None:
         parse_rules(rule_text("r", "always(bogus.x > 1 and command.STOP < 0.5)"), "r.toml")
     assert str(err.value) == (
         "r.toml: rule 'r': unknown signal 'bogus.x' "
-        "(signals: command.*, channel.*, nearest.*, factor.*, check.*, flag.*)"
+        "(signals: command.*, channel.*, nearest.*, factor.*, check.*, flag.*, perception.*, "
+        "evidence.*)"
     )
 
 

@@ -17,9 +17,10 @@ import orjson
 from sim.runner import RunConfig, run
 from trace_audit.causal import Decision, read_decision
 from trace_audit.rules.signals import read_signals
+from trace_audit.sensor_health import sensor_health
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.reading.logset import open_log
-from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION
+from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION, TOPIC_PERCEPTION
 
 REPO = Path(__file__).resolve().parents[3]
 
@@ -58,6 +59,38 @@ def _from_decision(decision: Decision, name: str) -> float | None:
     return None if value is None else abs(value)
 
 
+def _from_health(cycle: Cycle, name: str) -> float | None:
+    """A ``perception.*`` or ``evidence.*`` signal as explain's sensor health gives it, from
+    the full parse of the layers."""
+    perception = cycle.layer(TOPIC_PERCEPTION)
+    if not isinstance(perception, dict) and name.startswith("perception."):
+        return None
+    health = sensor_health(perception, cycle.layer(TOPIC_EXECUTION), cycle.t_ns, 0)
+    family, _, rest = name.partition(".")
+    key, _, which = rest.partition(".")
+    if family == "perception":
+        listed = health.unavailable if key == "sensors_unavailable" else health.used
+        return (1.0 if which in listed else 0.0) if which else float(len(listed))
+    ages = [c.age_ns for c in health.cited if not which or c.sensor == which]
+    return max(ages) / 1e9 if ages else None
+
+
+def _oracle(cycle: Cycle, decision: Decision, name: str) -> float | None:
+    if name.partition(".")[0] in ("perception", "evidence"):
+        return _from_health(cycle, name)
+    return _from_decision(decision, name)
+
+
+def _health_names(cycle: Cycle) -> list[str]:
+    perception = cycle.layer(TOPIC_PERCEPTION)
+    health = sensor_health(perception, cycle.layer(TOPIC_EXECUTION), cycle.t_ns, 0)
+    names = ["perception.sensors_used", "perception.sensors_unavailable", "evidence.age_s"]
+    for key, listed in (("sensors_used", health.used), ("sensors_unavailable", health.unavailable)):
+        names += [f"perception.{key}.{n}" for n in listed]
+    names += [f"evidence.age_s.{c.sensor}" for c in health.cited]
+    return [*names, "perception.sensors_unavailable.absent", "evidence.age_s.absent"]
+
+
 def _names(cycle: Cycle) -> list[str]:
     """Every signal name this cycle could give, and some it cannot."""
     decision = read_decision(cycle, with_tree=False)
@@ -71,6 +104,7 @@ def _names(cycle: Cycle) -> list[str]:
         names += [f"flag.{f}" for f in execution.flags]
         names += [f"channel.{c.name}.{p}" for c in execution.channels for p in _PARTS]
     names += [f"channel.speed.{p}" for p in _PARTS]
+    names += _health_names(cycle)
     return list(dict.fromkeys(names))
 
 
@@ -85,7 +119,7 @@ def _assert_same(root: Path) -> int:
         command, signals = read_signals(cycle, names)
         assert command == decision.command, cycle.cycle
         for name in names:
-            assert signals.get(name) == _from_decision(decision, name), (cycle.cycle, name)
+            assert signals.get(name) == _oracle(cycle, decision, name), (cycle.cycle, name)
             compared += 1
     return compared
 
@@ -130,4 +164,30 @@ def test_records_that_bend_the_schema(tmp_path: Path) -> None:
             command, signals = read_signals(bent, names)
             assert command == decision.command
             for name in names:
-                assert signals.get(name) == _from_decision(decision, name), (action, name)
+                assert signals.get(name) == _oracle(bent, decision, name), (action, name)
+
+
+def test_perception_records_that_bend_the_schema(tmp_path: Path) -> None:
+    """Sensor lists and refs of the wrong types read as explain's sensor health reads them."""
+    run(RunConfig(out=tmp_path / "sim", total_cycles=5, seed=1))
+    cycle = next(iter(open_log(tmp_path / "sim").iter_cycles()))
+    ref = {"topic": "/s", "log_time_ns": cycle.t_ns - 5}
+    perceptions = [
+        {"sensors_used": ["a", 3, "a"], "sensors_unavailable": "cam"},
+        {"sensors_unavailable": ["cam"], "entities": [{"id": "e", "evidence": [{"ref": ref}]}]},
+        {"entities": [{"evidence": [{"sensor": 5, "ref": {"log_time_ns": 1.5}}, "x"]}]},
+        {"entities": [{"id": "e", "evidence": [{"sensor": "lidar", "ref": ref}]}]},
+        [],
+    ]
+    executions = [
+        {"channels": [{"name": "elbow", "ref": dict(ref, log_time_ns=cycle.t_ns + 7)}]},
+        {"channels": [{"name": 3, "ref": "no"}]},
+    ]
+    for perception in perceptions:
+        for execution in executions:
+            bent = _bent(_bent(cycle, TOPIC_PERCEPTION, perception), TOPIC_EXECUTION, execution)
+            names = [*_health_names(bent), "perception.sensors_used.a", "evidence.age_s.lidar"]
+            names += ["evidence.age_s.elbow", "evidence.age_s.?"]
+            _command, signals = read_signals(bent, names)
+            for name in names:
+                assert signals.get(name) == _from_health(bent, name), (perception, name)
