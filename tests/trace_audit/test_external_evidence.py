@@ -304,7 +304,7 @@ def test_the_incident_report_resolves_the_recording_when_given_it(
     given = build_report(log, cycle=10, evidence=[bag])
     assert {e.state for e in without.data.explanation.external_evidence} == {"unresolved"}
     assert {e.state for e in given.data.explanation.external_evidence} == {"resolved"}
-    assert "not checked (recording not given" in without.html
+    assert "not checked, unknown" in without.html and "robot_bag_0.mcap not given" in without.html
     assert "resolved, digest matches" in given.html and "LaserScan" in given.html
     assert f"--evidence {bag}" in given.html
     assert given.data.metrics.external_refs.get("resolved", 0) >= 1

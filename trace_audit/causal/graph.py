@@ -19,6 +19,7 @@ from trace_audit.causal.decision import Decision, TreeView, format_value, read_d
 from trace_audit.causal.defaults import layer_with_defaults
 from trace_audit.causal.lenient import as_list, as_mapping, as_str, mappings
 from trace_audit.chains import DecisionChains, FactorChain, Link
+from trace_runtime.clock import EARLIEST_WALL_NS, iso_utc
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.records import TOPIC_BELIEF, TOPIC_PERCEPTION
 
@@ -372,12 +373,22 @@ class _GraphBuilder:
                 f"sensor:{sensor_link.ref}",
                 kind="sensor",
                 missing=not sensor_link.documented,
-                label=f"{topic} @ {int(when) / 1e9:.3f} s" if when.isdigit() else sensor_link.ref,
+                label=f"{topic} @ {_reading_time(int(when))}"
+                if when.isdigit()
+                else sensor_link.ref,
                 in_cycle=logged,
             )
         else:
             sensor_key = self._placeholder("sensor_reading", sensor_link, evidence_key)
         self._edge(sensor_key, evidence_key, chain, sensor_link)
+
+
+def _reading_time(t_ns: int) -> str:
+    """A reading's time for a label: UTC to the millisecond when it is a time of day (a
+    wall clock's: raw seconds since 1970 mean nothing to a person), else seconds."""
+    if t_ns >= EARLIEST_WALL_NS:
+        return iso_utc(t_ns, digits=3)
+    return f"{t_ns / 1e9:.3f} s"
 
 
 def _pick_evidence(
