@@ -7,7 +7,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from trace_audit.cli.doc import BoxColumn, BoxTable, Doc
-from trace_audit.log_time import SECONDS_CLOCK
 
 if TYPE_CHECKING:
     from trace_audit.cli.output import JsonValue
@@ -278,6 +277,8 @@ def _failures(out: Doc, report: MetricsReport) -> None:
         f"\n[bold]Failing decisions[/bold]: {report.failures_total}"
         + (f" (first {listed} listed)" if listed < report.failures_total else "")
     )
+    from trace_audit.log_time import SECONDS_CLOCK  # the library, not at --help time
+
     show = (report.clock or SECONDS_CLOCK).show
     for f in report.failures:
         out.verbatim(

@@ -90,10 +90,9 @@ def test_the_graph_exports_draw_missing_only_what_is_missing(
     roots: dict[str, Path], case: str, fmt: str
 ) -> None:
     text = export_decision(roots[case], cycle=CYCLE, fmt=fmt).text
-    missing = text.count("MISSING")
-    assert missing == (0 if case == "resolved" else 1), text
-    if case == "missing":
-        assert "UNKNOWN" in text or "not found" in text
+    # broken: the cited scan is drawn MISSING; not read: UNKNOWN, never MISSING
+    assert text.count("MISSING") == (1 if case == "broken" else 0), text
+    assert text.count("UNKNOWN") == (1 if case == "missing" else 0), text
 
 
 @pytest.mark.parametrize("fmt", ["dot", "mermaid"])
