@@ -12,6 +12,7 @@ import json
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Literal, get_args
 
 from trace_audit.causal import EdgeData, GraphData
@@ -47,13 +48,16 @@ def export_decision(
     cycle: int | None = None,
     fmt: str = "dot",
     robots: Sequence[str] = (),
+    evidence: Sequence[str | Path] = (),
 ) -> Export:
     """The causal graph and counterfactual tree of the decision at ``t`` (or ``cycle``);
-    ``robots`` as ``explain`` takes them (one robot's decision, or ``SeveralRobotsError``)."""
+    ``robots`` as ``explain`` takes them (one robot's decision, or ``SeveralRobotsError``).
+    Evidence resolves as explain resolves it: the recordings the log declares, ``evidence``
+    (``--evidence``) for a moved copy."""
     if fmt not in FORMATS:
         raise UsageError(f"unknown export format {fmt!r} (use {', '.join(FORMATS)})")
     # No look-back is needed for the graphs: only the sensor window and the seal.
-    result = explain(source, t=t, cycle=cycle, lookback_s=0, robots=robots)
+    result = explain(source, t=t, cycle=cycle, lookback_s=0, robots=robots, evidence=evidence)
     return render_export(result, fmt)
 
 
@@ -103,7 +107,10 @@ def _edge_note(edge: EdgeData) -> str:
     level = str(edge.get("level") or "")
     rule = edge.get("rule")
     note = f"{level}: {rule}" if rule else level
-    if not edge.get("documented"):
+    if edge.get("unknown"):
+        # the reading is in a recording that could not be read: not known to be missing
+        note = f"UNKNOWN {note} (recording not read)"
+    elif not edge.get("documented"):
         note = f"MISSING {note}"
     return note
 

@@ -117,18 +117,22 @@ class SensorWindow:
         name = str(ref.get("recording"))
         if self.recordings is None:
             found = ExternalCheck(
-                "unresolved", name, f"in external recording {name}, not given (--evidence)"
+                "unresolved",
+                name,
+                f"recording {name} not given (the log does not declare it; --evidence)",
             )
         else:
+            # unresolved says why: not found where the log declares it, or not given
             found = self.recordings.check(ref)
-            if found.state == "unresolved":
-                found = ExternalCheck(
-                    "unresolved", name, f"in external recording {name}, not among those given"
-                )
         self._external[key] = found
         if len(self._external) > _EXTERNAL_REMEMBERED:
             self._external.popitem(last=False)
         return found
+
+    def unknown(self, ref: Mapping[str, object]) -> bool:
+        """True when ``ref`` names a message in an external recording that could not be read
+        (not given, not where the log declares it): whether it resolves is unknown."""
+        return type(ref.get("recording")) is str and self.check_external(ref).state == "unresolved"
 
     def external_state(self, ref: Mapping[str, object]) -> ExternalState:
         """resolved, broken or unresolved: what became of a ref into an external recording."""

@@ -332,6 +332,8 @@ def _trace_seed(
         for p in failure.problems:
             kind = _problem_kind(p)
             trace_problems[kind] = trace_problems.get(kind, 0) + 1
+    # the simulator cites no external recording, so no decision's ET is unknown
+    assert o.et.mean is not None and o.et_partial.mean is not None
     trace = MethodSeed(
         et=o.et.mean,
         et_partial=o.et_partial.mean,

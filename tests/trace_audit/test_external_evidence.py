@@ -233,8 +233,9 @@ def test_metrics_count_resolved_broken_and_unresolved_apart(
     given = compute_metrics([log], MetricsConfig(evidence=(str(bag),)))
     assert without.external_refs == {"unresolved": CYCLES}
     assert given.external_refs == {"resolved": CYCLES}
-    # ET needs a resolving reading: not checked is not traced
-    assert without.overall.et.mean == 0.0 and given.overall.et.mean == 1.0
+    # not checked is unknown, not 0: those decisions are counted apart
+    assert without.overall.et.mean is None and without.overall.unknown == CYCLES
+    assert given.overall.et.mean == 1.0 and given.overall.unknown == 0
     changed = _copy_bag(recording, tmp_path / "c" / recording.name, change=3)
     broken = compute_metrics([log], MetricsConfig(evidence=(str(changed),)))
     assert broken.external_refs == {"broken": 1, "resolved": CYCLES - 1}
@@ -304,7 +305,7 @@ def test_the_incident_report_resolves_the_recording_when_given_it(
     given = build_report(log, cycle=10, evidence=[bag])
     assert {e.state for e in without.data.explanation.external_evidence} == {"unresolved"}
     assert {e.state for e in given.data.explanation.external_evidence} == {"resolved"}
-    assert "not checked (recording not given" in without.html
+    assert "not checked, unknown" in without.html and "robot_bag_0.mcap not given" in without.html
     assert "resolved, digest matches" in given.html and "LaserScan" in given.html
     assert f"--evidence {bag}" in given.html
     assert given.data.metrics.external_refs.get("resolved", 0) >= 1

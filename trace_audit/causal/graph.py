@@ -88,6 +88,9 @@ class EdgeAttributes(TypedDict, total=False):
     p: object
     label: str
     taken: bool
+    unknown: bool
+    """Set (True) on a link not documented only because the external recording holding
+    the reading could not be read: unknown, not missing."""
 
 
 class _ChainEdgeAttributes(TypedDict, total=False):
@@ -285,6 +288,10 @@ class _GraphBuilder:
             factors=[chain.node],
             **attrs,
         )
+        if link.unknown:
+            added = self.g.edge(u, v)
+            assert added is not None  # just added
+            added["unknown"] = True
 
     def _belief_node(self, node_id: str) -> str:
         raw = self.nodes.get(node_id)

@@ -30,8 +30,11 @@ Evidence refs resolve against the sensor messages of the decision's own cycle an
 ``SensorWindow.cycles`` cycles before it (default 50, i.e. 5 s at 10 Hz); a ref to a
 reading older than that or to a later cycle does not resolve. A ref into an external
 recording (PROFILE.md section 11, e.g. a rosbag2 MCAP) resolves when the window was given
-that recording and the message there matches the ref; without the recording it stays
-undocumented, with a reason that says it was not checked rather than broken.
+that recording (the log's declared recordings, ``evidence.recordings_for``) and the
+message there matches the ref; when the recording cannot be read it stays
+undocumented, with a reason that says it was not checked rather than broken, and marked
+``Link.unknown``: such a chain's traceability is unknown (``FactorChain.unknown``), so the
+decision's ET is unknown (``DecisionChains.known_et`` None, ``DecisionScore.unknown``), not 0.
 
 ``label_chain`` names a chain's nodes and links in the labels of its decision's causal graph
 (``trace_audit.causal``), the words ``trace-audit explain`` draws it with.

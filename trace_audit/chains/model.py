@@ -31,6 +31,9 @@ class Link:
     documented: bool
     ref: str
     detail: str = ""
+    unknown: bool = False
+    """Not documented because the external recording holding the reading could not be
+    read: whether it resolves is unknown, not false."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,6 +53,13 @@ class FactorChain:
     @property
     def partial(self) -> float:
         return self.depth / self.expected_depth
+
+    @property
+    def unknown(self) -> bool:
+        """Whether the chain is traceable is unknown: it stops only at a reading in an
+        external recording that could not be read."""
+        missing = self.missing
+        return missing is not None and missing.unknown
 
     @property
     def missing(self) -> Link | None:
@@ -79,6 +89,21 @@ class DecisionChains:
     def fully_traceable(self) -> bool:
         return bool(self.factors) and all(f.traceable for f in self.factors)
 
+    @property
+    def unknown(self) -> bool:
+        """ET is unknown: a factor's chain stops at a recording that could not be read."""
+        return any(f.unknown for f in self.factors)
+
+    @property
+    def known_et(self) -> float | None:
+        """ET, or None when it is unknown (``unknown``)."""
+        return None if self.unknown else self.et
+
+    @property
+    def known_et_partial(self) -> float | None:
+        """ET_partial, or None when ET is unknown."""
+        return None if self.unknown else self.et_partial
+
 
 class DecisionScore(NamedTuple):
     """ET numbers of one decision without the links (what metrics need per cycle)."""
@@ -88,7 +113,15 @@ class DecisionScore(NamedTuple):
     factors: int
     traceable: int
     reason: str
+    unknown: int = 0
+    """Factors whose chain stops only at a reading in an external recording that could not
+    be read: while any is, the decision's ET and ET_partial are unknown, not these."""
 
     @property
     def fully_traceable(self) -> bool:
         return self.factors > 0 and self.traceable == self.factors
+
+    @property
+    def known(self) -> bool:
+        """ET and ET_partial are known (no factor's evidence is in an unreadable recording)."""
+        return not self.unknown

@@ -89,17 +89,18 @@ def score_layers(
     if not raw_factors or type(raw_factors) is not list:
         return DecisionScore(0.0, 0.0, 0, 0, "action names no factors")
     walker = _Walker(belief, perception, window)
-    n = traceable = 0
+    n = traceable = unknown = 0
     partial = 0.0
     for factor in raw_factors:
         if type(factor) is dict:
-            depth, expected = walker.depth(factor)
+            depth, expected, not_known = walker.depth(factor)
             n += 1
             traceable += depth == expected
             partial += depth / expected
+            unknown += not_known
     if not n:
         return DecisionScore(0.0, 0.0, 0, 0, "action names no factors")
-    return DecisionScore(traceable / n, partial / n, n, traceable, "")
+    return DecisionScore(traceable / n, partial / n, n, traceable, "", unknown)
 
 
 class _Walker:
@@ -114,6 +115,7 @@ class _Walker:
         "_parents",
         "_perception",
         "_perception_missing",
+        "_unknown",
         "_window",
     )
 
@@ -134,6 +136,8 @@ class _Walker:
         self._entities: dict[str, dict[str, object]] | None = None
         self._entity_memo: dict[str, tuple[Link, ...]] = {}
         self._depth_memo: dict[str, int] = {}
+        # entities whose refs do not resolve but one lies in a recording not read
+        self._unknown: set[str] = set()
 
     def _entity(self, entity_id: str) -> dict[str, object] | None:
         entities = self._entities
@@ -147,19 +151,26 @@ class _Walker:
                         entities[key] = entity
         return entities.get(entity_id)
 
-    def depth(self, factor: dict[str, object]) -> tuple[int, int]:
-        """(documented depth, expected depth) of a factor: ``factor()`` without the links."""
+    def depth(self, factor: dict[str, object]) -> tuple[int, int, bool]:
+        """(documented depth, expected depth, unknown) of a factor: ``factor()`` without the
+        links; unknown when the chain stops only at a reading in a recording not read."""
         nodes = self._nodes
         start = factor.get("node")
         if type(start) is not str:
-            return 0, EXPECTED_DEPTH_STATE
+            return 0, EXPECTED_DEPTH_STATE, False
         node = nodes.get(start)
         if node is None:
-            return 0, EXPECTED_DEPTH_STATE
+            return 0, EXPECTED_DEPTH_STATE, False
         if node.get("kind") == "entity":
-            return 1 + self._entity_depth(node), EXPECTED_DEPTH_ENTITY
+            below = self._entity_depth(node)
+            return (
+                1 + below,
+                EXPECTED_DEPTH_ENTITY,
+                below == 2 and node.get("entity") in self._unknown,
+            )
         parents = self._parents
         best = -1
+        unknown = False
         seen = {start}
         frontier: list[str] = [start]
         while frontier:
@@ -175,14 +186,15 @@ class _Walker:
                     if above.get("kind") == "entity":
                         found = self._entity_depth(above)
                         if found == 3:
-                            return EXPECTED_DEPTH_STATE, EXPECTED_DEPTH_STATE
+                            return EXPECTED_DEPTH_STATE, EXPECTED_DEPTH_STATE, False
                         best = max(best, found)
+                        unknown = unknown or above.get("entity") in self._unknown
                     else:
                         upper.append(parent)
             frontier = upper
         if best < 0:
-            return 1, EXPECTED_DEPTH_STATE
-        return 2 + best, EXPECTED_DEPTH_STATE
+            return 1, EXPECTED_DEPTH_STATE, False
+        return 2 + best, EXPECTED_DEPTH_STATE, unknown and best == 2
 
     def _entity_depth(self, node: dict[str, object]) -> int:
         """Documented levels below an entity node: entity, evidence_ref, sensor_reading."""
@@ -197,14 +209,18 @@ class _Walker:
             depth = 0
         else:
             depth = 1
-            resolve = self._window.resolve
+            window = self._window
+            unknown = False
             for evidence in _dicts(entity.get("evidence")):
                 ref = evidence.get("ref")
                 if type(ref) is dict:
                     depth = 2
-                    if not resolve(ref):
+                    if not window.resolve(ref):
                         depth = 3
                         break
+                    unknown = unknown or window.unknown(ref)
+            if depth == 2 and unknown:
+                self._unknown.add(entity_id)
         self._depth_memo[entity_id] = depth
         return depth
 
@@ -324,18 +340,20 @@ class _Walker:
                 Link("sensor_reading", False, "", _NOT_REACHED),
             )
         first_why = ""
+        unknown = False
         for ref in refs:
             why = self._window.resolve(ref)
             if not why:
                 label = _ref_label(ref)
                 return (top, Link("evidence_ref", True, label), Link("sensor_reading", True, label))
             first_why = first_why or why
+            unknown = unknown or self._window.unknown(ref)
         label = _ref_label(refs[0])
         more = f" (and {len(refs) - 1} other refs)" if len(refs) > 1 else ""
         return (
             top,
             Link("evidence_ref", True, label),
-            Link("sensor_reading", False, label, first_why + more),
+            Link("sensor_reading", False, label, first_why + more, unknown),
         )
 
 

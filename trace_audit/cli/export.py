@@ -5,13 +5,22 @@ mermaid or JSON, on stdout or into a file.
 from __future__ import annotations
 
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from trace_audit.cli.app import EXIT_USAGE, app, fail, guarded, help_text
-from trace_audit.cli.options import LogArgument, PlainOption, RobotsOption, TimeOption, cycle_option
+from trace_audit.cli.options import (
+    EvidencePaths,
+    LogArgument,
+    PlainOption,
+    RobotsOption,
+    TimeOption,
+    cycle_option,
+    evidence_option,
+)
 from trace_audit.cli.output import print_json
 
 __all__ = ["EXPORT_FORMATS", "export_command"]
@@ -73,6 +82,12 @@ _ToOption = Annotated[
 ]
 
 
+# verify's words: the recordings the log declares are found without it
+_EvidenceOption = Annotated[
+    EvidencePaths, evidence_option(then=": their digests are checked there. Repeat for several.")
+]
+
+
 @app.command("export", help=help_text(_EXPORT_HELP))
 def export_command(
     log: LogArgument,
@@ -86,6 +101,7 @@ def export_command(
     plain: PlainOption = False,  # the export is plain text already; accepted like elsewhere
     start: _FromOption = None,
     end: _ToOption = None,
+    evidence: _EvidenceOption = None,
 ) -> None:
     if fmt not in EXPORT_FORMATS:
         fail(f"unknown export format {fmt!r} (use {', '.join(EXPORT_FORMATS)})", EXIT_USAGE)
@@ -96,9 +112,9 @@ def export_command(
                 f"--format foxglove exports a window (--from/--to), not one decision: drop {given}",
                 EXIT_USAGE,
             )
-        _foxglove(log, out, robot or (), start, end, json_out=json_out)
+        _foxglove(log, out, robot or (), start, end, json_out=json_out, evidence=evidence or ())
         return
-    _decision(log, t, cycle, robot or (), fmt, out, json_out=json_out)
+    _decision(log, t, cycle, robot or (), fmt, out, json_out=json_out, evidence=evidence or ())
 
 
 def _decision(  # noqa: PLR0917 - the export command's options for one decision
@@ -110,12 +126,17 @@ def _decision(  # noqa: PLR0917 - the export command's options for one decision
     out: Path | None,
     *,
     json_out: bool,
+    evidence: Sequence[Path],
 ) -> None:
     """One decision's export (dot, mermaid, json): on stdout, or written to a new file."""
     from trace_audit.export import export_decision
     from trace_runtime.boundary import write_new
 
-    result = guarded(lambda: export_decision(log, t=t, cycle=cycle, fmt=fmt, robots=robots))
+    result = guarded(
+        lambda: export_decision(
+            log, t=t, cycle=cycle, fmt=fmt, robots=robots, evidence=list(evidence)
+        )
+    )
     if json_out and out is None:
         print_json(result)
         return
@@ -137,6 +158,7 @@ def _foxglove(
     end: str | None,
     *,
     json_out: bool,
+    evidence: Sequence[Path],
 ) -> None:
     """``--format foxglove``: the library writes the file; this says what it wrote."""
     if out is None:
@@ -145,7 +167,9 @@ def _foxglove(
 
     target = out
     result = guarded(
-        lambda: export_foxglove(log, target, robots=tuple(robots), start=start, end=end)
+        lambda: export_foxglove(
+            log, target, robots=tuple(robots), start=start, end=end, evidence=list(evidence)
+        )
     )
     if json_out:
         print_json(result)

@@ -252,9 +252,20 @@ def _csv_cell(value: object) -> object:
     return json.dumps(value, ensure_ascii=False) if isinstance(value, list | dict) else value
 
 
+_UNKNOWN_WHEN_NULL = frozenset({"et", "et_partial", "tcs"})
+"""Index columns whose null means unknown (evidence in a recording not read), shown ``?``."""
+
+
 def _rows_doc(result: QueryResult) -> Doc:
     doc = Doc()
-    doc.table([Column(c) for c in result.columns], ([_cell(v) for v in r] for r in result.rows))
+    unknown = [c in _UNKNOWN_WHEN_NULL for c in result.columns]
+    doc.table(
+        [Column(c) for c in result.columns],
+        (
+            ["?" if v is None and q else _cell(v) for v, q in zip(r, unknown, strict=True)]
+            for r in result.rows
+        ),
+    )
     doc.line(f"{_count(result)} in {result.elapsed_s * 1000:.0f} ms")
     return doc
 

@@ -22,7 +22,19 @@ def pct(value: float | None, digits: int = 1, *, unit: bool = True) -> str:
 
 
 def _pm(stat: Stat) -> str:
+    """``mean±std`` in percent; ``?`` when nothing is known (never 0)."""
+    if stat.mean is None or stat.std is None:
+        return "?"
     return f"{stat.mean * 100:.1f}±{stat.std * 100:.1f}"
+
+
+def _num(value: float | None, spec: str = ".3f") -> str:
+    """A number as people read it; ``?`` when it is unknown."""
+    return "?" if value is None else format(value, spec)
+
+
+def _mean_std(stat: Stat) -> str:
+    return "?" if stat.mean is None else f"{_num(stat.mean)} ± {_num(stat.std)}"
 
 
 def _share(count: int, total: int) -> str:
@@ -116,14 +128,20 @@ def _table_ii_notes(out: Doc, report: MetricsReport) -> None:
         out.markup(
             f"  Across {a.groups} {a.by}s (mean ± std of the per-{a.by} values): "
             f"ET {_pm(a.et)}, fully traceable {_pm(a.fully_traceable_share)}, "
-            f"ET_partial {a.et_partial.mean:.3f} ± {a.et_partial.std:.3f}, TC {tc}, DR {dr}."
+            f"ET_partial {_mean_std(a.et_partial)}, TC {tc}, DR {dr}."
         )
     out.markup(
         f"  Fully traceable {_pm(overall.fully_traceable_share)}%, ET_partial "
-        f"{overall.et_partial.mean:.3f} ± {overall.et_partial.std:.3f}, TCS "
-        f"{overall.tcs.mean:.3f} ± {overall.tcs.std:.3f} (std across decisions); factors "
-        f"traceable {_share(overall.factors_traceable, overall.factors)}."
+        f"{_mean_std(overall.et_partial)}, TCS {_mean_std(overall.tcs)} (std across "
+        f"decisions); factors traceable {_share(overall.factors_traceable, overall.factors)}."
     )
+    if overall.unknown:
+        why = "; ".join(report.unread_recordings) or "a recording could not be read"
+        out.verbatim(
+            f"  ET {pct(overall.et.mean)} of {overall.decisions:,} decisions; "
+            f"{overall.unknown:,} unknown ({why}): their ET, ET_partial and TCS are not "
+            "known, so they are left out of those figures, not counted as 0."
+        )
     if overall.summarized:
         out.markup(
             f"  {overall.summarized} decisions come from warm-tier summaries, which keep the "
@@ -131,8 +149,10 @@ def _table_ii_notes(out: Doc, report: MetricsReport) -> None:
             "by design, ET_partial still measures the chain."
         )
     if overall.no_factors:
-        named = overall.decisions - overall.no_factors
-        et_named = overall.et.mean * overall.decisions / named if named else None
+        known = overall.decisions - overall.unknown
+        named = known - overall.no_factors
+        mean = overall.et.mean
+        et_named = mean * known / named if named and mean is not None else None
         out.markup(
             f"  {overall.no_factors} decisions name no factors (action missing or rationale "
             f"truncated away): ET(d) = 0 by definition; over the {named} that name factors, "
@@ -195,12 +215,12 @@ def _table_iii(report: MetricsReport, *, wide: bool) -> BoxTable:
             str(g.decisions),
             _pm(g.et),
             _share(g.fully_traceable, g.decisions),
-            f"{g.et_partial.mean:.3f}",
+            _num(g.et_partial.mean),
             pct(g.tc, unit=False),
             str(g.gaps),
             pct(g.dr, unit=False),
             str(g.not_reconstructable),
-            *((f"{g.tcs.mean:.3f}",) if wide else ()),
+            *((_num(g.tcs.mean),) if wide else ()),
         )
         for g in report.groups
     )
@@ -246,7 +266,7 @@ def _reading_notes(out: Doc, report: MetricsReport) -> None:
         out.verbatim(
             f"  evidence refs into external recordings: {ext.get('resolved', 0)} resolved, "
             f"{ext.get('broken', 0)} broken, {ext.get('unresolved', 0)} unresolved"
-            + (" (recording not given: --evidence)" if ext.get("unresolved") else "")
+            + (" (not read: see unknown above)" if ext.get("unresolved") else "")
         )
 
 
@@ -257,18 +277,21 @@ def _failures(out: Doc, report: MetricsReport) -> None:
         f"\n[bold]Failing decisions[/bold]: {report.failures_total}"
         + (f" (first {listed} listed)" if listed < report.failures_total else "")
     )
+    from trace_audit.log_time import SECONDS_CLOCK  # the library, not at --help time
+
+    show = (report.clock or SECONDS_CLOCK).show
     for f in report.failures:
         out.verbatim(
-            f"  cycle {f.cycle}  t={f.t_ns / 1e9:.3f} s  [{f.group}]  "
-            f"ET {f.et:.2f}, ET_partial {f.et_partial:.2f}"
+            f"  cycle {f.cycle}  t={show(f.t_ns)}  [{f.group}]  "
+            f"ET {_num(f.et, '.2f')}, ET_partial {_num(f.et_partial, '.2f')}"
         )
         for problem in f.problems:
             out.verbatim(f"      {problem}")
     out.markup(f"\n[bold]Gaps[/bold]: {report.gaps_total}")
     for gap in report.gaps:
         out.verbatim(
-            f"  {gap.robot}: after cycle {gap.after_cycle} (t={gap.after_t_ns / 1e9:.3f} s) "
-            f"until cycle {gap.before_cycle} (t={gap.before_t_ns / 1e9:.3f} s): "
+            f"  {gap.robot}: after cycle {gap.after_cycle} (t={show(gap.after_t_ns)}) "
+            f"until cycle {gap.before_cycle} (t={show(gap.before_t_ns)}): "
             f"{gap.gap_ns / 1e9:.3f} s, ~{gap.missing_cycles} missing, "
             f"{gap.declared_dropped} declared dropped"
         )
@@ -278,10 +301,12 @@ def metrics_json(report: MetricsReport, failures: bool) -> dict[str, JsonValue]:
     from trace_audit.jsonout import to_jsonable
 
     data: dict[str, JsonValue] = to_jsonable(report)
+    data.pop("clock", None)  # times stay t_ns in the log's clock for scripts
     data["passed"] = report.passed
     o = report.overall
     data["table_ii"] = {
         "ET_mean": o.et.mean,
+        "unknown": o.unknown,
         "ET_std_across_decisions": o.et.std,
         "ET_std_across_groups": report.across_groups.et.std if report.across_groups else None,
         "fully_traceable": o.fully_traceable,

@@ -72,11 +72,14 @@ def explain(
     sensor_window: int = DEFAULT_SENSOR_WINDOW,
     evidence: Sequence[str | Path] = (),
     robots: Sequence[str] = (),
+    recordings: Recordings | None = None,
 ) -> Explanation:
     """Explain the decision in force at ``t`` (or cycle number ``cycle``) in a log.
 
     ``evidence``: external recordings (MCAP files, rosbag2 directories) whose messages the
     decision's evidence refs may name; they are resolved, digest-checked and decoded.
+    ``recordings``: a caller's one resolution of evidence (the incident report's), used
+    instead of resolving the log's declared recordings and ``evidence`` here.
     ``robots``: look only at these robots' decisions. On a log of several robots the time
     (or cycle number) must name one robot's decision (``selection.robot_at``): otherwise
     ``SeveralRobotsError`` names the robots that have one."""
@@ -94,6 +97,7 @@ def explain(
             sensor_window=sensor_window,
             evidence=evidence,
             selection=Selection(tuple(robots)),
+            recordings=recordings,
         )
 
     try:
@@ -112,13 +116,15 @@ def _explain(
     sensor_window: int,
     evidence: Sequence[str | Path],
     selection: Selection,
+    recordings: Recordings | None = None,
 ) -> Explanation:
     log = selection.of(log)
     require_cycles(log)
     t_ns, log, target, offset = _find_target(log, t, cycle)
     whole, log = log, log.clock_run(target.segment)
     decision = read_decision(target)
-    recordings = recordings_for(whole, evidence)
+    if recordings is None:
+        recordings = recordings_for(whole, evidence)
     # The cadence the robot kept when it decided: the period of the segment holding the
     # decision (the walk back, the gap to the previous seal and the output use it).
     holder = log.segment_named(target.segment)

@@ -142,8 +142,10 @@ def _sums_sql(cfg: MetricsConfig, by: Sequence[str]) -> str:
     w = cfg.weights
     total = w.et + w.et_partial + w.dr + w.continuity + w.integrity
     gate = "NOT seal_verified" if w.integrity_gate else "false"
+    # A decision whose ET is unknown (null) has TCS unknown too; the sums skip nulls.
     tcs = (
-        f"CASE WHEN {gate} THEN 0.0 ELSE ({w.et!r} * et + {w.et_partial!r} * et_partial + "
+        f"CASE WHEN et IS NULL THEN NULL WHEN {gate} THEN 0.0 ELSE "
+        f"({w.et!r} * et + {w.et_partial!r} * et_partial + "
         f"{w.dr!r} * dr::DOUBLE + {w.continuity!r} * continuity + "
         f"{w.integrity!r} * seal_verified::DOUBLE) / {total!r} END"
     )
@@ -151,13 +153,17 @@ def _sums_sql(cfg: MetricsConfig, by: Sequence[str]) -> str:
         WITH d AS (SELECT *, {group} AS g, {tcs} AS tcs_w FROM decisions)
         SELECT g, count(*), sum(sealed::INT), sum(summarized::INT),
                fsum(et), fsum(et * et), fsum(et_partial), fsum(et_partial * et_partial),
-               sum((factors_total > 0 AND factors_traceable = factors_total)::INT),
-               sum(factors_total), sum(factors_traceable), sum((factors_total = 0)::INT),
+               sum((et IS NOT NULL AND factors_total > 0
+                   AND factors_traceable = factors_total)::INT),
+               sum(factors_total) FILTER (WHERE et IS NOT NULL),
+               sum(factors_traceable) FILTER (WHERE et IS NOT NULL),
+               sum((et IS NOT NULL AND factors_total = 0)::INT),
                sum(dr::INT), sum(seal_verified::INT), fsum(tcs_w), fsum(tcs_w * tcs_w),
                sum(window_ns), sum(gap_ns), sum((gap_ns > 0)::INT), sum(missing_cycles),
                sum(dropped), sum(clock_anomaly::INT), list(DISTINCT segment),
-               count(*) FILTER (WHERE NOT (factors_total > 0
-                   AND factors_traceable = factors_total AND dr AND seal_verified))
+               count(*) FILTER (WHERE NOT ((et IS NULL OR (factors_total > 0
+                   AND factors_traceable = factors_total)) AND dr AND seal_verified)),
+               count(*) FILTER (WHERE et IS NULL)
         FROM d GROUP BY g ORDER BY g
     """
 
@@ -166,28 +172,29 @@ def _group_sums(row: Sequence[Any]) -> tuple[str, GroupSums, list[str], int]:
     """One row of ``_sums_sql``: (group, its sums, its segments, its failing decisions)."""
     (name, n, sealed, summarized, et, et2, etp, etp2, full, factors, traceable) = row[:11]
     (no_factors, dr, intact, tcs_sum, tcs2, window, gap, gaps, missing) = row[11:20]
-    (dropped, anomalies, names, failing) = row[20:]
+    (dropped, anomalies, names, failing, unknown) = row[20:]
     sums = GroupSums(
         decisions=n,
         sealed=sealed,
         summarized=summarized,
-        et_sum=et,
-        et_sq=et2,
-        etp_sum=etp,
-        etp_sq=etp2,
+        et_sum=et or 0.0,  # fsum over no known row is NULL
+        et_sq=et2 or 0.0,
+        etp_sum=etp or 0.0,
+        etp_sq=etp2 or 0.0,
         full=full,
-        factors=factors,
-        factors_traceable=traceable,
+        factors=factors or 0,
+        factors_traceable=traceable or 0,
         no_factors=no_factors,
         dr_ok=dr,
         integrity_ok=intact,
-        tcs_sum=tcs_sum,
-        tcs_sq=tcs2,
+        tcs_sum=tcs_sum or 0.0,
+        tcs_sq=tcs2 or 0.0,
         window_ns=int(window),
         gap_ns=int(gap),
         gaps=gaps,
         missing_cycles=int(missing),
         dropped=int(dropped),
         anomalies=anomalies,
+        unknown=unknown,
     )
     return str(name), sums, names, failing

@@ -223,8 +223,8 @@ class SegmentRows:
                 _linear(execution.get("intended")),
                 _linear(execution.get("actual")),
                 None if scenario == NO_SCENARIO else scenario,
-                score.et,
-                score.et_partial,
+                score.et if score.known else None,  # unknown is null, never 0
+                score.et_partial if score.known else None,
                 score.factors,
                 score.traceable,
                 not d.dr_problems,

@@ -6,7 +6,8 @@ with the SDK's own message types, schemas and encoding (``foxglove-sdk``):
 - ``/foxglove/scene`` (``foxglove.SceneUpdate``), one per cycle: the robot (where the cycle
   logs ``robot_pose``) and each perceived entity that has a position, as a cube with a text
   label (class, confidence, whether its evidence verified), coloured green when every
-  evidence ref resolves, amber otherwise. Each update first deletes the previous cycle's
+  evidence ref resolves, amber when the rest lie in a recording that could not be read
+  (unknown), red otherwise (evidence FAILED). Each update first deletes the previous cycle's
   entities, so an entity lives exactly as long as the log perceives it. Positions are the
   log's x, y, z in the pose's own frame; nothing planar is assumed.
 - ``/foxglove/robot_pose`` (``foxglove.PoseInFrame``) where the robot logs its pose.
@@ -29,12 +30,14 @@ writes it to one file beside the TRACE channels as logged.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import orjson
 
+from trace_audit.evidence import recordings_for
 from trace_audit.foxglove.view import FoxgloveView, logged_schema, require_sdk
 from trace_audit.log_source import LogSource, require_cycles
 from trace_audit.log_time import TimeArg
@@ -43,6 +46,7 @@ from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import StorageError, UsageError
 from trace_runtime.reading.logset import Log
 from trace_runtime.reading.reader import Segment
+from trace_runtime.reading.recordings import Recordings
 from trace_runtime.records import PROFILE, TOPIC_SEAL
 from trace_runtime.session import EXCERPT_METADATA, SESSION_METADATA
 
@@ -72,11 +76,14 @@ def export_foxglove(
     robots: tuple[str, ...] = (),
     start: TimeArg = None,
     end: TimeArg = None,
+    evidence: Sequence[str | Path] = (),
 ) -> FoxgloveExport:
     """Write one robot's cycles between ``start`` and ``end`` to ``out`` for Foxglove.
 
     One robot: ``robots`` selects it in a log of several (``SeveralRobotsError`` else). The
-    file must not exist (``StorageError``), and the SDK must be installed (``UsageError``)."""
+    file must not exist (``StorageError``), and the SDK must be installed (``UsageError``).
+    Entities' evidence resolves as explain resolves it: the recordings the log declares,
+    ``evidence`` (``--evidence``) for a moved copy."""
     from trace_audit.transitions import one_robot
 
     log = one_robot(source, robots, "decisions in this log")
@@ -90,7 +97,7 @@ def export_foxglove(
     first = next(cycles, None)
     if first is None:
         raise UsageError("no cycle of the log falls in the window")
-    writer = _Writer(target, log, first)
+    writer = _Writer(target, log, first, recordings_for(log, evidence))
     try:
         writer.cycle(first)
         for cycle in cycles:
@@ -110,11 +117,11 @@ class _Writer:
     TRACE message's MCAP ``sequence`` is its cycle (PROFILE section 4), and the SDK's writer
     numbers every channel's messages itself, which would break the copied log."""
 
-    def __init__(self, target: Path, log: Log, first: Cycle) -> None:
+    def __init__(self, target: Path, log: Log, first: Cycle, recordings: Recordings | None) -> None:
         from mcap.writer import Writer
 
         session, source = _session(log, first)
-        self.view = FoxgloveView(source.session.robot_id, source.session.period_ns)
+        self.view = FoxgloveView(source.session.robot_id, source.session.period_ns, recordings)
         try:
             self.file = target.open("xb")
         except OSError as err:

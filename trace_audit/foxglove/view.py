@@ -23,6 +23,7 @@ from trace_audit.sensor_window import DEFAULT_SENSOR_WINDOW, SensorWindow
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import UsageError
 from trace_runtime.gaps import GapFinder, SealedStamp
+from trace_runtime.reading.recordings import Recordings
 from trace_runtime.records import TOPIC_PERCEPTION
 from trace_runtime.schemas import SENSOR_SCHEMA_NAME, schema_bytes, schema_name
 
@@ -47,6 +48,8 @@ TOPIC_ACTUATORS = "/foxglove/actuators"
 
 _VERIFIED = (0.2, 0.75, 0.3, 0.9)
 _UNVERIFIED = (0.95, 0.6, 0.1, 0.9)
+"""Amber: evidence in a recording that could not be read (unknown, not failed)."""
+_FAILED = (0.85, 0.2, 0.15, 0.9)
 _ROBOT = (0.2, 0.45, 0.95, 0.9)
 _ENTITY_SIZE_M = 0.5
 _PLOT_KEY = re.compile(r"[^A-Za-z0-9_]")
@@ -91,14 +94,17 @@ class FoxgloveView:
     sensor readings (what an entity's evidence refs are resolved against), so it can run
     over a whole export or a live tail alike."""
 
-    def __init__(self, robot: str, period_ns: int = 0) -> None:
+    def __init__(
+        self, robot: str, period_ns: int = 0, recordings: Recordings | None = None
+    ) -> None:
         self.fox = require_sdk()
         self.period_ns = period_ns
         """The cycle period gaps are found at (``trace_runtime.gaps``); 0: none shown."""
         self.gaps = GapFinder()
         self.m = self.fox.messages
         self.robot = robot
-        self.sensors = SensorWindow(DEFAULT_SENSOR_WINDOW)
+        # refs into external recordings resolve against the log's one resolution of them
+        self.sensors = SensorWindow(DEFAULT_SENSOR_WINDOW, recordings)
         self.command: str | None = None
         self.cycles = self.scene_updates = self.entities = self.changes = 0
         self._last_xyz = (0.0, 0.0, 0.0)
@@ -192,15 +198,22 @@ class FoxgloveView:
         cls = as_str(entity.get("class")) or "?"
         confidence = as_float((as_mapping(entity.get("confidence")) or {}).get(cls))
         refs = [as_mapping(e.get("ref")) for e in mappings(entity.get("evidence"))]
-        verified = bool(refs) and all(
-            r is not None and not self.sensors.resolve(dict(r)) for r in refs
+        problems = [self.sensors.resolve(dict(r)) if r is not None else "no ref" for r in refs]
+        verified = bool(refs) and not any(problems)
+        unknown = not verified and all(
+            r is not None and (not why or self.sensors.unknown(dict(r)))
+            for r, why in zip(refs, problems, strict=True)
         )
         label = f"{as_str(entity.get('id')) or '?'}: {cls}"
         if confidence is not None:
             label += f" {confidence:.2f}"
-        label += ", evidence verified" if verified else ", evidence not verified"
+        if verified:
+            label, colour = label + ", evidence verified", _VERIFIED
+        elif unknown and refs:
+            label, colour = label + ", evidence not checked (recording not read)", _UNVERIFIED
+        else:
+            label, colour = label + ", evidence FAILED", _FAILED
         frame = as_str(pose_data.get("frame")) or ""
-        colour = _VERIFIED if verified else _UNVERIFIED
         return self._cube(
             stamp, frame, as_str(entity.get("id")) or "", pose, colour=colour, label=label
         )

@@ -36,13 +36,14 @@ from trace_audit.incident.window import (
     window_samples,
 )
 from trace_audit.log_source import as_log
-from trace_audit.log_time import TimeArg
+from trace_audit.log_time import LogClock, TimeArg
 from trace_audit.metrics import MetricsConfig, MetricsReport, compute_metrics
 from trace_audit.rules import RobotRules, Rule, check_rules
 from trace_audit.transitions import Timeline, timeline
 from trace_runtime.errors import UsageError
 from trace_runtime.reading.logset import Log
 from trace_runtime.reading.reader import RECOVERED_WARNING, Segment
+from trace_runtime.reading.recordings import Recordings
 from trace_runtime.records import TOPIC_PERCEPTION
 from trace_runtime.session import SessionInfo
 from trace_runtime.tlog.keys import PublicKey
@@ -196,12 +197,15 @@ def gather_report(
     if not 0 < window_s <= MAX_WINDOW_S:
         raise UsageError(f"window must be in (0, {MAX_WINDOW_S:.0f}] s, got {window_s}")
     given = as_log(path)
-    result = explain(given, t=t, cycle=cycle, evidence=evidence, robots=robots)
+    # The one resolution of evidence of the page: the scene, the entity table, the evidence
+    # section, the chains and figures, the metrics and the integrity verdict all read it.
+    recordings = recordings_for(given, evidence)
+    result = explain(given, t=t, cycle=cycle, robots=robots, recordings=recordings)
     whole = given.of_robots([result.robot])
     log = whole.clock_run(result.decision.segment)
     start, end = _window(log, result.t_ns, window_s)
     spans = timeline(log, start=start, end=end)
-    samples, target, sensors = window_samples(log, start, end, result)
+    samples, target, sensors = window_samples(log, start, end, result, recordings)
     inputs = () if log is given else tuple(str(s.path) for s in log.segments)
     scope = [s for s in log.segments if s.end_ns >= start and s.start_ns <= end]
     return ReportData(
@@ -214,11 +218,11 @@ def gather_report(
         timeline=spans,
         samples=samples,
         factor_units={f.label: f.unit for f in result.decision.factors},
-        entities=entities_at(target, sensors) if target is not None else (),
+        entities=entities_at(target, sensors, LogClock.of(log)) if target is not None else (),
         entities_retained=target is not None and TOPIC_PERCEPTION in target.payloads,
         robot=robot_pose(target) if target is not None else None,
-        metrics=_window_metrics(whole, list(inputs) or [path], start, end, evidence),
-        integrity=_window_integrity(whole, scope, log.root, key, evidence),
+        metrics=_window_metrics(whole, list(inputs) or [path], start, end, recordings),
+        integrity=_window_integrity(whole, scope, log.root, key, recordings),
         integrity_scope=tuple(s.path.name for s in scope),
         key_id=key.key_id if key is not None else None,
         key_path=None if key_path is None else str(key_path),
@@ -246,13 +250,12 @@ def _session_of(log: Log, segment: str) -> SessionInfo:
 
 
 def _window_metrics(
-    whole: Log, inputs: list[str | Path], start: int, end: int, evidence: Sequence[str | Path]
+    whole: Log, inputs: list[str | Path], start: int, end: int, recordings: Recordings | None
 ) -> MetricsReport:
     """The window's auditability, by ``compute_metrics`` over its files (``inputs``)."""
     with _warned_once(whole):
         return compute_metrics(
-            inputs,
-            MetricsConfig(start_ns=start, end_ns=end, evidence=tuple(str(e) for e in evidence)),
+            inputs, MetricsConfig(start_ns=start, end_ns=end), recordings=recordings
         )
 
 
@@ -261,12 +264,12 @@ def _window_integrity(
     scope: Sequence[Segment],
     root: Path,
     key: PublicKey | None,
-    evidence: Sequence[str | Path],
+    recordings: Recordings | None,
 ) -> VerifyReport:
     """verify of the window's segments, told what it could not see: a chain that starts
     after segment 0 there is the window's start when the log holds the earlier segments,
     not retention having removed them."""
-    report = verify(Log(scope, root), key=key, recordings=recordings_for(whole, evidence))
+    report = verify(Log(scope, root), key=key, recordings=recordings)
     first = min((s.session.segment for s in scope), default=0)
     earlier = any(s.session.segment < first for s in whole.segments)
     if not earlier:

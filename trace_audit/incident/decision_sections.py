@@ -19,7 +19,6 @@ from trace_audit.incident.markup import (
     html_figure,
     html_problems,
     html_table,
-    seconds,
 )
 from trace_audit.incident.scene import scene_figure
 from trace_audit.incident.time_figures import execution_figure, factors_figure
@@ -36,11 +35,20 @@ __all__ = [
 
 
 def _clock_line(data: ReportData) -> str:
+    """The decision's time as the log's clock shows it: on a wall clock the UTC moment and
+    the seconds since the log's start, never raw seconds since 1970."""
     e = data.explanation
-    line = f"{seconds(e.t_ns)} in the log's clock ({escape(data.session.clock)})"
-    if e.log_clock.wall:
-        line += f" = {escape(e.log_clock.iso(e.t_ns, digits=3))}"
-    return line
+    return f"{escape(e.log_clock.show(e.t_ns))} in the log's clock ({escape(data.session.clock)})"
+
+
+def _evidence_status(state: str, problem: str) -> str:
+    """An evidence item's status after its ref: nothing when it resolves, the problem in red
+    when it fails, in amber as unknown when its recording could not be read."""
+    if state == "resolved":
+        return ""
+    kind = "warn" if state == "unresolved" else "bad"
+    said = f"not checked, unknown: {problem}" if state == "unresolved" else problem
+    return f' <span class="{kind}">{escape(said)}</span>'
 
 
 def summary_section(data: ReportData) -> str:
@@ -143,10 +151,14 @@ def scene_section(data: ReportData) -> str:
         evidence = (
             "<br>".join(
                 escape(f"{ev.sensor} (w={format_value(ev.weight)}) {ev.region}; ref {ev.ref}")
-                + ("" if ev.resolved else f' <span class="bad">{escape(ev.problem)}</span>')
+                + _evidence_status(ev.state, ev.problem)
                 for ev in entity.evidence
             )
             or '<span class="bad">no evidence logged</span>'
+        )
+        evidence = (
+            f'<span data-entity="{escape(entity.id)}" '
+            f'data-evidence="{entity.evidence_state}"></span>{evidence}'
         )
         where = (
             f"({entity.x:.2f}, {entity.y:.2f}) {escape(entity.frame)}"
@@ -168,7 +180,8 @@ def scene_section(data: ReportData) -> str:
         "Top-down view of the robot and what it perceived at the decision, in the frame the "
         "poses were logged in; dotted lines join the robot to each entity whose distance the "
         "belief graph holds. Hollow red marks: no evidence of that entity resolves to a "
-        "logged sensor reading."
+        "logged sensor reading. Hollow amber marks: its evidence is in a recording that "
+        "could not be read, so whether it resolves is unknown."
     )
     if data.robot is None:
         caption += " The robot did not log its own pose (robot_pose), so it is not drawn."
@@ -231,13 +244,18 @@ def _external(data: ReportData) -> str:
     state = {
         "resolved": '<span class="ok">resolved, digest matches</span>',
         "broken": '<span class="bad">broken</span>',
-        "unresolved": "not checked (recording not given: --evidence)",
+        "unresolved": '<span class="unknown">not checked, unknown</span>',
     }
+    clock = data.explanation.log_clock
     rows = [
         [
-            escape(e.entity),
-            escape(f"{e.recording} {e.topic} @ {seconds(e.log_time_ns)}"),
-            state.get(e.state, escape(e.state)) + (f" {escape(e.detail)}" if e.detail else ""),
+            f'<span data-external="{escape(e.entity)}" data-evidence="{e.state}"></span>'
+            + escape(e.entity),
+            escape(
+                f"{e.recording} {e.topic} @ "
+                + ("?" if e.log_time_ns is None else clock.show(e.log_time_ns))
+            ),
+            state.get(e.state, escape(e.state)) + (f" ({escape(e.detail)})" if e.detail else ""),
             escape(e.schema or ""),
         ]
         for e in refs

@@ -38,6 +38,7 @@ __all__ = [
     "command_legend",
     "figure_style",
     "new_figure",
+    "time_axis_label",
     "to_svg",
     "wrap_label",
 ]
@@ -120,8 +121,19 @@ def to_svg(fig: Figure, name: str, title: str) -> str:
     return text.replace("<svg ", f'<svg role="img" aria-label="{label}" class="figure" ', 1)
 
 
-def as_seconds(t_ns: int) -> float:
-    return t_ns / 1e9
+def as_seconds(data: ReportData, t_ns: int) -> float:
+    """A time on a figure's axis: seconds in the log's clock, or, on a wall clock, seconds
+    from the log's start (raw seconds since 1970 would print as an offset like +1.78e9)."""
+    clock = data.explanation.log_clock
+    return (t_ns - clock.start_ns) / 1e9 if clock.wall else t_ns / 1e9
+
+
+def time_axis_label(data: ReportData) -> str:
+    """What a figure's time axis counts, in the words of ``as_seconds``."""
+    clock = data.explanation.log_clock
+    if not clock.wall:
+        return "log time (s)"
+    return f"seconds from the log's start, {clock.iso(clock.start_ns, digits=3)}"
 
 
 def wrap_label(text: str, width: int = _WRAP, lines: int = 4) -> str:
@@ -135,22 +147,22 @@ def command_bands(ax: Axes, data: ReportData) -> None:
     """The command in force as coloured bands behind a time plot; gaps hatched."""
     for row in data.timeline.rows:
         ax.axvspan(
-            as_seconds(row.t_ns),
-            as_seconds(row.t_ns + row.held_ns),
+            as_seconds(data, row.t_ns),
+            as_seconds(data, row.t_ns + row.held_ns),
             color=command_colour(row.command),
             alpha=0.13,
             lw=0,
         )
     for gap in data.timeline.gaps:
         ax.axvspan(
-            as_seconds(gap.after_t_ns + gap.period_ns),
-            as_seconds(gap.before_t_ns),
+            as_seconds(data, gap.after_t_ns + gap.period_ns),
+            as_seconds(data, gap.before_t_ns),
             facecolor="none",
             edgecolor="#555555",
             hatch="////",
             lw=0,
         )
-    ax.axvline(as_seconds(data.explanation.t_ns), color=MARKED, lw=1.2, ls="-")
+    ax.axvline(as_seconds(data, data.explanation.t_ns), color=MARKED, lw=1.2, ls="-")
 
 
 def command_legend(fig: Figure, data: ReportData, extra: Sequence[Artist] = ()) -> None:

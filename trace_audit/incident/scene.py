@@ -29,7 +29,8 @@ _CLASS_MARKERS = {"person": "o", "forklift": "s", "vehicle": "s", "pallet": "D",
 
 def scene_figure(data: ReportData) -> str:
     """Top-down plot of the robot and the entities it perceived at t; entities whose
-    evidence failed are drawn hollow and red, each entity's logged distance as a line."""
+    evidence failed are drawn hollow and red, those whose evidence is in a recording that
+    could not be read hollow and amber (unknown), each entity's logged distance as a line."""
     placed = [e for e in data.entities[:MAX_ENTITIES] if e.x is not None and e.y is not None]
     with figure_style():
         fig = new_figure(7.5, 4.4)
@@ -39,9 +40,10 @@ def scene_figure(data: ReportData) -> str:
         if robot is not None:
             _draw_robot(ax, robot.x, robot.y, robot.heading_rad)
         taken: list[tuple[float, float]] = []
-        for entity in placed:
+        for number, entity in enumerate(placed):
             x, y = float(entity.x or 0.0), float(entity.y or 0.0)
-            colour = BROKEN if entity.evidence_failed else _ENTITY
+            state = entity.evidence_state
+            colour = _STATE_COLOURS[state]
             if robot is not None and entity.distance and entity.cls != "corridor":
                 ax.plot([robot.x, x], [robot.y, y], ":", color=colour, lw=1)
             ax.plot(
@@ -50,9 +52,12 @@ def scene_figure(data: ReportData) -> str:
                 _CLASS_MARKERS.get(entity.cls, "^"),
                 ms=11,
                 ls="none",
-                mfc="none" if entity.evidence_failed else colour,
+                mfc=colour if state == "resolved" else "none",
                 mec=colour,
                 mew=1.6,
+                # the SVG group names the entity and its evidence state, so a test (or a
+                # reader of the page's source) can hold the scene to the tables below it
+                gid=f"entity-{_gid_safe(entity.id)}-{state}" if number < MAX_ENTITIES else None,
             )
             # Entities close together get their labels on alternate sides, each with a
             # leader line, so a label is never read as another entity's.
@@ -85,6 +90,17 @@ def scene_figure(data: ReportData) -> str:
 
 
 _ENTITY = "#1f4e79"
+_UNKNOWN = "#b7791f"
+_STATE_COLOURS = {"resolved": _ENTITY, "broken": BROKEN, "unresolved": _UNKNOWN}
+"""Evidence that resolves, that fails (a finding), and in a recording not read (unknown)."""
+
+
+def _gid_safe(text: str) -> str:
+    """An entity id as it may stand in an SVG id: anything but letters, digits, ``_.-``
+    replaced by ``_``."""
+    return "".join(c if c.isalnum() or c in "_.-" else "_" for c in text)
+
+
 _MIN_SPAN_M = 4.0
 """The scene shows at least this many metres each way, so a lone entity is not a dot in a
 blown-up grid of centimetres."""
@@ -107,7 +123,13 @@ def _entity_label(entity: EntityView) -> str:
     if entity.distance and entity.cls != "corridor":
         lines.append(f"{entity.distance} from the robot")
     sensors = sorted({e.sensor for e in entity.evidence if e.resolved})
-    lines.append("evidence FAILED" if entity.evidence_failed else "seen by " + ", ".join(sensors))
+    state = entity.evidence_state
+    if state == "resolved":
+        lines.append("seen by " + ", ".join(sensors))
+    elif state == "unresolved":
+        lines.append("evidence not checked (recording not read)")
+    else:
+        lines.append("evidence FAILED")
     return "\n".join(wrap_label(line, 34, 1) for line in lines)
 
 

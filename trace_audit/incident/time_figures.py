@@ -17,6 +17,7 @@ from trace_audit.incident.drawing import (
     command_legend,
     figure_style,
     new_figure,
+    time_axis_label,
     to_svg,
     wrap_label,
 )
@@ -45,7 +46,7 @@ def factors_figure(data: ReportData) -> str:
                 0.5, 0.5, "no numeric factor logged", ha="center", transform=axes[0].transAxes
             )
             command_bands(axes[0], data)
-        axes[-1].set_xlabel("log time (s)")
+        axes[-1].set_xlabel(time_axis_label(data))
         command_legend(fig, data)
         return to_svg(fig, "factors", "The decision's factors over the window")
 
@@ -54,7 +55,7 @@ def _factor_axis(ax: Axes, data: ReportData, name: str) -> None:
     unit = data.factor_units.get(name)
     # A cycle whose action does not name the factor breaks the line (NaN), so values of
     # two different situations are never joined.
-    xs = [as_seconds(s.t_ns) for s in data.samples]
+    xs = [as_seconds(data, s.t_ns) for s in data.samples]
     ys = [s.factors.get(name, float("nan")) for s in data.samples]
     command_bands(ax, data)
     ax.plot(xs, ys, ".", ms=2.5, color="#333333")
@@ -79,10 +80,10 @@ def _factor_axis(ax: Axes, data: ReportData, name: str) -> None:
     now = next((f for f in data.decision.factors if f.label == name), None)
     value = as_float(now.value) if now is not None else None
     if now is not None and value is not None:
-        ax.plot([as_seconds(data.explanation.t_ns)], [value], "o", color=MARKED, ms=5)
+        ax.plot([as_seconds(data, data.explanation.t_ns)], [value], "o", color=MARKED, ms=5)
         ax.annotate(
             now.shown,
-            (as_seconds(data.explanation.t_ns), value),
+            (as_seconds(data, data.explanation.t_ns), value),
             xytext=(6, 6),
             textcoords="offset points",
             fontsize=8,
@@ -91,7 +92,7 @@ def _factor_axis(ax: Axes, data: ReportData, name: str) -> None:
             bbox={"fc": "white", "ec": "none", "alpha": 0.85, "pad": 1},
         )
     ax.set_ylabel(f"{name} ({unit})" if unit else name)
-    ax.set_xlim(as_seconds(data.start_ns), as_seconds(data.end_ns))
+    ax.set_xlim(as_seconds(data, data.start_ns), as_seconds(data, data.end_ns))
 
 
 # --- execution ---------------------------------------------------------------------------
@@ -107,7 +108,7 @@ def execution_figure(data: ReportData) -> str:
         for ax, channel in zip(axes, channels, strict=False):
             _channel_axis(ax, data, channel)
         _deviation_axis(axes[-1], data)
-        axes[-1].set_xlabel("log time (s)")
+        axes[-1].set_xlabel(time_axis_label(data))
         from matplotlib.lines import Line2D
 
         lines = [
@@ -122,29 +123,29 @@ def execution_figure(data: ReportData) -> str:
 
 def _channel_axis(ax: Axes, data: ReportData, channel: str) -> None:
     command_bands(ax, data)
-    xs = [as_seconds(s.t_ns) for s in data.samples if channel in s.channels]
+    xs = [as_seconds(data, s.t_ns) for s in data.samples if channel in s.channels]
     pairs = [s.channels[channel] for s in data.samples if channel in s.channels]
     ax.plot(xs, [_nan(p[0]) for p in pairs], "--", lw=1.2, color="#1f4e79")
     ax.plot(xs, [_nan(p[1]) for p in pairs], "-", lw=1.0, color="#333333")
     ax.set_ylabel(wrap_label(channel, 16, 2))
-    ax.set_xlim(as_seconds(data.start_ns), as_seconds(data.end_ns))
+    ax.set_xlim(as_seconds(data, data.start_ns), as_seconds(data, data.end_ns))
 
 
 def _deviation_axis(ax: Axes, data: ReportData) -> None:
     command_bands(ax, data)
-    xs = [as_seconds(s.t_ns) for s in data.samples]
+    xs = [as_seconds(data, s.t_ns) for s in data.samples]
     ax.plot(xs, [_nan(s.deviation) for s in data.samples], "-", lw=1.0, color="#333333")
     failed = [s for s in data.samples if s.failed_checks]
     if failed:
         ax.plot(
-            [as_seconds(s.t_ns) for s in failed],
+            [as_seconds(data, s.t_ns) for s in failed],
             [_nan(s.deviation) for s in failed],
             "x",
             ms=4,
             color=BROKEN,
         )
     ax.set_ylabel("deviation")
-    ax.set_xlim(as_seconds(data.start_ns), as_seconds(data.end_ns))
+    ax.set_xlim(as_seconds(data, data.start_ns), as_seconds(data, data.end_ns))
 
 
 def _nan(value: float | None) -> float:

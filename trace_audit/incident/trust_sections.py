@@ -214,17 +214,24 @@ def _notes(notes: Sequence[Finding]) -> str:
 
 def auditability_section(data: ReportData) -> str:
     s, m = data.explanation.scores, data.metrics.overall
-    traced = sum(1 for c in data.explanation.chains.factors if c.traceable)
+    chains = data.explanation.chains
+    traced = sum(1 for c in chains.factors if c.traceable)
+    # ET is unknown (not 0) while a chain stops at a recording that could not be read
+    unknown = chains.unknown
+    not_read = sum(1 for c in chains.factors if c.unknown)
     decision = html_fields(
         [
             (
                 "ET",
-                f"{s.et:.2f} ({traced} of {len(data.explanation.chains.factors)} factors "
+                f"? ({traced} of {len(chains.factors)} factors traced to a sensor reading, "
+                f"{not_read} unknown: evidence in a recording that could not be read)"
+                if unknown
+                else f"{s.et:.2f} ({traced} of {len(chains.factors)} factors "
                 "traced to a sensor reading)",
             ),
-            ("ET_partial", f"{s.et_partial:.2f}"),
+            ("ET_partial", "?" if unknown else f"{s.et_partial:.2f}"),
             ("DR", f"{s.dr:.0f}"),
-            ("TCS", f"{s.tcs:.2f}"),
+            ("TCS", "?" if unknown else f"{s.tcs:.2f}"),
         ]
     )
     tc = "n/a" if m.tc is None else f"{m.tc:.3f}"
@@ -235,11 +242,21 @@ def auditability_section(data: ReportData) -> str:
             (
                 "Decisions",
                 f"{m.decisions} ({m.fully_traceable} fully traceable, "
-                f"{m.not_reconstructable} not reconstructable)",
+                f"{m.not_reconstructable} not reconstructable"
+                + (
+                    f", {m.unknown} unknown: evidence in a recording not read)"
+                    if m.unknown
+                    else ")"
+                ),
             ),
-            ("ET (mean)", f"{m.et.mean:.3f} ± {m.et.std:.3f} (std {escape(m.et.across)})"),
+            (
+                "ET (mean)",
+                "? (no decision's ET is known)"
+                if m.et.mean is None or m.et.std is None
+                else f"{m.et.mean:.3f} ± {m.et.std:.3f} (std {escape(m.et.across)})",
+            ),
             ("DR", "n/a" if m.dr is None else f"{m.dr:.3f}"),
-            ("TCS (mean)", f"{m.tcs.mean:.3f}"),
+            ("TCS (mean)", "?" if m.tcs.mean is None else f"{m.tcs.mean:.3f}"),
         ]
     )
     gaps = (

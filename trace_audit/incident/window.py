@@ -9,17 +9,21 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Literal
 
 from trace_audit.causal import ExecutionView, format_value, layer_with_defaults, read_decision
 from trace_audit.causal.lenient import as_float, mappings
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, SensorWindow
 from trace_audit.explanation import Explanation
+from trace_audit.log_time import SECONDS_CLOCK, LogClock
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.reading.logset import Log
+from trace_runtime.reading.recordings import Recordings
 from trace_runtime.records import TOPIC_BELIEF, TOPIC_PERCEPTION
 
 __all__ = [
     "EntityView",
+    "EvidenceState",
     "EvidenceView",
     "RobotPose",
     "Sample",
@@ -59,6 +63,12 @@ class Sample:
     failed_checks: tuple[str, ...]
 
 
+EvidenceState = Literal["resolved", "broken", "unresolved"]
+"""What became of an evidence item's ref: it resolves; it does not (no ref, no reading, a
+changed reading: a finding); or it lies in an external recording that could not be read
+(unknown, not a finding)."""
+
+
 @dataclass(frozen=True, slots=True)
 class EvidenceView:
     """One item of an entity's evidence, and whether its ref resolves to a logged reading."""
@@ -67,8 +77,12 @@ class EvidenceView:
     weight: float | None
     region: str
     ref: str
-    resolved: bool
+    state: EvidenceState
     problem: str
+
+    @property
+    def resolved(self) -> bool:
+        return self.state == "resolved"
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,9 +100,18 @@ class EntityView:
     """The belief graph's distance to it, as logged (``<id>.distance``), when there is one."""
 
     @property
+    def evidence_state(self) -> EvidenceState:
+        """resolved when any evidence item resolves; else unresolved when one lies in a
+        recording that could not be read (unknown); else broken (none, or none resolves)."""
+        states = {e.state for e in self.evidence}
+        if "resolved" in states:
+            return "resolved"
+        return "unresolved" if "unresolved" in states else "broken"
+
+    @property
     def evidence_failed(self) -> bool:
-        """No evidence at all, or none of it resolves to a logged sensor reading."""
-        return not any(e.resolved for e in self.evidence)
+        """No evidence at all, or none of it resolves, and none is merely unknown."""
+        return self.evidence_state == "broken"
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,17 +125,18 @@ class RobotPose:
 
 
 def window_samples(
-    log: Log, start_ns: int, end_ns: int, result: Explanation
+    log: Log, start_ns: int, end_ns: int, result: Explanation, recordings: Recordings | None
 ) -> tuple[tuple[Sample, ...], Cycle | None, SensorWindow]:
     """The window's cycles as samples, the decision's own cycle (for the scene) and the
     sensor readings in reach of its evidence refs.
 
-    Sensor readings are pushed through a ``SensorWindow`` of the explain default so the
-    scene's evidence resolves exactly as the chain walker resolves it."""
+    Sensor readings are pushed through a ``SensorWindow`` of the explain default, over the
+    report's one resolution of external ``recordings``, so the scene's evidence resolves
+    exactly as the chain walker resolves it."""
     names = {f.label for f in result.decision.factors}
     period = max(result.period_ns, 1)
     lead_ns = (DEFAULT_SENSOR_WINDOW + 1) * period
-    window = SensorWindow(DEFAULT_SENSOR_WINDOW)
+    window = SensorWindow(DEFAULT_SENSOR_WINDOW, recordings)
     samples: list[Sample] = []
     target: Cycle | None = None
     for c in log.iter_cycles(min(start_ns, result.t_ns - lead_ns), max(end_ns, result.t_ns)):
@@ -144,8 +168,11 @@ def window_samples(
     return tuple(samples), target, window
 
 
-def entities_at(target: Cycle, sensors: SensorWindow) -> tuple[EntityView, ...]:
-    """The perceived entities of the decision's cycle, each evidence ref resolved."""
+def entities_at(
+    target: Cycle, sensors: SensorWindow, clock: LogClock = SECONDS_CLOCK
+) -> tuple[EntityView, ...]:
+    """The perceived entities of the decision's cycle, each evidence ref resolved (its time
+    shown in the log's ``clock``)."""
     perception = layer_with_defaults(target, TOPIC_PERCEPTION)
     belief = target.layer(TOPIC_BELIEF)
     distances: dict[str, str] = {}
@@ -176,7 +203,7 @@ def entities_at(target: Cycle, sensors: SensorWindow) -> tuple[EntityView, ...]:
                 x=xy[0],
                 y=xy[1],
                 frame=str(pose.get("frame", "map")) if isinstance(pose, Mapping) else "map",
-                evidence=tuple(_evidence(e, sensors) for e in mappings(raw.get("evidence"))),
+                evidence=tuple(_evidence(e, sensors, clock) for e in mappings(raw.get("evidence"))),
                 distance=distances.get(entity_id),
             )
         )
@@ -201,7 +228,7 @@ def robot_pose(target: Cycle) -> RobotPose | None:
     return RobotPose(x, y, heading, str(pose.get("frame", "map")))
 
 
-def _evidence(raw: Mapping[str, object], sensors: SensorWindow) -> EvidenceView:
+def _evidence(raw: Mapping[str, object], sensors: SensorWindow, clock: LogClock) -> EvidenceView:
     ref = raw.get("ref")
     region = raw.get("region")
     where = ""
@@ -211,9 +238,19 @@ def _evidence(raw: Mapping[str, object], sensors: SensorWindow) -> EvidenceView:
         )
         where = f"{region.get('kind')} [{values}] in {region.get('frame', '?')}"
     weight = raw.get("weight")
+    state: EvidenceState = "broken"
     if isinstance(ref, dict):
         problem = sensors.resolve(ref)
-        label = f"{ref.get('topic')} @ {ref.get('log_time_ns')}"
+        recording = ref.get("recording")
+        stamp = ref.get("log_time_ns")
+        when = clock.show(stamp) if type(stamp) is int else "?"
+        label = (
+            f"{recording} " if isinstance(recording, str) else ""
+        ) + f"{ref.get('topic')} @ {when}"
+        if not problem:
+            state = "resolved"
+        elif sensors.unknown(ref):
+            state = "unresolved"
     else:
         problem, label = "no evidence ref recorded", "-"
     return EvidenceView(
@@ -221,7 +258,7 @@ def _evidence(raw: Mapping[str, object], sensors: SensorWindow) -> EvidenceView:
         weight=as_float(weight),
         region=where,
         ref=label,
-        resolved=not problem,
+        state=state,
         problem=problem,
     )
 

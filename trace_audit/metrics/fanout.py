@@ -15,6 +15,7 @@ from concurrent.futures import Executor, as_completed
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from trace_audit.evidence import recordings_for
 from trace_audit.log_time import LogClock
 from trace_audit.metrics.config import MetricsConfig
 from trace_audit.metrics.report import build_report
@@ -25,6 +26,7 @@ from trace_audit.selection import Selection, each_robot
 from trace_runtime.errors import LogReadError, UsageError
 from trace_runtime.reading.logset import Log, open_logs
 from trace_runtime.reading.reader import Segment
+from trace_runtime.reading.recordings import Recordings
 from trace_runtime.records import TOPIC_SEAL
 
 __all__ = ["ProgressCallback", "compute_metrics"]
@@ -38,6 +40,8 @@ class _Task:
     path: str
     previous: str | None
     config: MetricsConfig
+    recordings: Recordings | None
+    """The log's one resolution of evidence (sent to a worker as its file list)."""
 
 
 def _plan(log: Log) -> list[tuple[str, list[Segment]]]:
@@ -48,7 +52,7 @@ def _plan(log: Log) -> list[tuple[str, list[Segment]]]:
 
 
 def _run_task(task: _Task) -> ScanResult:
-    return score_segment(task.path, task.previous, task.config)
+    return score_segment(task.path, task.previous, task.config, recordings=task.recordings)
 
 
 def _usable_cpus() -> int:
@@ -63,7 +67,11 @@ def _expected_cycles(segment: Segment) -> int:
 
 
 def _tasks(
-    plan: list[tuple[str, list[Segment]]], cfg: MetricsConfig, *, absolute: bool
+    plan: list[tuple[str, list[Segment]]],
+    cfg: MetricsConfig,
+    recordings: Recordings | None,
+    *,
+    absolute: bool,
 ) -> list[_Task]:
     """One task per segment of the plan, naming the robot's segment before it (if any).
 
@@ -74,7 +82,7 @@ def _tasks(
         return str(path.absolute()) if absolute else str(path)
 
     return [
-        _Task(where(seg.path), where(segs[i - 1].path) if i else None, cfg)
+        _Task(where(seg.path), where(segs[i - 1].path) if i else None, cfg, recordings)
         for _robot, segs in plan
         for i, seg in enumerate(segs)
     ]
@@ -107,6 +115,7 @@ def compute_metrics(
     robots: Sequence[str] | None = None,
     progress: ProgressCallback | None = None,
     executor: Executor | None = None,
+    recordings: Recordings | None = None,
 ) -> MetricsReport:
     """Score every decision in the given logs (files, directories or log roots) in one pass.
 
@@ -117,6 +126,9 @@ def compute_metrics(
     most ``config.max_listed`` failing decisions and gaps kept for listing. Given an
     ``executor`` (e.g. a Dask cluster's, ``trace_audit.fleet.cluster``), segments are
     scored there, one task each, instead of in local processes; the report is the same.
+    Evidence in external recordings resolves against ``recordings`` when given (a caller's
+    one resolution, e.g. the incident report's), else against those the log declares and
+    ``config.evidence`` (``evidence.recordings_for``).
     """
     cfg = config or MetricsConfig()
     started = time.perf_counter()
@@ -126,6 +138,8 @@ def compute_metrics(
     if cfg.by is None and len(log.robots) > 1:
         cfg = replace(cfg, by="robot")
     plan = _plan(log)
+    if recordings is None:
+        recordings = recordings_for(log, cfg.evidence)
     expected = sum(_expected_cycles(s) for _, segs in plan for s in segs) or None
     total = ScanResult()
     done = 0
@@ -136,7 +150,7 @@ def compute_metrics(
         if progress is not None:
             progress(done, expected)
 
-    _score_plan(plan, cfg, executor, total=total, advance=advance)
+    _score_plan(plan, cfg, recordings, executor, total=total, advance=advance)
     elapsed = time.perf_counter() - started
     segments_read = tuple(str(s.path) for _, segs in plan for s in segs)
     report = build_report(
@@ -158,6 +172,7 @@ def compute_metrics(
 def _score_plan(
     plan: list[tuple[str, list[Segment]]],
     cfg: MetricsConfig,
+    recordings: Recordings | None,
     executor: Executor | None,
     *,
     total: ScanResult,
@@ -165,13 +180,13 @@ def _score_plan(
 ) -> None:
     """Score the plan into ``total``: on ``executor`` when given, else in this process (one
     pass a robot) or, with ``cfg.workers``, in local processes."""
-    tasks = _tasks(plan, cfg, absolute=executor is not None)
+    tasks = _tasks(plan, cfg, recordings, absolute=executor is not None)
     workers = min(cfg.workers, len(tasks), _usable_cpus())
     if executor is not None:
         _fan_out(executor, tasks, plan=plan, total=total, advance=advance, limit=cfg.max_listed)
     elif workers <= 1:
         for _robot, segments in plan:
-            total.merge(score_robot(segments, cfg, advance), cfg.max_listed)
+            total.merge(score_robot(segments, cfg, advance, recordings), cfg.max_listed)
     else:
         # Each task scores one segment; it first reads the tail of the robot's previous
         # segment, so chain links, gaps and refs across the boundary come out as in one pass.

@@ -104,28 +104,31 @@ def build_report(
         failed_checks=_failed_checks(total.checks, log) if total.checks and log else None,
         robots=tuple(robots),
         external_refs=dict(sorted(total.external.items())),
+        unread_recordings=tuple(why for _name, why in sorted(total.unread.items())),
+        clock=LogClock.of(log) if log is not None else None,
     )
 
 
 def _stat(total: float, squares: float, n: int, across: str) -> Stat:
-    if n == 0:
-        return Stat(0.0, 0.0, 0, across)
+    if n == 0:  # nothing known to average: unknown, not 0
+        return Stat(None, None, 0, across)
     mean = total / n
     return Stat(mean, math.sqrt(max(0.0, squares / n - mean * mean)), n, across)
 
 
 def _group(name: str, acc: GroupSums) -> GroupMetrics:
     n = acc.decisions
+    known = n - acc.unknown  # ET, ET_partial and TCS are over the decisions whose ET is known
     return GroupMetrics(
         name=name,
         decisions=n,
         sealed=acc.sealed,
         unsealed=n - acc.sealed,
         summarized=acc.summarized,
-        et=_stat(acc.et_sum, acc.et_sq, n, "decisions"),
+        et=_stat(acc.et_sum, acc.et_sq, known, "decisions"),
         fully_traceable=acc.full,
-        fully_traceable_share=_stat(acc.full, acc.full, n, "decisions"),
-        et_partial=_stat(acc.etp_sum, acc.etp_sq, n, "decisions"),
+        fully_traceable_share=_stat(acc.full, acc.full, known, "decisions"),
+        et_partial=_stat(acc.etp_sum, acc.etp_sq, known, "decisions"),
         factors=acc.factors,
         factors_traceable=acc.factors_traceable,
         no_factors=acc.no_factors,
@@ -141,7 +144,8 @@ def _group(name: str, acc: GroupSums) -> GroupMetrics:
         clock_anomalies=acc.anomalies,
         integrity_ok=acc.integrity_ok,
         integrity_failed=n - acc.integrity_ok,
-        tcs=_stat(acc.tcs_sum, acc.tcs_sq, n, "decisions"),
+        tcs=_stat(acc.tcs_sum, acc.tcs_sq, known, "decisions"),
+        unknown=acc.unknown,
         clock_restarts=acc.restarts or None,
     )
 
@@ -160,7 +164,7 @@ def _across(by: str, groups: Sequence[GroupMetrics]) -> AcrossGroups:
     et = _spread((g.et.mean for g in groups), label)
     full = _spread((g.fully_traceable_share.mean for g in groups), label)
     etp = _spread((g.et_partial.mean for g in groups), label)
-    empty = Stat(0.0, 0.0, 0, label)
+    empty = Stat(None, None, 0, label)
     return AcrossGroups(
         by=by,
         groups=len(groups),
@@ -260,7 +264,9 @@ def _definitions(cfg: MetricsConfig) -> dict[str, str]:
     return {
         "decision": "every cycle in the log (sealed, or an unsealed tail of a crashed writer)",
         "ET": "share of the action's factors with a documented chain to a resolving sensor "
-        "reading; 0 when the action or its factors are missing",
+        "reading; 0 when the action or its factors are missing; unknown (null, not 0) when "
+        "a chain stops at a reading in an external recording that could not be read: such "
+        "decisions are counted apart (unknown) and left out of ET, ET_partial and TCS",
         "chain": "factor node -> belief path (edges child->parent) -> entity node -> "
         "perception entity -> evidence ref -> logged sensor message",
         "expected_depth": f"{EXPECTED_DEPTH_STATE} for a factor on a derived-state node, "

@@ -27,10 +27,11 @@ __all__ = [
 
 @dataclass(frozen=True, slots=True)
 class Stat:
-    """A mean and its population std (ddof = 0), with what the std is taken across."""
+    """A mean and its population std (ddof = 0), with what the std is taken across; both
+    None when no value is known (``n`` = 0: no decision, or every one unknown)."""
 
-    mean: float
-    std: float
+    mean: float | None
+    std: float | None
     n: int
     across: str
 
@@ -70,6 +71,10 @@ class GroupMetrics:
     integrity_ok: int
     integrity_failed: int
     tcs: Stat
+    unknown: int = 0
+    """Decisions whose ET, ET_partial and TCS are unknown: evidence they cite is in an
+    external recording that could not be read (``MetricsReport.unread_recordings`` says
+    why). ET, fully traceable, ET_partial and TCS are over the other decisions."""
     clock_restarts: int | None = field(default=None, metadata={OMIT_EMPTY: True})
     """Segments whose first sealed time is before the previous segment's last: the clock
     restarted (``trace_runtime.clock``; PROFILE section 4 allows it). The run starts a new
@@ -97,8 +102,9 @@ class DecisionFailure:
     t_ns: int
     segment: str
     group: str
-    et: float
-    et_partial: float
+    et: float | None
+    et_partial: float | None
+    """None when unknown: evidence the decision cites is in a recording not read."""
     problems: tuple[str, ...]
 
 
@@ -202,6 +208,12 @@ class MetricsReport:
     """Evidence refs into external recordings, by what became of them: ``resolved``,
     ``broken`` (recording given, message missing or changed) and ``unresolved`` (recording
     not given: not checked). Counted per citation in the perception records."""
+    unread_recordings: tuple[str, ...] = field(default=(), metadata={OMIT_EMPTY: True})
+    """Why each recording the decisions cite could not be read ("recording X not found at
+    P", "... not given"): what makes decisions unknown."""
+    clock: LogClock | None = field(default=None, metadata={OMIT_EMPTY: True})
+    """The clock of the listed failures' and gaps' times, for showing them (None: the sums
+    came from elsewhere); --json keeps them as ``t_ns``."""
     not_in_index: tuple[str, ...] = field(default=(), metadata={OMIT_EMPTY: True})
     """Fields a report from the fleet index cannot fill (the index holds no logger timing,
     execution channels or external refs): read them from the logs, not as zero."""

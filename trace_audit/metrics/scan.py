@@ -9,13 +9,13 @@ the previous segment) come out as in one pass (``score_robot``).
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
 from trace_audit.chains import DecisionScore, SensorWindow, score_layers, trace_layers
-from trace_audit.evidence import open_recordings
+from trace_audit.evidence import recordings_for
 from trace_audit.log_time import hour_of
 from trace_audit.metrics.config import MetricsConfig
 from trace_audit.metrics.decision import (
@@ -50,6 +50,7 @@ from trace_runtime.encoding.partial import (
 from trace_runtime.encoding.seal_check import verify_cycle
 from trace_runtime.gaps import Gap, continuity, find_gap
 from trace_runtime.reading.reader import Segment, open_segment
+from trace_runtime.reading.recordings import Recordings
 from trace_runtime.records import (
     TOPIC_ACTION,
     TOPIC_BELIEF,
@@ -87,12 +88,16 @@ class _Scanner:
     """Scores the cycles of one robot's segments in order, carrying chain and window state."""
 
     def __init__(
-        self, config: MetricsConfig, partial: ScanResult, sink: DecisionSink | None = None
+        self,
+        config: MetricsConfig,
+        partial: ScanResult,
+        recordings: Recordings | None,
+        sink: DecisionSink | None = None,
     ) -> None:
         self.config = config
         self.partial = partial
         self.sink = sink
-        self.window = SensorWindow(config.sensor_window, open_recordings(config.evidence))
+        self.window = SensorWindow(config.sensor_window, recordings)
         self.stream = _Stream()
         self.session_prev: str | None = None
 
@@ -155,8 +160,10 @@ class _Scanner:
             for evidence in (entity.get("evidence") or ()) if isinstance(entity, dict) else ():
                 ref = evidence.get("ref") if isinstance(evidence, dict) else None
                 if isinstance(ref, dict) and type(ref.get("recording")) is str:
-                    state = self.window.external_state(ref)
-                    tally[state] = tally.get(state, 0) + 1
+                    check = self.window.check_external(ref)
+                    tally[check.state] = tally.get(check.state, 0) + 1
+                    if check.state == "unresolved":
+                        self.partial.unread.setdefault(check.recording, check.detail)
 
     def _score(self, cycle: Cycle, segment: Segment, group_of: Callable[[Cycle], str]) -> None:
         """Score one decision into its group's sums; list it when it fails."""
@@ -201,7 +208,8 @@ class _Scanner:
                     tcs,
                 )
             )
-        full = score.factors > 0 and score.traceable == score.factors
+        # a decision whose ET is unknown fails only what is known to fail (DR, integrity)
+        full = score.unknown > 0 or (score.factors > 0 and score.traceable == score.factors)
         if full and not missing_dr and not seal.problems:
             return
         partial.failures_total += 1
@@ -223,7 +231,7 @@ class _Scanner:
         """A failing decision as listed; a chain that is not fully traceable is walked again
         with its links, since a listed chain names factors and nodes (the whole layers)."""
         problems: tuple[str, ...] | list[str] = ()
-        if not (score.factors > 0 and score.traceable == score.factors):
+        if not score.fully_traceable:
             problems = et_problems(
                 trace_layers(
                     cycle.cycle,
@@ -266,15 +274,21 @@ class _Scanner:
 
     def _add_scores(
         self, acc: GroupSums, cycle: Cycle, score: DecisionScore, *, dr_ok: bool, seal: SealOutcome
-    ) -> float:
+    ) -> float | None:
         """Add the decision's ET, ET_partial, DR, integrity and TCS(d) to its group's sums;
-        return its TCS(d)."""
+        return its TCS(d). A decision whose ET is unknown adds to DR and integrity only, and
+        is counted apart: its TCS is unknown (None), never a number made of a guess."""
         et, etp = score.et, score.et_partial
         factors, traceable = score.factors, score.traceable
         intact = not seal.problems
         acc.decisions += 1
         if cycle.summary is not None:
             acc.summarized += 1
+        acc.dr_ok += dr_ok
+        acc.integrity_ok += intact
+        if score.unknown:
+            acc.unknown += 1
+            return None
         acc.et_sum += et
         acc.et_sq += et * et
         acc.etp_sum += etp
@@ -283,8 +297,6 @@ class _Scanner:
         acc.factors += factors
         acc.factors_traceable += traceable
         acc.no_factors += factors == 0
-        acc.dr_ok += dr_ok
-        acc.integrity_ok += intact
         tcs = trust_score(
             self.config.weights,
             et=et,
@@ -415,8 +427,8 @@ def _failure(
         cycle.t_ns,
         segment.path.name,
         group,
-        score.et,
-        score.et_partial,
+        score.et if score.known else None,
+        score.et_partial if score.known else None,
         (*et, *(f"DR: {p}" for p in dr), *(f"integrity: {p}" for p in integrity)),
     )
 
@@ -456,26 +468,38 @@ def score_segment(
     previous: str | Path | None,
     config: MetricsConfig,
     sink: DecisionSink | None = None,
+    recordings: Recordings | None = None,
 ) -> ScanResult:
     """Score one segment as a run over the whole log would: the tail of the robot's
     ``previous`` segment is read first, so chain links, gaps and refs across the boundary
-    come out the same. Each decision is also handed to ``sink`` (the fleet index)."""
+    come out the same. Each decision is also handed to ``sink`` (the fleet index).
+    ``recordings``: the log's one resolution of evidence; None: resolved here, from what
+    the segments declare and ``config.evidence`` (``evidence.recordings_for``)."""
     partial = ScanResult()
-    scanner = _Scanner(config, partial, sink)
-    if previous is not None:
-        scanner.prefill(open_segment(previous))
-    scanner.scan(open_segment(path))
+    segment = open_segment(path)
+    before = open_segment(previous) if previous is not None else None
+    if recordings is None:
+        scanned = [segment] if before is None else [before, segment]
+        recordings = recordings_for(scanned, config.evidence)
+    scanner = _Scanner(config, partial, recordings, sink)
+    if before is not None:
+        scanner.prefill(before)
+    scanner.scan(segment)
     return partial
 
 
 def score_robot(
-    segments: Iterable[Segment],
+    segments: Sequence[Segment],
     config: MetricsConfig,
     progress: Callable[[int], None] | None = None,
+    recordings: Recordings | None = None,
 ) -> ScanResult:
-    """Score one robot's segments in chain order in this process, in one pass."""
+    """Score one robot's segments in chain order in this process, in one pass (evidence
+    resolved as ``score_segment`` says)."""
     partial = ScanResult()
-    scanner = _Scanner(config, partial)
+    if recordings is None:
+        recordings = recordings_for(segments, config.evidence)
+    scanner = _Scanner(config, partial, recordings)
     for segment in segments:
         scanner.scan(segment, progress)
     return partial

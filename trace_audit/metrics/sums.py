@@ -61,6 +61,9 @@ class GroupSums:
     dropped: int = 0
     anomalies: int = 0
     restarts: int = 0
+    unknown: int = 0
+    """Decisions whose ET is unknown (evidence in a recording not read): left out of the
+    ET, ET_partial, fully traceable and TCS sums, counted here instead."""
 
     def merge(self, other: GroupSums) -> None:
         for name in self.__slots__:
@@ -99,7 +102,8 @@ class ScoredDecision:
     score: DecisionScore
     dr_problems: tuple[str, ...]
     seal: SealOutcome
-    tcs: float
+    tcs: float | None
+    """TCS(d); None when its ET is unknown (``score.known`` is False)."""
 
 
 DecisionSink = Callable[[ScoredDecision], None]
@@ -139,8 +143,12 @@ class ScanResult:
     external: dict[str, int] = field(default_factory=dict)
     checks: dict[tuple[str, str], CheckTally] = field(default_factory=dict)
     """(robot, rule) -> the failed execution checks of that rule, in chain order."""
+    unread: dict[str, str] = field(default_factory=dict)
+    """Recording name -> why it could not be read (refs into it unresolved), first seen."""
 
     def merge(self, other: ScanResult, limit: int) -> None:
+        for name, why in other.unread.items():
+            self.unread.setdefault(name, why)
         for state, count in other.external.items():
             self.external[state] = self.external.get(state, 0) + count
         for name, acc in other.groups.items():

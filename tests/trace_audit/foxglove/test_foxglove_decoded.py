@@ -144,11 +144,11 @@ def test_the_export_decodes_with_the_sdks_descriptors_to_the_logs_values(
             )
             cls = entity["class"]
             label = f"{entity['id']}: {cls} {entity['confidence'][cls]:.2f}, evidence "
-            label += "verified" if verified else "not verified"
+            label += "verified" if verified else "FAILED"
             assert scene.texts[0].text == label
             green = scene.cubes[0].color.g > scene.cubes[0].color.r
             assert green == verified, label
-    assert any("not verified" in e.texts[0].text for _, u in scenes for e in u.entities)
+    assert any("FAILED" in e.texts[0].text for _, u in scenes for e in u.entities)
 
     # every decision change, as a Log message at its cycle's time
     actions = _layers(original, "/trace/action")
