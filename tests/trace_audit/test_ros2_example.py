@@ -41,13 +41,7 @@ BAD = [
     )
 ]
 OWNED = {
-    "metrics": "helper truth (metrics): metrics ignore the declared recording, ET 0.0%",
-    "report": "helper truth (incident): the entity table says 'not given (--evidence)'",
-    "prove": "helper truth (prove): the bundle carries none of the cited recording messages",
-    "export-foxglove": "helper truth (foxglove): entities labelled 'evidence not verified'",
-    "find": "helper truth (fleet): the index cannot resolve recordings, et 0",
-    "metrics-index": "helper truth (fleet): metrics --index shows ET 0.0%",
-    "sealed": "the lead (recording sealing, profile 1.4): uncited messages are not sealed",
+    "prove": "prove: the bundle carries none of the cited recording messages",
 }
 
 
@@ -197,7 +191,6 @@ def _index(site: Path) -> None:
         assert _cli(COMMANDS["index"], site).returncode == 0
 
 
-@_xfail("find")
 def test_the_index_finds_the_decisions_fully_traceable(site: Path) -> None:
     _index(site)
     done = _cli("trace-audit find robot_index --action STOP --json", site)
@@ -206,7 +199,6 @@ def test_the_index_finds_the_decisions_fully_traceable(site: Path) -> None:
     assert rows and all(row["et"] == 1.0 for row in rows)
 
 
-@_xfail("metrics-index")
 def test_metrics_from_the_index_count_the_evidence_resolved(site: Path) -> None:
     _index(site)
     done = _cli("trace-audit metrics --index robot_index", site)
