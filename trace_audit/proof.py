@@ -3,35 +3,35 @@
 
 A bundle holds the cycle's stored messages (base64 of a raw DEFLATE stream of their bytes,
 with their topics), the sensor readings its profile 1.3 seal covers (each with its topic,
-sequence and log time), its seal, the seal's leaf index in the robot's RFC 6962 tree, the
-inclusion proof of that leaf in the tree of the newest signed profile 1.2 checkpoint (a
-cosigned one where the root's witness store holds one that covers it), and that
-checkpoint's note: about 8 KB at most on a 24 h simulator log. ``check_bundle`` checks, in
-order: each message's digest against the seal, the readings against the seal's
-``sensors``, the seal's leaf in the tree (inclusion proof to the note's root), the note's
-signature by the robot's key under its origin and, given a witness key, the witness's
-cosignature.
+sequence and log time), the recording messages its evidence refs cite (``proof_readings``),
+its seal, the seal's leaf index in the robot's RFC 6962 tree, the inclusion proof of that
+leaf in the tree of the newest signed profile 1.2 checkpoint (a cosigned one where the
+root's witness store holds one that covers it), and that checkpoint's note: about 8 KB at
+most on a 24 h simulator log. ``check_bundle`` checks, in order: each message's digest
+against the seal, the readings against the seal's ``sensors`` and the recording messages
+against the sealed refs, the seal's leaf in the tree (inclusion proof to the note's root),
+the note's signature by the robot's key under its origin and, given a witness key, the
+witness's cosignature.
 """
 
 from __future__ import annotations
 
-import base64
-import binascii
 import hashlib
 import os
-import zlib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TypedDict, TypeVar
 
 import orjson
 
+from trace_audit.evidence import recordings_for
+from trace_audit.proof_data import BadBundleError, DataReader, b64, deflated, field_of, unb64
+from trace_audit.proof_readings import check_readings, check_recorded, readings_of, recorded_of
 from trace_audit.witness.tree import LevelTree
 from trace_runtime.boundary import read_side_file, write_new
-from trace_runtime.chain import sensor_cover, sensor_line
 from trace_runtime.clock import iso_utc
-from trace_runtime.errors import InputError, LogReadError, NoteError, StorageError, UsageError
+from trace_runtime.errors import LogReadError, NoteError, StorageError, UsageError
 from trace_runtime.reading.chain_tree import prove_pass
 from trace_runtime.reading.logset import Log, open_log
 from trace_runtime.records import TOPIC_SEAL
@@ -60,10 +60,11 @@ __all__ = [
     "write_bundle",
 ]
 
-BUNDLE_FORMAT = "trace-proof/3"
-"""The format ``prove`` writes: ``trace-proof/2`` with each message's and reading's data
-deflated (the largest bundle of a 24 h simulator log 7.9 KB, not 24)."""
-BUNDLE_FORMATS = ("trace-proof/1", "trace-proof/2", BUNDLE_FORMAT)
+BUNDLE_FORMAT = "trace-proof/4"
+"""The format ``prove`` writes: ``trace-proof/3`` (``/2`` with each message's and reading's
+data deflated: the largest bundle of a 24 h simulator log 7.9 KB, not 24) with the recording
+messages the cycle's refs cite (``recorded``)."""
+BUNDLE_FORMATS = ("trace-proof/1", "trace-proof/2", "trace-proof/3", BUNDLE_FORMAT)
 T = TypeVar("T")
 
 
@@ -76,6 +77,7 @@ class ProofBundle(TypedDict):
     t_ns: int
     messages: list[dict[str, str]]  # topic, data
     sensors: list[dict[str, str | int]]  # topic, sequence, log_time_ns, data
+    recorded: list[dict[str, str | int]]  # recording, topic, log_time_ns, sequence, data
     seal: str
     leaf_index: int
     tree_size: int
@@ -85,33 +87,30 @@ class ProofBundle(TypedDict):
     cosigned: bool
 
 
-_FIELDS_1 = ProofBundle.__required_keys__ - {"sensors"}
+_FIELDS_1 = ProofBundle.__required_keys__ - {"sensors", "recorded"}
 BUNDLE_FIELDS = {
     "trace-proof/1": _FIELDS_1,
     "trace-proof/2": _FIELDS_1 | {"sensors"},
-    BUNDLE_FORMAT: _FIELDS_1 | {"sensors"},
+    "trace-proof/3": _FIELDS_1 | {"sensors"},
+    BUNDLE_FORMAT: _FIELDS_1 | {"sensors", "recorded"},
 }
 """Every field of a bundle of each format, all required; any other is refused (nothing in a
 bundle goes unchecked: the robot is named by the note's origin, which the robot's key
 signs)."""
-_READING_FIELDS = frozenset({"topic", "sequence", "log_time_ns", "data"})
 MAX_BUNDLE_BYTES = 16 << 20
-MAX_INFLATED_BYTES = 64 << 20
+
 """All of a bundle's data together, inflated: a bomb stops here."""
 
 
-def _b64(data: bytes) -> str:
-    return base64.b64encode(data).decode()
-
-
-def _deflated(data: bytes) -> str:
-    """The base64 of a raw DEFLATE stream (RFC 1951: no zlib header, no checksum) of data."""
-    squeeze = zlib.compressobj(9, zlib.DEFLATED, -15)
-    return _b64(squeeze.compress(data) + squeeze.flush())
-
-
-def make_bundle(log_path: str | Path, cycle: int, *, robot: str | None = None) -> ProofBundle:
-    """The proof bundle of ``cycle`` of ``robot`` (the log's only robot when None)."""
+def make_bundle(
+    log_path: str | Path,
+    cycle: int,
+    *,
+    robot: str | None = None,
+    evidence: Sequence[str | Path] = (),
+) -> ProofBundle:
+    """The proof bundle of ``cycle`` of ``robot`` (the log's only robot when None), carrying
+    the recording messages its refs cite (the recordings the log declares, or ``evidence``)."""
     log = open_log(log_path)
     robot_id = robot or _only_robot(log)
     proved = prove_pass(log, robot_id, cycle)
@@ -123,31 +122,23 @@ def make_bundle(log_path: str | Path, cycle: int, *, robot: str | None = None) -
     del proved
     note, size, cosigned = _covering_note(log, robot_id, index, tree)
     messages: list[dict[str, str]] = [
-        {"topic": topic, "data": _deflated(data)}
+        {"topic": topic, "data": deflated(data)}
         for topic, data in sorted(found.payloads.items())
         if topic != TOPIC_SEAL
     ]
     covered = b'"sensors":{' in seal  # a 1.3 seal: the readings can be checked alone
-    sensors: list[dict[str, str | int]] = [
-        {
-            "topic": m.topic,
-            "sequence": m.sequence,
-            "log_time_ns": m.log_time_ns,
-            "data": _deflated(m.data),
-        }
-        for m in (found.sensors if covered else ())
-    ]
     return {
         "format": BUNDLE_FORMAT,
         "cycle": cycle,
         "t_ns": found.t_ns,
         "messages": messages,
-        "sensors": sensors,
-        "seal": _b64(seal),
+        "sensors": readings_of(found, covered),
+        "recorded": recorded_of(found, recordings_for(log, evidence)),
+        "seal": b64(seal),
         "leaf_index": index,
         "tree_size": size,
         "root": tree.root(size).hex(),
-        "inclusion": [_b64(h) for h in tree.inclusion_proof(index, size)],
+        "inclusion": [b64(h) for h in tree.inclusion_proof(index, size)],
         "note": note,
         "cosigned": cosigned,
     }
@@ -167,7 +158,12 @@ class WrittenBundle:
 
 
 def write_bundle(
-    log_path: str | Path, cycle: int, out: str | Path, *, robot: str | None = None
+    log_path: str | Path,
+    cycle: int,
+    out: str | Path,
+    *,
+    robot: str | None = None,
+    evidence: Sequence[str | Path] = (),
 ) -> WrittenBundle:
     """Write the proof bundle of ``cycle`` (``make_bundle``) to ``out`` as indented JSON.
 
@@ -176,7 +172,7 @@ def write_bundle(
     out = Path(out)
     if os.path.lexists(out):
         raise StorageError(str(out), "it exists, and is never overwritten")
-    bundle = make_bundle(log_path, cycle, robot=robot)
+    bundle = make_bundle(log_path, cycle, robot=robot, evidence=evidence)
     data = orjson.dumps(bundle, option=orjson.OPT_INDENT_2) + b"\n"
     write_new(out, data)
     return WrittenBundle(
@@ -245,97 +241,6 @@ def read_bundle(path: str | Path) -> dict[str, object]:
     return value
 
 
-class _BadBundleError(InputError):
-    """A bundle not of the documented shape (reported as a failed step, never raised out)."""
-
-
-def _field(bundle: Mapping[str, object], name: str, kind: type[T]) -> T:
-    value = bundle.get(name)
-    if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
-        raise _BadBundleError(f"field {name} is missing or not {kind.__name__}")
-    return value
-
-
-def _unb64(text: object, what: str) -> bytes:
-    if not isinstance(text, str):
-        raise _BadBundleError(f"{what} is not base64 text")
-    try:
-        data = base64.b64decode(text, validate=True)
-    except (binascii.Error, ValueError) as err:
-        raise _BadBundleError(f"{what} is not base64") from err
-    if _b64(data) != text:
-        raise _BadBundleError(f"{what} is not canonical base64")
-    return data
-
-
-def _inflate_exactly(data: bytes, limit: int) -> bytes | None:
-    """What ``data`` inflates to when it is one whole raw DEFLATE stream with nothing after
-    it, of at most ``limit`` bytes; None otherwise."""
-    stream = zlib.decompressobj(-15)
-    try:
-        out = stream.decompress(data, limit + 1)
-    except zlib.error:
-        return None
-    if not stream.eof or stream.unused_data or stream.unconsumed_tail or len(out) > limit:
-        return None
-    return out
-
-
-class _DataReader:
-    """A bundle's message and reading data: base64 of the bytes (trace-proof/1 and /2), or
-    base64 of a raw DEFLATE stream of them (/3). A stream whose final byte has a set bit
-    that inflating ignores (its padding) is refused, so no byte of a bundle can change and
-    it still verify; another compressor's stream of the same bytes is accepted (the seal's
-    digests cover the bytes, not their compression)."""
-
-    def __init__(self, deflated: bool) -> None:
-        self.deflated = deflated
-        self.left = MAX_INFLATED_BYTES
-
-    def __call__(self, text: object, what: str) -> bytes:
-        data = _unb64(text, what)
-        if not self.deflated:
-            return data
-        out = _inflate_exactly(data, self.left)
-        if out is None:
-            raise _BadBundleError(f"{what} is not one raw DEFLATE stream within the bounds")
-        last = data[-1]
-        for bit in range(8):
-            if last >> bit & 1:
-                cleared = data[:-1] + bytes([last & ~(1 << bit)])
-                if _inflate_exactly(cleared, self.left) == out:
-                    raise _BadBundleError(f"{what}: the stream's padding bits are not zero")
-        self.left -= len(out)
-        return out
-
-
-def _check_readings(
-    bundle: Mapping[str, object], seal: Mapping[str, object], r: BundleCheck, read: _DataReader
-) -> bool:
-    """The bundle's sensor readings against the seal's ``sensors``: False when they differ."""
-    lines = []
-    for m in _field(bundle, "sensors", list):
-        if not isinstance(m, dict) or set(m) != _READING_FIELDS:
-            raise _BadBundleError("a sensor reading is not topic, sequence, log_time_ns, data")
-        topic, sequence, at = m["topic"], m["sequence"], m["log_time_ns"]
-        if not isinstance(topic, str) or not all(type(v) is int for v in (sequence, at)):
-            raise _BadBundleError("a sensor reading's topic, sequence or time is malformed")
-        hexed = hashlib.sha256(read(m["data"], f"reading {topic}")).hexdigest()
-        lines.append(sensor_line(topic, sequence, at, hexed))
-    sealed = seal.get("sensors")
-    if sealed is None:
-        if lines:
-            raise _BadBundleError("sensor readings given for a seal that does not cover them")
-        r.steps.append(("sensors", True, "not covered by this seal (profile 1.2 or earlier)"))
-        return True
-    cover = count, _ = sensor_cover(lines)
-    if not isinstance(sealed, dict) or (sealed.get("count"), sealed.get("digest")) != cover:
-        r.steps.append(("sensors", False, f"the {count} reading(s) differ from the seal's"))
-        return False
-    r.steps.append(("sensors", True, f"{count} sensor reading(s) match the seal"))
-    return True
-
-
 def verify_proof(
     bundle_path: str | Path, key_path: str | Path, *, witness_key: str | None = None
 ) -> BundleCheck:
@@ -363,7 +268,7 @@ def check_bundle(
     result = BundleCheck(path)
     try:
         _check(bundle, key, witness_key, result)
-    except _BadBundleError as err:
+    except BadBundleError as err:
         result.steps.append(("bundle", False, str(err)))
     result.ok = bool(result.steps) and all(ok for _name, ok, _detail in result.steps)
     return result
@@ -376,14 +281,14 @@ def _check(
     fmt = bundle.get("format")
     expected = BUNDLE_FIELDS.get(fmt) if isinstance(fmt, str) else None
     if expected is None:
-        raise _BadBundleError(f"the format is not one of {', '.join(BUNDLE_FORMATS)}")
+        raise BadBundleError(f"the format is not one of {', '.join(BUNDLE_FORMATS)}")
     if set(bundle) != expected:
         odd = sorted(set(bundle) ^ expected)
-        raise _BadBundleError(f"fields missing or unknown: {', '.join(odd)}")
-    r.cycle = _field(bundle, "cycle", int)
-    r.t_ns = _field(bundle, "t_ns", int)
-    seal_bytes = _unb64(bundle.get("seal"), "seal")
-    read = _DataReader(deflated=bundle["format"] == BUNDLE_FORMAT)
+        raise BadBundleError(f"fields missing or unknown: {', '.join(odd)}")
+    r.cycle = field_of(bundle, "cycle", int)
+    r.t_ns = field_of(bundle, "t_ns", int)
+    seal_bytes = unb64(bundle.get("seal"), "seal")
+    read = DataReader(deflated=bundle["format"] in ("trace-proof/3", BUNDLE_FORMAT))
     if not _check_digests(bundle, seal_bytes, r, read):
         return
     root = _check_inclusion(bundle, seal_bytes, r)
@@ -395,25 +300,25 @@ def _check(
 
 
 def _check_digests(
-    bundle: Mapping[str, object], seal_bytes: bytes, r: BundleCheck, read: _DataReader
+    bundle: Mapping[str, object], seal_bytes: bytes, r: BundleCheck, read: DataReader
 ) -> bool:
     """The messages (and the readings a 1.3 seal covers) against the seal's digests."""
     try:
         seal = orjson.loads(seal_bytes)
     except orjson.JSONDecodeError as err:
-        raise _BadBundleError("the seal is not JSON") from err
+        raise BadBundleError("the seal is not JSON") from err
     digests = seal.get("digests") if isinstance(seal, dict) else None
     if not isinstance(digests, dict):
-        raise _BadBundleError("the seal has no digests")
+        raise BadBundleError("the seal has no digests")
     if seal.get("cycle") != r.cycle or seal.get("t_ns") != r.t_ns:
         r.steps.append(("digests", False, "the seal is of another cycle or time"))
         return False
     given: dict[str, bytes] = {}
-    for m in _field(bundle, "messages", list):
+    for m in field_of(bundle, "messages", list):
         if not isinstance(m, dict) or set(m) != {"topic", "data"} or type(m["topic"]) is not str:
-            raise _BadBundleError("a message has no topic")
+            raise BadBundleError("a message has no topic")
         if m["topic"] in given:
-            raise _BadBundleError(f"two messages on {m['topic']}")
+            raise BadBundleError(f"two messages on {m['topic']}")
         given[m["topic"]] = read(m.get("data"), f"message {m['topic']}")
     wrong = sorted(t for t, d in given.items() if digests.get(t) != hashlib.sha256(d).hexdigest())
     absent = sorted(set(digests) - set(given))
@@ -423,18 +328,20 @@ def _check_digests(
         r.steps.append(("digests", False, "; ".join(problems)))
         return False
     r.steps.append(("digests", True, f"{len(given)} message(s) match the seal"))
-    return "sensors" not in bundle or _check_readings(bundle, seal, r, read)
+    if "sensors" in bundle and not check_readings(bundle, seal, r.steps, read):
+        return False
+    return "recorded" not in bundle or check_recorded(bundle, given, r.steps, read)
 
 
 def _check_inclusion(bundle: Mapping[str, object], seal: bytes, r: BundleCheck) -> bytes | None:
     """The seal's leaf in the tree: the root it proves to, or None when it does not."""
-    r.leaf_index = _field(bundle, "leaf_index", int)
-    r.tree_size = _field(bundle, "tree_size", int)
-    root_hex = _field(bundle, "root", str)
+    r.leaf_index = field_of(bundle, "leaf_index", int)
+    r.tree_size = field_of(bundle, "tree_size", int)
+    root_hex = field_of(bundle, "root", str)
     if len(root_hex) != 64 or not set(root_hex) <= set("0123456789abcdef"):
-        raise _BadBundleError("the root is not 64 lowercase hex digits")
+        raise BadBundleError("the root is not 64 lowercase hex digits")
     root = bytes.fromhex(root_hex)
-    proof = [_unb64(h, "an inclusion hash") for h in _field(bundle, "inclusion", list)]
+    proof = [unb64(h, "an inclusion hash") for h in field_of(bundle, "inclusion", list)]
     if not verify_inclusion(r.leaf_index, r.tree_size, leaf_hash(seal), proof, root):
         r.steps.append(("inclusion", False, "the seal is not leaf of the tree at that root"))
         return None
@@ -453,10 +360,10 @@ def _check_note(
 ) -> OpenedNote | None:
     """The checkpoint note: of the proof's tree, signed by the robot's key under its origin,
     and ``cosigned`` saying what it carries. The opened note, or None when it fails."""
-    note = _field(bundle, "note", str)
+    note = field_of(bundle, "note", str)
     split = note.rfind("\n\n")
     for line in note[split + 2 :].splitlines() if split >= 0 else ():
-        _unb64(line.rpartition(" ")[2], "a note signature")  # canonical: one spelling only
+        unb64(line.rpartition(" ")[2], "a note signature")  # canonical: one spelling only
     try:
         body = parse_checkpoint(note[: split + 1] if split >= 0 else note)
     except NoteError as err:
@@ -478,7 +385,7 @@ def _check_note(
         r.steps.append(("note", False, f"not signed by the robot's key under {body.origin}"))
         return None
     r.steps.append(("note", True, f"signed by the robot's key under {body.origin}"))
-    cosigned = _field(bundle, "cosigned", bool)
+    cosigned = field_of(bundle, "cosigned", bool)
     if cosigned != (len(opened.verified) + len(opened.unverified) > 1):
         r.steps.append(("note", False, "'cosigned' does not say what the note carries"))
         return None
@@ -488,7 +395,7 @@ def _check_note(
 def _check_cosignature(opened: OpenedNote, witness_key: NoteVerifier, r: BundleCheck) -> None:
     """The witness's cosignature on the note, and the time it states."""
     if witness_key.sig_type != COSIGNATURE:
-        raise _BadBundleError("the witness key is not a cosignature key")
+        raise BadBundleError("the witness key is not a cosignature key")
     sig = opened.verified_by(witness_key)
     if sig is None or sig.timestamp is None:
         r.steps.append(("cosignature", False, f"no cosignature by {witness_key.name}"))

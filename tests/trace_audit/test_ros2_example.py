@@ -9,6 +9,7 @@ marked ``xfail(strict=True)`` naming the owner: it turns into a failure the day 
 
 from __future__ import annotations
 
+import base64
 import hashlib
 import html
 import json
@@ -17,6 +18,7 @@ import re
 import shutil
 import subprocess
 import sys
+import zlib
 from pathlib import Path
 
 import pytest
@@ -40,9 +42,7 @@ BAD = [
         r"evidence not verified",
     )
 ]
-OWNED = {
-    "prove": "prove: the bundle carries none of the cited recording messages",
-}
+OWNED = {}
 
 
 def _xfail(name: str) -> pytest.MarkDecorator:
@@ -175,9 +175,15 @@ def test_every_command_runs_on_the_example_and_shows_its_evidence_resolved(
         assert f"{CYCLES + SEALING} ref(s) resolved" in done.stdout and "CLEAN" in done.stdout
     if name == "report":
         _clean(_html_text(site / "incident.html"), "the report's page")
-    if name == "prove":
-        bundle = (site / "proof.json").read_text()
-        assert any(digest in bundle for digest in _scan_digests(site / "robot_log_bag"))
+    if name == "prove":  # the cited scan travels in the bundle, as recorded
+        recorded = json.loads((site / "proof.json").read_text())["recorded"]
+        carried = {
+            hashlib.sha256(zlib.decompress(base64.b64decode(m["data"]), -15)).hexdigest()
+            for m in recorded
+        }
+        assert carried and carried <= _scan_digests(site / "robot_log_bag")
+    if name == "verify-proof":
+        assert "1 cited recording message(s) match their refs" in done.stdout
     if name == "export-foxglove":
         with (site / "view.mcap").open("rb") as stream:
             scenes = [
@@ -219,3 +225,21 @@ def test_an_uncited_message_altered_in_a_split_is_found(site: Path, tmp_path: Pa
     split.write_bytes(bytes(data))
     done = _cli("trace-audit verify robot_log", copy)
     assert done.returncode == 1 and "/joint_states" in done.stdout
+
+
+def test_a_bundle_whose_carried_scan_was_swapped_does_not_verify(
+    site: Path, tmp_path: Path
+) -> None:
+    """The scan a bundle carries is checked against the ref sealed in the bundle's own
+    perception message: another scan in its place (validly encoded) fails verify-proof."""
+    if not (site / "proof.json").exists():
+        assert _cli(COMMANDS["prove"], site).returncode == 0
+    bundle = json.loads((site / "proof.json").read_text())
+    squeeze = zlib.compressobj(9, zlib.DEFLATED, -15)
+    other = squeeze.compress(b"\x00\x01 not the cited scan") + squeeze.flush()
+    bundle["recorded"][0]["data"] = base64.b64encode(other).decode()
+    (tmp_path / "swapped.json").write_text(json.dumps(bundle))
+    done = _cli(
+        f"trace-audit verify-proof {tmp_path / 'swapped.json'} --key keys/ros2-bot.pub", site
+    )
+    assert done.returncode == 1 and "no sealed ref cites it" in done.stdout

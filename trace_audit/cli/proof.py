@@ -11,8 +11,9 @@ import typer
 
 from trace_audit.cli.app import EXIT_FINDINGS, app, guarded, help_text
 from trace_audit.cli.doc import Column, Doc, Seg
-from trace_audit.cli.options import JsonOption, PlainOption, robot_option
+from trace_audit.cli.options import EvidenceOption, JsonOption, PlainOption, robot_option
 from trace_audit.cli.output import emit, setup_logging
+from trace_runtime.clock import is_wall_clock, iso_utc
 
 if TYPE_CHECKING:
     from trace_audit.proof import BundleCheck, WrittenBundle
@@ -51,13 +52,14 @@ def prove_command(
         Path, typer.Option("--out", help="The bundle file to write.", show_default=False)
     ],
     robot: Annotated[str | None, robot_option("The robot (needed on a fleet root).")] = None,
+    evidence: EvidenceOption = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
     from trace_audit.proof import write_bundle
 
     setup_logging()
-    written = guarded(lambda: write_bundle(log, cycle, out, robot=robot))
+    written = guarded(lambda: write_bundle(log, cycle, out, robot=robot, evidence=evidence or ()))
     emit(written, _written_doc, json_out=json_out, plain=plain)
 
 
@@ -102,7 +104,7 @@ def _check_doc(r: BundleCheck) -> Doc:
     doc = Doc()
     verdict = Seg("VERIFIED", "bold green") if r.ok else Seg("DOES NOT VERIFY", "bold red")
     doc.title([f"Proof {r.path}: ", verdict])
-    fields = [("cycle", "not read" if r.cycle is None else f"{r.cycle} (t_ns {r.t_ns})")]
+    fields = [("cycle", "not read" if r.cycle is None else f"{r.cycle} at {_when(r.t_ns)}")]
     if r.leaf_index is None or r.tree_size is None:  # the check stopped before the tree
         fields.append(("tree", "not reached"))
     else:
@@ -114,3 +116,13 @@ def _check_doc(r: BundleCheck) -> Doc:
         [[name, Seg("ok", "green") if ok else Seg("FAIL", "red"), d] for name, ok, d in r.steps],
     )
     return doc
+
+
+def _when(t_ns: int | None) -> str:
+    """A bundle's time: it does not name its clock, so a time of day when it can only be
+    one (after 2000, as a wall clock's), else seconds; the nanoseconds either way."""
+    if t_ns is None:
+        return "?"
+    if is_wall_clock("system", t_ns):
+        return f"{iso_utc(t_ns, digits=3)} (t_ns {t_ns})"
+    return f"{t_ns / 1e9:.3f} s (t_ns {t_ns})"

@@ -100,12 +100,15 @@ def _plain(bundle: dict[str, Any]) -> dict[str, Any]:
 
 
 def test_bundles_of_the_earlier_formats_still_verify(proved: tuple[Path, Path], keys: Keys) -> None:
-    """``trace-proof/1`` (before the readings were carried) and ``/2`` (before the data was
-    deflated) are checked as before; /1's readings are simply not there to check."""
+    """``trace-proof/1`` (before the readings were carried), ``/2`` (before the data was
+    deflated) and ``/3`` (before recording messages were carried) are checked as before;
+    /1's readings are simply not there to check."""
     _root, bundle = proved
     data = json.loads(bundle.read_text())
     key, witness = load_public_key(keys.robot_pub), keys.witness_verifier
-    second = _plain(data) | {"format": "trace-proof/2"}
+    third = {k: v for k, v in data.items() if k != "recorded"} | {"format": "trace-proof/3"}
+    assert check_bundle(third, key, witness_key=witness).ok  # before recordings were carried
+    second = _plain(third) | {"format": "trace-proof/2"}
     assert check_bundle(second, key, witness_key=witness).ok
     assert not check_bundle({**data, "format": "trace-proof/2"}, key, witness_key=witness).ok
     old = {k: v for k, v in second.items() if k != "sensors"} | {"format": "trace-proof/1"}
