@@ -328,19 +328,26 @@ def _scores(doc: Doc, r: Explanation) -> None:
     doc.heading("Auditability of this decision")
     s = r.scores
     traceable = sum(1 for c in r.chains.factors if c.traceable)
+    unread = sum(1 for c in r.chains.factors if c.unknown)
     score_rows: list[tuple[str, Line]] = [
         (
             "ET",
-            f"{s.et:.2f}  ({traceable} of {len(r.chains.factors)} factors traced to "
-            "a sensor reading)",
+            f"{_score(s.et)}  ({traceable} of {len(r.chains.factors)} factors traced to "
+            "a sensor reading"
+            + (f"; {unread} unknown: in a recording that could not be read)" if unread else ")"),
         ),
-        ("ET_partial", f"{s.et_partial:.2f}"),
+        ("ET_partial", _score(s.et_partial)),
         ("DR", f"{s.dr:.0f}"),
-        ("TCS", f"{s.tcs:.2f}"),
+        ("TCS", _score(s.tcs)),
     ]
     doc.fields(score_rows)
     for problem in s.problems:
         doc.line(Seg(f"- {problem}", "yellow"), 2)
+
+
+def _score(value: float | None) -> str:
+    """A score to two places; "?" when unknown (evidence in a recording not read)."""
+    return "?" if value is None else f"{value:.2f}"
 
 
 def _integrity(doc: Doc, r: Explanation) -> None:

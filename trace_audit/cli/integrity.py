@@ -235,7 +235,7 @@ def verify_doc(r: VerifyReport) -> Doc:
         rows.append(
             (
                 "external evidence",
-                f"{r.external_resolved} ref(s) resolved in the recordings given"
+                f"{r.external_resolved} ref(s) resolved in the robot's recordings"
                 + (
                     f", {r.external_unresolved} not checked (recording not given: --evidence)"
                     if r.external_unresolved

@@ -74,14 +74,15 @@ class DecisionScores:
 
     ``et`` and ``et_partial`` come from the chain walker; ``dr`` and ``tcs`` from the metrics
     library's definitions (the same ones ``trace-audit metrics`` uses). ``problems`` lists
-    why a score is below 1.
+    why a score is below 1. ET, ET_partial and TCS are None when unknown: a factor's chain
+    stops at a reading in a recording that could not be read (never 0 for that).
     """
 
-    et: float
-    et_partial: float
+    et: float | None
+    et_partial: float | None
     fully_traceable: bool
     dr: float
-    tcs: float
+    tcs: float | None
     problems: tuple[str, ...]
     source: str
 

@@ -47,12 +47,15 @@ def decision_scores(
         continuity=continuity_d,
         intact=seal.verified,
     )
+    if chains.unknown:
+        unread = sum(1 for f in chains.factors if f.unknown)
+        problems.append(f"ET: unknown: {unread} factor(s) cite a recording that could not be read")
     return DecisionScores(
-        et=chains.et,
-        et_partial=chains.et_partial,
+        et=chains.known_et,
+        et_partial=chains.known_et_partial,
         fully_traceable=chains.fully_traceable,
         dr=0.0 if missing_dr else 1.0,
-        tcs=tcs,
+        tcs=None if chains.unknown else tcs,
         problems=tuple(problems),
         source="trace_audit.metrics definitions (docs/metrics.md), default TCS weights",
     )

@@ -225,13 +225,13 @@ def auditability_section(data: ReportData) -> str:
                 "ET",
                 f"? ({traced} of {len(chains.factors)} factors traced to a sensor reading, "
                 f"{not_read} unknown: evidence in a recording that could not be read)"
-                if unknown
+                if unknown or s.et is None
                 else f"{s.et:.2f} ({traced} of {len(chains.factors)} factors "
                 "traced to a sensor reading)",
             ),
-            ("ET_partial", "?" if unknown else f"{s.et_partial:.2f}"),
+            ("ET_partial", "?" if s.et_partial is None else f"{s.et_partial:.2f}"),
             ("DR", f"{s.dr:.0f}"),
-            ("TCS", "?" if unknown else f"{s.tcs:.2f}"),
+            ("TCS", "?" if s.tcs is None else f"{s.tcs:.2f}"),
         ]
     )
     tc = "n/a" if m.tc is None else f"{m.tc:.3f}"

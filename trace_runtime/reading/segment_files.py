@@ -22,20 +22,30 @@ PARTIAL_MARK = ".partial"
 """File names holding this are writes in progress (compaction), never read as segments."""
 
 
+BAG_METADATA = "metadata.yaml"
+"""What marks a folder as a rosbag2 bag (a recording), whose MCAP files are not segments."""
+
+
 def find_segment_files(path: Path) -> list[Path]:
     """Segment files of a log: the file itself, or every ``*.mcap`` below a directory
     (writes in progress excluded).
 
     Below a directory only regular files count: a link (to a file elsewhere, or a tier folder
     that is one: ``boundary.tier_folder`` refuses it) would let the log reach outside its
-    folder, and a FIFO would block the reader, so each is skipped with a warning."""
+    folder, and a FIFO would block the reader, so each is skipped with a warning. The files
+    of a rosbag2 bag kept in the folder (beside its ``metadata.yaml``: a robot's recording,
+    profile 1.4) are not segments and are left to the recordings, without a word."""
     if not path.is_dir():
         return [path]
     for tier in TIERS:
         tier_folder(path, tier)
     files: list[Path] = []
+    bags: dict[Path, bool] = {}
     for candidate in sorted(path.rglob("*.mcap")):
         if PARTIAL_MARK in candidate.name:
+            continue
+        folder = candidate.parent
+        if folder != path and bags.setdefault(folder, (folder / BAG_METADATA).is_file()):
             continue
         try:
             mode = candidate.lstat().st_mode

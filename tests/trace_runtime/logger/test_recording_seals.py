@@ -206,3 +206,14 @@ def test_a_ref_by_header_stamp_resolves_by_its_digest_near_the_recorded_time(
     assert check.message.log_time_ns == recorded and "+0.004 s" in check.detail
     wrong = external_ref(bag, "/scan", recorded - 4_000_000, cdr("not recorded"))
     assert recordings.check(wrong.model_dump()).state == "broken"
+
+
+def test_a_bag_kept_inside_the_root_is_a_recording_not_a_foreign_file(tmp_path: Path) -> None:
+    root = tmp_path / "log"
+    bag = root / "recordings" / "ward_bag"
+    assert record(bag, "--messages", "20").wait(timeout=60) == 0
+    run_robot(root, bag, 40, cited=20)
+    code, report = verify(root)
+    assert code == 0, report["findings"]
+    assert "skipped_file" not in kinds(report, "notes")
+    assert "recording_unchecked" not in kinds(report, "notes")
