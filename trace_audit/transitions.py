@@ -20,6 +20,7 @@ from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log, require_cycles
 from trace_audit.log_time import SECONDS_CLOCK, LogClock, TimeArg, resolve_time
 from trace_audit.selection import Selection, SeveralRobotsError
+from trace_runtime.clock import ClockStep
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import UsageError
 from trace_runtime.flags import split_flags
@@ -113,6 +114,9 @@ class Timeline:
     """True when a segment of the log is being written right now; left out of JSON else."""
     clock: LogClock = SECONDS_CLOCK
     """The log's clock and first time: how its times are shown (``log_time.LogClock``)."""
+    clock_steps: tuple[ClockStep, ...] = field(default=(), metadata={OMIT_EMPTY: True})
+    """Where the clock went back between the runs: a step its writer declared (chrony, a
+    replay's ``/clock``), or a restart on a clock that begins lower."""
 
 
 class WindowOutsideLogError(UsageError):
@@ -200,6 +204,7 @@ def timeline(
         clock_runs,
         live=log.live or None,
         clock=LogClock.of(log),
+        clock_steps=tuple(log.clock_steps()) if len(runs) > 1 else (),
     )
 
 

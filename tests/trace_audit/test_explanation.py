@@ -486,7 +486,7 @@ def test_a_restarted_clock_keeps_each_explanation_in_its_own_run(
     by_time = explain(root, t=t_ns(45))
     assert by_time.decision.segment == second and by_time.held.since_cycle >= 100
     shown = CliRunner().invoke(app, ["explain", str(root), "--t", t_s(45), "--plain"]).output
-    assert "the robot's clock restarted in this log" in shown
+    assert "the robot's clock went back in this log" in shown
 
 
 def test_one_clock_run_is_the_whole_log(sample_log: Path) -> None:

@@ -179,10 +179,11 @@ def _decided(r: Explanation) -> str:
 
 
 def _clock_line(r: Explanation) -> Seg:
-    """Which run of a restarted clock the decision was read in."""
+    """Which run of the robot's clock (it went back: a declared step or a restart) the
+    decision was read in."""
     run = r.clock_run[0] if len(r.clock_run) == 1 else f"{r.clock_run[0]}..{r.clock_run[-1]}"
     return Seg(
-        f"the robot's clock restarted in this log: read in the run of {run}"
+        f"the robot's clock went back in this log (see timeline): read in the run of {run}"
         + (
             "; another run may hold a decision at the same time (ask by --cycle)"
             if r.query_t_ns is not None

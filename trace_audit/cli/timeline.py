@@ -100,11 +100,17 @@ def timeline_doc(r: Timeline) -> Doc:
     # runs are shown one after the other, never merged by time.
     doc.line(
         Seg(
-            f"The robot's clock restarted {len(r.clock_runs) - 1} time(s) in this log: each "
+            f"The robot's clock went back {len(r.clock_runs) - 1} time(s) in this log: each "
             "run of its clock is shown on its own.",
             "yellow",
         )
     )
+    for step in r.clock_steps:
+        how = "stepped back (declared by its writer)" if step.declared else "restarted lower"
+        doc.line(
+            f"  before cycle {step.first_cycle}: the clock {how} by {step.back_ns / 1e9:.3f} s, "
+            f"from {r.clock.show(step.from_ns)} to {r.clock.show(step.to_ns)}"
+        )
     for number, run in enumerate(r.clock_runs):
         cycles = (
             f"cycles {run.first_cycle}..{run.last_cycle}"
