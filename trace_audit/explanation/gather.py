@@ -125,10 +125,7 @@ def _explain(
     decision = read_decision(target)
     if recordings is None:
         recordings = recordings_for(whole, evidence)
-    # The cadence the robot kept when it decided: the period of the segment holding the
-    # decision (the walk back, the gap to the previous seal and the output use it).
-    holder = log.segment_named(target.segment)
-    period = holder.session.period_ns if holder is not None else log.period_ns
+    period, clock = _cadence(log, whole, target)
     chains, back = _chains_and_back(
         log,
         target,
@@ -140,7 +137,6 @@ def _explain(
     )
     seal = check_seal(log, target, back.prev_sealed)
     scores = decision_scores(target, chains, seal, prev_sealed=back.prev_sealed, period_ns=period)
-    clock = holder.session.clock if holder is not None else whole.clock
     graph = causal_graph_data(target, chains, decision, LogClock(clock, whole.start_ns))
     external, channels, sensors = _readings(target, recordings, period)
     return Explanation(
@@ -169,6 +165,15 @@ def _explain(
         channel_evidence=channels,
         sensors=sensors,
     )
+
+
+def _cadence(log: Log, whole: Log, target: Cycle) -> tuple[int, str]:
+    """The period and clock the robot kept when it decided: those of the segment holding
+    the decision (the walk back, the gap to the previous seal and the output use them)."""
+    holder = log.segment_named(target.segment)
+    if holder is None:
+        return log.period_ns, whole.clock
+    return holder.session.period_ns, holder.session.clock
 
 
 def _readings(

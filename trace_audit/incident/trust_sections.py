@@ -213,7 +213,7 @@ def _notes(notes: Sequence[Finding]) -> str:
 
 
 def auditability_section(data: ReportData) -> str:
-    s, m = data.explanation.scores, data.metrics.overall
+    s = data.explanation.scores
     chains = data.explanation.chains
     traced = sum(1 for c in chains.factors if c.traceable)
     # ET is unknown (not 0) while a chain stops at a recording that could not be read
@@ -234,8 +234,22 @@ def auditability_section(data: ReportData) -> str:
             ("TCS", "?" if s.tcs is None else f"{s.tcs:.2f}"),
         ]
     )
+    return (
+        "<h3>This decision</h3>"
+        + decision
+        + html_problems(s.problems)
+        + "<h3>The window</h3>"
+        + _window_fields(data)
+        + _gaps_table(data)
+        + f'<p class="note">{escape(s.source)}; docs/metrics.md defines each.</p>'
+    )
+
+
+def _window_fields(data: ReportData) -> str:
+    """The window's continuity, drops and mean scores ("?" where nothing is known)."""
+    m = data.metrics.overall
     tc = "n/a" if m.tc is None else f"{m.tc:.3f}"
-    window = html_fields(
+    return html_fields(
         [
             ("TC", f"{tc} ({m.gaps} gaps, {m.gap_s:.2f} s of {m.window_s:.2f} s)"),
             ("Declared drops", f"{m.declared_dropped} cycles the logger said it could not write"),
@@ -259,7 +273,11 @@ def auditability_section(data: ReportData) -> str:
             ("TCS (mean)", "?" if m.tcs.mean is None else f"{m.tcs.mean:.3f}"),
         ]
     )
-    gaps = (
+
+
+def _gaps_table(data: ReportData) -> str:
+    """The window's gaps, one row each ('' when there is none)."""
+    return (
         html_table(
             ["after cycle", "before cycle", "missing time", "declared dropped"],
             (
@@ -275,13 +293,4 @@ def auditability_section(data: ReportData) -> str:
         )
         if data.metrics.gaps
         else ""
-    )
-    return (
-        "<h3>This decision</h3>"
-        + decision
-        + html_problems(s.problems)
-        + "<h3>The window</h3>"
-        + window
-        + gaps
-        + f'<p class="note">{escape(s.source)}; docs/metrics.md defines each.</p>'
     )

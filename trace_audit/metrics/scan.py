@@ -9,7 +9,7 @@ the previous segment) come out as in one pass (``score_robot``).
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -242,14 +242,14 @@ class _Scanner:
                     window=self.window,
                 )
             )
-        return _failure(
-            cycle,
-            segment,
-            group=group,
-            score=score,
-            et=tuple(problems),
-            dr=dr,
-            integrity=seal.problems,
+        return DecisionFailure(  # its problems prefixed by the metric they fail
+            cycle.cycle,
+            cycle.t_ns,
+            segment.path.name,
+            group,
+            score.et if score.known else None,
+            score.et_partial if score.known else None,
+            (*problems, *(f"DR: {p}" for p in dr), *(f"integrity: {p}" for p in seal.problems)),
         )
 
     def _add_execution(self, cycle: Cycle, segment: Segment) -> None:
@@ -409,28 +409,6 @@ class _Scanner:
             self.stream.prev_cycle = last_sealed.cycle
             self.stream.prev_segment = segment.path.name
             self.stream.prev_seal = digest(last_sealed.payloads[TOPIC_SEAL])
-
-
-def _failure(
-    cycle: Cycle,
-    segment: Segment,
-    *,
-    group: str,
-    score: DecisionScore,
-    et: tuple[str, ...],
-    dr: Iterable[str],
-    integrity: Iterable[str],
-) -> DecisionFailure:
-    """A failing decision as listed, its problems prefixed by the metric they fail."""
-    return DecisionFailure(
-        cycle.cycle,
-        cycle.t_ns,
-        segment.path.name,
-        group,
-        score.et if score.known else None,
-        score.et_partial if score.known else None,
-        (*et, *(f"DR: {p}" for p in dr), *(f"integrity: {p}" for p in integrity)),
-    )
 
 
 _UNVOUCHED = ("modified", "unsealed")

@@ -47,7 +47,7 @@ from trace_runtime.logger.recording_seals import (
     encode_recording_seal,
 )
 from trace_runtime.logger.segment_writer import SegmentWriter
-from trace_runtime.logger.witness_feed import WitnessFeed
+from trace_runtime.logger.witness_feed import witness_feed_for
 from trace_runtime.recording_records import TOPIC_RECORDING
 from trace_runtime.records import GENESIS, LAYER_MODELS, TOPIC_SEAL
 from trace_runtime.segment_names import rotated_segment_name, segment_name
@@ -121,31 +121,18 @@ class ChainWriter:
         self.tree: CompactRange | None = self._first_tree(path, session)
         """The robot's Merkle tree through ``prev_seal`` (profile 1.2); None when it could not
         be resumed (checkpoints then carry no tree, counted in ``stats.tree_failures``)."""
-        self._feed: WitnessFeed | None = None
-        if config.witness and self.tree is not None and self._checkpoints.note_signer is not None:
-            self._feed = WitnessFeed(
-                config.witness,
-                timeout_s=config.witness_timeout_s,
-                store_root=path if is_root else path.parent,
-                robot_id=session.robot_id,
-                tree=self.tree,
-                stats=stats,
-                report_once=self.report_once,
-            )
-        elif config.witness:
-            self.report_once(
-                "witness", "no checkpoint is submitted to the witness: it needs signed notes"
-            )
+        self._feed = witness_feed_for(
+            config,
+            self.tree if self._checkpoints.note_signer is not None else None,
+            store_root=path if is_root else path.parent,
+            robot_id=session.robot_id,
+            stats=stats,
+            report_once=self.report_once,
+        )
         self._batch_leaves: list[bytes] = []  # this batch's leaves, for the witness feed
-        self._recordings: RecordingSeals | None = None
-        if session.recordings:
-            self._recordings = RecordingSeals(
-                session.recordings,
-                path if is_root else path.parent,
-                window_s=config.recording_window_s,
-                settle_s=config.recording_settle_s,
-                report_once=self.report_once,
-            )
+        self._recordings = RecordingSeals.declared(
+            session, path if is_root else path.parent, config, self.report_once
+        )
         self.open_segment(session)
 
     def _first_tree(self, path: Path, session: SessionInfo) -> CompactRange | None:

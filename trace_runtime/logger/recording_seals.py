@@ -29,10 +29,12 @@ from typing import Any
 import orjson
 
 from trace_runtime.errors import LogReadError
+from trace_runtime.logger.config import LoggerConfig
 from trace_runtime.read_limits import DEFAULT_LIMITS, ReadLimits
 from trace_runtime.reading.growing_mcap import GrowingMcap
 from trace_runtime.reading.recording_windows import Line, line_of, seal_window
 from trace_runtime.reading.recordings import recording_files
+from trace_runtime.session import SessionInfo
 
 __all__ = [
     "POLL_S",
@@ -199,6 +201,26 @@ class RecordingSeals:
         self._out = RecordingBatch()
         self._last_poll = -POLL_S
         self._report_once = report_once
+
+    @classmethod
+    def declared(
+        cls,
+        session: SessionInfo,
+        base: Path,
+        config: LoggerConfig,
+        report_once: Callable[[str, str], None],
+    ) -> RecordingSeals | None:
+        """The followers of the recordings ``session`` declares (paths relative to
+        ``base``); None when it declares none."""
+        if not session.recordings:
+            return None
+        return cls(
+            session.recordings,
+            base,
+            window_s=config.recording_window_s,
+            settle_s=config.recording_settle_s,
+            report_once=report_once,
+        )
 
     def collect(self) -> RecordingBatch | None:
         """What to seal into the next batch's first cycle (None: nothing yet): what an

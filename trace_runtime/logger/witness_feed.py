@@ -12,12 +12,12 @@ from collections.abc import Callable
 from pathlib import Path
 
 from trace_runtime.errors import WitnessProtocolError
-from trace_runtime.logger.config import LoggerStats
+from trace_runtime.logger.config import LoggerConfig, LoggerStats
 from trace_runtime.tlog.cosignature_store import append_cosigned
 from trace_runtime.tlog.merkle import CompactRange
 from trace_runtime.tlog.witness_client import Submitted, submit
 
-__all__ = ["WITNESS_MAX_LEAVES", "WitnessFeed"]
+__all__ = ["WITNESS_MAX_LEAVES", "WitnessFeed", "witness_feed_for"]
 
 log = logging.getLogger("trace_runtime")
 
@@ -141,3 +141,30 @@ class WitnessFeed:
     def _failed(self, message: str) -> None:
         self.stats.witness_failures += 1
         self._report_once("witness", message)
+
+
+def witness_feed_for(
+    config: LoggerConfig,
+    tree: CompactRange | None,
+    *,
+    store_root: Path,
+    robot_id: str,
+    stats: LoggerStats,
+    report_once: Callable[[str, str], None],
+) -> WitnessFeed | None:
+    """The feed of a writer whose ``config`` names a witness, given the robot's tree (None:
+    unknown, or its checkpoints carry no signed note); None, said once, when it cannot be."""
+    if not config.witness:
+        return None
+    if tree is None:
+        report_once("witness", "no checkpoint is submitted to the witness: it needs signed notes")
+        return None
+    return WitnessFeed(
+        config.witness,
+        timeout_s=config.witness_timeout_s,
+        store_root=store_root,
+        robot_id=robot_id,
+        tree=tree,
+        stats=stats,
+        report_once=report_once,
+    )

@@ -18,18 +18,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trace_runtime.clock import clock_restarted, show_instant
-from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import LogReadError
 from trace_runtime.gaps import CycleRange
 from trace_runtime.reading.copies import copy_rank, cut_short_copy
 from trace_runtime.reading.logset import FileProblem, Log
 from trace_runtime.reading.reader import Segment
 from trace_runtime.reading.recordings import Recordings
-from trace_runtime.records import GENESIS, TOPIC_SEAL
+from trace_runtime.records import GENESIS
 from trace_runtime.session import EXCERPT_METADATA
 from trace_runtime.tlog.keys import PublicKey
-from trace_runtime.tlog.merkle import CompactRange, leaf_hash
-from trace_runtime.verification.checkpoint_check import CheckpointCheck, TreeCheck
+from trace_runtime.tlog.merkle import CompactRange
 from trace_runtime.verification.recording_check import RecordingCheck
 from trace_runtime.verification.report import (
     Finding,
@@ -40,8 +38,8 @@ from trace_runtime.verification.report import (
     display_name,
 )
 from trace_runtime.verification.scan import Anchor, ChainTail
-from trace_runtime.verification.segment_check import SegmentCheck
 from trace_runtime.verification.sink import FindingSink
+from trace_runtime.verification.tree_segment import TreeSegmentCheck
 
 __all__ = ["problem_finding", "verify"]
 
@@ -272,12 +270,12 @@ class _RobotChain:
         entry: str | None,
         entry_cycle: int | None,
         entry_tree: CompactRange | None,
-    ) -> list[_TreeSegmentCheck]:
-        results: list[_TreeSegmentCheck] = []
+    ) -> list[TreeSegmentCheck]:
+        results: list[TreeSegmentCheck] = []
         prev_seal = copies[0].session.prev_seal
         for n, copy in enumerate(copies):
             # Further copies report their findings; their notes would repeat the first's.
-            check = _TreeSegmentCheck(
+            check = TreeSegmentCheck(
                 copy,
                 entry,
                 entry_cycle,
@@ -304,7 +302,7 @@ class _RobotChain:
         return results
 
     def _compare_copies(
-        self, number: int, copies: list[Segment], results: list[_TreeSegmentCheck]
+        self, number: int, copies: list[Segment], results: list[TreeSegmentCheck]
     ) -> None:
         """Several copies of one segment: noted, and a finding when they fork."""
         first = copies[0]
@@ -389,44 +387,6 @@ class _RobotChain:
                 ),
             )
         )
-
-
-class _TreeSegmentCheck(SegmentCheck):
-    """A segment's check that also follows the robot's Merkle tree: it keeps each seal's
-    leaf hash as the cycles are read (one pass, no second read) and checks the segment's 1.2
-    checkpoints against the tree (``TreeCheck``) before the segment is summarised, so its
-    findings count in the segment's verdict and a checkpoint with a wrong tree vouches for
-    nothing. ``exit_tree`` is the tree after the segment's last seal."""
-
-    def __init__(
-        self,
-        segment: Segment,
-        entry: str | None,
-        entry_cycle: int | None,
-        key: PublicKey | None,
-        sink: FindingSink,
-        *,
-        recordings: Recordings | None = None,
-        recorded: RecordingCheck | None = None,
-        entry_tree: CompactRange | None = None,
-    ) -> None:
-        super().__init__(
-            segment, entry, entry_cycle, key, sink, recordings=recordings, recorded=recorded
-        )
-        self.entry_tree = entry_tree
-        self.exit_tree: CompactRange | None = None
-        self.leaves: list[bytes] = []
-
-    def cycle_read(self, cycle: Cycle) -> None:
-        data = cycle.payloads.get(TOPIC_SEAL)
-        if data is not None:
-            self.leaves.append(leaf_hash(data))
-
-    def checkpoints_checked(self, checkpoints: CheckpointCheck) -> None:
-        tree = TreeCheck(self.report, self.scan, self.key, self.leaves, self.entry_tree)
-        tree.run(self.checkpoints, checkpoints)
-        self.exit_tree = tree.exit
-        self.leaves = []  # the tree keeps what it needs
 
 
 def _count_after(segments: list[SegmentSummary], robot_id: str, after: int) -> int:
