@@ -106,7 +106,6 @@ class RemoteLogger:
         self._closed = False
         self._open: RemoteCycle | None = None
         self._next = 0
-        self._last_t_ns = 0
         self._declared = 0  # drops already carried by a sent cycle (sender thread only)
         self._sock: socket.socket | None = None
         self._pending: dict[int, _Request] = {}
@@ -132,12 +131,8 @@ class RemoteLogger:
             raise UsageError(f"cycle {self._open.cycle} was begun but not committed")
         if t_ns is None:
             t_ns = time.time_ns()
-        elif t_ns < self._last_t_ns:
-            raise RecordError(
-                f"cycle time {t_ns} ns is earlier than {self._last_t_ns} ns, the previous "
-                "cycle's: time must not go backwards (PROFILE section 4)"
-            )
-        self._last_t_ns = t_ns
+        elif t_ns < 0:
+            raise RecordError(f"cycle time {t_ns} ns is negative (PROFILE section 4)")
         builder = RemoteCycle(self, self._next, t_ns)
         self._next += 1
         self._open = builder

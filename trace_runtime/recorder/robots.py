@@ -46,8 +46,8 @@ class RobotLog:
         log = self.logger
         self._undeclared += message.dropped
         # A dropped cycle leaves its number unused and the next seal declares it (PROFILE
-        # section 7): the logger does exactly that for an aborted cycle. Raises RecordError
-        # before using a number when the time went back; the drops wait for the next message.
+        # section 7): the logger does exactly that for an aborted cycle. A time that went back
+        # is the logger's declared clock step (section 4); a negative one raises RecordError.
         while self._undeclared:
             log.cycle(message.t_ns).abort()
             self._undeclared -= 1
