@@ -36,11 +36,11 @@ from pathlib import Path
 
 from trace_runtime.boundary import regular_file, tier_folder
 from trace_runtime.errors import LogReadError, UsageError
+from trace_runtime.reading.catalog_rows import CATALOG_NAME
 from trace_runtime.reading.reader import Segment
 from trace_runtime.session import TIERS
 from trace_runtime.tier_formats.warm import WarmPolicy
 from trace_runtime.tiers._files import LOCK_NAME, PartialOpener, open_partial, root_lock
-from trace_runtime.tiers.catalog import CATALOG_NAME
 from trace_runtime.tiers.durations import DAY_NS
 from trace_runtime.tiers.plan import (
     Choice,
