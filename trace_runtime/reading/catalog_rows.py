@@ -23,7 +23,7 @@ from typing import TypeVar
 import msgspec
 
 from trace_runtime.boundary import read_side_file
-from trace_runtime.errors import LogLimitError, LogReadError
+from trace_runtime.errors import InputError, LogLimitError, LogReadError
 
 __all__ = ["CATALOG_FORMAT", "CATALOG_NAME", "CatalogFile", "read_catalog_file"]
 
@@ -50,8 +50,9 @@ _STRING = re.compile(rb'"(?:[^"\\]++|\\.)*+"')
 _FLAT_OBJECT = re.compile(rb'\{(?:[^{}\[\]"]++|"(?:[^"\\]++|\\.)*+")*+\}')
 
 
-class _NotCatalogError(Exception):
-    """An array element that is not what the format puts there (caught in this module)."""
+class _NotCatalogError(InputError):
+    """An array element that is not what the format puts there (caught in this module: the
+    catalog is a hint, and one that is not a catalog is no hint)."""
 
 
 @dataclass(frozen=True, slots=True)
