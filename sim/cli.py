@@ -99,6 +99,9 @@ Examples:
 
   trace-sim run --scenario all --cycles 100 --seed 42 --out run.mcap
 
+A .mcap file that exists is not overwritten (exit 4) unless --force; a log root is
+continued, the robot's chain going on from its newest segment there.
+
   trace-sim run --duration 24h --seed 1 --out /data/amr-01
 
   trace-sim run --duration 2h --faults off --batch 100 --out day/ --json
@@ -176,6 +179,9 @@ _Witness = Annotated[
     ),
 ]
 _Json = Annotated[bool, typer.Option("--json", help="print the summary as JSON")]
+_Force = Annotated[
+    bool, typer.Option("--force", help="replace an --out .mcap file that exists (and its sidecar)")
+]
 
 
 @app.command("run", help=help_text(_RUN_HELP), short_help=summary(_RUN_HELP))
@@ -192,8 +198,10 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
     key: _Key = None,
     witness: _Witness = None,
     as_json: _Json = False,
+    force: _Force = False,
 ) -> None:
     """Simulate scenarios and write the TRACE log plus a fault ground-truth sidecar."""
+    _clear_out(out, force=force)
     # Injected audit-write timeouts make the logger warn; the summary reports them instead.
     runtime_log = logging.getLogger("trace_runtime")
     level = runtime_log.level
@@ -225,6 +233,23 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
         sys.stdout.write(json.dumps(result.as_dict(), indent=2) + "\n")
     else:
         _render(result)
+
+
+def _clear_out(out: Path, *, force: bool) -> None:
+    """An --out file that exists is a log already: refused (exit 4, like any output that
+    exists), or with --force removed so the run writes a new one (the logger itself never
+    opens a segment over a file)."""
+    if out.suffix != ".mcap" or not (out.is_file() or out.is_symlink()):
+        return
+    if not force:
+        fail(
+            f"{out} exists; trace-sim does not overwrite a log (--force replaces it)",
+            EXIT_CANNOT_WRITE,
+        )
+    try:
+        out.unlink()
+    except OSError as err:
+        fail(f"cannot replace {out}: {err.strerror or err}", EXIT_CANNOT_WRITE)
 
 
 def _run_config(
