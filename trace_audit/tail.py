@@ -202,6 +202,10 @@ def tail(
     if not path.is_dir():
         raise UsageError(f"{path}: tail follows a log root (a folder), not one file")
     chosen = tuple(dict.fromkeys(robots)) if follow else _selected(path, robots)
+    if not follow and not _newest_segments(path, chosen):
+        # Nothing to print is not "no change": a root holding no readable segment (only
+        # a file that is not MCAP, or nothing) is the reader's one error (exit 3), as info's.
+        open_log(path, lazy=True)
     state: dict[str, _Robot] = {}
     quiet = _QuietRecovered()
     reader_log = logging.getLogger("trace_runtime")

@@ -38,6 +38,7 @@ from trace_runtime.reading.segment_files import find_segment_files
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.session import TIER_METADATA, TIERS
 from trace_runtime.tier_formats.cold import INDEX_TOPIC
+from trace_runtime.tiers._files import require_root
 
 log = logging.getLogger(__name__)
 
@@ -131,8 +132,7 @@ def refresh_catalog(root: str | Path, *, write: bool = True, rehash: bool = Fals
 
     ``rehash``: recompute every file's digests instead of reusing a confirmed row's."""
     root = Path(root)
-    if not root.is_dir():
-        raise LogReadError(str(root), "not a log root (no such directory)")
+    require_root(root)
     files = {_relative(root, path): path for path in segment_files(root)}
     old = None if rehash else load_catalog(root, files)
     known = {e.path: e for e in old.entries} if old else {}
