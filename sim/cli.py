@@ -314,10 +314,13 @@ def _render(result: RunResult) -> None:
     table = Table(title="trace-sim run", show_header=False, title_justify="left")
     table.add_column(style="bold")
     table.add_column()
-    table.add_row("cycles", f"{result.cycles:,} ({result.written:,} written)")
-    table.add_row("dropped", f"{result.dropped:,}")
-    table.add_row("commands", ", ".join(f"{k} {v:,}" for k, v in sorted(result.commands.items())))
-    table.add_row("STOPs", f"{result.commands.get('STOP', 0):,}")
+    # Counted per cycle the robot decided, dropped or not: the log holds the written ones,
+    # so its counts (trace-audit why, timeline) are lower by the dropped cycles.
+    table.add_row("cycles", f"{result.cycles:,} decided, {result.written:,} written to the log")
+    table.add_row("dropped", f"{result.dropped:,} (lost writes, not in the log; seals count them)")
+    per_command = ", ".join(f"{k} {v:,}" for k, v in sorted(result.commands.items()))
+    table.add_row("cycles per command", f"{per_command} (of the {result.cycles:,} decided)")
+    table.add_row("STOP cycles", f"{result.commands.get('STOP', 0):,}")
     table.add_row("scenarios", ", ".join(f"{k} {v:,}" for k, v in result.scenarios.items()))
     faults = ", ".join(f"{k} {v:,}" for k, v in sorted(result.faults.items())) or "none"
     table.add_row("faults injected", faults)
@@ -330,7 +333,8 @@ def _render(result: RunResult) -> None:
             f"min separation person {_m(out['min_separation_person_m'])}, "
             f"vehicle {_m(out['min_separation_vehicle_m'])}; "
             f"near misses {out['near_miss_events']} ({out['near_miss_cycles']} cycles); "
-            f"STOPs {out['stops']}, time to stop median {_s(out['time_to_stop_median_s'])}, "
+            f"stops (changes to STOP) {out['stops']}, time to stop median "
+            f"{_s(out['time_to_stop_median_s'])}, "
             f"max {_s(out['time_to_stop_max_s'])}",
         )
     for cls, q in result.perception.get("per_class", {}).items():
