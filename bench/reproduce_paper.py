@@ -275,7 +275,7 @@ def _behaviour(main: Run, clean: list[Behaviour]) -> list[str]:
     out += ["", "Safety outcomes against the simulator's ground truth, over the same seeds:", ""]
     out.append(
         "| scenario | min separation to a person | to a vehicle | near-miss events (< 0.5 m) "
-        "| STOPs | time to stop, median / max |"
+        "| stops (changes to STOP) | time to stop, median / max |"
     )
     out.append("|---|---|---|---|---|---|")
     for name in SCENARIOS:

@@ -183,8 +183,27 @@ app = _program()
 
 
 def main() -> None:
-    """Entry point of ``trace-sim``."""
-    app()
+    """Entry point of ``trace-sim``: usage errors are one line on stderr with exit code 2, as
+    ``trace-audit``'s; run without a command, the help on stdout (exit 2)."""
+    from trace_audit.cli.typer_compat import (
+        TyperException,
+        help_without_command,
+        usage_error_line,
+    )
+
+    try:
+        code = app(standalone_mode=False, prog_name="trace-sim")
+    except TyperException as err:
+        shown = help_without_command(err)
+        if shown is not None:
+            sys.stdout.write(shown)
+        else:
+            sys.stderr.write(usage_error_line(err, "trace-sim") or "")
+        sys.exit(EXIT_USAGE)
+    except typer.Abort:
+        sys.stderr.write("trace-sim: interrupted\n")
+        sys.exit(130)
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":

@@ -32,6 +32,7 @@ from trace_runtime import (
     Perception,
     Pose,
     Rationale,
+    UsageError,
 )
 
 STOP_BELOW_M = 2.0
@@ -171,7 +172,11 @@ def main(argv: list[str] | None = None) -> int:
         "--announce", action="store_true", help="print each committed cycle and run in real time"
     )
     args = parser.parse_args(argv)
-    run(args.out, args.cycles, args.period, announce=args.announce)
+    try:
+        run(args.out, args.cycles, args.period, announce=args.announce)
+    except UsageError as err:  # a set-up error (an --out log that exists): one line, exit 2
+        print(f"minimal_robot: {err}", file=sys.stderr)
+        return 2
     return 0
 
 

@@ -99,6 +99,9 @@ Examples:
 
   trace-sim run --scenario all --cycles 100 --seed 42 --out run.mcap
 
+A .mcap file that exists is not overwritten (exit 4) unless --force; a log root is
+continued, the robot's chain going on from its newest segment there.
+
   trace-sim run --duration 24h --seed 1 --out /data/amr-01
 
   trace-sim run --duration 2h --faults off --batch 100 --out day/ --json
@@ -176,6 +179,9 @@ _Witness = Annotated[
     ),
 ]
 _Json = Annotated[bool, typer.Option("--json", help="print the summary as JSON")]
+_Force = Annotated[
+    bool, typer.Option("--force", help="replace an --out .mcap file that exists (and its sidecar)")
+]
 
 
 @app.command("run", help=help_text(_RUN_HELP), short_help=summary(_RUN_HELP))
@@ -192,8 +198,10 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
     key: _Key = None,
     witness: _Witness = None,
     as_json: _Json = False,
+    force: _Force = False,
 ) -> None:
     """Simulate scenarios and write the TRACE log plus a fault ground-truth sidecar."""
+    _clear_out(out, force=force)
     # Injected audit-write timeouts make the logger warn; the summary reports them instead.
     runtime_log = logging.getLogger("trace_runtime")
     level = runtime_log.level
@@ -225,6 +233,23 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
         sys.stdout.write(json.dumps(result.as_dict(), indent=2) + "\n")
     else:
         _render(result)
+
+
+def _clear_out(out: Path, *, force: bool) -> None:
+    """An --out file that exists is a log already: refused (exit 4, like any output that
+    exists), or with --force removed so the run writes a new one (the logger itself never
+    opens a segment over a file)."""
+    if out.suffix != ".mcap" or not (out.is_file() or out.is_symlink()):
+        return
+    if not force:
+        fail(
+            f"{out} exists; trace-sim does not overwrite a log (--force replaces it)",
+            EXIT_CANNOT_WRITE,
+        )
+    try:
+        out.unlink()
+    except OSError as err:
+        fail(f"cannot replace {out}: {err.strerror or err}", EXIT_CANNOT_WRITE)
 
 
 def _run_config(
@@ -289,10 +314,13 @@ def _render(result: RunResult) -> None:
     table = Table(title="trace-sim run", show_header=False, title_justify="left")
     table.add_column(style="bold")
     table.add_column()
-    table.add_row("cycles", f"{result.cycles:,} ({result.written:,} written)")
-    table.add_row("dropped", f"{result.dropped:,}")
-    table.add_row("commands", ", ".join(f"{k} {v:,}" for k, v in sorted(result.commands.items())))
-    table.add_row("STOPs", f"{result.commands.get('STOP', 0):,}")
+    # Counted per cycle the robot decided, dropped or not: the log holds the written ones,
+    # so its counts (trace-audit why, timeline) are lower by the dropped cycles.
+    table.add_row("cycles", f"{result.cycles:,} decided, {result.written:,} written to the log")
+    table.add_row("dropped", f"{result.dropped:,} (lost writes, not in the log; seals count them)")
+    per_command = ", ".join(f"{k} {v:,}" for k, v in sorted(result.commands.items()))
+    table.add_row("cycles per command", f"{per_command} (of the {result.cycles:,} decided)")
+    table.add_row("STOP cycles", f"{result.commands.get('STOP', 0):,}")
     table.add_row("scenarios", ", ".join(f"{k} {v:,}" for k, v in result.scenarios.items()))
     faults = ", ".join(f"{k} {v:,}" for k, v in sorted(result.faults.items())) or "none"
     table.add_row("faults injected", faults)
@@ -305,7 +333,8 @@ def _render(result: RunResult) -> None:
             f"min separation person {_m(out['min_separation_person_m'])}, "
             f"vehicle {_m(out['min_separation_vehicle_m'])}; "
             f"near misses {out['near_miss_events']} ({out['near_miss_cycles']} cycles); "
-            f"STOPs {out['stops']}, time to stop median {_s(out['time_to_stop_median_s'])}, "
+            f"stops (changes to STOP) {out['stops']}, time to stop median "
+            f"{_s(out['time_to_stop_median_s'])}, "
             f"max {_s(out['time_to_stop_max_s'])}",
         )
     for cls, q in result.perception.get("per_class", {}).items():

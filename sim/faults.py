@@ -20,6 +20,8 @@ from typing import IO, Any, BinaryIO, cast
 import numpy as np
 import orjson
 
+from trace_runtime.logger.config import default_opener
+
 
 @dataclass(frozen=True, slots=True)
 class FaultRates:
@@ -132,7 +134,7 @@ class FailingOpener:
         self._failing = False
 
     def __call__(self, path: Path) -> BinaryIO:
-        stream = FailingStream(open(path, "wb"))  # noqa: SIM115 - the logger closes it
+        stream = FailingStream(default_opener(path))  # never over an existing log
         stream.failing = self._failing
         self.streams.append(stream)
         return cast(BinaryIO, stream)

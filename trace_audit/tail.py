@@ -189,14 +189,23 @@ def tail(
 
     ``robots`` selects robots (``selection.Selection``; one not in the log is a
     ``UsageError``, but followed it is waited for: tail is started before the robot boots);
-    none follows every robot, including robots that start logging later."""
+    none follows every robot, including robots that start logging later. A root that does
+    not exist yet is, followed, waited for (like ``tail -F``): the robot creates it."""
     path = Path(root)
+    stop = stop or threading.Event()
+    if follow:
+        while not path.exists():
+            if stop.wait(poll_s):
+                return
     if not path.exists():
         raise LogReadError(str(path), "no such file or directory")
     if not path.is_dir():
         raise UsageError(f"{path}: tail follows a log root (a folder), not one file")
     chosen = tuple(dict.fromkeys(robots)) if follow else _selected(path, robots)
-    stop = stop or threading.Event()
+    if not follow and not _newest_segments(path, chosen):
+        # Nothing to print is not "no change": a root holding no readable segment (only
+        # a file that is not MCAP, or nothing) is the reader's one error (exit 3), as info's.
+        open_log(path, lazy=True)
     state: dict[str, _Robot] = {}
     quiet = _QuietRecovered()
     reader_log = logging.getLogger("trace_runtime")

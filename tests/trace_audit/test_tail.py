@@ -257,3 +257,36 @@ def test_a_robot_asked_for_is_waited_for_when_following(tmp_path: Path) -> None:
         follower.send_signal(signal.SIGINT)
         assert follower.wait(10) == 0
         out.reader.join(10)
+
+
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM])
+def test_a_root_that_does_not_exist_yet_is_waited_for_when_following(
+    tmp_path: Path, stop: signal.Signals
+) -> None:
+    """Like ``tail -F``: one line on stderr says it waits; the robot then creates the root;
+    Ctrl-C or SIGTERM (a service manager) ends it with exit 0."""
+    root = tmp_path / "not-yet" / "root"
+    with _tail(root, "--follow") as follower:
+        out = _Lines(follower)
+        time.sleep(1.0)  # tail is up before the robot boots, and waits
+        assert follower.poll() is None
+        with _robot(root) as robot:
+            _log(robot, 1)
+            out.until("r_000000.mcap live", WITHIN_S)
+            first, _ = out.until("cycle 0 ", WITHIN_S)
+            assert "STOP" in first
+        follower.send_signal(stop)
+        assert follower.wait(10) == 0
+        out.reader.join(10)
+        assert follower.stderr is not None
+        errors = follower.stderr.read()
+    assert errors.count("\n") == 1 and "does not exist yet; waiting" in errors, errors
+    assert str(root) in errors
+
+
+def test_sigterm_ends_a_follow_waiting_for_a_root_with_exit_0(tmp_path: Path) -> None:
+    with _tail(tmp_path / "nope", "--follow", "--json") as follower:
+        time.sleep(1.0)
+        follower.send_signal(signal.SIGTERM)
+        assert follower.wait(10) == 0
+        assert follower.stdout is not None and follower.stdout.read() == ""

@@ -25,7 +25,7 @@ from trace_audit.cli import (  # noqa: F401 - each module registers its commands
     witness,
 )
 from trace_audit.cli.app import EXIT_USAGE, app, claim_process
-from trace_audit.cli.typer_compat import TyperException, usage_error_line
+from trace_audit.cli.typer_compat import TyperException, help_without_command, usage_error_line
 
 __all__ = ["app", "main"]
 
@@ -59,9 +59,11 @@ def main() -> None:
     try:
         code = app.runner_for(sys.argv[1:])(standalone_mode=False)
     except TyperException as err:  # the command line's own errors: unknown option, bad value
-        line = usage_error_line(err, "trace-audit")
-        if line is not None:
-            sys.stderr.write(line)
+        shown = help_without_command(err)  # `trace-audit`, `trace-audit witness`: the help
+        if shown is not None:
+            sys.stdout.write(shown)
+        else:
+            sys.stderr.write(usage_error_line(err, "trace-audit") or "")
         sys.exit(EXIT_USAGE)
     except typer.Abort:
         sys.stderr.write("trace-audit: interrupted\n")

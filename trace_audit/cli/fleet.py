@@ -87,7 +87,7 @@ def index_command(
 
 def _index_doc(r: IndexReport) -> Doc:
     doc = Doc()
-    doc.title(f"Fleet index {r.index} (version {r.version})")
+    doc.title(f"Fleet index in {r.index} (version {r.version})")  # "index" is often its name
     doc.fields(
         [
             (

@@ -73,19 +73,23 @@ robot. Exit codes: 0 clean, 1 findings, 2 usage (e.g. a bad key file), 3 unreada
   trace-audit verify /data/fleet/ --scheduler tcp://10.0.0.5:8786
 """
 
-_KEYGEN_HELP = """Create an Ed25519 key pair for signing checkpoints.
+_KEYGEN_HELP = """Create an Ed25519 key pair for signing: a robot's checkpoints or a witness's
+cosignatures.
 
-Writes NAME.key (the private key, PKCS#8 PEM, file mode 0600: it stays on the robot) and
-NAME.pub (the public key, PEM: give it to whoever verifies). Point the logger at the private
-key with LoggerConfig(checkpoint_key="DIR/NAME.key"); verify with --key DIR/NAME.pub. Keys
-from openssl genpkey -algorithm ed25519 work as well. Refuses to overwrite a key unless
---force.
+Writes NAME.key (the private key, PKCS#8 PEM, file mode 0600: it stays on the host that
+signs) and NAME.pub (the public key, PEM: give it to whoever verifies). A robot's logger
+takes the private key as LoggerConfig(checkpoint_key="DIR/NAME.key"), verify its public key
+as --key; a witness takes the private key as witness serve --key. Keys from openssl genpkey
+-algorithm ed25519 work as well. A key that exists is not overwritten unless --force (exit
+4, like a folder that cannot be written).
 
 [bold]Examples[/bold]:
 
   trace-audit keygen --out keys/
 
   trace-audit keygen --out /etc/trace --name amr-7 --json
+
+  trace-audit keygen --out /etc/trace-witness --name witness
 """
 
 _MAX_LISTED = 200
@@ -366,14 +370,20 @@ def keygen_command(
 
 def keygen_doc(pair: KeyPair) -> Doc:
     doc = Doc()
-    doc.title(["Created an Ed25519 checkpoint key ", Seg(pair.key_id[:16] + "…", "bold")])
+    doc.title(["Created an Ed25519 signing key ", Seg(pair.key_id[:16] + "…", "bold")])
     doc.fields(
         [
-            ("private key", f"{pair.private_path} (mode 0600; keep it on the robot)"),
+            ("private key", f"{pair.private_path} (mode 0600; keep it on the host that signs)"),
             ("public key", f"{pair.public_path} (give it to whoever verifies)"),
             ("key id", pair.key_id),
         ]
     )
-    doc.line(f'Logger: LoggerConfig(checkpoint_key="{pair.private_path}")')
-    doc.line(f"Verify: trace-audit verify LOG --key {pair.public_path}")
+    # The same pair serves a robot or a witness; keygen cannot know which, so it says both.
+    doc.line(f'On a robot:   LoggerConfig(checkpoint_key="{pair.private_path}")')
+    doc.line(f"  its logs:   trace-audit verify LOG --key {pair.public_path}")
+    doc.line(f"On a witness: trace-audit witness serve --key {pair.private_path} …")
+    doc.line(
+        f"  its vkey:   trace-audit witness vkey --cosignature --key {pair.public_path} "
+        "--origin NAME"
+    )
     return doc

@@ -144,6 +144,8 @@ def emit_per_robot(
 
 
 _HANDLER_NAME = "trace-audit stderr line"
+_SAID_AT_MOST = 10_000
+"""Distinct warning lines remembered to print each once (past this, repeats print again)."""
 
 
 def setup_logging() -> None:
@@ -151,13 +153,22 @@ def setup_logging() -> None:
     import logging  # here, not at the top: ``--help`` never logs (start-up budget)
 
     class StderrLine(logging.Handler):
-        """One ``trace-audit: warning: ...`` line on whatever ``sys.stderr`` is at the time."""
+        """One ``trace-audit: warning: ...`` line on whatever ``sys.stderr`` is at the time,
+        each line once: a command that opens a segment twice (verify, then the witness
+        comparison) says once that it was recovered."""
+
+        def __init__(self, level: int) -> None:
+            super().__init__(level)
+            self.said: set[str] = set()
 
         def emit(self, record: logging.LogRecord) -> None:
+            line = f"trace-audit: {record.levelname.lower()}: {record.getMessage()}\n"
+            if line in self.said:
+                return
+            if len(self.said) < _SAID_AT_MOST:
+                self.said.add(line)
             try:
-                sys.stderr.write(
-                    f"trace-audit: {record.levelname.lower()}: {record.getMessage()}\n"
-                )
+                sys.stderr.write(line)
             except (OSError, ValueError):  # stderr closed or unable to encode the message
                 self.handleError(record)
 

@@ -106,8 +106,16 @@ _GAP = 2
 """Spaces between the columns of a plain table."""
 
 
+_MIN_WRAP = 32
+"""A wrapping column left fewer characters than this (an 80-column terminal, wide cells
+beside it) reads a word or two a line: its text goes under its row instead, full width."""
+
+
 def _plain_table(columns: list[Column], rows: list[list[Line]], width: int) -> list[str]:
     cells = [[plain_text(c) for c in row] for row in rows]
+    below = _wrap_below(columns, cells, width)
+    if below is not None:
+        return _plain_table_below(columns, cells, width, below)
     widths = _column_widths(columns, cells, width)
     out = _plain_row(columns, widths, [c.header for c in columns])
     out.append("  " + (" " * _GAP).join("-" * w for w in widths))
@@ -116,18 +124,55 @@ def _plain_table(columns: list[Column], rows: list[list[Line]], width: int) -> l
     return out
 
 
-def _column_widths(columns: list[Column], cells: list[list[str]], width: int) -> list[int]:
-    """Each column as wide as its widest cell; the wrapping one takes what is left."""
-    n = len(columns)
+def _natural_widths(columns: list[Column], cells: list[list[str]]) -> list[int]:
+    """Each column as wide as its header and its widest cell."""
     widths = [len(c.header) for c in columns]
     for row in cells:
-        for i, text in enumerate(row[:n]):
+        for i, text in enumerate(row[: len(columns)]):
             widths[i] = max(widths[i], len(text))
+    return widths
+
+
+def _column_widths(columns: list[Column], cells: list[list[str]], width: int) -> list[int]:
+    """Each column as wide as its widest cell; the wrapping one takes what is left."""
+    widths = _natural_widths(columns, cells)
     wrap_at = _wrap_column(columns)
     if wrap_at is not None:
-        others = sum(w for i, w in enumerate(widths) if i != wrap_at) + _GAP * (n - 1)
+        others = sum(w for i, w in enumerate(widths) if i != wrap_at) + _GAP * (len(columns) - 1)
         widths[wrap_at] = max(16, min(widths[wrap_at], width - others))
     return widths
+
+
+def _wrap_below(columns: list[Column], cells: list[list[str]], width: int) -> int | None:
+    """The wrapping column, when its text goes under each row (``_MIN_WRAP``); else None."""
+    wrap_at = _wrap_column(columns)
+    if wrap_at is None:
+        return None
+    widths = _natural_widths(columns, cells)
+    others = sum(w for i, w in enumerate(widths) if i != wrap_at) + _GAP * len(columns)
+    return wrap_at if width - others < min(_MIN_WRAP, widths[wrap_at]) else None
+
+
+def _plain_table_below(
+    columns: list[Column], cells: list[list[str]], width: int, below: int
+) -> list[str]:
+    """The table without column ``below``, each row followed by that column's text wrapped
+    to the whole width, indented under the row."""
+    kept = [c for i, c in enumerate(columns) if i != below]
+    rows = [[t for i, t in enumerate(row) if i != below] for row in cells]
+    widths = _natural_widths(kept, rows)
+    if 2 + sum(widths) + _GAP * (len(widths) - 1) > width:  # still too wide: the widest wraps
+        widest = widths.index(max(widths))
+        kept[widest] = Column(kept[widest].header, kept[widest].justify, wrap=True)
+        widths = _column_widths(kept, rows, width - 2)  # the rows' indent
+    out = _plain_row(kept, widths, [c.header for c in kept])
+    out.append("  " + (" " * _GAP).join("-" * w for w in widths))
+    for row, full in zip(rows, cells, strict=True):
+        out += _plain_row(kept, widths, row)
+        text = full[below] if below < len(full) else ""
+        if text:
+            out += _wrap(text, width, "      ", "      ")
+    return out
 
 
 def _wrap_column(columns: list[Column]) -> int | None:
@@ -205,11 +250,11 @@ def draw_rich(doc: Doc, console: Console) -> None:
         elif isinstance(block, BoxBlock):
             console.print(_box_table(block.table, plain=console.no_color))
         else:
-            console.print(_rich_block(block))
+            console.print(_rich_block(block, console.width))
 
 
 def _rich_block(
-    block: TitleBlock | FieldsBlock | TableBlock | TreeBlock | LineBlock,
+    block: TitleBlock | FieldsBlock | TableBlock | TreeBlock | LineBlock, width: int
 ) -> RenderableType:
     """A flow block other than a heading as one rich renderable."""
     if isinstance(block, TitleBlock):
@@ -219,7 +264,7 @@ def _rich_block(
     if isinstance(block, FieldsBlock):
         return _rich_fields(block.rows)
     if isinstance(block, TableBlock):
-        return _rich_table(block.columns, block.rows)
+        return _rich_table(block.columns, block.rows, width)
     if isinstance(block, TreeBlock):
         return _rich_tree(block.root)
     text = _rich_text(block.line)
@@ -242,9 +287,18 @@ def _rich_fields(rows: list[tuple[str, Line]]) -> Table:
     return grid
 
 
-def _rich_table(columns: list[Column], rows: list[list[Line]]) -> Table:
+def _rich_table(columns: list[Column], rows: list[list[Line]], width: int) -> RenderableType:
     from rich import box
     from rich.table import Table
+    from rich.text import Text
+
+    cells = [[plain_text(c) for c in row] for row in rows]
+    below = _wrap_below(columns, cells, width)
+    if below is not None:  # rich cannot span a cell across a row: the plain layout, bold head
+        lines = _plain_table_below(columns, cells, width, below)
+        text = Text("\n".join(lines), no_wrap=True, overflow="ignore")  # laid out already
+        text.stylize("bold", 0, len(lines[0]))
+        return text
 
     table = Table(box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False, header_style="bold")
     for col in columns:

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Annotated, Literal, TypedDict
 
 import typer
 
-from trace_audit.cli.app import EXIT_FINDINGS, app, guarded
+from trace_audit.cli.app import EXIT_FINDINGS, app, fail, guarded
 from trace_audit.cli.doc import BoxColumn, BoxTable, Doc
 from trace_audit.cli.options import (
     JsonOption,
@@ -25,7 +25,7 @@ from trace_audit.cli.options import (
     robot_option,
 )
 from trace_audit.cli.output import emit, progress_bar
-from trace_runtime.errors import UsageError
+from trace_runtime.errors import EXIT_UNREADABLE, UsageError
 
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
     from collections.abc import Callable
@@ -80,7 +80,8 @@ _CATALOG_HELP = "\n\n".join(
         (
             "The catalog is rebuilt from the segment files (only changed files are re-read); "
             "--refresh also writes it back. Per segment: robot, tier, segment number, time "
-            "and cycle range, first and last seal digest, file SHA-256 and size."
+            "and cycle range, first and last seal digest, file SHA-256 and size. Files that "
+            "cannot be read are listed; when no file is a readable segment, exit 3."
         ),
         "[bold]Examples[/bold]:",
         "  trace-audit catalog fleet/robot-7",
@@ -408,6 +409,9 @@ def catalog_command(
         plain=plain,
         to_json=lambda c: {"root": str(root), "segments": c.entries, "problems": c.problems},
     )
+    if not catalog.entries and catalog.problems:
+        # Files in the tiers and none of them a segment: unreadable input, not an empty root.
+        fail(f"{root}: no readable segment ({catalog.problems[0]})", EXIT_UNREADABLE)
 
 
 def catalog_doc(catalog: Catalog) -> Doc:

@@ -2,7 +2,7 @@
 
 Parses its arguments, iterates ``trace_audit.tail.tail`` and prints each event as it comes:
 a line for people, or one JSON object a line with ``--json`` (like ``journalctl -o json``).
-Ctrl-C (SIGINT) ends a followed tail cleanly, with exit code 0.
+Ctrl-C (SIGINT) or SIGTERM ends a followed tail cleanly, with exit code 0.
 """
 
 from __future__ import annotations
@@ -33,7 +33,8 @@ Reads each robot's newest segment of a log root (the one being written) and prin
 cycle whose command differs from the robot's previous cycle's: its time, the change, the
 leading factor and the rationale. A segment being written is shown as live (its writer holds
 its lock), one whose writer died as recovered. --follow keeps watching, following the logger
-to its next segment when it rotates, until Ctrl-C; without it, tail prints the changes
+to its next segment when it rotates, until Ctrl-C or SIGTERM (exit 0), and waits for a root
+or robot that has not appeared yet (like tail -F); without it, tail prints the changes
 written so far and exits. --json prints one JSON object a line. Each poll reads only what
 the logger appended since the last one.
 
@@ -93,7 +94,7 @@ def _run(
     json_out: bool,
     live: tuple[str, int] | None = None,
 ) -> None:
-    """Print each event as it comes; SIGINT sets the stop flag the poll waits on, so the
+    """Print each event as it comes; SIGINT or SIGTERM sets the stop flag the poll waits on, so the
     loop ends between reads, never with a traceback. ``live``: (host, port) of the Foxglove
     view to serve while following."""
     import threading
@@ -109,8 +110,13 @@ def _run(
     def interrupted(_signum: int, _frame: FrameType | None) -> None:
         stop.set()
 
-    previous = signal.signal(signal.SIGINT, interrupted)
+    # A followed tail runs under a service manager as often as in a terminal: SIGTERM is
+    # its Ctrl-C, and both end it between reads with exit 0.
+    previous = {sig: signal.signal(sig, interrupted) for sig in (signal.SIGINT, signal.SIGTERM)}
     on_cycle = view.cycle if view is not None else None
+    if follow and not root.exists():
+        sys.stderr.write(f"trace-audit: {root} does not exist yet; waiting for it (Ctrl-C stops)\n")
+        sys.stderr.flush()
     try:
         for event in tail(root, robots=robots, follow=follow, stop=stop, on_cycle=on_cycle):
             if stop.is_set():
@@ -119,19 +125,17 @@ def _run(
     except BrokenPipeError:  # `tail ... | head`: the reader went away, nothing more to say
         sys.stderr.close()
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
         if view is not None:
             view.close()
 
 
 def _serve(root: Path, robots: tuple[str, ...], host: str, port: int) -> LiveView:
-    """Start the live Foxglove view (the root checked first, as tail checks it) and say on
-    stderr where it listens."""
+    """Start the live Foxglove view and say on stderr where it listens (a root that does not
+    exist yet is waited for by tail, its first robot shown)."""
     from trace_audit.foxglove.live import LiveView, live_robot
-    from trace_runtime.errors import LogReadError
 
-    if not root.exists():
-        raise LogReadError(str(root), "no such file or directory")
     robot = live_robot(root, robots) if root.is_dir() else None
     view = LiveView(robot=robot, host=host, port=port)
     shown = robot or "the first robot to log"

@@ -22,7 +22,15 @@ from typer.exceptions import TyperException
 from typer.main import get_group, solve_typer_info_defaults
 from typer.models import CommandFunctionType, CommandInfo, OptionInfo, TyperInfo
 
-__all__ = ["App", "Command", "Group", "OptionInfo", "TyperException", "usage_error_line"]
+__all__ = [
+    "App",
+    "Command",
+    "Group",
+    "OptionInfo",
+    "TyperException",
+    "help_without_command",
+    "usage_error_line",
+]
 
 # Rich markup written in help texts ("[bold]Examples[/bold]:"): the help is drawn by click's
 # plain formatter (below), so the tags are taken out rather than printed. Only style tags:
@@ -232,6 +240,17 @@ def _without_parameters(info: CommandInfo) -> CommandInfo:
 
 def _no_parameters() -> None:
     pass
+
+
+def help_without_command(err: TyperException) -> str | None:
+    """The help a group prints when run without a sub-command (typer 0.29's click raises it
+    as ``NoArgsIsHelpError``, a usage error whose message is the help), for stdout; None
+    for any other error."""
+    from typer._click.exceptions import NoArgsIsHelpError
+
+    if not isinstance(err, NoArgsIsHelpError):
+        return None
+    return err.format_message().rstrip("\n") + "\n"
 
 
 def usage_error_line(err: TyperException, program: str) -> str | None:

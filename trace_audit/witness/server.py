@@ -30,7 +30,13 @@ from pathlib import Path
 from types import FrameType
 
 from trace_audit.witness.state import Latest, WitnessState
-from trace_runtime.errors import NoteError, UnverifiedNoteError, UsageError, WitnessProtocolError
+from trace_runtime.errors import (
+    NoteError,
+    StorageError,
+    UnverifiedNoteError,
+    UsageError,
+    WitnessProtocolError,
+)
 from trace_runtime.tlog.keys import load_signer
 from trace_runtime.tlog.merkle import EMPTY_ROOT, verify_consistency
 from trace_runtime.tlog.signed_note import (
@@ -210,12 +216,18 @@ def serve(
         cosigner = NoteSigner(name, signer, signer.public_key.raw, COSIGNATURE)
     except NoteError as err:
         raise UsageError(f"--name: {err}") from err
-    state = WitnessState(state_dir)
-    witness = Witness(cosigner, verifiers, state)
+    # Listen before the state is made: a witness that cannot start (its port taken) leaves
+    # no witness.sqlite behind in a folder it may just have created.
     try:
-        httpd = ThreadingHTTPServer((host, port), _handler(witness))
+        httpd = ThreadingHTTPServer((host, port), BaseHTTPRequestHandler)
     except OSError as err:
         raise UsageError(f"cannot listen on {listen}: {err.strerror or err}") from err
+    try:
+        state = WitnessState(state_dir)
+    except StorageError:
+        httpd.server_close()
+        raise
+    httpd.RequestHandlerClass = _handler(Witness(cosigner, verifiers, state))
     httpd.daemon_threads = True
     stop = threading.Event()
 

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO, Literal
 
+from trace_runtime.errors import UsageError
 from trace_runtime.tlog.keys import Signer
 
 __all__ = ["LoggerConfig", "LoggerStats", "Opener", "default_opener", "default_origin"]
@@ -21,8 +22,19 @@ def default_origin(robot_id: str) -> str:
 
 
 def default_opener(path: Path) -> BinaryIO:
-    """Open a new segment file for writing (``LoggerConfig.opener`` when none is given)."""
-    return open(path, "wb")
+    """Open a new segment file for writing (``LoggerConfig.opener`` when none is given).
+
+    Never over a file that exists: a log is evidence, and a robot started twice on the same
+    file name would erase the first run's. The first segment is opened when the logger is
+    made, so this is a set-up error the integrator sees there (``UsageError``); a later
+    segment that finds its name taken is a failed write, dropped and counted like any."""
+    try:
+        return open(path, "xb")
+    except FileExistsError as err:
+        raise UsageError(
+            f"{path} exists: the logger does not overwrite a log (log into a folder, a log "
+            "root, to continue the robot's chain there; or give a new file name)"
+        ) from err
 
 
 @dataclass(frozen=True, slots=True)

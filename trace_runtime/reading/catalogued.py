@@ -8,14 +8,15 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
-from trace_runtime.boundary import read_side_json
+import msgspec
+
 from trace_runtime.errors import (
     LogReadError,
     StaleCatalogError,
 )
 from trace_runtime.read_limits import ReadLimits
+from trace_runtime.reading.catalog_rows import read_catalog_file
 from trace_runtime.reading.reader import Segment
 
 log = logging.getLogger("trace_runtime")
@@ -80,11 +81,11 @@ def catalogued_slots(
     two tiers to choose between), finished, holding sealed cycles, and no file the catalog
     could not read (opening would make it a problem to report).
     """
-    catalog = _catalog_rows(root)
+    catalog = _catalog_rows(root, len(files))
     if catalog is None or len(catalog) != len(files):
         return None
-    rows = {row["path"]: row for row in catalog}
-    copies = {(row["robot"], row["segment"]) for row in catalog}
+    rows = {row.path: row for row in catalog}
+    copies = {(row.robot, row.segment) for row in catalog}
     if len(rows) != len(files) or len(copies) != len(rows):
         return None
     slots: list[Unopened] = []
@@ -96,53 +97,43 @@ def catalogued_slots(
             return None
         if (
             row is None
-            or row["bytes"] != stat.st_size
-            or row["mtime_ns"] != stat.st_mtime_ns
-            or row["finished"] is not True
-            or row["cycles"] <= 0
+            or row.bytes != stat.st_size
+            or row.mtime_ns != stat.st_mtime_ns
+            or row.finished is not True
+            or row.cycles <= 0
         ):
             return None
-        slots.append(
-            Unopened(file, row["robot"], row["segment"], row["start_ns"], row["end_ns"], limits)
-        )
+        slots.append(Unopened(file, row.robot, row.segment, row.start_ns, row.end_ns, limits))
     return slots
 
 
-_CATALOG_NAME = "catalog.json"
-_CATALOG_FORMAT = "trace-catalog-v1"
-_CATALOG_FIELDS = {
-    "path": str,
-    "robot": str,
-    "segment": int,
-    "start_ns": int,
-    "end_ns": int,
-    "finished": bool,
-    "cycles": int,
-    "bytes": int,
-    "mtime_ns": int,
-}
+class CatalogRow(msgspec.Struct):
+    """The fields of a catalog row (``trace_runtime.tiers.catalog.CatalogEntry``) a lazy log
+    needs, each checked for type as it is decoded."""
+
+    path: str
+    robot: str
+    segment: int
+    start_ns: int
+    end_ns: int
+    finished: bool
+    cycles: int
+    bytes: int
+    mtime_ns: int
 
 
-def _catalog_rows(root: Path) -> list[dict[str, Any]] | None:
-    """The rows of a root's catalog (``trace_runtime.tiers.catalog``), the fields a lazy log
-    needs checked for type, or None when there is no catalog that is whole and clean.
+def _catalog_rows(root: Path, files: int) -> list[CatalogRow] | None:
+    """The rows of a root's catalog, or None when there is no catalog that is whole and clean
+    or it holds more rows than the root has ``files`` (decoding stops there).
 
     Read here rather than through ``tiers.catalog.load_catalog`` because importing the tiers
     package loads the writer and the ``mcap`` library (~30 ms) into every ``explain``; a test
     pins these rows to ``load_catalog``'s entries.
     """
     try:
-        body = read_side_json(root / _CATALOG_NAME)
+        stored = read_catalog_file(root)
     except LogReadError:
         return None  # a hint that cannot be read is no hint: every segment is opened
-    if not isinstance(body, dict) or body.get("format") != _CATALOG_FORMAT or body.get("problems"):
+    if stored is None or not stored.lists_no_problem():
         return None
-    rows = body.get("segments")
-    if not isinstance(rows, list):
-        return None
-    for row in rows:
-        if not isinstance(row, dict) or not all(
-            type(row.get(name)) is kind for name, kind in _CATALOG_FIELDS.items()
-        ):
-            return None
-    return rows
+    return stored.rows(CatalogRow, limit=files)

@@ -11,6 +11,7 @@ the cold codec) sit below the reader, in ``trace_runtime.tier_formats``.
 
 from __future__ import annotations
 
+from trace_runtime.reading.catalog_rows import CATALOG_NAME
 from trace_runtime.tier_formats.cold import (
     CODEC,
     BlockEncoder,
@@ -20,7 +21,6 @@ from trace_runtime.tier_formats.cold import (
 )
 from trace_runtime.tier_formats.warm import WarmPolicy, assemble_warm, summarize
 from trace_runtime.tiers.catalog import (
-    CATALOG_NAME,
     Catalog,
     CatalogEntry,
     load_catalog,

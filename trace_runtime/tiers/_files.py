@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 from trace_runtime.boundary import create_exclusive, folder_lock
+from trace_runtime.errors import LogReadError
 from trace_runtime.logger.segment_writer import LIBRARY
 from trace_runtime.records import PROFILE
 from trace_runtime.segment_names import parse_segment_name
@@ -200,3 +201,14 @@ def root_lock(root: Path) -> contextlib.AbstractContextManager[None]:
     return folder_lock(
         root / LOCK_NAME, held=f"{root}: another compaction is running on this log root"
     )
+
+
+def require_root(root: Path) -> None:
+    """``root`` is a folder, or a ``LogReadError`` that says what it is instead: a segment
+    file handed where a root belongs is the common slip, and the message says so."""
+    if root.is_dir():
+        return
+    if root.is_file():
+        what = "a segment file" if root.suffix == ".mcap" else "a file"
+        raise LogReadError(str(root), f"{what}, not a log root (a folder with hot/ warm/ cold/)")
+    raise LogReadError(str(root), "not a log root (no such directory)")

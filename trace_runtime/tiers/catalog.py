@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,23 +26,24 @@ import orjson
 
 from trace_runtime.boundary import (
     read_side_file,
-    read_side_json,
     remove_stale_partials,
     tier_folder,
     write_atomic,
 )
 from trace_runtime.chain import digest
 from trace_runtime.errors import LogReadError
+from trace_runtime.reading.catalog_rows import CATALOG_FORMAT, CATALOG_NAME, read_catalog_file
 from trace_runtime.reading.reader import Segment
 from trace_runtime.reading.segment_files import find_segment_files
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.session import TIER_METADATA, TIERS
 from trace_runtime.tier_formats.cold import INDEX_TOPIC
+from trace_runtime.tiers._files import require_root
 
 log = logging.getLogger(__name__)
 
-CATALOG_NAME = "catalog.json"
-CATALOG_FORMAT = "trace-catalog-v1"
+_MAX_PROBLEMS = 10_000
+"""The most problems a stored catalog is read with (each is a line for a person)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -103,22 +104,27 @@ class Catalog:
         return orjson.dumps(body, option=orjson.OPT_INDENT_2) + b"\n"
 
 
-def load_catalog(root: str | Path) -> Catalog | None:
+def load_catalog(root: str | Path, paths: Collection[str] | None = None) -> Catalog | None:
     """The catalog stored in ``root`` as last written, or None if there is none, or none that
-    can be read (not a regular file, over the side-file bounds, not a catalog: a warning)."""
+    can be read (not a regular file, over the side-file bounds, not a catalog: a warning).
+
+    ``paths``: keep only the rows of these files (relative to the root), so a catalog full
+    of rows naming files that are not there costs no more than its bytes; its problems are
+    then not read (a rebuild finds its own). At most ``_MAX_PROBLEMS`` problems are kept."""
     root = Path(root)
     try:
-        body = read_side_json(root / CATALOG_NAME)
+        stored = read_catalog_file(root)
     except LogReadError as err:
         log.warning("%s; the catalog is rebuilt from the files", err)
         return None
-    if not isinstance(body, dict) or body.get("format") != CATALOG_FORMAT:
+    if stored is None:
         return None
-    try:
-        entries = [CatalogEntry(**row) for row in body.get("segments", [])]
-    except TypeError:
+    wanted = None if paths is None else set(paths)
+    entries = stored.rows(CatalogEntry, None if wanted is None else lambda e: e.path in wanted)
+    problems = [] if wanted is not None else stored.problems_listed(_MAX_PROBLEMS)
+    if entries is None or problems is None:
         return None
-    return Catalog(root, entries, [str(p) for p in body.get("problems", [])])
+    return Catalog(root, entries, problems)
 
 
 def refresh_catalog(root: str | Path, *, write: bool = True, rehash: bool = False) -> Catalog:
@@ -126,14 +132,13 @@ def refresh_catalog(root: str | Path, *, write: bool = True, rehash: bool = Fals
 
     ``rehash``: recompute every file's digests instead of reusing a confirmed row's."""
     root = Path(root)
-    if not root.is_dir():
-        raise LogReadError(str(root), "not a log root (no such directory)")
-    old = None if rehash else load_catalog(root)
+    require_root(root)
+    files = {_relative(root, path): path for path in segment_files(root)}
+    old = None if rehash else load_catalog(root, files)
     known = {e.path: e for e in old.entries} if old else {}
     entries: list[CatalogEntry] = []
     problems: list[str] = []
-    for path in segment_files(root):
-        rel = _relative(root, path)
+    for rel, path in files.items():
         try:
             entries.append(_confirmed(root, path, known.get(rel)))
         except FileNotFoundError:

@@ -35,12 +35,18 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trace_runtime.boundary import regular_file, tier_folder
-from trace_runtime.errors import LogReadError, UsageError
+from trace_runtime.errors import UsageError
+from trace_runtime.reading.catalog_rows import CATALOG_NAME
 from trace_runtime.reading.reader import Segment
 from trace_runtime.session import TIERS
 from trace_runtime.tier_formats.warm import WarmPolicy
-from trace_runtime.tiers._files import LOCK_NAME, PartialOpener, open_partial, root_lock
-from trace_runtime.tiers.catalog import CATALOG_NAME
+from trace_runtime.tiers._files import (
+    LOCK_NAME,
+    PartialOpener,
+    open_partial,
+    require_root,
+    root_lock,
+)
 from trace_runtime.tiers.durations import DAY_NS
 from trace_runtime.tiers.plan import (
     Choice,
@@ -131,8 +137,7 @@ def compact(
 
 def _check_target(root: Path, tier: str, sources: Iterable[str] | None) -> tuple[str, ...]:
     """The source tiers to compact from, once ``root`` and ``tier`` are known to be usable."""
-    if not root.is_dir():
-        raise LogReadError(str(root), "not a log root (no such directory)")
+    require_root(root)
     # Refused before any work: a tier folder that is a link (compaction would write and
     # delete outside the root), or a side file that is not a file (a FIFO would hang it).
     for name in TIERS:

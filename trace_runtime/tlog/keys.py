@@ -8,6 +8,7 @@ checkpoints does not pay for it. The formats are specified in docs/integrity.md.
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import logging
 import os
@@ -16,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
-from trace_runtime.errors import UsageError
+from trace_runtime.errors import StorageError, UsageError
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import (
@@ -194,7 +195,10 @@ class KeyPair:
 def generate_keypair(
     directory: str | Path, *, name: str = "trace-ed25519", overwrite: bool = False
 ) -> KeyPair:
-    """Write ``NAME.key`` (PKCS#8 PEM, mode 0600) and ``NAME.pub`` (PEM) into ``directory``."""
+    """Write ``NAME.key`` (PKCS#8 PEM, mode 0600) and ``NAME.pub`` (PEM) into ``directory``.
+
+    A key that exists, a folder that refuses the write, a full disk: ``StorageError`` (the
+    CLI's cannot-write), and no half pair is left behind."""
     if not name or "/" in name or name.startswith("."):
         raise UsageError(f"key name must be a plain file name: {name!r}")
     directory = Path(directory)
@@ -203,14 +207,19 @@ def generate_keypair(
     if not overwrite:
         for path in (private_path, public_path):
             if path.exists():
-                raise UsageError(f"{path} exists; refusing to overwrite a key (use --force)")
+                raise StorageError(str(path), "a key exists; refusing to overwrite it (--force)")
     signer = Ed25519Signer.generate()
     try:
         directory.mkdir(parents=True, exist_ok=True)
         _write_private(private_path, signer.private_pem(), overwrite=overwrite)
+    except OSError as err:
+        raise StorageError(str(directory), err.strerror or str(err)) from err
+    try:
         public_path.write_bytes(signer.public_pem())
     except OSError as err:
-        raise UsageError(f"cannot write keys to {directory}: {err.strerror or err}") from err
+        # A private key without its public half verifies nothing: take back what we made.
+        private_path.unlink(missing_ok=True)
+        raise StorageError(str(public_path), err.strerror or str(err)) from err
     return KeyPair(private_path, public_path, signer.key_id)
 
 
@@ -219,7 +228,12 @@ def _write_private(path: Path, data: bytes, *, overwrite: bool) -> None:
     fd = os.open(path, flags, 0o600)
     try:
         os.fchmod(fd, 0o600)  # also when overwriting a file that had a looser mode
-        os.write(fd, data)
+        if os.write(fd, data) != len(data):
+            raise OSError(errno.ENOSPC, "short write")
         os.fsync(fd)
+    except OSError:
+        if not overwrite:  # O_EXCL made it ours: a torn key file is no key
+            path.unlink(missing_ok=True)
+        raise
     finally:
         os.close(fd)

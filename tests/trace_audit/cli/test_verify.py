@@ -109,7 +109,7 @@ def test_cli_keygen_writes_a_key_pair_and_refuses_to_overwrite(tmp_path: Path) -
     assert (out / "amr-7.key").exists() and (out / "amr-7.pub").exists()
     assert "trace-audit verify LOG --key" in stdout
     code, _stdout, err = _run("keygen", "--out", str(out), "--name", "amr-7")
-    assert code == 2 and "refusing to overwrite" in err
+    assert code == 4 and "refusing to overwrite" in err
     code, stdout, err = _run("keygen", "--out", str(out), "--name", "amr-7", "--force", "--json")
     assert code == 0 and len(json.loads(stdout)["key_id"]) == 64
 

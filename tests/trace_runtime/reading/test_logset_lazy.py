@@ -11,16 +11,17 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import orjson
 import pytest
 
 from trace_runtime import AuditLogger, LoggerConfig
 from trace_runtime.errors import TimeOutOfRangeError
 from trace_runtime.reading import catalogued, logset
+from trace_runtime.reading.catalog_rows import CATALOG_NAME
 from trace_runtime.reading.logset import Log, open_log
 from trace_runtime.reading.reader import Segment
 from trace_runtime.tiers import compact, load_catalog, refresh_catalog
-from trace_runtime.tiers.catalog import CATALOG_FORMAT, CATALOG_NAME
 
 CYCLES = 60
 
@@ -148,14 +149,15 @@ def test_a_compacted_root_is_read_lazily(root: Path) -> None:
 def test_the_catalog_is_read_as_the_catalog_module_reads_it(root: Path) -> None:
     """``catalogued`` reads ``catalog.json`` itself (the tiers package would import the writer
     and the ``mcap`` library); its rows must be ``load_catalog``'s entries."""
-    rows = catalogued._catalog_rows(root)
     catalog = load_catalog(root)
-    assert rows is not None and catalog is not None
-    assert (catalogued._CATALOG_NAME, catalogued._CATALOG_FORMAT) == (CATALOG_NAME, CATALOG_FORMAT)
-    assert [{name: row[name] for name in catalogued._CATALOG_FIELDS} for row in rows] == [
-        {name: getattr(entry, name) for name in catalogued._CATALOG_FIELDS}
-        for entry in catalog.entries
+    assert catalog is not None
+    rows = catalogued._catalog_rows(root, len(catalog.entries))
+    assert rows is not None
+    fields = catalogued.CatalogRow.__struct_fields__
+    assert [msgspec.structs.asdict(row) for row in rows] == [
+        {name: getattr(entry, name) for name in fields} for entry in catalog.entries
     ]
+    assert catalogued._catalog_rows(root, len(catalog.entries) - 1) is None
 
 
 @pytest.mark.parametrize(

@@ -16,7 +16,7 @@ from cryptography.hazmat.primitives.serialization import (
     PublicFormat,
 )
 
-from trace_runtime.errors import UsageError
+from trace_runtime.errors import StorageError, UsageError
 from trace_runtime.tlog.keys import Ed25519Signer, generate_keypair, load_public_key, load_signer
 
 # --- keys ------------------------------------------------------------------------------------
@@ -34,7 +34,7 @@ def test_keygen_writes_a_private_key_only_its_owner_can_read(tmp_path: Path) -> 
 
 def test_keygen_refuses_to_overwrite_a_key_unless_forced(tmp_path: Path) -> None:
     first = generate_keypair(tmp_path)
-    with pytest.raises(UsageError, match="refusing to overwrite"):
+    with pytest.raises(StorageError, match="refusing to overwrite"):
         generate_keypair(tmp_path)
     os.chmod(first.private_path, 0o644)
     second = generate_keypair(tmp_path, overwrite=True)
