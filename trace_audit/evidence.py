@@ -122,7 +122,7 @@ def describe_refs(
                 topic,
                 t_ns,
                 check.state,
-                check.detail,
+                _detail(check),
                 schema=shown.schema,
                 message=shown.message,
                 lines=shown.lines,
@@ -155,7 +155,7 @@ def describe_channel_refs(
                 topic,
                 t_ns,
                 check.state,
-                check.detail,
+                _detail(check),
                 schema=shown.schema,
                 message=shown.message,
                 lines=shown.lines,
@@ -286,3 +286,11 @@ def decode_message(path: Path, topic: str, data: bytes) -> tuple[str, object]:
         return name, decoder(data)
     except (McapError, ValueError, IndexError, UnicodeDecodeError) as err:
         raise LogReadError(str(path), f"{topic}: does not decode as {name} ({err})") from err
+
+
+def _detail(check: ExternalCheck) -> str:
+    """Why a ref is broken or unresolved; for one resolved by its digest near its time, how
+    far the recorded message is from the time the ref names."""
+    if check.state == "resolved" and check.shift_ns:
+        return f"recorded {check.shift_ns / 1e9:+.3f} s from the ref's time (matched by digest)"
+    return check.detail

@@ -41,7 +41,7 @@ def _reading(doc: Doc, r: Explanation, e: ExternalEvidence, lead: str) -> None:
     where = f"{e.recording} {e.topic}" if e.recording else f"{e.topic} (this log)"
     t = fmt_t(e.log_time_ns, r.log_clock) if e.log_time_ns is not None else "?"
     doc.line([f"{lead}{where} @ {t}  ", Seg(_state(e), _STYLE[e.state])], 2)
-    if e.detail and e.state != "resolved":
+    if e.detail:
         doc.line(e.detail, 4)
     if e.schema:
         doc.line(e.schema, 4)

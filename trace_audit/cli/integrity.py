@@ -247,6 +247,20 @@ def verify_doc(r: VerifyReport) -> Doc:
                 ),
             )
         )
+    if r.recording_windows:
+        unchecked = r.recording_windows - r.recording_checked
+        rows.append(
+            (
+                "recordings",
+                f"{r.recording_messages:,} recorded message(s) sealed in "
+                f"{r.recording_windows:,} window(s), cited or not: "
+                + (
+                    "each checked against the recording"
+                    if not unchecked
+                    else f"{unchecked:,} window(s) not checked (recording not here)"
+                ),
+            )
+        )
     doc.fields(rows)
     clocks = _robot_clocks(r.robots)
     if r.findings:

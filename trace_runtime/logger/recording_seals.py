@@ -19,7 +19,6 @@ recording that ran before the robot, is sealed over several batches).
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -93,7 +92,7 @@ class RecordingFollower:
         files = recording_files(self.path)
         if not files:
             if self._state in ("new",):
-                self._gap(out, "absent", f"nothing recorded at {os.path.normpath(self.path)} yet")
+                self._gap(out, "absent", "nothing recorded at its declared path yet")
                 self._state = "absent"
             return
         grew = self._read(files, out)

@@ -67,6 +67,9 @@ class ExternalCheck:
     absent: bool = False
     """Broken because the recording holds no message of that topic and time at all (cut
     short, or the message removed), not because a message differs."""
+    shift_ns: int = 0
+    """Resolved by its digest near the ref's time: how far the recorded message's log time
+    is from the ref's (a robot that cited a message's stamp, not its receive time)."""
 
 
 def external_ref(
@@ -288,9 +291,8 @@ class Recordings:
         for path in paths:
             for msg in self._file(path).iter_messages(max(0, t_ns - NEAR_NS), t_ns + NEAR_NS):
                 if msg.topic == topic and hashlib.sha256(msg.data).hexdigest() == want:
-                    shift = (msg.log_time_ns - t_ns) / 1e9
-                    detail = f"recorded {shift:+.3f} s from the ref's time"
-                    return ExternalCheck("resolved", name, detail, msg, path)
+                    shift = msg.log_time_ns - t_ns
+                    return ExternalCheck("resolved", name, "", msg, path, shift_ns=shift)
         return None
 
 

@@ -55,6 +55,12 @@ class RecordingCheck:
         default_factory=dict
     )
     late: set[tuple[str, Line]] = field(default_factory=set)
+    windows: int = 0
+    """Sealed windows read (in cycles whose seal holds)."""
+    messages: int = 0
+    """Recorded messages those windows seal."""
+    checked: int = 0
+    """Windows checked against a recording that is here."""
     _opened: dict[Path, McapFile] = field(default_factory=dict)
 
     def sealed(self, payload: bytes, where: CycleRange, report: SegmentReporter) -> None:
@@ -90,6 +96,9 @@ class RecordingCheck:
             span = self.spans[name] = _Span(start, end, where=where, reporter=report)
         span.start_ns, span.end_ns = min(span.start_ns, start), max(span.end_ns, end)
         span.windows += 1
+        self.windows += 1
+        count = window.get("count")
+        self.messages += count if type(count) is int else 0
         files = self.recordings.files_of(name) if self.recordings is not None else ()
         if not files:
             span.unchecked += 1
@@ -103,6 +112,7 @@ class RecordingCheck:
                 where,
             )
             return
+        self.checked += 1
         diff = compare_window(window, actual)
         for line in diff.added:
             self.unlisted[(name, line)] = (report, where)

@@ -150,6 +150,12 @@ class RobotSummary:
     """Cycles after ``anchored_cycle``: chained, but no checkpoint vouches for them yet."""
     clock: str = "system"
     """The clock behind the robot's times (``SessionInfo.clock``), for showing them."""
+    recording_windows: int = 0
+    """Windows of the robot's recordings its chain sealed (profile 1.4)."""
+    recording_messages: int = 0
+    """Recorded messages those windows seal, cited or not."""
+    recording_checked: int = 0
+    """Of those windows, the ones checked against a recording that is here."""
 
 
 @dataclass(slots=True)
@@ -174,6 +180,10 @@ class VerifyReport:
     """Evidence refs into external recordings (--evidence) that resolved, digests equal."""
     external_unresolved: int = 0
     """Evidence refs into external recordings that were not given: unchecked, not broken."""
+    recording_windows: int = 0
+    """Sealed windows of the robots' recordings, every robot's summed (``RobotSummary``)."""
+    recording_messages: int = 0
+    recording_checked: int = 0
     cycle_range: CycleRange = field(default=NOWHERE, metadata=_INLINE)
     """Every robot's validated range merged."""
     ok: bool = True

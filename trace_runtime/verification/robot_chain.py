@@ -125,6 +125,10 @@ def _total(report: VerifyReport, sink: FindingSink) -> None:
         report.segments_valid += 1 if s.ok else 0
         report.external_resolved += s.external_resolved
         report.external_unresolved += s.external_unresolved
+    for robot in report.robots:
+        report.recording_windows += robot.recording_windows
+        report.recording_messages += robot.recording_messages
+        report.recording_checked += robot.recording_checked
     merged = CycleRange.merge_all(r.cycle_range for r in report.robots)
     if merged is not None:
         report.cycle_range = merged
@@ -169,6 +173,9 @@ class _RobotChain:
             self._segment(number, by_number[number])
         self.recorded.finish()
         robot = self.robot
+        robot.recording_windows = self.recorded.windows
+        robot.recording_messages = self.recorded.messages
+        robot.recording_checked = self.recorded.checked
         robot.declared_dropped = self.sink.declared - declared_before
         if segments:
             robot.clock = segments[0].session.clock
