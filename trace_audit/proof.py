@@ -202,10 +202,16 @@ def _covering_note(log: Log, robot: str, index: int, tree: LevelTree) -> tuple[s
         fits = index < record.tree_size <= tree.size
         if fits and tree.root(record.tree_size).hex() == record.root:
             return record.note, record.tree_size, True
-    for checkpoint in reversed(robot_checkpoints(log, robot)):
+    signed = robot_checkpoints(log, robot)
+    for checkpoint in reversed(signed):
         size = checkpoint.tree_size or 0
         if index < size <= tree.size and checkpoint.root == tree.root(size).hex():
             return checkpoint.note or "", size, False
+    if not signed:
+        raise UsageError(
+            f"robot {robot}'s checkpoints are not signed, so nothing vouches for its tree: "
+            "log with a checkpoint key (LoggerConfig.checkpoint_key, trace-audit keygen)"
+        )
     raise UsageError(
         f"no signed profile 1.2 checkpoint of robot {robot} covers leaf {index} yet "
         "(a later checkpoint is needed)"

@@ -13,9 +13,12 @@ from typing import Any
 import orjson
 import pytest
 
+from tests.outside import cli, one_line
 from tests.trace_audit.witness.conftest import Keys, WitnessProcess, run_cli
 from tests.trace_audit.witness.test_tail import write
 from trace_audit.proof import BUNDLE_FORMAT, check_bundle
+from trace_runtime import AuditLogger
+from trace_runtime.testing import synthetic_cycle
 from trace_runtime.tlog.keys import load_public_key
 
 
@@ -205,3 +208,13 @@ def test_a_bundle_that_fails_before_its_tree_says_so(proved: tuple[Path, Path], 
     done = run_cli("verify-proof", str(broken), "--key", str(keys.robot_pub), "--plain")
     assert done.returncode == 1
     assert "tree   not reached" in done.stdout and "None" not in done.stdout
+
+
+def test_prove_on_a_log_whose_checkpoints_are_unsigned_says_so(tmp_path: Path) -> None:
+    """Found from outside: an unsigned log was told that "a later checkpoint is needed"."""
+    with AuditLogger(tmp_path / "log", robot_id="r", period_s=0.1) as logger:
+        for i in range(30):
+            p, b, a, e = synthetic_cycle(i)
+            logger.log_cycle(i * 100_000_000, perception=p, belief=b, action=a, execution=e)
+    done = cli("prove", tmp_path / "log", "--cycle", "3", "--out", tmp_path / "p.json")
+    one_line(done, 2, "checkpoints are not signed", "checkpoint key")
