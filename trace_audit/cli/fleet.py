@@ -26,6 +26,7 @@ from trace_audit.cli.options import (
     sql_limits,
 )
 from trace_audit.cli.output import emit, print_json, progress_bar
+from trace_audit.fleet.limits import QueryLimits, format_size
 
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
     from trace_audit.fleet.index import IndexReport
@@ -108,7 +109,8 @@ def _index_doc(r: IndexReport) -> Doc:
     return doc
 
 
-_QUERY_HELP = help_text("""
+_BOUNDS = QueryLimits()
+_QUERY_HELP = help_text(f"""
 Run one SQL statement (DuckDB) on a fleet index. Tables: decisions (with an explain
 column: the command that reconstructs the decision), entities, channels, checks, gaps,
 segments; robot and day on each (day: the UTC date, or run-<segment> on a sim clock).
@@ -117,6 +119,11 @@ exit 3. The statement reads the index's files and nothing else: other files,
 COPY, ATTACH, extensions and the network are refused (export with --csv or --json, or
 point DuckDB itself at the Parquet files). SQL that starts with a comment (--) goes
 after a lone --.
+
+A runaway statement is stopped, one line on stderr, exit 2: by default after
+{_BOUNDS.timeout_s:g} s (--timeout), once DuckDB needs more than
+{format_size(_BOUNDS.memory_bytes)} of memory (--memory-limit; the process is capped at
+twice it), or once its result holds more than {format_size(_BOUNDS.result_bytes)}.
 
 [bold]Examples[/bold]:
 

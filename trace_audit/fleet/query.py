@@ -169,10 +169,14 @@ def _of(rel: str, table: str) -> bool:
 
 
 def _create_view(con: duckdb.DuckDBPyConnection, table: str, files: list[str]) -> None:
-    """View ``table`` over ``files`` (with the partition columns and, for decisions, the
-    explain column); of no file, an empty view of the table's shape. A first file whose
-    columns are not the table's (one missing, or of another type: it sets the view's
-    shape) is a ``LogReadError`` naming it; the later files DuckDB checks as it reads them."""
+    """View ``table`` over ``files``: the table's columns, each cast to its type, the
+    partition columns and, for decisions, the explain column; of no file, an empty view of
+    the same shape. A file's column of another type is cast, so the view is always of the
+    table's types (a cast of a column already of its type is no work for DuckDB); a value
+    that will not cast fails as it is read (``_guarded``). A first file that lacks a
+    column is a ``LogReadError`` naming it; a later one DuckDB reports as it reads it."""
+    import duckdb
+
     shape = sql_columns(table)
     extra = f", {_EXPLAIN} AS explain" if table == "decisions" else ""
     if not files:  # no rows yet (e.g. no gaps): typed NULLs, no row
@@ -185,14 +189,18 @@ def _create_view(con: duckdb.DuckDBPyConnection, table: str, files: list[str]) -
         f"read_parquet([{names}], hive_partitioning = true, "
         "hive_types = {'robot': VARCHAR, 'day': VARCHAR})"
     )
-    # The shape is checked before the explain column is added: that one reads columns
-    # a damaged file may lack, and would fail as a bare binder error.
-    got = _described(con, f"SELECT * FROM {source}")
-    want = _described(con, "SELECT " + ", ".join(f'CAST(NULL AS {k}) AS "{n}"' for n, k in shape))
-    damage = _mismatch(table, files[0], want, got)
-    if damage is not None:
-        raise damage
-    con.execute(f"CREATE VIEW {table} AS SELECT *{extra} FROM {source}")
+    typed = ", ".join(f'CAST("{name}" AS {kind}) AS "{name}"' for name, kind in shape)
+    try:
+        con.execute(
+            f"CREATE VIEW {table} AS SELECT {typed}, {', '.join(PARTITION_COLUMNS)}{extra} "
+            f"FROM {source}"
+        )
+    except duckdb.Error as err:  # a column missing, or of a type that cannot be cast
+        got = _described(con, f"SELECT * FROM {source}")
+        damage = _mismatch(table, files[0], dict(shape), got)
+        if damage is not None:
+            raise damage from err
+        raise
 
 
 def run_query(
@@ -318,17 +326,16 @@ def _guarded(
 
 
 def _damaged_file(con: duckdb.DuckDBPyConnection, index: str | Path) -> LogReadError | None:
-    """The first file of the index whose columns are not those of its table's first file
-    (which ``connect`` checked), or None. Each file's footer is read: for an error's
-    explanation only, never on the way of a statement that succeeds."""
+    """The first file of the index whose columns are not its table's, or None. Each
+    file's footer is read: for an error's explanation only, never on the way of a
+    statement that succeeds."""
     root = Path(index)
     manifest = load_manifest(root)
     listed = listed_files(root, manifest) if manifest is not None else []
     for table in TABLES:
-        files = [(root / rel).as_posix() for rel in listed if _of(rel, table)]
-        shapes = (_described(con, f"SELECT * FROM read_parquet({sql_literal(f)})") for f in files)
-        want = next(shapes, {})
-        for path, got in zip(files[1:], shapes, strict=False):
+        want = dict(sql_columns(table))
+        for path in [(root / rel).as_posix() for rel in listed if _of(rel, table)]:
+            got = _described(con, f"SELECT * FROM read_parquet({sql_literal(path)})")
             damage = _mismatch(table, path, want, got)
             if damage is not None:
                 return damage
@@ -336,7 +343,7 @@ def _damaged_file(con: duckdb.DuckDBPyConnection, index: str | Path) -> LogReadE
 
 
 def _described(con: duckdb.DuckDBPyConnection, select: str) -> dict[str, str]:
-    """The columns of a SELECT and their DuckDB types (bound, not run)."""
+    """The columns of a SELECT (or a view) and their DuckDB types (bound, not run)."""
     return {row[0]: row[1] for row in con.execute(f"DESCRIBE {select}").fetchall()}
 
 
@@ -346,7 +353,8 @@ def _mismatch(
     """The error for file ``path`` of ``table`` when a column ``want`` names is missing
     from ``got`` or of another type there; None when every one is as wanted."""
     for name, kind in want.items():
-        if got.get(name) != kind:
+        # DuckDB quotes a struct field's name only where it is a keyword: compared without
+        if got.get(name, "").replace('"', "") != kind.replace('"', ""):
             held = "has no such column" if name not in got else f"holds it as {got[name]}"
             return LogReadError(
                 path,

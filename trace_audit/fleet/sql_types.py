@@ -40,4 +40,4 @@ def map_(key: str, value: str) -> str:
 
 
 def struct(fields: Sequence[tuple[str, str]]) -> str:
-    return "STRUCT(" + ", ".join(f'"{name}" {kind}' for name, kind in fields) + ")"
+    return "STRUCT(" + ", ".join(f"{name} {kind}" for name, kind in fields) + ")"
