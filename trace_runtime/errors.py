@@ -40,7 +40,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from trace_runtime.clock import is_wall_clock, iso_utc
+from trace_runtime.clock import is_wall_clock, iso_utc, offset_hint
 
 if TYPE_CHECKING:
     from trace_runtime.tlog.signed_note import NoteSignature
@@ -119,6 +119,7 @@ class TimeOutOfRangeError(UsageError):
 
         super().__init__(
             f"t={shown(t_ns)} is outside the log's range [{shown(start_ns)}, {shown(end_ns)}]"
+            + offset_hint(clock, start_ns, t_ns)
         )
         self.t_ns = t_ns
         self.start_ns = start_ns

@@ -24,6 +24,7 @@ from trace_audit.rules.rulebook import Rule
 from trace_audit.rules.signals import read_signals
 from trace_audit.selection import Selection, per_robot
 from trace_audit.transitions import WindowOutsideLogError
+from trace_runtime.clock import offset_hint
 from trace_runtime.errors import TimeOutOfRangeError
 from trace_runtime.reading.logset import Log
 
@@ -81,7 +82,8 @@ def _overlaps(log: Log, lo: int | None, hi: int | None) -> None:
     if lo is not None and hi is not None and hi < lo:
         raise WindowOutsideLogError(f"the window {shown} ends before it starts ({where})")
     if start > last or end < first or end < start:
-        raise WindowOutsideLogError(f"the window {shown} does not overlap {where}")
+        hint = offset_hint(log.clock, first, lo, hi)
+        raise WindowOutsideLogError(f"the window {shown} does not overlap {where}{hint}")
 
 
 def _read_rows(
