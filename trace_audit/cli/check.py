@@ -343,9 +343,18 @@ def _rule_block(doc: Doc, robot: RobotRules, rule: RuleResult) -> None:
         2,
     )
     doc.line(rule.stl, 4)
-    for name in rule.unseen:
-        doc.line(Seg(f"note: the log never shows {name} (a typo?)", "yellow"), 4)
     clock = robot.clock
+    outside = {seen.signal: seen for seen in rule.seen_outside}
+    for name in rule.unseen:
+        seen = outside.get(name)
+        note = (
+            f"note: the log never shows {name} (a typo?)"
+            if seen is None
+            else f"note: {name} does not occur in the window; the log shows it "
+            f"{clock.show(seen.first_ns)} .. {clock.show(seen.last_ns)} "
+            f"(cycles {seen.first_cycle}-{seen.last_cycle})"
+        )
+        doc.line(Seg(note, "yellow"), 4)
     for v in rule.violations:
         doc.line(
             f"violated {clock.show(v.start_ns)} .. {clock.show(v.end_ns)}  cycles "

@@ -64,12 +64,22 @@ def _rule_outcomes(judged: RobotRules) -> str:
 
 def _unseen_names(judged: RobotRules) -> str:
     """A note for each name a rule reads that the window never shows."""
-    unseen = [(rule.rule, name) for rule in judged.rules for name in rule.unseen]
-    return "".join(
-        f'<p class="warn">Note: the window never shows <code>{escape(name)}</code>, read by '
-        f"<code>{escape(rule)}</code> (a typo?).</p>"
-        for rule, name in unseen
-    )
+    notes = []
+    for rule in judged.rules:
+        outside = {seen.signal: seen for seen in rule.seen_outside}
+        for name in rule.unseen:
+            seen = outside.get(name)
+            where = (
+                " (a typo?)"
+                if seen is None
+                else f"; the log shows it {escape(judged.clock.show(seen.first_ns))} – "
+                f"{escape(judged.clock.show(seen.last_ns))}"
+            )
+            notes.append(
+                f'<p class="warn">Note: the window never shows <code>{escape(name)}</code>, '
+                f"read by <code>{escape(rule.rule)}</code>{where}.</p>"
+            )
+    return "".join(notes)
 
 
 def _violations(judged: RobotRules, clock: LogClock) -> str:
