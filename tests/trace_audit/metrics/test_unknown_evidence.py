@@ -84,7 +84,7 @@ def test_every_decision_unknown_shows_no_number(root: Path, tmp_path: Path) -> N
     shown = runner.invoke(app, ["metrics", str(moved), "--failures"])
     assert shown.exit_code == 0, shown.output
     text = " ".join(shown.stdout.split())
-    assert "0.0" not in text.split("Table II")[1].split("fully")[0], text
+    assert "0.0" not in text.split("Auditability metrics of the")[1].split("fully")[0], text
     assert f"{CYCLES} unknown (recording front_bag not found" in text
     assert "ET ?" in text and "ET 0.00" not in text
     assert not EPOCH_SECONDS.search(shown.stdout), shown.stdout
