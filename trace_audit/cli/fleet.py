@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -10,6 +11,7 @@ import typer
 
 from trace_audit.cli.app import EXIT_USAGE, app, fail, guarded, help_text
 from trace_audit.cli.doc import Column, Doc
+from trace_audit.cli.find_doc import found_doc
 from trace_audit.cli.options import (
     CsvOption,
     IndexArgument,
@@ -217,7 +219,7 @@ def find_command(
             limits=sql_limits(memory_limit, timeout),
         )
     )
-    _print_rows(result, json_out=json_out, csv_out=csv_out, plain=plain)
+    _print_rows(result, json_out=json_out, csv_out=csv_out, plain=plain, doc=found_doc)
 
 
 def _one_format(*, json_out: bool, csv_out: bool) -> None:
@@ -225,7 +227,14 @@ def _one_format(*, json_out: bool, csv_out: bool) -> None:
         fail("give --json or --csv, not both", EXIT_USAGE)
 
 
-def _print_rows(result: QueryResult, *, json_out: bool, csv_out: bool, plain: bool) -> None:
+def _print_rows(
+    result: QueryResult,
+    *,
+    json_out: bool,
+    csv_out: bool,
+    plain: bool,
+    doc: Callable[[QueryResult], Doc] | None = None,
+) -> None:
     if (json_out or csv_out) and result.total is not None:
         # The rows go to stdout; that they were cut, to stderr.
         sys.stderr.write(f"trace-audit: note: {_count(result)}\n")
@@ -242,7 +251,7 @@ def _print_rows(result: QueryResult, *, json_out: bool, csv_out: bool, plain: bo
         for row in result.rows:
             writer.writerow([_csv_cell(plain_value(v)) for v in row])
         return
-    emit(result, _rows_doc, json_out=False, plain=plain)
+    emit(result, doc or _rows_doc, json_out=False, plain=plain)
 
 
 def _count(result: QueryResult) -> str:

@@ -225,9 +225,7 @@ def _table_iii(report: MetricsReport, *, wide: bool) -> BoxTable:
         )
         for g in report.groups
     )
-    return BoxTable(
-        tuple(columns), rows, title=f"Per {report.by}", flush=True, collapse_plain=True
-    )
+    return BoxTable(tuple(columns), rows, title=f"Per {report.by}", flush=True, collapse_plain=True)
 
 
 def _failed_checks(checks: FailedChecks) -> BoxTable:
