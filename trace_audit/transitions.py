@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from trace_audit.causal import CounterfactualView, FactorValue, read_decision
-from trace_audit.cycle_fields import command_of, execution_fields
+from trace_audit.cycle_fields import command_of, execution_fields, is_decision_change
 from trace_audit.jsonout import OMIT_EMPTY
 from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log, require_cycles
@@ -238,7 +238,9 @@ def _rows(
         gap = gap_of(cycle)
         if gap is not None:
             out.gaps.append(gap)
-        changed = current is not None and command != current.command
+        changed = is_decision_change(
+            current is not None, None if current is None else current.command, command
+        )
         out.changes += changed
         if current is None or every or changed:
             if current is not None:
