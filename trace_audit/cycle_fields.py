@@ -12,7 +12,14 @@ import orjson
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.records import TOPIC_ACTION, TOPIC_EXECUTION, TOPIC_SEAL
 
-__all__ = ["command_of", "execution_fields", "seal_dropped"]
+__all__ = ["command_of", "execution_fields", "is_decision_change", "seal_dropped"]
+
+
+def is_decision_change(seen_before: bool, previous: str | None, command: str | None) -> bool:
+    """The one definition of a decision change (``timeline``, the Foxglove export): a cycle
+    whose command differs from the cycle before it (``previous``). A robot's first
+    decision (``seen_before`` False) is where its record starts, not a change."""
+    return seen_before and command != previous
 
 
 def command_of(cycle: Cycle) -> str | None:

@@ -27,7 +27,7 @@ def as_log(source: LogSource, *, lazy: bool = False) -> Log:
 
 def require_cycles(log: Log) -> None:
     """Raise ``LogReadError`` when the log holds no decision cycle at all (an empty log)."""
-    if log.holds_trace_messages():
+    if log.holds_cycle_messages():
         return
     if next(log.iter_cycles(), None) is None:
         recovered = " (recovered from an unfinished segment)" if log.recovered else ""

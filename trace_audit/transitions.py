@@ -14,13 +14,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from trace_audit.causal import CounterfactualView, FactorValue, read_decision
-from trace_audit.cycle_fields import command_of, execution_fields
+from trace_audit.cycle_fields import command_of, execution_fields, is_decision_change
 from trace_audit.jsonout import OMIT_EMPTY
 from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log, require_cycles
 from trace_audit.log_time import SECONDS_CLOCK, LogClock, TimeArg, resolve_time
 from trace_audit.selection import Selection, SeveralRobotsError
-from trace_runtime.clock import ClockStep
+from trace_runtime.clock import ClockStep, offset_hint
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import UsageError
 from trace_runtime.flags import split_flags
@@ -135,6 +135,7 @@ def _window(log: Log, start: TimeArg, end: TimeArg) -> tuple[int, int]:
         raise WindowOutsideLogError(
             f"the window [{clock.show(lo)}, {clock.show(hi)}] does not overlap the log's "
             f"range [{clock.show(log.start_ns)}, {clock.show(log.end_ns)}]"
+            + offset_hint(log.clock, log.start_ns, start_ns, end_ns)
         )
     return lo, hi
 
@@ -237,7 +238,9 @@ def _rows(
         gap = gap_of(cycle)
         if gap is not None:
             out.gaps.append(gap)
-        changed = current is not None and command != current.command
+        changed = is_decision_change(
+            current is not None, None if current is None else current.command, command
+        )
         out.changes += changed
         if current is None or every or changed:
             if current is not None:

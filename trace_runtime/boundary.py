@@ -395,23 +395,45 @@ def open_lock_file(path: Path) -> int:
 
 
 @contextlib.contextmanager
-def folder_lock(path: Path, *, held: str) -> Iterator[None]:
+def folder_lock(path: Path, *, held: str, remove: bool = False) -> Iterator[None]:
     """Hold an exclusive ``flock`` on lock file ``path`` (released even on kill -9).
 
     ``held`` is the refusal's wording when another process holds it (a ``UsageError``); the
     lock file is opened without following a link, and a folder the tool cannot write is a
-    ``StorageError``."""
+    ``StorageError``. ``remove``: the lock file is deleted when the block ends, while the
+    lock is still held."""
     try:
         import fcntl
     except ImportError:  # not POSIX: no lock; each command stays correct when run alone
         yield
         return
-    fd = open_lock_file(path)
+    fd = _locked(path, held, fcntl)
     try:
+        yield
+    finally:
+        if remove:  # before the lock is let go: a run that starts now makes a new file
+            _unlink_own(path)
+        os.close(fd)
+
+
+def _locked(path: Path, held: str, fcntl: Any) -> int:
+    """A descriptor holding the ``flock`` of the file now at ``path``.
+
+    A holder that removes its lock file as it ends may do so between our open and our
+    lock: the lock then holds a file no longer at ``path``, which guards nothing, so the
+    name is opened again."""
+    while True:
+        fd = open_lock_file(path)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError as err:
+            os.close(fd)
             raise UsageError(held) from err
-        yield
-    finally:
+        here = os.fstat(fd)
+        try:
+            there = os.lstat(path)
+        except FileNotFoundError:
+            there = None
+        if there is not None and (there.st_dev, there.st_ino) == (here.st_dev, here.st_ino):
+            return fd
         os.close(fd)

@@ -31,6 +31,7 @@ __all__ = [
     "clock_restarted",
     "is_wall_clock",
     "iso_utc",
+    "offset_hint",
     "show_instant",
     "show_time",
 ]
@@ -96,6 +97,22 @@ def show_time(t_ns: int, clock: str, start_ns: int) -> str:
     if not is_wall_clock(clock, start_ns):
         return f"{t_ns / 1e9:.3f} s"
     return f"{iso_utc(t_ns, digits=3)} ({(t_ns - start_ns) / 1e9:+.3f} s)"
+
+
+def offset_hint(clock: str, start_ns: int, *times_ns: int | None) -> str:
+    """What to say after a time on a wall clock that fell in 1970: a plain number there is
+    seconds since the epoch, and ``+S`` (seconds after the log's start, ``log_time``) is
+    what was meant. ``""`` on any other clock, or when no time is that early (a time of day
+    that misses the log is simply outside it)."""
+    if not is_wall_clock(clock, start_ns):
+        return ""
+    early = [t for t in times_ns if t is not None and 0 <= t < EARLIEST_WALL_NS]
+    if not early:
+        return ""
+    return (
+        f"; on this wall clock a plain number is seconds since 1970: "
+        f"+{early[0] / 1e9:g} counts from the log's start"
+    )
 
 
 def show_instant(t_ns: int, clock: str) -> str:

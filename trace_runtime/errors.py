@@ -40,7 +40,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from trace_runtime.clock import is_wall_clock, iso_utc
+from trace_runtime.clock import is_wall_clock, iso_utc, offset_hint
 
 if TYPE_CHECKING:
     from trace_runtime.tlog.signed_note import NoteSignature
@@ -83,6 +83,22 @@ __all__ = [
 class TraceError(Exception):
     """Base of every error this project raises on purpose."""
 
+    def __reduce__(self) -> tuple[object, ...]:
+        # A fleet index task fails in another process (a local pool, a Dask worker) and its
+        # error crosses back pickled; the subclasses' own ``__init__`` signatures differ
+        # from ``args``, so the error is rebuilt from its message and fields instead.
+        return (_rebuilt, (type(self), self.args, dict(self.__dict__)))
+
+
+def _rebuilt(
+    kind: type[TraceError], args: tuple[object, ...], fields: dict[str, object]
+) -> TraceError:
+    """A ``TraceError`` of ``kind`` with ``args`` and ``fields``, not calling its ``__init__``."""
+    err = kind.__new__(kind)
+    Exception.__init__(err, *args)
+    err.__dict__.update(fields)
+    return err
+
 
 # -- exit 2: asked wrongly ----------------------------------------------------------------
 
@@ -103,6 +119,7 @@ class TimeOutOfRangeError(UsageError):
 
         super().__init__(
             f"t={shown(t_ns)} is outside the log's range [{shown(start_ns)}, {shown(end_ns)}]"
+            + offset_hint(clock, start_ns, t_ns)
         )
         self.t_ns = t_ns
         self.start_ns = start_ns

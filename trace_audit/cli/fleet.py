@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -10,6 +11,7 @@ import typer
 
 from trace_audit.cli.app import EXIT_USAGE, app, fail, guarded, help_text
 from trace_audit.cli.doc import Column, Doc
+from trace_audit.cli.find_doc import found_doc
 from trace_audit.cli.options import (
     CsvOption,
     IndexArgument,
@@ -26,6 +28,7 @@ from trace_audit.cli.options import (
     sql_limits,
 )
 from trace_audit.cli.output import emit, print_json, progress_bar
+from trace_audit.fleet.limits import QueryLimits, format_size
 
 if TYPE_CHECKING:  # the library is imported inside each command: start-up stays light
     from trace_audit.fleet.index import IndexReport
@@ -108,7 +111,8 @@ def _index_doc(r: IndexReport) -> Doc:
     return doc
 
 
-_QUERY_HELP = help_text("""
+_BOUNDS = QueryLimits()
+_QUERY_HELP = help_text(f"""
 Run one SQL statement (DuckDB) on a fleet index. Tables: decisions (with an explain
 column: the command that reconstructs the decision), entities, channels, checks, gaps,
 segments; robot and day on each (day: the UTC date, or run-<segment> on a sim clock).
@@ -117,6 +121,11 @@ exit 3. The statement reads the index's files and nothing else: other files,
 COPY, ATTACH, extensions and the network are refused (export with --csv or --json, or
 point DuckDB itself at the Parquet files). SQL that starts with a comment (--) goes
 after a lone --.
+
+A runaway statement is stopped, one line on stderr, exit 2: by default after
+{_BOUNDS.timeout_s:g} s (--timeout), once DuckDB needs more than
+{format_size(_BOUNDS.memory_bytes)} of memory (--memory-limit; the process is capped at
+twice it), or once its result holds more than {format_size(_BOUNDS.result_bytes)}.
 
 [bold]Examples[/bold]:
 
@@ -210,7 +219,7 @@ def find_command(
             limits=sql_limits(memory_limit, timeout),
         )
     )
-    _print_rows(result, json_out=json_out, csv_out=csv_out, plain=plain)
+    _print_rows(result, json_out=json_out, csv_out=csv_out, plain=plain, doc=found_doc)
 
 
 def _one_format(*, json_out: bool, csv_out: bool) -> None:
@@ -218,7 +227,14 @@ def _one_format(*, json_out: bool, csv_out: bool) -> None:
         fail("give --json or --csv, not both", EXIT_USAGE)
 
 
-def _print_rows(result: QueryResult, *, json_out: bool, csv_out: bool, plain: bool) -> None:
+def _print_rows(
+    result: QueryResult,
+    *,
+    json_out: bool,
+    csv_out: bool,
+    plain: bool,
+    doc: Callable[[QueryResult], Doc] | None = None,
+) -> None:
     if (json_out or csv_out) and result.total is not None:
         # The rows go to stdout; that they were cut, to stderr.
         sys.stderr.write(f"trace-audit: note: {_count(result)}\n")
@@ -235,7 +251,7 @@ def _print_rows(result: QueryResult, *, json_out: bool, csv_out: bool, plain: bo
         for row in result.rows:
             writer.writerow([_csv_cell(plain_value(v)) for v in row])
         return
-    emit(result, _rows_doc, json_out=False, plain=plain)
+    emit(result, doc or _rows_doc, json_out=False, plain=plain)
 
 
 def _count(result: QueryResult) -> str:

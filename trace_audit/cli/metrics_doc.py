@@ -1,6 +1,6 @@
 """What ``trace-audit metrics`` prints: the paper's Tables II and III and their notes as a
 ``Doc`` of console blocks (rich's layout, in both modes), and the JSON for scripts (the
-report with Table II and III as the paper names their columns)."""
+report: the paper's Table II and III columns, titled by what they show of the log)."""
 
 from __future__ import annotations
 
@@ -91,11 +91,12 @@ def metrics_doc(report: MetricsReport, *, failures: bool, width: int) -> Doc:
 
 def _table_ii(report: MetricsReport) -> BoxTable:
     overall = report.overall
-    names = ("Method", "ET%", "fully tr.", "TC%", "gaps", "DR%", "not rec.", "Time")
-    columns = [BoxColumn(name, "left" if name == "Method" else "right") for name in names]
-    columns[1] = BoxColumn("ET%", "right", min_width=len(_pm(overall.et)))
+    # What the user's own log shows, one row: the columns are the paper's Table II's
+    # (docs/metrics.md), without its comparison of methods.
+    names = ("ET%", "fully tr.", "TC%", "gaps", "DR%", "not rec.", "Time")
+    columns = [BoxColumn(name, "right") for name in names]
+    columns[0] = BoxColumn("ET%", "right", min_width=len(_pm(overall.et)))
     row = (
-        "TRACE (this log)",
         _pm(overall.et),
         _share(overall.fully_traceable, overall.decisions),
         pct(overall.tc, unit=False),
@@ -107,7 +108,7 @@ def _table_ii(report: MetricsReport) -> BoxTable:
     return BoxTable(
         tuple(columns),
         (row,),
-        title="Table II: auditability metrics",
+        title=f"Auditability metrics of the {overall.decisions:,} decisions",
         flush=True,
         collapse_plain=True,
     )
@@ -224,9 +225,7 @@ def _table_iii(report: MetricsReport, *, wide: bool) -> BoxTable:
         )
         for g in report.groups
     )
-    return BoxTable(
-        tuple(columns), rows, title=f"Table III: per {report.by}", flush=True, collapse_plain=True
-    )
+    return BoxTable(tuple(columns), rows, title=f"Per {report.by}", flush=True, collapse_plain=True)
 
 
 def _failed_checks(checks: FailedChecks) -> BoxTable:

@@ -13,11 +13,15 @@ from __future__ import annotations
 import copy
 import re
 from collections.abc import Callable, Sequence
-from typing import Any
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, get_args, get_origin
 
 import typer
 from typer._click import Context, HelpFormatter, Parameter
-from typer.core import TyperCommand, TyperGroup, TyperOption
+from typer._coercion import RuntimeParam, TypeDescriptor, build_runtime_param
+from typer._param_types import coerce_cli_path
+from typer.core import TyperCommand, TyperGroup, TyperOption, _TyperParameter
 from typer.exceptions import TyperException
 from typer.main import get_group, solve_typer_info_defaults
 from typer.models import CommandFunctionType, CommandInfo, OptionInfo, TyperInfo
@@ -114,6 +118,12 @@ class Command(TyperCommand):
         # Any: whatever typer (0.29) builds a command with, passed on to it unread.
         help = _plain(help)
         super().__init__(*args, help=help, short_help=short_help or _summary(help), **kwargs)
+
+    def get_params(self, ctx: Context) -> list[Parameter]:
+        params = super().get_params(ctx)
+        for param in params:  # the help option too: typer coerces its unset value
+            _coerce_plainly(param)
+        return params
 
     def collect_usage_pieces(self, ctx: Context) -> list[str]:
         # "explain [OPTIONS] LOG", as click and every Unix tool write it; typer 0.29 writes
@@ -263,3 +273,49 @@ def usage_error_line(err: TyperException, program: str) -> str | None:
     if not message.strip():
         return None
     return f"{program}: {message} (see '{command} --help')\n"
+
+
+@dataclass(frozen=True)
+class _PlainParam(RuntimeParam):
+    """A parameter's value as typer 0.29 would give it, without pydantic for text and paths.
+
+    typer 0.29 builds a pydantic ``TypeAdapter`` for every parameter of the command that
+    runs, set or not, before it reads a value: importing pydantic and building them is
+    ~70 ms of every command (a third of an honest ``query``). Text and paths are what its
+    adapters make of them (``str``; ``Path`` through typer's own ``coerce_cli_path``, which
+    also applies ``exists=`` and the like); anything else (a number, a choice, a parser)
+    goes to typer's adapter, built then, so its checks and messages stay typer's."""
+
+    descriptor: TypeDescriptor
+
+    def _coerce_value(self, value: Any, param: Any, ctx: Context) -> Any:
+        info, kind = self.parameter_info, self.annotation
+        # typer 0.29 types an annotation as ParamSpec-or-type; a list[...] is one at runtime
+        many: bool = get_origin(kind) is list  # type: ignore[comparison-overlap]
+        item = get_args(kind)[0] if many else kind
+        values = value if many and isinstance(value, tuple | list) else (value,)
+        if info.parser is None and all(isinstance(v, str) for v in values):
+            if item is str:
+                return list(values) if many else value
+            if item is Path and info.path_type is None:
+                paths = [
+                    coerce_cli_path(Path(v), info, path_type=Path, param=param, ctx=ctx)
+                    for v in values
+                ]
+                return paths if many else paths[0]
+        return build_runtime_param(self.descriptor)._coerce_value(value, param=param, ctx=ctx)
+
+
+def _coerce_plainly(param: Parameter) -> None:
+    """Give a typer parameter ``_PlainParam``'s coercion (a file parameter keeps typer's)."""
+    if (
+        isinstance(param, _TyperParameter)
+        and param._runtime_param is None
+        and param.type_descriptor.file_annotation is None
+    ):
+        described = param.type_descriptor
+        param._runtime_param = _PlainParam(
+            parameter_info=described.parameter_info,
+            annotation=described.annotation,
+            descriptor=described,
+        )

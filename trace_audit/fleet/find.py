@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +15,7 @@ from trace_audit.fleet.limits import QueryLimits
 from trace_audit.fleet.query import QueryResult, run_query, sql_literal
 from trace_runtime.errors import UsageError
 
-__all__ = ["find_decisions", "index_robots"]
+__all__ = ["FoundRun", "find_decisions", "found_runs", "index_robots"]
 
 _COLUMNS = (
     "d.robot, d.day, d.t_ns, d.cycle, d.command, d.previous_command, d.lead_factor, "
@@ -72,6 +73,85 @@ def find_decisions(
     count = run_query(index, f"SELECT count(*) FROM ({sql})", params, limits=limits).rows[0][0]
     assert isinstance(count, int)  # count(*) is a BIGINT, never NULL
     return dataclasses.replace(found, total=int(count) if count > len(found.rows) else None)
+
+
+@dataclass(frozen=True, slots=True)
+class FoundRun:
+    """Found decisions of one robot in a row: consecutive cycles holding one command (a
+    stop held for 2 s is 20 found cycles, one run). What a person reads of ``find``; the
+    rows themselves (one per cycle) are what scripts read."""
+
+    robot: str
+    command: str | None
+    previous_command: str | None
+    """The command before the run's first cycle."""
+    first_cycle: int
+    last_cycle: int
+    first_ns: int
+    last_ns: int
+    decisions: int
+    wall: bool
+    """The robot's clock tells the time of day (the index's ``day`` is a UTC date)."""
+    first: dict[str, object]
+    """The run's first row, by column (its lead factor, its ``explain`` command)."""
+    nearest_m: float | None
+    """The closest the nearest entity came over the run (with ``--near``/``--within``)."""
+    et_lowest: float | None
+    """The lowest ET over the run; None when any is unknown or none was scored."""
+
+
+def found_runs(result: QueryResult) -> list[FoundRun]:
+    """``find_decisions``' rows grouped into runs, in time order: a row continues its
+    robot's run when it holds the same command at the next cycle number."""
+    runs: list[FoundRun] = []
+    open_runs: dict[str, int] = {}  # robot -> index of its run still open in ``runs``
+    for row in result.records():
+        robot, cycle = str(row["robot"]), int(row["cycle"])  # type: ignore[call-overload]
+        at = open_runs.get(robot)
+        run = runs[at] if at is not None else None
+        if run is not None and run.command == row["command"] and cycle == run.last_cycle + 1:
+            runs[at] = _extended(run, row)  # type: ignore[index]
+            continue
+        open_runs[robot] = len(runs)
+        runs.append(_started(row))
+    return runs
+
+
+def _started(row: dict[str, object]) -> FoundRun:
+    t_ns, cycle = int(row["t_ns"]), int(row["cycle"])  # type: ignore[call-overload]
+    et = row.get("et")
+    return FoundRun(
+        robot=str(row["robot"]),
+        command=None if row["command"] is None else str(row["command"]),
+        previous_command=None if row["previous_command"] is None else str(row["previous_command"]),
+        first_cycle=cycle,
+        last_cycle=cycle,
+        first_ns=t_ns,
+        last_ns=t_ns,
+        decisions=1,
+        wall=not str(row["day"]).startswith("run-"),
+        first=row,
+        nearest_m=_number(row.get("nearest_m")),
+        et_lowest=_number(et),
+    )
+
+
+def _extended(run: FoundRun, row: dict[str, object]) -> FoundRun:
+    near, et = _number(row.get("nearest_m")), _number(row.get("et"))
+    return dataclasses.replace(
+        run,
+        last_cycle=int(row["cycle"]),  # type: ignore[call-overload]
+        last_ns=int(row["t_ns"]),  # type: ignore[call-overload]
+        decisions=run.decisions + 1,
+        nearest_m=near
+        if run.nearest_m is None or (near is not None and near < run.nearest_m)
+        else run.nearest_m,
+        et_lowest=None if run.et_lowest is None or et is None else min(run.et_lowest, et),
+    )
+
+
+def _number(value: object) -> float | None:
+    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
 
 
 def _nearest(near: str | None, within_m: float | None) -> tuple[str, list[str]]:

@@ -30,14 +30,16 @@ from trace_runtime.boundary import (
     folder_lock,
     read_side_json,
     remove_own_file,
+    storage_error,
     write_atomic,
 )
-from trace_runtime.errors import LogReadError, UnsafePathError, UsageError
+from trace_runtime.errors import LogReadError, StorageError, UnsafePathError, UsageError
 
 __all__ = [
     "LOCK",
     "MANIFEST",
     "check_target",
+    "discard_unlisted",
     "index_lock",
     "listed_files",
     "load_manifest",
@@ -119,6 +121,10 @@ def check_target(out: Path) -> dict[str, Any] | None:
     stopped by a full disk) is ours: it is rebuilt, its files replaced or removed."""
     if out.is_symlink() or (out.exists() and not out.is_dir()):
         raise UsageError(f"{out}: exists and is not a directory")
+    if out.is_dir() and not os.access(out, os.W_OK):
+        # Whatever the folder holds, a run needs to write there (its lock at least): what
+        # the user can act on is the write, not whether the folder looks like an index.
+        raise StorageError(str(out), "the folder is not writable (read-only or no permission)")
     try:
         body = read_side_json(out / MANIFEST)
     except LogReadError as err:
@@ -177,24 +183,57 @@ def _partial_of(name: str) -> bool:
 
 @contextlib.contextmanager
 def index_lock(out: Path) -> Iterator[None]:
-    """One ``index`` run per folder at a time; a second is refused with one line."""
-    out.mkdir(parents=True, exist_ok=True)
-    with folder_lock(out / LOCK, held=f"{out}: another index run is writing this index"):
+    """One ``index`` run per folder at a time; a second is refused with one line. The lock
+    file goes when the run ends, however it ends."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise storage_error(out, err) from err
+    held = f"{out}: another index run is writing this index"
+    with folder_lock(out / LOCK, held=held, remove=True):
         yield
+
+
+def discard_unlisted(out: Path) -> None:
+    """Delete the index's own files that the manifest now in ``out`` does not name (all of
+    them when there is none), and the folders left empty: what a run stopped by a full
+    disk wrote is not left for anyone to take as indexed. Run with the lock held."""
+    try:
+        body = read_side_json(out / MANIFEST)
+    except LogReadError:
+        return  # a manifest we cannot read is not ours to judge by: touch nothing
+    listed = set(listed_files(out, body)) if isinstance(body, dict) else set()
+    for table in TABLES:
+        top = out / table
+        if top.is_symlink() or not top.is_dir():
+            continue
+        for dirpath, _, filenames in os.walk(top, topdown=False):
+            for name in filenames:
+                rel = (Path(dirpath) / name).relative_to(out).as_posix()
+                if rel not in listed:
+                    remove_own(out, rel)
+            with contextlib.suppress(OSError):
+                os.rmdir(dirpath)  # only when empty: a folder still holding files stays
 
 
 def write_table_file(out: Path, rel: str, write: Callable[[BinaryIO], object]) -> None:
     """Write Parquet file ``out/rel`` aside through ``write(file)`` and rename it into place;
     its folder is made inside ``out`` and never reached through a link."""
     target = out / rel
-    target.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise storage_error(target.parent, err) from err
     if own_file(out, rel) is None:
         raise UnsafePathError(str(target), "is reached through a link or leads outside; refused")
     tmp, file = create_aside(target)
     try:
-        with file:
-            write(file)
-        os.replace(tmp, target)
+        try:
+            with file:
+                write(file)
+            os.replace(tmp, target)
+        except OSError as err:  # pyarrow's IO errors are OSErrors (a full disk: ENOSPC)
+            raise storage_error(target, err) from err
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()  # our own, made just now under a fresh name

@@ -23,6 +23,7 @@ last. Which file holds each position when the inputs hold it twice is ``fleet.co
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
@@ -39,6 +40,7 @@ from trace_audit.fleet.copies import (
 from trace_audit.fleet.folder import (
     MANIFEST,
     check_target,
+    discard_unlisted,
     index_lock,
     load_manifest,
     remove_own,
@@ -48,6 +50,7 @@ from trace_audit.fleet.rows import partition_of
 from trace_audit.fleet.tables import INDEX_VERSION
 from trace_audit.fleet.task import IndexedSegment, IndexTask, index_segment
 from trace_audit.metrics import MetricsConfig
+from trace_runtime.errors import StorageError
 from trace_runtime.reading.logset import Log
 from trace_runtime.tiers.catalog import file_digest
 
@@ -184,18 +187,29 @@ def build_index(
     # Absolute on the client: a Dask worker runs in its own directory, where a relative
     # --out would name another place (the files landed there, the manifest here).
     target = Path(out).absolute()
+    new = not target.exists()
     check_target(target)  # a folder that is not ours is refused before the lock is made in it
-    with index_lock(target):
-        return _build(
-            paths,
-            target,
-            out=str(out),
-            cfg=cfg,
-            workers=workers,
-            executor=executor,
-            progress=progress,
-            started=started,
-        )
+    try:
+        with index_lock(target):
+            try:
+                return _build(
+                    paths,
+                    target,
+                    out=str(out),
+                    cfg=cfg,
+                    workers=workers,
+                    executor=executor,
+                    progress=progress,
+                    started=started,
+                )
+            except StorageError:
+                discard_unlisted(target)  # the files of a run that could not finish
+                raise
+    except StorageError:
+        if new:
+            with contextlib.suppress(OSError):
+                target.rmdir()  # made by this run; only if nothing (another run's lock) is in it
+        raise
 
 
 def _build(

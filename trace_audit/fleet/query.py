@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, TypeVar
 
 from trace_audit.fleet.folder import listed_files, load_manifest
 from trace_audit.fleet.limits import QueryLimits, format_size, over_limit, row_bytes, watchdog
-from trace_audit.fleet.tables import TABLES, schema
+from trace_audit.fleet.tables import PARTITION_COLUMNS, TABLES, sql_columns
 from trace_runtime.errors import LogReadError, UsageError
 
 if TYPE_CHECKING:
@@ -135,33 +135,20 @@ def connect(
     # Only the index's own files inside the folder (``folder.listed_files``): a name the
     # manifest lists outside it would otherwise widen what the session may read.
     listed = listed_files(root, manifest)
-    for table in TABLES:
-        # The files the manifest lists, not a glob: a stray or leftover file in the
-        # directory is not the index's and must not be counted.
-        files = [(root / rel).as_posix() for rel in listed if rel.startswith(f"{table}/")]
-        if files:
-            names = ", ".join(sql_literal(f) for f in files)
-            source = (
-                f"read_parquet([{names}], hive_partitioning = true, "
-                "hive_types = {'robot': VARCHAR, 'day': VARCHAR})"
-            )
-        else:  # no rows yet (e.g. no gaps): an empty view of the right shape
-            import pyarrow as pa
-
-            empty = schema(table).empty_table()
-            empty = empty.append_column("robot", pa.array([], pa.string()))
-            empty = empty.append_column("day", pa.array([], pa.string()))
-            con.register(f"_empty_{table}", empty)
-            source = f"_empty_{table}"
-        extra = f", {_EXPLAIN} AS explain" if table == "decisions" else ""
-        try:
-            con.execute(f"CREATE VIEW {table} AS SELECT *{extra} FROM {source}")
-        except duckdb.Error as err:  # a listed file gone or damaged: the index is unreadable
-            con.close()
-            first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-            raise LogReadError(
-                str(root), f"{first} (run trace-audit index again to rebuild it)"
-            ) from err
+    try:
+        for table in TABLES:
+            # The files the manifest lists, not a glob: a stray or leftover file in the
+            # directory is not the index's and must not be counted.
+            _create_view(con, table, [(root / r).as_posix() for r in listed if _of(r, table)])
+    except duckdb.Error as err:  # a listed file gone or damaged: the index is unreadable
+        con.close()
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise LogReadError(
+            str(root), f"{first} (run trace-audit index again to rebuild it)"
+        ) from err
+    except LogReadError:
+        con.close()
+        raise
     # The index's files and nothing else: a query reads no other file, writes none (COPY,
     # ATTACH), loads no extension and reaches no network, and cannot undo this. The views
     # keep working (DuckDB checks each file against allowed_paths).
@@ -175,6 +162,45 @@ def connect(
     con.execute("SET enable_external_access = false")
     con.execute("SET lock_configuration = true")
     return con
+
+
+def _of(rel: str, table: str) -> bool:
+    return rel.startswith(f"{table}/")
+
+
+def _create_view(con: duckdb.DuckDBPyConnection, table: str, files: list[str]) -> None:
+    """View ``table`` over ``files``: the table's columns, each cast to its type, the
+    partition columns and, for decisions, the explain column; of no file, an empty view of
+    the same shape. A file's column of another type is cast, so the view is always of the
+    table's types (a cast of a column already of its type is no work for DuckDB); a value
+    that will not cast fails as it is read (``_guarded``). A first file that lacks a
+    column is a ``LogReadError`` naming it; a later one DuckDB reports as it reads it."""
+    import duckdb
+
+    shape = sql_columns(table)
+    extra = f", {_EXPLAIN} AS explain" if table == "decisions" else ""
+    if not files:  # no rows yet (e.g. no gaps): typed NULLs, no row
+        nulls = ", ".join(f'CAST(NULL AS {kind}) AS "{name}"' for name, kind in shape)
+        partitions = ", ".join(f"CAST(NULL AS VARCHAR) AS {c}" for c in PARTITION_COLUMNS)
+        con.execute(f"CREATE VIEW {table} AS SELECT {nulls}, {partitions}{extra} LIMIT 0")
+        return
+    names = ", ".join(sql_literal(f) for f in files)
+    source = (
+        f"read_parquet([{names}], hive_partitioning = true, "
+        "hive_types = {'robot': VARCHAR, 'day': VARCHAR})"
+    )
+    typed = ", ".join(f'CAST("{name}" AS {kind}) AS "{name}"' for name, kind in shape)
+    try:
+        con.execute(
+            f"CREATE VIEW {table} AS SELECT {typed}, {', '.join(PARTITION_COLUMNS)}{extra} "
+            f"FROM {source}"
+        )
+    except duckdb.Error as err:  # a column missing, or of a type that cannot be cast
+        got = _described(con, f"SELECT * FROM {source}")
+        damage = _mismatch(table, files[0], dict(shape), got)
+        if damage is not None:
+            raise damage from err
+        raise
 
 
 def run_query(
@@ -285,11 +311,64 @@ def _guarded(
         if isinstance(err, MemoryError):
             raise
         first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-        if isinstance(err, duckdb.IOException | duckdb.InvalidInputException) and (
-            ".parquet" in first
+        if _names_a_file(first, index) or (
+            isinstance(err, duckdb.IOException | duckdb.InvalidInputException)
+            and ".parquet" in first
         ):  # the index's own file is damaged or gone: unreadable input, not a usage error
             raise LogReadError(str(index), f"SQL: {first}") from err
+        if isinstance(err, duckdb.ConversionException):
+            # A value that will not cast, and DuckDB did not say whose: the statement's own
+            # (a CAST of the user's) or a file's whose column is of another type.
+            damage = _damaged_file(con, index)
+            if damage is not None:
+                raise damage from err
         raise UsageError(f"SQL: {first}") from err
+
+
+def _damaged_file(con: duckdb.DuckDBPyConnection, index: str | Path) -> LogReadError | None:
+    """The first file of the index whose columns are not its table's, or None. Each
+    file's footer is read: for an error's explanation only, never on the way of a
+    statement that succeeds."""
+    root = Path(index)
+    manifest = load_manifest(root)
+    listed = listed_files(root, manifest) if manifest is not None else []
+    for table in TABLES:
+        want = dict(sql_columns(table))
+        for path in [(root / rel).as_posix() for rel in listed if _of(rel, table)]:
+            got = _described(con, f"SELECT * FROM read_parquet({sql_literal(path)})")
+            damage = _mismatch(table, path, want, got)
+            if damage is not None:
+                return damage
+    return None
+
+
+def _described(con: duckdb.DuckDBPyConnection, select: str) -> dict[str, str]:
+    """The columns of a SELECT (or a view) and their DuckDB types (bound, not run)."""
+    return {row[0]: row[1] for row in con.execute(f"DESCRIBE {select}").fetchall()}
+
+
+def _mismatch(
+    table: str, path: str, want: dict[str, str], got: dict[str, str]
+) -> LogReadError | None:
+    """The error for file ``path`` of ``table`` when a column ``want`` names is missing
+    from ``got`` or of another type there; None when every one is as wanted."""
+    for name, kind in want.items():
+        # DuckDB quotes a struct field's name only where it is a keyword: compared without
+        if got.get(name, "").replace('"', "") != kind.replace('"', ""):
+            held = "has no such column" if name not in got else f"holds it as {got[name]}"
+            return LogReadError(
+                path,
+                f"damaged index file: the {table} table's column {name!r} ({kind}) {held} "
+                "(run trace-audit index again to rebuild it)",
+            )
+    return None
+
+
+def _names_a_file(message: str, index: str | Path) -> bool:
+    """Whether DuckDB's ``message`` is about a file inside ``index`` (a value of a file that
+    cannot be cast to its column's type): the session reads no other file, so the damage
+    is the index's, whatever the statement."""
+    return f'file "{Path(index).as_posix()}/' in message
 
 
 def _run(

@@ -10,6 +10,8 @@ text: the UTC date on a wall clock, ``run-<segment>`` on a sim or monotonic cloc
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from types import ModuleType
 from typing import TYPE_CHECKING, TypedDict
 
 from trace_audit.columns import (
@@ -31,6 +33,7 @@ __all__ = [
     "TABLES",
     "parquet_options",
     "schema",
+    "sql_columns",
 ]
 
 INDEX_FORMAT = "trace-fleet-index"
@@ -74,15 +77,16 @@ def schema(table: str) -> pa.Schema:
     """The Parquet schema of one table (without the partition columns)."""
     import pyarrow as pa
 
-    columns = {
-        "decisions": _decision_columns,
-        "entities": _entity_columns,
-        "channels": _channel_columns,
-        "checks": _check_columns,
-        "gaps": _gap_columns,
-        "segments": _segment_columns,
-    }[table]()
+    columns = _CATALOGUES[table](pa)
     return pa.schema(columns, metadata={"trace.index_version": str(INDEX_VERSION)})
+
+
+def sql_columns(table: str) -> list[tuple[str, str]]:
+    """One table's columns (without the partition columns) with their DuckDB types, from
+    the same catalogue as ``schema`` and without importing pyarrow."""
+    from trace_audit.fleet import sql_types
+
+    return [(name, str(kind)) for name, kind in _CATALOGUES[table](sql_types)]
 
 
 _Columns = list[tuple[str, "pa.DataType"]]
@@ -138,45 +142,33 @@ _ENTITY_COLUMNS = (
 )
 
 
-def _decision_columns() -> _Columns:
+def _decision_columns(pa: ModuleType) -> _Columns:
     """One row per decision: what it did, why, and how it scores."""
-    import pyarrow as pa
-
     return decision_columns(pa, _DECISION_COLUMNS)
 
 
-def _entity_columns() -> _Columns:
+def _entity_columns(pa: ModuleType) -> _Columns:
     """One row per perceived entity of a decision."""
-    import pyarrow as pa
-
     return entity_columns(pa, _ENTITY_COLUMNS)
 
 
-def _channel_columns() -> _Columns:
+def _channel_columns(pa: ModuleType) -> _Columns:
     """One row per actuator channel of a decision's execution record (profile 1.1)."""
-    import pyarrow as pa
-
     return [("segment", pa.string()), *channel_columns(pa)]
 
 
-def _check_columns() -> _Columns:
+def _check_columns(pa: ModuleType) -> _Columns:
     """One row per compliance check of a decision's execution record."""
-    import pyarrow as pa
-
     return [("segment", pa.string()), *check_columns(pa)]
 
 
-def _gap_columns() -> _Columns:
+def _gap_columns(pa: ModuleType) -> _Columns:
     """One row per gap between sealed cycles."""
-    import pyarrow as pa
-
     return [("segment", pa.string()), *gap_columns(pa)]
 
 
-def _segment_columns() -> _Columns:
+def _segment_columns(pa: ModuleType) -> _Columns:
     """One row per segment file indexed."""
-    import pyarrow as pa
-
     return [
         ("segment", pa.string()),
         ("segment_path", pa.string()),
@@ -196,3 +188,14 @@ def _segment_columns() -> _Columns:
         ("policy_version", pa.string()),
         ("period_ns", pa.int64()),
     ]
+
+
+_CATALOGUES: dict[str, Callable[[ModuleType], _Columns]] = {
+    "decisions": _decision_columns,
+    "entities": _entity_columns,
+    "channels": _channel_columns,
+    "checks": _check_columns,
+    "gaps": _gap_columns,
+    "segments": _segment_columns,
+}
+"""Each table's columns, given ``pyarrow`` (its schema) or ``sql_types`` (its SQL shape)."""

@@ -18,7 +18,7 @@ import orjson
 
 from trace_audit.causal import Decision, layer_with_defaults, read_decision
 from trace_audit.causal.lenient import as_float, as_mapping, as_str, mappings
-from trace_audit.cycle_fields import command_of, seal_dropped
+from trace_audit.cycle_fields import command_of, is_decision_change, seal_dropped
 from trace_audit.sensor_window import DEFAULT_SENSOR_WINDOW, SensorWindow
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import UsageError
@@ -120,7 +120,9 @@ class FoxgloveView:
             out.append(gap)
         decision = read_decision(cycle, with_tree=False)
         command = command_of(cycle)
-        if self.cycles == 1 or command != self.command:
+        changed = is_decision_change(self.cycles > 1, self.command, command)
+        self.changes += changed
+        if self.cycles == 1 or changed:  # the first decision is shown, not counted
             out.append(self._decision(cycle, decision, command))
         self.command = command
         numbers = {
@@ -306,7 +308,6 @@ class FoxgloveView:
             text += f"; leading {decision.leading.label} = {decision.leading.shown}"
         if decision.rationale:
             text += f"; because {decision.rationale}"
-        self.changes += 1
         return self._sdk_message(
             TOPIC_DECISIONS,
             m.Log(

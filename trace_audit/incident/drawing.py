@@ -14,6 +14,7 @@ from __future__ import annotations
 import io
 import re
 import textwrap
+import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import TYPE_CHECKING
@@ -76,20 +77,33 @@ def command_colour(command: str | None) -> str:
 
 @contextmanager
 def figure_style() -> Iterator[None]:
+    """The figures' style, and the text of the log drawn as the text it is.
+
+    A name or a rationale may hold ``$`` (matplotlib would read ``$...$`` as mathtext, and
+    fail on a bad one) or glyphs DejaVu Sans lacks (matplotlib warns, naming its own source
+    file, and draws a box): mathtext is off, and matplotlib's warnings stay inside the
+    figure code; the page has the text itself in its tables."""
     import matplotlib
 
-    with matplotlib.rc_context(
-        {
-            "svg.fonttype": "path",  # glyph outlines: the page needs no font
-            "svg.hashsalt": "trace-report",  # ids stable from run to run
-            "font.family": "DejaVu Sans",
-            "font.size": 9,
-            "axes.spines.top": False,
-            "axes.spines.right": False,
-            "axes.titlesize": 10,
-            "axes.titleweight": "bold",
-        }
+    with (
+        warnings.catch_warnings(),
+        matplotlib.rc_context(
+            {
+                "text.parse_math": False,
+                "svg.fonttype": "path",  # glyph outlines: the page needs no font
+                "svg.hashsalt": "trace-report",  # ids stable from run to run
+                "font.family": "DejaVu Sans",
+                "font.size": 9,
+                "axes.spines.top": False,
+                "axes.spines.right": False,
+                "axes.titlesize": 10,
+                "axes.titleweight": "bold",
+            }
+        ),
     ):
+        # matplotlib attributes a glyph's warning to the caller's line (``to_svg``), not to
+        # itself: every UserWarning of the drawing is matplotlib's, and stays here.
+        warnings.simplefilter("ignore", UserWarning)
         yield
 
 

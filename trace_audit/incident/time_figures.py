@@ -25,7 +25,7 @@ from trace_audit.incident.drawing import (
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-__all__ = ["execution_figure", "factors_figure"]
+__all__ = ["execution_figure", "factor_line", "factors_figure"]
 
 
 # --- factors over time --------------------------------------------------------------------
@@ -51,12 +51,30 @@ def factors_figure(data: ReportData) -> str:
         return to_svg(fig, "factors", "The decision's factors over the window")
 
 
+def factor_line(data: ReportData, name: str) -> tuple[list[float], list[float]]:
+    """The points of factor ``name`` over the window, NaN where the line must break: a
+    cycle whose action does not name the factor, and wherever the factor is read from
+    another entity (``ped_1.distance`` then ``ped_2.distance``) or the scenario changes,
+    so that two people, or two situations, are never joined as if one approached."""
+    xs: list[float] = []
+    ys: list[float] = []
+    before: tuple[str | None, str | None] | None = None
+    for s in data.samples:
+        x = as_seconds(data, s.t_ns)
+        value = s.factors.get(name)
+        whose = (s.factor_nodes.get(name), s.scenario)
+        if value is not None and before is not None and whose != before:
+            xs.append(x)
+            ys.append(float("nan"))
+        xs.append(x)
+        ys.append(float("nan") if value is None else value)
+        before = whose if value is not None else None
+    return xs, ys
+
+
 def _factor_axis(ax: Axes, data: ReportData, name: str) -> None:
     unit = data.factor_units.get(name)
-    # A cycle whose action does not name the factor breaks the line (NaN), so values of
-    # two different situations are never joined.
-    xs = [as_seconds(data, s.t_ns) for s in data.samples]
-    ys = [s.factors.get(name, float("nan")) for s in data.samples]
+    xs, ys = factor_line(data, name)
     command_bands(ax, data)
     ax.plot(xs, ys, ".", ms=2.5, color="#333333")
     ax.plot(xs, ys, "-", lw=0.8, color="#333333", alpha=0.5)

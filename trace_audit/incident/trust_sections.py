@@ -15,6 +15,7 @@ from trace_audit.incident.markup import html_fields, html_problems, html_table
 from trace_audit.log_time import LogClock
 from trace_audit.rules import RobotRules
 from trace_runtime.verification import Finding
+from trace_runtime.verification.report import KIND_WORDS
 
 __all__ = ["auditability_section", "integrity_section", "rules_section"]
 
@@ -64,12 +65,22 @@ def _rule_outcomes(judged: RobotRules) -> str:
 
 def _unseen_names(judged: RobotRules) -> str:
     """A note for each name a rule reads that the window never shows."""
-    unseen = [(rule.rule, name) for rule in judged.rules for name in rule.unseen]
-    return "".join(
-        f'<p class="warn">Note: the window never shows <code>{escape(name)}</code>, read by '
-        f"<code>{escape(rule)}</code> (a typo?).</p>"
-        for rule, name in unseen
-    )
+    notes = []
+    for rule in judged.rules:
+        outside = {seen.signal: seen for seen in rule.seen_outside}
+        for name in rule.unseen:
+            seen = outside.get(name)
+            where = (
+                " (a typo?)"
+                if seen is None
+                else f"; the log shows it {escape(judged.clock.show(seen.first_ns))} – "
+                f"{escape(judged.clock.show(seen.last_ns))}"
+            )
+            notes.append(
+                f'<p class="warn">Note: the window never shows <code>{escape(name)}</code>, '
+                f"read by <code>{escape(rule.rule)}</code>{where}.</p>"
+            )
+    return "".join(notes)
 
 
 def _violations(judged: RobotRules, clock: LogClock) -> str:
@@ -175,10 +186,29 @@ def integrity_section(data: ReportData) -> str:
         ("Signatures", signatures),
         ("Declared drops", str(report.declared_dropped)),
     ]
-    findings = [f"{f.kind}: {f.message}" for f in report.findings]
     # The cycle in flight's one "problem" is the verdict row itself, not a failure to list.
     problems = [] if seal.in_flight else list(seal.problems)
-    return html_fields(rows) + html_problems([*problems, *findings]) + _notes(report.notes)
+    return (
+        html_fields(rows)
+        + html_problems(problems)
+        + _findings(report.findings)
+        + _notes(report.notes)
+    )
+
+
+def _findings(findings: Sequence[Finding]) -> str:
+    """verify's findings in words, each with its kind as a data attribute (for scripts)."""
+    listed = "".join(
+        f'<li data-kind="{escape(f.kind)}">{escape(_said(f.kind))}: {escape(f.message)}</li>'
+        for f in findings
+    )
+    return f'<ul class="problems">{listed}</ul>' if listed else ""
+
+
+def _said(kind: str) -> str:
+    """A finding or note kind as a reader of the page says it."""
+    words = KIND_WORDS.get(kind, kind.replace("_", " "))
+    return words[:1].upper() + words[1:]
 
 
 def _anchoring(data: ReportData) -> str:
@@ -208,7 +238,10 @@ def _notes(notes: Sequence[Finding]) -> str:
     lines = []
     for kind, items in by_kind.items():
         more = f" (and {len(items) - 1} more like it)" if len(items) > 1 else ""
-        lines.append(f'<p class="note">{escape(kind)}: {escape(items[0].message)}{more}</p>')
+        lines.append(
+            f'<p class="note" data-kind="{escape(kind)}">{escape(_said(kind))}: '
+            f"{escape(items[0].message)}{more}</p>"
+        )
     return "".join(lines)
 
 
@@ -241,7 +274,7 @@ def auditability_section(data: ReportData) -> str:
         + "<h3>The window</h3>"
         + _window_fields(data)
         + _gaps_table(data)
-        + f'<p class="note">{escape(s.source)}; docs/metrics.md defines each.</p>'
+        + f'<p class="note">{escape(s.source)}.</p>'
     )
 
 

@@ -58,6 +58,9 @@ class Sample:
     command: str | None
     factors: dict[str, float]
     """Factor name -> numeric value, for the factors this cycle's action names."""
+    factor_nodes: dict[str, str]
+    """Factor name -> the belief node it was read from (``ped_2.distance``): whose value it is."""
+    scenario: str | None
     channels: dict[str, tuple[float | None, float | None]]
     deviation: float | None
     failed_checks: tuple[str, ...]
@@ -158,6 +161,8 @@ def window_samples(
                     for f in d.factors
                     if f.label in names and (value := as_float(f.value)) is not None
                 },
+                factor_nodes={f.label: f.node for f in d.factors if f.label in names},
+                scenario=ex.scenario if ex is not None else None,
                 channels=execution_channels(ex) if ex is not None else {},
                 deviation=ex.deviation if ex is not None else None,
                 failed_checks=tuple(ch.rule for ch in ex.checks if not ch.passed)

@@ -12,18 +12,20 @@ through too (``rules.index_check``).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 from trace_audit.log_gaps import gap_stepper
 from trace_audit.log_source import LogSource, as_log
 from trace_audit.log_time import LogClock, NotWallClockError, TimeArg
 from trace_audit.rules.formula import Horizon, RulesError
-from trace_audit.rules.judge import RobotSignals, SignalColumns, judge
-from trace_audit.rules.results import CheckResult, RobotRules, Skipped
+from trace_audit.rules.judge import RobotSignals, SignalColumns, judge, shows
+from trace_audit.rules.results import CheckResult, RobotRules, SeenOutside, Skipped
 from trace_audit.rules.rulebook import Rule
 from trace_audit.rules.signals import read_signals
 from trace_audit.selection import Selection, per_robot
 from trace_audit.transitions import WindowOutsideLogError
+from trace_runtime.clock import offset_hint
 from trace_runtime.errors import TimeOutOfRangeError
 from trace_runtime.reading.logset import Log
 
@@ -66,7 +68,45 @@ def _check_robot(
         raise RulesError(f"{log.first_robot}: the log declares no cycle period to judge rules at")
     lo, hi = selection.window(log)
     _overlaps(log, lo, hi)
-    return judge(_read_rows(log, rules, lo, hi, path), rules, engine=engine)[0]
+    judged = judge(_read_rows(log, rules, lo, hi, path), rules, engine=engine)[0]
+    unseen = {name for rule in judged.rules for name in rule.unseen}
+    if not unseen or (lo is None and hi is None):
+        return judged
+    outside = _seen_outside(log, sorted(unseen), lo, hi)
+    return replace(
+        judged,
+        rules=tuple(
+            replace(rule, seen_outside=tuple(outside[n] for n in rule.unseen if n in outside))
+            for rule in judged.rules
+        ),
+    )
+
+
+def _seen_outside(
+    log: Log, names: list[str], lo: int | None, hi: int | None
+) -> dict[str, SeenOutside]:
+    """Where the robot's log, outside the window ``lo``..``hi``, shows each of ``names``
+    (none of which the window shows): read only when a window hides a signal, so that a
+    note calls a name a typo only when the whole log never shows it."""
+    import numpy as np
+
+    found: dict[str, SeenOutside] = {}
+    for cycle in log.iter_cycles():
+        if (lo is None or cycle.t_ns >= lo) and (hi is None or cycle.t_ns <= hi):
+            continue
+        values = read_signals(cycle, names)[1]
+        for name, value in values.items():
+            if not shows(name, np.array([value])):
+                continue
+            first = found.get(name)
+            found[name] = SeenOutside(
+                name,
+                cycle.t_ns if first is None else first.first_ns,
+                cycle.t_ns,
+                cycle.cycle if first is None else first.first_cycle,
+                cycle.cycle,
+            )
+    return found
 
 
 def _overlaps(log: Log, lo: int | None, hi: int | None) -> None:
@@ -81,7 +121,8 @@ def _overlaps(log: Log, lo: int | None, hi: int | None) -> None:
     if lo is not None and hi is not None and hi < lo:
         raise WindowOutsideLogError(f"the window {shown} ends before it starts ({where})")
     if start > last or end < first or end < start:
-        raise WindowOutsideLogError(f"the window {shown} does not overlap {where}")
+        hint = offset_hint(log.clock, first, lo, hi)
+        raise WindowOutsideLogError(f"the window {shown} does not overlap {where}{hint}")
 
 
 def _read_rows(

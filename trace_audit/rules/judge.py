@@ -49,7 +49,7 @@ from trace_audit.rules.rulebook import Rule
 from trace_audit.rules.signals import is_indicator
 from trace_runtime.gaps import Gap
 
-__all__ = ["Labels", "RobotSignals", "SignalColumns", "judge"]
+__all__ = ["Labels", "RobotSignals", "SignalColumns", "judge", "shows"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -238,17 +238,20 @@ def _unseen(formula: Formula, signals: RobotSignals, judged: NDArray[np.bool_]) 
     if not judged.any():
         return ()
     for name in formula.signals:
-        values = signals.column(name)[judged]
-        family = name.partition(".")[0]
-        if family == "nearest":
-            seen = bool(np.isfinite(values).any())
-        elif is_indicator(name):
-            seen = bool((values == 1.0).any())
-        else:
-            seen = not bool(np.isnan(values).all())
-        if not seen:
+        if not shows(name, signals.column(name)[judged]):
             out.append(name)
     return tuple(out)
+
+
+def shows(name: str, values: NDArray[np.float64]) -> bool:
+    """Whether rows with these ``values`` of signal ``name`` show it: a class perceived
+    (a finite ``nearest.*``), an indicator at 1 (a command in force, a flag raised), any
+    other signal logged (not NaN)."""
+    if name.partition(".")[0] == "nearest":
+        return bool(np.isfinite(values).any())
+    if is_indicator(name):
+        return bool((values == 1.0).any())
+    return not bool(np.isnan(values).all())
 
 
 def _lowest(values: NDArray[np.float64]) -> float | None:

@@ -20,6 +20,7 @@ __all__ = [
     "Outcome",
     "RobotRules",
     "RuleResult",
+    "SeenOutside",
     "Undecided",
     "UndecidedReason",
     "Violation",
@@ -104,6 +105,20 @@ class RuleResult:
     """Signals the rule reads that the robot's rows never show: a class never perceived
     (``nearest.*`` +inf throughout), a command never in force, a flag never raised, a
     channel, check or factor never logged. Often a typo; the outcome does not change."""
+    seen_outside: tuple[SeenOutside, ...] = field(default=(), metadata={OMIT_EMPTY: True})
+    """Of ``unseen``, with a window (``--from``/``--to``): those the log shows outside it,
+    and where. The others the whole log never shows."""
+
+
+@dataclass(frozen=True, slots=True)
+class SeenOutside:
+    """A signal a window never shows, where the rest of the robot's log shows it."""
+
+    signal: str
+    first_ns: int
+    last_ns: int
+    first_cycle: int
+    last_cycle: int
 
 
 @dataclass(frozen=True, slots=True)

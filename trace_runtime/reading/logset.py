@@ -41,9 +41,14 @@ from trace_runtime.reading.catalogued import (
 from trace_runtime.reading.copies import preferred_copies
 from trace_runtime.reading.reader import Segment
 from trace_runtime.reading.segment_files import files_of
+from trace_runtime.records import LAYER_TOPICS, TOPIC_SEAL
 from trace_runtime.segment_names import parse_segment_name
+from trace_runtime.tier_formats.warm import SUMMARY_TOPIC
 
 log = logging.getLogger("trace_runtime")
+
+_CYCLE_TOPICS = (*LAYER_TOPICS, TOPIC_SEAL, SUMMARY_TOPIC)
+"""The topics a decision cycle's messages are on (a checkpoint's is not one of them)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -228,14 +233,15 @@ class Log:
         slot = next((s for s in self._slots if s.path.name == name), None)
         return None if slot is None else open_slot(slot)
 
-    def holds_trace_messages(self) -> bool:
-        """Whether a segment's summary counts any message on a ``/trace/`` topic (False
-        also when no segment has a summary: a scan must decide)."""
+    def holds_cycle_messages(self) -> bool:
+        """Whether a segment's summary counts any message of a decision cycle (a layer, a
+        seal or a warm summary; a checkpoint is not one). False also when no segment has
+        a summary: a scan must decide."""
         if self._all is None:
             return True  # the catalog admits only segments that hold sealed cycles
         for segment in self._all:
             counts = segment.info.channels
-            if any(n > 0 for topic, n in counts.items() if topic.startswith("/trace/")):
+            if any(counts.get(topic, 0) > 0 for topic in _CYCLE_TOPICS):
                 return True
         return False
 

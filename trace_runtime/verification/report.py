@@ -17,6 +17,7 @@ from trace_runtime.session import TIERS
 
 __all__ = [
     "EXTERNAL_RECORDING",
+    "KIND_WORDS",
     "Finding",
     "FindingKind",
     "NoteKind",
@@ -80,6 +81,49 @@ NoteKind = Literal[
 declared a recording absent, stalled or unreadable; ``recording_unchecked``: sealed windows of
 a recording that is not here; ``recording_unsealed``: recorded messages after the last window
 the chain sealed (written after the robot's last cycle, or within the sealing lag)."""
+
+KIND_WORDS: dict[str, str] = {
+    # findings
+    "modified": "a record changed after it was sealed",
+    "evidence_mismatch": "a sensor reading differs from the one the decision cited",
+    "missing": "sealed cycles missing",
+    "inserted": "cycles inserted",
+    "reordered": "cycles out of order",
+    "unsealed": "cycles without a seal",
+    "undeclared_gap": "cycles missing that the logger never declared dropped",
+    "truncated": "a segment cut short",
+    "missing_segment": "a segment missing",
+    "checkpoint_mismatch": "a checkpoint disagrees with the seals",
+    "bad_signature": "a signature that does not verify",
+    "key_mismatch": "signed with another key",
+    "unsigned_checkpoint": "a checkpoint without a signature",
+    "damaged": "damaged data",
+    "tree_mismatch": "a checkpoint states another tree than the seals give",
+    "truncated_tail": "the log ends before what a witness cosigned",
+    "fork": "the log differs from what a witness cosigned",
+    "recording_modified": "a recording changed after it was sealed",
+    # notes
+    "declared_gap": "cycles the logger declared dropped",
+    "summarised": "cycles kept as summaries (warm tier)",
+    "unanchored": "cycles no checkpoint vouches for",
+    "recovered": "recovered from an unfinished segment",
+    "live": "a segment still being written",
+    "signatures_unchecked": "signatures not checked",
+    "chain_start": "where the chain starts",
+    "duplicate_segment": "a segment held twice",
+    "skipped_file": "a file left out",
+    "uncovered_sensors": "sensor readings no seal covers",
+    "no_checkpoints": "no checkpoint",
+    "external_unresolved": "evidence in a recording not read",
+    "clock_backwards": "the clock went back",
+    "clock_restart": "the clock restarted",
+    "clock_step": "the clock was stepped",
+    "recording_gap": "a recording the logger declared missing",
+    "recording_unchecked": "a recording not checked",
+    "recording_unsealed": "recorded messages no seal covers yet",
+}
+"""Each finding and note kind in an investigator's words, for pages people read (the
+report); the kinds themselves stay the names scripts match (JSON, data attributes)."""
 
 _INLINE = {JSON_INLINE: True}
 

@@ -49,7 +49,7 @@ def test_each_robot_is_a_row(fleet: Path) -> None:
         ("amr-2", 40),
     ]
     code, out, _ = run(str(fleet), "--plain")
-    assert code == 0 and "Table III: per robot" in out
+    assert code == 0 and "Per robot" in out
     assert "Failed execution checks" not in out  # these robots' checks all pass
 
 

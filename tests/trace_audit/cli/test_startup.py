@@ -122,3 +122,55 @@ def test_help_names_values_as_click_does_not_by_python_type() -> None:
     assert "--gap-tolerance NUMBER" in shown and "--end TIME" in shown
     assert "\n  LOGS...  " in shown
     assert "<" not in shown.split("Arguments:")[1].replace("<=", "")
+
+
+_DEMO = """
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+import typer
+from trace_audit.cli.typer_compat import App, Group
+
+demo = App(cls=Group, rich_markup_mode=None, add_completion=False)
+
+@demo.command("q")
+def q(
+    index: Path,
+    sql: str,
+    limit: Annotated[Optional[int], typer.Option("--limit", min=0)] = None,
+    robot: Annotated[Optional[list[str]], typer.Option("--robot")] = None,
+    logs: Annotated[Optional[list[Path]], typer.Option("--log")] = None,
+) -> None:
+    print(repr(index), repr(sql), repr(limit), repr(robot), repr(logs))
+
+@demo.command("other")
+def other() -> None: ...
+
+try:
+    demo(sys.argv[1:], standalone_mode=False)
+except typer.BadParameter as err:
+    print("bad:", err.format_message())
+print("pydantic" in sys.modules)
+"""
+
+
+def _demo(*args: str) -> list[str]:
+    done = subprocess.run(
+        [sys.executable, "-c", _DEMO, *args], check=True, capture_output=True, text=True
+    )
+    return done.stdout.splitlines()
+
+
+def test_text_and_paths_reach_a_command_without_pydantic() -> None:
+    """typer 0.29 would build a pydantic adapter for every parameter (~70 ms a command):
+    text and paths are given as typer gives them, and pydantic is never imported."""
+    assert _demo("q", "idx", "SELECT 1", "--robot", "a", "--robot", "b", "--log", "x") == [
+        "PosixPath('idx') 'SELECT 1' None ['a', 'b'] [PosixPath('x')]",
+        "False",
+    ]
+
+
+def test_a_number_is_still_typers_with_its_checks_and_messages() -> None:
+    assert _demo("q", "idx", "s", "--limit", "5")[0] == "PosixPath('idx') 's' 5 None None"
+    refused = _demo("q", "idx", "s", "--limit", "-1")
+    assert refused[0].startswith("bad:") and "0" in refused[0], refused

@@ -138,8 +138,8 @@ def test_a_manifest_that_is_a_fifo_deep_or_huge_isone_line(
 
 def test_a_second_index_run_at_the_same_time_is_refused(built: tuple[Path, Path]) -> None:
     root, index = built
-    before = snapshot(index)
     with folder_lock(index / LOCK, held="held by this test"):
+        before = snapshot(index)  # with the lock file this test made
         done = cli("index", root, "--out", index)
     one_line(done, 2, "another index run")
     assert snapshot(index) == before

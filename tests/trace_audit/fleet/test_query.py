@@ -85,14 +85,14 @@ def test_a_damaged_parquet_file_is_unreadable_input(index: Path, tmp_path: Path)
 def test_a_cut_result_says_so(index: Path) -> None:
     done = _run("find", index, "--limit", "5", "--plain")
     assert done.exit_code == 0, done.stderr
-    assert "5 of 100 rows (--limit 5)" in done.stdout
+    assert "5 of 100 decisions (--limit 5)" in done.stdout
     rows = _run("find", index, "--limit", "5", "--json")
     assert len(json.loads(rows.stdout)) == 5
     assert "5 of 100 rows" in rows.stderr
     whole = _run("query", index, "SELECT cycle FROM decisions", "--limit", "3", "--plain")
     assert "3 of 100 rows (--limit 3)" in whole.stdout
     uncut = _run("find", index, "--limit", "500", "--plain")
-    assert "100 rows" in uncut.stdout and " of " not in uncut.stdout.splitlines()[-1]
+    assert "100 decisions" in uncut.stdout and " of " not in uncut.stdout.splitlines()[-1]
 
 
 @pytest.mark.parametrize(

@@ -95,7 +95,7 @@ def test_every_segment_is_opened_when_all_are_asked_for(root: Path) -> None:
         (s.start_ns, s.end_ns) for s in full.segments
     ]
     assert lazy.period_ns == full.period_ns and lazy.problems == full.problems == []
-    assert lazy.holds_trace_messages() and full.holds_trace_messages()
+    assert lazy.holds_cycle_messages() and full.holds_cycle_messages()
 
 
 def test_a_time_outside_the_log_is_refused_alike(root: Path) -> None:
