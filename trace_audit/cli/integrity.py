@@ -235,6 +235,24 @@ def verify_doc(r: VerifyReport) -> Doc:
         ("segments", f"{r.segments_valid} valid of {len(r.segments)}"),
         ("declared gaps", f"{r.declared_dropped} cycle(s) dropped by the logger"),
     ]
+    rows += _recording_rows(r)
+    doc.fields(rows)
+    clocks = _robot_clocks(r.robots)
+    if r.findings:
+        doc.heading("Findings")
+        _finding_table(doc, r.findings, clocks)
+    if r.notes:
+        doc.heading("Notes (not tampering)")
+        _finding_table(doc, r.notes, clocks)
+    if len(r.segments) > 1:
+        _segment_table(doc, r.segments)
+    return doc
+
+
+def _recording_rows(r: VerifyReport) -> list[tuple[str, str]]:
+    """What verify checked outside the log: refs into recordings, and recorded messages
+    sealed in windows (profile 1.4)."""
+    rows: list[tuple[str, str]] = []
     if r.external_resolved or r.external_unresolved:
         rows.append(
             (
@@ -261,17 +279,7 @@ def verify_doc(r: VerifyReport) -> Doc:
                 ),
             )
         )
-    doc.fields(rows)
-    clocks = _robot_clocks(r.robots)
-    if r.findings:
-        doc.heading("Findings")
-        _finding_table(doc, r.findings, clocks)
-    if r.notes:
-        doc.heading("Notes (not tampering)")
-        _finding_table(doc, r.notes, clocks)
-    if len(r.segments) > 1:
-        _segment_table(doc, r.segments)
-    return doc
+    return rows
 
 
 def _segment_table(doc: Doc, segments: list[SegmentSummary]) -> None:
