@@ -5,6 +5,7 @@ entity's class and distance, by robot and by any SQL condition, each with the ex
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -16,6 +17,8 @@ from trace_audit.fleet.query import QueryResult, run_query, sql_literal
 from trace_runtime.errors import UsageError
 
 __all__ = ["FoundRun", "find_decisions", "found_runs", "index_robots"]
+
+log = logging.getLogger("trace_audit")
 
 _COLUMNS = (
     "d.robot, d.day, d.t_ns, d.cycle, d.command, d.previous_command, d.lead_factor, "
@@ -67,6 +70,8 @@ def find_decisions(
         if where:  # the error is about SQL the user did not write around the condition
             raise UsageError(f"--where {where!r}: {err}") from err
         raise
+    if near is not None and not found.rows:
+        _say_why_none_is_near(index, near, limits)
     if len(found.rows) < limit:
         return found
     # As many rows as the limit: count the matches so the output can say it was cut.
@@ -176,6 +181,20 @@ def _nearest(near: str | None, within_m: float | None) -> tuple[str, list[str]]:
             raise UsageError(f"--within must be a finite distance, got {within_m}")
         conditions.append(f"{distance} < {float(within_m)!r}")
     return select, conditions
+
+
+def _say_why_none_is_near(index: str | Path, near: str, limits: QueryLimits | None) -> None:
+    """No decision has a ``near`` entity at a known distance: when the index does hold such
+    entities, say that their distance is what is missing, not the entities."""
+    sql = "SELECT count(*), count(distance) FROM entities WHERE class = ?"
+    seen, measured = run_query(index, sql, [near], limits=limits).rows[0]
+    if isinstance(seen, int) and seen and not measured:
+        log.warning(
+            "%d %s entit(ies) are indexed, none at a known distance: a distance comes from a "
+            "belief state node of a distance unit whose parent is the entity (docs/fleet.md)",
+            seen,
+            near,
+        )
 
 
 def index_robots(index: str | Path, limits: QueryLimits | None = None) -> list[str]:
