@@ -13,7 +13,7 @@ from trace_audit.cli.app import EXIT_FINDINGS, app, guarded, help_text
 from trace_audit.cli.doc import Column, Doc, Seg
 from trace_audit.cli.options import EvidenceOption, JsonOption, PlainOption, robot_option
 from trace_audit.cli.output import emit, setup_logging
-from trace_runtime.clock import is_wall_clock, iso_utc
+from trace_runtime.clock import show_instant
 
 if TYPE_CHECKING:
     from trace_audit.proof import BundleCheck, WrittenBundle
@@ -121,8 +121,4 @@ def _check_doc(r: BundleCheck) -> Doc:
 def _when(t_ns: int | None) -> str:
     """A bundle's time: it does not name its clock, so a time of day when it can only be
     one (after 2000, as a wall clock's), else seconds; the nanoseconds either way."""
-    if t_ns is None:
-        return "?"
-    if is_wall_clock("system", t_ns):
-        return f"{iso_utc(t_ns, digits=3)} (t_ns {t_ns})"
-    return f"{t_ns / 1e9:.3f} s (t_ns {t_ns})"
+    return "?" if t_ns is None else f"{show_instant(t_ns, 'system')} (t_ns {t_ns})"

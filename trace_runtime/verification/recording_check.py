@@ -18,7 +18,7 @@ from typing import Any
 
 import orjson
 
-from trace_runtime.clock import is_wall_clock, iso_utc
+from trace_runtime.clock import show_instant
 from trace_runtime.encoding.mcap_file import McapFile
 from trace_runtime.errors import LogReadError
 from trace_runtime.gaps import CycleRange
@@ -201,8 +201,9 @@ def _describe(name: str, start: int, end: int, diff: WindowDiff) -> str:
 
 
 def _t(t_ns: int) -> str:
-    """A recording's log time: a time of day for a wall clock (ROS time), else seconds."""
-    return iso_utc(t_ns, digits=3) if is_wall_clock("system", t_ns) else f"{t_ns / 1e9:.3f} s"
+    """A recording's log time: its clock is not named, so a time of day when it can only be
+    one (ROS time on a wall clock), else seconds."""
+    return show_instant(t_ns, "system")
 
 
 def _dicts(value: object) -> list[dict[str, Any]]:
