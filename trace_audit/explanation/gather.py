@@ -25,6 +25,7 @@ from trace_audit.sensor_health import SensorHealth, sensor_health
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.errors import StaleCatalogError, TimeOutOfRangeError, UsageError
 from trace_runtime.reading.logset import Log
+from trace_runtime.reading.reader import Segment
 from trace_runtime.reading.recordings import Recordings
 from trace_runtime.records import TOPIC_EXECUTION, TOPIC_PERCEPTION
 
@@ -123,9 +124,11 @@ def _explain(
     t_ns, log, target, offset = _find_target(log, t, cycle)
     whole, log = log, log.clock_run(target.segment)
     decision = read_decision(target)
+    holder = log.segment_named(target.segment)
     if recordings is None:
-        recordings = recordings_for(whole, evidence)
-    period, clock = _cadence(log, whole, target)
+        # its own segment's (whose logger wrote the refs): not every one, opened lazily
+        recordings = recordings_for([holder] if holder is not None else whole, evidence)
+    period, clock = _cadence(holder, log, whole)
     chains, back = _chains_and_back(
         log,
         target,
@@ -167,10 +170,9 @@ def _explain(
     )
 
 
-def _cadence(log: Log, whole: Log, target: Cycle) -> tuple[int, str]:
+def _cadence(holder: Segment | None, log: Log, whole: Log) -> tuple[int, str]:
     """The period and clock the robot kept when it decided: those of the segment holding
     the decision (the walk back, the gap to the previous seal and the output use them)."""
-    holder = log.segment_named(target.segment)
     if holder is None:
         return log.period_ns, whole.clock
     return holder.session.period_ns, holder.session.clock
