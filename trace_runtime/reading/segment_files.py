@@ -45,7 +45,9 @@ def find_segment_files(path: Path) -> list[Path]:
         if PARTIAL_MARK in candidate.name:
             continue
         folder = candidate.parent
-        if folder != path and bags.setdefault(folder, (folder / BAG_METADATA).is_file()):
+        if folder not in bags:  # one stat a folder, not one a file
+            bags[folder] = folder != path and (folder / BAG_METADATA).is_file()
+        if bags[folder]:
             continue
         try:
             mode = candidate.lstat().st_mode
