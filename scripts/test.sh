@@ -5,6 +5,7 @@ cd "$(dirname "$0")/.."
 bash scripts/bootstrap.sh
 bash scripts/install-browser.sh
 bash scripts/install-go.sh
+bash scripts/install-softhsm.sh
 # the C++ robot the recorder's tests run against (tests/trace_runtime/recorder/)
 bash scripts/build-cpp.sh
 .venv/bin/ruff check .

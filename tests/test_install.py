@@ -114,14 +114,20 @@ def test_the_entry_check_looks_for_exactly_what_the_cli_extra_brings() -> None:
     assert checked == _extra("cli")
 
 
+# extras a robot installs beside the runtime: they must not bring the investigator
+ROBOT_EXTRAS = {"token"}
+
+
 def test_all_is_every_extra_but_dev_and_each_investigator_extra_brings_cli() -> None:
     extras = PYPROJECT["optional-dependencies"]
     (everything,) = extras["all"]
     assert everything.startswith("trace-audit[")
     named = set(everything.removeprefix("trace-audit[").removesuffix("]").split(","))
     assert named == set(extras) - {"all", "dev"}
-    for name in named - {"cli"}:
+    for name in named - {"cli"} - ROBOT_EXTRAS:
         assert "trace-audit[cli]" in extras[name], name
+    for name in ROBOT_EXTRAS:
+        assert not any(dep.startswith("trace-audit[") for dep in extras[name]), name
 
 
 def test_the_console_scripts_start_with_the_check() -> None:
