@@ -21,7 +21,7 @@ import orjson
 
 from trace_audit.jsonout import OMIT_EMPTY
 from trace_audit.readings import CitedRegion, cited_region, message_data, message_lines
-from trace_audit.sensor_window import SensorWindow
+from trace_audit.sensor_window import SensorWindow, check_in_recordings
 from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.errors import LogReadError
 from trace_runtime.reading.logset import Log
@@ -105,31 +105,11 @@ def describe_refs(
     ``recordings`` (None: each is unresolved) and, when resolved, decoded."""
     out: list[ExternalEvidence] = []
     for entity_id, evidence, ref in _external_refs(perception):
-        name = str(ref.get("recording"))
-        topic = str(ref.get("topic"))
-        t_ns = _time_of(ref)
-        sensor = str(evidence.get("sensor") or "")
-        check = (
-            ExternalCheck("unresolved", name, "not given")
-            if recordings is None
-            else recordings.check(ref)
-        )
+        check = check_in_recordings(ref, recordings)
         shown = _shown(check) if decode and check.state == "resolved" else _NOT_DECODED
-        out.append(
-            ExternalEvidence(
-                entity_id,
-                name,
-                topic,
-                t_ns,
-                check.state,
-                _detail(check),
-                schema=shown.schema,
-                message=shown.message,
-                lines=shown.lines,
-                sensor=sensor,
-                region=cited_region(evidence.get("region"), shown.decoded),
-            )
-        )
+        region = cited_region(evidence.get("region"), shown.decoded)
+        sensor = str(evidence.get("sensor") or "")
+        out.append(_evidence(ref, check, shown, entity=entity_id, sensor=sensor, region=region))
     return out
 
 
@@ -141,28 +121,41 @@ def describe_channel_refs(
     evidence is (``Recordings.check``), or in this log, among the cycle's ``sensors``."""
     out: list[ExternalEvidence] = []
     for channel, ref in _channel_refs(execution):
-        topic, t_ns = str(ref.get("topic")), _time_of(ref)
         if is_external(ref):
-            window = SensorWindow(0, recordings)
-            check = window.check_external(ref)
+            check = check_in_recordings(ref, recordings)
         else:
             check = _check_in_log(ref, sensors)
         shown = _shown(check) if check.state == "resolved" else _NOT_DECODED
-        out.append(
-            ExternalEvidence(
-                "",
-                check.recording,
-                topic,
-                t_ns,
-                check.state,
-                _detail(check),
-                schema=shown.schema,
-                message=shown.message,
-                lines=shown.lines,
-                channel=channel,
-            )
-        )
+        out.append(_evidence(ref, check, shown, channel=channel))
     return out
+
+
+def _evidence(
+    ref: Mapping[str, object],
+    check: ExternalCheck,
+    shown: _Shown,
+    *,
+    entity: str = "",
+    sensor: str = "",
+    region: CitedRegion | None = None,
+    channel: str | None = None,
+) -> ExternalEvidence:
+    """What became of one ref: an entity's evidence (``entity``, ``sensor``, ``region``) or
+    an actuator channel's (``channel``)."""
+    return ExternalEvidence(
+        entity,
+        str(ref.get("recording")) if entity else check.recording,
+        str(ref.get("topic")),
+        _time_of(ref),
+        check.state,
+        _detail(check),
+        schema=shown.schema,
+        message=shown.message,
+        lines=shown.lines,
+        sensor=sensor,
+        region=region,
+        channel=channel,
+    )
 
 
 def _time_of(ref: Mapping[str, object]) -> int | None:

@@ -16,7 +16,7 @@ from collections.abc import Mapping, Sequence
 from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.reading.recordings import ExternalCheck, ExternalState, Recordings
 
-__all__ = ["DEFAULT_SENSOR_WINDOW", "SensorWindow"]
+__all__ = ["DEFAULT_SENSOR_WINDOW", "SensorWindow", "check_in_recordings"]
 
 DEFAULT_SENSOR_WINDOW = 50
 """Cycles before a decision whose sensor messages its refs may resolve to (5 s at 10 Hz)."""
@@ -114,16 +114,7 @@ class SensorWindow:
         if found is not None:
             self._external.move_to_end(key)
             return found
-        name = str(ref.get("recording"))
-        if self.recordings is None:
-            found = ExternalCheck(
-                "unresolved",
-                name,
-                f"recording {name} not given (the log does not declare it; --evidence)",
-            )
-        else:
-            # unresolved says why: not found where the log declares it, or not given
-            found = self.recordings.check(ref)
+        found = check_in_recordings(ref, self.recordings)
         self._external[key] = found
         if len(self._external) > _EXTERNAL_REMEMBERED:
             self._external.popitem(last=False)
@@ -146,3 +137,14 @@ class SensorWindow:
         if found is None:
             found = self._digests[id(msg)] = hashlib.sha256(msg.data).hexdigest()
         return found
+
+
+def check_in_recordings(ref: Mapping[str, object], recordings: Recordings | None) -> ExternalCheck:
+    """The check of a ref into an external recording; unresolved says why: not found where
+    the log declares it, or (``recordings`` None) not given."""
+    if recordings is not None:
+        return recordings.check(ref)
+    name = str(ref.get("recording"))
+    return ExternalCheck(
+        "unresolved", name, f"recording {name} not given (the log does not declare it; --evidence)"
+    )
