@@ -64,9 +64,7 @@ def publish_command(
             def progress(name: str, done: int, total: int) -> None:
                 bar.update(task, description=f"publishing {name}", completed=done, total=total)
 
-            report = guarded(
-                lambda: publish_root(root, out, robots=robot or (), progress=progress)
-            )
+            report = guarded(lambda: publish_root(root, out, robots=robot or (), progress=progress))
     emit(report, _publish_doc, json_out=json_out, plain=plain)
     if not report.ok:
         raise typer.Exit(EXIT_FINDINGS)

@@ -3,7 +3,7 @@
 A static web server may serve the folder while ``publish`` runs, so no reader ever sees
 half a file: every file is written beside its name (``boundary.create_aside``), fsynced,
 then linked in under its name. A tile or bundle is immutable: a name already held is never
-replaced; its bytes are compared instead, and a difference is a ``TileConflict`` (the log
+replaced; its bytes are compared instead, and a difference is a ``TileConflictError`` (the log
 no longer holds the history published from it, or the folder was altered). New tiles are
 *staged* (written aside) and linked in only when ``commit`` says a checkpoint vouches for
 them, so a tree that turns out not to match its checkpoint leaves nothing published; a
@@ -28,13 +28,13 @@ from trace_runtime.boundary import (
 from trace_runtime.errors import StorageError, UnsafePathError
 from trace_runtime.tlog.tiles import MAX_ENTRY_BYTES, TILE_WIDTH
 
-__all__ = ["MAX_TILE_FILE", "PublishedFolder", "TileConflict", "make_top"]
+__all__ = ["MAX_TILE_FILE", "PublishedFolder", "TileConflictError", "make_top"]
 
 MAX_TILE_FILE = TILE_WIDTH * (2 + MAX_ENTRY_BYTES)
 """The largest file of a published tree (a full bundle of the largest entries)."""
 
 
-class TileConflict(Exception):
+class TileConflictError(Exception):
     """A published tile or bundle whose bytes differ from the log's (not a ``TraceError``:
     ``publish`` turns it into a problem of the robot, never an exit of its own)."""
 
@@ -83,7 +83,7 @@ class PublishedFolder:
         if not regular_file(path):
             return False
         if read_side_file(path, limit=MAX_TILE_FILE) != tile.data:
-            raise TileConflict(tile.path)
+            raise TileConflictError(tile.path)
         self.kept += 1
         return True
 
@@ -108,7 +108,7 @@ class PublishedFolder:
             os.link(tmp, path, follow_symlinks=False)
         except FileExistsError:
             if read_side_file(path, limit=MAX_TILE_FILE) != read_side_file(tmp):
-                raise TileConflict(str(path.relative_to(self.folder))) from None
+                raise TileConflictError(str(path.relative_to(self.folder))) from None
             self.kept += 1
             return
         except OSError as err:

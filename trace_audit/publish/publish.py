@@ -22,7 +22,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from trace_audit.publish.files import PublishedFolder, TileConflict, make_top
+from trace_audit.publish.files import PublishedFolder, TileConflictError, make_top
 from trace_audit.publish.tiler import TileBuilder
 from trace_audit.witness.push import robot_checkpoints
 from trace_runtime.boundary import folder_lock, read_side_file
@@ -71,7 +71,7 @@ class PublishReport:
         return all(not r.problems for r in self.robots)
 
 
-class _Mismatch(Exception):
+class _MismatchError(Exception):
     """The seals do not make the tree a signed statement says (a problem of the robot)."""
 
 
@@ -99,7 +99,9 @@ def publish_root(
     out = Path(out)
     report = PublishReport(str(root), str(out))
     make_top(out)
-    with folder_lock(out / ".publish.lock", held=f"another publish is writing to {out}", remove=True):
+    with folder_lock(
+        out / ".publish.lock", held=f"another publish is writing to {out}", remove=True
+    ):
         for robot in chosen:
             report.robots.append(_publish_robot(log, robot, signed[robot], out, progress))
     return report
@@ -130,13 +132,20 @@ def _publish_robot(
         return result
     published = PublishedFolder(folder)
     try:
-        _cut(log, robot, checkpoints, previous, published, progress)
-    except TileConflict as err:
+        _cut(
+            log,
+            robot,
+            checkpoints=checkpoints,
+            previous=previous,
+            published=published,
+            progress=progress,
+        )
+    except TileConflictError as err:
         result.problems.append(
             f"{err.path} as published differs from this log's: the log no longer holds the "
             f"history published from it, or the folder was altered; nothing replaced"
         )
-    except _Mismatch as err:
+    except _MismatchError as err:
         result.problems.append(f"{err}: the checkpoint is not replaced")
     finally:
         published.discard()
@@ -174,6 +183,7 @@ def _published(folder: Path, result: RobotPublish) -> NoteBody | None:
 def _cut(
     log: Log,
     robot: str,
+    *,
     checkpoints: list[Checkpoint],
     previous: NoteBody | None,
     published: PublishedFolder,
@@ -184,7 +194,7 @@ def _cut(
     roots = {c.tree_size or 0: c.root for c in checkpoints}
     final = max(roots)
     if previous is not None and previous.size > final:
-        raise _Mismatch(
+        raise _MismatchError(
             f"the folder serves a tree of {previous.size} seals, beyond the {final} this "
             "log's newest signed checkpoint states (the log lost its newest cycles?)"
         )
@@ -194,11 +204,15 @@ def _cut(
             published.stage(tile)
         size = builder.size
         if previous is not None and size == previous.size and builder.root() != previous.root:
-            raise _Mismatch(f"the published checkpoint of {size} states another root than the seals")
+            raise _MismatchError(
+                f"the published checkpoint of {size} states another root than the seals"
+            )
         if size not in roots:
             continue
         if builder.root().hex() != roots[size]:
-            raise _Mismatch(f"the signed checkpoint of {size} states another root than the seals")
+            raise _MismatchError(
+                f"the signed checkpoint of {size} states another root than the seals"
+            )
         published.commit()  # a signed root vouches for every tile staged so far
         for tile in builder.partial_tiles():
             published.stage(tile)
@@ -210,4 +224,4 @@ def _cut(
             progress(robot, size, final)
         if size == final:
             return
-    raise _Mismatch(f"the log holds {builder.size} seals, its checkpoint a tree of {final}")
+    raise _MismatchError(f"the log holds {builder.size} seals, its checkpoint a tree of {final}")
