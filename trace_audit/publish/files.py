@@ -25,7 +25,7 @@ from trace_runtime.boundary import (
     storage_error,
     write_atomic,
 )
-from trace_runtime.errors import StorageError, UnsafePathError
+from trace_runtime.errors import InputError, StorageError, UnsafePathError
 from trace_runtime.tlog.tiles import MAX_ENTRY_BYTES, TILE_WIDTH
 
 __all__ = ["MAX_TILE_FILE", "PublishedFolder", "TileConflictError", "make_top"]
@@ -34,9 +34,9 @@ MAX_TILE_FILE = TILE_WIDTH * (2 + MAX_ENTRY_BYTES)
 """The largest file of a published tree (a full bundle of the largest entries)."""
 
 
-class TileConflictError(Exception):
-    """A published tile or bundle whose bytes differ from the log's (not a ``TraceError``:
-    ``publish`` turns it into a problem of the robot, never an exit of its own)."""
+class TileConflictError(InputError):
+    """A published tile or bundle whose bytes differ from the log's (``publish`` turns it
+    into a problem of the robot, exit 1, before it could end the command)."""
 
     def __init__(self, path: str) -> None:
         super().__init__(path)

@@ -26,7 +26,7 @@ from trace_audit.publish.files import PublishedFolder, TileConflictError, make_t
 from trace_audit.publish.tiler import TileBuilder
 from trace_audit.witness.push import robot_checkpoints
 from trace_runtime.boundary import folder_lock, read_side_file
-from trace_runtime.errors import NoteError, UsageError
+from trace_runtime.errors import InputError, NoteError, UsageError
 from trace_runtime.reading.chain_tree import iter_seal_data
 from trace_runtime.reading.logset import Log, open_log
 from trace_runtime.records import Checkpoint
@@ -71,8 +71,9 @@ class PublishReport:
         return all(not r.problems for r in self.robots)
 
 
-class _MismatchError(Exception):
-    """The seals do not make the tree a signed statement says (a problem of the robot)."""
+class _MismatchError(InputError):
+    """The seals do not make the tree a signed statement says (turned into a problem of the
+    robot, exit 1, by ``_publish_robot``)."""
 
 
 def publish_root(

@@ -17,6 +17,7 @@ import pytest
 from tests.outside import cli
 from tests.trace_audit.publish.conftest import ORIGIN, GoClient, RobotKey
 from tests.trace_audit.witness.test_tail import write
+from trace_runtime.tlog.tlog_proof import parse_tlog_proof
 
 
 def publish(root: Path, out: Path) -> dict[str, Any]:
@@ -52,13 +53,21 @@ def test_go_verifies_the_published_tree_and_proves_a_seal(
     root, out = published
     url = static_server(out) + "/amr-7"
     bundle = prove(root, 300, tmp_path)
-    done = go_client({"url": url, "vkey": robot_key.vkey, "index": bundle["leaf_index"]})
+    request = {"url": url, "vkey": robot_key.vkey, "index": bundle["leaf_index"],
+               "proof": bundle["tlog_proof"]}  # fmt: skip
+    done = go_client(request)
     assert done.returncode == 0, done.stderr
     answer = json.loads(done.stdout)
     assert (answer["origin"], answer["size"]) == (ORIGIN, 600)
     assert base64.b64decode(answer["entry"]) == base64.b64decode(bundle["seal"])
     assert bundle["tree_size"] == 600  # the same tree: Go's proof is the bundle's
-    assert answer["inclusion"] == bundle["inclusion"]
+    hashes = parse_tlog_proof(bundle["tlog_proof"]).hashes
+    assert [base64.b64decode(h) for h in answer["inclusion"]] == list(hashes)
+    assert (answer["proof_index"], answer["proof_size"]) == (bundle["leaf_index"], 600)
+    i = bundle["leaf_index"]
+    moved = bundle["tlog_proof"].replace(f"index {i}\n", f"index {i + 1}\n")
+    refused = go_client({**request, "proof": moved})  # the bundle's proof, of another leaf
+    assert refused.returncode == 1 and "tlog-proof" in refused.stderr, refused.stderr
     assert any("/tile/0/001" in u for u in answer["fetched"])
     assert any("/tile/entries/001" in u for u in answer["fetched"])
 
