@@ -53,6 +53,7 @@ class PublishedFolder:
         self._staged: list[tuple[Path, Path]] = []
         self._made: set[Path] = set()
         self._seen: set[str] = set()  # this run's paths: a level-1 partial recurs per checkpoint
+        self._dirty: set[Path] = set()  # folders whose new names ``sync`` makes durable
 
     def _path(self, relative: str) -> Path:
         path = self.folder / relative
@@ -75,7 +76,7 @@ class PublishedFolder:
             with f:
                 f.write(tile.data)
                 f.flush()
-                os.fsync(f.fileno())
+                _datasync(f.fileno())  # its bytes are durable before its name points at them
         except OSError as err:
             raise storage_error(path, err) from err
 
@@ -89,7 +90,6 @@ class PublishedFolder:
 
     def commit(self) -> None:
         """Link every staged file in under its name (a name taken meanwhile is compared)."""
-        folders: set[Path] = set()
         staged = self._staged
         for i, (tmp, path) in enumerate(staged):
             self._staged = staged[i + 1 :]  # what ``discard`` removes should this one fail
@@ -98,10 +98,16 @@ class PublishedFolder:
             finally:
                 with contextlib.suppress(OSError):
                     os.unlink(tmp)  # our own, made this run under a name no one else holds
-            folders.add(path.parent)
+            self._dirty.add(path.parent)
         self._staged = []
-        for folder in folders:
+
+    def sync(self) -> None:
+        """Make every name linked in so far durable: once per robot, before its checkpoint
+        is replaced (a name lost to a crash before then is written again by the next run;
+        the checkpoint never names a tree whose tiles a crash could take away)."""
+        for folder in sorted(self._dirty):
             fsync_dir(folder)
+        self._dirty.clear()
 
     def _link(self, tmp: Path, path: Path) -> None:
         try:
@@ -130,6 +136,11 @@ class PublishedFolder:
             return
         write_atomic(path, data)
         self.written += 1
+
+
+def _datasync(fd: int) -> None:
+    sync = getattr(os, "fdatasync", os.fsync)  # fdatasync: Linux; fsync elsewhere
+    sync(fd)
 
 
 def _make_folders(top: Path, folder: Path) -> None:

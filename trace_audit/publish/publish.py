@@ -150,6 +150,7 @@ def _publish_robot(
         result.problems.append(f"{err}: the checkpoint is not replaced")
     finally:
         published.discard()
+        published.sync()
         result.written, result.kept = published.written, published.kept
     if result.problems:
         return result

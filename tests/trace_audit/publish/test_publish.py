@@ -151,3 +151,20 @@ def test_a_file_where_a_tile_folder_belongs_is_refused(tmp_path: Path, robot_key
     (out / "amr-7").mkdir(parents=True)
     (out / "amr-7" / "tile").write_text("not a folder")
     one_line(cli("publish", root, "--out", out), 3, "tile")
+
+
+def test_another_history_of_the_same_robot_is_a_fork_not_a_replacement(
+    tmp_path: Path, robot_key: RobotKey
+) -> None:
+    """The same robot and key, another history (re-signed from genesis): what the folder
+    serves is not replaced, whatever the other log's own checkpoints say."""
+    first, other, out = tmp_path / "first", tmp_path / "other", tmp_path / "out"
+    write(first, robot_key.private, range(200))
+    write(other, robot_key.private, range(1000, 1300))
+    publish(first, out)
+    before = snapshot(out)
+    report = publish(other, out)
+    assert report["exit"] == 1
+    [problem] = report["robots"][0]["problems"]
+    assert "differs from this log's" in problem or "another root" in problem
+    assert snapshot(out) == before
