@@ -6,8 +6,9 @@ with their topics), the sensor readings its profile 1.3 seal covers (each with i
 sequence and log time), the recording messages its evidence refs cite (``proof_readings``),
 its seal, the seal's leaf index in the robot's RFC 6962 tree, the inclusion proof of that
 leaf in the tree of the newest signed profile 1.2 checkpoint (a cosigned one where the
-root's witness store holds one that covers it), and that checkpoint's note: about 8 KB at
-most on a 24 h simulator log. ``check_bundle`` checks, in order: each message's digest
+root's witness store holds one that covers it), and that checkpoint's note (since
+``trace-proof/5`` the leaf index, proof and note as one C2SP tlog-proof text): about 8 KB
+at most on a 24 h simulator log. ``check_bundle`` checks, in order: each message's digest
 against the seal, the readings against the seal's ``sensors`` and the recording messages
 against the sealed refs, the seal's leaf in the tree (inclusion proof to the note's root),
 the note's signature by the robot's key under its origin and, given a witness key, the
@@ -46,6 +47,7 @@ from trace_runtime.tlog.signed_note import (
     parse_checkpoint,
     parse_verifier_key,
 )
+from trace_runtime.tlog.tlog_proof import format_tlog_proof, parse_tlog_proof
 
 __all__ = [
     "BUNDLE_FORMAT",
@@ -60,11 +62,18 @@ __all__ = [
     "write_bundle",
 ]
 
-BUNDLE_FORMAT = "trace-proof/4"
-"""The format ``prove`` writes: ``trace-proof/3`` (``/2`` with each message's and reading's
-data deflated: the largest bundle of a 24 h simulator log 7.9 KB, not 24) with the recording
-messages the cycle's refs cite (``recorded``)."""
-BUNDLE_FORMATS = ("trace-proof/1", "trace-proof/2", "trace-proof/3", BUNDLE_FORMAT)
+BUNDLE_FORMAT = "trace-proof/5"
+"""The format ``prove`` writes: ``trace-proof/4`` (``/3``, itself ``/2`` with each message's
+and reading's data deflated, with the recording messages the cycle's refs cite,
+``recorded``) whose inclusion proof and checkpoint note are one C2SP tlog-proof text
+(``tlog_proof``, c2sp.org/tlog-proof@v1), which any tlog client checks as it is."""
+BUNDLE_FORMATS = (
+    "trace-proof/1",
+    "trace-proof/2",
+    "trace-proof/3",
+    "trace-proof/4",
+    BUNDLE_FORMAT,
+)
 T = TypeVar("T")
 
 
@@ -82,17 +91,18 @@ class ProofBundle(TypedDict):
     leaf_index: int
     tree_size: int
     root: str
-    inclusion: list[str]
-    note: str
+    tlog_proof: str  # index, inclusion hashes, the checkpoint note (c2sp.org/tlog-proof@v1)
     cosigned: bool
 
 
-_FIELDS_1 = ProofBundle.__required_keys__ - {"sensors", "recorded"}
+_FIELDS_4 = ProofBundle.__required_keys__ - {"tlog_proof"} | {"inclusion", "note"}
+_FIELDS_1 = _FIELDS_4 - {"sensors", "recorded"}
 BUNDLE_FIELDS = {
     "trace-proof/1": _FIELDS_1,
     "trace-proof/2": _FIELDS_1 | {"sensors"},
     "trace-proof/3": _FIELDS_1 | {"sensors"},
-    BUNDLE_FORMAT: _FIELDS_1 | {"sensors", "recorded"},
+    "trace-proof/4": _FIELDS_4,
+    BUNDLE_FORMAT: ProofBundle.__required_keys__,
 }
 """Every field of a bundle of each format, all required; any other is refused (nothing in a
 bundle goes unchecked: the robot is named by the note's origin, which the robot's key
@@ -138,8 +148,7 @@ def make_bundle(
         "leaf_index": index,
         "tree_size": size,
         "root": tree.root(size).hex(),
-        "inclusion": [b64(h) for h in tree.inclusion_proof(index, size)],
-        "note": note,
+        "tlog_proof": format_tlog_proof(index, tree.inclusion_proof(index, size), note),
         "cosigned": cosigned,
     }
 
@@ -181,7 +190,7 @@ def write_bundle(
         cycle=bundle["cycle"],
         leaf_index=bundle["leaf_index"],
         tree_size=bundle["tree_size"],
-        proof_hashes=len(bundle["inclusion"]),
+        proof_hashes=len(parse_tlog_proof(bundle["tlog_proof"]).hashes),
         cosigned=bundle["cosigned"],
     )
 
@@ -294,13 +303,14 @@ def _check(
     r.cycle = field_of(bundle, "cycle", int)
     r.t_ns = field_of(bundle, "t_ns", int)
     seal_bytes = unb64(bundle.get("seal"), "seal")
-    read = DataReader(deflated=bundle["format"] in ("trace-proof/3", BUNDLE_FORMAT))
+    read = DataReader(deflated=bundle["format"] not in ("trace-proof/1", "trace-proof/2"))
     if not _check_digests(bundle, seal_bytes, r, read):
         return
-    root = _check_inclusion(bundle, seal_bytes, r)
-    if root is None:
+    included = _check_inclusion(bundle, seal_bytes, r)
+    if included is None:
         return
-    opened = _check_note(bundle, key, witness_key, root, r)
+    root, note = included
+    opened = _check_note(bundle, note=note, key=key, witness_key=witness_key, root=root, r=r)
     if opened is not None and witness_key is not None:
         _check_cosignature(opened, witness_key, r)
 
@@ -339,26 +349,48 @@ def _check_digests(
     return "recorded" not in bundle or check_recorded(bundle, given, r.steps, read)
 
 
-def _check_inclusion(bundle: Mapping[str, object], seal: bytes, r: BundleCheck) -> bytes | None:
-    """The seal's leaf in the tree: the root it proves to, or None when it does not."""
+def _check_inclusion(
+    bundle: Mapping[str, object], seal: bytes, r: BundleCheck
+) -> tuple[bytes, str] | None:
+    """The seal's leaf in the tree: the root it proves to and the checkpoint note, or None
+    when it does not."""
     r.leaf_index = field_of(bundle, "leaf_index", int)
     r.tree_size = field_of(bundle, "tree_size", int)
     root_hex = field_of(bundle, "root", str)
     if len(root_hex) != 64 or not set(root_hex) <= set("0123456789abcdef"):
         raise BadBundleError("the root is not 64 lowercase hex digits")
     root = bytes.fromhex(root_hex)
-    proof = [unb64(h, "an inclusion hash") for h in field_of(bundle, "inclusion", list)]
+    proof, note = _inclusion_of(bundle, r.leaf_index)
     if not verify_inclusion(r.leaf_index, r.tree_size, leaf_hash(seal), proof, root):
         r.steps.append(("inclusion", False, "the seal is not leaf of the tree at that root"))
         return None
     r.steps.append(
         ("inclusion", True, f"leaf {r.leaf_index} of {r.tree_size}, {len(proof)} hash(es)")
     )
-    return root
+    return root, note
+
+
+def _inclusion_of(bundle: Mapping[str, object], leaf_index: int) -> tuple[list[bytes], str]:
+    """The inclusion proof and checkpoint note: a ``/5`` bundle's tlog-proof (of the leaf
+    the bundle names, with no extra data: nothing would check it), earlier ones' fields."""
+    if bundle["format"] != BUNDLE_FORMAT:
+        hashes = [unb64(h, "an inclusion hash") for h in field_of(bundle, "inclusion", list)]
+        return hashes, field_of(bundle, "note", str)
+    try:
+        proof = parse_tlog_proof(field_of(bundle, "tlog_proof", str))
+    except NoteError as err:
+        raise BadBundleError(f"the tlog-proof: {err}") from err
+    if proof.extra is not None:
+        raise BadBundleError("the tlog-proof carries extra data, which nothing checks")
+    if proof.index != leaf_index:
+        raise BadBundleError("the tlog-proof is of another leaf than leaf_index")
+    return list(proof.hashes), proof.note
 
 
 def _check_note(
     bundle: Mapping[str, object],
+    *,
+    note: str,
     key: PublicKey,
     witness_key: NoteVerifier | None,
     root: bytes,
@@ -366,7 +398,6 @@ def _check_note(
 ) -> OpenedNote | None:
     """The checkpoint note: of the proof's tree, signed by the robot's key under its origin,
     and ``cosigned`` saying what it carries. The opened note, or None when it fails."""
-    note = field_of(bundle, "note", str)
     split = note.rfind("\n\n")
     for line in note[split + 2 :].splitlines() if split >= 0 else ():
         unb64(line.rpartition(" ")[2], "a note signature")  # canonical: one spelling only

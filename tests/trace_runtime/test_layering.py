@@ -191,7 +191,8 @@ FLOORS: dict[str, list[set[str]]] = {
         {"causal", "chains", "sensor_health"},
         # the questions an investigator asks of a log
         {"metrics", "explanation", "export", "transitions", "info", "verify", "doctor", "layers"}
-        | {"rules", "tail", "witness", "proof", "proof_data", "proof_readings"},
+        | {"rules", "tail", "witness", "proof", "proof_data", "proof_readings"}
+        | {"publish"},
         # what is built from the answers: the fleet index, the incident report, the Foxglove view
         {"fleet", "incident", "foxglove"},
         {"cli", "entry"},  # entry: the console script's check that the cli extra is installed

@@ -17,6 +17,7 @@ from trace_audit.cli import (  # noqa: F401 - each module registers its commands
     integrity,
     metrics,
     proof,
+    publish,
     report,
     storage,
     tail,
@@ -32,7 +33,7 @@ __all__ = ["app", "main"]
 _SECTIONS = (
     ("Investigate", ("info", "explain", "why", "timeline", "tail", "export", "report")),
     ("Measure and check rules", ("metrics", "check")),
-    ("Integrity", ("verify", "keygen", "prove", "verify-proof", "witness")),
+    ("Integrity", ("verify", "keygen", "prove", "verify-proof", "publish", "witness")),
     ("Storage", ("compact", "catalog")),
     ("Fleet", ("index", "query", "find")),
     ("Authoring", ("doctor",)),

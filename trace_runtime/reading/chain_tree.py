@@ -43,6 +43,7 @@ __all__ = [
     "checkpoint_range",
     "consistency_proof_from",
     "has_tree",
+    "iter_seal_data",
     "prove_pass",
     "robot_leaves",
     "robot_seal_leaves",
@@ -125,6 +126,17 @@ def prove_pass(log: Log, robot: str, number: int) -> ProvedCycle:
                 out.cycle, out.index = cycle, len(leaves)
             leaves.append(leaf_hash(data))
     return out
+
+
+def iter_seal_data(log: Log, robot: str) -> Iterator[bytes]:
+    """The message data of ``robot``'s seals in chain order from its genesis: the entries of
+    its tree, leaf ``i`` being ``merkle.leaf_hash`` of the ``i``-th (as ``prove_pass`` reads
+    them). ``ChainTreeError`` as ``robot_seal_leaves``."""
+    for segment in _genesis_chain(log, robot):
+        for cycle in segment.iter_cycles():
+            data = cycle.payloads.get(TOPIC_SEAL)
+            if data is not None:
+                yield data
 
 
 def _genesis_chain(log: Log, robot: str) -> Iterator[Segment]:

@@ -20,6 +20,7 @@ from trace_audit.proof import BUNDLE_FORMAT, check_bundle
 from trace_runtime import AuditLogger
 from trace_runtime.testing import synthetic_cycle
 from trace_runtime.tlog.keys import load_public_key
+from trace_runtime.tlog.tlog_proof import parse_tlog_proof
 
 
 @pytest.fixture
@@ -102,13 +103,25 @@ def _plain(bundle: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def _fourth(bundle: dict[str, Any]) -> dict[str, Any]:
+    """A ``trace-proof/5`` bundle as ``/4`` wrote it: the inclusion proof and the note as
+    fields of their own, not one tlog-proof text."""
+    proof = parse_tlog_proof(bundle["tlog_proof"])
+    fields = {k: v for k, v in bundle.items() if k != "tlog_proof"}
+    inclusion = [base64.b64encode(h).decode() for h in proof.hashes]
+    return fields | {"format": "trace-proof/4", "inclusion": inclusion, "note": proof.note}
+
+
 def test_bundles_of_the_earlier_formats_still_verify(proved: tuple[Path, Path], keys: Keys) -> None:
     """``trace-proof/1`` (before the readings were carried), ``/2`` (before the data was
-    deflated) and ``/3`` (before recording messages were carried) are checked as before;
-    /1's readings are simply not there to check."""
+    deflated), ``/3`` (before recording messages were carried) and ``/4`` (before the
+    inclusion proof was a C2SP tlog-proof) are checked as before; /1's readings are simply
+    not there to check."""
     _root, bundle = proved
-    data = json.loads(bundle.read_text())
     key, witness = load_public_key(keys.robot_pub), keys.witness_verifier
+    data = _fourth(json.loads(bundle.read_text()))
+    assert check_bundle(data, key, witness_key=witness).ok
+    assert not check_bundle({**data, "format": BUNDLE_FORMAT}, key, witness_key=witness).ok
     third = {k: v for k, v in data.items() if k != "recorded"} | {"format": "trace-proof/3"}
     assert check_bundle(third, key, witness_key=witness).ok  # before recordings were carried
     second = _plain(third) | {"format": "trace-proof/2"}

@@ -1,0 +1,92 @@
+"""``trace-audit publish``: each robot's tree as C2SP tlog-tiles in a folder any static web
+server serves. Parses its arguments and calls one library function
+(``trace_audit.publish.publish_root``)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+
+from trace_audit.cli.app import EXIT_FINDINGS, app, guarded, help_text
+from trace_audit.cli.doc import Column, Doc, Seg
+from trace_audit.cli.options import JsonOption, PlainOption, robot_option
+from trace_audit.cli.output import emit, progress_bar, setup_logging
+
+if TYPE_CHECKING:
+    from trace_audit.publish import PublishReport
+
+__all__ = ["publish_command"]
+
+_HELP = """Publish each robot's tree as C2SP tlog-tiles, for any transparency-log client.
+
+Writes OUT/ROBOT/checkpoint (the robot's newest signed checkpoint note, as the log carries
+it), the hash tiles OUT/ROBOT/tile/L/N and the entry bundles OUT/ROBOT/tile/entries/N (each
+entry a seal's stored bytes), up to that checkpoint's tree size. Run it again after the
+robot logged more: only new tiles and the checkpoint are written; published tiles are
+compared, never rewritten. Serve OUT with any static web server (docs/integrity.md,
+"Publishing a fleet's logs"). Exit 1 when a robot's seals do not make the tree its signed
+checkpoints state, or its published tiles differ from the log; 2 when a robot's log is not
+signed (nothing would vouch for its tiles).
+
+[bold]Examples[/bold]:
+
+  trace-audit publish /data/fleet --out /srv/tlog
+
+  python -m http.server -d /srv/tlog 8080
+"""
+
+
+@app.command("publish", help=help_text(_HELP))
+def publish_command(
+    root: Annotated[Path, typer.Argument(help="A log root or segment.", show_default=False)],
+    *,
+    out: Annotated[
+        Path, typer.Option("--out", help="The folder to publish into.", show_default=False)
+    ],
+    robot: Annotated[
+        list[str] | None, robot_option("Only this robot's tree (repeat for several).")
+    ] = None,
+    json_out: JsonOption = False,
+    plain: PlainOption = False,
+) -> None:
+    from trace_audit.publish import publish_root
+
+    setup_logging()
+    if json_out or plain or not sys.stderr.isatty():
+        report = guarded(lambda: publish_root(root, out, robots=robot or ()))
+    else:
+        with progress_bar("publishing seals") as bar:
+            task = bar.task_ids[0]
+
+            def progress(name: str, done: int, total: int) -> None:
+                bar.update(task, description=f"publishing {name}", completed=done, total=total)
+
+            report = guarded(lambda: publish_root(root, out, robots=robot or (), progress=progress))
+    emit(report, _publish_doc, json_out=json_out, plain=plain)
+    if not report.ok:
+        raise typer.Exit(EXIT_FINDINGS)
+
+
+def _publish_doc(r: PublishReport) -> Doc:
+    doc = Doc()
+    doc.title(
+        [
+            f"Published {r.root} to {r.out}: ",
+            Seg("ok", "bold green") if r.ok else Seg("problems", "bold red"),
+        ]
+    )
+    doc.table(
+        [Column("robot"), Column("origin"), Column("tree size", "right"),
+         Column("before", "right"), Column("written", "right"), Column("kept", "right"),
+         Column("problems", wrap=True)],
+        [
+            [p.robot_id, p.origin, "-" if p.tree_size is None else str(p.tree_size),
+             "-" if p.previous_size is None else str(p.previous_size), str(p.written),
+             str(p.kept), "; ".join(p.problems)]
+            for p in r.robots
+        ],
+    )  # fmt: skip
+    return doc
