@@ -8,6 +8,7 @@ import sys
 import typer
 
 from trace_audit.cli import (  # noqa: F401 - each module registers its commands
+    assistant,
     check,
     doctor,
     explain,
@@ -36,6 +37,7 @@ _SECTIONS = (
     ("Storage", ("compact", "catalog")),
     ("Fleet", ("index", "query", "find")),
     ("Authoring", ("doctor",)),
+    ("Assistant", ("mcp",)),
 )
 """How ``trace-audit --help`` lists the commands: by what a user does with them, each
 section's commands in this order (a sub-command group, ``witness``, after its section's
