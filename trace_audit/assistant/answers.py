@@ -7,7 +7,7 @@ to know what an answer means, so they say it plainly.
 
 from __future__ import annotations
 
-from typing import Any, Generic, Literal, TypeVar
+from typing import Generic, Literal, TypeVar
 
 from pydantic import BaseModel, Field
 
@@ -100,4 +100,3 @@ class Answer(BaseModel, Generic[T]):
         description="The data of trace-audit's --json for the same question (null only when "
         "even cut it would not fit)."
     )
-

@@ -62,7 +62,7 @@ def integrity_of(report: dict[str, Any], robots: Sequence[str], *, cached: bool)
         )
         status = "verified"
     return Integrity(
-        status=status,  # type: ignore[arg-type]  # one of the two literals above
+        status=status,
         summary=summary,
         findings=shown,
         findings_total=len(findings),

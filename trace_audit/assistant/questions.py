@@ -53,7 +53,11 @@ def _timeline(args: dict[str, Any]) -> Any:
     from trace_audit.cli.timeline import timeline_each_robot
 
     path, answers = timeline_each_robot(
-        Path(args["log"]), args.get("start"), args.get("end"), bool(args.get("every")), _robots(args)
+        Path(args["log"]),
+        args.get("start"),
+        args.get("end"),
+        bool(args.get("every")),
+        _robots(args),
     )
     return to_jsonable(per_robot_value(path, answers))
 

@@ -23,7 +23,7 @@ from trace_audit.assistant.roots import Roots, fingerprint
 from trace_audit.assistant.worker import CallTimeoutError, Worker
 from trace_runtime.errors import TraceError
 
-__all__ = ["Assistant", "Ask", "command_line"]
+__all__ = ["Ask", "Assistant", "command_line"]
 
 _WHOLE = 1 << 40
 """The bound of a verify report kept for integrity: never cut (findings past a cut would
@@ -94,7 +94,7 @@ class Assistant:
 
     async def answer(self, ask: Ask) -> CallToolResult:
         """Ask ``ask`` and return the answer, integrity first."""
-        status, data, cuts = await self._ask(ask.name, ask.args, MAX_ANSWER_BYTES)
+        _, data, cuts = await self._ask(ask.name, ask.args, MAX_ANSWER_BYTES)
         integrity = await self._integrity(ask)
         return _result(integrity, ask.reproduce, data, cuts)
 
@@ -161,6 +161,9 @@ def _result(integrity: Integrity, reproduce: str, data: Any, cuts: Any) -> CallT
         lead.append("the data did not fit the answer's size bound: run the reproduce command")
     text = json.dumps(envelope, ensure_ascii=False)
     return CallToolResult(
-        content=[TextContent(type="text", text="\n".join(lead)), TextContent(type="text", text=text)],
+        content=[
+            TextContent(type="text", text="\n".join(lead)),
+            TextContent(type="text", text=text),
+        ],
         structured_content=envelope,
     )

@@ -93,7 +93,7 @@ class Tools:
         any execution flags. With t, only the transition in force at that time. Use it
         for "why did it stop / slow / reroute"."""
         path = self.a.log(log)
-        args = {"log": str(path), "action": action, "t": t, "robot": robot}
+        args: dict[str, Any] = {"log": str(path), "action": action, "t": t, "robot": robot}
         reproduce = command_line("why", path, action=action, t=t, robot=robot)
         return await self.a.answer(Ask("why", args, reproduce, robots=robot or ()))
 
@@ -110,7 +110,7 @@ class Tools:
         scores (ET, DR, TCS) and whether its seal matches. Use it for "what exactly did it
         decide at t, and on what evidence"."""
         path = self.a.log(log)
-        args = {"log": str(path), "t": t, "cycle": cycle, "robot": robot}
+        args: dict[str, Any] = {"log": str(path), "t": t, "cycle": cycle, "robot": robot}
         reproduce = command_line("explain", path, t=t, cycle=cycle, robot=robot)
         return await self.a.answer(Ask("explain", args, reproduce, robots=robot or ()))
 
@@ -127,13 +127,20 @@ class Tools:
         and end are the command's --from and --to. Use it for "what happened between
         t1 and t2"."""
         path = self.a.log(log)
-        args = {"log": str(path), "start": start, "end": end, "every": every, "robot": robot}
+        args: dict[str, Any] = {
+            "log": str(path),
+            "start": start,
+            "end": end,
+            "every": every,
+            "robot": robot,
+        }
         options = {"from": start, "to": end, "every": every, "robot": robot}
         reproduce = command_line("timeline", path, **options)
         return await self.a.answer(Ask("timeline", args, reproduce, robots=robot or ()))
 
     async def metrics(
         self,
+        *,
         log: Log,
         robot: Robots = None,
         by: Annotated[
@@ -150,7 +157,13 @@ class Tools:
         continuity (TC, with gaps), decision reconstructability (DR) and the combined
         score (TCS), overall and per group. Use it for "can this log support an audit"."""
         path = self.a.log(log)
-        args = {"log": str(path), "robot": robot, "by": by, "start": start, "end": end}
+        args: dict[str, Any] = {
+            "log": str(path),
+            "robot": robot,
+            "by": by,
+            "start": start,
+            "end": end,
+        }
         args["failures"] = failures
         options = {"robot": robot, "by": by, "start": start, "end": end, "failures": failures}
         reproduce = command_line("metrics", path, **options)
@@ -186,7 +199,7 @@ class Tools:
         satisfied, violated (with where and by how much) or not decidable. start and end
         are the command's --from and --to. Use it for "did the robot keep its rules"."""
         path, rules_path = self.a.log(log), self.a.file(rules, "rules file")
-        args = {"log": str(path), "rules": str(rules_path), "robot": robot}
+        args: dict[str, Any] = {"log": str(path), "rules": str(rules_path), "robot": robot}
         args |= {"start": start, "end": end}
         options = {"rules": rules_path, "robot": robot, "from": start, "to": end}
         reproduce = command_line("check", path, **options)
@@ -194,6 +207,7 @@ class Tools:
 
     async def find(
         self,
+        *,
         action: Annotated[str | None, Field(description="The command, e.g. STOP.")] = None,
         near: Annotated[
             str | None, Field(description="A perceived entity's class as logged, e.g. person.")
@@ -212,7 +226,12 @@ class Tools:
         segment and the explain command that reconstructs it. Use it for "when did any
         robot stop near a person"; then explain a row's decision from its log."""
         index = self.a.index_path()
-        args = {"index": str(index), "action": action, "near": near, "within": within}
+        args: dict[str, Any] = {
+            "index": str(index),
+            "action": action,
+            "near": near,
+            "within": within,
+        }
         args |= {"where": where, "robot": robot, "limit": limit}
         options = {"action": action, "near": near, "within": within, "where": where}
         reproduce = command_line("find", index, **options, robot=robot, limit=limit)
@@ -253,7 +272,7 @@ class Tools:
         path = self.a.log(log)
         reproduce = command_line("prove", path, cycle=cycle, robot=robot)
         reproduce = reproduce.removesuffix(" --json") + " --out BUNDLE.json"
-        args = {"log": str(path), "cycle": cycle, "robot": robot}
+        args: dict[str, Any] = {"log": str(path), "cycle": cycle, "robot": robot}
         return await self.a.answer(Ask("prove", args, reproduce, robots=[robot] if robot else ()))
 
 

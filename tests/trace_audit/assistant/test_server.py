@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import sys
 from collections.abc import Awaitable, Callable
 from pathlib import Path
@@ -13,14 +14,14 @@ from typing import Any, TypeVar
 import anyio
 import pytest
 
-from tests.outside import REPO, cli, snapshot
+from tests.outside import REPO, cli, one_line, snapshot
 from tests.trace_audit.conftest import rewrite_segment
 
 pytest.importorskip("mcp")
 
-from mcp import ClientSession  # noqa: E402 - after the skip: the extra may be missing
-from mcp.client.stdio import StdioServerParameters, stdio_client  # noqa: E402
-from mcp.types import CallToolResult, TextContent  # noqa: E402
+from mcp import ClientSession
+from mcp.client.stdio import StdioServerParameters, stdio_client
+from mcp.types import CallToolResult, TextContent
 
 T = TypeVar("T")
 _SIM_ACTION = "STOP"
@@ -48,12 +49,11 @@ def root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (base / "tampered").mkdir()
     rewrite_segment(segment, base / "tampered" / segment.name, tamper)
     assert changed["done"]
+    shutil.copy(REPO / "docs" / "rules" / "warehouse.toml", base / "rules.toml")
     return base
 
 
-def _serve(
-    roots: list[Path], ask: Callable[[ClientSession], Awaitable[T]], *extra: str
-) -> T:
+def _serve(roots: list[Path], ask: Callable[[ClientSession], Awaitable[T]], *extra: str) -> T:
     """``ask`` of a ``trace-audit mcp`` process over stdio, through the SDK's client."""
     args = ["-m", "trace_audit.cli", "mcp", *(a for r in roots for a in ("--root", str(r)))]
     params = StdioServerParameters(
@@ -131,7 +131,7 @@ def test_a_tampered_copy_is_answered_with_integrity_failed_first(root: Path) -> 
     first, again = _serve([root], ask)
     answer = first.structured_content
     assert answer is not None and not first.is_error
-    assert list(answer)[0] == "integrity"
+    assert next(iter(answer)) == "integrity"
     assert answer["integrity"]["status"] == "integrity_failed"
     assert _text(first).startswith("integrity failed")
     assert answer["integrity"]["findings"][0]["kind"] == "modified"
@@ -167,22 +167,57 @@ def test_paths_outside_the_roots_are_refused(root: Path, tmp_path: Path) -> None
     assert "FIFO" in texts[5]
 
 
+_SAME_AS = [
+    ("explain", {"cycle": 120}, ["explain", "--cycle", "120"]),
+    ("timeline", {"start": "+2", "end": "+8"}, ["timeline", "--from", "+2", "--to", "+8"]),
+    ("verify", {}, ["verify"]),
+    ("metrics", {"by": "scenario"}, ["metrics", "--by", "scenario"]),
+    ("check", {"rules": "rules.toml"}, ["check", "--rules", "{root}/rules.toml"]),
+]
+"""Tools, their arguments, and the command (after the log) that prints the same JSON."""
+
+
+def test_each_answer_is_its_commands_json(root: Path) -> None:
+    async def ask(s: ClientSession) -> list[CallToolResult]:
+        return [await s.call_tool(tool, {"log": "sim", **args}) for tool, args, _ in _SAME_AS]
+
+    for result, (tool, _, command) in zip(_serve([root], ask), _SAME_AS, strict=True):
+        assert not result.is_error, (tool, _text(result))
+        assert result.structured_content is not None
+        assert result.structured_content["integrity"]["status"] == "verified", tool
+        words = [w.replace("{root}", str(root)) for w in command[1:]]
+        expected = _cli_json(command[0], root / "sim", *words)
+        assert _unmeasured(result.structured_content["data"]) == _unmeasured(expected), tool
+
+
+def _unmeasured(data: dict[str, Any]) -> dict[str, Any]:
+    """The data without how fast this run was (metrics' elapsed_s, cycles_per_s)."""
+    return {k: v for k, v in data.items() if k not in {"elapsed_s", "cycles_per_s"}}
+
+
+def test_a_call_past_its_time_is_stopped_and_the_server_goes_on(root: Path) -> None:
+    async def ask(s: ClientSession) -> list[CallToolResult]:
+        first = await s.call_tool("verify", {"log": "sim"})
+        return [first, await s.call_tool("why", {"log": "sim", "action": "STOP"})]
+
+    # 0.05 s: less than a worker process needs to start, so every call overruns
+    results = _serve([root], ask, "--timeout", "0.05")
+    for result in results:
+        assert result.is_error
+        assert "did not finish within 0.05 s and was stopped" in _text(result)
+
+
 @pytest.mark.parametrize(
-    ("tool", "args", "command"),
+    ("args", "needle"),
     [
-        ("explain", {"cycle": 120}, ["explain", "--cycle", "120"]),
-        ("timeline", {"start": "+2", "end": "+8"}, ["timeline", "--from", "+2", "--to", "+8"]),
-        ("verify", {}, ["verify"]),
+        (["--http", "0.0.0.0:8765"], "only a loopback address"),
+        (["--http", "127.0.0.1"], "give 127.0.0.1:PORT"),
+        (["--timeout", "0"], "--timeout must be above 0"),
     ],
 )
-def test_each_answer_is_its_commands_json(
-    root: Path, tool: str, args: dict[str, Any], command: list[str]
-) -> None:
-    async def ask(s: ClientSession) -> CallToolResult:
-        return await s.call_tool(tool, {"log": "sim", **args})
+def test_a_bad_option_is_one_line_and_exit_2(root: Path, args: list[str], needle: str) -> None:
+    one_line(cli("mcp", "--root", root, *args), 2, needle)
 
-    result = _serve([root], ask)
-    assert not result.is_error, _text(result)
-    assert result.structured_content is not None
-    expected = _cli_json(command[0], root / "sim", *command[1:])
-    assert result.structured_content["data"] == expected
+
+def test_a_root_that_is_not_a_folder_is_one_line_and_exit_2(tmp_path: Path) -> None:
+    one_line(cli("mcp", "--root", tmp_path / "nowhere"), 2, "not a folder")
