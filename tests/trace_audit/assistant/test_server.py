@@ -29,9 +29,11 @@ _SIM_ACTION = "STOP"
 
 @pytest.fixture(scope="module")
 def root(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A root with a simulated robot's log (sim/, 100 cycles a scenario) and a tampered
-    copy of it (tampered/: one action message's rationale changed after it was sealed)."""
+    """A root with a simulated robot's log (sim/, 100 cycles a scenario), a tampered
+    copy of it (tampered/: one action message's rationale changed after it was sealed), a
+    rules file, and a log with signed checkpoints (signed/: what a proof needs)."""
     from sim.runner import RunConfig, run
+    from trace_runtime.tlog.keys import generate_keypair
 
     base = tmp_path_factory.mktemp("mcp") / "root"
     run(RunConfig(out=base / "sim", scenario="all", cycles=100, seed=42))
@@ -50,6 +52,8 @@ def root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     rewrite_segment(segment, base / "tampered" / segment.name, tamper)
     assert changed["done"]
     shutil.copy(REPO / "docs" / "rules" / "warehouse.toml", base / "rules.toml")
+    key = generate_keypair(base.parent / "keys", name="amr-01").private_path
+    run(RunConfig(out=base / "signed", scenario="all", cycles=40, seed=7, checkpoint_key=key))
     return base
 
 
@@ -221,3 +225,44 @@ def test_a_bad_option_is_one_line_and_exit_2(root: Path, args: list[str], needle
 
 def test_a_root_that_is_not_a_folder_is_one_line_and_exit_2(tmp_path: Path) -> None:
     one_line(cli("mcp", "--root", tmp_path / "nowhere"), 2, "not a folder")
+
+
+def test_a_long_answer_is_cut_to_its_bound_and_says_so(root: Path) -> None:
+    async def ask(s: ClientSession) -> CallToolResult:
+        return await s.call_tool("timeline", {"log": "sim", "every": True})
+
+    result = _serve([root], ask)
+    answer = result.structured_content
+    assert answer is not None and not result.is_error
+    full = _cli_json("timeline", root / "sim", "--every")
+    assert _size(full) > 200_000  # the premise: all of it would not fit
+    assert _size(answer["data"]) <= 200_000
+    [cut] = answer["truncated"]
+    assert cut == {"path": "rows", "kept": len(answer["data"]["rows"]), "total": len(full["rows"])}
+    assert answer["data"]["rows"] == full["rows"][: cut["kept"]]
+    assert f"rows {cut['kept']} of {cut['total']}" in _text(result)
+
+
+def _size(data: Any) -> int:
+    """Bytes of ``data`` as compact JSON (what the bound counts)."""
+    return len(json.dumps(data, separators=(",", ":"), ensure_ascii=False).encode())
+
+
+def test_prove_answers_the_bundle_prove_writes_and_writes_nothing(
+    root: Path, tmp_path: Path
+) -> None:
+    before = snapshot(root)
+
+    async def ask(s: ClientSession) -> CallToolResult:
+        return await s.call_tool("prove", {"log": "signed", "cycle": 50})
+
+    result = _serve([root], ask)
+    answer = result.structured_content
+    assert answer is not None and not result.is_error, _text(result)
+    assert snapshot(root) == before
+    out = tmp_path / "bundle.json"
+    done = cli("prove", root / "signed", "--cycle", "50", "--out", out)
+    assert done.returncode == 0, done.stderr
+    assert answer["data"] == json.loads(out.read_text())
+    assert answer["integrity"]["status"] == "verified"
+    assert answer["reproduce"].endswith("--cycle 50 --out BUNDLE.json")
