@@ -48,7 +48,11 @@ def integrity_of(report: dict[str, Any], robots: Sequence[str], *, cached: bool)
     shown = [_finding(f) for f in findings[:FINDINGS_SHOWN]]
     if findings:
         first = shown[0]
-        where = f" cycles {first.first_cycle}..{first.last_cycle}" if first.first_cycle is not None else ""
+        where = (
+            f" cycles {first.first_cycle}..{first.last_cycle}"
+            if first.first_cycle is not None
+            else ""
+        )
         robot = f" of {first.robot}" if first.robot else ""
         summary = (
             f"integrity failed: {len(findings)} finding(s) in the log this answer rests on; "

@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import socket
+import subprocess
 import sys
 from collections.abc import Awaitable, Callable
 from pathlib import Path
@@ -266,3 +268,69 @@ def test_prove_answers_the_bundle_prove_writes_and_writes_nothing(
     assert answer["data"] == json.loads(out.read_text())
     assert answer["integrity"]["status"] == "verified"
     assert answer["reproduce"].endswith("--cycle 50 --out BUNDLE.json")
+
+
+def test_find_and_query_answer_from_the_index_marked_unverified(root: Path) -> None:
+    index = root.parent / "index"
+    built = cli("index", root / "sim", "--out", index)
+    assert built.returncode == 0, built.stderr
+    sql = "SELECT command, count(*) AS n FROM decisions GROUP BY ALL ORDER BY command"
+
+    async def ask(s: ClientSession) -> list[CallToolResult]:
+        return [
+            await s.call_tool("find", {"action": "STOP", "limit": 5}),
+            await s.call_tool("query", {"sql": sql}),
+        ]
+
+    found, queried = _serve([root], ask, "--index", str(index))
+    for result in (found, queried):
+        assert not result.is_error, _text(result)
+        assert result.structured_content is not None
+        assert result.structured_content["integrity"]["status"] == "unverified"
+        assert _text(result).startswith("unverified: answered from the fleet index")
+    assert found.structured_content is not None and queried.structured_content is not None
+    rows = found.structured_content["data"]
+    assert rows and rows == _cli_json("find", index, "--action", "STOP", "--limit", "5")
+    assert queried.structured_content["data"] == _cli_json("query", index, "--limit", "100", sql)
+
+
+def test_streamable_http_on_loopback_answers_the_same(root: Path) -> None:
+    from mcp.client.streamable_http import streamable_http_client
+
+    with socket.socket() as probe:  # a free port, given back for the server to take
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    command = ["-m", "trace_audit.cli", "mcp", "--root", str(root), "--http", f"127.0.0.1:{port}"]
+    server = subprocess.Popen(
+        [sys.executable, *command],
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
+
+    async def ask() -> CallToolResult:
+        with anyio.fail_after(120):
+            while True:  # until the server listens
+                try:
+                    await (await anyio.connect_tcp("127.0.0.1", port)).aclose()
+                    break
+                except OSError:
+                    assert server.poll() is None, "the server exited"
+                    await anyio.sleep(0.2)
+            url = f"http://127.0.0.1:{port}/mcp"
+            async with (
+                streamable_http_client(url) as (read, write),
+                ClientSession(read, write) as s,
+            ):
+                await s.initialize()
+                return await s.call_tool("why", {"log": "sim", "action": _SIM_ACTION})
+
+    try:
+        result = anyio.run(ask)
+    finally:
+        server.terminate()
+        _, err = server.communicate(timeout=30)  # and closes its pipes
+    assert b"Traceback" not in err, err
+    assert result.structured_content is not None
+    assert result.structured_content["integrity"]["status"] == "verified"
+    assert result.structured_content["data"]["transitions"]
