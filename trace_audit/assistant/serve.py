@@ -67,6 +67,7 @@ def serve(
     """Run the server until its client leaves (stdio) or it is interrupted (HTTP)."""
     where = loopback(http) if http is not None else None
     server, assistant = build(roots, index, timeout_s)
+    assistant.worker.start()
     try:
         if where is None:
             server.run("stdio")

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+import anyio.to_thread
 from mcp.server.mcpserver.exceptions import ToolError
 from mcp.types import CallToolResult, TextContent
 
@@ -103,7 +104,10 @@ class Assistant:
         verify, not two), cut to the bound after the integrity has read it whole."""
         if ask.robots:
             return await self.answer(ask)
-        report, cached = await self._report(Path(ask.args["log"]))
+        try:
+            report, cached = await self._report(Path(ask.args["log"]))
+        except CallTimeoutError as err:
+            raise ToolError(f"{err}: ask about one robot, or run trace-audit verify") from None
         integrity = integrity_of(report, (), cached=cached)
         data, cuts = bound(copy.deepcopy(report))
         return _result(integrity, ask.reproduce, data, cuts)
@@ -127,18 +131,20 @@ class Assistant:
             return unverified("a listing of what the roots hold; ask verify about a log")
         try:
             report, cached = await self._report(Path(ask.args["log"]))
-        except ToolError as err:
-            return unverified(f"verify could not finish ({err})")
+        except (CallTimeoutError, ToolError) as err:  # the answer stands; its check did not
+            return unverified(f"{err}; run trace-audit verify on the log")
         return integrity_of(report, ask.robots, cached=cached)
 
     async def _report(self, log: Path) -> tuple[dict[str, Any], bool]:
         """The whole log's verify JSON, from this server's cache when the log's files are
         unchanged (and whether it was)."""
-        key = fingerprint(log)
+        key = await anyio.to_thread.run_sync(fingerprint, log)  # a large root: many stats
         found = self.cache.get(str(log), key)
         if found is not None:
             return found, True
-        _, report, _ = await self._ask("verify", {"log": str(log)}, _WHOLE)
+        status, report, _ = await self.worker.ask("verify", {"log": str(log)}, _WHOLE)
+        if status != "ok":
+            raise ToolError(f"verify could not read the log: {report}")
         self.cache.put(str(log), key, report)
         return report, False
 

@@ -45,6 +45,9 @@ class Worker:
         self._lock = anyio.Lock()
 
     def _started(self) -> Pool:
+        """The worker pool, started now if it is not running (at the server's start, so the
+        worker's interpreter starts while the client connects; after a kill, on the next
+        call)."""
         if self._pool is None:
             context = multiprocessing.get_context("spawn")
             self._pool = context.Pool(processes=1, initializer=_quiet_stdout)
@@ -68,6 +71,10 @@ class Worker:
                     f"{name} did not finish within {self.timeout_s:g} s and was stopped"
                 ) from None
             return result
+
+    def start(self) -> None:
+        """Start the worker process before the first call."""
+        self._started()
 
     def close(self) -> None:
         """Stop the worker (the server is leaving)."""
