@@ -57,10 +57,10 @@ class Roots:
             if relative == "":
                 return root
             path = confined(root, relative)
-            if path is None:
-                raise self._refused(name, what)
-            if os.path.lexists(path):
+            if path is not None and os.path.lexists(path):
                 return self._checked(path, name, what)
+            if path is None and not _absent(root, relative):
+                break  # it leads out of the root (a '..', a link): refused, not looked for on
             if name.startswith("/"):
                 break
         raise self._refused(name, what)
@@ -108,3 +108,23 @@ def fingerprint(path: Path) -> tuple[tuple[str, int, int], ...] | None:
                 return None
         dirs.sort()
     return tuple(sorted(found))
+
+
+def _absent(root: Path, relative: str) -> bool:
+    """Whether ``relative`` (a name ``confined`` declined) is simply not in ``root``: a
+    folder on its way missing, not a ``..`` or a link."""
+    parts = relative.split("/")
+    if any(part in ("", ".", "..") for part in parts) or "\\" in relative:
+        return False
+    path = root
+    for part in parts:
+        path = path / part
+        try:
+            mode = os.lstat(path).st_mode
+        except FileNotFoundError:
+            return True
+        except OSError:
+            return False
+        if stat.S_ISLNK(mode):
+            return False
+    return False
