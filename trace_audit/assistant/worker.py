@@ -22,12 +22,14 @@ import anyio
 import anyio.to_thread
 
 from trace_audit.assistant.questions import ask
+from trace_runtime.errors import UsageError
 
 __all__ = ["CallTimeoutError", "Worker"]
 
 
-class CallTimeoutError(Exception):
-    """A question did not finish within the call's time; its worker was killed."""
+class CallTimeoutError(UsageError):
+    """A question did not finish within the call's time; its worker was killed. A usage
+    error: the question asks for too much at once (a narrower one fits)."""
 
 
 def _quiet_stdout() -> None:
