@@ -31,13 +31,12 @@ from trace_audit.cli.typer_compat import TyperException, help_without_command, u
 __all__ = ["app", "main"]
 
 _SECTIONS = (
-    ("Investigate", ("info", "explain", "why", "timeline", "tail", "export", "report")),
+    ("Investigate", ("info", "explain", "why", "timeline", "tail", "export", "report", "mcp")),
     ("Measure and check rules", ("metrics", "check")),
     ("Integrity", ("verify", "keygen", "prove", "verify-proof", "witness")),
     ("Storage", ("compact", "catalog")),
     ("Fleet", ("index", "query", "find")),
     ("Authoring", ("doctor",)),
-    ("Assistant", ("mcp",)),
 )
 """How ``trace-audit --help`` lists the commands: by what a user does with them, each
 section's commands in this order (a sub-command group, ``witness``, after its section's
