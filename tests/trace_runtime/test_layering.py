@@ -195,7 +195,9 @@ FLOORS: dict[str, list[set[str]]] = {
         | {"publish"},
         # what is built from the answers: the fleet index, the incident report, the Foxglove view
         {"fleet", "incident", "foxglove"},
-        {"cli", "entry"},  # entry: the console script's check that the cli extra is installed
+        # entry: the console script's check that the cli extra is installed; assistant: the
+        # MCP server, the CLI's sibling face (it asks the questions as the commands' --json does)
+        {"cli", "entry", "assistant"},
         {""},
     ],
 }  # fmt: skip

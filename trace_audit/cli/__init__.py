@@ -8,6 +8,7 @@ import sys
 import typer
 
 from trace_audit.cli import (  # noqa: F401 - each module registers its commands
+    assistant,
     check,
     doctor,
     explain,
@@ -31,7 +32,7 @@ from trace_audit.cli.typer_compat import TyperException, help_without_command, u
 __all__ = ["app", "main"]
 
 _SECTIONS = (
-    ("Investigate", ("info", "explain", "why", "timeline", "tail", "export", "report")),
+    ("Investigate", ("info", "explain", "why", "timeline", "tail", "export", "report", "mcp")),
     ("Measure and check rules", ("metrics", "check")),
     ("Integrity", ("verify", "keygen", "prove", "verify-proof", "publish", "witness")),
     ("Storage", ("compact", "catalog")),

@@ -21,7 +21,7 @@ if TYPE_CHECKING:  # the library is imported inside the command: start-up stays 
 
     from trace_audit.info import LogInfo
 
-__all__ = ["info_command", "info_doc"]
+__all__ = ["info_command", "info_doc", "info_each_robot"]
 
 _INFO_HELP = """What a log holds: robot, time range, cycles, segments and tiers, channels,
 dropped cycles and gaps, and whether each segment was finished or recovered.
@@ -48,11 +48,11 @@ def info_command(
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
-    path, answers = guarded(lambda: _each_robot(log, not quick, robot or ()))
+    path, answers = guarded(lambda: info_each_robot(log, not quick, robot or ()))
     emit_per_robot(path, answers, info_doc, json_out=json_out, plain=plain)
 
 
-def _each_robot(source: Path, scan: bool, robots: Sequence[str]) -> tuple[str, list[LogInfo]]:
+def info_each_robot(source: Path, scan: bool, robots: Sequence[str]) -> tuple[str, list[LogInfo]]:
     from trace_audit.info import log_info
     from trace_audit.log_source import as_log
     from trace_audit.selection import Selection, per_robot

@@ -39,7 +39,7 @@ if TYPE_CHECKING:  # the library is imported inside the command: start-up stays 
     from trace_audit.fleet.limits import QueryLimits
     from trace_audit.metrics import GroupBy, MetricsConfig, MetricsReport
 
-__all__ = ["metrics_command"]
+__all__ = ["metrics_command", "window_ns"]
 
 _PROGRESS_MIN_CYCLES = 20_000
 
@@ -213,8 +213,8 @@ def metrics_command(
             weights=TCSWeights.parse(tcs_weights) if tcs_weights else TCSWeights(),
             thresholds=parse_thresholds(fail_under) if fail_under else {},
             workers=jobs,
-            start_ns=_window_ns(start, logs, robot, index),
-            end_ns=_window_ns(end, logs, robot, index),
+            start_ns=window_ns(start, logs, robot, index),
+            end_ns=window_ns(end, logs, robot, index),
             max_listed=10_000 if failures else 0,
             evidence=tuple(str(p) for p in evidence or ()),
         )
@@ -254,7 +254,7 @@ def _exit_when_below(report: MetricsReport) -> None:
     raise typer.Exit(EXIT_FINDINGS)
 
 
-def _window_ns(
+def window_ns(
     text: str | None, logs: list[Path] | None, robots: list[str] | None, index: Path | None
 ) -> int | None:
     """A window end as ``t_ns``: seconds are read exactly as given; ``+seconds`` and ISO

@@ -24,11 +24,14 @@ if TYPE_CHECKING:  # rich is imported where a document is drawn: ``--help`` need
     from rich.console import Console
     from rich.progress import Progress
 
+    from trace_audit.selection import PerRobot
+
 __all__ = [
     "JsonValue",
     "console",
     "console_width",
     "emit",
+    "per_robot_value",
     "print_json",
     "progress_bar",
     "setup_logging",
@@ -141,6 +144,16 @@ def emit_per_robot(
         return Doc([block for answer in fleet.robots for block in to_doc(answer).blocks])
 
     emit(PerRobot(path, tuple(answers)), each, json_out=json_out, plain=plain)
+
+
+def per_robot_value(path: str, answers: Sequence[R]) -> R | PerRobot[R]:
+    """What ``emit_per_robot`` prints as JSON: the one answer, or every robot's
+    (``selection.PerRobot``); the assistant's answers carry the same."""
+    if len(answers) == 1:
+        return answers[0]
+    from trace_audit.selection import PerRobot
+
+    return PerRobot(path, tuple(answers))
 
 
 _HANDLER_NAME = "trace-audit stderr line"

@@ -29,7 +29,7 @@ if TYPE_CHECKING:  # the library is imported inside the command: start-up stays 
     from trace_audit.transitions import ClockRun, Timeline, TimelineRow
     from trace_runtime.gaps import Gap
 
-__all__ = ["timeline_command", "timeline_doc"]
+__all__ = ["timeline_command", "timeline_doc", "timeline_each_robot"]
 
 _TIMELINE_HELP = """The decisions over time: a row per decision change, with the leading
 factor and execution flags, and the gaps where no cycle was logged.
@@ -59,11 +59,11 @@ def timeline_command(  # noqa: PLR0917 - typer maps each parameter to an option
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
-    path, answers = guarded(lambda: _each_robot(log, start, end, every, robot or ()))
+    path, answers = guarded(lambda: timeline_each_robot(log, start, end, every, robot or ()))
     emit_per_robot(path, answers, timeline_doc, json_out=json_out, plain=plain)
 
 
-def _each_robot(
+def timeline_each_robot(
     source: Path, start: str | None, end: str | None, every: bool, robots: Sequence[str]
 ) -> tuple[str, list[Timeline]]:
     """Each selected robot's timeline of the window (read in each robot's own clock); a

@@ -28,7 +28,7 @@ if TYPE_CHECKING:  # the library is imported inside the command: start-up stays 
 
     from trace_audit.transitions import WhyResult
 
-__all__ = ["why_command", "why_doc"]
+__all__ = ["why_command", "why_doc", "why_each_robot"]
 
 _WHY_HELP = """Why did the robot take an action? Every transition into it, with the reason.
 
@@ -64,11 +64,11 @@ def why_command(  # noqa: PLR0917 - typer maps each parameter to an option
 ) -> None:
     if all_ and t is not None:
         fail("give either --t or --all, not both", EXIT_USAGE)
-    path, answers = guarded(lambda: _why_each_robot(log, action, t, robot or ()))
+    path, answers = guarded(lambda: why_each_robot(log, action, t, robot or ()))
     emit_per_robot(path, answers, why_doc, json_out=json_out, plain=plain)
 
 
-def _why_each_robot(
+def why_each_robot(
     source: Path, action: str, t: str | None, robots: Sequence[str]
 ) -> tuple[str, list[WhyResult]]:
     """Each selected robot's answer; a robot that never takes the action (or has no

@@ -28,9 +28,10 @@ ALL_COMMANDS = (
         for c in g.typer_instance.registered_commands
     ),
 )
-RENDERING = tuple(c for c in ALL_COMMANDS if c not in {"witness serve", "witness vkey"})
-"""The commands that render a result: ``witness serve`` runs a server (its lines go to
-stderr) and ``witness vkey`` prints a key alone, for ``$(...)``."""
+RENDERING = tuple(c for c in ALL_COMMANDS if c not in {"witness serve", "witness vkey", "mcp"})
+"""The commands that render a result: ``witness serve`` and ``mcp`` run a server (their
+lines go to stderr; ``mcp``'s stdout is the MCP client's) and ``witness vkey`` prints a key
+alone, for ``$(...)``."""
 
 
 def _run(*args: str, width: int = 80) -> Result:
