@@ -95,9 +95,13 @@ def serve_command(
         ),
     ],
     key: Annotated[
-        Path,
+        str,
         typer.Option(
-            "--key", help="The witness's private key (trace-audit keygen).", show_default=False
+            "--key",
+            metavar="PATH|URI",
+            help="The witness's private key (trace-audit keygen): a key file or a pkcs11: URI "
+            "of a key in a token.",
+            show_default=False,
         ),
     ],
     log: Annotated[

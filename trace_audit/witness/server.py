@@ -198,7 +198,7 @@ def parse_listen(listen: str) -> tuple[str, int]:
 def serve(
     listen: str,
     state_dir: Path,
-    key: Path,
+    key: str | Path,
     logs: Iterable[str],
     *,
     name: str = DEFAULT_NAME,

@@ -76,8 +76,9 @@ def _parser() -> argparse.ArgumentParser:
     )
     serve.add_argument(
         "--key",
-        metavar="KEYFILE",
-        help="sign every robot's checkpoints with this Ed25519 key (trace-audit keygen)",
+        metavar="KEY",
+        help="sign every robot's checkpoints with this Ed25519 key (trace-audit keygen): a "
+        "key file or a pkcs11: URI of a key in a token",
     )
     serve.add_argument(
         "--witness",

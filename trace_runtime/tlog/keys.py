@@ -18,11 +18,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 from trace_runtime.errors import StorageError, UsageError
+from trace_runtime.tlog.pkcs11_uri import is_token_uri
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import (
         Ed25519PrivateKey,
     )
+
+    from trace_runtime.tlog.token import TokenSigner
 
 __all__ = [
     "PRIVATE_SUFFIX",
@@ -35,6 +38,7 @@ __all__ = [
     "key_id_of",
     "load_public_key",
     "load_signer",
+    "public_pem_of",
 ]
 
 log = logging.getLogger("trace_runtime")
@@ -123,6 +127,15 @@ class Ed25519Signer:
         return self._key.public_key().public_bytes(Encoding.PEM, PublicFormat.SubjectPublicKeyInfo)
 
 
+def public_pem_of(raw: bytes) -> bytes:
+    """A raw Ed25519 public key as SubjectPublicKeyInfo PEM (what ``keygen`` writes)."""
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
+    from cryptography.hazmat.primitives.serialization import Encoding, PublicFormat
+
+    key = Ed25519PublicKey.from_public_bytes(PublicKey.from_raw(raw).raw)
+    return key.public_bytes(Encoding.PEM, PublicFormat.SubjectPublicKeyInfo)
+
+
 def _read_key_file(path: Path, what: str) -> bytes:
     try:
         return path.read_bytes()
@@ -132,12 +145,21 @@ def _read_key_file(path: Path, what: str) -> bytes:
         raise UsageError(f"{what} {path}: cannot read ({err.strerror or err})") from err
 
 
-def load_signer(path: str | Path) -> Ed25519Signer:
-    """Load an Ed25519 private key: PKCS#8 PEM (``keygen``, ``openssl genpkey``) or 32 raw bytes."""
+def load_signer(path: str | Path) -> Ed25519Signer | TokenSigner:
+    """Load an Ed25519 private key: PKCS#8 PEM (``keygen``, ``openssl genpkey``) or 32 raw
+    bytes; or, given an RFC 7512 ``pkcs11:`` URI, open the key a token holds (``token``)."""
+    if isinstance(path, str) and is_token_uri(path):
+        # Deferred: the token module (and python-pkcs11) only when a token is named.
+        from trace_runtime.tlog.token import open_token_signer
+
+        return open_token_signer(path)
+    return _load_key_file(Path(path))
+
+
+def _load_key_file(path: Path) -> Ed25519Signer:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
     from cryptography.hazmat.primitives.serialization import load_pem_private_key
 
-    path = Path(path)
     data = _read_key_file(path, "private key")
     try:
         mode = path.stat().st_mode
