@@ -95,8 +95,8 @@ extra (python-pkcs11).
 
   trace-audit keygen --out keys/
 
-  trace-audit keygen --out keys/ --token \\
-    'pkcs11:token=robot;object=amr-7?module-path=/usr/lib/softhsm/libsofthsm2.so&pin-source=/etc/pin'
+  trace-audit keygen --out keys/ --token
+"pkcs11:token=robot;object=amr-7?module-path=$P11&pin-source=/etc/trace/pin"
 
   trace-audit keygen --out /etc/trace --name amr-7 --json
 
