@@ -89,14 +89,14 @@ With --token 'pkcs11:token=LABEL;object=NAME?module-path=MODULE.so&pin-value=PIN
 PKCS#11 token (an HSM, a smart card, SoftHSM2), sensitive and not extractable: only NAME.pub
 is written, and the robot or the witness signs through the token with the same URI as its
 key. A key of that name already in the token is never replaced (exit 4). Needs the token
-extra (python-pkcs11).
+extra (python-pkcs11). In the example,
+P11='module-path=/usr/lib/softhsm/libsofthsm2.so&pin-source=/etc/trace/pin'.
 
 [bold]Examples[/bold]:
 
   trace-audit keygen --out keys/
 
-  trace-audit keygen --out keys/ --token
-"pkcs11:token=robot;object=amr-7?module-path=$P11&pin-source=/etc/trace/pin"
+  trace-audit keygen --out keys/ --token "pkcs11:token=hsm;object=amr-7?$P11"
 
   trace-audit keygen --out /etc/trace --name amr-7 --json
 
