@@ -37,7 +37,6 @@ from trace_runtime.errors import (
     UsageError,
     WitnessProtocolError,
 )
-from trace_runtime.tlog.keys import load_signer
 from trace_runtime.tlog.merkle import EMPTY_ROOT, verify_consistency
 from trace_runtime.tlog.signed_note import (
     COSIGNATURE,
@@ -49,6 +48,7 @@ from trace_runtime.tlog.signed_note import (
     parse_checkpoint,
     parse_verifier_key,
 )
+from trace_runtime.tlog.signers import open_signer
 from trace_runtime.tlog.witness_client import (
     CONTENT_TYPE_SIZE,
     MAX_BODY_BYTES,
@@ -211,7 +211,7 @@ def serve(
         raise UsageError(f"--log: {err}") from err
     if not verifiers:
         raise UsageError("a witness needs at least one --log key")
-    signer = load_signer(key)
+    signer = open_signer(key)
     try:
         cosigner = NoteSigner(name, signer, signer.public_key.raw, COSIGNATURE)
     except NoteError as err:

@@ -153,6 +153,11 @@ class ChainWriter:
             )
         return tree
 
+    def rotate_key(self, signer: Signer) -> None:
+        """Announce ``signer``'s key in the next checkpoint and sign with it after that
+        (called from the control thread; the checkpointer hands it over under a lock)."""
+        self._checkpoints.rotate(signer)
+
     @property
     def segment(self) -> SegmentWriter | None:
         """The segment being written (None between a lost one and the next batch)."""

@@ -111,13 +111,13 @@ def _serve(args: argparse.Namespace) -> int:
     # Deferred: --help and argument errors answer without loading the logger.
     from trace_runtime.logger.config import LoggerConfig
     from trace_runtime.recorder.server import Recorder, parse_tcp
-    from trace_runtime.tlog.keys import load_signer
+    from trace_runtime.tlog.signers import open_signer
 
     if args.witness and not args.key:
         raise UsageError("--witness needs --key: a witness cosigns signed checkpoints only")
     tcp = parse_tcp(args.tcp) if args.tcp else None
     # A bad key is the operator's to fix before any robot connects: load it once here.
-    signer = load_signer(args.key) if args.key else None
+    signer = open_signer(args.key) if args.key else None
     config = LoggerConfig(checkpoint_key=signer, witness=args.witness)
     recorder = Recorder(args.root, socket_path=args.socket, tcp=tcp, config=config)
 

@@ -18,14 +18,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 from trace_runtime.errors import StorageError, UsageError
-from trace_runtime.tlog.pkcs11_uri import is_token_uri
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import (
         Ed25519PrivateKey,
     )
 
-    from trace_runtime.tlog.token import TokenSigner
 
 __all__ = [
     "PRIVATE_SUFFIX",
@@ -145,21 +143,13 @@ def _read_key_file(path: Path, what: str) -> bytes:
         raise UsageError(f"{what} {path}: cannot read ({err.strerror or err})") from err
 
 
-def load_signer(path: str | Path) -> Ed25519Signer | TokenSigner:
-    """Load an Ed25519 private key: PKCS#8 PEM (``keygen``, ``openssl genpkey``) or 32 raw
-    bytes; or, given an RFC 7512 ``pkcs11:`` URI, open the key a token holds (``token``)."""
-    if isinstance(path, str) and is_token_uri(path):
-        # Deferred: the token module (and python-pkcs11) only when a token is named.
-        from trace_runtime.tlog.token import open_token_signer
-
-        return open_token_signer(path)
-    return _load_key_file(Path(path))
-
-
-def _load_key_file(path: Path) -> Ed25519Signer:
+def load_signer(path: str | Path) -> Ed25519Signer:
+    """Load an Ed25519 private key file: PKCS#8 PEM (``keygen``, ``openssl genpkey``) or 32
+    raw bytes. A key argument that may also name a key in a token: ``signers.open_signer``."""
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
     from cryptography.hazmat.primitives.serialization import load_pem_private_key
 
+    path = Path(path)
     data = _read_key_file(path, "private key")
     try:
         mode = path.stat().st_mode

@@ -12,8 +12,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from trace_runtime.errors import UsageError
-from trace_runtime.tlog.keys import load_signer
 from trace_runtime.tlog.pkcs11_uri import is_token_uri, parse_token_uri
+from trace_runtime.tlog.signers import open_signer
 
 MODULE = "module-path=/usr/lib/softhsm/libsofthsm2.so"
 
@@ -71,7 +71,7 @@ def test_a_key_file_path_is_not_a_uri(tmp_path: Path) -> None:
     assert is_token_uri("PKCS11:object=k") and not is_token_uri(str(tmp_path / "pkcs11.key"))
     assert not is_token_uri(tmp_path / "x")
     with pytest.raises(UsageError, match="no such file"):
-        load_signer(tmp_path / "pkcs11:object=k")  # a Path is always a file
+        open_signer(tmp_path / "pkcs11:object=k")  # a Path is always a file
 
 
 @given(st.binary(min_size=1, max_size=40))

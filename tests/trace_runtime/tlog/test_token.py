@@ -13,7 +13,8 @@ import pytest
 
 from tests.softhsm import PIN, SoftHsm, softhsm_token
 from trace_runtime.errors import StorageError, UsageError
-from trace_runtime.tlog.keys import load_public_key, load_signer
+from trace_runtime.tlog.keys import load_public_key
+from trace_runtime.tlog.signers import open_signer
 from trace_runtime.tlog.token import TokenSigner, generate_token_key
 
 
@@ -30,7 +31,7 @@ def test_a_token_key_signs_what_its_written_public_key_verifies(
     assert "pin-value" not in made.uri and PIN not in made.uri
     assert [p.name for p in (tmp_path / "keys").iterdir()] == ["amr-7.pub"]
     public = load_public_key(made.public_path)
-    signer = load_signer(hsm.uri("amr-7"))
+    signer = open_signer(hsm.uri("amr-7"))
     assert isinstance(signer, TokenSigner)
     assert signer.key_id == public.key_id == made.key_id
     assert public.verify(signer.sign(b"head"), b"head")
@@ -88,12 +89,12 @@ def test_a_key_is_never_replaced_in_the_token(hsm: SoftHsm, tmp_path: Path) -> N
     with pytest.raises(StorageError, match="never replaced"):
         generate_token_key(hsm.uri("amr-7"), tmp_path / "b", overwrite=True)
     assert not (tmp_path / "b").exists()
-    assert load_signer(hsm.uri("amr-7")).key_id == first.key_id
+    assert open_signer(hsm.uri("amr-7")).key_id == first.key_id
 
 
 def test_one_signer_signs_from_many_threads(hsm: SoftHsm, tmp_path: Path) -> None:
     made = generate_token_key(hsm.uri("amr-7"), tmp_path)
-    public, signer = load_public_key(made.public_path), load_signer(hsm.uri("amr-7"))
+    public, signer = load_public_key(made.public_path), open_signer(hsm.uri("amr-7"))
     bad: list[int] = []
 
     def sign(n: int) -> None:
@@ -124,5 +125,5 @@ def test_what_cannot_be_found_is_a_usage_error(
     generate_token_key(hsm.uri("amr-7"), tmp_path)
     assert callable(uri_of)
     with pytest.raises(UsageError) as raised:
-        load_signer(uri_of(hsm))
+        open_signer(uri_of(hsm))
     assert says in str(raised.value)
