@@ -60,6 +60,9 @@ robot (they chain-verify, but no signature vouches for them yet), and a clock th
 back within a segment (PROFILE section 4 forbids it; the seals still chain).
 
 Without --key the chain is checked but a log re-chained by someone else is not detected.
+With --key, key rotations the chain announces (profile 1.5, signed by the key before) are
+followed: give the robot's first key; a checkpoint under a key never announced, or under
+one rotated away from, is a key mismatch.
 With --scheduler, a root of several robots is verified on a Dask cluster, one task per
 robot. Exit codes: 0 clean, 1 findings, 2 usage (e.g. a bad key file), 3 unreadable input.
 

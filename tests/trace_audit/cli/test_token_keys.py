@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -16,8 +17,10 @@ import pytest
 
 from tests.outside import REPO, cli, one_line
 from tests.softhsm import SoftHsm, softhsm_token
-from trace_runtime.tlog.keys import load_public_key
-from trace_runtime.tlog.signed_note import verifier_key
+from tests.trace_audit.conftest import fill_cycle
+from trace_runtime import AuditLogger, LoggerConfig
+from trace_runtime.tlog.keys import generate_keypair, load_public_key
+from trace_runtime.tlog.signed_note import COSIGNATURE, verifier_key
 
 
 @pytest.fixture
@@ -87,3 +90,47 @@ def test_without_the_token_extra_a_token_key_is_one_line(hsm: SoftHsm, tmp_path:
     done = sim("run", "--cycles", "3", "--out", tmp_path / "log", "--key", hsm.uri("amr-7"),
                pythonpath=path)  # fmt: skip
     one_line(done, 2, "pip install 'trace-audit[token]'")
+
+
+def test_a_witness_cosigns_with_a_key_in_a_token(hsm: SoftHsm, tmp_path: Path) -> None:
+    """``witness serve --key URI``: the robot's logger submits to it, and its cosignatures,
+    made in the token, check under the verifier key of the public key keygen wrote."""
+    assert cli("keygen", "--out", tmp_path, "--token", hsm.uri("witness")).returncode == 0
+    robot = generate_keypair(tmp_path, name="amr-7")
+    robot_vkey = verifier_key("trace.local/amr-7", load_public_key(robot.public_path).raw)
+    witness_vkey = verifier_key(
+        "trace.local/witness", load_public_key(tmp_path / "witness.pub").raw, COSIGNATURE
+    )
+    process = subprocess.Popen(
+        [sys.executable, "-m", "trace_audit.cli", "witness", "serve", "--listen", "127.0.0.1:0",
+         "--state", str(tmp_path / "state"), "--key", hsm.uri("witness"), "--log", robot_vkey],
+        stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )  # fmt: skip
+    try:
+        assert process.stderr is not None
+        line = process.stderr.readline()
+        assert f"as {witness_vkey} " in line, line
+        url = line.split("listening on ", 1)[1].split()[0]
+        config = LoggerConfig(threaded=False, fsync_interval_s=None, checkpoint_interval_s=1.0,
+                              checkpoint_key=robot.private_path, witness=url)  # fmt: skip
+        logger = AuditLogger(tmp_path / "root", robot_id="amr-7", period_s=0.1, config=config)
+        for i in range(30):
+            with logger.cycle(1_790_000_000_000_000_000 + i * 100_000_000) as c:
+                fill_cycle(c, "clear")
+        logger.close()
+        assert logger.stats.witness_cosigned > 0 and logger.stats.witness_failures == 0
+    finally:
+        process.send_signal(signal.SIGTERM)
+        assert process.wait(timeout=20) == 0
+        if process.stderr is not None:
+            process.stderr.close()
+    checked = cli("verify", tmp_path / "root", "--key", robot.public_path, "--witness", "local",
+                  "--witness-key", witness_vkey, "--json")  # fmt: skip
+    assert checked.returncode == 0, checked.stdout
+    # The same check with another key than the witness's: the cosignatures are really checked.
+    other = verifier_key("trace.local/witness", load_public_key(robot.public_path).raw, COSIGNATURE)
+    forged = cli("verify", tmp_path / "root", "--key", robot.public_path, "--witness", "local",
+                 "--witness-key", other, "--json")  # fmt: skip
+    assert forged.returncode == 1
+    assert {f["kind"] for f in json.loads(forged.stdout)["findings"]} == {"bad_signature"}
