@@ -7,38 +7,51 @@ rotated away from, or announced by a forged announcement are findings (exit 1)."
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import orjson
 import pytest
 
-from tests.outside import cli
+from tests.outside import REPO, cli
 from tests.softhsm import softhsm_token
 from tests.trace_audit.conftest import fill_cycle, rewrite_segment
 from trace_runtime import AuditLogger, LoggerConfig
 from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.records import TOPIC_CHECKPOINT
+from trace_runtime.tlog.cosignature_store import read_cosigned
 from trace_runtime.tlog.keys import Ed25519Signer, KeyPair, generate_keypair, load_signer
 from trace_runtime.tlog.rotation import rotation_bytes
-from trace_runtime.tlog.signed_note import verifier_key
+from trace_runtime.tlog.signed_note import COSIGNATURE, verifier_key
 
 T0_NS = 1_790_000_000_000_000_000
 PERIOD_NS = 100_000_000
 
 
 def write(
-    root: Path, key: str | Path, cycles: range, *, rotate: dict[int, str | Path] | None = None
-) -> None:
+    root: Path,
+    key: str | Path,
+    cycles: range,
+    *,
+    rotate: dict[int, str | Path] | None = None,
+    witness: str | None = None,
+) -> int:
     """Cycles through the real logger (5 s segments, a checkpoint a second); at each cycle
-    of ``rotate`` the robot rotates to that key."""
+    of ``rotate`` the robot rotates to that key. Returns its failed witness submissions."""
     config = LoggerConfig(
         threaded=False,
         fsync_interval_s=None,
         checkpoint_interval_s=1.0,
         checkpoint_key=key,
         max_segment_s=5.0,
+        witness=witness,
     )
     logger = AuditLogger(root, robot_id="amr-7", period_s=0.1, config=config)
     for i in cycles:
@@ -48,6 +61,7 @@ def write(
         fill_cycle(c, ("ped_close", "clear")[(i // 9) % 2])
         c.commit()
     logger.close()
+    return logger.stats.witness_failures
 
 
 def verify(root: Path, public: Path) -> tuple[int, dict[str, Any]]:
@@ -187,3 +201,48 @@ def checkpoints(root: Path) -> list[dict[str, Any]]:
                 assert channel.topic == TOPIC_CHECKPOINT
                 found.append(orjson.loads(message.data))
     return found
+
+
+def test_a_witnessed_rotated_log_verifies_clean(tmp_path: Path, pairs: dict[str, KeyPair]) -> None:
+    """A witness given both keys of the robot (``--log`` twice, one origin) cosigns its
+    checkpoints before and after the rotation, across a restart of the robot; ``verify
+    --key OLD --witness local`` takes the notes signed by the announced key as the robot's."""
+    origin, name = "trace.local/amr-7", "trace.local/witness"
+    witness_key = generate_keypair(tmp_path / "keys", name="witness")
+    w_vkey = verifier_key(name, load_signer(witness_key.private_path).public_key.raw, COSIGNATURE)
+    vkeys = {n: verifier_key(origin, load_signer(pairs[n].private_path).public_key.raw)
+             for n in ("old", "new")}  # fmt: skip
+    root = tmp_path / "root"
+    with serving(tmp_path / "state", witness_key.private_path, *vkeys.values()) as url:
+        failures = write(root, pairs["old"].private_path, range(60),
+                         rotate={30: pairs["new"].private_path}, witness=url)  # fmt: skip
+        failures += write(root, pairs["new"].private_path, range(60, 100), witness=url)
+    assert failures == 0
+    assert max(c.tree_size for c in read_cosigned(root, "amr-7")) == 100
+    done = cli("verify", root, "--key", pairs["old"].public_path, "--witness", "local",
+               "--witness-key", w_vkey, "--json")  # fmt: skip
+    report = json.loads(done.stdout)
+    assert (done.returncode, report["findings"]) == (0, [])
+    (robot,) = report["robots"]
+    assert robot["announced_keys"] == [vkeys["new"]]
+
+
+@contextlib.contextmanager
+def serving(state: Path, key: Path, *log_vkeys: str) -> Iterator[str]:
+    """A real ``witness serve`` process for the robot's keys; yields its URL."""
+    logs = [arg for vkey in log_vkeys for arg in ("--log", vkey)]
+    process = subprocess.Popen(
+        [sys.executable, "-m", "trace_audit.cli", "witness", "serve", "--listen", "127.0.0.1:0",
+         "--state", str(state), "--key", str(key), *logs],
+        stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )  # fmt: skip
+    assert process.stderr is not None
+    try:
+        line = process.stderr.readline()
+        assert "listening on " in line, line
+        yield line.split("listening on ", 1)[1].split()[0]
+    finally:
+        process.send_signal(signal.SIGTERM)
+        assert process.wait(timeout=20) == 0
+        process.stderr.close()

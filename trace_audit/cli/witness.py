@@ -109,7 +109,8 @@ def serve_command(
         typer.Option(
             "--log",
             help="A robot's verifier key (witness vkey): the witness cosigns its checkpoints. "
-            "At least one; repeat for each robot.",
+            "At least one; repeat for each robot, and for a robot's next key when it rotates "
+            "keys (both keys of one origin are accepted).",
             show_default=False,
         ),
     ] = None,

@@ -85,13 +85,13 @@ class Witness:
         if cosigner.sig_type != COSIGNATURE:
             raise UsageError("a witness cosigns with a COSIGNATURE key")
         self.cosigner = cosigner
-        self.logs: dict[str, NoteVerifier] = {}
+        # Several keys of one origin: a robot rotating its key (profile 1.5) signs with the
+        # old one up to the announcing checkpoint and with the new one after it.
+        self.logs: dict[str, list[NoteVerifier]] = {}
         for v in logs:
             if v.sig_type != ED25519:
                 raise UsageError(f"log key {v.name} is not an Ed25519 note key")
-            if v.name in self.logs:
-                raise UsageError(f"two --log keys for the origin {v.name}")
-            self.logs[v.name] = v
+            self.logs.setdefault(v.name, []).append(v)
         self.state = state
 
     def add_checkpoint(self, body: bytes) -> Answer:
@@ -100,11 +100,11 @@ class Witness:
         except WitnessProtocolError as err:
             return _text(400, str(err))
         origin = request.note.split(b"\n", 1)[0].decode("utf-8", "replace")
-        verifier = self.logs.get(origin)
-        if verifier is None:
+        verifiers = self.logs.get(origin)
+        if verifiers is None:
             return _text(404, f"unknown origin {origin[:100]!r}")
         try:
-            opened = open_note(request.note, [verifier])
+            opened = open_note(request.note, verifiers)
         except (UnverifiedNoteError, NoteError) as err:
             return _text(403, f"the note does not verify under {origin}'s key: {err}")
         try:

@@ -93,12 +93,19 @@ class KeyChain:
 
     key: PublicKey | None
     retired: dict[str, int] = field(default_factory=dict)
+    announced: list[str] = field(default_factory=list)
+    """The verifier keys followed, in chain order (``next_key`` as stored)."""
 
-    def rotate(self, announced_at: int, next_key: PublicKey) -> None:
+    def rotate(self, announced_at: int, next_key: PublicKey, vkey: str) -> None:
         if self.key is not None and self.key.key_id != next_key.key_id:
             self.retired[self.key.key_id] = announced_at
         self.retired.pop(next_key.key_id, None)
         self.key = next_key
+        self.announced.append(vkey)
+
+    def copy(self) -> KeyChain:
+        """The same state, to be moved on independently (another copy of a segment)."""
+        return KeyChain(self.key, dict(self.retired), list(self.announced))
 
     def why_not(self, key_id: str | None) -> str:
         """Why a checkpoint signed by ``key_id`` does not count, in words."""

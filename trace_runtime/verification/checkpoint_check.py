@@ -139,7 +139,7 @@ class CheckpointCheck:
         and the key stays."""
         state, announced = check_announcement(c, key)
         if announced is not None:
-            self.keys.rotate(c.cycle, announced)
+            self.keys.rotate(c.cycle, announced, c.next_key or "")
         if state in ("none", "valid"):
             return True
         why = "does not verify" if state == "bad_signature" else "is malformed"

@@ -184,6 +184,7 @@ class _RobotChain:
             robot.clock = segments[0].session.clock
         if self.anchor is not None:
             robot.anchored_cycle, robot.anchored_ns = self.anchor.cycle, self.anchor.t_ns
+        robot.announced_keys = list(self.keys.announced)
         self._note_unanchored()
         return robot
 
@@ -296,7 +297,7 @@ class _RobotChain:
                 recorded=self.recorded if n == 0 else None,
                 entry_tree=entry_tree,
                 # Each copy follows the rotations from where the chain stands.
-                keys=KeyChain(self.keys.key, dict(self.keys.retired)),
+                keys=self.keys.copy(),
             )
             check.run()
             check.summary.copy = n > 0

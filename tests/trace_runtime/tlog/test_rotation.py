@@ -63,7 +63,7 @@ def test_a_checkpoint_that_announces_nothing_is_written_as_in_profile_1_4() -> N
 def test_a_retired_key_is_told_from_one_never_announced() -> None:
     old, new = Ed25519Signer.generate(), Ed25519Signer.generate()
     chain = KeyChain(old.public_key)
-    chain.rotate(41, new.public_key)
+    chain.rotate(41, new.public_key, "vkey")
     assert chain.key == new.public_key
     assert "retired by the rotation at cycle 41" in chain.why_not(old.key_id)
     assert "never announced" in chain.why_not("00" * 32)
