@@ -40,6 +40,7 @@ from trace_runtime.records import GENESIS
 from trace_runtime.session import MIN_PERIOD_NS, SessionInfo
 from trace_runtime.tlog.keys import Signer
 from trace_runtime.tlog.signers import open_signer
+from trace_runtime.tlog.token import TokenSigner
 
 __all__ = ["AuditLogger", "CycleBuilder", "LogLockedError", "LoggerConfig", "LoggerStats"]
 
@@ -76,7 +77,8 @@ class AuditLogger:
             raise UsageError(f"checkpoint_interval_s must be positive or None, got {interval}")
         # A bad key file is a set-up error the integrator must see: it raises here.
         key = self.config.checkpoint_key
-        signer: Signer | None = open_signer(key) if isinstance(key, str | Path) else key
+        self._opened: list[TokenSigner] = []  # token sessions this logger opened: it closes them
+        signer: Signer | None = self._open_key(key) if isinstance(key, str | Path) else key
         self.path = Path(path)
         self.is_root = self.path.suffix != ".mcap"
         self.stats = LoggerStats()
@@ -212,8 +214,14 @@ class AuditLogger:
         ``verify --key OLD`` follows it. A key that cannot be loaded raises here."""
         if self._closed:
             raise UsageError("the logger is closed")
-        signer = open_signer(key) if isinstance(key, str | Path) else key
+        signer = self._open_key(key) if isinstance(key, str | Path) else key
         self._chain.rotate_key(signer)
+
+    def _open_key(self, key: str | Path) -> Signer:
+        signer = open_signer(key)
+        if isinstance(signer, TokenSigner):
+            self._opened.append(signer)
+        return signer
 
     def flush(self, timeout_s: float = 5.0) -> bool:
         """Wait until every committed cycle has been written; True if it got there."""
@@ -232,7 +240,10 @@ class AuditLogger:
         if self._closed:
             return
         self._closed = True
-        self._writer.close(timeout_s)
+        if self._writer.close(timeout_s):
+            # A writer still going (a hung disk) may yet sign its closing checkpoint.
+            for signer in self._opened:
+                signer.close()
 
     def __enter__(self) -> AuditLogger:
         return self

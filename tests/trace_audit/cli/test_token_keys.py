@@ -72,6 +72,13 @@ def test_a_wrong_pin_is_one_line_from_every_command(hsm: SoftHsm, tmp_path: Path
     vkey = verifier_key("trace.local/amr-7", load_public_key(tmp_path / "amr-7.pub").raw)
     one_line(cli("witness", "serve", "--state", tmp_path / "st", "--key", wrong, "--log", vkey),
              2, "wrong PIN")  # fmt: skip
+    recorder = subprocess.run(
+        [sys.executable, "-m", "trace_runtime.recorder.cli", "serve", "--root", tmp_path / "rec",
+         "--socket", tmp_path / "rec.sock", "--key", wrong],
+        capture_output=True, text=True, check=False, timeout=120,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+    )  # fmt: skip
+    one_line(recorder, 2, "trace-recorder: token 'robot': wrong PIN")
     assert not (tmp_path / "log").exists() or not list((tmp_path / "log").rglob("*.mcap"))
 
 
