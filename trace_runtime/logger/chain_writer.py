@@ -13,8 +13,8 @@ at the next batch and replaced. The segment opener and the checkpoint signer are
 that may raise anything, so the boundary around them catches ``Exception``: a bug there
 costs cycles (counted and logged), never the robot.
 
-Every method runs on one thread at a time: the writer thread, or the control thread with
-``threaded=False`` (``trace_runtime.logger.writer_thread`` holds the lock).
+Every method but ``rotate_key`` runs on one thread at a time: the writer thread, or the
+control thread with ``threaded=False`` (``logger.writer_thread`` holds the lock).
 """
 
 from __future__ import annotations
@@ -153,9 +153,7 @@ class ChainWriter:
             )
         return tree
 
-    def rotate_key(self, signer: Signer) -> None:
-        """Announce ``signer``'s key in the next checkpoint and sign with it after that
-        (called from the control thread; the checkpointer hands it over under a lock)."""
+    def rotate_key(self, signer: Signer) -> None:  # the control thread's: under a lock
         self._checkpoints.rotate(signer)
 
     @property
