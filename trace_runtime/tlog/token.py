@@ -206,7 +206,9 @@ def generate_token_key(
     token object) and write its public key to ``directory/NAME.pub`` (NAME: the object label).
 
     A key of that label or id already in the token is a ``StorageError`` (exit 4, like a key
-    file that exists): a token key is never replaced."""
+    file that exists): a token key is never replaced. A public key that cannot be written is
+    a ``StorageError`` too, and the key is taken out of the token again: a key nobody can
+    verify signs nothing useful, and would block its name."""
     parsed = parse_token_uri(uri)
     label = parsed.object_label
     if label is None:
@@ -220,13 +222,14 @@ def generate_token_key(
     session = _session(parsed, rw=True)
     try:
         raw = _generate(session, parsed, label)
+        try:
+            public_path.parent.mkdir(parents=True, exist_ok=True)
+            public_path.write_bytes(public_pem_of(raw))
+        except OSError as err:
+            _destroy(session, parsed)
+            raise StorageError(str(public_path), err.strerror or str(err)) from err
     finally:
         session.close()
-    try:
-        public_path.parent.mkdir(parents=True, exist_ok=True)
-        public_path.write_bytes(public_pem_of(raw))
-    except OSError as err:
-        raise StorageError(str(public_path), err.strerror or str(err)) from err
     return TokenKeyPair(parsed.redacted(), public_path, PublicKey.from_raw(raw).key_id)
 
 
@@ -260,3 +263,11 @@ def _generate(session: Any, uri: TokenUri, label: str) -> bytes:
             f"{uri.describe()}: the token cannot make an Ed25519 key ({_why(err)})"
         ) from err
     return _public_raw(session, uri)
+
+
+def _destroy(session: Any, uri: TokenUri) -> None:
+    """Take the key just made out of the token (both its objects)."""
+    p11 = _pkcs11()
+    for object_class in (p11.ObjectClass.PRIVATE_KEY, p11.ObjectClass.PUBLIC_KEY):
+        for obj in _find(session, uri, object_class):
+            obj.destroy()

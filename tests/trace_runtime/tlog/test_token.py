@@ -92,6 +92,17 @@ def test_a_key_is_never_replaced_in_the_token(hsm: SoftHsm, tmp_path: Path) -> N
     assert open_signer(hsm.uri("amr-7")).key_id == first.key_id
 
 
+def test_a_public_key_that_cannot_be_written_leaves_no_key_in_the_token(
+    hsm: SoftHsm, tmp_path: Path
+) -> None:
+    (tmp_path / "a-file").write_text("not a folder")
+    with pytest.raises(StorageError, match="a-file"):
+        generate_token_key(hsm.uri("amr-7"), tmp_path / "a-file")
+    with pytest.raises(UsageError, match="no private key"):
+        open_signer(hsm.uri("amr-7"))
+    assert generate_token_key(hsm.uri("amr-7"), tmp_path / "keys").public_path.exists()
+
+
 def test_one_signer_signs_from_many_threads(hsm: SoftHsm, tmp_path: Path) -> None:
     made = generate_token_key(hsm.uri("amr-7"), tmp_path)
     public, signer = load_public_key(made.public_path), open_signer(hsm.uri("amr-7"))
