@@ -113,8 +113,9 @@ a sim clock from 0):
 
   trace-sim run --robot-id amr-3 --start 2026-05-04T06:00:00Z --out fleet/
 
---key signs the robot's checkpoints with a key from trace-audit keygen; --witness URL has
-its logger submit each checkpoint to a witness (trace-audit witness serve):
+--key signs the robot's checkpoints with a key from trace-audit keygen (a key file, or a
+pkcs11: URI of a key in a token); --witness URL has its logger submit each checkpoint to a
+witness (trace-audit witness serve):
 
   trace-sim run --key robot.key --witness http://127.0.0.1:8080 --out logs/
 """
@@ -164,11 +165,12 @@ _Start = Annotated[
     ),
 ]
 _Key = Annotated[
-    Path | None,
+    str | None,
     typer.Option(
         "--key",
-        metavar="PATH",
-        help="the robot's private key (trace-audit keygen): checkpoints signed",
+        metavar="PATH|URI",
+        help="the robot's private key (trace-audit keygen): a key file or a pkcs11: URI of a "
+        "key in a token; checkpoints signed",
     ),
 ]
 _Witness = Annotated[
@@ -263,7 +265,7 @@ def _run_config(
     batch: int | None,
     robot_id: str,
     start: str | None,
-    key: Path | None,
+    key: str | None,
     witness: str | None,
 ) -> RunConfig:
     """The run the options ask for; ``SimUsageError`` for options that do not go together."""

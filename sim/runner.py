@@ -81,8 +81,9 @@ class RunConfig:
     audit: bool = True
     """False: the same loop with a ``NullLogger`` (nothing written), to measure what logging
     costs per cycle. The ground-truth sidecar is still written."""
-    checkpoint_key: Path | None = None
-    """The robot's private key file: checkpoints signed (``LoggerConfig.checkpoint_key``)."""
+    checkpoint_key: str | Path | None = None
+    """The robot's private key: a key file or a ``pkcs11:`` URI of a key in a token;
+    checkpoints signed (``LoggerConfig.checkpoint_key``)."""
     witness: str | None = None
     """A witness's URL the logger submits each checkpoint to (``LoggerConfig.witness``)."""
 

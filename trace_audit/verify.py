@@ -12,7 +12,7 @@ same verification finds clean. For one decision (``explain``) the check is
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -82,17 +82,21 @@ def witness_check(
     witness_key: NoteVerifier | None = None,
     robots: Sequence[str] = (),
     expected: Sequence[str] = (),
+    announced: Mapping[str, Sequence[PublicKey]] | None = None,
 ) -> WitnessReport:
     """``verify --witness``: the log's robots compared with what a witness cosigned
     (``trace_audit.witness.compare``): ``source`` is a witness URL, a file of cosigned
     checkpoint notes, or ``local`` (the root's own ``witness/`` store). Its findings
     (``truncated_tail``, ``fork``, ``bad_signature``) belong in the verify report
     (``add_witness``). ``expected``: robots (or origins) the witness is asked about even
-    when the log holds none of their segments (one deleted whole is a ``truncated_tail``)."""
+    when the log holds none of their segments (one deleted whole is a ``truncated_tail``).
+    ``announced``: each robot's keys rotated to from ``key`` (``announced_keys``)."""
     from trace_audit.witness.compare import compare_witnessed
 
     log = Selection(tuple(robots)).of(open_log(path))
-    return compare_witnessed(log, source, key=key, witness_key=witness_key, expected=expected)
+    return compare_witnessed(
+        log, source, key=key, witness_key=witness_key, expected=expected, announced=announced
+    )
 
 
 def add_witness(report: VerifyReport, witness: WitnessReport) -> VerifyReport:
@@ -135,7 +139,18 @@ def verify_witnessed(
     except NoteError as err:
         raise UsageError(f"--witness-key: {err}") from err
     report = verify_log(path, key=key, evidence=evidence, executor=executor, robots=robots)
+    # The robots' notes after a key rotation are signed by the keys their chains announced.
+    announced = {
+        r.robot_id: [parse_verifier_key(v).public_key for v in r.announced_keys]
+        for r in report.robots
+    }
     witnessed = witness_check(
-        path, source, key=key, witness_key=verifier, robots=robots, expected=expected
+        path,
+        source,
+        key=key,
+        witness_key=verifier,
+        robots=robots,
+        expected=expected,
+        announced=announced,
     )
     return WitnessedVerifyReport(add_witness(report, witnessed), witnessed)

@@ -30,6 +30,7 @@ _EXPORTS = {
     "generate_keypair": "trace_runtime.tlog.keys",
     "load_public_key": "trace_runtime.tlog.keys",
     "load_signer": "trace_runtime.tlog.keys",
+    "open_signer": "trace_runtime.tlog.signers",
     "AuditLogger": "trace_runtime.logger.api",
     "CycleBuilder": "trace_runtime.logger.cycle_builder",
     "LoggerConfig": "trace_runtime.logger.config",
@@ -120,6 +121,7 @@ __all__ = [
     "load_signer",
     "open_log",
     "open_segment",
+    "open_signer",
     "verify_cycle",
 ]
 
@@ -176,6 +178,7 @@ if TYPE_CHECKING:
         load_public_key,
         load_signer,
     )
+    from trace_runtime.tlog.signers import open_signer
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, __all__)

@@ -20,7 +20,7 @@ from trace_runtime.record_model import RecordModel, Stamp
 from trace_runtime.recording_records import TOPIC_RECORDING, RecordingSeal
 
 PROFILE = "trace"
-PROFILE_VERSION = "1.4"
+PROFILE_VERSION = "1.5"
 """Major.minor (schemas/PROFILE.md §10). Minor revisions only add optional fields: every
 version 1 log is read as before, and a version 1 reader reads 1.1 logs (ignoring what it
 does not know). 1.2 adds each robot's Merkle tree to its checkpoints; 1.3 seals every
@@ -435,6 +435,10 @@ class Checkpoint(Stamp):
     Profile 1.2 adds the robot's Merkle tree through the head seal (``tree_size``, ``root``,
     ``range``) and the same statement as a C2SP tlog checkpoint (``origin``, ``note``), so any
     signed-note verifier checks it; all null in 1.0/1.1 checkpoints.
+
+    Profile 1.5 adds key rotation: a checkpoint may announce the key that signs the robot's
+    later checkpoints (``next_key``), signed by its own key (``next_key_signature``, over
+    ``tlog.rotation.rotation_bytes``).
     """
 
     robot_id: str = Field(min_length=1, description="the robot whose chain this is")
@@ -473,6 +477,18 @@ class Checkpoint(Stamp):
         default=None,
         description="the C2SP signed note of (origin, tree_size, root), signed with the "
         "checkpoint key under the key name origin; null when unsigned (profile 1.2)",
+    )
+    next_key: str | None = Field(
+        default=None,
+        min_length=1,
+        description="key rotation: the C2SP verifier key (under origin) of the key that signs "
+        "the robot's checkpoints after this one (profile 1.5)",
+    )
+    next_key_signature: str | None = Field(
+        default=None,
+        pattern=r"^[0-9a-f]{128}$",
+        description="Ed25519 signature, hex, by this checkpoint's key over the key rotation "
+        "bytes announcing next_key (profile 1.5)",
     )
 
 

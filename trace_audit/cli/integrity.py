@@ -38,6 +38,7 @@ if TYPE_CHECKING:  # the library is imported inside each command: start-up stays
     )
     from trace_audit.witness.compare import WitnessReport
     from trace_runtime.tlog.keys import KeyPair
+    from trace_runtime.tlog.token import TokenKeyPair
 
 _VERIFY_HELP = """Verify that a log is what the robot wrote: all of it, unaltered, in order.
 
@@ -59,6 +60,9 @@ robot (they chain-verify, but no signature vouches for them yet), and a clock th
 back within a segment (PROFILE section 4 forbids it; the seals still chain).
 
 Without --key the chain is checked but a log re-chained by someone else is not detected.
+With --key, key rotations the chain announces (profile 1.5, signed by the key before) are
+followed: give the robot's first key; a checkpoint under a key never announced, or under
+one rotated away from, is a key mismatch.
 With --scheduler, a root of several robots is verified on a Dask cluster, one task per
 robot. Exit codes: 0 clean, 1 findings, 2 usage (e.g. a bad key file), 3 unreadable input.
 
@@ -83,9 +87,19 @@ as --key; a witness takes the private key as witness serve --key. Keys from open
 -algorithm ed25519 work as well. A key that exists is not overwritten unless --force (exit
 4, like a folder that cannot be written).
 
+With --token 'pkcs11:token=LABEL;object=NAME?module-path=MODULE.so&pin-value=PIN' (an RFC
+7512 URI; pin-source=file:/path reads the PIN from a file) the key is generated inside that
+PKCS#11 token (an HSM, a smart card, SoftHSM2), sensitive and not extractable: only NAME.pub
+is written, and the robot or the witness signs through the token with the same URI as its
+key. A key of that name already in the token is never replaced (exit 4). Needs the token
+extra (python-pkcs11). In the example,
+P11='module-path=/usr/lib/softhsm/libsofthsm2.so&pin-source=/etc/trace/pin'.
+
 [bold]Examples[/bold]:
 
   trace-audit keygen --out keys/
+
+  trace-audit keygen --out keys/ --token "pkcs11:token=hsm;object=amr-7?$P11"
 
   trace-audit keygen --out /etc/trace --name amr-7 --json
 
@@ -378,15 +392,38 @@ def keygen_command(
     ],
     *,
     name: Annotated[
-        str, typer.Option("--name", help="File name stem of the key pair.")
-    ] = "trace-ed25519",
+        str | None,
+        typer.Option(
+            "--name",
+            help="File name stem of the key pair [default: trace-ed25519; with --token the "
+            "object's label].",
+            show_default=False,
+        ),
+    ] = None,
+    token: Annotated[
+        str | None,
+        typer.Option(
+            "--token",
+            metavar="URI",
+            help="Generate the key inside this PKCS#11 token (a pkcs11: URI naming token, "
+            "object, module-path and PIN); only the public key is written.",
+            show_default=False,
+        ),
+    ] = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing key pair.")] = False,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
+    if token is not None:
+        from trace_runtime.tlog.token import generate_token_key
+
+        made = guarded(lambda: generate_token_key(token, out, name=name, overwrite=force))
+        emit(made, token_keygen_doc, json_out=json_out, plain=plain)
+        return
     from trace_runtime.tlog.keys import generate_keypair
 
-    pair = guarded(lambda: generate_keypair(out, name=name, overwrite=force))
+    stem = name or "trace-ed25519"
+    pair = guarded(lambda: generate_keypair(out, name=stem, overwrite=force))
     emit(pair, keygen_doc, json_out=json_out, plain=plain)
 
 
@@ -408,4 +445,22 @@ def keygen_doc(pair: KeyPair) -> Doc:
         f"  its vkey:   trace-audit witness vkey --cosignature --key {pair.public_path} "
         "--origin NAME"
     )
+    return doc
+
+
+def token_keygen_doc(made: TokenKeyPair) -> Doc:
+    doc = Doc()
+    doc.title(["Created an Ed25519 signing key in a token ", Seg(made.key_id[:16] + "…", "bold")])
+    doc.fields(
+        [
+            ("private key", f"{made.uri} (in the token: sensitive, not extractable)"),
+            ("public key", f"{made.public_path} (give it to whoever verifies)"),
+            ("key id", made.key_id),
+        ]
+    )
+    # The URI is shown without a pin-value: the robot names its PIN by a file instead.
+    uri = made.uri if "pin-source=" in made.uri else f"{made.uri}&pin-source=file:PINFILE"
+    doc.line(f'On a robot:   LoggerConfig(checkpoint_key="{uri}")')
+    doc.line(f"  its logs:   trace-audit verify LOG --key {made.public_path}")
+    doc.line(f"On a witness: trace-audit witness serve --key '{uri}' …")
     return doc

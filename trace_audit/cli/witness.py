@@ -95,9 +95,13 @@ def serve_command(
         ),
     ],
     key: Annotated[
-        Path,
+        str,
         typer.Option(
-            "--key", help="The witness's private key (trace-audit keygen).", show_default=False
+            "--key",
+            metavar="PATH|URI",
+            help="The witness's private key (trace-audit keygen): a key file or a pkcs11: URI "
+            "of a key in a token.",
+            show_default=False,
         ),
     ],
     log: Annotated[
@@ -105,7 +109,8 @@ def serve_command(
         typer.Option(
             "--log",
             help="A robot's verifier key (witness vkey): the witness cosigns its checkpoints. "
-            "At least one; repeat for each robot.",
+            "At least one; repeat for each robot, and for a robot's next key when it rotates "
+            "keys (both keys of one origin are accepted).",
             show_default=False,
         ),
     ] = None,

@@ -28,7 +28,7 @@ from __future__ import annotations
 import urllib.error
 import urllib.parse
 import urllib.request
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -235,25 +235,22 @@ def _finding(kind: FindingKind, robot: str, message: str, leaf: SealLeaf | None 
 
 
 def _check_signatures(
-    w: Witnessed, key: PublicKey | None, witness_key: NoteVerifier | None
+    w: Witnessed, keys: Sequence[PublicKey], witness_key: NoteVerifier | None
 ) -> tuple[str | None, int | None]:
-    """(problem, verified cosignature time)."""
-    verifiers: list[NoteVerifier] = []
-    if key is not None:
-        verifiers.append(NoteVerifier.of(w.origin, key.raw))
-    if witness_key is not None:
-        verifiers.append(witness_key)
+    """(problem, verified cosignature time). ``keys``: the robot's key and those its chain
+    announced (profile 1.5); the note must be signed by one of them."""
+    robot = [NoteVerifier.of(w.origin, k.raw) for k in keys]
+    verifiers = [*robot, *([witness_key] if witness_key is not None else [])]
     if not verifiers:
         return None, None
     try:
         opened = open_note(w.note, verifiers)
     except NoteError as err:
         return f"does not verify: {err}", None
-    for v in verifiers:
-        sig = opened.verified_by(v)
-        if sig is None:
-            whose = "the robot's key" if v.sig_type == 1 else f"witness key {v.name}"
-            return f"carries no signature by {whose}", None
+    if robot and all(opened.verified_by(v) is None for v in robot):
+        return "carries no signature by the robot's key", None
+    if witness_key is not None and opened.verified_by(witness_key) is None:
+        return f"carries no signature by witness key {witness_key.name}", None
     if witness_key is not None:
         sig = opened.verified_by(witness_key)
         return None, sig.timestamp if sig else None
@@ -268,9 +265,11 @@ def compare_witnessed(
     witness_key: NoteVerifier | None = None,
     timeout_s: float = 5.0,
     expected: Sequence[str] = (),
+    announced: Mapping[str, Sequence[PublicKey]] | None = None,
 ) -> WitnessReport:
     """Compare each robot's log, and each ``expected`` robot the log lacks, with what the
-    witness saw (see the module doc)."""
+    witness saw (see the module doc). ``announced``: by robot, the keys its chain rotated to
+    from ``key`` (``RobotSummary.announced_keys``); its notes may be signed by any of them."""
     report = WitnessReport(source, witness_key=witness_key.vkey if witness_key else None)
     absent = [expected_origin(name) for name in expected]
     absent = [(robot, origin) for robot, origin in absent if robot not in log.robots]
@@ -285,7 +284,8 @@ def compare_witnessed(
             continue
         trusted: list[tuple[Witnessed, int]] = []
         for w in entries:
-            problem, stamp = _check_signatures(w, key, witness_key)
+            keys = [] if key is None else [key, *(announced or {}).get(robot, ())]
+            problem, stamp = _check_signatures(w, keys, witness_key)
             if problem is not None:
                 report.findings.append(
                     _finding(
@@ -314,7 +314,7 @@ def _vanished(
     was removed whole."""
     trusted: list[tuple[Witnessed, int]] = []
     for w in entries:
-        problem, stamp = _check_signatures(w, None, witness_key)
+        problem, stamp = _check_signatures(w, (), witness_key)
         if problem is None:
             trusted.append((w, stamp if stamp is not None else w.timestamp))
         else:

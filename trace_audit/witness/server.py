@@ -37,7 +37,6 @@ from trace_runtime.errors import (
     UsageError,
     WitnessProtocolError,
 )
-from trace_runtime.tlog.keys import load_signer
 from trace_runtime.tlog.merkle import EMPTY_ROOT, verify_consistency
 from trace_runtime.tlog.signed_note import (
     COSIGNATURE,
@@ -49,6 +48,7 @@ from trace_runtime.tlog.signed_note import (
     parse_checkpoint,
     parse_verifier_key,
 )
+from trace_runtime.tlog.signers import open_signer
 from trace_runtime.tlog.witness_client import (
     CONTENT_TYPE_SIZE,
     MAX_BODY_BYTES,
@@ -85,13 +85,13 @@ class Witness:
         if cosigner.sig_type != COSIGNATURE:
             raise UsageError("a witness cosigns with a COSIGNATURE key")
         self.cosigner = cosigner
-        self.logs: dict[str, NoteVerifier] = {}
+        # Several keys of one origin: a robot rotating its key (profile 1.5) signs with the
+        # old one up to the announcing checkpoint and with the new one after it.
+        self.logs: dict[str, list[NoteVerifier]] = {}
         for v in logs:
             if v.sig_type != ED25519:
                 raise UsageError(f"log key {v.name} is not an Ed25519 note key")
-            if v.name in self.logs:
-                raise UsageError(f"two --log keys for the origin {v.name}")
-            self.logs[v.name] = v
+            self.logs.setdefault(v.name, []).append(v)
         self.state = state
 
     def add_checkpoint(self, body: bytes) -> Answer:
@@ -100,11 +100,11 @@ class Witness:
         except WitnessProtocolError as err:
             return _text(400, str(err))
         origin = request.note.split(b"\n", 1)[0].decode("utf-8", "replace")
-        verifier = self.logs.get(origin)
-        if verifier is None:
+        verifiers = self.logs.get(origin)
+        if verifiers is None:
             return _text(404, f"unknown origin {origin[:100]!r}")
         try:
-            opened = open_note(request.note, [verifier])
+            opened = open_note(request.note, verifiers)
         except (UnverifiedNoteError, NoteError) as err:
             return _text(403, f"the note does not verify under {origin}'s key: {err}")
         try:
@@ -198,7 +198,7 @@ def parse_listen(listen: str) -> tuple[str, int]:
 def serve(
     listen: str,
     state_dir: Path,
-    key: Path,
+    key: str | Path,
     logs: Iterable[str],
     *,
     name: str = DEFAULT_NAME,
@@ -211,7 +211,7 @@ def serve(
         raise UsageError(f"--log: {err}") from err
     if not verifiers:
         raise UsageError("a witness needs at least one --log key")
-    signer = load_signer(key)
+    signer = open_signer(key)
     try:
         cosigner = NoteSigner(name, signer, signer.public_key.raw, COSIGNATURE)
     except NoteError as err:

@@ -38,7 +38,9 @@ from trace_runtime.logger.segment_writer import SegmentWriter
 from trace_runtime.logger.writer_thread import WriterThread
 from trace_runtime.records import GENESIS
 from trace_runtime.session import MIN_PERIOD_NS, SessionInfo
-from trace_runtime.tlog.keys import Signer, load_signer
+from trace_runtime.tlog.keys import Signer
+from trace_runtime.tlog.signers import open_signer
+from trace_runtime.tlog.token import TokenSigner
 
 __all__ = ["AuditLogger", "CycleBuilder", "LogLockedError", "LoggerConfig", "LoggerStats"]
 
@@ -75,7 +77,8 @@ class AuditLogger:
             raise UsageError(f"checkpoint_interval_s must be positive or None, got {interval}")
         # A bad key file is a set-up error the integrator must see: it raises here.
         key = self.config.checkpoint_key
-        signer: Signer | None = load_signer(key) if isinstance(key, str | Path) else key
+        self._opened: list[TokenSigner] = []  # token sessions this logger opened: it closes them
+        signer: Signer | None = self._open_key(key) if isinstance(key, str | Path) else key
         self.path = Path(path)
         self.is_root = self.path.suffix != ".mcap"
         self.stats = LoggerStats()
@@ -204,6 +207,22 @@ class AuditLogger:
                     add(record)
         return c.cycle
 
+    def rotate_key(self, key: str | Path | Signer) -> None:
+        """Rotate the checkpoint key to ``key`` (a key file, a ``pkcs11:`` URI or a
+        ``Signer`` with a ``public_key``): the next checkpoint, signed by the current key,
+        announces the new one, and later checkpoints are signed by it (profile 1.5), so
+        ``verify --key OLD`` follows it. A key that cannot be loaded raises here."""
+        if self._closed:
+            raise UsageError("the logger is closed")
+        signer = self._open_key(key) if isinstance(key, str | Path) else key
+        self._chain.rotate_key(signer)
+
+    def _open_key(self, key: str | Path) -> Signer:
+        signer = open_signer(key)
+        if isinstance(signer, TokenSigner):
+            self._opened.append(signer)
+        return signer
+
     def flush(self, timeout_s: float = 5.0) -> bool:
         """Wait until every committed cycle has been written; True if it got there."""
         return self._writer.flush(timeout_s)
@@ -221,7 +240,10 @@ class AuditLogger:
         if self._closed:
             return
         self._closed = True
-        self._writer.close(timeout_s)
+        if self._writer.close(timeout_s):
+            # A writer still going (a hung disk) may yet sign its closing checkpoint.
+            for signer in self._opened:
+                signer.close()
 
     def __enter__(self) -> AuditLogger:
         return self

@@ -13,8 +13,8 @@ at the next batch and replaced. The segment opener and the checkpoint signer are
 that may raise anything, so the boundary around them catches ``Exception``: a bug there
 costs cycles (counted and logged), never the robot.
 
-Every method runs on one thread at a time: the writer thread, or the control thread with
-``threaded=False`` (``trace_runtime.logger.writer_thread`` holds the lock).
+Every method but ``rotate_key`` runs on one thread at a time: the writer thread, or the
+control thread with ``threaded=False`` (``logger.writer_thread`` holds the lock).
 """
 
 from __future__ import annotations
@@ -152,6 +152,9 @@ class ChainWriter:
                 "not be followed to the last seal): checkpoints are written without it",
             )
         return tree
+
+    def rotate_key(self, signer: Signer) -> None:  # the control thread's: under a lock
+        self._checkpoints.rotate(signer)
 
     @property
     def segment(self) -> SegmentWriter | None:

@@ -8,16 +8,19 @@ unsigned (it still anchors the chain head; ``verify`` reports it unsigned).
 from __future__ import annotations
 
 import functools
+import threading
 from collections.abc import Callable
 
+from trace_runtime.errors import UsageError
 from trace_runtime.logger.config import LoggerConfig, LoggerStats
 from trace_runtime.logger.mcap_out import OutMessage
 from trace_runtime.logger.segment_writer import SegmentWriter
-from trace_runtime.records import TOPIC_CHECKPOINT
+from trace_runtime.records import TOPIC_CHECKPOINT, Checkpoint
 from trace_runtime.session import SessionInfo
 from trace_runtime.tlog.checkpoints import encode_checkpoint, make_checkpoint
 from trace_runtime.tlog.keys import PublicKey, Signer
 from trace_runtime.tlog.merkle import CompactRange
+from trace_runtime.tlog.rotation import announce
 from trace_runtime.tlog.signed_note import NoteSigner
 
 __all__ = ["Checkpointer"]
@@ -42,6 +45,9 @@ class Checkpointer:
         self.origin = origin
         self._signer = signer
         self.note_signer = self._note_signer(signer)
+        # A key to rotate to: set by the control thread, taken by the writer thread.
+        self._next: tuple[Signer, PublicKey] | None = None
+        self._next_lock = threading.Lock()
         self._note: tuple[str, int] | None = None  # the newest note and its tree size
         self._due_ns: int | None = None  # log time the next periodic one is due
 
@@ -59,6 +65,42 @@ class Checkpointer:
             )
             return None
         return NoteSigner(self.origin, signer, public.raw)
+
+    def rotate(self, signer: Signer) -> None:
+        """Rotate to ``signer``'s key: the next checkpoint announces it, signed by the
+        current key (profile 1.5), and the ones after it are signed by it. Without a current
+        key there is nothing to announce it with: it signs from the next checkpoint on."""
+        public = getattr(signer, "public_key", None)
+        if not isinstance(public, PublicKey):
+            raise UsageError("a key to rotate to needs its public_key (it is announced)")
+        with self._next_lock:
+            self._next = (signer, public)
+
+    def _pending(self) -> tuple[Signer, PublicKey] | None:
+        """The rotation asked for, if any; with no current key it takes effect at once."""
+        with self._next_lock:
+            pending = self._next
+            if pending is not None and self._signer is None:
+                self._next = None
+                self._signer = pending[0]
+                self.note_signer = self._note_signer(pending[0])
+                return None
+        return pending
+
+    def _announce(self, checkpoint: Checkpoint, pending: tuple[Signer, PublicKey]) -> Checkpoint:
+        """A signed checkpoint with the pending rotation's announcement, after which the new
+        key signs; one written unsigned (the signer failed) announces nothing: the rotation
+        waits for the next checkpoint the old key signs."""
+        signer = self._signer
+        if signer is None or checkpoint.signature is None:
+            return checkpoint
+        fields = announce(checkpoint, signer, self.origin, pending[1])
+        with self._next_lock:
+            if self._next is pending:  # not replaced meanwhile by another rotate()
+                self._next = None
+        self._signer = pending[0]
+        self.note_signer = self._note_signer(pending[0])
+        return checkpoint.model_copy(update=fields)
 
     def take_note(self) -> tuple[str, int] | None:
         """The signed note and tree size of the newest checkpoint made since the last call
@@ -123,7 +165,10 @@ class Checkpointer:
             if tree is None:
                 stats.tree_failures += 1
             try:
+                pending = self._pending()
                 checkpoint = build(signer=self._signer, note_signer=self.note_signer)
+                if pending is not None:
+                    checkpoint = self._announce(checkpoint, pending)
             except Exception as err:  # a signer is a plug point (an HSM that is gone)
                 if self._signer is None:
                     raise

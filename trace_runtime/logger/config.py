@@ -66,7 +66,9 @@ class LoggerConfig:
     multiple of this much log time from the segment's first cycle, however cycles are
     batched into chunks; one is always written when a segment closes. None: only then."""
     checkpoint_key: str | Path | Signer | None = None
-    """Sign checkpoints: an Ed25519 private key file (``trace-audit keygen``) or a ``Signer``.
+    """Sign checkpoints: an Ed25519 private key file (``trace-audit keygen``), an RFC 7512
+    ``pkcs11:`` URI of a key held in a token (``tlog.token``; the ``token`` extra), or a
+    ``Signer``.
     None writes unsigned checkpoints (chain-head anchors only). A ``Signer`` that also has a
     ``public_key`` (a ``keys.PublicKey``, as ``Ed25519Signer`` has) signs each checkpoint's
     C2SP note too (profile 1.2); one without gives checkpoints whose tree is unsigned."""

@@ -70,9 +70,9 @@ class WriterThread:
             return True
         return self.queue.wait_idle(timeout_s)
 
-    def close(self, timeout_s: float | None) -> None:
+    def close(self, timeout_s: float | None) -> bool:
         """Write what is queued, then end the log; wait at most ``timeout_s`` (None: as long
-        as it takes) and count what is left as undelivered."""
+        as it takes) and count what is left as undelivered. True when the writer finished."""
         if self.queue is not None and self._thread is not None:
             self.queue.close()
             finisher = self._thread
@@ -89,6 +89,8 @@ class WriterThread:
         finisher.join(timeout_s)
         if timeout_s is not None and finisher.is_alive():
             self._give_up(timeout_s)
+            return False
+        return True
 
     def _give_up(self, timeout_s: float) -> None:
         """close() timed out: count what the writer still holds as undelivered."""

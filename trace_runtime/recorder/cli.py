@@ -76,8 +76,9 @@ def _parser() -> argparse.ArgumentParser:
     )
     serve.add_argument(
         "--key",
-        metavar="KEYFILE",
-        help="sign every robot's checkpoints with this Ed25519 key (trace-audit keygen)",
+        metavar="KEY",
+        help="sign every robot's checkpoints with this Ed25519 key (trace-audit keygen): a "
+        "key file or a pkcs11: URI of a key in a token",
     )
     serve.add_argument(
         "--witness",
@@ -110,13 +111,13 @@ def _serve(args: argparse.Namespace) -> int:
     # Deferred: --help and argument errors answer without loading the logger.
     from trace_runtime.logger.config import LoggerConfig
     from trace_runtime.recorder.server import Recorder, parse_tcp
-    from trace_runtime.tlog.keys import load_signer
+    from trace_runtime.tlog.signers import open_signer
 
     if args.witness and not args.key:
         raise UsageError("--witness needs --key: a witness cosigns signed checkpoints only")
     tcp = parse_tcp(args.tcp) if args.tcp else None
     # A bad key is the operator's to fix before any robot connects: load it once here.
-    signer = load_signer(args.key) if args.key else None
+    signer = open_signer(args.key) if args.key else None
     config = LoggerConfig(checkpoint_key=signer, witness=args.witness)
     recorder = Recorder(args.root, socket_path=args.socket, tcp=tcp, config=config)
 

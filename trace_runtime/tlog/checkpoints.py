@@ -114,6 +114,8 @@ def make_checkpoint(
     root: str | None = None,
     range: list[str] | None = None,
     note: str | None = None,
+    next_key: str | None = None,
+    next_key_signature: str | None = None,
 ) -> Checkpoint:
     """Build a checkpoint of the chain head; signed when ``signer`` is given.
 
@@ -121,7 +123,9 @@ def make_checkpoint(
     origin; with a ``note_signer`` (the same key, named ``origin``) the checkpoint carries
     the signed C2SP note of (origin, tree size, root). The signature over ``signing_bytes``
     is unchanged (``trace-checkpoint/1``): the note is what signs the tree. The tree's fields
-    may also be given as they are stated (``tree_size``, ``root``, ``range``, ``note``).
+    may also be given as they are stated (``tree_size``, ``root``, ``range``, ``note``), and
+    so may a key rotation's announcement (profile 1.5: ``next_key``, ``next_key_signature``;
+    ``tlog.rotation.announce`` makes one).
     """
     tree_fields: dict[str, object] = {
         "tree_size": tree_size,
@@ -142,6 +146,8 @@ def make_checkpoint(
         head=head,
         final=final,
         key_id=None if signer is None else signer.key_id,
+        next_key=next_key,
+        next_key_signature=next_key_signature,
         **tree_fields,
     )
     if signer is None:
@@ -149,9 +155,17 @@ def make_checkpoint(
     return body.model_copy(update={"signature": signer.sign(signing_bytes(body)).hex()})
 
 
+_ROTATION_FIELDS = {"next_key", "next_key_signature"}
+
+
 def encode_checkpoint(checkpoint: Checkpoint) -> bytes:
-    """The message data of a checkpoint: compact JSON of the model, like a seal."""
-    return checkpoint.model_dump_json(by_alias=True).encode()
+    """The message data of a checkpoint: compact JSON of the model, like a seal. The key
+    rotation fields (profile 1.5) are written only by the checkpoint that announces a key,
+    so every other checkpoint is byte for byte what a 1.4 writer wrote and a 1.4 reader
+    that refuses unknown properties reads it."""
+    rotating = checkpoint.next_key is not None or checkpoint.next_key_signature is not None
+    exclude = None if rotating else _ROTATION_FIELDS
+    return checkpoint.model_dump_json(by_alias=True, exclude=exclude).encode()
 
 
 def decode_checkpoint(data: bytes) -> Checkpoint:

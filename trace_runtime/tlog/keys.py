@@ -24,6 +24,7 @@ if TYPE_CHECKING:
         Ed25519PrivateKey,
     )
 
+
 __all__ = [
     "PRIVATE_SUFFIX",
     "PUBLIC_SUFFIX",
@@ -35,6 +36,7 @@ __all__ = [
     "key_id_of",
     "load_public_key",
     "load_signer",
+    "public_pem_of",
 ]
 
 log = logging.getLogger("trace_runtime")
@@ -123,6 +125,15 @@ class Ed25519Signer:
         return self._key.public_key().public_bytes(Encoding.PEM, PublicFormat.SubjectPublicKeyInfo)
 
 
+def public_pem_of(raw: bytes) -> bytes:
+    """A raw Ed25519 public key as SubjectPublicKeyInfo PEM (what ``keygen`` writes)."""
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
+    from cryptography.hazmat.primitives.serialization import Encoding, PublicFormat
+
+    key = Ed25519PublicKey.from_public_bytes(PublicKey.from_raw(raw).raw)
+    return key.public_bytes(Encoding.PEM, PublicFormat.SubjectPublicKeyInfo)
+
+
 def _read_key_file(path: Path, what: str) -> bytes:
     try:
         return path.read_bytes()
@@ -133,7 +144,8 @@ def _read_key_file(path: Path, what: str) -> bytes:
 
 
 def load_signer(path: str | Path) -> Ed25519Signer:
-    """Load an Ed25519 private key: PKCS#8 PEM (``keygen``, ``openssl genpkey``) or 32 raw bytes."""
+    """Load an Ed25519 private key file: PKCS#8 PEM (``keygen``, ``openssl genpkey``) or 32
+    raw bytes. A key argument that may also name a key in a token: ``signers.open_signer``."""
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
     from cryptography.hazmat.primitives.serialization import load_pem_private_key
 

@@ -23,6 +23,7 @@ from trace_runtime.session import TIER_METADATA
 from trace_runtime.tlog.checkpoints import CheckpointState, NoteState, check_checkpoint, check_note
 from trace_runtime.tlog.keys import PublicKey
 from trace_runtime.tlog.merkle import CompactRange
+from trace_runtime.tlog.rotation import KeyChain, check_announcement
 from trace_runtime.verification.report import FindingKind
 from trace_runtime.verification.scan import Anchor, SealScan
 from trace_runtime.verification.sink import SegmentReporter
@@ -45,12 +46,16 @@ class CheckpointCheck:
     report: SegmentReporter
     scan: SealScan
     segment: Segment
-    key: PublicKey | None
+    keys: KeyChain
+    """The key the robot's checkpoints are signed with here, followed through the key
+    rotations they announce (profile 1.5)."""
     checkpoints: int = 0
     valid: int = 0
     anchor: Anchor | None = None
     vouching: list[Checkpoint] = field(default_factory=list)
     """The checkpoints that matched (and verified): each an anchor candidate."""
+    key_of: dict[int, PublicKey] = field(default_factory=dict)
+    """The key each vouching checkpoint (by ``id``) was checked with: its note's key."""
 
     def run(self, read: list[ReadCheckpoint]) -> None:
         """Check every checkpoint read from the segment, then how the segment ends."""
@@ -92,7 +97,8 @@ class CheckpointCheck:
         """Check one checkpoint record; True when it matches the chain and vouches for it."""
         scan = self.scan
         problems = self._checkpoint_problems(c, last_cycle, is_sorted)
-        state: CheckpointState = check_checkpoint(c, self.key)
+        key = self.keys.key
+        state: CheckpointState = check_checkpoint(c, key)
         if problems:
             kind: FindingKind = problems[0][0]
             located = where
@@ -105,7 +111,7 @@ class CheckpointCheck:
             )
         if state in ("bad_signature", "key_mismatch", "unsigned"):
             message = (
-                f"it is signed by another key ({(c.key_id or '?')[:16]}…)"
+                self.keys.why_not(c.key_id)
                 if state == "key_mismatch"
                 else _SIGNATURE_PROBLEMS[state]
             )
@@ -117,11 +123,32 @@ class CheckpointCheck:
             )
         if problems or state not in ("valid", "unchecked"):
             return False
+        if key is not None and not self._follow_rotation(c, key, where):
+            return False
         self.valid += 1
         self.vouching.append(c)
+        if key is not None:
+            self.key_of[id(c)] = key
         if self.anchor is None or c.cycle >= self.anchor.cycle:
             self.anchor = Anchor(c.cycle, c.t_ns)
         return True
+
+    def _follow_rotation(self, c: Checkpoint, key: PublicKey, where: CycleRange) -> bool:
+        """A verified checkpoint that announces the next key (profile 1.5): from here on
+        that key signs. False when the announcement does not verify: it vouches for nothing
+        and the key stays."""
+        state, announced = check_announcement(c, key)
+        if announced is not None:
+            self.keys.rotate(c.cycle, announced, c.next_key or "")
+        if state in ("none", "valid"):
+            return True
+        why = "does not verify" if state == "bad_signature" else "is malformed"
+        self.report.finding(
+            "bad_signature",
+            f"checkpoint at cycle {c.cycle}: its announcement of the next key {why}",
+            where,
+        )
+        return False
 
     def _check_end(
         self, read: list[ReadCheckpoint], final_seen: Checkpoint | None, last_cycle: int
@@ -159,7 +186,7 @@ class CheckpointCheck:
         first_t = min(self.scan.t) if self.scan.t else None
         first_cycle = self.segment.session.first_cycle
         span = CycleRange(first_cycle, last_cycle, first_t, last_t)
-        if self.key is not None:
+        if self.keys.key is not None:
             self.report.finding(
                 "unsigned_checkpoint",
                 "a key was given but the segment holds no checkpoint: no signature vouches "
@@ -291,7 +318,7 @@ class TreeCheck:
         vouching = {id(c) for c in vouched.vouching}
         for c in trees:
             if id(c) in vouching:
-                self._note(c)
+                self._note(c, vouched.key_of.get(id(c), self.key))
         self._tree(trees)
         if self.rejected:
             kept = [c for c in vouched.vouching if c.cycle not in self.rejected]
@@ -355,9 +382,10 @@ class TreeCheck:
             CycleRange(c.cycle, c.cycle, c.t_ns, c.t_ns),
         )
 
-    def _note(self, c: Checkpoint) -> None:
-        """The note against the checkpoint (whose head and signature are in order)."""
-        state = check_note(c, self.key)
+    def _note(self, c: Checkpoint, key: PublicKey | None) -> None:
+        """The note against the checkpoint (whose head and signature are in order), with
+        the key that signed the checkpoint (after any rotation)."""
+        state = check_note(c, key)
         problem = _NOTE_PROBLEMS.get(state)
         if problem is None:
             return

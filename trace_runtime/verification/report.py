@@ -200,6 +200,9 @@ class RobotSummary:
     """Recorded messages those windows seal, cited or not."""
     recording_checked: int = 0
     """Of those windows, the ones checked against a recording that is here."""
+    announced_keys: list[str] = field(default_factory=list)
+    """The keys the robot's chain announced and the check followed (profile 1.5: verifier
+    keys, in chain order); empty without rotations, or without a key to follow them from."""
 
 
 @dataclass(slots=True)

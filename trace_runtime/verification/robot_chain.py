@@ -28,6 +28,7 @@ from trace_runtime.records import GENESIS
 from trace_runtime.session import EXCERPT_METADATA
 from trace_runtime.tlog.keys import PublicKey
 from trace_runtime.tlog.merkle import CompactRange
+from trace_runtime.tlog.rotation import KeyChain
 from trace_runtime.verification.recording_check import RecordingCheck
 from trace_runtime.verification.report import (
     Finding,
@@ -151,6 +152,8 @@ class _RobotChain:
     ) -> None:
         self.robot = RobotSummary(robot_id)
         self.key = key
+        self.keys = KeyChain(key)
+        """The robot's checkpoint key, followed through the rotations its chain announces."""
         self.sink = sink
         self.report = report
         self.recordings = recordings
@@ -181,6 +184,7 @@ class _RobotChain:
             robot.clock = segments[0].session.clock
         if self.anchor is not None:
             robot.anchored_cycle, robot.anchored_ns = self.anchor.cycle, self.anchor.t_ns
+        robot.announced_keys = list(self.keys.announced)
         self._note_unanchored()
         return robot
 
@@ -208,6 +212,7 @@ class _RobotChain:
         if main.tail is not None:
             self.tail = main.tail  # an empty segment (killed before its first write) passes it on
         self.tree = main.exit_tree
+        self.keys = main.keys
         self.previous = number
 
     def _entry_tree(self, number: int, first: Segment, entry: str | None) -> CompactRange | None:
@@ -291,6 +296,8 @@ class _RobotChain:
                 recordings=self.recordings,
                 recorded=self.recorded if n == 0 else None,
                 entry_tree=entry_tree,
+                # Each copy follows the rotations from where the chain stands.
+                keys=self.keys.copy(),
             )
             check.run()
             check.summary.copy = n > 0

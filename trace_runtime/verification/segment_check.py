@@ -19,6 +19,7 @@ from trace_runtime.recording_records import TOPIC_RECORDING
 from trace_runtime.records import TOPIC_CHECKPOINT, Checkpoint
 from trace_runtime.tlog.checkpoints import decode_checkpoint, iter_checkpoints
 from trace_runtime.tlog.keys import PublicKey
+from trace_runtime.tlog.rotation import KeyChain
 from trace_runtime.verification.checkpoint_check import CheckpointCheck, ReadCheckpoint
 from trace_runtime.verification.numbering import Numbering
 from trace_runtime.verification.recording_check import RecordingCheck
@@ -52,6 +53,7 @@ class SegmentCheck:
         *,
         recordings: Recordings | None = None,
         recorded: RecordingCheck | None = None,
+        keys: KeyChain | None = None,
     ) -> None:
         self.segment = segment
         self.recordings = recordings
@@ -62,6 +64,8 @@ class SegmentCheck:
         self.entry = entry
         self.entry_cycle = entry_cycle
         self.key = key
+        self.keys = KeyChain(key) if keys is None else keys
+        """The robot's key through the segment: rotations announced in it move it on."""
         self.sink = sink
         self.report = SegmentReporter(sink, self.session.robot_id, self.name, self.session.segment)
         info = segment.info
@@ -93,7 +97,7 @@ class SegmentCheck:
         self._report_damaged_chunks()
         self._check_structure()
         self._check_unsealed()
-        checkpoints = CheckpointCheck(self.report, self.scan, self.segment, self.key)
+        checkpoints = CheckpointCheck(self.report, self.scan, self.segment, self.keys)
         checkpoints.run(self.checkpoints)
         self.checkpoints_checked(checkpoints)
         self.anchor = checkpoints.anchor

@@ -9,6 +9,7 @@ from trace_runtime.reading.recordings import Recordings
 from trace_runtime.records import TOPIC_SEAL
 from trace_runtime.tlog.keys import PublicKey
 from trace_runtime.tlog.merkle import CompactRange, leaf_hash
+from trace_runtime.tlog.rotation import KeyChain
 from trace_runtime.verification.checkpoint_check import CheckpointCheck, TreeCheck
 from trace_runtime.verification.recording_check import RecordingCheck
 from trace_runtime.verification.segment_check import SegmentCheck
@@ -35,9 +36,17 @@ class TreeSegmentCheck(SegmentCheck):
         recordings: Recordings | None = None,
         recorded: RecordingCheck | None = None,
         entry_tree: CompactRange | None = None,
+        keys: KeyChain | None = None,
     ) -> None:
         super().__init__(
-            segment, entry, entry_cycle, key, sink, recordings=recordings, recorded=recorded
+            segment,
+            entry,
+            entry_cycle,
+            key,
+            sink,
+            recordings=recordings,
+            recorded=recorded,
+            keys=keys,
         )
         self.entry_tree = entry_tree
         self.exit_tree: CompactRange | None = None
