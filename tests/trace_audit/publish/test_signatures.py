@@ -5,14 +5,19 @@ robot (exit 1); without a key the output says the signatures were not checked.""
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 from typing import Any
 
+import orjson
 import pytest
 
 from tests.outside import cli, one_line
+from tests.trace_audit.conftest import rewrite_segment
 from tests.trace_audit.publish.conftest import RobotKey
 from tests.trace_audit.witness.test_tail import write
+from trace_runtime.encoding.cycles import RawMessage
+from trace_runtime.reading.reader import open_segment
 from trace_runtime.tlog.keys import generate_keypair, load_public_key
 
 
@@ -80,3 +85,34 @@ def test_a_key_file_that_is_not_a_key_is_one_line(root: Path, tmp_path: Path) ->
     bad.write_text("not a key\n")
     one_line(cli("publish", root, "--out", tmp_path / "out", "--key", bad), 2, "bad.pub")
     assert not (tmp_path / "out").exists()
+
+
+def test_a_note_whose_signature_was_changed_publishes_nothing(
+    root: Path, tmp_path: Path, robot_key: RobotKey
+) -> None:
+    """The newest checkpoint's note, one base64 digit of its signature changed (the
+    segment rewritten with the plain ``mcap`` Writer): it does not verify under the key."""
+    changed = tmp_path / "changed"
+    shutil.copytree(root, changed)
+    last = sorted((changed / "hot").glob("*.mcap"))[-1]
+    original = tmp_path / "original.mcap"
+    shutil.move(last, original)
+    newest = max(m.sequence for m in open_segment(original).topic_messages("/trace/checkpoint"))
+
+    def tamper(msg: RawMessage) -> bytes:
+        if msg.topic != "/trace/checkpoint" or msg.sequence != newest:
+            return msg.data
+        record = orjson.loads(msg.data)
+        note: str = record["note"]
+        at = note.rindex(" ") + 20  # a digit inside the signature's base64
+        record["note"] = note[:at] + ("A" if note[at] != "A" else "B") + note[at + 1 :]
+        return orjson.dumps(record)
+
+    rewrite_segment(original, last, tamper)
+    code, report = publish(changed, tmp_path / "out", "--key", robot_key.public)
+    assert code == 1
+    [problem] = report["robots"][0]["problems"]
+    assert "signature that does not verify" in problem, problem
+    assert not (tmp_path / "out" / "amr-7").exists()
+    code, _report = publish(changed, tmp_path / "unchecked")  # without a key: the auditor's
+    assert code == 0
