@@ -168,7 +168,7 @@ func (v cosigVerifier) Verify(msg, sig []byte) bool {
 
 // newCosigVerifier parses "<name>+<hash>+<base64(0x04 || key)>" and checks its hash.
 func newCosigVerifier(vkey string) (cosigVerifier, error) {
-	parts := strings.Split(vkey, "+")
+	parts := strings.SplitN(vkey, "+", 3) // base64 may hold a "+": name and hash never do
 	if len(parts) != 3 {
 		return cosigVerifier{}, fmt.Errorf("witness key: not name+hash+key")
 	}
