@@ -219,8 +219,7 @@ def serve(
     name: str = DEFAULT_NAME,
     tiles: Path | None = None,
 ) -> int:
-    """Run the witness until SIGINT/SIGTERM (exit 0). Prints its address and verifier key;
-    with ``tiles``, serves that published folder too."""
+    """Run the witness (and serve ``tiles``) until SIGINT/SIGTERM (exit 0); prints its key."""
     host, port = parse_listen(listen)
     folder = TileFolder(tiles) if tiles is not None else None
     try:
@@ -256,11 +255,10 @@ def serve(
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
     bound_host, bound_port = str(httpd.server_address[0]), int(httpd.server_address[1])
+    also = f", serving the tiles of {tiles} at {PREFIX}" if tiles is not None else ""
     sys.stderr.write(
         f"witness: listening on http://{bound_host}:{bound_port} as {cosigner.vkey} "
-        f"for {len(verifiers)} log(s)"
-        + (f", serving the tiles of {tiles} at {PREFIX}" if tiles is not None else "")
-        + "\n"
+        f"for {len(verifiers)} log(s){also}\n"
     )
     sys.stderr.flush()
     try:
