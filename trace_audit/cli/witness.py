@@ -53,7 +53,7 @@ outside DIR or through a link.
 
   trace-audit witness serve --state st --key w.key --log VKEY
 
-  trace-audit witness serve --state st --key w.key --log VKEY --tiles /srv/tlog
+  trace-audit witness serve --state st --key w.key --log VKEY --tiles out
 """
 
 _PUSH_HELP = """Submit a log root's signed checkpoints to a witness (a robot that was offline).
