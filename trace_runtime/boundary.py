@@ -23,7 +23,7 @@ from __future__ import annotations
 import contextlib
 import os
 import stat
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -52,6 +52,7 @@ __all__ = [
     "read_side_json",
     "regular_file",
     "remove_own_file",
+    "remove_stale_asides",
     "remove_stale_partials",
     "storage_error",
     "tier_folder",
@@ -283,27 +284,40 @@ def write_new(path: Path, data: bytes) -> None:
 
 def remove_stale_partials(path: Path) -> None:
     """Remove the partial files of earlier ``write_atomic`` calls on ``path`` that were
-    killed before their rename: named as ``create_aside`` names them, regular files, and
-    written by a process that no longer runs (a live one may be writing right now)."""
-    prefix = f".{path.name}."
+    killed before their rename (``remove_stale_asides`` for that one name)."""
+    remove_stale_asides(path.parent, lambda name: name == path.name)
+
+
+def remove_stale_asides(folder: Path, own: Callable[[str], bool]) -> int:
+    """Remove from ``folder`` the files ``create_aside`` made beside a name ``own`` accepts
+    whose writer was killed before it linked them in: named as ``create_aside`` names them,
+    regular files (never a link or a folder), and written by a process that no longer runs
+    (a live one may be writing right now; a reused id only keeps a file). The count removed."""
+    removed = 0
     with contextlib.suppress(OSError):
-        for entry in os.scandir(path.parent):
-            pid = _writer_pid(entry.name, prefix)
-            if pid is None or pid == os.getpid() or _running(pid):
+        for entry in os.scandir(folder):
+            aside = _aside_of(entry.name)
+            if aside is None or not own(aside[0]):
+                continue
+            if aside[1] == os.getpid() or _running(aside[1]):
                 continue
             if entry.is_file(follow_symlinks=False):
                 with contextlib.suppress(OSError):
                     os.unlink(entry.path)
+                    removed += 1
+    return removed
 
 
-def _writer_pid(name: str, prefix: str) -> int | None:
-    """The process id in a partial file name of ``create_aside``'s, or None."""
-    if not (name.startswith(prefix) and name.endswith(".partial")):
+def _aside_of(name: str) -> tuple[str, int] | None:
+    """The name a partial file of ``create_aside``'s stands beside and its writer's process
+    id (``.NAME.PID.N.partial``), or None for any other name."""
+    if not (name.startswith(".") and name.endswith(".partial")):
         return None
-    middle = name[len(prefix) : -len(".partial")].split(".")
-    if len(middle) != 2 or not all(part.isdigit() for part in middle):
+    parts = name[1 : -len(".partial")].rsplit(".", 2)
+    if len(parts) != 3 or not parts[0] or not all(p.isascii() and p.isdigit() for p in parts[1:]):
         return None
-    return int(middle[0])
+    pid = int(parts[1])
+    return (parts[0], pid) if 0 < pid < 1 << 31 else None  # os.kill takes no larger id
 
 
 def _running(pid: int) -> bool:

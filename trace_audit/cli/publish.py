@@ -12,7 +12,7 @@ import typer
 
 from trace_audit.cli.app import EXIT_FINDINGS, app, guarded, help_text
 from trace_audit.cli.doc import Column, Doc, Seg
-from trace_audit.cli.options import JsonOption, PlainOption, robot_option
+from trace_audit.cli.options import JsonOption, PlainOption, key_option, robot_option
 from trace_audit.cli.output import emit, progress_bar, setup_logging
 
 if TYPE_CHECKING:
@@ -31,9 +31,15 @@ compared, never rewritten. Serve OUT with any static web server (docs/integrity.
 checkpoints state, or its published tiles differ from the log; 2 when a robot's log is not
 signed (nothing would vouch for its tiles).
 
+With --key (the robot's public key as verify takes it; repeat for a fleet's keys), the
+checkpoint note must verify under one of the keys, or nothing is published for that robot
+(exit 1); without it, signatures are not checked here (the auditor checks them). When the
+root's witness store holds the same checkpoint cosigned (witness push), that note is served,
+with the witness's cosignature lines.
+
 [bold]Examples[/bold]:
 
-  trace-audit publish /data/fleet --out /srv/tlog
+  trace-audit publish /data/fleet --out /srv/tlog --key keys/amr-7.pub
 
   python -m http.server -d /srv/tlog 8080
 """
@@ -49,14 +55,23 @@ def publish_command(
     robot: Annotated[
         list[str] | None, robot_option("Only this robot's tree (repeat for several).")
     ] = None,
+    key: Annotated[
+        list[Path] | None,
+        key_option(
+            "A robot's Ed25519 public key (PEM, OpenSSH or 32 raw bytes): each robot's "
+            "checkpoint note must verify under one of them. Repeat for several."
+        ),
+    ] = None,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
     from trace_audit.publish import publish_root
+    from trace_runtime.tlog.keys import load_public_key
 
     setup_logging()
+    keys = guarded(lambda: [load_public_key(k) for k in key or ()])
     if json_out or plain or not sys.stderr.isatty():
-        report = guarded(lambda: publish_root(root, out, robots=robot or ()))
+        report = guarded(lambda: publish_root(root, out, robots=robot or (), keys=keys))
     else:
         with progress_bar("publishing seals") as bar:
             task = bar.task_ids[0]
@@ -64,7 +79,9 @@ def publish_command(
             def progress(name: str, done: int, total: int) -> None:
                 bar.update(task, description=f"publishing {name}", completed=done, total=total)
 
-            report = guarded(lambda: publish_root(root, out, robots=robot or (), progress=progress))
+            report = guarded(
+                lambda: publish_root(root, out, robots=robot or (), keys=keys, progress=progress)
+            )
     emit(report, _publish_doc, json_out=json_out, plain=plain)
     if not report.ok:
         raise typer.Exit(EXIT_FINDINGS)
@@ -78,15 +95,28 @@ def _publish_doc(r: PublishReport) -> Doc:
             Seg("ok", "bold green") if r.ok else Seg("problems", "bold red"),
         ]
     )
+    doc.fields(
+        [
+            (
+                "signatures",
+                f"checked with key {', '.join(k[:16] + '…' for k in r.key_ids)}"
+                if r.key_ids
+                else Seg("not checked (no --key): the auditor checks them", "yellow"),
+            ),
+        ]
+    )
     doc.table(
         [Column("robot"), Column("origin"), Column("tree size", "right"),
          Column("before", "right"), Column("written", "right"), Column("kept", "right"),
-         Column("problems", wrap=True)],
+         Column("cosigned by"), Column("problems", wrap=True)],
         [
             [p.robot_id, p.origin, "-" if p.tree_size is None else str(p.tree_size),
              "-" if p.previous_size is None else str(p.previous_size), str(p.written),
-             str(p.kept), "; ".join(p.problems)]
+             str(p.kept), ", ".join(p.cosigned_by) or "-", "; ".join(p.problems)]
             for p in r.robots
         ],
     )  # fmt: skip
+    for p in r.robots:
+        if p.removed:
+            doc.line(f"{p.robot_id}: removed {p.removed} unfinished file(s) a killed run left")
     return doc

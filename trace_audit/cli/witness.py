@@ -45,9 +45,15 @@ verifies (404 unknown origin, 403 bad signature, 409 conflict with its size, 422
 proof); GET /checkpoint/ORIGIN answers the latest cosigned note. State (SQLite, fsynced)
 in --state DIR; its key: --key (keygen). Stops on SIGINT/SIGTERM (exit 0).
 
+With --tiles DIR (a folder trace-audit publish writes), GET /tiles/ROBOT/checkpoint and
+/tiles/ROBOT/tile/... serve it read-only: only the names of a published tree, never a file
+outside DIR or through a link.
+
 [bold]Examples[/bold]:
 
   trace-audit witness serve --state st --key w.key --log VKEY
+
+  trace-audit witness serve --state st --key w.key --log VKEY --tiles out
 """
 
 _PUSH_HELP = """Submit a log root's signed checkpoints to a witness (a robot that was offline).
@@ -120,11 +126,19 @@ def serve_command(
     name: Annotated[
         str, typer.Option("--name", help="The witness's key name, in its cosignatures.")
     ] = "trace.local/witness",
+    tiles: Annotated[
+        Path | None,
+        typer.Option(
+            "--tiles",
+            help="A folder publish --out wrote: served read-only under /tiles/.",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     from trace_audit.witness.server import serve
 
     setup_logging()
-    raise typer.Exit(guarded(lambda: serve(listen, state, key, log or (), name=name)))
+    raise typer.Exit(guarded(lambda: serve(listen, state, key, log or (), name=name, tiles=tiles)))
 
 
 @witness_app.command("push", help=help_text(_PUSH_HELP))

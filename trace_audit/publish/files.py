@@ -7,7 +7,9 @@ replaced; its bytes are compared instead, and a difference is a ``TileConflictEr
 no longer holds the history published from it, or the folder was altered). New tiles are
 *staged* (written aside) and linked in only when ``commit`` says a checkpoint vouches for
 them, so a tree that turns out not to match its checkpoint leaves nothing published; a
-staged file not committed is removed (``discard``): it is this run's own.
+staged file not committed is removed (``discard``): it is this run's own. What a run killed
+before it could remove its own left beside a name is removed by the next run that enters
+that folder (``_sweep``).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from trace_runtime.boundary import (
     fsync_dir,
     read_side_file,
     regular_file,
+    remove_stale_asides,
     storage_error,
     write_atomic,
 )
@@ -50,6 +53,8 @@ class PublishedFolder:
         self.folder = folder
         self.written = 0
         self.kept = 0
+        self.removed = 0
+        """Files a killed run left beside their names, removed (``_sweep``)."""
         self._staged: list[tuple[Path, Path]] = []
         self._made: set[Path] = set()
         self._seen: set[str] = set()  # this run's paths: a level-1 partial recurs per checkpoint
@@ -60,7 +65,15 @@ class PublishedFolder:
         if path.parent not in self._made:
             _make_folders(self.folder, path.parent)
             self._made.add(path.parent)
+            self._sweep(path.parent)
         return path
+
+    def _sweep(self, folder: Path) -> None:
+        """Remove what a killed run left in ``folder`` (a folder of this tree, entered
+        once a run, which holds the output folder's lock): only files named as
+        ``create_aside`` names them beside a name this tree holds, by a process that no
+        longer runs; a file of any other name, a link or a folder is left alone."""
+        self.removed += remove_stale_asides(folder, _tree_name)
 
     def stage(self, tile: TileFile) -> None:
         """Write ``tile`` aside when its name is free; compare it when the name is held."""
@@ -136,6 +149,12 @@ class PublishedFolder:
             return
         write_atomic(path, data)
         self.written += 1
+
+
+def _tree_name(name: str) -> bool:
+    """A name ``publish`` writes: ``checkpoint``, or a tile's (``000``-``999``, the index
+    elements, or a partial tile's width ``1``-``255``)."""
+    return name == "checkpoint" or (name.isascii() and name.isdigit() and len(name) <= 3)
 
 
 def _datasync(fd: int) -> None:

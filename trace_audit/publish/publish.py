@@ -12,8 +12,11 @@ against the seals as they stream by; the partial hash tiles of each one's size a
 auditor already holds, from a proof bundle or a witness, can be checked against the tiles);
 the partial entry bundle only for the newest. A second run writes only what is new: full
 tiles are immutable, compared when present, never rewritten; nothing is ever deleted but
-this run's own uncommitted files. An unsigned robot is refused (exit 2): a public tlog's
-checkpoint carries the log's signature, and tiles nobody signed prove nothing.
+this run's own uncommitted files (and what a killed run left beside a name, ``files``). An
+unsigned robot is refused (exit 2): a public tlog's checkpoint carries the log's signature,
+and tiles nobody signed prove nothing. Given the robot's public key(s), the note served
+must verify under one of them; the note served is the root's witness-cosigned one when the
+witness store holds it (``served``).
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from trace_audit.publish.files import PublishedFolder, TileConflictError, make_top
+from trace_audit.publish.served import served_note, signature_problem
 from trace_audit.publish.tiler import TileBuilder
 from trace_audit.witness.push import robot_checkpoints
 from trace_runtime.boundary import folder_lock, read_side_file
@@ -31,6 +35,7 @@ from trace_runtime.reading.chain_tree import iter_seal_data
 from trace_runtime.reading.logset import Log, open_log
 from trace_runtime.records import Checkpoint
 from trace_runtime.tlog.checkpoints import check_note
+from trace_runtime.tlog.keys import PublicKey
 from trace_runtime.tlog.signed_note import MAX_NOTE_BYTES, parse_checkpoint
 from trace_runtime.tlog.signed_note import Checkpoint as NoteBody
 
@@ -57,6 +62,11 @@ class RobotPublish:
     written: int = 0
     kept: int = 0
     """Tiles and bundles already published, compared byte for byte, left as they were."""
+    removed: int = 0
+    """Files a killed earlier run left beside their names, removed."""
+    cosigned_by: list[str] = field(default_factory=list)
+    """The witnesses whose cosignature lines the served ``checkpoint`` carries (from the
+    root's witness store; not verified by publish)."""
     problems: list[str] = field(default_factory=list)
 
 
@@ -64,6 +74,8 @@ class RobotPublish:
 class PublishReport:
     root: str
     out: str
+    key_ids: list[str] = field(default_factory=list)
+    """The keys each served note was checked with (empty: signatures not checked here)."""
     robots: list[RobotPublish] = field(default_factory=list)
 
     @property
@@ -81,9 +93,11 @@ def publish_root(
     out: str | Path,
     *,
     robots: Sequence[str] = (),
+    keys: Sequence[PublicKey] = (),
     progress: Progress | None = None,
 ) -> PublishReport:
-    """Publish every robot's (or ``robots``') tree under ``out`` (see the module doc)."""
+    """Publish every robot's (or ``robots``') tree under ``out`` (see the module doc); with
+    ``keys``, a robot whose newest note none of them signed publishes nothing."""
     log = open_log(root)
     chosen = list(robots) or log.robots
     unknown = [r for r in chosen if r not in log.robots]
@@ -98,13 +112,17 @@ def publish_root(
             "or name the other robots with --robot"
         )
     out = Path(out)
-    report = PublishReport(str(root), str(out))
+    report = PublishReport(str(root), str(out), [key.key_id for key in keys])
     make_top(out)
     with folder_lock(
         out / ".publish.lock", held=f"another publish is writing to {out}", remove=True
     ):
         for robot in chosen:
-            report.robots.append(_publish_robot(log, robot, signed[robot], out, progress))
+            checkpoints = signed[robot]
+            result = _checked(robot, checkpoints, keys)
+            if not result.problems:
+                _publish_robot(log, result, checkpoints, out, progress)
+            report.robots.append(result)
     return report
 
 
@@ -112,25 +130,36 @@ def _names(log: Log) -> str:
     return ", ".join(log.robots) or "no robot"
 
 
-def _publish_robot(
-    log: Log, robot: str, checkpoints: list[Checkpoint], out: Path, progress: Progress | None
-) -> RobotPublish:
-    result = RobotPublish(robot)
+def _checked(robot: str, checkpoints: list[Checkpoint], keys: Sequence[PublicKey]) -> RobotPublish:
+    """The robot's result, with a problem when nothing may be published for it: an id that
+    cannot name a folder, a note that does not state its checkpoint's tree, or a newest note
+    that none of ``keys`` signed."""
+    result = RobotPublish(robot, origin=checkpoints[-1].origin or "")
     if robot in ("", ".", "..") or any(c in robot for c in "/\\\x00") or robot.startswith("."):
         result.problems.append(f"robot id {robot!r} cannot name a folder: not published")
         return result
-    newest = checkpoints[-1]
-    result.origin = newest.origin or ""
-    folder = out / robot
-    result.folder = str(folder)
     for c in checkpoints:
         if check_note(c, None) != "unchecked":
             result.problems.append(f"the note of checkpoint {c.tree_size} does not state its tree")
             return result
+    problem = signature_problem(checkpoints[-1], keys)
+    if problem is not None:
+        result.problems.append(f"{problem}: nothing published")
+    return result
+
+
+def _publish_robot(
+    log: Log, result: RobotPublish, checkpoints: list[Checkpoint], out: Path,
+    progress: Progress | None,
+) -> None:  # fmt: skip
+    """Publish one checked robot's tree into ``out/<robot>``; problems go into ``result``."""
+    robot, newest = result.robot_id, checkpoints[-1]
+    folder = out / robot
+    result.folder = str(folder)
     make_top(folder)
     previous = _published(folder, result)
     if result.problems:
-        return result
+        return
     published = PublishedFolder(folder)
     try:
         _cut(
@@ -152,13 +181,15 @@ def _publish_robot(
         published.discard()
         published.sync()
         result.written, result.kept = published.written, published.kept
+        result.removed = published.removed
     if result.problems:
-        return result
-    published.replace("checkpoint", (newest.note or "").encode())
+        return
+    served = served_note(log.root, robot, newest)
+    published.replace("checkpoint", served.note.encode())
     result.written, result.kept = published.written, published.kept
+    result.removed, result.cosigned_by = published.removed, list(served.witnesses)
     result.tree_size, result.root = newest.tree_size, newest.root or ""
     result.checkpoints = len(checkpoints)
-    return result
 
 
 def _published(folder: Path, result: RobotPublish) -> NoteBody | None:

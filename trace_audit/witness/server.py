@@ -13,7 +13,8 @@
 
 then stores the checkpoint (SQLite, synchronous FULL) before it answers 200 with its
 tlog-cosignature/v1 line, timestamped with its own clock. ``GET /checkpoint/<origin>`` (our
-extension) answers the latest cosigned note for an origin (404 when none).
+extension) answers the latest cosigned note for an origin (404 when none). Given a folder
+``publish`` writes (``--tiles``), ``GET /tiles/<robot>/...`` serves it read-only (``tiles``).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from pathlib import Path
 from types import FrameType
 
 from trace_audit.witness.state import Latest, WitnessState
+from trace_audit.witness.tiles import PREFIX, TileFolder
 from trace_runtime.errors import (
     NoteError,
     StorageError,
@@ -67,6 +69,7 @@ class Answer:
     status: int
     body: bytes
     content_type: str = _TEXT
+    cache_control: str = ""
 
 
 def _text(status: int, message: str) -> Answer:
@@ -143,7 +146,14 @@ class Witness:
         return Answer(200, latest.note.encode(), _TEXT)
 
 
-def _handler(witness: Witness) -> type[BaseHTTPRequestHandler]:
+def _tile_answer(tiles: TileFolder | None, path: str) -> Answer:
+    served = tiles.get(path[len(PREFIX) :]) if tiles is not None else None
+    if served is None:
+        return _text(404, "not found")
+    return Answer(200, served.body, served.content_type, served.cache_control)
+
+
+def _handler(witness: Witness, tiles: TileFolder | None) -> type[BaseHTTPRequestHandler]:
     class Handler(BaseHTTPRequestHandler):
         server_version = "trace-witness/1"
         protocol_version = "HTTP/1.1"
@@ -153,6 +163,8 @@ def _handler(witness: Witness) -> type[BaseHTTPRequestHandler]:
             self.send_response(answer.status)
             self.send_header("Content-Type", answer.content_type)
             self.send_header("Content-Length", str(len(answer.body)))
+            if answer.cache_control:
+                self.send_header("Cache-Control", answer.cache_control)
             self.end_headers()
             self.wfile.write(answer.body)
 
@@ -175,6 +187,9 @@ def _handler(witness: Witness) -> type[BaseHTTPRequestHandler]:
             self._send(witness.add_checkpoint(body))
 
         def do_GET(self) -> None:
+            if self.path.startswith(PREFIX):
+                self._send(_tile_answer(tiles, self.path))
+                return
             prefix = "/checkpoint/"
             if not self.path.startswith(prefix):
                 self._send(_text(404, "not found"))
@@ -202,9 +217,11 @@ def serve(
     logs: Iterable[str],
     *,
     name: str = DEFAULT_NAME,
+    tiles: Path | None = None,
 ) -> int:
-    """Run the witness until SIGINT/SIGTERM (exit 0). Prints its address and verifier key."""
+    """Run the witness (and serve ``tiles``) until SIGINT/SIGTERM (exit 0); prints its key."""
     host, port = parse_listen(listen)
+    folder = TileFolder(tiles) if tiles is not None else None
     try:
         verifiers = [parse_verifier_key(v) for v in logs]
     except NoteError as err:
@@ -227,7 +244,7 @@ def serve(
     except StorageError:
         httpd.server_close()
         raise
-    httpd.RequestHandlerClass = _handler(Witness(cosigner, verifiers, state))
+    httpd.RequestHandlerClass = _handler(Witness(cosigner, verifiers, state), folder)
     httpd.daemon_threads = True
     stop = threading.Event()
 
@@ -238,9 +255,10 @@ def serve(
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
     bound_host, bound_port = str(httpd.server_address[0]), int(httpd.server_address[1])
+    also = f", serving the tiles of {tiles} at {PREFIX}" if tiles is not None else ""
     sys.stderr.write(
         f"witness: listening on http://{bound_host}:{bound_port} as {cosigner.vkey} "
-        f"for {len(verifiers)} log(s)\n"
+        f"for {len(verifiers)} log(s){also}\n"
     )
     sys.stderr.flush()
     try:

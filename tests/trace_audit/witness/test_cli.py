@@ -11,7 +11,7 @@ import pytest
 from tests.trace_audit.witness.conftest import ORIGIN, WITNESS_NAME, Keys, run_cli
 
 OPTIONS = {
-    "serve": {"--state", "--key", "--log", "--listen", "--name", "--help"},
+    "serve": {"--state", "--key", "--log", "--listen", "--name", "--tiles", "--help"},
     "push": {"--witness", "--robot", "--json", "--plain", "--help"},
     "vkey": {"--key", "--origin", "--cosignature", "--help"},
 }

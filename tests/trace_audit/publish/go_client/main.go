@@ -4,9 +4,12 @@
 // It reads one JSON request on stdin:
 //
 //	{"url": "http://host:port/<robot>", "vkey": "<verifier key>", "index": N,
-//	 "old_note": "<an older checkpoint note, optional>", "proof": "<a tlog-proof, optional>"}
+//	 "old_note": "<an older checkpoint note, optional>", "proof": "<a tlog-proof, optional>",
+//	 "witness_vkey": "<a witness's tlog-cosignature/v1 verifier key, optional>"}
 //
-// fetches <url>/checkpoint and opens it with note.Open under the robot's verifier key,
+// fetches <url>/checkpoint and opens it with note.Open under the robot's verifier key (and,
+// given a witness's key, requires that witness's cosignature on it too: note.Open under both
+// keys, the cosignature checked by a note.Verifier written here from c2sp.org/tlog-cosignature),
 // recomputes the tree's root from the hash tiles (tlog.TileHashReader verifies every tile it
 // reads against the checkpoint's root), fetches entry N from its entry bundle, proves and
 // checks its inclusion (tlog.ProveRecord, tlog.CheckRecord) and, given an older note, the
@@ -17,6 +20,8 @@ package main
 
 import (
 	"bytes"
+	"crypto/ed25519"
+	"crypto/sha256"
 	"encoding/base64"
 	"encoding/binary"
 	"encoding/json"
@@ -39,6 +44,7 @@ type request struct {
 	Index   int64  `json:"index"`
 	OldNote string `json:"old_note"`
 	Proof   string `json:"proof"`
+	Witness string `json:"witness_vkey"`
 }
 
 type answer struct {
@@ -51,6 +57,8 @@ type answer struct {
 	Consistency []string `json:"consistency"`
 	ProofIndex  int64    `json:"proof_index"`
 	ProofSize   int64    `json:"proof_size"`
+	Signers     []string `json:"signers"`
+	CosignedAt  uint64   `json:"cosigned_at"`
 	Fetched     []string `json:"fetched"`
 }
 
@@ -132,16 +140,83 @@ func parseCheckpoint(text string) (checkpoint, error) {
 	return checkpoint{lines[0], size, h}, nil
 }
 
+// cosigVerifier is a note.Verifier of c2sp.org/tlog-cosignature@v1 signatures (type 0x04):
+// x/mod's note knows only Ed25519 notes, but its Verifier is an interface. A cosignature
+// is the 8-byte big-endian time then the Ed25519 signature of "cosignature/v1\ntime T\n"
+// followed by the note's text.
+type cosigVerifier struct {
+	name string
+	hash uint32
+	key  ed25519.PublicKey
+	seen *uint64
+}
+
+func (v cosigVerifier) Name() string    { return v.name }
+func (v cosigVerifier) KeyHash() uint32 { return v.hash }
+func (v cosigVerifier) Verify(msg, sig []byte) bool {
+	if len(sig) != 8+ed25519.SignatureSize {
+		return false
+	}
+	t := binary.BigEndian.Uint64(sig[:8])
+	signed := append([]byte(fmt.Sprintf("cosignature/v1\ntime %d\n", t)), msg...)
+	if !ed25519.Verify(v.key, signed, sig[8:]) {
+		return false
+	}
+	*v.seen = t
+	return true
+}
+
+// newCosigVerifier parses "<name>+<hash>+<base64(0x04 || key)>" and checks its hash.
+func newCosigVerifier(vkey string) (cosigVerifier, error) {
+	parts := strings.SplitN(vkey, "+", 3) // base64 may hold a "+": name and hash never do
+	if len(parts) != 3 {
+		return cosigVerifier{}, fmt.Errorf("witness key: not name+hash+key")
+	}
+	raw, err := base64.StdEncoding.DecodeString(parts[2])
+	if err != nil || len(raw) != 1+ed25519.PublicKeySize || raw[0] != 0x04 {
+		return cosigVerifier{}, fmt.Errorf("witness key: not a tlog-cosignature/v1 key")
+	}
+	sum := sha256.Sum256(append([]byte(parts[0]+"\n"), raw...))
+	hash := binary.BigEndian.Uint32(sum[:4])
+	if fmt.Sprintf("%08x", hash) != parts[1] {
+		return cosigVerifier{}, fmt.Errorf("witness key: wrong key hash")
+	}
+	return cosigVerifier{parts[0], hash, ed25519.PublicKey(raw[1:]), new(uint64)}, nil
+}
+
 func openCheckpoint(msg []byte, verifier note.Verifier) (checkpoint, error) {
-	n, err := note.Open(msg, note.VerifierList(verifier))
+	c, _, err := openCosigned(msg, verifier, nil)
+	return c, err
+}
+
+// openCosigned opens a checkpoint under the log's key and, given one, a witness's: with a
+// witness, its cosignature must be among the verified signatures.
+func openCosigned(msg []byte, verifier note.Verifier, witness note.Verifier) (checkpoint, []string, error) {
+	known := note.VerifierList(verifier)
+	if witness != nil {
+		known = note.VerifierList(verifier, witness)
+	}
+	n, err := note.Open(msg, known)
 	if err != nil {
-		return checkpoint{}, fmt.Errorf("checkpoint: %v", err)
+		return checkpoint{}, nil, fmt.Errorf("checkpoint: %v", err)
+	}
+	var signers []string
+	signed := map[string]bool{}
+	for _, s := range n.Sigs { // note.Open lists only the known keys' verified signatures
+		signers = append(signers, s.Name)
+		signed[fmt.Sprintf("%s+%08x", s.Name, s.Hash)] = true
+	}
+	if !signed[fmt.Sprintf("%s+%08x", verifier.Name(), verifier.KeyHash())] {
+		return checkpoint{}, nil, fmt.Errorf("checkpoint: not signed by %s", verifier.Name())
+	}
+	if witness != nil && !signed[fmt.Sprintf("%s+%08x", witness.Name(), witness.KeyHash())] {
+		return checkpoint{}, nil, fmt.Errorf("checkpoint: no cosignature by %s", witness.Name())
 	}
 	c, err := parseCheckpoint(n.Text)
 	if err == nil && c.origin != verifier.Name() {
 		err = fmt.Errorf("checkpoint of %s, not of %s", c.origin, verifier.Name())
 	}
-	return c, err
+	return c, signers, err
 }
 
 // entryAt fetches entry index of a tree of size entries from its (full or partial) bundle.
@@ -190,13 +265,26 @@ func run(req request) (answer, error) {
 	if err != nil {
 		return a, err
 	}
+	var witness note.Verifier
+	var cosigned *uint64
+	if req.Witness != "" {
+		w, err := newCosigVerifier(req.Witness)
+		if err != nil {
+			return a, err
+		}
+		witness, cosigned = w, w.seen
+	}
 	msg, err := get(req.URL + "/checkpoint")
 	if err != nil {
 		return a, err
 	}
-	cp, err := openCheckpoint(msg, verifier)
+	cp, signers, err := openCosigned(msg, verifier, witness)
 	if err != nil {
 		return a, err
+	}
+	a.Signers = signers
+	if cosigned != nil {
+		a.CosignedAt = *cosigned
 	}
 	a.Origin, a.Size, a.Root = cp.origin, cp.size, base64.StdEncoding.EncodeToString(cp.root[:])
 	hashes := tlog.TileHashReader(tlog.Tree{N: cp.size, Hash: cp.root}, tileReader{req.URL})
