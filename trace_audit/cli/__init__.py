@@ -9,6 +9,7 @@ import typer
 
 from trace_audit.cli import (  # noqa: F401 - each module registers its commands
     check,
+    comply,
     doctor,
     explain,
     export,
@@ -33,6 +34,7 @@ _SECTIONS = (
     ("Investigate", ("info", "explain", "why", "timeline", "tail", "export", "report")),
     ("Measure and check rules", ("metrics", "check")),
     ("Integrity", ("verify", "keygen", "prove", "verify-proof", "witness")),
+    ("Compliance", ("comply",)),
     ("Storage", ("compact", "catalog")),
     ("Fleet", ("index", "query", "find")),
     ("Authoring", ("doctor",)),
