@@ -38,7 +38,7 @@ def render_conformity_page(report: ComplianceReport) -> str:
         _header(report, verdict),
         _section("clauses", "Clauses", _overview(report)),
         *(
-            _section(f"clause-{i}", c.reference, _clause(c))
+            _section(f"clause-{i}", c.reference, _clause(c, report.check_commands))
             for i, c in enumerate(report.clauses, 1)
         ),
         _section("reproduce", "Reproduce", _reproduce(report)),
@@ -92,21 +92,22 @@ def _overview(report: ComplianceReport) -> str:
     return html_table(("clause", "what it asks (our words)", "verdict"), rows, set())
 
 
-def _clause(clause: ClauseResult) -> str:
+def _clause(clause: ClauseResult, commands: dict[str, str]) -> str:
     period = f" Records kept at least {clause.keep_days} days." if clause.keep_days else ""
     parts = [
         f"<p>{_badge(clause.met, clause.verdict)} {escape(clause.summary)}{escape(period)}</p>"
     ]
-    parts += [_check(check) for check in clause.checks]
+    parts += [_check(check, commands.get(check.check, "")) for check in clause.checks]
     return "".join(parts)
 
 
-def _check(check: CheckResult) -> str:
+def _check(check: CheckResult, command: str) -> str:
     met = check.verdict == "met"
     evidence = "".join(
         f'<li class="{"ok" if met else "bad"}">{escape(line)}</li>' for line in check.evidence
     )
     fix = f"<p><strong>Fix:</strong> {escape(check.fix)}</p>" if check.fix else ""
+    fix += f'<p class="note">Reproduce:</p><pre>{escape(command)}</pre>' if command else ""
     return (
         f'<div class="check" data-check="{escape(check.check)}" data-verdict="'
         f'{escape(check.verdict)}"><h3>{escape(check.check)} {_badge(met, check.verdict)}</h3>'

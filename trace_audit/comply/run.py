@@ -14,7 +14,7 @@ from pathlib import Path
 
 from trace_audit.comply.checks import CheckResult, Verdict, run_check
 from trace_audit.comply.evidence import RootEvidence, gather
-from trace_audit.comply.profile import Clause, Profile
+from trace_audit.comply.profile import CHECK_NAMES, Clause, Profile
 from trace_runtime.errors import UsageError
 from trace_runtime.tiers.keep import KeptProfile, RootKeep, adopt_profile
 from trace_runtime.tlog.keys import PublicKey
@@ -51,6 +51,8 @@ class ComplianceReport:
     command: str
     """The command that reproduces this report (keys by the paths given)."""
     verify_command: str
+    check_commands: dict[str, str]
+    """Per check, the command that shows its evidence on its own."""
 
     @property
     def conforms(self) -> bool:
@@ -86,7 +88,7 @@ def comply(
         profile=profile_arg or profile.name,
     )
     clauses = tuple(_judge(evidence, clause) for clause in profile.clauses)
-    command, verify = _commands(root, profile_arg or profile.path, key_path, witness_key)
+    command, verify, per_check = _commands(root, profile_arg or profile.path, key_path, witness_key)
     return ComplianceReport(
         root=str(root),
         profile=profile.name,
@@ -97,6 +99,7 @@ def comply(
         clauses=clauses,
         command=command,
         verify_command=verify,
+        check_commands=per_check,
     )
 
 
@@ -108,14 +111,17 @@ def _judge(evidence: RootEvidence, clause: Clause) -> ClauseResult:
 
 def _commands(
     root: Path, profile: str, key_path: str | None, witness_key: str | None
-) -> tuple[str, str]:
+) -> tuple[str, str, dict[str, str]]:
+    """(the comply command, the verify command, per check the command showing its evidence)."""
     key = f" --key {shlex.quote(key_path)}" if key_path else ""
     witness = f" --witness-key {shlex.quote(witness_key)}" if witness_key else ""
     where = shlex.quote(str(root))
-    return (
-        f"trace-audit comply {where} --profile {shlex.quote(profile)}{key}{witness}",
-        f"trace-audit verify {where}{key}",
-    )
+    command = f"trace-audit comply {where} --profile {shlex.quote(profile)}{key}{witness}"
+    verify = f"trace-audit verify {where}{key}"
+    per_check: dict[str, str] = {name: f"{command} --json" for name in CHECK_NAMES}
+    per_check |= {"chain": verify, "gaps": verify, "signed": verify}
+    per_check["witnessed"] = f"{verify} --witness local{witness}"
+    return command, verify, per_check
 
 
 def adopt(root: str | Path, profile: Profile) -> RootKeep:

@@ -19,8 +19,10 @@ from trace_runtime import AuditLogger, LoggerConfig
 
 def _one_check(folder: Path, check: str, keep: str = "") -> str:
     path = folder / f"only-{check}.toml"
-    path.write_text(f'name = "only-{check}"\n[[clause]]\nreference = "Test {check}"\n'
-                    f'summary = "the {check} check alone"\nchecks = ["{check}"]\n{keep}')  # fmt: skip
+    path.write_text(
+        f'name = "only-{check}"\n[[clause]]\nreference = "Test {check}"\n'
+        f'summary = "the {check} check alone"\nchecks = ["{check}"]\n{keep}'
+    )
     return str(path)
 
 
@@ -153,8 +155,9 @@ def test_safety_rules_fails_when_decisions_record_no_check(tmp_path: Path) -> No
     logger.close()
     done = comply(tmp_path / "root", _one_check(tmp_path, "safety_rules"))
     assert done.code == 1
-    assert "20 of 20 decisions record no safety-rule check" in (
-        _verdict(done, "safety_rules")["evidence"][0]
+    assert (
+        "20 of 20 decisions record no safety-rule check"
+        in (_verdict(done, "safety_rules")["evidence"][0])
     )
 
 
