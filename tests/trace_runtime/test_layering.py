@@ -193,7 +193,7 @@ FLOORS: dict[str, list[set[str]]] = {
         {"metrics", "explanation", "export", "transitions", "info", "verify", "doctor", "layers"}
         | {"rules", "tail", "witness", "proof", "proof_data", "proof_readings"},
         # what is built from the answers: the fleet index, the incident report, the Foxglove view
-        {"fleet", "incident", "foxglove"},
+        {"fleet", "incident", "foxglove", "comply"},
         {"cli", "entry"},  # entry: the console script's check that the cli extra is installed
         {""},
     ],

@@ -49,8 +49,7 @@ fix), 2 a bad profile or usage, 3 an unreadable root.
 
   trace-audit comply logs/ --profile ai-act-art12 --key keys/amr-7.pub
 
-  trace-audit comply logs/ --profile machinery-2023-1230 --key keys/amr-7.pub
-  --witness-key "$(cat witness.vkey)" --html conformity.html
+  trace-audit comply logs/ --profile machinery-2023-1230 --html c.html
 
   trace-audit comply logs/ --profile ai-act-art12 --adopt --json
 
