@@ -109,6 +109,12 @@ def _duration(text: str | None, name: str) -> int | None:
     return parse_duration(text)
 
 
+def _retention_ns(text: str | None) -> int | Literal["default"] | None:
+    """``--retention``: not given is the library's default (183d, or the root's compliance
+    period when longer); ``off`` is None."""
+    return "default" if text is None else _duration(text, "--retention")
+
+
 _Tier = Annotated[str, typer.Option("--tier", help="Target tier: warm or cold.")]
 _OlderThan = Annotated[
     str | None,
@@ -221,9 +227,7 @@ def compact_command(
                 sources=source or None,
                 dry_run=dry_run,
                 wall_clock=now,
-                retention_ns="default"
-                if retention is None
-                else _duration(retention, "--retention"),
+                retention_ns=_retention_ns(retention),
                 include_unfinished=include_unfinished,
                 warm=WarmPolicy(
                     context_ns=context_ns,
@@ -240,6 +244,11 @@ def compact_command(
 
     report = guarded(run)
     emit(report, compact_doc, json_out=json_out, plain=plain, to_json=_report_json)
+    _exit_on_problems(report)
+
+
+def _exit_on_problems(report: CompactionReport) -> None:
+    """A line on stderr for segments that failed and copies held for a human; then exit 1."""
     if report.failed:
         names = ", ".join(s.source for s in report.failed)
         sys.stderr.write(f"trace-audit: compaction failed for {names}; sources kept\n")

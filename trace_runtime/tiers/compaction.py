@@ -16,6 +16,11 @@ time, ages by its own clock) or, with ``wall_clock``, the current time. The newe
 segment of a robot that is not finished is the one its logger may still be writing, and
 is left alone unless ``include_unfinished``.
 
+A root that carries compliance profiles (``compliance.toml``, ``keep``) keeps what they ask:
+both defaults (warm's age when a profile asks for full detail, and retention) rise to their
+period, and a shorter explicit request is refused (``UsageError``, exit 2) unless
+``override_compliance``.
+
 Retention deletes only cold segments (already compacted) whose newest log time is more
 than ``retention_ns`` before the reference, and only if the verification ``trace-audit
 verify`` runs (``trace_runtime.verification``: seals, links, checkpoints, and signatures when
@@ -49,7 +54,7 @@ from trace_runtime.tiers._files import (
     root_lock,
 )
 from trace_runtime.tiers.durations import DAY_NS
-from trace_runtime.tiers.keep import COMPLIANCE_NAME, read_keep, resolve_periods
+from trace_runtime.tiers.keep import COMPLIANCE_NAME, RootKeep, read_keep, resolve_periods
 from trace_runtime.tiers.plan import (
     Choice,
     cycle_estimate,
@@ -102,32 +107,15 @@ def compact(
 
     ``older_than_ns`` defaults to 24 h for warm and 7 days for cold; ``sources`` to hot for
     warm and hot + warm for cold. ``now_ns`` fixes the reference time (tests, replays).
-    ``retention_ns=None`` turns retention off; ``"default"`` is 183 days. A root that carries
-    compliance profiles (``keep``: ``compliance.toml``) raises both defaults to what they keep
-    and refuses a shorter explicit request (``UsageError``) unless ``override_compliance``.
-    ``key``: the robots' public key; retention and
-    the settling of leftovers then check checkpoint signatures too. ``opener`` creates each
-    partial file (a plug point for fault injection). A dry run changes nothing on disk.
+    ``retention_ns=None`` turns retention off, ``"default"`` is 183 days; both defaults rise
+    to what the root's compliance profiles keep, which refuse a shorter explicit request
+    unless ``override_compliance`` (module doc). ``key``: the robots' public key; retention
+    and the settling of leftovers then check signatures too. ``opener`` creates each partial
+    file (a plug point for fault injection). A dry run changes nothing on disk.
     """
     root = Path(root)
     chosen = _check_target(root, tier, sources)
-    default_retention = retention_ns == "default"
-    asked_retention = DEFAULT_RETENTION_NS if retention_ns == "default" else retention_ns
-    if (older_than_ns is not None and older_than_ns < 0) or (
-        asked_retention is not None and asked_retention < 0
-    ):
-        raise UsageError("durations must not be negative")
-    keep = read_keep(root)
-    older, retention = resolve_periods(
-        root,
-        keep,
-        tier=tier,
-        older_than_ns=older_than_ns,
-        default_older_than_ns=DEFAULT_OLDER_THAN_NS[tier],
-        retention_ns=asked_retention,
-        retention_default=default_retention,
-        override=override_compliance,
-    )
+    older, retention, keep = _periods(root, tier, older_than_ns, retention_ns, override_compliance)
     warm_policy = warm or WarmPolicy()
     cold_options = cold or ColdOptions()
     if cold_options.block_cycles < 1 or cold_options.jobs < 1:
@@ -154,6 +142,32 @@ def compact(
     report.kept_for = tuple(p.name for p in keep.profiles) if keep else ()
     report.seconds = time.perf_counter() - started
     return report
+
+
+def _periods(
+    root: Path,
+    tier: str,
+    older_than_ns: int | None,
+    retention_ns: int | Literal["default"] | None,
+    override: bool,
+) -> tuple[int, int | None, RootKeep | None]:
+    """(older_than_ns, retention_ns, the root's compliance profiles) of the run: checked,
+    defaults filled in, and held to what the profiles keep (``keep.resolve_periods``)."""
+    asked = DEFAULT_RETENTION_NS if retention_ns == "default" else retention_ns
+    if (older_than_ns is not None and older_than_ns < 0) or (asked is not None and asked < 0):
+        raise UsageError("durations must not be negative")
+    keep = read_keep(root)
+    older, retention = resolve_periods(
+        root,
+        keep,
+        tier=tier,
+        older_than_ns=older_than_ns,
+        default_older_than_ns=DEFAULT_OLDER_THAN_NS[tier],
+        retention_ns=asked,
+        retention_default=retention_ns == "default",
+        override=override,
+    )
+    return older, retention, keep
 
 
 def _check_target(root: Path, tier: str, sources: Iterable[str] | None) -> tuple[str, ...]:
