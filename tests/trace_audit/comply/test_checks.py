@@ -166,3 +166,45 @@ def test_every_check_has_a_test_here() -> None:
 
     names = {n.removeprefix("test_").split("_")[0] for n in globals() if n.startswith("test_")}
     assert {c.split("_")[0] for c in CHECK_NAMES} <= names
+
+
+def _versioned_root(root: Path, versions: list[str]) -> Path:
+    """A robot restarted once per version: a segment each, its chain continued."""
+    t_ns = 100_000_000_000
+    for version in versions:
+        logger = AuditLogger(
+            root,
+            robot_id="amr-7",
+            period_s=0.1,
+            software_version=f"nav {version}",
+            policy_version="p1",
+            config=LoggerConfig(threaded=False, fsync_interval_s=None),
+        )
+        for _ in range(10):
+            c = logger.cycle(t_ns)
+            fill_cycle(c, "clear")
+            c.commit()
+            t_ns += 100_000_000
+        logger.close()
+    return root
+
+
+def test_versions_lists_each_change_with_its_time_and_fails_on_one_not_visible(
+    tmp_path: Path,
+) -> None:
+    root = _versioned_root(tmp_path / "root", ["1.0", "1.1", "2.0"])
+    profile = _one_check(tmp_path, "versions")
+    done = comply(root, profile)
+    assert done.code == 0, done.stderr
+    evidence = _verdict(done, "versions")["evidence"]
+    assert evidence[1:] == [
+        "amr-7: at 101.000 s (segment 1) software 'nav 1.0' -> 'nav 1.1', policy 'p1' -> 'p1'",
+        "amr-7: at 102.000 s (segment 2) software 'nav 1.1' -> 'nav 2.0', policy 'p1' -> 'p1'",
+    ]
+    (root / "hot" / "amr-7_000001.mcap").unlink()  # the segment that ran 1.1
+    cut = comply(root, profile)
+    assert cut.code == 1
+    assert (
+        "not visible, segments 1..1 between are not here"
+        in (_verdict(cut, "versions")["evidence"][0])
+    )
