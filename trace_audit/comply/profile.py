@@ -113,7 +113,9 @@ def load_profile(name_or_path: str) -> Profile:
 def _profile(table: dict[str, object], origin: str) -> Profile:
     unknown = sorted(set(table) - _TOP)
     if unknown:
-        raise ProfileError(f"{origin}: unknown key {unknown[0]!r} (known: {', '.join(_TOP)})")
+        raise ProfileError(
+            f"{origin}: unknown key {unknown[0]!r} (known: {', '.join(sorted(_TOP))})"
+        )
     name, title = table.get("name"), table.get("title", "")
     if not isinstance(name, str) or not name.strip():
         raise ProfileError(f'{origin}: the profile needs a name (name = "...")')

@@ -2,8 +2,8 @@
 adoption of a profile by a root (so that compaction and retention keep what it asks).
 
 A clause is met when every check it names is met; the root conforms to the profile when
-every clause is met. Each check is run once and shared by the clauses that name it, except
-``retention``, which depends on the clause's period.
+every clause is met. The root is read once (``evidence.gather``); each clause judges its
+checks on that evidence (``retention`` with the clause's own period).
 """
 
 from __future__ import annotations
