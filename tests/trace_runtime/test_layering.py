@@ -194,7 +194,7 @@ FLOORS: dict[str, list[set[str]]] = {
         | {"rules", "tail", "witness", "proof", "proof_data", "proof_readings"}
         | {"publish"},
         # what is built from the answers: the fleet index, the incident report, the Foxglove view
-        {"fleet", "incident", "foxglove"},
+        {"fleet", "incident", "foxglove", "comply"},
         # entry: the console script's check that the cli extra is installed; assistant: the
         # MCP server, the CLI's sibling face (it asks the questions as the commands' --json does)
         {"cli", "entry", "assistant"},

@@ -10,6 +10,7 @@ import typer
 from trace_audit.cli import (  # noqa: F401 - each module registers its commands
     assistant,
     check,
+    comply,
     doctor,
     explain,
     export,
@@ -35,6 +36,7 @@ _SECTIONS = (
     ("Investigate", ("info", "explain", "why", "timeline", "tail", "export", "report", "mcp")),
     ("Measure and check rules", ("metrics", "check")),
     ("Integrity", ("verify", "keygen", "prove", "verify-proof", "publish", "witness")),
+    ("Compliance", ("comply",)),
     ("Storage", ("compact", "catalog")),
     ("Fleet", ("index", "query", "find")),
     ("Authoring", ("doctor",)),

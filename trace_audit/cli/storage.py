@@ -65,6 +65,13 @@ _COMPACT_HELP = "\n\n".join(
             "signatures with --key); a copy is removed only when a verified one stays, and "
             "only files compaction can prove its own; nothing else is ever deleted."
         ),
+        (
+            "A root that carries a compliance profile (compliance.toml, written by "
+            "trace-audit comply --adopt) keeps its records as long as the profile asks: the "
+            "defaults are raised to its period, and an --older-than (warm, when the profile "
+            "asks for full detail) or --retention below it is refused (exit 2) unless "
+            "--override-compliance is given."
+        ),
         "[bold]Examples[/bold]:",
         "  trace-audit compact fleet/robot-7 --tier warm",
         "  trace-audit compact run/ --tier cold --older-than 0 --json",
@@ -102,6 +109,12 @@ def _duration(text: str | None, name: str) -> int | None:
     return parse_duration(text)
 
 
+def _retention_ns(text: str | None) -> int | Literal["default"] | None:
+    """``--retention``: not given is the library's default (183d, or the root's compliance
+    period when longer); ``off`` is None."""
+    return "default" if text is None else _duration(text, "--retention")
+
+
 _Tier = Annotated[str, typer.Option("--tier", help="Target tier: warm or cold.")]
 _OlderThan = Annotated[
     str | None,
@@ -123,8 +136,20 @@ _Now = Annotated[
     typer.Option("--now", help="Measure age against the wall clock, not the newest log time."),
 ]
 _Retention = Annotated[
-    str,
-    typer.Option("--retention", help="Delete verified cold segments older than this (or 'off')."),
+    str | None,
+    typer.Option(
+        "--retention",
+        help="Delete verified cold segments older than this (or 'off'); default "
+        f"{_DEFAULT_RETENTION}, or the root's compliance period when longer.",
+        show_default=False,
+    ),
+]
+_OverrideCompliance = Annotated[
+    bool,
+    typer.Option(
+        "--override-compliance",
+        help="Delete or summarise records younger than the root's compliance profile keeps.",
+    ),
 ]
 _Context = Annotated[
     str, typer.Option("--context", help="Warm: time kept in full around each flagged cycle.")
@@ -174,7 +199,7 @@ def compact_command(
     source: _Sources = None,
     dry_run: _DryRun = False,
     now: _Now = False,
-    retention: _Retention = _DEFAULT_RETENTION,
+    retention: _Retention = None,
     context: _Context = "2s",
     keep_readings: _KeepReadings = False,
     informational: _Informational = None,
@@ -182,6 +207,7 @@ def compact_command(
     jobs: Annotated[int, jobs_option("Cold: processes encoding blocks in parallel.")] = 1,
     include_unfinished: _IncludeUnfinished = False,
     key: _CompactKey = None,
+    override_compliance: _OverrideCompliance = False,
     json_out: JsonOption = False,
     plain: PlainOption = False,
 ) -> None:
@@ -201,7 +227,7 @@ def compact_command(
                 sources=source or None,
                 dry_run=dry_run,
                 wall_clock=now,
-                retention_ns=_duration(retention, "--retention"),
+                retention_ns=_retention_ns(retention),
                 include_unfinished=include_unfinished,
                 warm=WarmPolicy(
                     context_ns=context_ns,
@@ -211,12 +237,18 @@ def compact_command(
                 cold=ColdOptions(block_cycles=block_cycles, jobs=jobs),
                 progress=progress,
                 key=public,
+                override_compliance=override_compliance,
             ),
             quiet=json_out or plain,
         )
 
     report = guarded(run)
     emit(report, compact_doc, json_out=json_out, plain=plain, to_json=_report_json)
+    _exit_on_problems(report)
+
+
+def _exit_on_problems(report: CompactionReport) -> None:
+    """A line on stderr for segments that failed and copies held for a human; then exit 1."""
     if report.failed:
         names = ", ".join(s.source for s in report.failed)
         sys.stderr.write(f"trace-audit: compaction failed for {names}; sources kept\n")
@@ -259,6 +291,7 @@ class _ReportJson(TypedDict):
     older_than_ns: int
     cutoff_ns: int | None
     retention_ns: int | None
+    kept_for: list[str]
     cycles: int
     bytes_before: int
     bytes_after: int
@@ -280,6 +313,7 @@ def _report_json(report: CompactionReport) -> _ReportJson:
         "older_than_ns": report.older_than_ns,
         "cutoff_ns": report.cutoff_ns,
         "retention_ns": report.retention_ns,
+        "kept_for": list(report.kept_for),
         "cycles": report.cycles,
         "bytes_before": report.bytes_before,
         "bytes_after": report.bytes_after,
@@ -331,6 +365,10 @@ def compact_doc(report: CompactionReport) -> Doc:
         f"  segments older than {_span(report.older_than_ns)} before the {report.reference}"
         f" ({_when(report.reference_ns)})"
     )
+    if report.kept_for:
+        out.markup(
+            f"  the root keeps its records for {', '.join(report.kept_for)} (compliance.toml)"
+        )
     for leftover in report.leftovers:
         out.markup(f"  leftover {leftover.path}: {leftover.action}")
     if report.segments:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import shlex
+from collections.abc import Sequence
 from html import escape
 
 from trace_audit.incident.data import ReportData
@@ -30,7 +31,7 @@ from trace_audit.incident.trust_sections import (
 )
 from trace_audit.jsonout import to_jsonable
 
-__all__ = ["SECTIONS", "render_page", "sections_of"]
+__all__ = ["SECTIONS", "html_document", "render_page", "sections_of"]
 
 SECTIONS = (
     ("summary", "Summary"),
@@ -125,6 +126,13 @@ def render_page(data: ReportData, *, command_name: str = "trace-audit") -> str:
     ]
     when = e.log_clock.show(e.t_ns)
     title = f"Incident report: {e.robot} {e.decision.command or 'no action'} at {when}"
+    return html_document(title, body)
+
+
+def html_document(title: str, body: Sequence[str]) -> str:
+    """A whole self-contained page: ``body``'s parts (HTML already) under ``title``, in the
+    report's style, with a policy that lets it load and run nothing (the conformity page
+    of ``trace-audit comply`` is built with it too)."""
     return (
         '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
         '<meta name="viewport" content="width=device-width, initial-scale=1">\n'

@@ -16,6 +16,11 @@ time, ages by its own clock) or, with ``wall_clock``, the current time. The newe
 segment of a robot that is not finished is the one its logger may still be writing, and
 is left alone unless ``include_unfinished``.
 
+A root that carries compliance profiles (``compliance.toml``, ``keep``) keeps what they ask:
+both defaults (warm's age when a profile asks for full detail, and retention) rise to their
+period, and a shorter explicit request is refused (``UsageError``, exit 2) unless
+``override_compliance``.
+
 Retention deletes only cold segments (already compacted) whose newest log time is more
 than ``retention_ns`` before the reference, and only if the verification ``trace-audit
 verify`` runs (``trace_runtime.verification``: seals, links, checkpoints, and signatures when
@@ -33,6 +38,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 from trace_runtime.boundary import regular_file, tier_folder
 from trace_runtime.errors import UsageError
@@ -48,6 +54,7 @@ from trace_runtime.tiers._files import (
     root_lock,
 )
 from trace_runtime.tiers.durations import DAY_NS
+from trace_runtime.tiers.keep import COMPLIANCE_NAME, RootKeep, read_keep, resolve_periods
 from trace_runtime.tiers.plan import (
     Choice,
     cycle_estimate,
@@ -87,27 +94,28 @@ def compact(
     dry_run: bool = False,
     wall_clock: bool = False,
     now_ns: int | None = None,
-    retention_ns: int | None = DEFAULT_RETENTION_NS,
+    retention_ns: int | Literal["default"] | None = "default",
     include_unfinished: bool = False,
     warm: WarmPolicy | None = None,
     cold: ColdOptions | None = None,
     progress: ProgressCallback | None = None,
     key: PublicKey | None = None,
     opener: PartialOpener = open_partial,
+    override_compliance: bool = False,
 ) -> CompactionReport:
     """Move every eligible segment of ``root`` into ``tier`` ("warm" or "cold"); see module doc.
 
     ``older_than_ns`` defaults to 24 h for warm and 7 days for cold; ``sources`` to hot for
     warm and hot + warm for cold. ``now_ns`` fixes the reference time (tests, replays).
-    ``retention_ns=None`` turns retention off. ``key``: the robots' public key; retention and
-    the settling of leftovers then check checkpoint signatures too. ``opener`` creates each
-    partial file (a plug point for fault injection). A dry run changes nothing on disk.
+    ``retention_ns=None`` turns retention off, ``"default"`` is 183 days; both defaults rise
+    to what the root's compliance profiles keep, which refuse a shorter explicit request
+    unless ``override_compliance`` (module doc). ``key``: the robots' public key; retention
+    and the settling of leftovers then check signatures too. ``opener`` creates each partial
+    file (a plug point for fault injection). A dry run changes nothing on disk.
     """
     root = Path(root)
     chosen = _check_target(root, tier, sources)
-    older = DEFAULT_OLDER_THAN_NS[tier] if older_than_ns is None else older_than_ns
-    if older < 0 or (retention_ns is not None and retention_ns < 0):
-        raise UsageError("durations must not be negative")
+    older, retention, keep = _periods(root, tier, older_than_ns, retention_ns, override_compliance)
     warm_policy = warm or WarmPolicy()
     cold_options = cold or ColdOptions()
     if cold_options.block_cycles < 1 or cold_options.jobs < 1:
@@ -123,7 +131,7 @@ def compact(
             dry_run=dry_run,
             wall_clock=wall_clock,
             now_ns=now_ns,
-            retention_ns=retention_ns,
+            retention_ns=retention,
             include_unfinished=include_unfinished,
             warm=warm_policy,
             cold=cold_options,
@@ -131,8 +139,35 @@ def compact(
             opener=opener,
         )
         report = _run(root, settings, progress)
+    report.kept_for = tuple(p.name for p in keep.profiles) if keep else ()
     report.seconds = time.perf_counter() - started
     return report
+
+
+def _periods(
+    root: Path,
+    tier: str,
+    older_than_ns: int | None,
+    retention_ns: int | Literal["default"] | None,
+    override: bool,
+) -> tuple[int, int | None, RootKeep | None]:
+    """(older_than_ns, retention_ns, the root's compliance profiles) of the run: checked,
+    defaults filled in, and held to what the profiles keep (``keep.resolve_periods``)."""
+    asked = DEFAULT_RETENTION_NS if retention_ns == "default" else retention_ns
+    if (older_than_ns is not None and older_than_ns < 0) or (asked is not None and asked < 0):
+        raise UsageError("durations must not be negative")
+    keep = read_keep(root)
+    older, retention = resolve_periods(
+        root,
+        keep,
+        tier=tier,
+        older_than_ns=older_than_ns,
+        default_older_than_ns=DEFAULT_OLDER_THAN_NS[tier],
+        retention_ns=asked,
+        retention_default=retention_ns == "default",
+        override=override,
+    )
+    return older, retention, keep
 
 
 def _check_target(root: Path, tier: str, sources: Iterable[str] | None) -> tuple[str, ...]:
@@ -142,7 +177,7 @@ def _check_target(root: Path, tier: str, sources: Iterable[str] | None) -> tuple
     # delete outside the root), or a side file that is not a file (a FIFO would hang it).
     for name in TIERS:
         tier_folder(root, name)
-    for name in (CATALOG_NAME, RETENTION_LOG, LOCK_NAME):
+    for name in (CATALOG_NAME, RETENTION_LOG, LOCK_NAME, COMPLIANCE_NAME):
         regular_file(root / name)
     if tier not in ("warm", "cold"):
         raise UsageError(f"unknown target tier {tier!r}: use warm or cold")

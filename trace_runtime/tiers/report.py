@@ -92,6 +92,9 @@ class CompactionReport:
     retention: list[RetentionResult] = field(default_factory=list)
     skipped: list[SegmentResult] = field(default_factory=list)
     seconds: float = 0.0
+    kept_for: tuple[str, ...] = ()
+    """The compliance profiles the root carries (``compliance.toml``), whose periods the
+    run's ages and retention were held to."""
 
     @property
     def compacted(self) -> list[SegmentResult]:

@@ -90,7 +90,8 @@ def test_the_command_list_is_grouped_by_what_a_user_does(
     listed = shown.split("\nCommands:\n\n", 1)[1]
     headings = [line[:-1] for line in listed.splitlines() if line and not line.startswith(" ")]
     assert headings == [
-        "Investigate", "Measure and check rules", "Integrity", "Storage", "Fleet", "Authoring",
+        "Investigate", "Measure and check rules", "Integrity", "Compliance", "Storage",
+        "Fleet", "Authoring",
     ]  # fmt: skip
     rows = [line for line in listed.splitlines() if line.startswith("  ") and line[2] != " "]
     names = [row.split()[0] for row in rows]
