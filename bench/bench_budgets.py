@@ -44,6 +44,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
 ANCHOR = REPO.parent / "shared" / "bench" / "perf_ratio.py"
@@ -207,7 +208,12 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="trace-budgets-") as work:
         figures |= own_budgets(Path(work), args.runs, args.sim)
         floor = None if args.no_floor else against_floor(args, Path(work))
-    result = {"load_before": before, "load_after": load(), "figures": figures, "floor": floor}
+    result: dict[str, Any] = {
+        "load_before": before,
+        "load_after": load(),
+        "figures": figures,
+        "floor": floor,
+    }
     result["budgets"] = [
         {"budget": name, "measured": figures[key], "verdict": verdict(key, figures[key])}
         for key, (name, _) in TARGETS.items()

@@ -32,6 +32,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -88,7 +89,7 @@ class Target:
         self.wall, self.cpu = min(self.wall, wall), min(self.cpu, cpu)
 
 
-def targets_of(tree: Path, root: Path, work: Path, only: set[str]) -> dict[str, Target]:
+def targets_of(tree: Path, root: Path, work: Path, only: AbstractSet[str]) -> dict[str, Target]:
     env = environment(tree)
     ta = str(BIN / "trace-audit")
     index_dir = work / f"idx-{abs(hash(str(tree)))}"
@@ -132,7 +133,7 @@ def measure(
     runs: int,
     vs: Path | None,
     work: Path,
-    only: set[str] = frozenset(),  # type: ignore[assignment]
+    only: AbstractSet[str] = frozenset(),
 ) -> dict[str, object]:
     """Every target of this tree (and ``vs``), in rounds; the best of ``runs`` of each."""
     floor_env = environment(REPO)
