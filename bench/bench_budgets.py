@@ -1,6 +1,7 @@
 """Every read-speed budget in one run: the shared anchor's ratios and the rest beside them.
 
     .venv/bin/python bench/bench_budgets.py [--runs 3] [--sim 30m] [--anchor PATH] [--json]
+        [--floor-sim 2h] [--floor-root DIR] [--no-floor]
 
 1. ``../shared/bench/perf_ratio.py`` (the shared anchor; its docstring defines each anchor)
    run as is, with ``PERF_RUNS`` and ``PERF_SIM`` from ``--runs`` and ``--sim``: logger
@@ -16,6 +17,14 @@
      included);
    - cold size, bytes a cycle of the root's cold files after ``compact --tier cold``, and
      their ratio to the same segments rewritten with the ``mcap`` Writer's defaults.
+
+3. Against the floor (issue 46, ``bench_floor.py``): ``../shared/bench/floor.py ROOT hash``
+   (every chunk decompressed, SHA-256 of every message, in a minimal loop) beside
+   ``verify``, ``metrics``, ``index`` and ``doctor`` on a 2 h simulator root (seed 3; kept
+   under ``--floor-root`` when given, else built in the run's temporary folder), whole
+   processes in rounds, best of ``--runs``: verify / floor, metrics / floor, index /
+   metrics, doctor / verify, as times (lower is better), wall and CPU, with their own load
+   average. ``--no-floor`` leaves them out.
 
 The load average is printed before and after: read the ratios, the machine is shared.
 Every process runs with byte code written and read, as an installed user's does:
@@ -35,6 +44,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
 ANCHOR = REPO.parent / "shared" / "bench" / "perf_ratio.py"
@@ -42,6 +52,7 @@ BIN = Path(sys.executable).parent
 ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 sys.path.insert(0, str(REPO))
 
+from bench_floor import build_root, measure  # noqa: E402
 from bench_tiers import mcap_default_bytes  # noqa: E402
 
 # Each budget: its name, the target, and whether the figure is a ratio (higher is better)
@@ -149,6 +160,25 @@ def own_budgets(work: Path, runs: int, sim: str) -> dict[str, float]:
     return out
 
 
+def against_floor(args: argparse.Namespace, work: Path) -> dict[str, object]:
+    """The floor ratios (``bench_floor.measure``) on a 2 h root, this tree only."""
+    root = args.floor_root or work / "floor-root"
+    build_root(root, args.floor_sim)
+    return measure(root, args.runs, None, work)
+
+
+def show_floor(floor: dict[str, object]) -> None:
+    ours = floor["this"]
+    assert isinstance(ours, dict)
+    print(
+        f"against the floor (floor.py hash, {floor['floor']} s; load average "
+        f"{floor['load_before']} before, {floor['load_after']} after), times, lower is better:"
+    )
+    for key, r in ours["ratios"].items():
+        met = "met" if r["wall"] <= r["target"] else "not met"
+        print(f"| {key} <= {r['target']}x | {r['wall']}x wall, {r['cpu']}x CPU | {met} |")
+
+
 def verdict(key: str, value: float) -> str:
     target = TARGETS[key][1]
     if key in LOWER_IS_BETTER:
@@ -162,6 +192,9 @@ def main() -> None:
     parser.add_argument("--sim", default="30m", help="the simulator root's duration")
     parser.add_argument("--anchor", type=Path, default=ANCHOR, help="perf_ratio.py")
     parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    parser.add_argument("--floor-sim", default="2h", help="the floor root's duration")
+    parser.add_argument("--floor-root", type=Path, help="keep the floor root here (built once)")
+    parser.add_argument("--no-floor", action="store_true", help="leave the floor ratios out")
     args = parser.parse_args()
     if not args.anchor.is_file():
         sys.exit(f"the shared anchor {args.anchor} is not there (--anchor PATH)")
@@ -174,7 +207,13 @@ def main() -> None:
     figures = shared_anchor(args.anchor, args.runs, args.sim)
     with tempfile.TemporaryDirectory(prefix="trace-budgets-") as work:
         figures |= own_budgets(Path(work), args.runs, args.sim)
-    result = {"load_before": before, "load_after": load(), "figures": figures}
+        floor = None if args.no_floor else against_floor(args, Path(work))
+    result: dict[str, Any] = {
+        "load_before": before,
+        "load_after": load(),
+        "figures": figures,
+        "floor": floor,
+    }
     result["budgets"] = [
         {"budget": name, "measured": figures[key], "verdict": verdict(key, figures[key])}
         for key, (name, _) in TARGETS.items()
@@ -186,6 +225,8 @@ def main() -> None:
     for row in result["budgets"]:
         print(f"| {row['budget']} | {row['measured']} | {row['verdict']} |")
     print(f"start-up (python -c pass / trace-audit --help): {figures.get('startup')}")
+    if floor is not None:
+        show_floor(floor)
 
 
 if __name__ == "__main__":

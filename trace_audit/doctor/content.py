@@ -20,9 +20,9 @@ from mcap.records import Message
 
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, SensorWindow
 from trace_audit.doctor.rules import SegmentDoctor
+from trace_runtime.encoding.codec import validate_parsed
 from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.errors import RecordError
-from trace_runtime.record_model import validate_record
 from trace_runtime.records import (
     LAYER_TOPICS,
     MESSAGE_MODELS,
@@ -135,7 +135,7 @@ class CycleCheck:
         stamp = self._stamp(topic, value, message, offset)
         if topic in MESSAGE_MODELS:
             try:
-                validate_record(MESSAGE_MODELS[topic], value)
+                validate_parsed(MESSAGE_MODELS[topic], value)
             except RecordError as err:
                 where = stamp[0] if stamp else cycle
                 self.report.add(

@@ -5,6 +5,10 @@ the manifest's entry)."""
 
 from __future__ import annotations
 
+import contextlib
+import gc
+import threading
+from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -64,12 +68,13 @@ def index_segment(task: IndexTask) -> IndexedSegment:
     config = MetricsConfig(
         gap_tolerance=task.gap_tolerance, sensor_window=task.sensor_window, max_listed=0
     )
-    score_segment(task.path, task.previous, config, rows)
+    with _CYCLIC_GC.paused():
+        score_segment(task.path, task.previous, config, rows)
+        tables = {name: rows.table(name) for name in ROW_TABLES}
     out = Path(task.out)
     robot = segment.session.robot_id
     stem = task.key.replace("/", "_")
     files: list[str] = []
-    tables = {name: rows.table(name) for name in ROW_TABLES}
     tables["segments"] = _segment_row(segment, rows, task.sha256, task.run)
     for name, (table, days) in tables.items():
         for day in sorted(set(days)):
@@ -89,6 +94,41 @@ def index_segment(task: IndexTask) -> IndexedSegment:
         gaps=tables["gaps"][0].num_rows,
         files=tuple(files),
     )
+
+
+class _CyclicGcPause:
+    """The cyclic garbage collector paused while a segment's rows are built.
+
+    The rows (a tuple of scalars per decision, entity and check: ~240,000 for an hour of a
+    sim log) live until their tables are written, and every collection the allocations
+    trigger walks all of them again: 12% of a segment's build (5.7 -> 5.0 s CPU, in
+    process). Nothing built here is cyclic (parsed JSON, tuples of scalars), so reference
+    counting frees it all. A Dask worker runs tasks in threads, so the pause is counted: the
+    collector comes back, if it was on, when the last task running leaves.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._holders = 0
+        self._was_enabled = False
+
+    @contextlib.contextmanager
+    def paused(self) -> Iterator[None]:
+        with self._lock:
+            if self._holders == 0:
+                self._was_enabled = gc.isenabled()
+                gc.disable()
+            self._holders += 1
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._holders -= 1
+                if self._holders == 0 and self._was_enabled:
+                    gc.enable()
+
+
+_CYCLIC_GC = _CyclicGcPause()
 
 
 def _rows_of_day(table: pa.Table, days: list[str], day: str) -> pa.Table:

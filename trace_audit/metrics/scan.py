@@ -42,6 +42,9 @@ from trace_runtime.clock import clock_restarted, is_wall_clock
 from trace_runtime.costs import TIMING_METADATA, CostHistogram
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.encoding.partial import (
+    INDEX_ACTION,
+    INDEX_BELIEF,
+    INDEX_PERCEPTION,
     METRICS_ACTION,
     METRICS_BELIEF,
     METRICS_PERCEPTION,
@@ -97,6 +100,7 @@ class _Scanner:
         self.config = config
         self.partial = partial
         self.sink = sink
+        self.shapes = _METRICS_SHAPES if sink is None else _INDEX_SHAPES
         self.window = SensorWindow(config.sensor_window, recordings)
         self.stream = _Stream()
         self.session_prev: str | None = None
@@ -169,17 +173,13 @@ class _Scanner:
         """Score one decision into its group's sums; list it when it fails."""
         window = self.window
         window.push(cycle.sensors)
-        # Each layer is read once: ET, DR and the seal check's evidence step share it. Without
-        # a sink only the fields they read are decoded (trace_runtime.encoding.partial); a sink (the
-        # fleet index) is handed whole layers.
-        if self.sink is None:
-            action = read_layer(cycle, METRICS_ACTION)
-            belief = read_layer(cycle, METRICS_BELIEF)
-            perception = read_layer(cycle, METRICS_PERCEPTION)
-        else:
-            action = cycle.layer(TOPIC_ACTION)
-            belief = cycle.layer(TOPIC_BELIEF)
-            perception = cycle.layer(TOPIC_PERCEPTION)
+        # Each layer is read once: ET, DR, the seal check's evidence step and a sink (the
+        # fleet index's rows) share it, only the fields they read decoded
+        # (trace_runtime.encoding.partial): the index's shapes are the metrics' and its columns.
+        action_shape, belief_shape, perception_shape = self.shapes
+        action = read_layer(cycle, action_shape)
+        belief = read_layer(cycle, belief_shape)
+        perception = read_layer(cycle, perception_shape)
         score = score_layers(action, belief, perception, window=window)
         if perception is not None and _may_cite_recording(cycle.payloads.get(TOPIC_PERCEPTION)):
             self._count_external(perception)
@@ -321,7 +321,7 @@ class _Scanner:
             cycle, expected, perception_json=parsed, sensor_digest=self.window.digest_of
         )
         integrity = [] if status.ok else integrity_problems(status)
-        if self.sink is None and status.state in _UNVOUCHED:
+        if status.state in _UNVOUCHED:
             _parse_in_full(cycle)
         if status.state == "unsealed":
             return SealOutcome(integrity, False, 0.0, 0, None, 0, False)
@@ -410,6 +410,11 @@ class _Scanner:
             self.stream.prev_segment = segment.path.name
             self.stream.prev_seal = digest(last_sealed.payloads[TOPIC_SEAL])
 
+
+_METRICS_SHAPES = (METRICS_ACTION, METRICS_BELIEF, METRICS_PERCEPTION)
+_INDEX_SHAPES = (INDEX_ACTION, INDEX_BELIEF, INDEX_PERCEPTION)
+"""What a scan decodes of a cycle's action, belief and perception: the index's shapes hold
+the metrics' fields and the columns of its rows (``fleet.rows``)."""
 
 _UNVOUCHED = ("modified", "unsealed")
 """Seal states in which the seal does not vouch for a cycle's layer bytes."""

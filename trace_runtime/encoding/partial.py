@@ -45,6 +45,9 @@ from trace_runtime.records import (
 
 __all__ = [
     "DECISION_FIELDS",
+    "INDEX_ACTION",
+    "INDEX_BELIEF",
+    "INDEX_PERCEPTION",
     "METRICS_ACTION",
     "METRICS_BELIEF",
     "METRICS_PERCEPTION",
@@ -310,6 +313,76 @@ RULES_PERCEPTION: Shape[RulesPerception] = Shape(
 RULES_BELIEF: Shape[RulesBelief] = Shape("rules belief", TOPIC_BELIEF, RulesBelief)
 RULES_ACTION: Shape[RulesAction] = Shape("rules action", TOPIC_ACTION, RulesAction)
 RULES_EXECUTION: Shape[RulesExecution] = Shape("rules execution", TOPIC_EXECUTION, RulesExecution)
+
+# --- the fleet index: what metrics read, and what the index's rows keep -----------------------
+
+
+class _IndexFactor(TypedDict, total=False):
+    node: str
+    name: str
+    value: Number | str | bool | None
+    unit: str | None
+
+
+class _IndexRationale(TypedDict, total=False):
+    factors: list[_IndexFactor]
+    truncated: bool
+
+
+class IndexAction(TypedDict, total=False):
+    """``MetricsAction`` and each factor's name, value and unit (``fleet.rows``)."""
+
+    command: str
+    alternatives: list[_Skipped]
+    rationale: _IndexRationale
+    counterfactuals: list[_Skipped]
+    counterfactuals_none_applicable: bool
+
+
+class _IndexNode(TypedDict, total=False):
+    id: str
+    kind: str
+    entity: str | None
+    label: str
+    unit: str | None
+    value: Number | str | bool | None
+
+
+class IndexBelief(TypedDict, total=False):
+    """``MetricsBelief`` and the distance nodes' labels, units and values."""
+
+    nodes: list[_IndexNode]
+    edges: list[_Edge]
+
+
+class _IndexPose(TypedDict, total=False):
+    position: list[Number]
+
+
+_IndexEntity = TypedDict(
+    "_IndexEntity",
+    {
+        "id": str,
+        "class": str,
+        "pose": _IndexPose,
+        "confidence": dict[str, Number],
+        "evidence": list[_Evidence],
+    },
+    total=False,
+)
+
+
+class IndexPerception(TypedDict, total=False):
+    """``MetricsPerception`` and each entity's class, position and confidences."""
+
+    entities: list[_IndexEntity]
+
+
+INDEX_ACTION: Shape[IndexAction] = Shape("index action", TOPIC_ACTION, IndexAction)
+INDEX_BELIEF: Shape[IndexBelief] = Shape("index belief", TOPIC_BELIEF, IndexBelief)
+INDEX_PERCEPTION: Shape[IndexPerception] = Shape(
+    "index perception", TOPIC_PERCEPTION, IndexPerception
+)
 
 
 # --- a decision's own fields, for the library's iteration -----------------------------------

@@ -23,6 +23,9 @@ from trace_runtime.encoding.codec import encode_layer
 from trace_runtime.encoding.cycles import Cycle
 from trace_runtime.encoding.partial import (
     DECISION_FIELDS,
+    INDEX_ACTION,
+    INDEX_BELIEF,
+    INDEX_PERCEPTION,
     METRICS_ACTION,
     METRICS_BELIEF,
     METRICS_PERCEPTION,
@@ -32,6 +35,9 @@ from trace_runtime.encoding.partial import (
     RULES_PERCEPTION,
     SEAL_FIELDS,
     DecisionFields,
+    IndexAction,
+    IndexBelief,
+    IndexPerception,
     MetricsAction,
     MetricsBelief,
     MetricsPerception,
@@ -98,6 +104,9 @@ _KINDS: dict[Shape[Any], type] = {
     RULES_BELIEF: RulesBelief,
     RULES_ACTION: RulesAction,
     RULES_EXECUTION: RulesExecution,
+    INDEX_ACTION: IndexAction,
+    INDEX_BELIEF: IndexBelief,
+    INDEX_PERCEPTION: IndexPerception,
 }
 
 
@@ -429,3 +438,37 @@ def test_a_seal_value_swapped_for_an_odd_one_decodes_as_the_full_parse(
 def test_odd_seals_read_as_the_full_parse_reads_them(data: bytes) -> None:
     check_seal(data)
     assert _parse_seal(data) == _parse_seal_in_full(data)
+
+
+_INDEX = st.one_of(
+    st.tuples(st.just(INDEX_PERCEPTION), perceptions),
+    st.tuples(st.just(INDEX_BELIEF), beliefs),
+    st.tuples(st.just(INDEX_ACTION), actions),
+)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(record=_INDEX, cycle=st.integers(0, 2**40), t_ns=st.integers(0, 2**62))
+def test_every_valid_record_gives_the_index_the_full_parse_of_its_fields(
+    record: tuple[Shape[Any], Any], cycle: int, t_ns: int
+) -> None:
+    shape, value = record
+    data = encode_layer(cycle, t_ns, value)
+    fast = shape.decode(data)
+    assert fast is not None, data  # a valid record never needs the full parse
+    assert typed(fast) == typed(project(_KINDS[shape], orjson.loads(data)))
+
+
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    record=_INDEX,
+    edits=st.lists(st.tuples(st.integers(0, 10_000), st.integers(0, 255)), min_size=1, max_size=3),
+)
+def test_damaged_bytes_give_the_index_the_full_parse_or_nothing(
+    record: tuple[Shape[Any], Any], edits: list[tuple[int, int]]
+) -> None:
+    shape, value = record
+    data = bytearray(encode_layer(7, 700, value))
+    for at, byte in edits:
+        data[at % len(data)] = byte
+    check_shape(shape, bytes(data))
