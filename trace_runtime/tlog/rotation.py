@@ -12,6 +12,7 @@ and so is one under a key already rotated away from (a retired key, maybe a stol
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -26,6 +27,7 @@ __all__ = [
     "KeyChain",
     "announce",
     "check_announcement",
+    "follow_keys",
     "rotation_bytes",
 ]
 
@@ -103,6 +105,15 @@ class KeyChain:
         self.key = next_key
         self.announced.append(vkey)
 
+    def follow(self, checkpoint: Checkpoint, key: PublicKey) -> AnnouncementState:
+        """Move on past ``checkpoint``, verified under ``key`` (the chain's key there): a
+        valid announcement makes the key it announces the chain's; any other state leaves
+        the key as it was (the caller says why, when the state is a problem)."""
+        state, announced = check_announcement(checkpoint, key)
+        if announced is not None:
+            self.rotate(checkpoint.cycle, announced, checkpoint.next_key or "")
+        return state
+
     def copy(self) -> KeyChain:
         """The same state, to be moved on independently (another copy of a segment)."""
         return KeyChain(self.key, dict(self.retired), list(self.announced))
@@ -114,3 +125,22 @@ class KeyChain:
         if cycle is not None:
             return f"it is signed by key {short}…, retired by the rotation at cycle {cycle}"
         return f"it is signed by another key ({short}…), never announced in the chain"
+
+
+def follow_keys(
+    checkpoints: Iterable[Checkpoint],
+    key: PublicKey,
+    signed_by: Callable[[Checkpoint, PublicKey], bool],
+) -> KeyChain:
+    """The chain of keys from ``key`` through the announcements of ``checkpoints`` (the
+    robot's, in chain order), as verify follows them: a checkpoint moves the key on only
+    when the chain's key at that point signed it (``signed_by``) and its announcement
+    verifies under that key. For a reader that checks one statement of the chain (the
+    newest note, a proof bundle's checkpoint) rather than every checkpoint: one signed by
+    another key, or whose announcement does not verify, moves nothing."""
+    chain = KeyChain(key)
+    for checkpoint in checkpoints:
+        current = chain.key
+        if current is not None and signed_by(checkpoint, current):
+            chain.follow(checkpoint, current)
+    return chain
