@@ -34,9 +34,9 @@ signed (nothing would vouch for its tiles).
 With --key (the robot's public key as verify takes it; repeat for a fleet's keys), the
 checkpoint note must verify under one of the keys, or under a key the robot's chain announced
 from it (key rotation, followed as verify follows it: the robot's first key is enough), or
-nothing is published for that robot (exit 1); without it, signatures are not checked here (the auditor checks them). When the
-root's witness store holds the same checkpoint cosigned (witness push), that note is served,
-with the witness's cosignature lines.
+nothing is published for that robot (exit 1); without it, signatures are not checked here
+(the auditor checks them). When the root's witness store holds the same checkpoint cosigned
+(witness push), that note is served, with the witness's cosignature lines.
 
 [bold]Examples[/bold]:
 
