@@ -21,18 +21,22 @@ from trace_runtime.tlog.rotation import KeyChain, follow_keys
 __all__ = ["announcing_checkpoints", "followed_keys", "signed_by"]
 
 
-def announcing_checkpoints(log: Log, robot: str) -> list[Checkpoint]:
+def announcing_checkpoints(log: Log, robot: str, *, before: str | None = None) -> list[Checkpoint]:
     """The robot's checkpoints that announce a key, in chain order (every one, also two of
-    one tree size: a closing checkpoint may announce after a periodic one of its size)."""
+    one tree size: a closing checkpoint may announce after a periodic one of its size);
+    ``before``, a note: only those before the checkpoint that carries it (a cosigned note
+    begins with the robot's), whose key they lead to."""
     found: list[Checkpoint] = []
     for segment in log.segments_of(robot):
         for message in iter_checkpoints(segment):
-            if b'"next_key' not in message.data:  # most checkpoints: not decoded twice
+            if before is None and b'"next_key' not in message.data:  # most: not decoded
                 continue
             try:
                 checkpoint = decode_checkpoint(message.data)
             except RecordError:  # verify reports it; it announces nothing here
                 continue
+            if before is not None and checkpoint.note and before.startswith(checkpoint.note):
+                return found
             if checkpoint.next_key is not None or checkpoint.next_key_signature is not None:
                 found.append(checkpoint)
     return found
