@@ -37,7 +37,7 @@ def bundles(tmp_path_factory: pytest.TempPathFactory, pairs: dict[str, KeyPair])
     write(root, pairs["old"].private_path, range(120), rotate={62: pairs["new"].private_path})
     write(root, pairs["new"].private_path, range(120, 160))
     for cycle in (30, 100):
-        made = cli("prove", root, "--cycle", cycle, "--out", base / f"cycle-{cycle}.json")
+        made = cli("prove", root, "--cycle", str(cycle), "--out", base / f"cycle-{cycle}.json")
         assert made.returncode == 0, made.stderr
     shutil.rmtree(root)
     return base
@@ -133,7 +133,7 @@ def test_a_key_never_announced_carries_no_rotation_and_fails(
     write(root, pairs["old"].private_path, range(60))
     write(root, pairs["evil"].private_path, range(60, 110))  # root, no old key: a fresh key
     bundle = tmp_path / "cycle-30.json"
-    assert cli("prove", root, "--cycle", 30, "--out", bundle).returncode == 0
+    assert cli("prove", root, "--cycle", "30", "--out", bundle).returncode == 0
     assert json.loads(bundle.read_text())["key_rotations"] == []
     code, report = verify_proof(bundle, pairs["old"].public_path)
     assert code == 1 and steps(report)["note"][0] is False
