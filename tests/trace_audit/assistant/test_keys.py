@@ -53,13 +53,19 @@ def root(tmp_path: Path, keys: Keys, witness_process: Callable[..., WitnessProce
 
 
 def integrity(serve_args: list[str], root: Path, *logs: str) -> list[dict[str, Any]]:
-    """Each log's verify answer (its structured content) from one server process."""
+    """Each log's verify answer (its structured content) from one server process; another
+    tool's answer on the log (timeline) carries the same integrity, from the same verify."""
 
     async def ask(s: ClientSession) -> list[dict[str, Any]]:
         answers = []
         for log in logs:
             result = await s.call_tool("verify", {"log": log})
+            other = await s.call_tool("timeline", {"log": log})
             assert result.structured_content is not None, result
+            assert other.structured_content is not None, other
+            seen = result.structured_content["integrity"], other.structured_content["integrity"]
+            assert seen[1]["scope"]["cached"], seen  # the verify answer's report, kept
+            assert seen[0] | {"scope": None} == seen[1] | {"scope": None}
             answers.append(result.structured_content)
         return answers
 
