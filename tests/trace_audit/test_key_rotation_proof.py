@@ -16,10 +16,10 @@ import orjson
 import pytest
 
 from tests.outside import cli
-from tests.trace_audit.test_key_rotation import write
+from tests.trace_audit.test_key_rotation import serving, write
 from trace_audit.proof import BUNDLE_FORMAT, check_bundle
 from trace_runtime.tlog.keys import KeyPair, generate_keypair, load_public_key, load_signer
-from trace_runtime.tlog.signed_note import verifier_key
+from trace_runtime.tlog.signed_note import COSIGNATURE, verifier_key
 
 
 @pytest.fixture(scope="module")
@@ -137,3 +137,41 @@ def test_a_key_never_announced_carries_no_rotation_and_fails(
     assert json.loads(bundle.read_text())["key_rotations"] == []
     code, report = verify_proof(bundle, pairs["old"].public_path)
     assert code == 1 and steps(report)["note"][0] is False
+
+
+def test_cosigned_bundles_carry_the_rotations_before_their_note(
+    tmp_path: Path, pairs: dict[str, KeyPair]
+) -> None:
+    """A witness given both keys cosigns the robot's notes before and after the rotation;
+    each bundle is proved to the smallest cosigned tree covering its cycle, and carries the
+    rotations before that note only: none for the announcing checkpoint's own note (the old
+    key signed it), one after it. Each verifies with the first key and the witness's key."""
+    origin, name = "trace.local/amr-7", "trace.local/witness"
+    witness = generate_keypair(tmp_path / "witness", name="witness")
+    w_vkey = verifier_key(name, load_signer(witness.private_path).public_key.raw, COSIGNATURE)
+    vkeys = [verifier_key(origin, load_signer(pairs[n].private_path).public_key.raw)
+             for n in ("old", "new")]  # fmt: skip
+    root = tmp_path / "root"
+    with serving(tmp_path / "state", witness.private_path, *vkeys) as url:
+        failures = write(root, pairs["old"].private_path, range(60),
+                         rotate={30: pairs["new"].private_path}, witness=url)  # fmt: skip
+        failures += write(root, pairs["new"].private_path, range(60, 100), witness=url)
+    assert failures == 0
+
+    def proved(cycle: int) -> tuple[Path, dict[str, Any]]:
+        bundle = tmp_path / f"cycle-{cycle}.json"
+        made = cli("prove", root, "--cycle", str(cycle), "--out", bundle)
+        assert made.returncode == 0, made.stderr
+        data: dict[str, Any] = json.loads(bundle.read_text())
+        assert data["cosigned"], data["tree_size"]
+        return bundle, data
+
+    after, data = proved(80)
+    [rotation] = data["key_rotations"]
+    announcing, own = proved(rotation["cycle"])  # its tree: the announcing checkpoint's
+    assert own["tree_size"] == rotation["cycle"] + 1 and own["key_rotations"] == []
+    for bundle in (after, announcing):
+        done = cli("verify-proof", bundle, "--key", pairs["old"].public_path,
+                   "--witness-key", w_vkey, "--json")  # fmt: skip
+        assert done.returncode == 0, done.stdout + done.stderr
+        assert "cosignature" in steps(json.loads(done.stdout))
