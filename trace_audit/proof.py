@@ -7,12 +7,13 @@ sequence and log time), the recording messages its evidence refs cite (``proof_r
 its seal, the seal's leaf index in the robot's RFC 6962 tree, the inclusion proof of that
 leaf in the tree of the newest signed profile 1.2 checkpoint (a cosigned one where the
 root's witness store holds one that covers it), and that checkpoint's note (since
-``trace-proof/5`` the leaf index, proof and note as one C2SP tlog-proof text): about 8 KB
-at most on a 24 h simulator log. ``check_bundle`` checks, in order: each message's digest
+``trace-proof/5`` the leaf index, proof and note as one C2SP tlog-proof text, and the key
+rotations announced before that checkpoint, ``proof_keys``): about 8 KB at most on a 24 h
+simulator log. ``check_bundle`` checks, in order: each message's digest
 against the seal, the readings against the seal's ``sensors`` and the recording messages
 against the sealed refs, the seal's leaf in the tree (inclusion proof to the note's root),
-the note's signature by the robot's key under its origin and, given a witness key, the
-witness's cosignature.
+the note's signature by the robot's key (moved on through the carried key rotations) under
+its origin and, given a witness key, the witness's cosignature.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import orjson
 
 from trace_audit.evidence import recordings_for
 from trace_audit.proof_data import BadBundleError, DataReader, b64, deflated, field_of, unb64
+from trace_audit.proof_keys import followed_key, rotations_before
 from trace_audit.proof_readings import check_readings, check_recorded, readings_of, recorded_of
 from trace_audit.witness.tree import LevelTree
 from trace_runtime.boundary import read_side_file, write_new
@@ -66,7 +68,8 @@ BUNDLE_FORMAT = "trace-proof/5"
 """The format ``prove`` writes: ``trace-proof/4`` (``/3``, itself ``/2`` with each message's
 and reading's data deflated, with the recording messages the cycle's refs cite,
 ``recorded``) whose inclusion proof and checkpoint note are one C2SP tlog-proof text
-(``tlog_proof``, c2sp.org/tlog-proof@v1), which any tlog client checks as it is."""
+(``tlog_proof``, c2sp.org/tlog-proof@v1), which any tlog client checks as it is, and the
+key rotations the robot's chain announced before its checkpoint (``key_rotations``)."""
 BUNDLE_FORMATS = (
     "trace-proof/1",
     "trace-proof/2",
@@ -93,9 +96,13 @@ class ProofBundle(TypedDict):
     root: str
     tlog_proof: str  # index, inclusion hashes, the checkpoint note (c2sp.org/tlog-proof@v1)
     cosigned: bool
+    key_rotations: list[dict[str, str | int]]  # proof_keys.ROTATION_FIELDS, in chain order
 
 
-_FIELDS_4 = ProofBundle.__required_keys__ - {"tlog_proof"} | {"inclusion", "note"}
+_FIELDS_4 = ProofBundle.__required_keys__ - {"tlog_proof", "key_rotations"} | {
+    "inclusion",
+    "note",
+}
 _FIELDS_1 = _FIELDS_4 - {"sensors", "recorded"}
 BUNDLE_FIELDS = {
     "trace-proof/1": _FIELDS_1,
@@ -150,6 +157,7 @@ def make_bundle(
         "root": tree.root(size).hex(),
         "tlog_proof": format_tlog_proof(index, tree.inclusion_proof(index, size), note),
         "cosigned": cosigned,
+        "key_rotations": rotations_before(log, robot_id, note),
     }
 
 
@@ -410,7 +418,10 @@ def _check_note(
     if (body.size, body.root) != (r.tree_size, root):
         r.steps.append(("note", False, "the note states another tree than the proof's"))
         return None
-    verifiers = [NoteVerifier.of(body.origin, key.raw)]
+    followed = followed_key(bundle, key, body.origin, r.steps)  # after a key rotation
+    if followed is None:
+        return None
+    verifiers = [NoteVerifier.of(body.origin, followed.raw)]
     if witness_key is not None:
         verifiers.append(witness_key)
     try:

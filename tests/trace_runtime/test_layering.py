@@ -192,7 +192,8 @@ FLOORS: dict[str, list[set[str]]] = {
         # the questions an investigator asks of a log
         {"metrics", "explanation", "export", "transitions", "info", "verify", "doctor", "layers"}
         | {"rules", "tail", "witness", "proof", "proof_data", "proof_readings"}
-        | {"publish"},
+        | {"publish"}
+        | {"key_chain", "proof_keys"},
         # what is built from the answers: the fleet index, the incident report, the Foxglove view
         {"fleet", "incident", "foxglove", "comply"},
         # entry: the console script's check that the cli extra is installed; assistant: the

@@ -46,7 +46,17 @@ class IntegrityScope(BaseModel):
     cycles_valid: int = Field(description="Of them, cycles whose messages match their seal.")
     signatures_checked: bool = Field(
         description="Whether checkpoint signatures were checked with the robot's key (the "
-        "server has no key: false unless a signature is self-certifying)."
+        "server was started with --key): when false, verified says the log is consistent "
+        "with itself, not who wrote it, and the summary says signatures were not checked."
+    )
+    witness_checked: bool = Field(
+        description="Whether the log was compared with its root's witness store, each "
+        "cosignature checked with the witness's key (the server was started with "
+        "--witness-key)."
+    )
+    witnessed: int = Field(
+        description="Checkpoints of these robots the witness cosigned (its key checked) "
+        "that the log agrees with (0 without --witness-key)."
     )
     cached: bool = Field(
         description="True when this verify was run earlier in this server on the same "
@@ -60,7 +70,9 @@ class Integrity(BaseModel):
     status: IntegrityStatus = Field(
         description="verified: trace-audit verify found no problem in the chains of the "
         "robots the answer is about (every cycle matches its seal, no cycle missing or "
-        "reordered, checkpoints consistent). integrity_failed: it found at least one "
+        "reordered, checkpoints consistent; with the server's --key, checkpoints signed by "
+        "the robot's key, and with --witness-key, agreeing with what its witness cosigned: "
+        "scope says which were checked). integrity_failed: it found at least one "
         "(listed in findings): the log was changed or damaged after it was written, so "
         "treat the answer as unreliable and say so. unverified: the answer could not be "
         "checked (the summary says why: an index answer, a listing, or verify ran out of "

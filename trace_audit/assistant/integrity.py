@@ -14,16 +14,58 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from trace_audit.assistant.answers import Integrity, IntegrityFinding, IntegrityScope
+from trace_runtime.errors import NoteError, UsageError
+from trace_runtime.tlog.keys import load_public_key
+from trace_runtime.tlog.signed_note import COSIGNATURE, parse_verifier_key
 
-__all__ = ["FINDINGS_SHOWN", "VerifyCache", "integrity_of", "unverified"]
+__all__ = ["FINDINGS_SHOWN", "VerifyCache", "VerifyKeys", "integrity_of", "unverified"]
 
 FINDINGS_SHOWN = 5
 """Findings an answer lists (findings_total counts the rest)."""
 _CACHED_LOGS = 32
 """Verify reports kept (the least recently used goes first)."""
+
+
+@dataclass(frozen=True, slots=True)
+class VerifyKeys:
+    """The keys the server checks signatures with (``mcp --key``, ``--witness-key``): the
+    robot's public key file (checkpoint signatures, followed through the key rotations the
+    chain announces, as ``verify --key``) and the witness's verifier key (the cosignatures
+    of the log root's own witness store, as ``verify --witness local --witness-key``)."""
+
+    key: str | None = None
+    witness_key: str | None = None
+
+    @classmethod
+    def checked(cls, key: Path | None, witness_key: str | None) -> VerifyKeys:
+        """The keys, each read now so a bad one stops the server before it serves."""
+        if key is not None:
+            load_public_key(key)
+        if witness_key is not None:
+            try:
+                verifier = parse_verifier_key(witness_key)
+            except NoteError as err:
+                raise UsageError(f"--witness-key: {err}") from err
+            if verifier.sig_type != COSIGNATURE:
+                raise UsageError(
+                    "--witness-key: not a cosignature key (witness vkey --cosignature)"
+                )
+        return cls(str(key.resolve()) if key is not None else None, witness_key)
+
+    def args(self) -> dict[str, str]:
+        """The verify question's arguments for them."""
+        given = {"key": self.key, "witness_key": self.witness_key}
+        return {name: value for name, value in given.items() if value is not None}
+
+    def options(self) -> dict[str, str | None]:
+        """The ``trace-audit verify`` options that check the same."""
+        witness = "local" if self.witness_key is not None else None
+        return {"key": self.key, "witness": witness, "witness_key": self.witness_key}
 
 
 def _concerns(robot_id: str, robots: Sequence[str]) -> bool:
@@ -36,6 +78,10 @@ def integrity_of(report: dict[str, Any], robots: Sequence[str], *, cached: bool)
     findings = [f for f in report.get("findings", []) if _concerns(f.get("robot_id", ""), robots)]
     chains = [r for r in report.get("robots", []) if _concerns(r.get("robot_id", ""), robots)]
     segments = [s for s in report.get("segments", []) if _concerns(s.get("robot_id", ""), robots)]
+    witness = report.get("witness")
+    bounds = [
+        b for b in (witness or {}).get("bounds", []) if _concerns(b.get("robot_id", ""), robots)
+    ]
     scope = IntegrityScope(
         source=str(report.get("path", "")),
         robots=[str(r["robot_id"]) for r in chains],
@@ -43,6 +89,8 @@ def integrity_of(report: dict[str, Any], robots: Sequence[str], *, cached: bool)
         cycles=sum(int(r.get("cycles", 0)) for r in chains),
         cycles_valid=sum(int(r.get("cycles_valid", 0)) for r in chains),
         signatures_checked=bool(report.get("signatures_checked", False)),
+        witness_checked=witness is not None,
+        witnessed=sum(1 for b in bounds if b.get("cosignature_checked")),
         cached=cached,
     )
     shown = [_finding(f) for f in findings[:FINDINGS_SHOWN]]
@@ -62,7 +110,7 @@ def integrity_of(report: dict[str, Any], robots: Sequence[str], *, cached: bool)
     else:
         summary = (
             f"verified: {scope.cycles} cycles of {', '.join(scope.robots) or 'no robot'} in "
-            f"{scope.segments} segment(s) match their seals and chain (trace-audit verify)"
+            f"{scope.segments} segment(s) match their seals and chain" + _signatures(scope, bounds)
         )
         status = "verified"
     return Integrity(
@@ -71,6 +119,24 @@ def integrity_of(report: dict[str, Any], robots: Sequence[str], *, cached: bool)
         findings=shown,
         findings_total=len(findings),
         scope=scope,
+    )
+
+
+def _signatures(scope: IntegrityScope, bounds: list[dict[str, Any]]) -> str:
+    """What the verified status says of signatures: checked with the server's key (and the
+    witness's), or not checked."""
+    if not scope.signatures_checked:
+        said = "; checkpoint signatures not checked (the server was given no --key)"
+    else:
+        said = "; their checkpoints are signed by the robot's key (or keys its chain announced)"
+    if not scope.witness_checked:
+        return said + " (trace-audit verify)"
+    if not bounds:
+        return said + "; no checkpoint of theirs is cosigned in the root's witness store"
+    newest = max(bounds, key=lambda b: int(b.get("timestamp", 0)))
+    return (
+        f"{said}; {scope.witnessed} checkpoint(s) cosigned by the witness agree with the log, "
+        f"the newest logged no later than {newest.get('time', '')} (trace-audit verify)"
     )
 
 

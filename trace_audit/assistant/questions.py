@@ -88,9 +88,18 @@ def _metrics(args: dict[str, Any]) -> Any:
 
 
 def _verify(args: dict[str, Any]) -> Any:
-    from trace_audit.verify import verify_log
+    """``verify --json``; with the server's keys ``verify --key K [--witness local
+    --witness-key V]`` (the witness: the log root's own store, nothing fetched)."""
+    from trace_audit.verify import verify_log, verify_witnessed
+    from trace_runtime.tlog.keys import load_public_key
 
-    return to_jsonable(verify_log(Path(args["log"]), robots=_robots(args)))
+    log, robots = Path(args["log"]), _robots(args)
+    key = load_public_key(Path(args["key"])) if args.get("key") else None
+    witness_key = args.get("witness_key")
+    if witness_key:
+        report = verify_witnessed(log, "local", key=key, witness_key=witness_key, robots=robots)
+        return to_jsonable(report)
+    return to_jsonable(verify_log(log, key=key, robots=robots))
 
 
 def _check(args: dict[str, Any]) -> Any:

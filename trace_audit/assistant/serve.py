@@ -9,6 +9,7 @@ from pathlib import Path
 
 from mcp.server.mcpserver import MCPServer
 
+from trace_audit.assistant.integrity import VerifyKeys
 from trace_audit.assistant.roots import Roots
 from trace_audit.assistant.server import Assistant
 from trace_audit.assistant.tools import INSTRUCTIONS, register
@@ -21,14 +22,18 @@ DEFAULT_TIMEOUT_S = 60.0
 
 
 def build(
-    roots: Sequence[str | Path], index: Path | None, timeout_s: float
+    roots: Sequence[str | Path],
+    index: Path | None,
+    timeout_s: float,
+    keys: VerifyKeys | None = None,
 ) -> tuple[MCPServer, Assistant]:
-    """The server and its state over ``roots`` (and ``index``, which adds find and query)."""
+    """The server and its state over ``roots`` (and ``index``, which adds find and query;
+    ``keys``, which every verify checks signatures with)."""
     if index is not None and not index.is_dir():
         raise UsageError(f"--index {index}: not a folder")
     if timeout_s <= 0:
         raise UsageError("--timeout must be above 0")
-    assistant = Assistant(Roots.of(roots), index.resolve() if index else None, timeout_s)
+    assistant = Assistant(Roots.of(roots), index.resolve() if index else None, timeout_s, keys)
     server: MCPServer = MCPServer(
         "trace-audit",
         instructions=INSTRUCTIONS,
@@ -63,10 +68,13 @@ def serve(
     index: Path | None = None,
     http: str | None = None,
     timeout_s: float = DEFAULT_TIMEOUT_S,
+    key: Path | None = None,
+    witness_key: str | None = None,
 ) -> None:
     """Run the server until its client leaves (stdio) or it is interrupted (HTTP)."""
     where = loopback(http) if http is not None else None
-    server, assistant = build(roots, index, timeout_s)
+    keys = VerifyKeys.checked(key, witness_key)
+    server, assistant = build(roots, index, timeout_s, keys)
     assistant.worker.start()
     try:
         if where is None:

@@ -19,7 +19,7 @@ from mcp.types import CallToolResult, TextContent
 
 from trace_audit.assistant.answers import Answer, Integrity, Truncation
 from trace_audit.assistant.bound import MAX_ANSWER_BYTES, bound
-from trace_audit.assistant.integrity import VerifyCache, integrity_of, unverified
+from trace_audit.assistant.integrity import VerifyCache, VerifyKeys, integrity_of, unverified
 from trace_audit.assistant.roots import Roots, fingerprint
 from trace_audit.assistant.worker import CallTimeoutError, Worker
 from trace_runtime.errors import TraceError
@@ -68,9 +68,13 @@ class Ask:
 class Assistant:
     """The server's state: its roots, the index, the worker and the verify reports."""
 
-    def __init__(self, roots: Roots, index: Path | None, timeout_s: float) -> None:
+    def __init__(
+        self, roots: Roots, index: Path | None, timeout_s: float, keys: VerifyKeys | None = None
+    ) -> None:
         self.roots = roots
         self.index = index
+        self.keys = keys or VerifyKeys()
+        """What every verify of this server checks signatures with (none: not checked)."""
         self.worker = Worker(timeout_s)
         self.cache = VerifyCache()
 
@@ -142,7 +146,8 @@ class Assistant:
         found = self.cache.get(str(log), key)
         if found is not None:
             return found, True
-        status, report, _ = await self.worker.ask("verify", {"log": str(log)}, _WHOLE)
+        args = {"log": str(log), **self.keys.args()}
+        status, report, _ = await self.worker.ask("verify", args, _WHOLE)
         if status != "ok":
             raise ToolError(f"verify could not read the log: {report}")
         self.cache.put(str(log), key, report)

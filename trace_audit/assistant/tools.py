@@ -177,8 +177,9 @@ class Tools:
         recomputed; findings located by robot, segment and cycles. Use it when the user
         asks whether the record can be trusted, or before relying on a log."""
         path = self.a.log(log)
-        reproduce = command_line("verify", path, robot=robot)
-        ask = Ask("verify", {"log": str(path), "robot": robot}, reproduce, robots=robot or ())
+        reproduce = command_line("verify", path, robot=robot, **self.a.keys.options())
+        args = {"log": str(path), "robot": robot, **self.a.keys.args()}
+        ask = Ask("verify", args, reproduce, robots=robot or ())
         return await self.a.verify_answer(ask)
 
     async def check(

@@ -20,16 +20,21 @@ timeline, metrics, verify, check, prove, and with --index find and query.
 
 Every answer carries its integrity (verified, unverified or integrity failed, with the
 findings: the log's verify, kept while its files are unchanged) and the trace-audit
-command that reproduces it. A tool reads only under the roots (no '..', no links out, no
-FIFOs), writes nothing, and each call is bounded in size (~200 KB of data, cuts said) and
-time (--timeout). Over stdio by default (the client starts this command); --http serves
-streamable HTTP on a loopback address only. Needs the assistant extra. docs/assistant.md.
+command that reproduces it. With --key, verified includes the checkpoints' signatures by
+the robot's key (and with --witness-key, what the witness cosigned in the log root's witness
+store); without it the answer says signatures were not checked. A tool reads only under the
+roots (no '..', no links out, no FIFOs), writes nothing, and each call is bounded in size
+(~200 KB of data, cuts said) and time (--timeout). Over stdio by default (the client starts
+this command); --http serves streamable HTTP on a loopback address only. Needs the assistant
+extra. docs/assistant.md.
 
 [bold]Examples[/bold]:
 
   trace-audit mcp --root /data/robots
 
   trace-audit mcp --root /data/amr-7 --root /data/amr-9 --index /data/idx
+
+  trace-audit mcp --root /data/amr-7 --key keys/amr-7.pub --witness-key "$(cat witness.vkey)"
 
   trace-audit mcp --root /data/robots --http 127.0.0.1:8765
 """
@@ -45,6 +50,7 @@ def mcp_command(
             show_default=False,
         ),
     ],
+    *,
     index: Annotated[
         Path | None,
         typer.Option(
@@ -64,6 +70,24 @@ def mcp_command(
     timeout: Annotated[
         float, typer.Option("--timeout", help="Seconds a tool call may run before it is stopped.")
     ] = 60.0,
+    key: Annotated[
+        Path | None,
+        typer.Option(
+            "--key",
+            help="The robot's Ed25519 public key (as verify --key takes it): integrity then "
+            "includes the checkpoint signatures (key rotations followed).",
+            show_default=False,
+        ),
+    ] = None,
+    witness_key: Annotated[
+        str | None,
+        typer.Option(
+            "--witness-key",
+            help="The witness's verifier key (witness vkey --cosignature): integrity then "
+            "includes the log root's witness store, each cosignature checked.",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     if importlib.util.find_spec("mcp") is None:
         fail(
@@ -72,4 +96,8 @@ def mcp_command(
         )
     from trace_audit.assistant.serve import serve
 
-    guarded(lambda: serve(root, index=index, http=http, timeout_s=timeout))
+    guarded(
+        lambda: serve(
+            root, index=index, http=http, timeout_s=timeout, key=key, witness_key=witness_key
+        )
+    )

@@ -34,8 +34,9 @@ with verify-proof. An existing --out file is never overwritten (exit 4).
 
 _VERIFY_PROOF_HELP = """Check a proof bundle without the log: the messages' digests against
 the seal, the seal's leaf in the tree (inclusion proof), the checkpoint note's signature by
-the robot's key (--key) and, with --witness-key, the witness's cosignature and its time.
-Exit 0 when every step verifies, 1 when one does not.
+the robot's key (--key; after a key rotation, the key the bundle's rotations lead to from
+it, so the robot's first key is enough) and, with --witness-key, the witness's cosignature
+and its time. Exit 0 when every step verifies, 1 when one does not.
 
 [bold]Examples[/bold]:
 

@@ -32,10 +32,11 @@ checkpoints state, or its published tiles differ from the log; 2 when a robot's 
 signed (nothing would vouch for its tiles).
 
 With --key (the robot's public key as verify takes it; repeat for a fleet's keys), the
-checkpoint note must verify under one of the keys, or nothing is published for that robot
-(exit 1); without it, signatures are not checked here (the auditor checks them). When the
-root's witness store holds the same checkpoint cosigned (witness push), that note is served,
-with the witness's cosignature lines.
+checkpoint note must verify under one of the keys, or under a key the robot's chain announced
+from it (key rotation, followed as verify follows it: the robot's first key is enough), or
+nothing is published for that robot (exit 1); without it, signatures are not checked here
+(the auditor checks them). When the root's witness store holds the same checkpoint cosigned
+(witness push), that note is served, with the witness's cosignature lines.
 
 [bold]Examples[/bold]:
 
@@ -117,6 +118,11 @@ def _publish_doc(r: PublishReport) -> Doc:
         ],
     )  # fmt: skip
     for p in r.robots:
+        if p.announced_keys:
+            doc.line(
+                f"{p.robot_id}: note checked under the key its chain announced "
+                f"({len(p.announced_keys)} rotation(s) from the key given)"
+            )
         if p.removed:
             doc.line(f"{p.robot_id}: removed {p.removed} unfinished file(s) a killed run left")
     return doc

@@ -15,7 +15,8 @@ tiles are immutable, compared when present, never rewritten; nothing is ever del
 this run's own uncommitted files (and what a killed run left beside a name, ``files``). An
 unsigned robot is refused (exit 2): a public tlog's checkpoint carries the log's signature,
 and tiles nobody signed prove nothing. Given the robot's public key(s), the note served
-must verify under one of them; the note served is the root's witness-cosigned one when the
+must verify under one of them, or under a key the robot's chain announced from it (key
+rotation, ``key_chain``); the note served is the root's witness-cosigned one when the
 witness store holds it (``served``).
 """
 
@@ -25,6 +26,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from trace_audit.key_chain import announcing_checkpoints
 from trace_audit.publish.files import PublishedFolder, TileConflictError, make_top
 from trace_audit.publish.served import served_note, signature_problem
 from trace_audit.publish.tiler import TileBuilder
@@ -67,6 +69,9 @@ class RobotPublish:
     cosigned_by: list[str] = field(default_factory=list)
     """The witnesses whose cosignature lines the served ``checkpoint`` carries (from the
     root's witness store; not verified by publish)."""
+    announced_keys: list[str] = field(default_factory=list)
+    """The verifier keys the robot's chain announced (key rotation) from the key given, that
+    the note served was checked with the last of (as ``verify``'s ``announced_keys``)."""
     problems: list[str] = field(default_factory=list)
 
 
@@ -119,7 +124,7 @@ def publish_root(
     ):
         for robot in chosen:
             checkpoints = signed[robot]
-            result = _checked(robot, checkpoints, keys)
+            result = _checked(robot, checkpoints, keys, log)
             if not result.problems:
                 _publish_robot(log, result, checkpoints, out, progress)
             report.robots.append(result)
@@ -130,10 +135,12 @@ def _names(log: Log) -> str:
     return ", ".join(log.robots) or "no robot"
 
 
-def _checked(robot: str, checkpoints: list[Checkpoint], keys: Sequence[PublicKey]) -> RobotPublish:
+def _checked(
+    robot: str, checkpoints: list[Checkpoint], keys: Sequence[PublicKey], log: Log
+) -> RobotPublish:
     """The robot's result, with a problem when nothing may be published for it: an id that
     cannot name a folder, a note that does not state its checkpoint's tree, or a newest note
-    that none of ``keys`` signed."""
+    signed neither by one of ``keys`` nor by a key the chain announced from one."""
     result = RobotPublish(robot, origin=checkpoints[-1].origin or "")
     if robot in ("", ".", "..") or any(c in robot for c in "/\\\x00") or robot.startswith("."):
         result.problems.append(f"robot id {robot!r} cannot name a folder: not published")
@@ -142,7 +149,8 @@ def _checked(robot: str, checkpoints: list[Checkpoint], keys: Sequence[PublicKey
         if check_note(c, None) != "unchecked":
             result.problems.append(f"the note of checkpoint {c.tree_size} does not state its tree")
             return result
-    problem = signature_problem(checkpoints[-1], keys)
+    announcing = announcing_checkpoints(log, robot) if keys else []
+    problem, result.announced_keys = signature_problem(checkpoints[-1], keys, announcing)
     if problem is not None:
         result.problems.append(f"{problem}: nothing published")
     return result

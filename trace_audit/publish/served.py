@@ -1,10 +1,11 @@
 """The note a robot's published ``checkpoint`` serves, and whose keys it was checked with.
 
 Given the robot's public key(s) (``publish --key``), the newest signed checkpoint's note must
-verify under one of them, the key's name being the checkpoint's origin, as any signed-note
-verifier checks it; otherwise the robot publishes nothing (a problem, exit 1). Without a key
-the signature is not checked here: the auditor checks it, with a key from a channel they
-trust, and the report says it was not checked.
+verify under one of them, or under a key the robot's chain announced from one of them (key
+rotation, followed as verify follows it: ``key_chain``), the key's name being the
+checkpoint's origin, as any signed-note verifier checks it; otherwise the robot publishes
+nothing (a problem, exit 1). Without a key the signature is not checked here: the auditor
+checks it, with a key from a channel they trust, and the report says it was not checked.
 
 When the root's witness store (``<root>/witness/<robot>.jsonl``) holds the same checkpoint
 cosigned, that is served instead: the robot's note byte for byte with every stored
@@ -23,6 +24,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from trace_audit.key_chain import followed_keys
 from trace_runtime.errors import NoteError, UnverifiedNoteError, WitnessStoreError
 from trace_runtime.records import Checkpoint
 from trace_runtime.tlog.checkpoints import check_note
@@ -44,21 +46,32 @@ class ServedNote:
     witnesses: tuple[str, ...] = ()
 
 
-def signature_problem(checkpoint: Checkpoint, keys: Sequence[PublicKey]) -> str | None:
-    """Why ``checkpoint``'s note does not verify under any of ``keys`` (None: it does, or
-    no key was given)."""
+def signature_problem(
+    checkpoint: Checkpoint, keys: Sequence[PublicKey], announcing: Sequence[Checkpoint] = ()
+) -> tuple[str | None, list[str]]:
+    """Why ``checkpoint``'s note does not verify under the key the chain reached from one of
+    ``keys``, following the rotations the robot's ``announcing`` checkpoints announce
+    (``key_chain``, as verify follows them): None when it does (or no key was given), with
+    the verifier keys followed to get there."""
     if not keys:
-        return None
-    states = {check_note(checkpoint, key) for key in keys}
-    if "valid" in states:
-        return None
+        return None, []
+    states: set[str] = set()
+    why = ""
+    for key in keys:
+        chain = followed_keys(list(announcing), key)
+        state = check_note(checkpoint, chain.key)
+        if state == "valid":
+            return None, list(chain.announced)
+        states.add(state)
+        if state == "key_mismatch" and chain.announced and not why:
+            why = f", nor by a key announced from it ({chain.why_not(checkpoint.key_id)})"
     size = checkpoint.tree_size
     if "bad_signature" in states:
-        return f"the note of checkpoint {size} carries a signature that does not verify"
+        return f"the note of checkpoint {size} carries a signature that does not verify", []
     if "mismatch" in states:
-        return f"the note of checkpoint {size} does not state its tree"
+        return f"the note of checkpoint {size} does not state its tree", []
     given = ", ".join(key.key_id[:16] for key in keys)
-    return f"the note of checkpoint {size} is not signed by the key given ({given})"
+    return f"the note of checkpoint {size} is not signed by the key given ({given}){why}", []
 
 
 def served_note(root: str | Path, robot: str, checkpoint: Checkpoint) -> ServedNote:

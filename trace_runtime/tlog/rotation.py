@@ -12,8 +12,9 @@ and so is one under a key already rotated away from (a retired key, maybe a stol
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, Protocol
 
 from trace_runtime.errors import NoteError
 from trace_runtime.records import Checkpoint
@@ -23,9 +24,11 @@ from trace_runtime.tlog.signed_note import ED25519, parse_verifier_key, verifier
 __all__ = [
     "ROTATION_FORMAT",
     "AnnouncementState",
+    "Announcing",
     "KeyChain",
     "announce",
     "check_announcement",
+    "follow_keys",
     "rotation_bytes",
 ]
 
@@ -33,7 +36,27 @@ ROTATION_FORMAT = "trace-key-rotation/1"
 """First line of the bytes a key rotation signs."""
 
 
-def rotation_bytes(checkpoint: Checkpoint, next_key: str) -> bytes:
+class Announcing(Protocol):
+    """What an announcement is checked from: a ``Checkpoint``, or the same six values and
+    the origin carried out of the chain (a proof bundle's ``key_rotations``)."""
+
+    @property
+    def robot_id(self) -> str: ...
+    @property
+    def cycle(self) -> int: ...
+    @property
+    def head(self) -> str: ...
+    @property
+    def key_id(self) -> str | None: ...
+    @property
+    def origin(self) -> str | None: ...
+    @property
+    def next_key(self) -> str | None: ...
+    @property
+    def next_key_signature(self) -> str | None: ...
+
+
+def rotation_bytes(checkpoint: Announcing, next_key: str) -> bytes:
     """The exact bytes the announcing key signs (docs/integrity.md, PROFILE section 6):
     ``name=value`` lines in fixed order, like ``checkpoints.signing_bytes``."""
     c = checkpoint
@@ -64,7 +87,7 @@ key, or one under another name than the checkpoint's origin, or a signature miss
 
 
 def check_announcement(
-    checkpoint: Checkpoint, key: PublicKey
+    checkpoint: Announcing, key: PublicKey
 ) -> tuple[AnnouncementState, PublicKey | None]:
     """Check a checkpoint's key announcement against the key that signed the checkpoint;
     with ``valid``, the announced key."""
@@ -79,7 +102,8 @@ def check_announcement(
         return "malformed", None
     if verifier.sig_type != ED25519 or (c.origin is not None and verifier.name != c.origin):
         return "malformed", None
-    signature = bytes.fromhex(c.next_key_signature)  # the schema's pattern: 128 hex digits
+    # 128 hex digits: the schema's pattern (a checkpoint), or the reader's check (a bundle)
+    signature = bytes.fromhex(c.next_key_signature)
     if not key.verify(signature, rotation_bytes(c, c.next_key)):
         return "bad_signature", None
     return "valid", verifier.public_key
@@ -103,6 +127,15 @@ class KeyChain:
         self.key = next_key
         self.announced.append(vkey)
 
+    def follow(self, checkpoint: Announcing, key: PublicKey) -> AnnouncementState:
+        """Move on past ``checkpoint``, verified under ``key`` (the chain's key there): a
+        valid announcement makes the key it announces the chain's; any other state leaves
+        the key as it was (the caller says why, when the state is a problem)."""
+        state, announced = check_announcement(checkpoint, key)
+        if announced is not None:
+            self.rotate(checkpoint.cycle, announced, checkpoint.next_key or "")
+        return state
+
     def copy(self) -> KeyChain:
         """The same state, to be moved on independently (another copy of a segment)."""
         return KeyChain(self.key, dict(self.retired), list(self.announced))
@@ -114,3 +147,22 @@ class KeyChain:
         if cycle is not None:
             return f"it is signed by key {short}…, retired by the rotation at cycle {cycle}"
         return f"it is signed by another key ({short}…), never announced in the chain"
+
+
+def follow_keys(
+    checkpoints: Iterable[Checkpoint],
+    key: PublicKey,
+    signed_by: Callable[[Checkpoint, PublicKey], bool],
+) -> KeyChain:
+    """The chain of keys from ``key`` through the announcements of ``checkpoints`` (the
+    robot's, in chain order), as verify follows them: a checkpoint moves the key on only
+    when the chain's key at that point signed it (``signed_by``) and its announcement
+    verifies under that key. For a reader that checks one statement of the chain (the
+    newest note, a proof bundle's checkpoint) rather than every checkpoint: one signed by
+    another key, or whose announcement does not verify, moves nothing."""
+    chain = KeyChain(key)
+    for checkpoint in checkpoints:
+        current = chain.key
+        if current is not None and signed_by(checkpoint, current):
+            chain.follow(checkpoint, current)
+    return chain

@@ -105,9 +105,9 @@ def _plain(bundle: dict[str, Any]) -> dict[str, Any]:
 
 def _fourth(bundle: dict[str, Any]) -> dict[str, Any]:
     """A ``trace-proof/5`` bundle as ``/4`` wrote it: the inclusion proof and the note as
-    fields of their own, not one tlog-proof text."""
+    fields of their own, not one tlog-proof text, and no key rotations."""
     proof = parse_tlog_proof(bundle["tlog_proof"])
-    fields = {k: v for k, v in bundle.items() if k != "tlog_proof"}
+    fields = {k: v for k, v in bundle.items() if k not in ("tlog_proof", "key_rotations")}
     inclusion = [base64.b64encode(h).decode() for h in proof.hashes]
     return fields | {"format": "trace-proof/4", "inclusion": inclusion, "note": proof.note}
 
