@@ -129,7 +129,7 @@ def make_bundle(
     """The proof bundle of ``cycle`` of ``robot`` (the log's only robot when None), carrying
     the recording messages its refs cite (the recordings the log declares, or ``evidence``)."""
     log = open_log(log_path)
-    robot_id = robot or _only_robot(log)
+    robot_id = _one_robot(log, robot)
     proved = prove_pass(log, robot_id, cycle)
     found, index = proved.cycle, proved.index
     if found is None or index is None:
@@ -203,11 +203,17 @@ def write_bundle(
     )
 
 
-def _only_robot(log: Log) -> str:
+def _one_robot(log: Log, robot: str | None) -> str:
+    """``robot``, or the log's only robot; a ``UsageError`` naming the log's robots when
+    there is no such robot or several to choose from (as ``publish --robot`` does)."""
     robots = log.robots
-    if len(robots) != 1:
-        raise UsageError(f"the log holds {len(robots)} robots: name one with --robot")
-    return robots[0]
+    if robot is not None and robot not in robots:
+        held = ", ".join(robots) or "no robot"
+        raise UsageError(f"no robot {robot} in {log.root} (it holds {held})")
+    if robot is None and len(robots) != 1:
+        named = f" ({', '.join(robots)})" if robots else ""
+        raise UsageError(f"the log holds {len(robots)} robots{named}: name one with --robot")
+    return robot or robots[0]
 
 
 def _covering_note(log: Log, robot: str, index: int, tree: LevelTree) -> tuple[str, int, bool]:
@@ -259,9 +265,22 @@ def read_bundle(path: str | Path) -> dict[str, object]:
         value = orjson.loads(data)
     except orjson.JSONDecodeError as err:
         raise LogReadError(str(path), f"not a proof bundle: not JSON ({err})") from err
-    if not isinstance(value, dict) or value.get("format") not in BUNDLE_FORMATS:
-        raise LogReadError(str(path), f"not a proof bundle (format {BUNDLE_FORMAT})")
+    if not isinstance(value, dict):
+        raise LogReadError(str(path), "not a proof bundle: its JSON is not an object")
+    if value.get("format") not in BUNDLE_FORMATS:
+        raise LogReadError(str(path), f"not a proof bundle: {_format_of(value)}")
     return value
+
+
+def _format_of(bundle: Mapping[str, object]) -> str:
+    """What a bundle says its format is, against the ones this version reads (the value
+    shown as JSON and shortened: it is the file's, so it may be anything)."""
+    if "format" not in bundle:
+        has = "it has no format field"
+    else:
+        shown = orjson.dumps(bundle["format"]).decode()
+        has = f"its format is {shown if len(shown) <= 40 else shown[:37] + '...'}"
+    return f"{has}; the formats read are {', '.join(BUNDLE_FORMATS)}"
 
 
 def verify_proof(
@@ -304,7 +323,7 @@ def _check(
     fmt = bundle.get("format")
     expected = BUNDLE_FIELDS.get(fmt) if isinstance(fmt, str) else None
     if expected is None:
-        raise BadBundleError(f"the format is not one of {', '.join(BUNDLE_FORMATS)}")
+        raise BadBundleError(_format_of(bundle))
     if set(bundle) != expected:
         odd = sorted(set(bundle) ^ expected)
         raise BadBundleError(f"fields missing or unknown: {', '.join(odd)}")
@@ -370,7 +389,8 @@ def _check_inclusion(
     root = bytes.fromhex(root_hex)
     proof, note = _inclusion_of(bundle, r.leaf_index)
     if not verify_inclusion(r.leaf_index, r.tree_size, leaf_hash(seal), proof, root):
-        r.steps.append(("inclusion", False, "the seal is not leaf of the tree at that root"))
+        tree = f"leaf {r.leaf_index} of the tree of {r.tree_size} at that root"
+        r.steps.append(("inclusion", False, f"the seal is not {tree}"))
         return None
     r.steps.append(
         ("inclusion", True, f"leaf {r.leaf_index} of {r.tree_size}, {len(proof)} hash(es)")
@@ -383,9 +403,10 @@ def _inclusion_of(bundle: Mapping[str, object], leaf_index: int) -> tuple[list[b
     the bundle names, with no extra data: nothing would check it), earlier ones' fields."""
     if bundle["format"] != BUNDLE_FORMAT:
         hashes = [unb64(h, "an inclusion hash") for h in field_of(bundle, "inclusion", list)]
-        return hashes, field_of(bundle, "note", str)
+        return hashes, _ends_a_line(field_of(bundle, "note", str), "the note")
     try:
-        proof = parse_tlog_proof(field_of(bundle, "tlog_proof", str))
+        text = _ends_a_line(field_of(bundle, "tlog_proof", str), "the tlog-proof")
+        proof = parse_tlog_proof(text)
     except NoteError as err:
         raise BadBundleError(f"the tlog-proof: {err}") from err
     if proof.extra is not None:
@@ -393,6 +414,16 @@ def _inclusion_of(bundle: Mapping[str, object], leaf_index: int) -> tuple[list[b
     if proof.index != leaf_index:
         raise BadBundleError("the tlog-proof is of another leaf than leaf_index")
     return list(proof.hashes), proof.note
+
+
+def _ends_a_line(text: str, what: str) -> str:
+    """``text``, which ends as a checkpoint note does, with a newline: the note's parser
+    would only say that its signature block is empty, not what is missing."""
+    if not text.endswith("\n"):
+        raise BadBundleError(
+            f"{what} does not end with a newline (a checkpoint note's last line ends with one)"
+        )
+    return text
 
 
 def _check_note(
