@@ -92,8 +92,19 @@ class Truncation(BaseModel):
     """A list cut to keep the answer within the server's size bound."""
 
     path: str = Field(description="Where in data, e.g. robots[0].transitions.")
-    kept: int = Field(description="Items kept (the first ones).")
-    total: int = Field(description="Items the full answer has.")
+    robot: str | None = Field(
+        None,
+        description="The robot whose items were cut (null: the list is not one robot's). "
+        "An answer about several robots is cut evenly: each robot keeps its share.",
+    )
+    kept: int = Field(description="Items kept (the robot's first ones).")
+    total: int = Field(description="Items the full answer has (of that robot).")
+    through: str | None = Field(
+        None,
+        description="Where the kept items end: the last one's cycle and time, the time as "
+        "start or end take it (null: the items have no time).",
+    )
+    rest: str = Field("", description="How to ask for the items left out.")
 
 
 class Answer(BaseModel, Generic[T]):

@@ -12,7 +12,7 @@ from mcp.server.mcpserver import MCPServer
 from trace_audit.assistant.integrity import VerifyKeys
 from trace_audit.assistant.roots import Roots
 from trace_audit.assistant.server import Assistant
-from trace_audit.assistant.tools import INSTRUCTIONS, register
+from trace_audit.assistant.tools import INSTRUCTIONS, tools_of
 from trace_runtime.errors import UsageError
 
 __all__ = ["DEFAULT_TIMEOUT_S", "build", "loopback", "serve"]
@@ -38,8 +38,8 @@ def build(
         "trace-audit",
         instructions=INSTRUCTIONS,
         log_level="WARNING",  # stderr stays for the one-line problems, not each request
+        tools=tools_of(assistant),
     )
-    register(server, assistant)
     return server, assistant
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import copy
 import json
+import re
 import shlex
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -166,8 +167,7 @@ def _result(integrity: Integrity, reproduce: str, data: Any, cuts: Any) -> CallT
     envelope["data"] = data  # as the library's JSON gave it, not re-serialized by a model
     lead = [integrity.summary, f"reproduce: {reproduce}"]
     if cuts:
-        cut = "; ".join(f"{c['path'] or 'data'} {c['kept']} of {c['total']}" for c in cuts)
-        lead.append(f"cut to fit the answer's size bound: {cut}")
+        lead.append(f"cut to fit the answer's size bound: {_cuts_line(cuts)}")
     if data is None:
         lead.append("the data did not fit the answer's size bound: run the reproduce command")
     text = json.dumps(envelope, ensure_ascii=False)
@@ -178,3 +178,19 @@ def _result(integrity: Integrity, reproduce: str, data: Any, cuts: Any) -> CallT
         ],
         structured_content=envelope,
     )
+
+
+_IN_ROBOT = re.compile(r"^robots\[\d+\]\.")
+
+
+def _cuts_line(cuts: list[dict[str, Any]]) -> str:
+    """``amr-1 rows 180 of 3000 (through cycle 179, t 17.9); ...``, then how to ask for the
+    rest (the same for each cut of one answer but for the robot, so said once)."""
+    said = []
+    for c in cuts:
+        where = c["path"] or "data"
+        if c.get("robot"):  # its robot named, not its index in the answer
+            where = f"{c['robot']} {_IN_ROBOT.sub('', where)}"
+        through = f" (through {c['through']})" if c.get("through") else ""
+        said.append(f"{where} {c['kept']} of {c['total']}{through}")
+    return "; ".join(said) + f"; for the rest: {cuts[0]['rest']}"

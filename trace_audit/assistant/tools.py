@@ -9,21 +9,24 @@ answer, and hands the question to the ``Assistant``; none writes anything.
 from __future__ import annotations
 
 import inspect
+import json
 import shlex
 from typing import Annotated, Any, Literal
 
-from mcp.server.mcpserver import MCPServer
+from mcp.server.mcpserver.exceptions import ToolError
+from mcp.server.mcpserver.tools import Tool
 from mcp.types import CallToolResult, ToolAnnotations
 from pydantic import BaseModel, Field
 
 from trace_audit.assistant.answers import Answer
+from trace_audit.assistant.arguments import CheckedTool
 from trace_audit.assistant.server import Ask, Assistant, command_line
 from trace_audit.info import LogInfo
 from trace_audit.selection import PerRobot
 from trace_audit.transitions import Timeline, WhyResult
 from trace_runtime.verification.report import VerifyReport
 
-__all__ = ["INSTRUCTIONS", "Tools", "register"]
+__all__ = ["INSTRUCTIONS", "Tools", "tools_of"]
 
 INSTRUCTIONS = """Tools to investigate TRACE robot decision logs (why a robot did something,
 what it knew, whether the record can be trusted). Start with robots to see which logs and
@@ -43,7 +46,10 @@ Log = Annotated[
 ]
 Robots = Annotated[
     list[str] | None,
-    Field(description="Only these robots (a root may hold several: robots lists them)."),
+    Field(
+        description='Only these robots, a list of names like ["amr-7"] (a root may hold '
+        "several: robots lists them); the command's --robot, which repeats."
+    ),
 ]
 Time = Annotated[
     str | None,
@@ -263,32 +269,33 @@ class Tools:
         log: Log,
         cycle: Annotated[int, Field(description="The cycle to prove.")],
         robot: Annotated[
-            str | None, Field(description="The robot (needed on a root of several).")
+            list[str] | None,
+            Field(description="The robot, as a list of one name (needed on a root of several)."),
         ] = None,
     ) -> Annotated[CallToolResult, Answer[dict[str, Any]]]:
         """A proof bundle of one decision cycle, inline (nothing is written): its messages
         and seal, the seal's inclusion proof in the robot's Merkle tree and the signed
         checkpoint note, checkable without the log (trace-audit verify-proof). Use it when
         the user needs evidence of a decision to hand to someone else."""
+        if robot is not None and len(robot) != 1:  # a list, as every tool's robot is
+            given = json.dumps(robot)
+            raise ToolError(f"prove proves one robot's cycle: give robot one name, not {given}")
         path = self.a.log(log)
-        reproduce = command_line("prove", path, cycle=cycle, robot=robot)
+        one = robot[0] if robot else None
+        reproduce = command_line("prove", path, cycle=cycle, robot=one)
         reproduce = reproduce.removesuffix(" --json") + " --out BUNDLE.json"
-        args: dict[str, Any] = {"log": str(path), "cycle": cycle, "robot": robot}
-        return await self.a.answer(Ask("prove", args, reproduce, robots=[robot] if robot else ()))
+        args: dict[str, Any] = {"log": str(path), "cycle": cycle, "robot": one}
+        return await self.a.answer(Ask("prove", args, reproduce, robots=robot or ()))
 
 
-def register(server: MCPServer, assistant: Assistant) -> None:
-    """Add every tool to ``server``; find and query only with an index."""
+def tools_of(assistant: Assistant) -> list[Tool]:
+    """Every tool of the server; find and query only with an index."""
     tools = Tools(assistant)
     names = ["robots", "why", "explain", "timeline", "metrics", "verify", "check", "prove"]
     if assistant.index is not None:
         names += ["find", "query"]
-    for name in names:
-        method = getattr(tools, name)
-        server.add_tool(
-            method,
-            name=name,
-            description=inspect.getdoc(method),
-            annotations=_READ_ONLY,
-            structured_output=True,
-        )
+    return [
+        CheckedTool.of(method, name, _READ_ONLY, inspect.getdoc(method) or "")
+        for name in names
+        for method in [getattr(tools, name)]
+    ]

@@ -1,11 +1,11 @@
 """An answer cut to its size bound: the longest lists first, each cut named, short lists
-(a pose, a motion) left whole."""
+(a pose, a motion) left whole; an answer about several robots cut evenly across them."""
 
 from __future__ import annotations
 
 import orjson
 
-from trace_audit.assistant.bound import bound
+from trace_audit.assistant.bound import bound, rest_of
 
 
 def _rows(n: int) -> list[dict[str, object]]:
@@ -23,7 +23,9 @@ def test_the_longest_list_is_cut_to_fit_and_the_cut_is_named() -> None:
     assert len(orjson.dumps(cut)) <= 20_000
     rows = cut["robots"][0]["rows"]
     assert rows == _rows(len(rows))  # the first rows, in order
-    assert cuts == [{"path": "robots[0].rows", "kept": len(rows), "total": 5000}]
+    [made] = cuts
+    assert made == {"path": "robots[0].rows", "robot": None, "kept": len(rows), "total": 5000,
+                    "through": None}  # fmt: skip
     assert cut["robots"][0]["gaps"] == _rows(20)  # what fitted stays whole
     assert all(r["pose"] == [1.0, 2.0, 3.0] for r in rows)
 
@@ -37,3 +39,70 @@ def test_several_lists_are_cut_when_one_is_not_enough() -> None:
 
 def test_an_answer_with_nothing_to_cut_is_none() -> None:
     assert bound({"text": "x" * 50_000}, 10_000) == (None, [])
+
+
+def _robot(name: str, rows: int) -> dict[str, object]:
+    """One robot's answer in an answer per robot (``selection.PerRobot`` as JSON)."""
+    return {"robot": name, "clock": {"name": "sim", "start_ns": 0},
+            "rows": [{"cycle": i, "t_ns": i * 100_000_000, "command": "GO"} for i in range(rows)]}  # fmt: skip
+
+
+def test_an_answer_per_robot_is_cut_evenly_and_each_cut_names_its_robot() -> None:
+    """Found from outside: one robot kept 1 row of 3000 while another kept 366 of 1800."""
+    data = {"path": "fleet", "robots": [_robot("amr-1", 3000), _robot("amr-2", 1800)]}
+    cut, cuts = bound(data, 40_000)
+    assert len(orjson.dumps(cut)) <= 40_000
+    kept = [len(r["rows"]) for r in cut["robots"]]
+    assert min(kept) > 0.9 * max(kept), kept  # rows of one size: equal shares, equal rows
+    assert len(orjson.dumps(cut)) > 0.8 * 40_000  # the bound is used, not wasted
+    assert cuts == [
+        {"path": "robots[0].rows", "robot": "amr-1", "kept": kept[0], "total": 3000,
+         "through": f"cycle {kept[0] - 1}, t {(kept[0] - 1) / 10:g}"},
+        {"path": "robots[1].rows", "robot": "amr-2", "kept": kept[1], "total": 1800,
+         "through": f"cycle {kept[1] - 1}, t {(kept[1] - 1) / 10:g}"},
+    ]  # fmt: skip
+    assert cut["robots"][1]["rows"] == _robot("amr-2", kept[1])["rows"]  # the first, in order
+
+
+def test_a_robot_under_its_share_keeps_all_and_leaves_the_rest_to_the_others() -> None:
+    data = {"robots": [_robot("a", 3000), _robot("b", 20), _robot("c", 3000)]}
+    cut, cuts = bound(data, 60_000)
+    assert len(orjson.dumps(cut)) <= 60_000
+    a, b, c = (len(r["rows"]) for r in cut["robots"])
+    assert b == 20 and [x["robot"] for x in cuts] == ["a", "c"]
+    assert abs(a - c) <= 0.1 * a and a > 20 * 5
+
+
+def test_a_list_whose_items_name_robots_keeps_each_robots_share() -> None:
+    def findings() -> list[dict[str, object]]:
+        ones = [{"robot_id": "amr-1", "kind": "modified", "cycle": i} for i in range(2000)]
+        return ones + [{"robot_id": "amr-2", "kind": "gap", "cycle": i} for i in range(300)]
+
+    cut, cuts = bound({"findings": findings()}, 20_000)
+    assert len(orjson.dumps(cut)) <= 20_000
+    by_robot = {r: [f for f in cut["findings"] if f["robot_id"] == r] for r in ("amr-1", "amr-2")}
+    ones, twos = len(by_robot["amr-1"]), len(by_robot["amr-2"])
+    assert abs(ones - twos) <= 1 and ones > 50
+    assert by_robot["amr-2"] == findings()[2000 : 2000 + twos]  # each robot's first, in order
+    assert [(c["robot"], c["kept"], c["total"]) for c in cuts] == [
+        ("amr-1", ones, 2000), ("amr-2", twos, 300),
+    ]  # fmt: skip
+
+
+def test_no_robot_is_dropped_whole_from_an_answer_of_many() -> None:
+    data = {"robots": [_robot(f"amr-{i}", 400) for i in range(8)]}
+    cut, cuts = bound(data, 30_000)
+    assert len(orjson.dumps(cut)) <= 30_000
+    assert [r["robot"] for r in cut["robots"]] == [f"amr-{i}" for i in range(8)]
+    assert all(len(r["rows"]) >= 5 for r in cut["robots"])
+    assert len(cuts) == 8
+
+
+def test_the_rest_is_asked_of_one_robot_with_a_narrower_question() -> None:
+    cut = {"path": "robots[1].rows", "robot": "amr-2", "kept": 10, "total": 1800}
+    assert rest_of("timeline", cut) == (
+        'ask timeline with robot ["amr-2"] and a narrower window (start, end), '
+        "or run the reproduce command for all 1800"
+    )
+    alone = {"path": "rows", "robot": None, "kept": 10, "total": 99}
+    assert rest_of("explain", alone) == "run the reproduce command for all 99"
