@@ -240,8 +240,12 @@ def test_a_long_answer_is_cut_to_its_bound_and_says_so(root: Path) -> None:
     assert _size(full) > 200_000  # the premise: all of it would not fit
     assert _size(answer["data"]) <= 200_000
     [cut] = answer["truncated"]
-    assert cut == {"path": "rows", "kept": len(answer["data"]["rows"]), "total": len(full["rows"])}
-    assert answer["data"]["rows"] == full["rows"][: cut["kept"]]
+    kept = answer["data"]["rows"]
+    assert cut["path"] == "rows" and cut["robot"] is None
+    assert (cut["kept"], cut["total"]) == (len(kept), len(full["rows"]))
+    assert cut["through"] == f"cycle {kept[-1]['end_cycle']}, t {kept[-1]['end_t_ns'] / 1e9:g}"
+    assert cut["rest"].startswith("ask timeline with a narrower window (start, end)")
+    assert kept == full["rows"][: cut["kept"]]
     assert f"rows {cut['kept']} of {cut['total']}" in _text(result)
 
 
