@@ -43,8 +43,8 @@ def test_an_answer_with_nothing_to_cut_is_none() -> None:
 
 def _robot(name: str, rows: int) -> dict[str, object]:
     """One robot's answer in an answer per robot (``selection.PerRobot`` as JSON)."""
-    return {"robot": name, "clock": {"name": "sim", "start_ns": 0},
-            "rows": [{"cycle": i, "t_ns": i * 100_000_000, "command": "GO"} for i in range(rows)]}  # fmt: skip
+    listed = [{"cycle": i, "t_ns": i * 100_000_000, "command": "GO"} for i in range(rows)]
+    return {"robot": name, "clock": {"name": "sim", "start_ns": 0}, "rows": listed}
 
 
 def test_an_answer_per_robot_is_cut_evenly_and_each_cut_names_its_robot() -> None:
