@@ -37,10 +37,13 @@ Cuts = dict[tuple[str, str | None], dict[str, Any]]
 """The cuts made, by list path and robot (None: the list is not split by robot)."""
 
 
-def bound(data: Any, limit: int = MAX_ANSWER_BYTES) -> tuple[Any, list[dict[str, Any]]]:
+def bound(
+    data: Any, limit: int = MAX_ANSWER_BYTES, tool: str = ""
+) -> tuple[Any, list[dict[str, Any]]]:
     """``data`` (plain JSON values) cut to at most ``limit`` bytes of JSON, and the cuts
-    made (``path``, ``robot``, ``kept``, ``total``, ``through``). The data is changed in
-    place. When no list is left to cut, the data is None and the cuts say what was tried."""
+    made (``path``, ``robot``, ``kept``, ``total``, ``through``, and ``rest``: how to ask
+    ``tool`` for the rest). The data is changed in place. When no list is left to cut, the
+    data is None and the cuts say what was tried."""
     cuts: Cuts = {}
     if _size(data) > limit and _is_per_robot(data):
         _share_out(data["robots"], limit - (_size(data) - _size(data["robots"])), cuts)
@@ -48,6 +51,7 @@ def bound(data: Any, limit: int = MAX_ANSWER_BYTES) -> tuple[Any, list[dict[str,
     listed = list(cuts.values())
     for cut in listed:
         _attribute(cut, data)
+        cut["rest"] = rest_of(tool, cut)
     return fitted, listed
 
 
@@ -56,9 +60,12 @@ def _size(value: Any) -> int:
 
 
 def _is_per_robot(data: Any) -> bool:
-    """Whether ``data`` is one answer per robot (``selection.PerRobot`` as JSON)."""
+    """Whether ``data`` is one answer per robot (``selection.PerRobot`` as JSON: each
+    answer names its ``robot``; verify's per-robot summaries, ``robot_id``, are not)."""
     answers = data.get("robots") if isinstance(data, dict) else None
-    return isinstance(answers, list) and len(answers) > 1 and _one_per_robot(answers)
+    if not isinstance(answers, list) or len(answers) < 2:
+        return False
+    return _one_per_robot(answers) and all("robot" in answer for answer in answers)
 
 
 def _robot_of(item: Any) -> str | None:

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from trace_audit.assistant.bound import bound, rest_of
+from trace_audit.assistant.bound import bound
 from trace_audit.jsonout import to_jsonable
 from trace_runtime.errors import InputError, TraceError, UsageError
 
@@ -173,5 +173,5 @@ def ask(name: str, args: dict[str, Any], limit: int) -> tuple[str, Any, Any]:
         return "input", str(err), None
     except TraceError as err:
         return "error", str(err), None
-    data, cuts = bound(data, limit)
-    return "ok", data, [{**cut, "rest": rest_of(name, cut)} for cut in cuts]
+    data, cuts = bound(data, limit, name)
+    return "ok", data, cuts

@@ -114,7 +114,7 @@ class Assistant:
         except CallTimeoutError as err:
             raise ToolError(f"{err}: ask about one robot, or run trace-audit verify") from None
         integrity = integrity_of(report, (), cached=cached)
-        data, cuts = bound(copy.deepcopy(report))
+        data, cuts = bound(copy.deepcopy(report), tool="verify")
         return _result(integrity, ask.reproduce, data, cuts)
 
     async def _ask(self, name: str, args: dict[str, Any], limit: int) -> tuple[str, Any, Any]:

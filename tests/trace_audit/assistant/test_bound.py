@@ -25,7 +25,7 @@ def test_the_longest_list_is_cut_to_fit_and_the_cut_is_named() -> None:
     assert rows == _rows(len(rows))  # the first rows, in order
     [made] = cuts
     assert made == {"path": "robots[0].rows", "robot": None, "kept": len(rows), "total": 5000,
-                    "through": None}  # fmt: skip
+                    "through": None, "rest": "run the reproduce command for all 5000"}  # fmt: skip
     assert cut["robots"][0]["gaps"] == _rows(20)  # what fitted stays whole
     assert all(r["pose"] == [1.0, 2.0, 3.0] for r in rows)
 
@@ -50,16 +50,19 @@ def _robot(name: str, rows: int) -> dict[str, object]:
 def test_an_answer_per_robot_is_cut_evenly_and_each_cut_names_its_robot() -> None:
     """Found from outside: one robot kept 1 row of 3000 while another kept 366 of 1800."""
     data = {"path": "fleet", "robots": [_robot("amr-1", 3000), _robot("amr-2", 1800)]}
-    cut, cuts = bound(data, 40_000)
+    cut, cuts = bound(data, 40_000, "timeline")
     assert len(orjson.dumps(cut)) <= 40_000
     kept = [len(r["rows"]) for r in cut["robots"]]
     assert min(kept) > 0.9 * max(kept), kept  # rows of one size: equal shares, equal rows
     assert len(orjson.dumps(cut)) > 0.8 * 40_000  # the bound is used, not wasted
+    rest = 'ask timeline with robot ["{}"] and a narrower window (start, end), or run the '
     assert cuts == [
         {"path": "robots[0].rows", "robot": "amr-1", "kept": kept[0], "total": 3000,
-         "through": f"cycle {kept[0] - 1}, t {(kept[0] - 1) / 10:g}"},
+         "through": f"cycle {kept[0] - 1}, t {(kept[0] - 1) / 10:g}",
+         "rest": rest.format("amr-1") + "reproduce command for all 3000"},
         {"path": "robots[1].rows", "robot": "amr-2", "kept": kept[1], "total": 1800,
-         "through": f"cycle {kept[1] - 1}, t {(kept[1] - 1) / 10:g}"},
+         "through": f"cycle {kept[1] - 1}, t {(kept[1] - 1) / 10:g}",
+         "rest": rest.format("amr-2") + "reproduce command for all 1800"},
     ]  # fmt: skip
     assert cut["robots"][1]["rows"] == _robot("amr-2", kept[1])["rows"]  # the first, in order
 
@@ -106,3 +109,27 @@ def test_the_rest_is_asked_of_one_robot_with_a_narrower_question() -> None:
     )
     alone = {"path": "rows", "robot": None, "kept": 10, "total": 99}
     assert rest_of("explain", alone) == "run the reproduce command for all 99"
+
+
+def test_a_verify_report_keeps_each_robots_summary_and_share_of_findings() -> None:
+    """verify's JSON is no answer per robot: its per-robot summaries stay whole, its findings
+    and segments (each naming its robot) are cut robot by robot, and the answer's first
+    line says so."""
+    from trace_audit.assistant.integrity import unverified
+    from trace_audit.assistant.server import _result
+
+    def finding(robot: str, i: int) -> dict[str, object]:
+        return {"robot_id": robot, "kind": "modified", "first_cycle": i, "message": "x" * 80}
+
+    report = {
+        "robots": [{"robot_id": r, "cycles": 9000, "announced_keys": []} for r in ("a", "b")],
+        "findings": [finding("a", i) for i in range(3000)] + [finding("b", i) for i in range(40)],
+    }
+    cut, cuts = bound(report, 20_000, "verify")
+    assert [r["robot_id"] for r in cut["robots"]] == ["a", "b"]
+    assert [(c["path"], c["robot"], c["total"]) for c in cuts] == [("findings", "a", 3000)]
+    rest = 'ask verify with robot ["a"], or run the reproduce command for all 3000'
+    assert cuts[0]["rest"] == rest
+    assert sum(f["robot_id"] == "b" for f in cut["findings"]) == 40  # under its share: whole
+    lead = _result(unverified("test"), "trace-audit verify x --json", cut, cuts).content[0]
+    assert "a findings " in getattr(lead, "text", "") and 'robot ["a"]' in getattr(lead, "text", "")
