@@ -185,7 +185,7 @@ _IN_ROBOT = re.compile(r"^robots\[\d+\]\.")
 
 def _cuts_line(cuts: list[dict[str, Any]]) -> str:
     """``amr-1 rows 180 of 3000 (through cycle 179, t 17.9); ...``, then how to ask for the
-    rest (the same for each cut of one answer but for the robot, so said once)."""
+    rest: the one cut's way, or, when several robots were cut, a robot at a time."""
     said = []
     for c in cuts:
         where = c["path"] or "data"
@@ -193,4 +193,8 @@ def _cuts_line(cuts: list[dict[str, Any]]) -> str:
             where = f"{c['robot']} {_IN_ROBOT.sub('', where)}"
         through = f" (through {c['through']})" if c.get("through") else ""
         said.append(f"{where} {c['kept']} of {c['total']}{through}")
-    return "; ".join(said) + f"; for the rest: {cuts[0]['rest']}"
+    robots = {c.get("robot") for c in cuts} - {None}
+    rest = cuts[0]["rest"]
+    if len(robots) > 1:
+        rest = "ask about one robot at a time (each cut's rest in truncated says how)"
+    return "; ".join(said) + f"; for the rest: {rest}"

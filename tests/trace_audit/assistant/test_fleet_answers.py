@@ -70,6 +70,8 @@ def test_a_long_answer_about_two_robots_is_cut_evenly_and_says_so_per_robot(root
     lead = _text(result).splitlines()[2]
     for robot, cut in cuts.items():
         assert f"{robot} rows {cut['kept']} of {cut['total']} (through {cut['through']})" in lead
+    assert lead.endswith("for the rest: ask about one robot at a time (each cut's rest in "
+                         "truncated says how)")  # fmt: skip
 
 
 def test_robot_is_a_list_in_every_tool_and_no_tool_takes_other_arguments(root: Path) -> None:
