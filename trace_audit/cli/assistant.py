@@ -34,7 +34,7 @@ extra. docs/assistant.md.
 
   trace-audit mcp --root /data/amr-7 --root /data/amr-9 --index /data/idx
 
-  trace-audit mcp --root /data/amr-7 --key keys/amr-7.pub --witness-key "$WKEY"
+  trace-audit mcp --root /data/amr-7 --key amr-7.pub --witness-key "$WKEY"
 
   trace-audit mcp --root /data/robots --http 127.0.0.1:8765
 """
