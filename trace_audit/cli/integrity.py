@@ -38,6 +38,7 @@ if TYPE_CHECKING:  # the library is imported inside each command: start-up stays
     )
     from trace_audit.witness.compare import WitnessReport
     from trace_runtime.tlog.keys import KeyPair
+    from trace_runtime.tlog.rotation import KeyRotation
     from trace_runtime.tlog.token import TokenKeyPair
 
 _VERIFY_HELP = """Verify that a log is what the robot wrote: all of it, unaltered, in order.
@@ -353,7 +354,17 @@ def _robot_rows(robot: RobotSummary, prefix: str) -> list[tuple[str, str | Seg]]
                 f"(t = {fmt_t(robot.anchored_ns, clock)}){tail}",
             )
         )
-    return rows
+    return rows + [(f"{prefix}key rotated", _rotation(k)) for k in robot.key_rotations]
+
+
+def _rotation(k: KeyRotation) -> str:
+    """A rotation by both of a key's names: its key id (keygen's, verify's) and the C2SP
+    verifier key's name+hash (what a note's signature line and a witness show)."""
+    before = f"key {k.from_key_id[:16]}…" if k.from_key_id else "no key"
+    return (
+        f"at cycle {k.cycle}, announced by {before}, to key {k.to_key_id[:16]}… "
+        f"(vkey {'+'.join(k.to_vkey.split('+')[:2])})"
+    )
 
 
 def _robot_clocks(robots: list[RobotSummary]) -> dict[str, LogClock]:

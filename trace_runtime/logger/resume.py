@@ -9,6 +9,11 @@ it reads only what it needs: names, then the newest segment's last seal (from it
 The robot's Merkle tree (profile 1.2) goes on too (``resume_tree``): from the newest
 checkpoint's compact range plus the seals after it (a crashed segment has some), or, when the
 chain has no 1.2 checkpoint yet, from all its seals, once.
+
+Two more answers for a robot that goes on where it stopped: the time and clock of its last
+cycle on disk (``resume_time``, for a simulated robot whose clock should go on too), and the
+key its newest signed checkpoint hands on (``resume_key_id``, for a logger told to rotate
+to a key its chain may already have announced, ``LoggerConfig.next_key``).
 """
 
 from __future__ import annotations
@@ -22,10 +27,12 @@ from trace_runtime.reading.copies import best_copy_first
 from trace_runtime.reading.logset import open_segments
 from trace_runtime.reading.reader import Segment, last_seal
 from trace_runtime.reading.segment_files import robot_segment_files
-from trace_runtime.records import GENESIS
+from trace_runtime.records import GENESIS, TOPIC_CHECKPOINT
+from trace_runtime.tlog.checkpoints import decode_checkpoint
 from trace_runtime.tlog.merkle import CompactRange
+from trace_runtime.tlog.signed_note import parse_verifier_key
 
-__all__ = ["ResumePoint", "resume_point", "resume_tree"]
+__all__ = ["ResumePoint", "resume_key_id", "resume_point", "resume_time", "resume_tree"]
 
 
 class ResumePoint(NamedTuple):
@@ -73,6 +80,56 @@ def resume_tree(root: Path, robot_id: str, prev_seal: str) -> CompactRange | Non
         return tree_through(root, robot_id, prev_seal)
     except (TraceError, OSError):
         return None
+
+
+def resume_time(root: Path, robot_id: str) -> tuple[int, str] | None:
+    """The time (ns) of the robot's newest seal on disk and the clock of the segment that
+    holds it; None for a robot with no readable seal in ``root``."""
+    for files in _newest_first(root, robot_id):
+        for copy in _copies_best_first(files):
+            try:
+                segment = copy if isinstance(copy, Segment) else Segment(copy)
+            except TraceError:
+                continue
+            found = last_seal(segment)
+            if found is not None:
+                return found[0].t_ns, segment.session.clock
+    return None
+
+
+def resume_key_id(root: Path, robot_id: str) -> str | None:
+    """The key id that signs after the robot's newest signed checkpoint: the key it
+    announces (profile 1.5), else its own. None when no signed checkpoint is readable.
+    Read from the newest segment back; damage is passed over, as the chain's resume is."""
+    for files in _newest_first(root, robot_id):
+        for copy in _copies_best_first(files):
+            try:
+                segment = copy if isinstance(copy, Segment) else Segment(copy)
+                for message in segment.iter_messages(reverse=True):
+                    if message.topic == TOPIC_CHECKPOINT:
+                        found = _hands_on(message.data)
+                        if found is not None:
+                            return found
+            except TraceError:
+                continue
+    return None
+
+
+def _hands_on(data: bytes) -> str | None:
+    try:
+        checkpoint = decode_checkpoint(data)
+        if checkpoint.key_id is None:
+            return None
+        if checkpoint.next_key is None:
+            return checkpoint.key_id
+        return parse_verifier_key(checkpoint.next_key).public_key.key_id
+    except TraceError:
+        return None
+
+
+def _newest_first(root: Path, robot_id: str) -> list[list[Path]]:
+    numbered = robot_segment_files(root, robot_id)
+    return [numbered[n] for n in sorted(numbered, reverse=True)]
 
 
 def _copies_best_first(files: list[Path]) -> list[Path] | list[Segment]:
