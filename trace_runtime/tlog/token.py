@@ -1,6 +1,8 @@
 """Ed25519 keys held in a PKCS#11 token (an HSM, a smart card, a TPM's PKCS#11 face,
 SoftHSM2): the ``TokenSigner`` a logger or a witness signs through, and
-``generate_token_key``, which makes a key inside the token and writes only its public half.
+``generate_token_key``, which makes a key inside the token and writes only its public half,
+and ``read_token_public_key`` / ``export_token_public_key``, which read that half back (a
+lost ``.pub``, or a verifier on the robot itself).
 
 The private key never leaves the token: it is generated there as a token object that is
 sensitive and not extractable, and every signature is the token's own (``CKM_EDDSA``). The
@@ -24,7 +26,14 @@ from trace_runtime.errors import StorageError, UsageError
 from trace_runtime.tlog.keys import PUBLIC_SUFFIX, PublicKey, public_pem_of
 from trace_runtime.tlog.pkcs11_uri import TokenUri, parse_token_uri
 
-__all__ = ["TokenKeyPair", "TokenSigner", "generate_token_key", "open_token_signer"]
+__all__ = [
+    "TokenKeyPair",
+    "TokenSigner",
+    "export_token_public_key",
+    "generate_token_key",
+    "open_token_signer",
+    "read_token_public_key",
+]
 
 # DER of the Ed25519 curve's OID, 1.3.101.112 (RFC 8410): CKA_EC_PARAMS of an Ed25519 key.
 _ED25519_PARAMS = bytes.fromhex("06032b6570")
@@ -199,6 +208,45 @@ class TokenKeyPair:
     key_id: str
 
 
+def read_token_public_key(uri: str) -> PublicKey:
+    """The public key of the key a ``pkcs11:`` URI names, read from the token's public key
+    object (``CKA_EC_POINT``). A public object needs no PIN; one given is used."""
+    parsed = parse_token_uri(uri)
+    session = _session(parsed, rw=False)
+    try:
+        return PublicKey.from_raw(_public_raw(session, parsed))
+    finally:
+        session.close()
+
+
+def export_token_public_key(
+    uri: str, directory: str | Path, *, name: str | None = None, overwrite: bool = False
+) -> TokenKeyPair:
+    """Write ``directory/NAME.pub`` (NAME: the object label) of a key the token already
+    holds, makes nothing in the token. A ``.pub`` there is replaced only with ``overwrite``
+    (``StorageError`` otherwise, as for any key file that exists)."""
+    parsed = parse_token_uri(uri)
+    public_path = _public_path(parsed, directory, name)
+    if public_path.exists() and not overwrite:
+        raise StorageError(str(public_path), "a key exists; refusing to overwrite it (--force)")
+    public = read_token_public_key(uri)
+    try:
+        public_path.parent.mkdir(parents=True, exist_ok=True)
+        public_path.write_bytes(public_pem_of(public.raw))
+    except OSError as err:
+        raise StorageError(str(public_path), err.strerror or str(err)) from err
+    return TokenKeyPair(parsed.redacted(), public_path, public.key_id)
+
+
+def _public_path(uri: TokenUri, directory: str | Path, name: str | None) -> Path:
+    stem = name or uri.object_label
+    if stem is None:
+        raise UsageError(f"{uri.redacted()}: name the key's file (--name) or object (object=NAME)")
+    if not stem or "/" in stem or stem.startswith("."):
+        raise UsageError(f"key name must be a plain file name: {stem!r}")
+    return Path(directory) / f"{stem}{PUBLIC_SUFFIX}"
+
+
 def generate_token_key(
     uri: str, directory: str | Path, *, name: str | None = None, overwrite: bool = False
 ) -> TokenKeyPair:
@@ -213,14 +261,14 @@ def generate_token_key(
     label = parsed.object_label
     if label is None:
         raise UsageError(f"{parsed.redacted()}: a new key needs a label (object=NAME)")
-    stem = name or label
-    if not stem or "/" in stem or stem.startswith("."):
-        raise UsageError(f"key name must be a plain file name: {stem!r}")
-    public_path = Path(directory) / f"{stem}{PUBLIC_SUFFIX}"
-    if public_path.exists() and not overwrite:
-        raise StorageError(str(public_path), "a key exists; refusing to overwrite it (--force)")
+    public_path = _public_path(parsed, directory, name)
     session = _session(parsed, rw=True)
     try:
+        # The token first: --force cannot replace a key the token holds, so the file's
+        # refusal below suggests it only when the token has no key of that name.
+        _refuse_taken(session, parsed)
+        if public_path.exists() and not overwrite:
+            raise StorageError(str(public_path), "a key exists; refusing to overwrite it (--force)")
         raw = _generate(session, parsed, label)
         try:
             public_path.parent.mkdir(parents=True, exist_ok=True)
@@ -233,14 +281,22 @@ def generate_token_key(
     return TokenKeyPair(parsed.redacted(), public_path, PublicKey.from_raw(raw).key_id)
 
 
-def _generate(session: Any, uri: TokenUri, label: str) -> bytes:
+def _refuse_taken(session: Any, uri: TokenUri) -> None:
     p11 = _pkcs11()
     taken = [
         *_find(session, uri, p11.ObjectClass.PRIVATE_KEY),
         *_find(session, uri, p11.ObjectClass.PUBLIC_KEY),
     ]
     if taken:
-        raise StorageError(uri.describe(), "it exists; a key in a token is never replaced")
+        raise StorageError(
+            uri.describe(),
+            "it exists; a key in a token is never replaced (--public-only writes its "
+            "public key again)",
+        )
+
+
+def _generate(session: Any, uri: TokenUri, label: str) -> bytes:
+    p11 = _pkcs11()
     attr = p11.Attribute
     try:
         session.generate_keypair(
