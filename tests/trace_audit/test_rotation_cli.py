@@ -128,7 +128,9 @@ def test_recorder_next_key_without_key_is_a_usage_error(
 def test_a_continued_sim_robot_s_clock_goes_on(tmp_path: Path) -> None:
     root = tmp_path / "fleet"
     for _ in range(2):
-        done = sim("run", "--duration", "30s", "--faults", "off", "--robot-id", "amr-1", "--out", root)
+        done = sim(
+            "run", "--duration", "30s", "--faults", "off", "--robot-id", "amr-1", "--out", root
+        )
         assert done.returncode == 0, done.stderr
     report = json.loads(cli("verify", root, "--json").stdout)
     (robot,) = report["robots"]
