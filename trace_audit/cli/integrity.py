@@ -109,7 +109,11 @@ _ExpectOption = Annotated[
     ),
 ]
 _VerifyKeyOption = Annotated[
-    Path | None, key_option("The robot's Ed25519 public key (PEM, OpenSSH or 32 raw bytes).")
+    Path | None,
+    key_option(
+        "The robot's Ed25519 public key (PEM, OpenSSH or 32 raw bytes), or the pkcs11: URI "
+        "of its key in a token (read from the token)."
+    ),
 ]
 _VerifyEvidenceOption = Annotated[
     EvidencePaths, evidence_option(then=": their digests are checked there. Repeat for several.")
