@@ -47,7 +47,7 @@ P11='module-path=/usr/lib/softhsm/libsofthsm2.so&pin-source=/etc/trace/pin'.
 
   trace-audit keygen --out keys/ --token "pkcs11:token=hsm;object=amr-7?$P11"
 
-  trace-audit keygen --out keys/ --token "pkcs11:token=hsm;object=amr-7?$P11" --public-only
+  trace-audit keygen --out . --token "pkcs11:object=amr-7?$P11" --public-only
 
   trace-audit keygen --out /etc/trace --name amr-7 --json
 

@@ -38,7 +38,7 @@ from trace_runtime.logger.segment_writer import SegmentWriter
 from trace_runtime.logger.writer_thread import WriterThread
 from trace_runtime.records import GENESIS
 from trace_runtime.session import MIN_PERIOD_NS, SessionInfo
-from trace_runtime.tlog.keys import Signer
+from trace_runtime.tlog.keys import PublicKey, Signer
 from trace_runtime.tlog.signers import open_signer
 from trace_runtime.tlog.token import TokenSigner
 
@@ -164,11 +164,14 @@ class AuditLogger:
         nxt = self._open_key(key) if isinstance(key, str | Path) else key
         if nxt.key_id == signer.key_id:
             raise UsageError("next_key is the checkpoint_key itself: nothing to rotate to")
+        public = getattr(nxt, "public_key", None)
+        if not isinstance(public, PublicKey):
+            raise UsageError("next_key needs its public_key (it is announced)")
         if self.is_root:
             # Deferred like the resume point: only a logger told to rotate reads the keys.
-            from trace_runtime.logger.resume import resume_key_id
+            from trace_runtime.logger.resume import rotated_to
 
-            if resume_key_id(self.path, robot_id) == nxt.key_id:
+            if rotated_to(self.path, robot_id, signer, public):
                 return nxt, None
         return signer, nxt
 

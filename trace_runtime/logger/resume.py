@@ -12,8 +12,8 @@ chain has no 1.2 checkpoint yet, from all its seals, once.
 
 Two more answers for a robot that goes on where it stopped: the time and clock of its last
 cycle on disk (``resume_time``, for a simulated robot whose clock should go on too), and the
-key its newest signed checkpoint hands on (``resume_key_id``, for a logger told to rotate
-to a key its chain may already have announced, ``LoggerConfig.next_key``).
+key its newest signed checkpoint hands on (``rotated_to``, for a logger told to rotate to a
+key its chain may already have announced, ``LoggerConfig.next_key``).
 """
 
 from __future__ import annotations
@@ -27,12 +27,13 @@ from trace_runtime.reading.copies import best_copy_first
 from trace_runtime.reading.logset import open_segments
 from trace_runtime.reading.reader import Segment, last_seal
 from trace_runtime.reading.segment_files import robot_segment_files
-from trace_runtime.records import GENESIS, TOPIC_CHECKPOINT
-from trace_runtime.tlog.checkpoints import decode_checkpoint
+from trace_runtime.records import GENESIS, Checkpoint
+from trace_runtime.tlog.checkpoints import check_checkpoint, decode_checkpoint, iter_checkpoints
+from trace_runtime.tlog.keys import PublicKey, Signer
 from trace_runtime.tlog.merkle import CompactRange
-from trace_runtime.tlog.signed_note import parse_verifier_key
+from trace_runtime.tlog.rotation import check_announcement
 
-__all__ = ["ResumePoint", "resume_key_id", "resume_point", "resume_time", "resume_tree"]
+__all__ = ["ResumePoint", "resume_point", "resume_time", "resume_tree", "rotated_to"]
 
 
 class ResumePoint(NamedTuple):
@@ -97,34 +98,39 @@ def resume_time(root: Path, robot_id: str) -> tuple[int, str] | None:
     return None
 
 
-def resume_key_id(root: Path, robot_id: str) -> str | None:
-    """The key id that signs after the robot's newest signed checkpoint: the key it
-    announces (profile 1.5), else its own. None when no signed checkpoint is readable.
-    Read from the newest segment back; damage is passed over, as the chain's resume is."""
+def rotated_to(root: Path, robot_id: str, old: Signer, new: PublicKey) -> bool:
+    """Whether the robot's chain in ``root`` already hands on to ``new``: its newest
+    checkpoint signed by ``old`` or ``new`` is ``new``'s, or is ``old``'s and announces
+    ``new`` (profile 1.5). Checkpoints neither key signed (unsigned, damaged, planted under
+    another key) are passed over, as damage is by the chain's resume."""
+    old_public = getattr(old, "public_key", None)
     for files in _newest_first(root, robot_id):
         for copy in _copies_best_first(files):
             try:
                 segment = copy if isinstance(copy, Segment) else Segment(copy)
-                for message in segment.iter_messages(reverse=True):
-                    if message.topic == TOPIC_CHECKPOINT:
-                        found = _hands_on(message.data)
-                        if found is not None:
-                            return found
+                messages = list(iter_checkpoints(segment))
             except TraceError:
                 continue
-    return None
+            for message in reversed(messages):
+                try:
+                    checkpoint = decode_checkpoint(message.data)
+                except TraceError:
+                    continue
+                if check_checkpoint(checkpoint, new) == "valid":
+                    return True
+                if _signed_by(checkpoint, old, old_public):
+                    if not isinstance(old_public, PublicKey):
+                        return False  # a signer that cannot check its own announcement
+                    announced = check_announcement(checkpoint, old_public)[1]
+                    return announced is not None and announced.key_id == new.key_id
+    return False
 
 
-def _hands_on(data: bytes) -> str | None:
-    try:
-        checkpoint = decode_checkpoint(data)
-        if checkpoint.key_id is None:
-            return None
-        if checkpoint.next_key is None:
-            return checkpoint.key_id
-        return parse_verifier_key(checkpoint.next_key).public_key.key_id
-    except TraceError:
-        return None
+def _signed_by(checkpoint: Checkpoint, old: Signer, public: object) -> bool:
+    if isinstance(public, PublicKey):
+        return check_checkpoint(checkpoint, public) == "valid"
+    # A Signer without its public key (an HSM behind the protocol): by its key id.
+    return checkpoint.signature is not None and checkpoint.key_id == old.key_id
 
 
 def _newest_first(root: Path, robot_id: str) -> list[list[Path]]:

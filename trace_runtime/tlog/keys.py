@@ -182,10 +182,11 @@ def load_public_key(path: str | Path) -> PublicKey:
 
     # A CLI option typed as a path hands a URI over as a Path: its text is the URI.
     if is_token_uri(str(path)):
-        # Deferred: token imports this module, and python-pkcs11 only when a URI is used.
-        from trace_runtime.tlog.token import read_token_public_key
+        # Deferred: python-pkcs11 is loaded only when a URI is used.
+        from trace_runtime.tlog.pkcs11_session import read_public_raw
+        from trace_runtime.tlog.pkcs11_uri import parse_token_uri
 
-        return read_token_public_key(str(path))
+        return PublicKey.from_raw(read_public_raw(parse_token_uri(str(path))))
     path = Path(path)
     data = _read_key_file(path, "public key")
     if len(data) == 32 and not data.startswith((b"-----", b"ssh-")):

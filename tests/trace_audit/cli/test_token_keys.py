@@ -143,9 +143,7 @@ def test_a_witness_cosigns_with_a_key_in_a_token(hsm: SoftHsm, tmp_path: Path) -
     assert {f["kind"] for f in json.loads(forged.stdout)["findings"]} == {"bad_signature"}
 
 
-def test_a_token_key_s_public_key_is_read_back_from_the_token(
-    hsm: SoftHsm, tmp_path: Path
-) -> None:
+def test_a_token_key_s_public_key_is_read_back_from_the_token(hsm: SoftHsm, tmp_path: Path) -> None:
     """A lost .pub is no lost key: verify, witness vkey and keygen --public-only read the
     public key from the token's public key object, by the key's URI (no PIN needed)."""
     made = json.loads(cli("keygen", "--out", tmp_path / "keys", "--token", hsm.uri("amr-7"),
