@@ -144,8 +144,9 @@ def test_a_witness_cosigns_with_a_key_in_a_token(hsm: SoftHsm, tmp_path: Path) -
 
 
 def test_a_token_key_s_public_key_is_read_back_from_the_token(hsm: SoftHsm, tmp_path: Path) -> None:
-    """A lost .pub is no lost key: verify, witness vkey and keygen --public-only read the
-    public key from the token's public key object, by the key's URI (no PIN needed)."""
+    """A lost .pub is no lost key: verify, publish, witness vkey and keygen --public-only
+    read the public key from the token's public key object, by the key's URI (no PIN
+    needed)."""
     made = json.loads(cli("keygen", "--out", tmp_path / "keys", "--token", hsm.uri("amr-7"),
                           "--json").stdout)  # fmt: skip
     original = Path(made["public_path"]).read_bytes()
@@ -156,6 +157,10 @@ def test_a_token_key_s_public_key_is_read_back_from_the_token(hsm: SoftHsm, tmp_
         checked = cli("verify", tmp_path / "log", "--key", uri, "--json")
         assert checked.returncode == 0, checked.stderr
         assert json.loads(checked.stdout)["key_id"] == made["key_id"]
+    published = cli("publish", tmp_path / "log", "--out", tmp_path / "tlog", "--key",
+                    hsm.uri("amr-7", pin=None))  # fmt: skip
+    assert published.returncode == 0, published.stderr
+    assert (tmp_path / "tlog" / "amr-01" / "checkpoint").is_file()
     vkey = cli("witness", "vkey", "--key", hsm.uri("amr-7", pin=None), "--origin", "o.example/r")
     assert vkey.returncode == 0, vkey.stderr
     raw = load_public_key(hsm.uri("amr-7")).raw
