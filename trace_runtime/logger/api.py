@@ -117,6 +117,8 @@ class AuditLogger:
         except BaseException:
             if writer_lock is not None:
                 writer_lock.release()
+            for opened in self._opened:  # a logger that never started keeps no token session
+                opened.close()
             raise
         self._queue = self._writer.queue  # None with threaded=False
 
