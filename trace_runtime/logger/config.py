@@ -76,8 +76,9 @@ class LoggerConfig:
     """Rotate the checkpoint key to this one (a key file, a ``pkcs11:`` URI, or a ``Signer``
     with a ``public_key``) unless the robot's chain already has: at start the logger reads
     its newest checkpoint that either key signed (``resume.rotated_to``, profile 1.5).
-    ``next_key``'s, or announcing it: it signs with ``next_key`` from the first checkpoint. Otherwise it signs with ``checkpoint_key``
-    and its first checkpoint announces ``next_key`` (``AuditLogger.rotate_key``). So the
+    ``next_key``'s, or announcing it: it signs with ``next_key`` from the first checkpoint.
+    Otherwise it signs with ``checkpoint_key`` and its first checkpoint announces
+    ``next_key`` (``AuditLogger.rotate_key``). So the
     same configuration may be started again and again (a service's restarts, a recorder's
     reconnecting robots) and rotates once. Needs ``checkpoint_key``."""
     origin: str | None = None
