@@ -78,9 +78,9 @@ class LoggerConfig:
     its newest checkpoint that either key signed (``resume.rotated_to``, profile 1.5).
     ``next_key``'s, or announcing it: it signs with ``next_key`` from the first checkpoint.
     Otherwise it signs with ``checkpoint_key`` and its first checkpoint announces
-    ``next_key`` (``AuditLogger.rotate_key``). So the
-    same configuration may be started again and again (a service's restarts, a recorder's
-    reconnecting robots) and rotates once. Needs ``checkpoint_key``."""
+    ``next_key`` (``AuditLogger.rotate_key``). So the same configuration may be started
+    again and again (a service's restarts, a recorder's reconnecting robots) and rotates
+    once. Needs ``checkpoint_key``."""
     origin: str | None = None
     """The C2SP checkpoint origin naming this robot's log, and the key name its notes are
     signed under (e.g. ``fleet.example.com/amr-7``; no spaces, no ``+``). None:
