@@ -113,11 +113,23 @@ a sim clock from 0):
 
   trace-sim run --robot-id amr-3 --start 2026-05-04T06:00:00Z --out fleet/
 
+A robot continued in a log root without --start goes on with its clock too: its first
+cycle comes one period (0.1 s) after its last one there, on that log's clock, as a
+restarted robot's clock does. A --start earlier than that restarts the clock (verify and
+info say so: a clock restart, not tampering).
+
 --key signs the robot's checkpoints with a key from trace-audit keygen (a key file, or a
 pkcs11: URI of a key in a token); --witness URL has its logger submit each checkpoint to a
 witness (trace-audit witness serve):
 
   trace-sim run --key robot.key --witness http://127.0.0.1:8080 --out logs/
+
+--next-key rotates the robot to a new key (profile 1.5): the run's first checkpoint, signed
+by --key, announces it and it signs from then on; verify --key with the first key's .pub
+follows the rotation. Run it again with the same two keys and nothing is announced twice:
+a chain that already handed on to --next-key is signed by it (or give --key NEW alone):
+
+  trace-sim run --key old.key --next-key new.key --out logs/
 """
 
 
@@ -161,7 +173,8 @@ _Start = Annotated[
     typer.Option(
         metavar="TEXT",
         help="the first cycle's time: an ISO 8601 UTC time (e.g. 2026-05-04T06:00:00Z, "
-        "a wall clock) or seconds (a sim clock); default a sim clock from 0",
+        "a wall clock) or seconds (a sim clock); default a sim clock from 0, or, for a "
+        "robot continued in a log root, one period after its last cycle there",
     ),
 ]
 _Key = Annotated[
@@ -171,6 +184,15 @@ _Key = Annotated[
         metavar="PATH|URI",
         help="the robot's private key (trace-audit keygen): a key file or a pkcs11: URI of a "
         "key in a token; checkpoints signed",
+    ),
+]
+_NextKey = Annotated[
+    str | None,
+    typer.Option(
+        "--next-key",
+        metavar="PATH|URI",
+        help="rotate to this key (a key file or a pkcs11: URI): --key announces it at the "
+        "first checkpoint, unless the robot's chain already did; needs --key",
     ),
 ]
 _Witness = Annotated[
@@ -198,6 +220,7 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
     robot_id: _RobotId = DEFAULT_ROBOT_ID,
     start: _Start = None,
     key: _Key = None,
+    next_key: _NextKey = None,
     witness: _Witness = None,
     as_json: _Json = False,
     force: _Force = False,
@@ -220,6 +243,7 @@ def run_cmd(  # noqa: PLR0917 - typer maps each option to a parameter
             robot_id=robot_id,
             start=start,
             key=key,
+            next_key=next_key,
             witness=witness,
         )
         result = run(config) if as_json else _run_with_progress(config)
@@ -266,6 +290,7 @@ def _run_config(
     robot_id: str,
     start: str | None,
     key: str | None,
+    next_key: str | None,
     witness: str | None,
 ) -> RunConfig:
     """The run the options ask for; ``SimUsageError`` for options that do not go together."""
@@ -274,7 +299,10 @@ def _run_config(
     if batch is not None and duration is None:
         raise SimUsageError("--batch needs --duration (scenario runs write cycle by cycle)")
     total = parse_duration(duration) if duration is not None else None
-    start_ns, clock = (0, "sim") if start is None else parse_start(start)
+    if next_key is not None and key is None:
+        raise SimUsageError("--next-key needs --key: the key the robot signs with announces it")
+    # No --start: the runner goes on from the robot's last time in a log root (or 0).
+    start_ns, clock = (None, "sim") if start is None else parse_start(start)
     return RunConfig(
         out=out,
         scenario=scenario,
@@ -287,6 +315,7 @@ def _run_config(
         start_ns=start_ns,
         clock=clock,
         checkpoint_key=key,
+        next_key=next_key,
         witness=witness,
     )
 

@@ -12,7 +12,7 @@ import re
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
@@ -69,8 +69,11 @@ class RunConfig:
     total_cycles: int | None = None
     """Routine operation: this many cycles, cycling through the scenarios episode by episode."""
     robot_id: str = DEFAULT_ROBOT_ID
-    start_ns: int = 0
-    """The first cycle's time: ns on ``clock`` (``parse_start``)."""
+    start_ns: int | None = 0
+    """The first cycle's time: ns on ``clock`` (``parse_start``). None: one period after the
+    robot's last cycle in the log root ``out``, on that log's clock (``clock`` is then not
+    used), as a real robot's clock goes on across a restart; 0 on ``clock`` for a robot
+    new there."""
     clock: str = "sim"
     """The segments' session ``clock``: ``sim`` (counting from an arbitrary zero) or
     ``system`` (``start_ns`` is then ns since the Unix epoch, a time of day)."""
@@ -84,6 +87,9 @@ class RunConfig:
     checkpoint_key: str | Path | None = None
     """The robot's private key: a key file or a ``pkcs11:`` URI of a key in a token;
     checkpoints signed (``LoggerConfig.checkpoint_key``)."""
+    next_key: str | Path | None = None
+    """A key to rotate to (``LoggerConfig.next_key``): announced by ``checkpoint_key`` at the
+    run's first checkpoint unless the robot's chain in the root already did; then it signs."""
     witness: str | None = None
     """A witness's URL the logger submits each checkpoint to (``LoggerConfig.witness``)."""
 
@@ -200,7 +206,7 @@ def plan(config: RunConfig) -> Iterator[tuple[str, bool]]:
 def _validate(config: RunConfig) -> int:
     if config.batch_cycles < 1:
         raise SimUsageError(f"batch cycles must be at least 1, got {config.batch_cycles}")
-    if config.start_ns < 0:
+    if config.start_ns is not None and config.start_ns < 0:
         raise SimUsageError(f"the start time must be >= 0 ns, got {config.start_ns}")
     if config.total_cycles is not None:
         if config.total_cycles <= 0:
@@ -221,6 +227,8 @@ def run(config: RunConfig, progress: Callable[[int, int], None] | None = None) -
     """Simulate and log; ``progress(done, total)`` is called every 1000 cycles and at the end."""
     total = _validate(config)
     out = Path(config.out)
+    if config.start_ns is None:
+        config = replace(config, **_clock_going_on(out, config.robot_id))
     truth_path = truth_path_for(out, config.robot_id)
     opener = FailingOpener()
     truth, logger = _open_outputs(config, out, truth_path, opener)
@@ -229,13 +237,14 @@ def run(config: RunConfig, progress: Callable[[int, int], None] | None = None) -
     per_scenario: dict[str, int] = {}
     started = time.perf_counter()
     done = 0
+    start_ns = config.start_ns or 0
     try:
         with few_collections():
             for k, (scenario, new_episode) in enumerate(plan(config)):
                 if new_episode:
                     sim.world.make_room(EPISODE_ROOM_M)
                     sim.world.actors = SCENARIOS[scenario].spawn(sim.world)
-                command = sim.cycle(scenario, config.start_ns + k * PERIOD_NS)
+                command = sim.cycle(scenario, start_ns + k * PERIOD_NS)
                 commands[command] = commands.get(command, 0) + 1
                 per_scenario[scenario] = per_scenario.get(scenario, 0) + 1
                 done += 1
@@ -270,6 +279,20 @@ def run(config: RunConfig, progress: Callable[[int, int], None] | None = None) -
     )
 
 
+def _clock_going_on(out: Path, robot_id: str) -> dict[str, Any]:
+    """``start_ns`` and ``clock`` that go on one period after the robot's last cycle in the
+    log root ``out`` (a restarted robot's clock does not go back to 0); 0 on a sim clock for a
+    robot not there yet, or for a single file (never continued)."""
+    if out.suffix == ".mcap" or not out.is_dir():
+        return {"start_ns": 0, "clock": "sim"}
+    from trace_runtime.logger.resume import resume_time
+
+    last = resume_time(out, robot_id)
+    if last is None:
+        return {"start_ns": 0, "clock": "sim"}
+    return {"start_ns": last[0] + PERIOD_NS, "clock": last[1]}
+
+
 def _open_outputs(
     config: RunConfig, out: Path, truth_path: Path, opener: FailingOpener
 ) -> tuple[TruthLog, AuditLogger | NullLogger]:
@@ -297,6 +320,7 @@ def _open_outputs(
                     opener=opener,
                     batch_cycles=config.batch_cycles,
                     checkpoint_key=config.checkpoint_key,
+                    next_key=config.next_key,
                     witness=config.witness,
                 ),
             )

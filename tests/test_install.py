@@ -93,7 +93,7 @@ def test_every_module_the_runtime_imports_comes_with_a_core_dependency() -> None
     """Each third-party import in trace_runtime/ is provided (per the installed
     distributions' records) by a distribution pyproject.toml lists as a core dependency, or
     by a robot's extra and then imported in the one module that needs it (python-pkcs11 in
-    ``tlog/token.py``, only when a key is a ``pkcs11:`` URI). The cold codec imports no
+    ``tlog/pkcs11_session.py``, only when a key is a ``pkcs11:`` URI). The cold codec imports no
     numpy."""
     imports = _third_party_imports("trace_runtime")
     assert {"mcap", "pydantic", "zstandard", "lz4", "orjson", "msgspec", "cryptography"} <= set(
@@ -107,7 +107,7 @@ def test_every_module_the_runtime_imports_comes_with_a_core_dependency() -> None
         for module, files in imports.items()
         if not {_normalized(d) for d in providers.get(module, [])} & core
     }
-    assert unprovided == {"pkcs11": ["trace_runtime/tlog/token.py"]}
+    assert unprovided == {"pkcs11": ["trace_runtime/tlog/pkcs11_session.py"]}
     assert {_normalized(d) for d in providers["pkcs11"]} <= robot_extra
 
 

@@ -17,6 +17,7 @@ from trace_audit.cli import (  # noqa: F401 - each module registers its commands
     fleet,
     info,
     integrity,
+    keygen,
     metrics,
     proof,
     publish,

@@ -1,8 +1,8 @@
-"""trace-audit commands for integrity: ``verify`` a log, ``keygen`` a checkpoint signing key.
+"""trace-audit ``verify``: is a log what the robot wrote (``cli/keygen.py`` makes the keys).
 
-Each parses its arguments, calls one library function (``trace_audit.verify.verify_log``,
-``trace_runtime.tlog.keys.generate_keypair``) and renders the typed result: rich on a
-terminal, plain text with ``--plain`` or in a pipe, JSON with ``--json``.
+It parses its arguments, calls one library function (``trace_audit.verify.verify_log``) and
+renders the typed result: rich on a terminal, plain text with ``--plain`` or in a pipe, JSON
+with ``--json``.
 """
 
 from __future__ import annotations
@@ -37,8 +37,7 @@ if TYPE_CHECKING:  # the library is imported inside each command: start-up stays
         WitnessedVerifyReport,
     )
     from trace_audit.witness.compare import WitnessReport
-    from trace_runtime.tlog.keys import KeyPair
-    from trace_runtime.tlog.token import TokenKeyPair
+    from trace_runtime.tlog.rotation import KeyRotation
 
 _VERIFY_HELP = """Verify that a log is what the robot wrote: all of it, unaltered, in order.
 
@@ -77,35 +76,6 @@ robot. Exit codes: 0 clean, 1 findings, 2 usage (e.g. a bad key file), 3 unreada
   trace-audit verify /data/fleet/ --scheduler tcp://10.0.0.5:8786
 """
 
-_KEYGEN_HELP = """Create an Ed25519 key pair for signing: a robot's checkpoints or a witness's
-cosignatures.
-
-Writes NAME.key (the private key, PKCS#8 PEM, file mode 0600: it stays on the host that
-signs) and NAME.pub (the public key, PEM: give it to whoever verifies). A robot's logger
-takes the private key as LoggerConfig(checkpoint_key="DIR/NAME.key"), verify its public key
-as --key; a witness takes the private key as witness serve --key. Keys from openssl genpkey
--algorithm ed25519 work as well. A key that exists is not overwritten unless --force (exit
-4, like a folder that cannot be written).
-
-With --token 'pkcs11:token=LABEL;object=NAME?module-path=MODULE.so&pin-value=PIN' (an RFC
-7512 URI; pin-source=file:/path reads the PIN from a file) the key is generated inside that
-PKCS#11 token (an HSM, a smart card, SoftHSM2), sensitive and not extractable: only NAME.pub
-is written, and the robot or the witness signs through the token with the same URI as its
-key. A key of that name already in the token is never replaced (exit 4). Needs the token
-extra (python-pkcs11). In the example,
-P11='module-path=/usr/lib/softhsm/libsofthsm2.so&pin-source=/etc/trace/pin'.
-
-[bold]Examples[/bold]:
-
-  trace-audit keygen --out keys/
-
-  trace-audit keygen --out keys/ --token "pkcs11:token=hsm;object=amr-7?$P11"
-
-  trace-audit keygen --out /etc/trace --name amr-7 --json
-
-  trace-audit keygen --out /etc/trace-witness --name witness
-"""
-
 _MAX_LISTED = 200
 
 
@@ -139,7 +109,11 @@ _ExpectOption = Annotated[
     ),
 ]
 _VerifyKeyOption = Annotated[
-    Path | None, key_option("The robot's Ed25519 public key (PEM, OpenSSH or 32 raw bytes).")
+    Path | None,
+    key_option(
+        "The robot's Ed25519 public key (PEM, OpenSSH or 32 raw bytes), or the pkcs11: URI "
+        "of its key in a token (read from the token)."
+    ),
 ]
 _VerifyEvidenceOption = Annotated[
     EvidencePaths, evidence_option(then=": their digests are checked there. Repeat for several.")
@@ -353,7 +327,17 @@ def _robot_rows(robot: RobotSummary, prefix: str) -> list[tuple[str, str | Seg]]
                 f"(t = {fmt_t(robot.anchored_ns, clock)}){tail}",
             )
         )
-    return rows
+    return rows + [(f"{prefix}key rotated", _rotation(k)) for k in robot.key_rotations]
+
+
+def _rotation(k: KeyRotation) -> str:
+    """A rotation by both of a key's names: its key id (keygen's, verify's) and the C2SP
+    verifier key's name+hash (what a note's signature line and a witness show)."""
+    before = f"key {k.from_key_id[:16]}…" if k.from_key_id else "no key"
+    return (
+        f"at cycle {k.cycle}, announced by {before}, to key {k.to_key_id[:16]}… "
+        f"(vkey {'+'.join(k.to_vkey.split('+')[:2])})"
+    )
 
 
 def _robot_clocks(robots: list[RobotSummary]) -> dict[str, LogClock]:
@@ -382,85 +366,3 @@ def _finding_table(doc: Doc, findings: list[Finding], clocks: dict[str, LogClock
     )
     if len(findings) > _MAX_LISTED:
         doc.line(f"… and {len(findings) - _MAX_LISTED} more (--json lists all)", 2)
-
-
-@app.command("keygen", help=help_text(_KEYGEN_HELP))
-def keygen_command(
-    out: Annotated[
-        Path,
-        typer.Option("--out", help="Directory to write the key pair into.", show_default=False),
-    ],
-    *,
-    name: Annotated[
-        str | None,
-        typer.Option(
-            "--name",
-            help="File name stem of the key pair [default: trace-ed25519; with --token the "
-            "object's label].",
-            show_default=False,
-        ),
-    ] = None,
-    token: Annotated[
-        str | None,
-        typer.Option(
-            "--token",
-            metavar="URI",
-            help="Generate the key inside this PKCS#11 token (a pkcs11: URI naming token, "
-            "object, module-path and PIN); only the public key is written.",
-            show_default=False,
-        ),
-    ] = None,
-    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing key pair.")] = False,
-    json_out: JsonOption = False,
-    plain: PlainOption = False,
-) -> None:
-    if token is not None:
-        from trace_runtime.tlog.token import generate_token_key
-
-        made = guarded(lambda: generate_token_key(token, out, name=name, overwrite=force))
-        emit(made, token_keygen_doc, json_out=json_out, plain=plain)
-        return
-    from trace_runtime.tlog.keys import generate_keypair
-
-    stem = name or "trace-ed25519"
-    pair = guarded(lambda: generate_keypair(out, name=stem, overwrite=force))
-    emit(pair, keygen_doc, json_out=json_out, plain=plain)
-
-
-def keygen_doc(pair: KeyPair) -> Doc:
-    doc = Doc()
-    doc.title(["Created an Ed25519 signing key ", Seg(pair.key_id[:16] + "…", "bold")])
-    doc.fields(
-        [
-            ("private key", f"{pair.private_path} (mode 0600; keep it on the host that signs)"),
-            ("public key", f"{pair.public_path} (give it to whoever verifies)"),
-            ("key id", pair.key_id),
-        ]
-    )
-    # The same pair serves a robot or a witness; keygen cannot know which, so it says both.
-    doc.line(f'On a robot:   LoggerConfig(checkpoint_key="{pair.private_path}")')
-    doc.line(f"  its logs:   trace-audit verify LOG --key {pair.public_path}")
-    doc.line(f"On a witness: trace-audit witness serve --key {pair.private_path} …")
-    doc.line(
-        f"  its vkey:   trace-audit witness vkey --cosignature --key {pair.public_path} "
-        "--origin NAME"
-    )
-    return doc
-
-
-def token_keygen_doc(made: TokenKeyPair) -> Doc:
-    doc = Doc()
-    doc.title(["Created an Ed25519 signing key in a token ", Seg(made.key_id[:16] + "…", "bold")])
-    doc.fields(
-        [
-            ("private key", f"{made.uri} (in the token: sensitive, not extractable)"),
-            ("public key", f"{made.public_path} (give it to whoever verifies)"),
-            ("key id", made.key_id),
-        ]
-    )
-    # The URI is shown without a pin-value: the robot names its PIN by a file instead.
-    uri = made.uri if "pin-source=" in made.uri else f"{made.uri}&pin-source=file:PINFILE"
-    doc.line(f'On a robot:   LoggerConfig(checkpoint_key="{uri}")')
-    doc.line(f"  its logs:   trace-audit verify LOG --key {made.public_path}")
-    doc.line(f"On a witness: trace-audit witness serve --key '{uri}' …")
-    return doc

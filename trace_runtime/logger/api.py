@@ -38,7 +38,7 @@ from trace_runtime.logger.segment_writer import SegmentWriter
 from trace_runtime.logger.writer_thread import WriterThread
 from trace_runtime.records import GENESIS
 from trace_runtime.session import MIN_PERIOD_NS, SessionInfo
-from trace_runtime.tlog.keys import Signer
+from trace_runtime.tlog.keys import PublicKey, Signer
 from trace_runtime.tlog.signers import open_signer
 from trace_runtime.tlog.token import TokenSigner
 
@@ -79,6 +79,8 @@ class AuditLogger:
         key = self.config.checkpoint_key
         self._opened: list[TokenSigner] = []  # token sessions this logger opened: it closes them
         signer: Signer | None = self._open_key(key) if isinstance(key, str | Path) else key
+        if self.config.next_key is not None and signer is None:
+            raise UsageError("next_key needs checkpoint_key: the key it follows announces it")
         self.path = Path(path)
         self.is_root = self.path.suffix != ".mcap"
         self.stats = LoggerStats()
@@ -96,6 +98,9 @@ class AuditLogger:
             session = self._first_session(
                 robot_id, period_s, software_version, policy_version, clock
             )
+            rotate_to: Signer | None = None
+            if self.config.next_key is not None:
+                signer, rotate_to = self._start_keys(signer, robot_id)
             self._chain = ChainWriter(
                 self.path,
                 session,
@@ -105,11 +110,15 @@ class AuditLogger:
                 signer=signer,
                 writer_lock=writer_lock,
             )
+            if rotate_to is not None:
+                self._chain.rotate_key(rotate_to)
             self._next_cycle = session.first_cycle
             self._writer = WriterThread(self._chain, self.config, self._undeclared)
         except BaseException:
             if writer_lock is not None:
                 writer_lock.release()
+            for opened in self._opened:  # a logger that never started keeps no token session
+                opened.close()
             raise
         self._queue = self._writer.queue  # None with threaded=False
 
@@ -147,6 +156,26 @@ class AuditLogger:
             first_cycle=first_cycle,
             recordings=recordings,
         )
+
+    def _start_keys(self, signer: Signer | None, robot_id: str) -> tuple[Signer, Signer | None]:
+        """``LoggerConfig.next_key``: (the key to sign with, the key to rotate to at once);
+        the next key alone when the chain's newest signed checkpoint already hands on to it
+        (a restart after the rotation)."""
+        key = self.config.next_key
+        assert key is not None and signer is not None  # checked before the lock was taken
+        nxt = self._open_key(key) if isinstance(key, str | Path) else key
+        if nxt.key_id == signer.key_id:
+            raise UsageError("next_key is the checkpoint_key itself: nothing to rotate to")
+        public = getattr(nxt, "public_key", None)
+        if not isinstance(public, PublicKey):
+            raise UsageError("next_key needs its public_key (it is announced)")
+        if self.is_root:
+            # Deferred like the resume point: only a logger told to rotate reads the keys.
+            from trace_runtime.logger.resume import rotated_to
+
+            if rotated_to(self.path, robot_id, signer, public):
+                return nxt, None
+        return signer, nxt
 
     def _undeclared(self) -> int:
         return self._undeclared_control

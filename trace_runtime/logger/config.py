@@ -72,6 +72,15 @@ class LoggerConfig:
     None writes unsigned checkpoints (chain-head anchors only). A ``Signer`` that also has a
     ``public_key`` (a ``keys.PublicKey``, as ``Ed25519Signer`` has) signs each checkpoint's
     C2SP note too (profile 1.2); one without gives checkpoints whose tree is unsigned."""
+    next_key: str | Path | Signer | None = None
+    """Rotate the checkpoint key to this one (a key file, a ``pkcs11:`` URI, or a ``Signer``
+    with a ``public_key``) unless the robot's chain already has: at start the logger reads
+    its newest checkpoint that either key signed (``resume.rotated_to``, profile 1.5).
+    ``next_key``'s, or announcing it: it signs with ``next_key`` from the first checkpoint.
+    Otherwise it signs with ``checkpoint_key`` and its first checkpoint announces
+    ``next_key`` (``AuditLogger.rotate_key``). So the same configuration may be started
+    again and again (a service's restarts, a recorder's reconnecting robots) and rotates
+    once. Needs ``checkpoint_key``."""
     origin: str | None = None
     """The C2SP checkpoint origin naming this robot's log, and the key name its notes are
     signed under (e.g. ``fleet.example.com/amr-7``; no spaces, no ``+``). None:

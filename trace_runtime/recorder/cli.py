@@ -81,6 +81,13 @@ def _parser() -> argparse.ArgumentParser:
         "key file or a pkcs11: URI of a key in a token",
     )
     serve.add_argument(
+        "--next-key",
+        metavar="KEY",
+        help="rotate every robot to this key (profile 1.5): --key announces it at the robot's "
+        "next checkpoint, unless its chain already did (a restart, a reconnect): then it "
+        "signs with this key alone; needs --key",
+    )
+    serve.add_argument(
         "--witness",
         metavar="URL",
         help="submit signed checkpoints to this C2SP witness (needs --key)",
@@ -116,9 +123,14 @@ def _serve(args: argparse.Namespace) -> int:
     if args.witness and not args.key:
         raise UsageError("--witness needs --key: a witness cosigns signed checkpoints only")
     tcp = parse_tcp(args.tcp) if args.tcp else None
+    if args.next_key and not args.key:
+        raise UsageError("--next-key needs --key: the key the robots sign with announces it")
     # A bad key is the operator's to fix before any robot connects: load it once here.
     signer = open_signer(args.key) if args.key else None
-    config = LoggerConfig(checkpoint_key=signer, witness=args.witness)
+    next_signer = open_signer(args.next_key) if args.next_key else None
+    if next_signer is not None and signer is not None and next_signer.key_id == signer.key_id:
+        raise UsageError("--next-key is --key itself: nothing to rotate to")
+    config = LoggerConfig(checkpoint_key=signer, next_key=next_signer, witness=args.witness)
     recorder = Recorder(args.root, socket_path=args.socket, tcp=tcp, config=config)
 
     def stop(signum: int, frame: FrameType | None) -> None:

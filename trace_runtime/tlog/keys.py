@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 from trace_runtime.errors import StorageError, UsageError
+from trace_runtime.tlog.pkcs11_uri import is_token_uri
 
 if TYPE_CHECKING:
     from cryptography.hazmat.primitives.asymmetric.ed25519 import (
@@ -169,7 +170,8 @@ def load_signer(path: str | Path) -> Ed25519Signer:
 
 
 def load_public_key(path: str | Path) -> PublicKey:
-    """Load an Ed25519 public key: PEM (SubjectPublicKeyInfo), OpenSSH, or 32 raw bytes."""
+    """Load an Ed25519 public key: PEM (SubjectPublicKeyInfo), OpenSSH, or 32 raw bytes; or
+    read it from a token, given a ``pkcs11:`` URI (``token.read_token_public_key``)."""
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
     from cryptography.hazmat.primitives.serialization import (
         Encoding,
@@ -178,6 +180,13 @@ def load_public_key(path: str | Path) -> PublicKey:
         load_ssh_public_key,
     )
 
+    # A CLI option typed as a path hands a URI over as a Path: its text is the URI.
+    if is_token_uri(str(path)):
+        # Deferred: python-pkcs11 is loaded only when a URI is used.
+        from trace_runtime.tlog.pkcs11_session import read_public_raw
+        from trace_runtime.tlog.pkcs11_uri import parse_token_uri
+
+        return PublicKey.from_raw(read_public_raw(parse_token_uri(str(path))))
     path = Path(path)
     data = _read_key_file(path, "public key")
     if len(data) == 32 and not data.startswith((b"-----", b"ssh-")):

@@ -26,6 +26,7 @@ __all__ = [
     "AnnouncementState",
     "Announcing",
     "KeyChain",
+    "KeyRotation",
     "announce",
     "check_announcement",
     "follow_keys",
@@ -109,6 +110,18 @@ def check_announcement(
     return "valid", verifier.public_key
 
 
+@dataclass(frozen=True, slots=True)
+class KeyRotation:
+    """One rotation a verifier followed: the cycle of the checkpoint that announced it, the
+    key rotated from and to by key id (SHA-256 of the raw key, as ``keygen`` and ``verify``
+    show it), and the new key as announced (its C2SP verifier key)."""
+
+    cycle: int
+    from_key_id: str | None
+    to_key_id: str
+    to_vkey: str
+
+
 @dataclass(slots=True)
 class KeyChain:
     """The key a robot's checkpoints must be signed with, followed through its rotations
@@ -119,13 +132,17 @@ class KeyChain:
     retired: dict[str, int] = field(default_factory=dict)
     announced: list[str] = field(default_factory=list)
     """The verifier keys followed, in chain order (``next_key`` as stored)."""
+    rotations: list[KeyRotation] = field(default_factory=list)
+    """The same rotations with where they happened and both keys' ids."""
 
     def rotate(self, announced_at: int, next_key: PublicKey, vkey: str) -> None:
+        before = None if self.key is None else self.key.key_id
         if self.key is not None and self.key.key_id != next_key.key_id:
             self.retired[self.key.key_id] = announced_at
         self.retired.pop(next_key.key_id, None)
         self.key = next_key
         self.announced.append(vkey)
+        self.rotations.append(KeyRotation(announced_at, before, next_key.key_id, vkey))
 
     def follow(self, checkpoint: Announcing, key: PublicKey) -> AnnouncementState:
         """Move on past ``checkpoint``, verified under ``key`` (the chain's key there): a
@@ -138,7 +155,7 @@ class KeyChain:
 
     def copy(self) -> KeyChain:
         """The same state, to be moved on independently (another copy of a segment)."""
-        return KeyChain(self.key, dict(self.retired), list(self.announced))
+        return KeyChain(self.key, dict(self.retired), list(self.announced), list(self.rotations))
 
     def why_not(self, key_id: str | None) -> str:
         """Why a checkpoint signed by ``key_id`` does not count, in words."""

@@ -1,6 +1,8 @@
 """Ed25519 keys held in a PKCS#11 token (an HSM, a smart card, a TPM's PKCS#11 face,
 SoftHSM2): the ``TokenSigner`` a logger or a witness signs through, and
-``generate_token_key``, which makes a key inside the token and writes only its public half.
+``generate_token_key``, which makes a key inside the token and writes only its public half,
+and ``read_token_public_key`` / ``export_token_public_key``, which read that half back (a
+lost ``.pub``, or a verifier on the robot itself).
 
 The private key never leaves the token: it is generated there as a token object that is
 sensitive and not extractable, and every signature is the token's own (``CKM_EDDSA``). The
@@ -17,108 +19,32 @@ import os
 import threading
 from dataclasses import dataclass
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 from trace_runtime.errors import StorageError, UsageError
 from trace_runtime.tlog.keys import PUBLIC_SUFFIX, PublicKey, public_pem_of
+from trace_runtime.tlog.pkcs11_session import (
+    find_objects,
+    open_session,
+    pkcs11_module,
+    public_key_raw,
+    read_public_raw,
+    why,
+)
 from trace_runtime.tlog.pkcs11_uri import TokenUri, parse_token_uri
 
-__all__ = ["TokenKeyPair", "TokenSigner", "generate_token_key", "open_token_signer"]
+__all__ = [
+    "TokenKeyPair",
+    "TokenSigner",
+    "export_token_public_key",
+    "generate_token_key",
+    "open_token_signer",
+    "read_token_public_key",
+]
 
 # DER of the Ed25519 curve's OID, 1.3.101.112 (RFC 8410): CKA_EC_PARAMS of an Ed25519 key.
 _ED25519_PARAMS = bytes.fromhex("06032b6570")
 _PROBE = b"trace-audit token key check\n"
-
-
-def _pkcs11() -> ModuleType:
-    try:
-        import pkcs11
-    except ImportError as err:
-        raise UsageError(
-            "a pkcs11: key needs python-pkcs11: pip install 'trace-audit[token]'"
-        ) from err
-    return pkcs11
-
-
-def _token(uri: TokenUri) -> Any:
-    """The token the URI names, in the module it names."""
-    p11 = _pkcs11()
-    module = uri.module_path or ""
-    try:
-        lib = p11.lib(module)
-    except p11.PKCS11Error as err:  # python-pkcs11 reports dlopen failures as PKCS11Error
-        raise UsageError(f"PKCS#11 module {module}: cannot load ({err})") from err
-    query: dict[str, object] = {}
-    if uri.token_label is not None:
-        query["token_label"] = uri.token_label
-    if "serial" in uri.path:
-        query["token_serial"] = uri.path["serial"]
-    try:
-        tokens = list(lib.get_tokens(**query))
-    except p11.PKCS11Error as err:
-        raise UsageError(f"PKCS#11 module {module}: cannot list tokens ({_why(err)})") from err
-    if len(tokens) != 1:
-        which = uri.token_label or "(unnamed)"
-        found = "no" if not tokens else f"{len(tokens)}"
-        raise UsageError(f"PKCS#11 module {module}: {found} token(s) match token={which!r}")
-    return tokens[0]
-
-
-def _why(err: BaseException) -> str:
-    """A PKCS#11 error in words: python-pkcs11 often raises its typed errors without text."""
-    return str(err) or type(err).__name__
-
-
-def _session(uri: TokenUri, *, rw: bool) -> Any:
-    """A session on the URI's token, logged in with its PIN when it gives one."""
-    p11 = _pkcs11()
-    token = _token(uri)
-    try:
-        return token.open(rw=rw, user_pin=uri.pin)
-    except p11.exceptions.UserAlreadyLoggedIn:
-        # PKCS#11 logs in per process, not per session: another signer on this token (the
-        # old key of a rotation) already did, and its login holds for this session too.
-        return token.open(rw=rw)
-    except (p11.exceptions.PinIncorrect, p11.exceptions.PinLenRange) as err:
-        raise UsageError(f"token {token.label!r}: wrong PIN") from err
-    except p11.exceptions.PinLocked as err:
-        raise UsageError(f"token {token.label!r}: PIN locked (too many wrong PINs)") from err
-    except p11.PKCS11Error as err:
-        raise UsageError(f"token {token.label!r}: cannot log in ({_why(err)})") from err
-
-
-def _find(session: Any, uri: TokenUri, object_class: Any) -> Any:
-    p11 = _pkcs11()
-    attrs: dict[Any, object] = {p11.Attribute.CLASS: object_class}
-    if uri.object_label is not None:
-        attrs[p11.Attribute.LABEL] = uri.object_label
-    if uri.object_id is not None:
-        attrs[p11.Attribute.ID] = uri.object_id
-    try:
-        found = list(session.get_objects(attrs))
-    except p11.PKCS11Error as err:
-        raise UsageError(f"{uri.describe()}: cannot search ({_why(err)})") from err
-    return found
-
-
-def _public_raw(session: Any, uri: TokenUri) -> bytes:
-    """The raw 32-byte Ed25519 public key of the URI's key, from its ``CKA_EC_POINT``."""
-    p11 = _pkcs11()
-    found = _find(session, uri, p11.ObjectClass.PUBLIC_KEY)
-    if len(found) != 1:
-        count = "no" if not found else str(len(found))
-        raise UsageError(f"{uri.describe()}: {count} public key object(s) found")
-    try:
-        point = bytes(found[0][p11.Attribute.EC_POINT])
-    except p11.PKCS11Error as err:
-        raise UsageError(f"{uri.describe()}: not an EC key ({_why(err)})") from err
-    # PKCS#11 3.0 wraps the point in a DER OCTET STRING; some tokens give it bare.
-    if len(point) == 34 and point[:2] == b"\x04\x20":
-        point = point[2:]
-    if len(point) != 32:
-        raise UsageError(f"{uri.describe()}: not an Ed25519 key ({len(point)}-byte point)")
-    return point
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,10 +55,10 @@ class _Opened:
 
 
 def _open_key(uri: TokenUri) -> _Opened:
-    p11 = _pkcs11()
-    session = _session(uri, rw=False)
+    p11 = pkcs11_module()
+    session = open_session(uri, rw=False)
     try:
-        found = _find(session, uri, p11.ObjectClass.PRIVATE_KEY)
+        found = find_objects(session, uri, p11.ObjectClass.PRIVATE_KEY)
         if len(found) != 1:
             hint = "" if uri.pin is not None else " (no PIN given: pin-value or pin-source)"
             count = "no" if not found else str(len(found))
@@ -140,11 +66,11 @@ def _open_key(uri: TokenUri) -> _Opened:
         key = found[0]
         if key[p11.Attribute.KEY_TYPE] != p11.KeyType.EC_EDWARDS:
             raise UsageError(f"{uri.describe()}: not an Ed25519 key")
-        public = PublicKey.from_raw(_public_raw(session, uri))
+        public = PublicKey.from_raw(public_key_raw(session, uri))
         try:
             signature = key.sign(_PROBE, mechanism=p11.Mechanism.EDDSA)
         except p11.PKCS11Error as err:
-            raise UsageError(f"{uri.describe()}: the token cannot sign ({_why(err)})") from err
+            raise UsageError(f"{uri.describe()}: the token cannot sign ({why(err)})") from err
         if not public.verify(bytes(signature), _PROBE):
             raise UsageError(f"{uri.describe()}: its private and public key objects differ")
     except BaseException:
@@ -171,7 +97,7 @@ class TokenSigner:
         self.uri = uri.redacted()
 
     def sign(self, data: bytes) -> bytes:
-        p11 = _pkcs11()
+        p11 = pkcs11_module()
         with self._lock:
             return bytes(self._key.sign(data, mechanism=p11.Mechanism.EDDSA))
 
@@ -199,6 +125,40 @@ class TokenKeyPair:
     key_id: str
 
 
+def read_token_public_key(uri: str) -> PublicKey:
+    """The public key of the key a ``pkcs11:`` URI names, read from the token's public key
+    object (``CKA_EC_POINT``). A public object needs no PIN; one given is used."""
+    return PublicKey.from_raw(read_public_raw(parse_token_uri(uri)))
+
+
+def export_token_public_key(
+    uri: str, directory: str | Path, *, name: str | None = None, overwrite: bool = False
+) -> TokenKeyPair:
+    """Write ``directory/NAME.pub`` (NAME: the object label) of a key the token already
+    holds, makes nothing in the token. A ``.pub`` there is replaced only with ``overwrite``
+    (``StorageError`` otherwise, as for any key file that exists)."""
+    parsed = parse_token_uri(uri)
+    public_path = _public_path(parsed, directory, name)
+    if public_path.exists() and not overwrite:
+        raise StorageError(str(public_path), "a key exists; refusing to overwrite it (--force)")
+    public = read_token_public_key(uri)
+    try:
+        public_path.parent.mkdir(parents=True, exist_ok=True)
+        public_path.write_bytes(public_pem_of(public.raw))
+    except OSError as err:
+        raise StorageError(str(public_path), err.strerror or str(err)) from err
+    return TokenKeyPair(parsed.redacted(), public_path, public.key_id)
+
+
+def _public_path(uri: TokenUri, directory: str | Path, name: str | None) -> Path:
+    stem = name or uri.object_label
+    if stem is None:
+        raise UsageError(f"{uri.redacted()}: name the key's file (--name) or object (object=NAME)")
+    if not stem or "/" in stem or stem.startswith("."):
+        raise UsageError(f"key name must be a plain file name: {stem!r}")
+    return Path(directory) / f"{stem}{PUBLIC_SUFFIX}"
+
+
 def generate_token_key(
     uri: str, directory: str | Path, *, name: str | None = None, overwrite: bool = False
 ) -> TokenKeyPair:
@@ -213,14 +173,14 @@ def generate_token_key(
     label = parsed.object_label
     if label is None:
         raise UsageError(f"{parsed.redacted()}: a new key needs a label (object=NAME)")
-    stem = name or label
-    if not stem or "/" in stem or stem.startswith("."):
-        raise UsageError(f"key name must be a plain file name: {stem!r}")
-    public_path = Path(directory) / f"{stem}{PUBLIC_SUFFIX}"
-    if public_path.exists() and not overwrite:
-        raise StorageError(str(public_path), "a key exists; refusing to overwrite it (--force)")
-    session = _session(parsed, rw=True)
+    public_path = _public_path(parsed, directory, name)
+    session = open_session(parsed, rw=True)
     try:
+        # The token first: --force cannot replace a key the token holds, so the file's
+        # refusal below suggests it only when the token has no key of that name.
+        _refuse_taken(session, parsed)
+        if public_path.exists() and not overwrite:
+            raise StorageError(str(public_path), "a key exists; refusing to overwrite it (--force)")
         raw = _generate(session, parsed, label)
         try:
             public_path.parent.mkdir(parents=True, exist_ok=True)
@@ -233,14 +193,22 @@ def generate_token_key(
     return TokenKeyPair(parsed.redacted(), public_path, PublicKey.from_raw(raw).key_id)
 
 
-def _generate(session: Any, uri: TokenUri, label: str) -> bytes:
-    p11 = _pkcs11()
+def _refuse_taken(session: Any, uri: TokenUri) -> None:
+    p11 = pkcs11_module()
     taken = [
-        *_find(session, uri, p11.ObjectClass.PRIVATE_KEY),
-        *_find(session, uri, p11.ObjectClass.PUBLIC_KEY),
+        *find_objects(session, uri, p11.ObjectClass.PRIVATE_KEY),
+        *find_objects(session, uri, p11.ObjectClass.PUBLIC_KEY),
     ]
     if taken:
-        raise StorageError(uri.describe(), "it exists; a key in a token is never replaced")
+        raise StorageError(
+            uri.describe(),
+            "it exists; a key in a token is never replaced (--public-only writes its "
+            "public key again)",
+        )
+
+
+def _generate(session: Any, uri: TokenUri, label: str) -> bytes:
+    p11 = pkcs11_module()
     attr = p11.Attribute
     try:
         session.generate_keypair(
@@ -260,14 +228,14 @@ def _generate(session: Any, uri: TokenUri, label: str) -> bytes:
         )
     except p11.PKCS11Error as err:
         raise UsageError(
-            f"{uri.describe()}: the token cannot make an Ed25519 key ({_why(err)})"
+            f"{uri.describe()}: the token cannot make an Ed25519 key ({why(err)})"
         ) from err
-    return _public_raw(session, uri)
+    return public_key_raw(session, uri)
 
 
 def _destroy(session: Any, uri: TokenUri) -> None:
     """Take the key just made out of the token (both its objects)."""
-    p11 = _pkcs11()
+    p11 = pkcs11_module()
     for object_class in (p11.ObjectClass.PRIVATE_KEY, p11.ObjectClass.PUBLIC_KEY):
-        for obj in _find(session, uri, object_class):
+        for obj in find_objects(session, uri, object_class):
             obj.destroy()

@@ -14,6 +14,7 @@ from typing import Literal
 
 from trace_runtime.gaps import JSON_INLINE, NOWHERE, CycleRange
 from trace_runtime.session import TIERS
+from trace_runtime.tlog.rotation import KeyRotation
 
 __all__ = [
     "EXTERNAL_RECORDING",
@@ -203,6 +204,9 @@ class RobotSummary:
     announced_keys: list[str] = field(default_factory=list)
     """The keys the robot's chain announced and the check followed (profile 1.5: verifier
     keys, in chain order); empty without rotations, or without a key to follow them from."""
+    key_rotations: list[KeyRotation] = field(default_factory=list)
+    """The same rotations, each with the announcing checkpoint's cycle and the key ids
+    (SHA-256, as ``keygen`` and ``verify`` show them) of the keys rotated from and to."""
 
 
 @dataclass(slots=True)

@@ -185,6 +185,7 @@ class _RobotChain:
         if self.anchor is not None:
             robot.anchored_cycle, robot.anchored_ns = self.anchor.cycle, self.anchor.t_ns
         robot.announced_keys = list(self.keys.announced)
+        robot.key_rotations = list(self.keys.rotations)
         self._note_unanchored()
         return robot
 

@@ -141,3 +141,56 @@ def test_a_witness_cosigns_with_a_key_in_a_token(hsm: SoftHsm, tmp_path: Path) -
                  "--witness-key", other, "--json")  # fmt: skip
     assert forged.returncode == 1
     assert {f["kind"] for f in json.loads(forged.stdout)["findings"]} == {"bad_signature"}
+
+
+def test_a_token_key_s_public_key_is_read_back_from_the_token(hsm: SoftHsm, tmp_path: Path) -> None:
+    """A lost .pub is no lost key: verify, publish, witness vkey and keygen --public-only
+    read the public key from the token's public key object, by the key's URI (no PIN
+    needed)."""
+    made = json.loads(cli("keygen", "--out", tmp_path / "keys", "--token", hsm.uri("amr-7"),
+                          "--json").stdout)  # fmt: skip
+    original = Path(made["public_path"]).read_bytes()
+    ran = sim("run", "--cycles", "30", "--out", tmp_path / "log", "--key", hsm.uri("amr-7"))
+    assert ran.returncode == 0, ran.stderr
+    Path(made["public_path"]).unlink()
+    for uri in (hsm.uri("amr-7"), hsm.uri("amr-7", pin=None)):
+        checked = cli("verify", tmp_path / "log", "--key", uri, "--json")
+        assert checked.returncode == 0, checked.stderr
+        assert json.loads(checked.stdout)["key_id"] == made["key_id"]
+    published = cli("publish", tmp_path / "log", "--out", tmp_path / "tlog", "--key",
+                    hsm.uri("amr-7", pin=None))  # fmt: skip
+    assert published.returncode == 0, published.stderr
+    assert (tmp_path / "tlog" / "amr-01" / "checkpoint").is_file()
+    vkey = cli("witness", "vkey", "--key", hsm.uri("amr-7", pin=None), "--origin", "o.example/r")
+    assert vkey.returncode == 0, vkey.stderr
+    raw = load_public_key(hsm.uri("amr-7")).raw
+    assert vkey.stdout.strip() == verifier_key("o.example/r", raw)
+    # keygen --public-only writes the same .pub again, and makes nothing in the token.
+    again = cli("keygen", "--out", tmp_path / "keys", "--token", hsm.uri("amr-7"),
+                "--public-only", "--json")  # fmt: skip
+    assert again.returncode == 0, again.stderr
+    assert json.loads(again.stdout)["key_id"] == made["key_id"]
+    assert Path(made["public_path"]).read_bytes() == original
+    # A .pub there is replaced only with --force (this --force can do what it says).
+    public_only = ("keygen", "--out", tmp_path / "keys", "--token", hsm.uri("amr-7"),
+                   "--public-only")  # fmt: skip
+    one_line(cli(*public_only), 4, "amr-7.pub", "--force")
+    assert cli(*public_only, "--force").returncode == 0
+    one_line(cli("keygen", "--out", tmp_path, "--public-only"), 2, "--token")
+    one_line(cli("verify", tmp_path / "log", "--key", hsm.uri("nobody")), 2,
+             "no public key object(s) found")  # fmt: skip
+
+
+def test_keygen_on_a_key_the_token_holds_does_not_suggest_force(
+    hsm: SoftHsm, tmp_path: Path
+) -> None:
+    """A second keygen of a token key cannot succeed with --force (the token never replaces
+    a key), so the refusal says so and points to --public-only, with or without a .pub."""
+    keygen = ("keygen", "--out", tmp_path / "keys", "--token", hsm.uri("amr-7"))
+    assert cli(*keygen).returncode == 0
+    for extra in ((), ("--force",)):
+        done = cli(*keygen, *extra)
+        one_line(done, 4, "never replaced", "--public-only")
+        assert "(--force)" not in done.stderr
+    (tmp_path / "keys" / "amr-7.pub").unlink()
+    one_line(cli(*keygen), 4, "never replaced", "--public-only")

@@ -239,10 +239,11 @@ def test_two_roots_of_distinct_robots_index_together(tmp_path: Path) -> None:
 
 def test_a_restarted_sim_clock_starts_a_new_run_partition(tmp_path: Path) -> None:
     """A second run into the root continues amr-1's chain from segment 1 on a clock back
-    at 0: its rows are a run of their own, named by its first segment."""
+    at 0 (``--start 0``: a continued sim robot's clock otherwise goes on): its rows are a
+    run of their own, named by its first segment."""
     root = tmp_path / "root"
     _sim(root, "amr-1", duration="2s")
-    _sim(root, "amr-1", duration="2s", seed=2)
+    _sim(root, "amr-1", "--start", "0", duration="2s", seed=2)
     _json("index", root, "--out", tmp_path / "idx")
     rows = _rows(
         tmp_path / "idx",

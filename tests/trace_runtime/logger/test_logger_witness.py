@@ -45,7 +45,7 @@ class LocalWitness:
         self.state = WitnessState(state)
         log = NoteVerifier.of(ORIGIN, robot.public_key.raw)
         witness = Witness(self.cosigner, [log], self.state)
-        self.httpd = ThreadingHTTPServer(("127.0.0.1", port), _handler(witness))
+        self.httpd = ThreadingHTTPServer(("127.0.0.1", port), _handler(witness, None))
         self.httpd.daemon_threads = True
         self.port = int(self.httpd.server_address[1])
         self.url = f"http://127.0.0.1:{self.port}"
