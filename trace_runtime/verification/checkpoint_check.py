@@ -23,7 +23,7 @@ from trace_runtime.session import TIER_METADATA
 from trace_runtime.tlog.checkpoints import CheckpointState, NoteState, check_checkpoint, check_note
 from trace_runtime.tlog.keys import PublicKey
 from trace_runtime.tlog.merkle import CompactRange
-from trace_runtime.tlog.rotation import KeyChain, check_announcement
+from trace_runtime.tlog.rotation import KeyChain
 from trace_runtime.verification.report import FindingKind
 from trace_runtime.verification.scan import Anchor, SealScan
 from trace_runtime.verification.sink import SegmentReporter
@@ -137,9 +137,7 @@ class CheckpointCheck:
         """A verified checkpoint that announces the next key (profile 1.5): from here on
         that key signs. False when the announcement does not verify: it vouches for nothing
         and the key stays."""
-        state, announced = check_announcement(c, key)
-        if announced is not None:
-            self.keys.rotate(c.cycle, announced, c.next_key or "")
+        state = self.keys.follow(c, key)
         if state in ("none", "valid"):
             return True
         why = "does not verify" if state == "bad_signature" else "is malformed"
