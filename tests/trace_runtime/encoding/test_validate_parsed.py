@@ -63,7 +63,10 @@ def test_a_spoiled_message_gets_pydantics_verdict_and_message(
         plain: Any = seal
     else:
         model = _MESSAGE_OF[type(record)]
-        stamp = {"cycle": data.draw(st.integers(0, 2**40)), "t_ns": data.draw(st.integers(0))}
+        stamp = {
+            "cycle": data.draw(st.integers(0, 2**40)),
+            "t_ns": data.draw(st.integers(0, 2**63 - 1)),
+        }
         plain = {**stamp, **record.model_dump(by_alias=True, mode="json")}
     plain = orjson.loads(orjson.dumps(plain))  # what a reader parses from the bytes
     spoiled = plain
