@@ -20,7 +20,7 @@ from mcap.records import Message
 
 from trace_audit.chains import DEFAULT_SENSOR_WINDOW, SensorWindow
 from trace_audit.doctor.rules import SegmentDoctor
-from trace_runtime.encoding.codec import validate_parsed
+from trace_runtime.encoding.codec import decode_canonical, validate_parsed
 from trace_runtime.encoding.cycles import RawMessage
 from trace_runtime.errors import RecordError
 from trace_runtime.records import (
@@ -84,6 +84,14 @@ def parse_canonical(data: bytes) -> tuple[Any, str]:
     return value, ""
 
 
+def _decode_canonical(topic: str, data: bytes) -> Any:
+    """A /trace message's record when its bytes are canonical and valid (``codec``'s
+    ``decode_canonical``: the verdict of ``parse_canonical`` and ``validate_parsed`` on
+    them, half the cost); None for a topic without a model, or bytes to judge the slow way."""
+    model = MESSAGE_MODELS.get(topic)
+    return None if model is None else decode_canonical(model, data)
+
+
 @dataclass(slots=True)
 class _Open:
     """The cycle being read: messages since the last seal."""
@@ -124,6 +132,13 @@ class CycleCheck:
         if not topic.startswith("/trace/"):
             self._sensor(topic, message, offset)
             return
+        canonical = None if topic == TOPIC_PERCEPTION else _decode_canonical(topic, message.data)
+        if canonical is not None:
+            # canonical and valid: nothing to report of its bytes; only its stamp is read
+            stamp = self._stamp(topic, canonical.cycle, canonical.t_ns, message, offset)
+            if stamp is not None:  # (always: the model types both as integers)
+                self._place(topic, canonical, stamp, offset, sensors_given=True)
+            return
         value, why = parse_canonical(message.data)
         cycle = self.open.stamp[0] if self.open.stamp else None
         if why:
@@ -132,7 +147,7 @@ class CycleCheck:
             )
         if not isinstance(value, dict):
             return
-        stamp = self._stamp(topic, value, message, offset)
+        stamp = self._stamp(topic, value.get("cycle"), value.get("t_ns"), message, offset)
         if topic in MESSAGE_MODELS:
             try:
                 validate_parsed(MESSAGE_MODELS[topic], value)
@@ -141,14 +156,28 @@ class CycleCheck:
                 self.report.add(
                     "schema-valid", f"{topic}: {err}", cycle=where, offset=offset, key=str(err)
                 )
-        if stamp is None:
-            return
+        if stamp is not None:
+            final = topic == TOPIC_CHECKPOINT and value.get("final") is True
+            self._place(topic, value, stamp, offset, sensors_given="sensors" in value, final=final)
+
+    def _place(
+        self,
+        topic: str,
+        value: Any,
+        stamp: tuple[int, int],
+        offset: int,
+        *,
+        sensors_given: bool,
+        final: bool = False,
+    ) -> None:
+        """A stamped /trace message into its cycle: a checkpoint, a layer, or the seal that
+        closes the cycle. ``sensors_given``: a seal's ``sensors`` key is there."""
         if topic == TOPIC_CHECKPOINT:
-            self.checkpoints.append((stamp[1], value.get("final") is True))
+            self.checkpoints.append((stamp[1], final))
         elif topic in LAYER_TOPICS:
             self._layer(topic, value, stamp, offset)
         elif topic == TOPIC_SEAL:
-            if self.seals_cover_sensors and "sensors" not in value:
+            if self.seals_cover_sensors and not sensors_given:
                 self.report.add(
                     "seal-sensors",
                     "a seal of a profile 1.3 segment has no 'sensors': its cycle's sensor "
@@ -173,9 +202,8 @@ class CycleCheck:
         self.open.chunks.add(self._chunk)
 
     def _stamp(
-        self, topic: str, value: dict[str, Any], message: Message, offset: int
+        self, topic: str, cycle: Any, t_ns: Any, message: Message, offset: int
     ) -> tuple[int, int] | None:
-        cycle, t_ns = value.get("cycle"), value.get("t_ns")
         if type(cycle) is not int or type(t_ns) is not int:
             self.report.add(
                 "stamp", f"{topic} message without integer cycle and t_ns", offset=offset
@@ -200,9 +228,7 @@ class CycleCheck:
             )
         return cycle, t_ns
 
-    def _layer(
-        self, topic: str, value: dict[str, Any], stamp: tuple[int, int], offset: int
-    ) -> None:
+    def _layer(self, topic: str, value: Any, stamp: tuple[int, int], offset: int) -> None:
         current = self.open
         self._same_cycle(topic, stamp, offset)
         if topic in current.layers:

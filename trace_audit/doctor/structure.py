@@ -344,9 +344,12 @@ def _message(message: Message, offset: int, seen: _Seen, *, in_chunk: bool = Tru
     counts = seen.messages_per_channel
     counts[message.channel_id] = counts.get(message.channel_id, 0) + 1
     t = message.log_time
-    seen.start_ns = t if seen.start_ns is None else min(seen.start_ns, t)
-    seen.end_ns = t if seen.end_ns is None else max(seen.end_ns, t)
-    if _tier(seen) == "cold":
+    # comparisons, not min()/max() calls: this runs for every message of the log
+    if seen.start_ns is None or t < seen.start_ns:
+        seen.start_ns = t
+    if seen.end_ns is None or t > seen.end_ns:
+        seen.end_ns = t
+    if seen.session is not None and seen.session.tier == "cold":
         seen.cold_pending.append(RawMessage(topic, message.sequence, t, message.data))
         if topic == BLOCK_TOPIC:
             _decode_cold(seen, offset)

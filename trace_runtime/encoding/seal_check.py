@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
+from hashlib import sha256
 from typing import TYPE_CHECKING, Any, Literal
 
 import orjson
@@ -139,18 +140,22 @@ def _parse_seal_in_full(data: bytes) -> _SealParts | None:
 def _sensor_problem(
     cycle: Cycle,
     sealed: tuple[int, str],
-    hexes: dict[int, str],
+    hexes: list[str | None],
     sensor_digest: Callable[[RawMessage], str] | None,
 ) -> str | None:
     """What differs between the cycle's sensor readings and the (count, digest) its 1.3
-    seal covers them with; None when they match. ``hexes`` (id of a reading -> SHA-256 hex
-    of its data) is filled, so the evidence check hashes no reading twice."""
+    seal covers them with; None when they match. ``hexes`` (the SHA-256 hex of each
+    reading's data, by its place in ``cycle.sensors``; None for a reading the seal does not
+    cover) is filled, so the evidence check hashes no reading twice."""
     lines = []
     for reading in cycle.sensors:
         if not reading.topic.startswith(SENSOR_PREFIX):
+            hexes.append(None)
             continue  # a channel the profile does not define: readers ignore it (§10)
-        hexed = digest(reading.data) if sensor_digest is None else sensor_digest(reading)
-        hexes[id(reading)] = hexed
+        hexed = (
+            sha256(reading.data).hexdigest() if sensor_digest is None else sensor_digest(reading)
+        )
+        hexes.append(hexed)
         lines.append(sensor_line(reading.topic, reading.sequence, reading.log_time_ns, hexed))
     count, readings = sensor_cover(lines)
     if count != sealed[0]:
@@ -189,11 +194,11 @@ def verify_cycle(
     number, t_ns, digests, prev, dropped, sealed_sensors = parsed
     modified, missing, summarised, extra = _compare_layers(cycle, digests)
     sensor_problem = None
+    hexes: list[str | None] | None = None
     if sealed_sensors is not None and cycle.summary is None:
         # (a warm summary keeps only the readings its evidence cites: not checkable here)
-        hexes: dict[int, str] = {}
+        hexes = []
         sensor_problem = _sensor_problem(cycle, sealed_sensors, hexes, sensor_digest)
-        sensor_digest = _digest_from(hexes, sensor_digest)
     external: list[dict[str, Any]] = []
     found = _check_cited(
         cycle,
@@ -201,7 +206,7 @@ def verify_cycle(
         modified=modified,
         perception_json=perception_json,
         external=external,
-        sensor_digest=sensor_digest,
+        hashes=_Hashes(cycle.sensors, hexes, sensor_digest),
     )
     checked, unresolved, bad, uncited = found or (0, 0, [], len(cycle.sensors))
     if sealed_sensors is not None:
@@ -262,7 +267,7 @@ def _check_cited(
     modified: list[str],
     perception_json: Any,
     external: list[dict[str, Any]],
-    sensor_digest: Callable[[RawMessage], str] | None,
+    hashes: _Hashes,
 ) -> tuple[int, int, list[str], int] | None:
     """The evidence refs of an intact perception message checked against the readings they
     cite: (checked, unresolved, bad, uncited); None without such a message. Sensor readings
@@ -272,26 +277,44 @@ def _check_cited(
     if perception is None or TOPIC_PERCEPTION in modified:
         return None
     if perception_json is None and TOPIC_PERCEPTION in digests:
-        return _check_evidence_shape(cycle, perception, external, sensor_digest)
-    found = _check_evidence(cycle, perception, perception_json, external, sensor_digest)
+        return _check_evidence_shape(cycle, perception, external, hashes)
+    found = _check_evidence(cycle, perception, hashes, perception_json, external)
     assert found is not None  # whole=True: never None
     return found
 
 
-def _digest_from(
-    hexes: dict[int, str], given: Callable[[RawMessage], str] | None
-) -> Callable[[RawMessage], str]:
-    """A ``sensor_digest`` that answers from the readings hashed for the seal (``hexes``)."""
-    if given is None:
-        return lambda reading: hexes.get(id(reading)) or digest(reading.data)
-    return lambda reading: hexes.get(id(reading)) or given(reading)
+class _Hashes:
+    """The SHA-256 hex of a cycle's sensor readings by their place in ``cycle.sensors``:
+    those the seal's sensor cover hashed (``hexes``), the others from ``given`` or hashed
+    here. Places, not a lookup by ``id()`` through a closure: it runs for every cited
+    reading of every cycle."""
+
+    __slots__ = ("given", "hexes", "sensors")
+
+    def __init__(
+        self,
+        sensors: Sequence[RawMessage],
+        hexes: list[str | None] | None,
+        given: Callable[[RawMessage], str] | None,
+    ) -> None:
+        self.sensors = sensors
+        self.hexes = hexes
+        self.given = given
+
+    def of(self, index: int) -> str:
+        hexes = self.hexes
+        found = hexes[index] if hexes is not None else None
+        if found is not None:
+            return found
+        reading = self.sensors[index]
+        return sha256(reading.data).hexdigest() if self.given is None else self.given(reading)
 
 
 def _check_evidence_shape(
     cycle: Cycle,
     perception: bytes,
     external: list[Any],
-    sensor_digest: Callable[[RawMessage], str] | None,
+    hashes: _Hashes,
 ) -> tuple[int, int, list[str], int]:
     """``_check_evidence`` of a perception whose bytes match its seal, its entities' refs
     read as the metrics' perception shape (ids and refs only) rather than the whole JSON.
@@ -301,10 +324,10 @@ def _check_evidence_shape(
     sealed, matching perception is read this way: its bytes are the ones its writer sealed."""
     shaped = METRICS_PERCEPTION.decode(perception)
     if shaped is not None:
-        found = _check_evidence(cycle, perception, shaped, None, sensor_digest, whole=False)
+        found = _check_evidence(cycle, perception, hashes, shaped, None, whole=False)
         if found is not None:
             return found
-    checked = _check_evidence(cycle, perception, None, external, sensor_digest)
+    checked = _check_evidence(cycle, perception, hashes, None, external)
     assert checked is not None
     return checked
 
@@ -321,7 +344,7 @@ def _compare_layers(
         data = cycle.payloads.get(topic)
         if data is None:
             (summarised if cycle.summary is not None else missing).append(topic)
-        elif digest(data) != expected:
+        elif sha256(data).hexdigest() != expected:  # (no wrapper call: 4 a cycle)
             modified.append(topic)
     # A layer the seal does not name was added. A /trace channel this reader does not know
     # and the seal does not name is ignored, as PROFILE section 10 asks of every reader.
@@ -390,9 +413,9 @@ class _Readings:
 def _check_evidence(
     cycle: Cycle,
     perception: bytes,
+    hashes: _Hashes,
     parsed: Any = None,
     external: list[Any] | None = None,
-    sensor_digest: Callable[[RawMessage], str] | None = None,
     *,
     whole: bool = True,
 ) -> tuple[int, int, list[str], int] | None:
@@ -433,10 +456,7 @@ def _check_evidence(
                 continue
             checked += 1
             if index not in digests:
-                reading = cycle.sensors[index]
-                digests[index] = (
-                    digest(reading.data) if sensor_digest is None else sensor_digest(reading)
-                )
+                digests[index] = hashes.of(index)
             if digests[index] != ref["digest"]:
                 label = f"{topic}#{cycle.sensors[index].sequence}"
                 if label not in bad:
