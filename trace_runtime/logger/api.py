@@ -64,17 +64,8 @@ class AuditLogger:
         clock: str = "system",
         config: LoggerConfig | None = None,
     ) -> None:
-        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", robot_id):
-            raise UsageError(f"robot_id must be a simple name (letters, digits, _.-): {robot_id!r}")
-        if not period_s * 1e9 >= MIN_PERIOD_NS:  # also refuses NaN
-            raise UsageError(
-                f"period_s must be at least {MIN_PERIOD_NS / 1e9:g} s (PROFILE section 2), "
-                f"got {period_s}"
-            )
         self.config = config or LoggerConfig()
-        interval = self.config.checkpoint_interval_s
-        if interval is not None and interval <= 0:
-            raise UsageError(f"checkpoint_interval_s must be positive or None, got {interval}")
+        _check_arguments(robot_id, period_s, self.config)
         # A bad key file is a set-up error the integrator must see: it raises here.
         key = self.config.checkpoint_key
         self._opened: list[TokenSigner] = []  # token sessions this logger opened: it closes them
@@ -313,3 +304,17 @@ class AuditLogger:
     def _abort(self, builder: CycleBuilder) -> None:
         self.stats.dropped_aborted += 1
         self._undeclared_control += 1
+
+
+def _check_arguments(robot_id: str, period_s: float, config: LoggerConfig) -> None:
+    """Refuse, before anything is opened, what the profile does not allow (UsageError)."""
+    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", robot_id):
+        raise UsageError(f"robot_id must be a simple name (letters, digits, _.-): {robot_id!r}")
+    if not period_s * 1e9 >= MIN_PERIOD_NS:  # also refuses NaN
+        raise UsageError(
+            f"period_s must be at least {MIN_PERIOD_NS / 1e9:g} s (PROFILE section 2), "
+            f"got {period_s}"
+        )
+    interval = config.checkpoint_interval_s
+    if interval is not None and interval <= 0:
+        raise UsageError(f"checkpoint_interval_s must be positive or None, got {interval}")
