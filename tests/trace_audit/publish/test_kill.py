@@ -40,20 +40,42 @@ class Killed:
     report: dict[str, Any]
 
 
-def _killed_first_run(root: Path, out: Path, rng: random.Random) -> tuple[int, list[str]]:
-    """Start publish, SIGKILL it a random time after its tree appears; its pid and the
-    unfinished files it left (none when it ended before the kill: the caller tries again)."""
-    process = subprocess.Popen(
+def _start_publish(root: Path, out: Path) -> subprocess.Popen[bytes]:
+    return subprocess.Popen(
         [sys.executable, "-m", "trace_audit.cli", "publish", str(root), "--out", str(out)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         env={**os.environ, "PYTHONPATH": str(REPO)},
     )
+
+
+def _wait_for_tiles(out: Path, process: subprocess.Popen[bytes]) -> None:
     deadline = time.monotonic() + 120
     while not (out / "amr-7" / "tile").exists() and process.poll() is None:
         assert time.monotonic() < deadline, "publish wrote no tile in 120 s"
         time.sleep(0.005)
-    time.sleep(rng.uniform(0.0, 1.5))
+
+
+def _writing_time(root: Path, out: Path) -> float:
+    """How long a whole first run writes after its tree appears, on this machine now: the
+    kill is drawn within it, so it lands mid-run on a fast machine as on a loaded one."""
+    process = _start_publish(root, out)
+    _wait_for_tiles(out, process)
+    tiles_at = time.monotonic()
+    assert process.wait(timeout=300) == 0
+    shutil.rmtree(out)
+    return time.monotonic() - tiles_at
+
+
+def _killed_first_run(
+    root: Path, out: Path, rng: random.Random, writing_s: float
+) -> tuple[int, list[str]]:
+    """Start publish, SIGKILL it a random time after its tree appears, within the time a
+    whole run writes; its pid and the unfinished files it left (none when it ended before
+    the kill: the caller tries again)."""
+    process = _start_publish(root, out)
+    _wait_for_tiles(out, process)
+    time.sleep(rng.uniform(0.0, 0.9 * writing_s))
     process.send_signal(signal.SIGKILL)
     code = process.wait(timeout=20)
     if code != -signal.SIGKILL:
@@ -89,10 +111,11 @@ def killed(tmp_path_factory: pytest.TempPathFactory, robot_key: RobotKey) -> Kil
     write(root, robot_key.private, range(CYCLES))
     seed = random.randrange(1 << 32)
     rng = random.Random(seed)
+    writing_s = _writing_time(root, out)
     for attempt in range(5):  # a kill nearly always lands while a file is being written
         kills = attempt + 1
         shutil.rmtree(out, ignore_errors=True)
-        pid, leftovers = _killed_first_run(root, out, rng)
+        pid, leftovers = _killed_first_run(root, out, rng, writing_s)
         if leftovers and not (out / "amr-7" / "checkpoint").exists():
             break
     else:
